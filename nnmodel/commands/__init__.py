@@ -1,0 +1,1 @@
+"""Sub-commands of the ``eap`` command line (one module per command, found automatically)."""

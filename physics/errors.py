@@ -1,0 +1,15 @@
+"""Exception types shared by the whole package.
+
+Every error caused by what a user supplied (a device file, a measurement, an option)
+is an :class:`InputError`: its message names the file, key or column and says what
+was expected.  The command line prints such messages without a traceback.
+"""
+
+
+class InputError(ValueError):
+    """Bad user input: a device file, a measurement file, a parameter or an option."""
+
+
+class ModelError(RuntimeError):
+    """A model cannot be built or solved with the given parameters (for example a
+    realisation that cannot meet its accuracy target)."""

@@ -1,0 +1,52 @@
+"""Safe file output: every result is written to a temporary file in the target folder
+and renamed into place, so a crash never leaves a half-written file that looks complete,
+and inputs are never overwritten by accident."""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+from .errors import InputError
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, *, overwrite: bool = True,
+                protect: tuple[str | os.PathLike, ...] = ()) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success rename it to ``path``.
+
+    ``protect`` lists input files that must never be the target (raises
+    :class:`InputError`).  With ``overwrite=False`` an existing target is an error.
+    On an exception the temporary file is removed and the target is untouched.
+    """
+    target = Path(path)
+    for p in protect:
+        if Path(p).resolve() == target.resolve():
+            raise InputError(f"refusing to overwrite the input file {target}; choose another output path")
+    if target.exists() and not overwrite:
+        raise InputError(f"{target} already exists; pass an empty output location or allow overwriting")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, target)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_text(path: str | os.PathLike, text: str, **kw) -> Path:
+    """Atomically write ``text`` (UTF-8) to ``path``."""
+    with atomic_path(path, **kw) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def write_json(path: str | os.PathLike, obj, **kw) -> Path:
+    """Atomically write ``obj`` as indented JSON (NaN/inf are refused: not valid JSON)."""
+    return write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n", **kw)
