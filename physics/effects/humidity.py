@@ -1,0 +1,82 @@
+"""``humidity``: parameters that depend on relative humidity.
+
+Nafion's water uptake changes with RH, and with it the stiffness and the
+electromechanical coupling: thesis Table V identifies, for the IPMC at RH 40/60/80/100 %,
+Y = 0.49/0.39/0.225/0.18 GPa and kf = 0.21/0.312/0.15/0.17 N m/mol (drier is stiffer,
+so the resonance moves with RH; Brunetto et al. 2010).  A device file lists such maps
+under ``humidity_maps`` (``mode: ratio`` — relative to the value at the device's
+reference RH — or ``absolute``), for ``Y``, ``kf`` or any other parameter (user maps,
+e.g. ``D_cation`` or ``Rs``).  Values are interpolated linearly in RH and held constant
+outside the tabulated range (with a warning).  The ``Y`` map scales the polymer modulus in
+every mechanical variant (``Y``, ``Y_polymer`` or the DMA modulus); the ``kf`` map scales
+``kf0`` as well.  RH may vary in time (slowly, compared with the mechanics).
+Off: parameters are those of the reference RH whatever the RH.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from .base import Effect
+
+# Parameters whose maps act on the mechanical chain only (no re-solve of the electrochemistry).
+MECHANICAL_MAPS = ("Y", "Y_polymer", "kf", "kf0")
+
+
+class HumidityInvariant(Effect):
+    slot = "humidity"
+    enabled = False
+    summary = "parameters independent of RH (those at the device's reference RH)"
+
+    def factors(self, rh) -> dict[str, np.ndarray]:
+        """Multiplicative factor of each RH-dependent parameter at ``rh`` [%]."""
+        return {}
+
+    def stiffness_factor(self, rh):
+        return self.factors(rh).get("Y", np.ones(np.shape(rh)))
+
+    def coupling_factor(self, rh):
+        return self.factors(rh).get("kf", np.ones(np.shape(rh)))
+
+    def params_at(self, base: dict, rh: float) -> dict:
+        """Parameters at ``rh`` (the Y factor is applied by the beam section, not here)."""
+        p = dict(base)
+        for name, f in self.factors(rh).items():
+            if name == "Y":
+                continue
+            if name in p:
+                p[name] = p[name] * float(f)
+            if name == "kf" and "kf0" in p:
+                p["kf0"] = p["kf0"] * float(f)
+        return p
+
+    def electrochemistry_varies(self) -> bool:
+        """True when RH changes parameters upstream of the mechanics (needs a re-solve)."""
+        return any(n not in MECHANICAL_MAPS for n in self.factors(50.0))
+
+
+class Humidity(HumidityInvariant):
+    id = "humidity"
+    enabled = True
+    summary = "RH-dependent parameters: Y(RH), kf(RH) of Table V, user maps for others"
+    explanation = __doc__
+
+    def __init__(self, device):
+        super().__init__(device)
+        if not device.humidity_maps:
+            from ..errors import InputError
+            raise InputError(f"humidity needs 'humidity_maps' in device {device.name!r} "
+                             f"({device.path or 'in memory'})")
+
+    def factors(self, rh) -> dict[str, np.ndarray]:
+        rh = np.asarray(rh, dtype=float)
+        out = {}
+        for name, m in self.device.humidity_maps.items():
+            if np.any(rh < m.rh[0] - 1e-9) or np.any(rh > m.rh[-1] + 1e-9):
+                warnings.warn(f"RH {float(np.min(rh)):.3g}–{float(np.max(rh)):.3g} % is outside the "
+                              f"{m.rh[0]:g}–{m.rh[-1]:g} % range of the {name} map of device "
+                              f"{self.device.name!r}; the end value is used", stacklevel=3)
+            base = self.device.params.get(name, 1.0)
+            out[name] = m.factor(rh, base, self.device.reference_rh)
+        return out

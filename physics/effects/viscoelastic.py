@@ -1,0 +1,101 @@
+"""``viscoelastic``: frequency-dependent storage and loss modulus from DMA measurements.
+
+Thesis §4.3.2 (Fig. 9 IPMC, Fig. 11 Nafion membrane, Fig. 27 IP2C): Nafion is
+viscoelastic, its storage and loss moduli rising with frequency.  The tabulated DMA
+data are fitted by a generalised Maxwell (Prony) model
+
+    E*(s) = E∞ + Σ_k E_k s τ_k / (1 + s τ_k),   E∞, E_k ≥ 0,
+
+which is causal and passive (loss ≥ 0 at every frequency) and has an exact state-space
+form, so both solvers use the same modulus.  Relaxation times are spread over the
+measured band (non-negative least squares on the relative error of E' and E'').  The
+fit quality is reported by ``fit_report``.  Off: an elastic modulus (``Y``, or
+``Y_polymer`` with ``layered_beam``), no loss besides Rayleigh damping.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy.optimize import nnls
+
+from ..errors import InputError
+from ..parameters import TableSpec
+from .base import Effect
+
+
+@dataclass(frozen=True)
+class Prony:
+    """E*(s) = E_inf + Σ E_k s tau_k/(1 + s tau_k) [Pa]; arrays E_k, tau_k."""
+
+    E_inf: float
+    E_k: tuple[float, ...] = ()
+    tau_k: tuple[float, ...] = ()
+    max_rel_error: float = 0.0
+
+    def __call__(self, s) -> np.ndarray:
+        s = np.asarray(s, dtype=complex)
+        out = np.full(s.shape, self.E_inf, dtype=complex)
+        for E, t in zip(self.E_k, self.tau_k):
+            out += E * s * t / (1.0 + s * t)
+        return out
+
+    def scaled(self, factor: float, offset: float = 0.0) -> "Prony":
+        """factor·E*(s) + offset (e.g. a humidity factor, then electrode layers)."""
+        return Prony(factor * self.E_inf + offset, tuple(factor * e for e in self.E_k), self.tau_k,
+                     self.max_rel_error)
+
+
+class ElasticModulus(Effect):
+    slot = "modulus"
+    enabled = False
+    summary = "elastic polymer modulus (Y, or Y_polymer with layered_beam)"
+
+    def polymer_modulus(self, p, layered: bool) -> Prony:
+        return Prony(p["Y_polymer"] if layered else p["Y"])
+
+
+class Viscoelastic(ElasticModulus):
+    id = "viscoelastic"
+    enabled = True
+    summary = "frequency-dependent storage/loss modulus fitted (Prony) to DMA tables"
+    explanation = __doc__
+    tables = (
+        TableSpec("dma", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
+                  "DMA storage and loss modulus of the whole strip vs frequency", optional=False),
+        TableSpec("dma_membrane", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
+                  "DMA of the bare membrane (used with layered_beam)", optional=True),
+    )
+
+    def polymer_modulus(self, p, layered: bool) -> Prony:
+        name = "dma_membrane" if layered else "dma"
+        if name not in self.device.tables:
+            raise InputError(f"viscoelastic with layered_beam needs the table {name!r} in section "
+                             f"'viscoelastic' of device {self.device.name!r}")
+        t = self.device.tables[name]
+        return fit_prony(tuple(t["freq"]), tuple(t["storage"]), tuple(t["loss"]))
+
+
+@lru_cache(maxsize=64)
+def fit_prony(freq: tuple, storage: tuple, loss: tuple, per_decade: float = 2.0) -> Prony:
+    """Non-negative Prony fit of a DMA table (frequencies in Hz, moduli in Pa)."""
+    f, Es, El = (np.asarray(x, dtype=float) for x in (freq, storage, loss))
+    if np.any(Es <= 0) or np.any(El < 0):
+        raise InputError("DMA table: storage must be positive and loss non-negative")
+    w = 2.0 * np.pi * f
+    lo, hi = np.log10(1.0 / (3.0 * w.max())), np.log10(3.0 / w.min())
+    tau = np.logspace(lo, hi, max(2, int(np.ceil((hi - lo) * per_decade)) + 1))
+    wt = w[:, None] * tau[None, :]
+    Ast = np.hstack([np.ones((w.size, 1)), wt ** 2 / (1.0 + wt ** 2)]) / Es[:, None]
+    Alo = np.hstack([np.zeros((w.size, 1)), wt / (1.0 + wt ** 2)]) / np.maximum(El, 1e-12 * Es)[:, None]
+    A = np.vstack([Ast, Alo])
+    b = np.concatenate([np.ones(w.size), (El > 0).astype(float)])
+    col = np.linalg.norm(A, axis=0)
+    x, _ = nnls(A / col, b, maxiter=100 * A.shape[1])
+    x = x / col
+    keep = x[1:] > 1e-9 * x.max()
+    pr = Prony(float(x[0]), tuple(x[1:][keep]), tuple(tau[keep]))
+    E = pr(1j * w)
+    err = max(np.max(np.abs(E.real / Es - 1.0)), np.max(np.abs(E.imag - El) / np.maximum(El, 1e-12 * Es)))
+    return Prony(pr.E_inf, pr.E_k, pr.tau_k, float(err))

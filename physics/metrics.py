@@ -1,0 +1,78 @@
+"""Fit metrics between a measured signal ``y`` and a model output ``yhat``.
+
+All take 1-D arrays of equal length with finite values (otherwise
+:class:`~physics.errors.InputError`) and return plain floats.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError
+
+
+def _pair(y, yhat, *, allow_complex: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    arrays = []
+    for name, value in (("y", y), ("yhat", yhat)):
+        arr = np.asarray(value)
+        if arr.dtype.kind not in ("biufc" if allow_complex else "biuf"):
+            raise InputError(f"{name}: expected real numbers, got {arr.dtype} values")
+        if arr.ndim != 1 or arr.size == 0:
+            raise InputError(f"{name}: expected a non-empty 1-D array, got shape {arr.shape}")
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise InputError(f"{name}: element {bad[0]} is {arr[bad[0]]}; expected finite values")
+        arrays.append(arr if arr.dtype.kind == "c" else arr.astype(float))
+    if arrays[0].shape != arrays[1].shape:
+        raise InputError(f"y has {arrays[0].size} values but yhat has {arrays[1].size}")
+    return arrays[0], arrays[1]
+
+
+def _spread(y: np.ndarray, name: str = "y") -> float:
+    """‖y − ȳ‖, refusing a constant signal (for which relative metrics are undefined)."""
+    spread = float(np.linalg.norm(y - y.mean()))
+    if spread == 0:
+        raise InputError(f"{name} is constant; a relative metric or correlation is undefined")
+    return spread
+
+
+def rmse(y, yhat) -> float:
+    """Root-mean-square error sqrt(mean((y − ŷ)²)), in the unit of y."""
+    y, yhat = _pair(y, yhat)
+    return float(np.sqrt(np.mean((y - yhat) ** 2)))
+
+
+def nrmse(y, yhat) -> float:
+    """RMSE / std(y) (population std), a fraction: 0 is perfect, 1 is no better than the
+    mean of y.  Equals ‖y − ŷ‖ / ‖y − ȳ‖."""
+    y, yhat = _pair(y, yhat)
+    return float(np.linalg.norm(y - yhat)) / _spread(y)
+
+
+def fit_percent(y, yhat) -> float:
+    """Fit (%) = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖), the NRMSE fit of MATLAB ``compare``/
+    ``goodnessOfFit``: 100 is perfect, 0 is the mean of y, negative is worse."""
+    return 100.0 * (1.0 - nrmse(y, yhat))
+
+
+def correlation(y, yhat) -> float:
+    """Pearson correlation coefficient of y and ŷ (−1…1)."""
+    y, yhat = _pair(y, yhat)
+    return float(np.dot(y - y.mean(), yhat - yhat.mean()) / (_spread(y) * _spread(yhat, "yhat")))
+
+
+def j_err(mag_exp, mag_sim) -> float:
+    """Identification cost of the thesis, eq. 13 (De Luca 2014):
+    sqrt(Σ_i (|δ_exp(f_i)| − |δ_sim(f_i)|)² / N), in the unit of the magnitudes.
+
+    Accepts magnitudes or complex responses (their absolute values are compared).
+    """
+    a, b = _pair(mag_exp, mag_sim, allow_complex=True)
+    return rmse(np.abs(a), np.abs(b))
+
+
+def summary(y, yhat) -> dict:
+    """All time-domain metrics as a JSON-ready dict: ``n``, ``rmse``, ``nrmse``,
+    ``fit_percent``, ``correlation``.  (:func:`j_err` compares FRF magnitudes, not
+    signals, and is left out.)"""
+    return {"n": int(np.size(y)), "rmse": rmse(y, yhat), "nrmse": nrmse(y, yhat),
+            "fit_percent": fit_percent(y, yhat), "correlation": correlation(y, yhat)}
