@@ -146,6 +146,8 @@ def estimate_frf(u, y, fs: float, *, nperseg: int | None = None, window="hann",
         raise InputError(f"nperseg={nperseg} must lie within 2 and the record length {n}")
     if not 0 <= overlap < 1:
         raise InputError(f"overlap={overlap!r} must lie within [0, 1)")
+    if not 0 <= min_input_power < 1:
+        raise InputError(f"min_input_power={min_input_power!r} must lie within [0, 1)")
     noverlap = int(round(overlap * nperseg))
     if noverlap >= nperseg:
         raise InputError(f"overlap={overlap!r} leaves no step between segments of {nperseg}")
@@ -180,7 +182,8 @@ def estimate_frf(u, y, fs: float, *, nperseg: int | None = None, window="hann",
 
 def _tone(x: np.ndarray, fs: float, f0: float, i0: int, n: int) -> tuple[complex, float]:
     """Least-squares fit of x[i0:i0+n] ≈ Re(X e^{j2πf0 t}) + c0 + c1 t; returns the phasor
-    X and the standard error of each of its real and imaginary parts."""
+    X and the standard error of each of its real and imaginary parts (numpy float, so
+    that dividing by a zero amplitude gives inf rather than an exception)."""
     t = np.arange(n) / fs
     w = 2 * np.pi * f0 * t
     basis = np.column_stack([np.cos(w), np.sin(w), np.ones(n), t - t.mean()])
@@ -188,7 +191,7 @@ def _tone(x: np.ndarray, fs: float, f0: float, i0: int, n: int) -> tuple[complex
     resid = x[i0:i0 + n] - basis @ coef
     sigma2 = resid @ resid / (n - basis.shape[1])
     cov = sigma2 * np.linalg.inv(basis.T @ basis)
-    return complex(coef[0], -coef[1]), float(np.sqrt((cov[0, 0] + cov[1, 1]) / 2))
+    return complex(coef[0], -coef[1]), np.sqrt((cov[0, 0] + cov[1, 1]) / 2)
 
 
 def stepped_sine(records, *, settle: float = 0.0, confidence: float = 0.95,
@@ -216,11 +219,10 @@ def stepped_sine(records, *, settle: float = 0.0, confidence: float = 0.95,
                              f"{(u.size - i0) / fs:.4g} s remain, less than one period of "
                              f"f0={f0:g} Hz (or fewer than 5 samples)")
         (U, su), (Y, sy) = (_tone(x, fs, f0, i0, n) for x in (u, y))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            eps = np.hypot(sy / abs(Y), su / abs(U))
-        excited = abs(U) > min_snr * su
-        rows.append((float(f0), Y / U if excited else complex(np.nan, np.nan),
-                     eps if excited else np.nan, periods, excited))
+        excited = bool(abs(U) > min_snr * su)
+        with np.errstate(divide="ignore"):
+            h, eps = (Y / U, np.hypot(sy / abs(Y), su / abs(U))) if excited else (np.nan, np.nan)
+        rows.append((float(f0), h, eps, periods, excited))
     if not rows:
         raise InputError("stepped sine: no records given")
     rows.sort(key=lambda r: r[0])

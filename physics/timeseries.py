@@ -254,22 +254,23 @@ def read_table(path: Path) -> Table:
     """Read a CSV (header line of names) or .mat file into a :class:`Table`."""
     if path.suffix.lower() == ".mat":
         return _read_mat(path)
-    with open(path, encoding="utf-8-sig", newline="") as fh:
-        header_line = fh.readline()
-    names = [n.strip() for n in next(csv.reader([header_line]), [])]
-    if not any(names):
-        raise InputError(f"{path}: empty file; expected a header line of column names "
-                         "followed by data rows")
     try:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            header_line = fh.readline()
+        names = [n.strip() for n in next(csv.reader([header_line]), [])]
+        if not any(names):
+            raise InputError(f"{path}: empty file; expected a header line of column names "
+                             "followed by data rows")
         df = pd.read_csv(path, header=None, skiprows=1, names=list(range(len(names))),
                          dtype=str, keep_default_na=False, skip_blank_lines=False,
                          encoding="utf-8-sig")
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(range(len(names))))
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file; expected a CSV") from None
+    except pd.errors.ParserError as exc:
         raise InputError(f"{path}: cannot be parsed as CSV ({' '.join(str(exc).split())}); "
-                         "every line must have "
-                         f"the {len(names)} fields of the header") from None
+                         f"every line must have the {len(names)} fields of the header") from None
     raw = df.to_numpy(dtype=object)
     raw[pd.isna(raw)] = ""
     end = raw.shape[0]
