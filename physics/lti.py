@@ -15,7 +15,7 @@ from math import factorial
 
 import numpy as np
 from scipy import linalg
-from scipy.signal import lfilter
+from scipy.signal import lfilter, lfiltic
 
 
 @dataclass
@@ -131,69 +131,123 @@ def _moments(mu: np.ndarray, order: int) -> np.ndarray:
 
 
 def _padded_input(u: np.ndarray, nodes) -> tuple[np.ndarray, int]:
-    """Input with ghost samples (linear extrapolation) so every step sees all its nodes."""
+    """Input with ghost samples (linear extrapolation) so every step sees all its nodes;
+    time is the last axis."""
     lo, hi = -min(nodes), max(nodes) - 1
     parts = []
     if lo:
-        parts.append(u[:, :1] - (u[:, 1:2] - u[:, :1]) * np.arange(lo, 0, -1)[None, :])
+        parts.append(u[..., :1] - (u[..., 1:2] - u[..., :1]) * np.arange(lo, 0, -1))
     parts.append(u)
     if hi:
-        parts.append(u[:, -1:] + (u[:, -1:] - u[:, -2:-1]) * np.arange(1, hi + 1)[None, :])
-    return np.hstack(parts), lo
+        parts.append(u[..., -1:] + (u[..., -1:] - u[..., -2:-1]) * np.arange(1, hi + 1))
+    return np.concatenate(parts, axis=-1), lo
+
+
+def _periodic_input(u: np.ndarray, nodes) -> tuple[np.ndarray, int]:
+    """One period plus sample N (= sample 0), with ghost samples wrapped around."""
+    lo, hi = -min(nodes), max(nodes) - 1
+    ext = np.concatenate([u, u[..., :1]], axis=-1)
+    parts = [u[..., u.shape[-1] - lo:]] if lo else []
+    parts += [ext, u[..., 1:1 + hi]] if hi else [ext]
+    return np.concatenate(parts, axis=-1), lo
 
 
 def simulate(ss: StateSpace, u: np.ndarray, dt: float, x0: np.ndarray | None = None,
-             hold: str = "cubic", chunk: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """Simulate ``ss`` for input samples ``u`` (n_in × N, spacing ``dt`` s).
+             hold: str = "cubic", chunk: int = 16, periodic: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Simulate ``ss`` for input samples ``u`` (spacing ``dt`` s).
 
-    Returns (y, x_final) with y of shape (n_out × N); y[:, 0] uses the initial state x0
-    (zeros by default).  Exact for inputs that are polynomial (linear or cubic Lagrange)
-    between samples.  Falls back to a matrix-exponential recursion when A is not
-    safely diagonalisable.
+    ``u`` is (n_in, N), or (n_in, B, N) for a batch of B independent input records run
+    through the same system.  Returns (y, x_final): y is (n_out, N) or (n_out, B, N);
+    y[..., 0] uses the initial state x0 (zeros by default; (n,) or (n, B)).  Exact for
+    inputs that are polynomial (linear or cubic Lagrange) between samples.  Falls back
+    to a matrix-exponential recursion when A is not safely diagonalisable.
+
+    ``periodic=True`` treats the record as one period of a periodic input (sample N is
+    sample 0 again) and starts from the exact periodic steady state instead of x0: the
+    response contains no start-up transient, however slow the system.
     """
-    u = np.atleast_2d(np.asarray(u, dtype=float))
-    n_in, N = u.shape
+    u = np.asarray(u, dtype=float)
+    single = u.ndim <= 2
+    u = np.atleast_2d(u)[:, None, :] if single else u
+    n_in, B, N = u.shape
     if n_in != ss.n_inputs:
         raise ValueError(f"input has {n_in} channels, system expects {ss.n_inputs}")
     if hold not in _HOLD_NODES:
         raise ValueError(f"hold must be one of {sorted(_HOLD_NODES)}")
-    y = ss.D @ u
     n = ss.n_states
-    x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)
+    x0 = np.zeros((n, B)) if x0 is None else np.asarray(x0, dtype=float).reshape(n, -1) * np.ones((1, B))
+    y = np.einsum("oi,ibn->obn", ss.D, u)
     if n == 0 or N == 0:
-        return y, x0
+        return (y[:, 0] if single else y), (x0[:, 0] if single else x0)
     if N < 3 and hold == "cubic":
         hold = "linear"
     if N < 2:
-        return y + (ss.C @ x0)[:, None], x0
+        y += (ss.C @ x0)[:, :, None]
+        return (y[:, 0] if single else y), (x0[:, 0] if single else x0)
     nodes = _HOLD_NODES[hold]
     lam, V = linalg.eig(ss.A)
+    if periodic:
+        x0 = np.zeros_like(x0)
+        N_run = N + 1
+    else:
+        N_run = N
     if np.linalg.cond(V) > 1e8:
-        return _simulate_expm(ss, u, dt, x0, nodes)
+        if periodic:
+            raise ValueError("periodic steady state needs a diagonalisable system")
+        Y, X = zip(*(_simulate_expm(ss, u[:, b], dt, x0[:, b], nodes) for b in range(B)))
+        y, xf = np.stack(Y, axis=1), np.stack(X, axis=1)
+        return (y[:, 0] if single else y), (xf[:, 0] if single else xf)
     Vinv = linalg.inv(V)
     Bt, Ct, z0 = Vinv @ ss.B, ss.C @ V, Vinv @ x0
     mu = lam * dt
     M = _moments(mu, len(nodes) - 1)
     W = dt * (_lagrange_coeffs(nodes) @ M)  # (n_nodes, n_modes): weight of u[n + node]
-    up, off = _padded_input(u, nodes)
+    up, off = _periodic_input(u, nodes) if periodic else _padded_input(u, nodes)
+    lead = max(nodes)
+    k0 = off + lead                          # padded index of the newest sample used for z[1]
+    x_new = up[:, :, k0:k0 + N_run - 1]      # (n_in, B, N_run-1)
+    x_past = up[:, :, k0 - len(nodes) + 1:k0][:, :, ::-1]  # older samples, newest first
     # Conjugate pairs: keep one (Im > 0) and double its real part; real modes count once.
     keep = np.where(lam.imag >= -1e-12 * np.maximum(1.0, np.abs(lam)))[0]
     wgt = np.where(np.abs(lam[keep].imag) > 1e-12 * np.maximum(1.0, np.abs(lam[keep])), 2.0, 1.0)
     a = np.exp(mu)
     z_final = np.array(z0, dtype=complex)
+    taps = W[::-1]                           # FIR taps, newest sample first (nodes descending)
     for c0 in range(0, keep.size, chunk):
         idx = keep[c0:c0 + chunk]
-        Z = np.empty((idx.size, N), dtype=complex)
+        Z = np.zeros((idx.size, B, N_run), dtype=complex)
         for r, k in enumerate(idx):
-            bu = Bt[k] @ up  # projected input on the padded grid
-            v = sum(W[j, k] * bu[off + nd: off + nd + N - 1] for j, nd in enumerate(nodes))
-            Z[r, 0] = z0[k]
-            Z[r, 1:] = lfilter([1.0], [1.0, -a[k]], v, zi=[a[k] * z0[k]])[0]
-            z_final[k] = Z[r, -1]
-        y += ((Ct[:, idx] * wgt[None, :]) @ Z).real
+            Z[r, :, 0] = z0[k]
+            real = lam[k].imag == 0.0
+            acc = np.array([1.0, -a[k].real]) if real else np.array([1.0, -a[k]])
+            first = _first_input(Bt[k])
+            for i in np.nonzero(np.abs(Bt[k]) > 1e-300)[0]:
+                b = taps[:, k] * Bt[k, i]
+                b = b.real if real else b
+                y0 = z0[k] if i == first else np.zeros(B)
+                zi = np.stack([lfiltic(b, acc, [y0[bb].real if real else y0[bb]], x_past[i, bb])
+                               for bb in range(B)])
+                Z[r, :, 1:] += lfilter(b, acc, x_new[i], axis=-1, zi=zi)[0]
+            if first < 0 and z0[k].any():
+                Z[r, :, 1:] = z0[k][:, None] * a[k] ** np.arange(1, N_run)[None, :]
+            if periodic:  # add the homogeneous solution that makes z(N) = z(0)
+                den = 1.0 - a[k] ** N
+                zp = Z[r, :, N] / den if abs(den) > 1e-13 else np.zeros(B, dtype=complex)
+                Z[r] += zp[:, None] * a[k] ** np.arange(N_run)[None, :]
+            z_final[k] = Z[r, :, N - 1]
+        Cw = Ct[:, idx] * wgt[None, c0:c0 + idx.size]
+        Zf = Z[:, :, :N].reshape(idx.size, B * N)
+        y += (Cw.real @ Zf.real - Cw.imag @ Zf.imag).reshape(-1, B, N)
     conj = np.setdiff1d(np.arange(n), keep)
     z_final[conj] = np.conj(z_final[_partner(lam, conj, keep)])
-    return y, (V @ z_final).real
+    xf = (V @ z_final).real
+    return (y[:, 0] if single else y), (xf[:, 0] if single else xf)
+
+
+def _first_input(b: np.ndarray) -> int:
+    """Index of the input channel that carries a mode's initial condition."""
+    nz = np.nonzero(np.abs(b) > 1e-300)[0]
+    return int(nz[0]) if nz.size else -1
 
 
 def _partner(lam, conj, keep):

@@ -1,0 +1,134 @@
+"""The actuator model: a device plus a list of effects, assembled into one chain.
+
+Chain (each stage is one slot of :data:`physics.effects.SLOTS`)::
+
+    Vin ─▶ double layer / charge law (per area) ─▶ line (voltage along the strip)
+        ─▶ interface cation excess ─▶ solvent factor × kf  ─▶ couple along the strip
+        ─▶ beam section (EI*(s), ρA) ─▶ modal cantilever + quasi-static residual ─▶ tip
+
+Both solvers (:mod:`physics.frequency`, :mod:`physics.timedomain`) walk this chain
+through the same effect objects, so they cannot drift apart.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .beam import CantileverModes
+from .device import Device, load_device
+from .effects import EFFECTS, SLOTS, Effect
+from .effects.double_layer import DoubleLayer, DoubleLayerProps
+from .errors import InputError
+
+
+def resolve_effects(effects, device: Device) -> tuple[str, ...]:
+    """Effect ids from a list, a comma-separated string, ``"default"`` (the device's
+    ``default_effects``), ``"all"``, ``"linear"`` or ``"none"``; ``double_layer`` is
+    always included."""
+    if effects is None or effects == "default":
+        ids = list(device.default_effects)
+    elif isinstance(effects, str):
+        key = effects.strip()
+        if key == "all":
+            ids = list(EFFECTS)
+        elif key == "linear":
+            ids = [k for k, v in EFFECTS.items() if v.linear]
+        elif key in ("none", ""):
+            ids = []
+        else:
+            ids = [e.strip() for e in key.split(",") if e.strip()]
+    else:
+        ids = [e.id if isinstance(e, Effect) else str(e) for e in effects]
+    unknown = [e for e in ids if e not in EFFECTS]
+    if unknown:
+        raise InputError(f"unknown effect(s) {', '.join(unknown)}; known effects: {', '.join(EFFECTS)}")
+    ids = set(ids) | {"double_layer"}
+    return tuple(k for k in EFFECTS if k in ids)
+
+
+class ActuatorModel:
+    """A device with a set of effects switched on (every other slot uses its "off" variant)."""
+
+    def __init__(self, device, effects=None, *, n_modes: int = 4):
+        self.device: Device = load_device(device)
+        self.effect_ids = resolve_effects(effects, self.device)
+        self.n_modes = int(n_modes)
+        if self.n_modes < 1:
+            raise InputError("n_modes must be at least 1")
+        self.components: dict[str, Effect] = {}
+        for slot, (on, off) in SLOTS.items():
+            cls = on if (on.id in self.effect_ids or off is None) else off
+            self.components[slot] = cls(self.device)
+
+    # --- the effect list, as the user reads it back --------------------------------------
+    @property
+    def effects(self) -> list[Effect]:
+        return list(self.components.values())
+
+    @property
+    def is_linear(self) -> bool:
+        return all(type(e).linear for e in self.effects)
+
+    def __getattr__(self, slot: str) -> Effect:
+        comps = self.__dict__.get("components", {})
+        if slot in comps:
+            return comps[slot]
+        raise AttributeError(slot)
+
+    def __repr__(self) -> str:
+        return f"ActuatorModel({self.device.name!r}, effects={list(self.effect_ids)})"
+
+    # --- geometry and parameters ----------------------------------------------------------
+    @property
+    def free_length(self) -> float:
+        return self.device["L_total"] - self.device["L_clamp"]
+
+    def modes(self) -> CantileverModes:
+        return CantileverModes(self.free_length, self.n_modes)
+
+    def check_rh(self, rh, what: str = "rh"):
+        """Validate RH [%]; None is allowed only when the humidity effect is off."""
+        if rh is None:
+            if self.components["humidity"].enabled:
+                raise InputError(f"the humidity effect is on: give {what} (relative humidity, %)")
+            return self.device.reference_rh
+        arr = np.asarray(rh, dtype=float)
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > 100):
+            raise InputError(f"{what} must be finite and within 0–100 %")
+        return arr if arr.ndim else float(arr)
+
+    def params_at(self, rh=None) -> dict:
+        """Parameters (SI) at relative humidity ``rh`` [%] (Y's factor is applied by the section)."""
+        rh = self.check_rh(rh)
+        return self.components["humidity"].params_at(dict(self.device.params), float(np.mean(rh)))
+
+    def double_layer_props(self, p: dict, T=None) -> DoubleLayerProps:
+        return DoubleLayer.props(p, T)
+
+    def section(self, p: dict, stiffness_factor: float = 1.0):
+        """(EI*(s) Prony series [N m²], ρA [kg/m]) with the humidity stiffness factor."""
+        layered = self.components["section"].layered
+        polymer = self.components["modulus"].polymer_modulus(p, layered)
+        return self.components["section"].section(p, polymer, stiffness_factor)
+
+    def describe(self) -> str:
+        lines = [repr(self)]
+        for slot, e in self.components.items():
+            lines.append(f"  {slot:12s} {e.label:24s} {e.summary}")
+        return "\n".join(lines)
+
+    # --- solvers --------------------------------------------------------------------------
+    def frequency_response(self, freqs, rh=None):
+        from .frequency import frequency_response
+        return frequency_response(self, None, freqs, rh=rh)
+
+    def simulate(self, t, voltage, rh=None, **kw):
+        from .timedomain import simulate
+        return simulate(self, None, t, voltage, rh=rh, **kw)
+
+
+def as_model(device, effects=None, n_modes: int = 4) -> ActuatorModel:
+    if isinstance(device, ActuatorModel):
+        if effects is not None and resolve_effects(effects, device.device) != device.effect_ids:
+            return ActuatorModel(device.device, effects, n_modes=device.n_modes)
+        return device
+    return ActuatorModel(device, effects, n_modes=n_modes)
