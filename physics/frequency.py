@@ -48,9 +48,14 @@ class FrequencyResponse:
     def phase_deg(self) -> np.ndarray:
         return np.degrees(np.unwrap(np.angle(self.deflection)))
 
-    def peak(self) -> tuple[float, float]:
-        """(frequency [Hz], magnitude [m/V]) of the largest deflection magnitude."""
-        i = int(np.argmax(self.magnitude))
+    def resonance(self) -> tuple[float, float] | None:
+        """(frequency [Hz], magnitude [m/V]) of the most prominent local maximum of the
+        deflection magnitude (the first bending resonance), or None if there is none."""
+        from scipy.signal import find_peaks
+        idx, props = find_peaks(np.log(self.magnitude), prominence=0.05)
+        if idx.size == 0:
+            return None
+        i = idx[int(np.argmax(props["prominences"]))]
         return float(self.freq[i]), float(self.magnitude[i])
 
     def to_dict(self) -> dict:

@@ -1,0 +1,41 @@
+"""``eap effects``: list the physical effects, what they do and the parameters they use."""
+from __future__ import annotations
+
+from physics.device import all_param_specs, load_device
+from physics.effects import EFFECTS, SLOTS
+
+NAME = "effects"
+HELP = "list the physical effects with one-line explanations and their parameters"
+
+
+def add_arguments(p):
+    p.add_argument("--device", default=None, help="also show this device's values of the parameters")
+    p.add_argument("--explain", default=None, metavar="ID", help="print the full explanation of one effect")
+
+
+def run(args) -> int:
+    dev = load_device(args.device) if args.device else None
+    specs = all_param_specs()
+    if args.explain:
+        if args.explain not in EFFECTS:
+            from physics.errors import InputError
+            raise InputError(f"unknown effect {args.explain!r}; known: {', '.join(EFFECTS)}")
+        print(EFFECTS[args.explain].explanation.strip())
+        return 0
+    for slot, (on, off) in SLOTS.items():
+        print(f"{on.id:22s} {on.summary}")
+        print(f"{'':22s} off: {off.summary if off else '(always on)'}")
+        names = [p.name for p in on.params] + [t.name for t in on.tables] + list(on.requires)
+        for n in names:
+            if n in specs:
+                s = specs[n]
+                val = f" = {dev.params[n]:.4g}" if dev is not None and n in dev.params else ""
+                print(f"{'':24s}{n}{val} [{s.unit}]: {s.description}")
+            else:
+                have = " (present)" if dev is not None and n in dev.tables else ""
+                print(f"{'':24s}{n}{have}: table")
+        if on.id == "humidity" and dev is not None:
+            for m in dev.humidity_maps.values():
+                print(f"{'':24s}map {m.param} ({m.mode}) over RH {m.rh[0]:g}-{m.rh[-1]:g} %: {m.source}")
+    print("\n`eap effects --explain ID` prints the physics and references of one effect.")
+    return 0

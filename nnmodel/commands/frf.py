@@ -1,0 +1,43 @@
+"""``eap frf``: closed-form small-signal frequency response of a device."""
+from __future__ import annotations
+
+import numpy as np
+
+from physics.fileio import write_json
+from physics.frequency import frequency_response
+from physics.frfdata import FRFData, write_frf
+from physics.plotting import plot_bode
+
+from ._common import add_model_options, provenance
+
+NAME = "frf"
+HELP = "frequency response (deflection/voltage, impedance, Cs_up) as JSON, CSV and a Bode plot"
+
+
+def add_arguments(p):
+    add_model_options(p)
+    p.add_argument("--f-min-Hz", type=float, default=0.1, help="lowest frequency [Hz]")
+    p.add_argument("--f-max-Hz", type=float, default=50.0, help="highest frequency [Hz]")
+    p.add_argument("--points", type=int, default=500, help="log-spaced frequencies")
+    p.add_argument("--json", default="frf.json", help="output JSON (frequency, magnitude, phase, ...)")
+    p.add_argument("--csv", default=None, help="also write the FRF CSV of DATA_FORMAT.md")
+    p.add_argument("--plot", default=None, help="also write a Bode plot (PNG)")
+
+
+def run(args) -> int:
+    f = np.logspace(np.log10(args.f_min_Hz), np.log10(args.f_max_Hz), args.points)
+    fr = frequency_response(args.device, args.effects, f, rh=args.rh, n_modes=args.n_modes)
+    out = fr.to_dict()
+    out["provenance"] = provenance()
+    write_json(args.json, out)
+    if args.csv:
+        write_frf(FRFData(freq=fr.freq, response=fr.deflection, rh=fr.rh,
+                          meta={"device": fr.device, "effects": list(fr.effects)}), args.csv)
+    if args.plot:
+        plot_bode(fr.freq, {f"{fr.device} RH {fr.rh:g} %": fr.deflection}, args.plot,
+                  title=", ".join(fr.effects))
+    res = fr.resonance()
+    peak = f", resonance {1e3 * res[1]:.3g} mm/V at {res[0]:.3g} Hz" if res else ", no resonance in range"
+    print(f"{fr.device} [{', '.join(fr.effects)}] RH {fr.rh:g} %: {1e3 * fr.magnitude[0]:.3g} mm/V "
+          f"at {fr.freq[0]:g} Hz{peak}; wrote {args.json}")
+    return 0

@@ -1,0 +1,75 @@
+"""``eap run``: the end-to-end job on built-in defaults (the README's first command)."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from physics import signals
+from physics.fileio import write_json, write_text
+from physics.frequency import frequency_response
+from physics.model import ActuatorModel
+from physics.plotting import plot_bode, plot_timeseries
+from physics.timeseries import write_timeseries
+
+from ._common import out_dir, provenance
+
+NAME = "run"
+HELP = "run the end-to-end job on built-in defaults and write a report folder"
+
+
+def add_arguments(p):
+    p.add_argument("--out", default="runs/quickstart", help="report folder")
+
+
+def _physics_stage(d: Path) -> dict:
+    """Thesis experiments on both devices: FRFs over RH 40–100 % and a 4 Vpp sweep."""
+    out = {}
+    rhs = (40.0, 60.0, 80.0, 100.0)
+    for dev in ("ipmc_pt_eg", "ip2c_pedot_water"):
+        model = ActuatorModel(dev, "default")
+        f = np.logspace(-1, np.log10(50.0), 500)
+        frs = {rh: frequency_response(model, None, f, rh=rh) for rh in rhs}
+        plot_bode(f, {f"RH {rh:g} %": fr.deflection for rh, fr in frs.items()}, d / f"{dev}_bode.png",
+                  title=f"{dev}: {', '.join(model.effect_ids)}")
+        sig = signals.sweep(2.0, 0.1, 50.0, 100.0, 1000.0)
+        t0 = time.perf_counter()
+        res = model.simulate(sig.t, sig.v, rh=60.0)
+        elapsed = time.perf_counter() - t0
+        ts = res.to_timeseries()
+        ts.meta.update({"signal": sig.describe(), "provenance": provenance()})
+        write_timeseries(ts, d / f"{dev}_sweep_rh60.csv", overwrite=True)
+        plot_timeseries(res.time, {"voltage": (res.voltage, "V"), "deflection": (1e3 * res.deflection, "mm"),
+                                   "current": (1e3 * res.current, "mA")}, d / f"{dev}_sweep_rh60.png",
+                        title=f"{dev}, 4 Vpp sweep 0.1–50 Hz, RH 60 %")
+        out[dev] = {"effects": list(model.effect_ids),
+                    "resonance_Hz_by_rh": {f"{rh:g}": (frs[rh].resonance() or (float("nan"),))[0] for rh in rhs},
+                    "gain_at_1Hz_mm_per_V_by_rh": {
+                        f"{rh:g}": float(1e3 * np.interp(1.0, f, frs[rh].magnitude)) for rh in rhs},
+                    "sweep_simulation_runtime_s": elapsed,
+                    "sweep_deflection_peak_to_peak_mm": float(1e3 * np.ptp(res.deflection))}
+    return out
+
+
+def run(args) -> int:
+    d = out_dir(args.out)
+    t0 = time.perf_counter()
+    report = {"physics": _physics_stage(d)}
+    report["runtime_s"] = time.perf_counter() - t0
+    report["provenance"] = provenance()
+    write_json(d / "report.json", report)
+    imgs = sorted(p.name for p in d.glob("*.png"))
+    html = ["<html><head><meta charset='utf-8'><title>eap-model quickstart</title></head><body>",
+            "<h1>eap-model quickstart report</h1><pre>"]
+    for dev, r in report["physics"].items():
+        html.append(f"{dev}: effects {', '.join(r['effects'])}\n  resonance by RH [Hz]: "
+                    + ", ".join(f"{k} %: {v:.1f}" for k, v in r["resonance_Hz_by_rh"].items()))
+    html.append("</pre>")
+    html += [f"<h3>{name}</h3><img src='{name}' width='700'>" for name in imgs]
+    html.append("</body></html>")
+    write_text(d / "index.html", "\n".join(html))
+    for dev, r in report["physics"].items():
+        print(f"{dev}: resonance by RH " + ", ".join(f"{k}%→{v:.1f} Hz" for k, v in r["resonance_Hz_by_rh"].items()))
+    print(f"report: {d / 'index.html'} (JSON: {d / 'report.json'}); total {report['runtime_s']:.1f} s")
+    return 0
