@@ -119,7 +119,7 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
             out[k] = np.empty((nb, N))
     if thermal:
         tn = model.components["temperature"].network(net.p, edges)
-        Kt = np.diag(tn.convection) + np.diag(np.append(tn.sink, np.zeros(nb - 1)))
+        Kt = np.diag(tn.convection)
         Kt[np.arange(nb - 1), np.arange(nb - 1)] += tn.links
         Kt[np.arange(1, nb), np.arange(1, nb)] += tn.links
         Kt[np.arange(nb - 1), np.arange(1, nb)] -= tn.links
@@ -142,7 +142,7 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
             if thermal:
                 f, U, Ueq, *_ = net.rhs(Q, vin[n + 1])
                 P = net.joule(U, Ueq, vin[n + 1])
-                rhs_T = tn.capacity / dt * T + P + (tn.convection + np.append(tn.sink, np.zeros(nb - 1))) * tn.T_ext
+                rhs_T = tn.capacity / dt * T + P + tn.convection * tn.T_ext
                 T = linalg.lu_solve(heat_lu, rhs_T)
                 if np.max(np.abs(T - T_props)) > 5e-3:
                     net.set_temperature(T)

@@ -133,6 +133,8 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     else:
         p = model.params_at(float(rh_t[0]))
         ell, c_up, c_low, current, flds = _electrochemistry_lti(model, p, edges, v, dt, hold, fields, periodic)
+        if "temperature" in fields:
+            flds["temperature"] = np.full((edges.size - 1, t.size), p["T_ext"])
     if "cation" in fields:
         flds["cation_upper"], flds["cation_lower"] = c_up[1:], c_low[1:]
 

@@ -3,8 +3,9 @@
 Thesis eq. 12: ρ Cp ∂T/∂t − ∇·(k∇T) = Q_T + h_trans (T_ext − T), with Q_T the Joule
 heat of the currents (eq. 12.b).  Reduced along the strip: each segment has the heat
 capacity and axial conductance of its layers (polymer, electrodes, and the copper
-contacts in the clamp), loses heat by convection from both faces, and the clamp's outer
-end is held at T_ext (heat sink).  Heat sources: the electrode currents in the sheet
+contacts in the clamp) and loses heat by convection from both faces; the ends are
+insulated apart from that (thesis §4.5.1–4.5.2: convective flux on the supply and beam
+electrodes).  Heat sources: the electrode currents in the sheet
 resistance, the ionic current in the bulk resistance and the electronic leakage through
 the polymer.  Temperature enters the electrochemistry through the mobility µ = D/(RT)
 (eq. 6) — Debye length and ionic conductivity — and, optionally, an Arrhenius
@@ -29,7 +30,6 @@ class ThermalNetwork:
     capacity: np.ndarray      # J/K per segment
     links: np.ndarray         # W/K between consecutive segments
     convection: np.ndarray    # W/K to ambient per segment
-    sink: float               # W/K from segment 0 to the clamp heat sink
     T_ext: float              # K
 
 
@@ -72,5 +72,4 @@ class Thermal(Isothermal):
         half = 0.5 * dz / kseg                       # thermal resistance of half a segment
         links = 1.0 / (half[:-1] + half[1:])
         conv = 2.0 * w * p["h_trans"] * dz
-        sink = 1.0 / half[0] if dz[0] > 0 else 0.0
-        return ThermalNetwork(cap, links, conv, sink, p["T_ext"])
+        return ThermalNetwork(cap, links, conv, p["T_ext"])

@@ -1,0 +1,65 @@
+"""The physics commands of the `eap` command line, end to end."""
+import json
+
+import numpy as np
+import pytest
+
+from nnmodel.cli import main
+from physics.timeseries import read_timeseries
+
+
+def test_simulate_writes_a_readable_time_series_and_plots(tmp_path, capsys):
+    out = tmp_path / "sim"
+    rc = main(["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone",
+               "--frequency-Hz", "2", "--duration-s", "3", "--fs-Hz", "200", "--fields", "voltage",
+               "--out", str(out)])
+    assert rc == 0
+    ts = read_timeseries(out / "simulation.csv")
+    assert ts.n == 600 and ts.fs == pytest.approx(200.0)
+    assert np.all(ts.rh == 60.0) and np.ptp(ts.deflection) > 0
+    assert (out / "simulation.png").stat().st_size > 1000
+    summary = json.loads((out / "summary.json").read_text())
+    assert "fractional_coupling" in summary["effects"]
+    with np.load(out / "fields.npz", allow_pickle=False) as f:
+        assert f["voltage"].shape[1] == 600
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_simulate_from_an_input_file_never_overwrites_it(tmp_path):
+    src = tmp_path / "in.csv"
+    t = np.arange(0, 1, 0.01)
+    src.write_text("time_s,voltage_V,rh_pct\n" + "\n".join(f"{a},{np.sin(6 * a)},55" for a in t))
+    before = src.read_text()
+    assert main(["simulate", "--device", "ipmc_pt_eg", "--input", str(src), "--out", str(tmp_path)]) == 0
+    assert src.read_text() == before
+    assert read_timeseries(tmp_path / "simulation.csv").rh[0] == 55.0
+
+
+def test_frf_json_csv_and_plot(tmp_path):
+    j, c, p = tmp_path / "f.json", tmp_path / "f.csv", tmp_path / "f.png"
+    assert main(["frf", "--device", "ipmc_pt_eg", "--rh", "80", "--points", "50", "--json", str(j),
+                 "--csv", str(c), "--plot", str(p)]) == 0
+    data = json.loads(j.read_text())
+    assert len(data["freq_Hz"]) == 50 and data["rh_pct"] == 80
+    assert p.stat().st_size > 1000
+    from physics.frfdata import read_frf
+    assert read_frf(c).freq.size == 50
+
+
+def test_effects_lists_every_effect(capsys):
+    from physics.effects import EFFECTS
+    assert main(["effects", "--device", "ipmc_pt_eg"]) == 0
+    out = capsys.readouterr().out
+    for eid in EFFECTS:
+        assert eid in out
+    assert main(["effects", "--explain", "solvent_diffusion"]) == 0
+    assert "back-relaxation" in capsys.readouterr().out
+
+
+def test_bad_options_give_one_clear_error(tmp_path, capsys):
+    rc = main(["frf", "--device", "ipmc_pt_eg", "--effects", "magic", "--json", str(tmp_path / "x.json")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "unknown effect(s) magic" in err and "Traceback" not in err
+    assert main(["frf", "--device", "ipmc_pt_eg", "--effects", "humidity", "--json", str(tmp_path / "y.json")]) == 2
+    assert "give rh" in capsys.readouterr().err

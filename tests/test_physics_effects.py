@@ -1,0 +1,152 @@
+"""Each effect against an independent limit or closed form."""
+import numpy as np
+import pytest
+from scipy.integrate import solve_bvp
+
+import physics
+from physics import signals
+from physics.device import load_device
+from physics.effects.double_layer import DoubleLayer
+from physics.frequency import frequency_response
+from physics.model import ActuatorModel
+
+F = np.logspace(-1, np.log10(50), 40)
+
+
+# --- electrode_resistance ---------------------------------------------------------------
+def test_no_resistance_limit():
+    d = load_device("ipmc_pt_eg").with_params(Rs=1e-7)
+    a = frequency_response(d, "electrode_resistance", F)
+    b = frequency_response(d, "none", F)
+    np.testing.assert_allclose(a.deflection, b.deflection, rtol=1e-6)
+    np.testing.assert_allclose(a.current, b.current, rtol=1e-6)
+
+
+def test_transmission_line_matches_a_boundary_value_solve():
+    """U'' = 2 Rs Y_p U, U(0) = 1, U'(L) = 0 solved numerically (scipy solve_bvp) at 20 Hz."""
+    m = ActuatorModel("ipmc_pt_eg", "electrode_resistance")
+    p = dict(m.device.params)
+    s = 2j * np.pi * 20.0
+    d = DoubleLayer.props(p)
+    Yp = s * DoubleLayer.charge_per_volt(np.array([s]), d)[0][0] + d.G_leak
+    k2 = 2 * p["Rs"] * Yp
+    L = m.free_length
+
+    def rhs(z, y):  # y = [Re U, Im U, Re U', Im U']
+        U = y[0] + 1j * y[1]
+        dd = k2 * U
+        return np.vstack([y[2], y[3], dd.real, dd.imag])
+
+    def bc(ya, yb):
+        return np.array([ya[0] - 1.0, ya[1], yb[2], yb[3]])
+
+    z = np.linspace(0, L, 200)
+    sol = solve_bvp(rhs, bc, z, np.zeros((4, z.size)), tol=1e-8, max_nodes=100000)
+    assert sol.success
+    U = m.components["line"].distribution(np.array([s]), np.array([Yp]), p, z)[0]
+    ref = sol.sol(z)
+    np.testing.assert_allclose(U, ref[0] + 1j * ref[1], atol=1e-5)
+    assert np.all(np.diff(np.abs(U)) < 0)     # the voltage falls along the strip
+
+
+def test_voltage_falls_along_the_strip_in_time():
+    sig = signals.tone(1.0, 20.0, 1.0, 2000.0)
+    r = physics.simulate("ipmc_pt_eg", "electrode_resistance", sig.t, sig.v, fields=("voltage",), periodic=True)
+    amp = np.ptp(r.fields["voltage"], axis=1)
+    assert np.all(np.diff(amp) < 0)
+    assert amp[-1] < 0.9 * amp[0] < 0.9 * np.ptp(sig.v)
+
+
+# --- solvent_diffusion ------------------------------------------------------------------
+def test_solvent_back_diffusion_removes_the_dc_gain():
+    f = np.logspace(-7, -5, 5)
+    fr = frequency_response("ip2c_pedot_water", "solvent_diffusion", f)
+    slope = np.diff(np.log(np.abs(fr.deflection))) / np.diff(np.log(f))
+    np.testing.assert_allclose(slope, 1.0, atol=1e-3)      # B(s) ≈ s h²/(3 Ds): gain ∝ f → 0 at DC
+    nodiff = frequency_response("ip2c_pedot_water", "none", f).magnitude
+    h, Ds = 90e-6, 2.4e-10
+    np.testing.assert_allclose(fr.magnitude / nodiff, 2 * np.pi * f * h ** 2 / (3 * Ds), rtol=1e-3)
+
+
+def test_step_relaxation_rate_is_the_first_diffusion_mode():
+    """After a voltage step the deflection relaxes back with rate Ds (π/2h)² (slowest mode of
+    diffusion on [0, h] with a Dirichlet midplane and a no-flux face)."""
+    d = load_device("ip2c_pedot_water")
+    for Ds in (2.4e-10, 9.6e-10):
+        dev = d.with_params(D_solvent=Ds)
+        sig = signals.steps([1.0], [0.05], duration=120.0, fs=20.0)
+        r = physics.simulate(dev, "solvent_diffusion", sig.t, sig.v, hold="linear")
+        rate = Ds * (np.pi / d["t_polymer"]) ** 2
+        sel = (sig.t > 4.0 / rate) & (sig.t < 8.0 / rate)
+        fit = np.polyfit(sig.t[sel], np.log(r.deflection[sel]), 1)[0]
+        assert -fit == pytest.approx(rate, rel=0.02)
+
+
+# --- fractional_coupling ----------------------------------------------------------------
+def test_fractional_coupling_has_the_thesis_constant_phase():
+    """Thesis §4.1 case II: the phase of kf(f) = 0.095/(j2πf)^0.6 is constant at −54°."""
+    m = ActuatorModel("ipmc_pt_eg", "fractional_coupling")
+    p = dict(m.device.params)
+    f = np.logspace(-1, np.log10(50), 20)
+    kf = m.components["coupling"].kf(2j * np.pi * f, p)
+    np.testing.assert_allclose(np.degrees(np.angle(kf)), -54.0, atol=0.05)
+    slope = np.diff(np.log(np.abs(kf))) / np.diff(np.log(f))
+    np.testing.assert_allclose(slope, -0.6, atol=1e-3)
+
+
+# --- viscoelastic -----------------------------------------------------------------------
+@pytest.mark.parametrize("device,table", [("ipmc_pt_eg", "dma"), ("ipmc_pt_eg", "dma_membrane"),
+                                          ("ip2c_pedot_water", "dma")])
+def test_prony_fit_reproduces_the_dma_table_and_is_passive(device, table):
+    from physics.effects.viscoelastic import fit_prony
+    t = load_device(device).tables[table]
+    pr = fit_prony(tuple(t["freq"]), tuple(t["storage"]), tuple(t["loss"]))
+    E = pr(2j * np.pi * t["freq"])
+    np.testing.assert_allclose(E.real, t["storage"], rtol=0.04)
+    np.testing.assert_allclose(E.imag, t["loss"], rtol=0.01)
+    Ew = pr(2j * np.pi * np.logspace(-6, 6, 400))
+    assert np.all(Ew.imag >= 0) and np.all(Ew.real > 0)
+
+
+# --- humidity ---------------------------------------------------------------------------
+def test_resonance_moves_with_rh_as_sqrt_of_table_V_modulus():
+    table_v = {40: 0.49, 60: 0.39, 80: 0.225, 100: 0.18}  # GPa, thesis Table V
+    d = load_device("ipmc_pt_eg").with_params(beta_f=1e-7)
+    f1 = {}
+    for rh in table_v:
+        guess = frequency_response(d, "humidity", [1.0], rh=rh).natural_frequencies[0]
+        f = np.linspace(0.98 * guess, 1.02 * guess, 4001)
+        f1[rh] = f[np.argmax(frequency_response(d, "humidity", f, rh=rh).magnitude)]
+    for rh, Y in table_v.items():
+        assert f1[rh] / f1[100] == pytest.approx(np.sqrt(Y / table_v[100]), rel=5e-3)
+
+
+def test_humidity_needs_rh_and_rejects_bad_values():
+    with pytest.raises(physics.InputError, match="give rh"):
+        frequency_response("ipmc_pt_eg", "humidity", F)
+    with pytest.raises(physics.InputError, match="0–100"):
+        frequency_response("ipmc_pt_eg", "humidity", F, rh=120)
+
+
+def test_rh_outside_the_table_warns():
+    with pytest.warns(UserWarning, match="outside the 40–100 % range"):
+        frequency_response("ipmc_pt_eg", "humidity", F, rh=20)
+
+
+# --- thesis behaviour ---------------------------------------------------------------------
+def test_ipmc_at_full_hydration_is_an_underdamped_resonator_inside_1_50_Hz():
+    f = np.logspace(0, np.log10(50), 400)
+    fr = frequency_response("ipmc_pt_eg", "default", f, rh=100)
+    fres, peak = fr.resonance()
+    assert 1.0 < fres < 50.0
+    assert peak > 2.0 * fr.magnitude[0]                       # resonant amplification
+    drop = fr.phase_deg[0] - fr.phase_deg[-1]
+    assert 150.0 < drop < 230.0                                # second-order phase roll-off
+
+
+def test_ip2c_low_frequency_response_is_fractional():
+    """Eq. 16: below the resonance the IP2C's gain falls with a fractional slope."""
+    f = np.logspace(-1, 0.5, 20)
+    fr = frequency_response("ip2c_pedot_water", "fractional_coupling", f, rh=100)
+    slope = np.polyfit(np.log(f), np.log(fr.magnitude), 1)[0]
+    assert -0.8 < slope < -0.5
