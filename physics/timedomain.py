@@ -110,10 +110,7 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     if edges is None:
         p_mid = model.params_at(float(np.median(rh_t)))
         edges = _line_grid(model, p_mid, w_hi, n_segments)
-    modes = model.modes()
     base = dict(model.device.params)
-    coef = 2.0 * 0.5 * base["t_polymer"] * base["width"] * base["n_solvation"]
-    proj = projection(modes, edges, coef)
 
     # 1. electrochemistry
     if stepper_needed:
@@ -138,20 +135,53 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     if "cation" in fields:
         flds["cation_upper"], flds["cation_lower"] = c_up[1:], c_low[1:]
 
-    # 2.–3. projection and load filter
-    pre = np.vstack([proj.modal @ ell, proj.residual @ ell])
+    # 2.–4. projection, load filter, mechanics
     lengths = np.concatenate([[base["L_clamp"]], np.diff(edges)])
     cs_pre = base["n_solvation"] * np.vstack([lengths @ c_up, lengths @ c_low]) / base["L_total"]
     load_filter, cs_filter = _load_filters(model, base, w_hi)
-    loads = _apply_filter(load_filter, pre, dt, hold, periodic)
     cs = _apply_filter(cs_filter, cs_pre, dt, hold, periodic)
-    loads = loads * hum.coupling_factor(rh_t)[None, :]
-
-    # 4. mechanics
-    tip = _mechanics(model, base, loads, hum.stiffness_factor(rh_t), dt, hold, periodic)
+    tip = _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic)
     return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs[0],
                             cs_low=cs[1], device=model.device.name, effects=model.effect_ids,
                             z=0.5 * (edges[1:] + edges[:-1]), fields=flds)
+
+
+@single_threaded
+def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_factor: bool = True,
+                              hold: str = "cubic", periodic: bool = False) -> np.ndarray:
+    """Tip deflection [m] for a given load history, through the same beam as :func:`simulate`.
+
+    ``ell`` (n_seg, N) is the antisymmetric interface cation excess (C⁺(h) − C⁺(−h))/2
+    [mol/m³] on the free segments with ``edges`` [m] (from the clamp), sampled at ``t`` [s];
+    the couple is mu = 2 h w n⁺ kf ℓ with kf(s) and the humidity factors of ``model`` at ``rh``
+    [%].  ``apply_solvent_factor=False`` skips the solvent factor B(s), for loads that already
+    contain the solvent's back-diffusion."""
+    model = as_model(model)
+    t, _ = _check_record(t, np.zeros(np.size(t)))
+    ell = np.atleast_2d(np.asarray(ell, dtype=float))
+    edges = np.asarray(edges, dtype=float)
+    if ell.shape != (edges.size - 1, t.size):
+        raise InputError(f"ell must have shape (segments, samples) = ({edges.size - 1}, {t.size}), got {ell.shape}")
+    rh_t = model.check_rh(rh)
+    rh_t = np.full(t.size, float(rh_t)) if np.ndim(rh_t) == 0 else np.asarray(rh_t, dtype=float)
+    base = dict(model.device.params)
+    dt = float(t[1] - t[0])
+    filt = model
+    if not apply_solvent_factor and model.components["solvent"].enabled:
+        filt = ActuatorModel(model.device, [e for e in model.effect_ids if e != "solvent_diffusion"],
+                             n_modes=model.n_modes)
+    load_filter, _ = _load_filters(filt, base, np.pi / dt)
+    return _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic)
+
+
+def _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic):
+    """Stages 2–4: projection onto the modes, load filter kf(s)(·B(s)), humidity, mechanics."""
+    hum = model.components["humidity"]
+    coef = 2.0 * 0.5 * base["t_polymer"] * base["width"] * base["n_solvation"]
+    proj = projection(model.modes(), edges, coef)
+    pre = np.vstack([proj.modal @ ell, proj.residual @ ell])
+    loads = _apply_filter(load_filter, pre, dt, hold, periodic) * hum.coupling_factor(rh_t)[None, :]
+    return _mechanics(model, base, loads, hum.stiffness_factor(rh_t), dt, hold, periodic)
 
 
 def _check_record(t, voltage):
