@@ -22,8 +22,9 @@ steady state), central fluxes for the solvent diffusion.  Scaled unknowns per no
 Time stepping: TR-BDF2 (γ = 2 − √2; Bank et al. 1985, Hosea & Shampine 1996), L-stable and
 second order, with the embedded third-order error estimate filtered through the iteration
 matrix, adaptive steps, full Newton per stage, and steps that land on the input's kinks.
-The cation and solvent rows are written in conservative form and, after Newton, set from
-the converged fluxes, so the totals ∫C⁺ dx and ∫Cs dx are constant to round-off.
+The cation and solvent rows are written in conservative form (the totals change only by
+the linear solver's round-off) and each stage ends with a projection onto the initial totals,
+so ∫C⁺ dx and ∫Cs dx are constant to round-off however long the run.
 
 Several identical slabs ("slices") can be integrated together; they are either all driven
 by the same voltage or coupled along the strip through the electrode resistance (a
@@ -442,18 +443,23 @@ class Integrator:
         r = self.slab.diff_rows
         return float(np.max(np.abs(e[:, r]) / w[:, r]))
 
-    def _conservative(self, y, a, dh):
-        """Set the balance rows from the fluxes J of the converged Newton state: y_diff = a + dh f
-        exactly, so the totals are conserved to round-off.  f and J are those of the Newton state
-        (with its consistent potential): re-evaluating them at the corrected state would amplify
-        the tiny correction by the double layer's stiffness K = D/λ² ≈ 1e10 1/s."""
+    def _conservative(self, y):
+        """Restore the cation and solvent totals of the record's start exactly (to round-off):
+        ĉ is scaled by (1 + ε), ŝ shifted uniformly, with ε and the shift of the order of the
+        linear solver's round-off.  The conservative form already conserves them up to that
+        round-off, which grows with h·D/Δx² (~1e15 at the largest steps near the faces); the
+        projection keeps it from accumulating without disturbing the Boltzmann layers.  Returns
+        the state, its rates f and cation fluxes J (those of the Newton state, consistent with
+        its potential: re-evaluating them after the projection would amplify it by the double
+        layer's stiffness K = D/λ² ≈ 1e10 1/s)."""
         J, G, _ = self.slab.fluxes(y)
         f = np.zeros_like(y)
         f[:, 1::3] = -self.slab._div(J)
         f[:, 2::3] = -self.slab._div(G)
         y = y.copy()
-        r = self.slab.diff_rows
-        y[:, r] = a[:, r] + dh * f[:, r]
+        V = self.slab.V
+        y[:, 1::3] *= (self._tc / (y[:, 1::3] @ V))[:, None]
+        y[:, 2::3] += ((self._ts - y[:, 2::3] @ V) / V.sum())[:, None]
         return y, f, J
 
     def _input_step(self, vin, t, h, v_scale):
@@ -510,6 +516,7 @@ class Integrator:
             out[k][:, 0] = o0[k]
         shots = []
         vin = lambda tt: float(np.interp(tt, t_in, v_in))  # noqa: E731
+        self._tc, self._ts = y[:, 1::3] @ slab.V, y[:, 2::3] @ slab.V
         t = float(t_in[0])
         v_scale = max(float(np.max(np.abs(v_in))), 1e-12)
         f = slab.rates(y)
@@ -530,7 +537,7 @@ class Integrator:
             r2 = None
             if r1 is not None:
                 yg, Ug, _ = r1
-                yg, fg, Jg = self._conservative(yg, a1, _D * h)
+                yg, fg, Jg = self._conservative(yg)
                 # stage 2: BDF2 through t, t + γh, t + h
                 a2 = (yg - (1.0 - _GAMMA) ** 2 * y) / (_GAMMA * (2.0 - _GAMMA))
                 guess = y + (yg - y) / _GAMMA
@@ -542,7 +549,7 @@ class Integrator:
                     raise ModelError(f"reference solver: Newton fails at t = {t:g} s even with tiny steps")
                 continue
             y1, U1, lus = r2
-            y1, f1, J1 = self._conservative(y1, a2, _D * h)
+            y1, f1, J1 = self._conservative(y1)
             est = h * (_E[0] * f + _E[1] * fg + _E[2] * f1)
             if self.ladder is None:
                 est, _ = self._solve(lus, est)

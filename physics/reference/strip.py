@@ -22,7 +22,7 @@ moved (∝ the charge), not the interface concentration.  ℓ_ref is pushed thro
 model's kf(s), humidity factors, modes and Prony modulus by
 :func:`physics.timedomain.tip_from_interface_excess` (without the solvent factor, which the
 reference contains).  Cs_up/Cs_low are reported as first-moment-equivalent interface values,
-2∫₀ʰ x ΔCs dx/Λ and −2∫₋ₕ⁰ |x| ΔCs dx/Λ averaged over L_total (clamp included), as the
+2∫₀ʰ x ΔCs dx/Λ and 2∫₋ₕ⁰ |x| ΔCs dx/Λ averaged over L_total (clamp included), as the
 reduced model does.
 """
 from __future__ import annotations
@@ -167,7 +167,7 @@ class ReferenceStrip:
         ell = (out["m_up"] - out["m_low"]) / (prm.n_solv * prm.Lambda)
         lengths = self.area / p["width"]
         cs_up = 2.0 * (lengths @ out["m_up"]) / prm.Lambda / p["L_total"]
-        cs_low = -2.0 * (lengths @ out["m_low"]) / prm.Lambda / p["L_total"]
+        cs_low = 2.0 * (lengths @ out["m_low"]) / prm.Lambda / p["L_total"]
         tip = tip_from_interface_excess(self.model, t, ell[1:], self.edges, self.rh,
                                         apply_solvent_factor=False, hold="linear")
         profiles = {}
