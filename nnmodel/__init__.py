@@ -1,1 +1,13 @@
 """Neural and grey-box models of EAP actuators, datasets, training and the ``eap`` command line."""
+
+
+def load(path):
+    """Load a saved model bundle (folder with ``card.json`` and weights): returns a
+    :class:`nnmodel.bundle.Bundle` with ``.predict(voltage, rh=..., fs=..., steps_ahead=None,
+    resample=False)``.  Imported lazily so that ``import nnmodel`` stays light."""
+    from .bundle import load as _load
+
+    return _load(path)
+
+
+__all__ = ["load"]

@@ -1,0 +1,48 @@
+"""Benchmark suites for the neural models.
+
+A suite is a function ``run(models, out, *, quick=False, overrides=None, progress=True,
+**options) -> dict`` in a module of this package; :data:`SUITES` maps the name used by
+``eap benchmark --suite NAME`` to a :class:`Suite` entry.  Entries name the function by
+import path, so listing the suites (for the command line's choices) imports no torch.
+Add a suite by writing its module and one ``register(Suite(...))`` line below.
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Callable
+
+__all__ = ["Suite", "SUITES", "register", "get_suite"]
+
+
+@dataclass(frozen=True)
+class Suite:
+    name: str
+    target: str  # "package.module:function"
+    help: str
+    default_models: tuple[str, ...] = field(default=("ff", "rbf", "narx", "lstm", "gru"))
+
+    def load(self) -> Callable:
+        mod, func = self.target.split(":")
+        return getattr(importlib.import_module(mod), func)
+
+
+SUITES: dict[str, Suite] = {}
+
+
+def register(suite: Suite) -> Suite:
+    SUITES[suite.name] = suite
+    return suite
+
+
+def get_suite(name: str) -> Suite:
+    from physics.errors import InputError
+
+    if name not in SUITES:
+        raise InputError(f"unknown benchmark suite {name!r}; available: {', '.join(sorted(SUITES))}")
+    return SUITES[name]
+
+
+register(Suite("silverbox", "nnmodel.benchmarks.silverbox:run",
+               "real measured Silverbox data (Wigren & Schoukens 2013), standard split, "
+               "free-run RMSE in mV beside published results"))

@@ -1,0 +1,133 @@
+"""Pieces shared by benchmark suites: model construction from recipes with suite
+overrides, timing, text tables and a self-contained HTML page."""
+from __future__ import annotations
+
+import base64
+import html
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from physics.errors import InputError
+
+__all__ = ["build_model", "parse_models", "time_free_run", "text_table", "html_page",
+           "environment", "fmt"]
+
+
+def parse_models(models, default: Sequence[str]) -> list[str]:
+    """Model names from a list or a comma-separated string; validated against the registry."""
+    from ..models import MODELS
+
+    if models is None or models == "" or models == []:
+        names = list(default)
+    elif isinstance(models, str):
+        names = [m.strip() for m in models.split(",") if m.strip()]
+    else:
+        names = [n.strip() for m in models for n in str(m).split(",") if n.strip()]
+    bad = [n for n in names if n not in MODELS]
+    if bad:
+        raise InputError(f"unknown model(s) {bad}; known: {', '.join(MODELS)}")
+    if len(set(names)) != len(names):
+        raise InputError(f"model listed twice in {names}")
+    return names
+
+
+def build_model(name: str, *layers: dict | None):
+    """Model ``name`` from its recipe, updated by each override dict in turn."""
+    from ..training import load_recipe
+    from ..models import MODELS
+
+    merged: dict = {}
+    for layer in layers:
+        merged.update(layer or {})
+    rec = load_recipe(name, merged)
+    return MODELS[rec["model"]](**rec["hyper_parameters"])
+
+
+def time_free_run(model, u, y_init=None, rh=None, repeats: int = 1) -> tuple[np.ndarray, float]:
+    """Free-run simulation and its speed in simulated samples per second."""
+    best = np.inf
+    y = None
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        y = model.simulate(u, rh=rh, y_init=y_init)
+        best = min(best, time.perf_counter() - t0)
+    n = len(u) - (0 if y_init is None else len(y_init))
+    return y, n / best if best > 0 else float("inf")
+
+
+def fmt(v, nd=3) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, str):
+        return v
+    if isinstance(v, (int, np.integer)):
+        return f"{int(v):d}"
+    v = float(v)
+    if not np.isfinite(v):
+        return "inf"
+    if abs(v) >= 1e4:
+        return f"{v:.3g}"
+    return f"{v:.{nd}f}"
+
+
+def text_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
+    cells = [[str(h) for h in header]] + [[c if isinstance(c, str) else fmt(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
+    def line(r):
+        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    sep = "  ".join("-" * w for w in widths)
+    return "\n".join([line(cells[0]), sep] + [line(r) for r in cells[1:]])
+
+
+def _img(path: Path) -> str:
+    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    return f'<img alt="{html.escape(Path(path).name)}" src="data:image/png;base64,{data}">'
+
+
+def html_page(title: str, blocks: Sequence[tuple[str, object]]) -> str:
+    """A self-contained page. ``blocks`` are (kind, content): ``("h2", text)``,
+    ``("p", text)``, ``("html", raw)``, ``("table", (header, rows))``, ``("img", path)``,
+    ``("pre", text)``."""
+    out = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>",
+           "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
+           "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
+           "text-align:right}td:first-child,th:first-child{text-align:left}"
+           "tr.pub td{color:#555;font-style:italic}img{max-width:100%}"
+           "pre{background:#f6f6f6;padding:.5em;overflow-x:auto}</style></head><body>",
+           f"<h1>{html.escape(title)}</h1>"]
+    for kind, content in blocks:
+        if kind in ("h2", "h3", "p"):
+            out.append(f"<{kind}>{html.escape(str(content))}</{kind}>")
+        elif kind == "html":
+            out.append(str(content))
+        elif kind == "pre":
+            out.append(f"<pre>{html.escape(str(content))}</pre>")
+        elif kind == "img":
+            out.append(_img(content))
+        elif kind == "table":
+            header, rows = content
+            out.append("<table><tr>" + "".join(f"<th>{html.escape(str(h))}</th>" for h in header) + "</tr>")
+            for r in rows:
+                cls = ""
+                if isinstance(r, dict):
+                    cls, r = f" class='{r.get('class', '')}'", r["cells"]
+                out.append(f"<tr{cls}>" + "".join(
+                    f"<td>{html.escape(c if isinstance(c, str) else fmt(c))}</td>" for c in r) + "</tr>")
+            out.append("</table>")
+        else:  # pragma: no cover - programming error
+            raise ValueError(kind)
+    out.append("</body></html>")
+    return "\n".join(out)
+
+
+def environment() -> dict:
+    import torch
+
+    return {"python": platform.python_version(), "torch": torch.__version__,
+            "torch_threads": torch.get_num_threads(), "cpu_count": os.cpu_count(),
+            "machine": platform.machine(), "platform": platform.platform()}

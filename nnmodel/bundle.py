@@ -1,0 +1,302 @@
+"""Saved model bundles: a folder with the weights (no pickled code) and a JSON card.
+
+::
+
+    MODEL/
+      card.json     model type, hyper-parameters, inputs and units, sampling rate, RH range
+                    seen in training, dataset hash, metrics, parameter count, versions
+      weights.pt    the torch ``state_dict`` (tensors only; read with ``weights_only=True``)
+
+:func:`save` writes the folder atomically (a temporary folder renamed into place).
+:func:`load` returns a :class:`Bundle` whose :meth:`Bundle.predict` takes physical units,
+refuses a sampling rate other than the training rate unless asked to resample, warns
+when the humidity is outside the range seen in training, and rejects NaNs and bad shapes.
+Loading never unpickles arbitrary objects: the card is JSON, the weights are read with
+``torch.load(..., weights_only=True)`` and must be a flat mapping of tensors.
+"""
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from physics.errors import InputError
+
+from .models import MODELS
+from .models.base import NeuralModel
+
+__all__ = ["save", "load", "Bundle", "resample", "FORMAT", "FORMAT_VERSION"]
+
+FORMAT = "eap-model-bundle"
+FORMAT_VERSION = 1
+WEIGHTS = "weights.pt"
+CARD = "card.json"
+#: relative sampling-rate difference accepted as "the same rate" (timestamps in files are
+#: rounded; 0.01 % changes no dynamics that matter)
+FS_RTOL = 1e-4
+
+_UNITS = {"voltage": "V", "rh": "%RH"}
+
+
+def _package_version() -> str:
+    try:
+        from importlib.metadata import version
+        return version("eap-model")
+    except Exception:  # pragma: no cover - not installed
+        return "unknown"
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _jsonable(obj):
+    """Convert numpy scalars/arrays inside metrics to plain JSON values (NaN -> None)."""
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if np.isfinite(v) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    return obj
+
+
+def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | None = None,
+         metrics: dict | None = None, output: tuple[str, str] = ("deflection", "m"),
+         notes: str = "", overwrite: bool = False) -> Path:
+    """Save a trained model as the folder ``path`` (atomically).
+
+    ``output`` names the output quantity and its unit (default tip deflection in m; the
+    Silverbox benchmark saves ``("V2", "V")``).  An existing folder is replaced only with
+    ``overwrite=True``.
+    """
+    model._check_fitted()
+    target = Path(path)
+    if target.exists() and not overwrite:
+        raise InputError(f"{target} already exists; choose another folder or pass overwrite=True")
+    if target.exists() and not (target / CARD).is_file():
+        raise InputError(f"{target} exists and is not a model bundle; refusing to replace it")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    learned = model.learned_state()
+    state = {k: v.detach().cpu().clone() for k, v in model.net_.state_dict().items()}
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent))
+    try:
+        torch.save(state, tmp / WEIGHTS)
+        stats = {n: dict(zip(("mean", "std"), model.net_.stat(n))) for n in ("u", "y", "rh")}
+        card = {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "model": model.kind,
+            "class": f"{type(model).__module__}.{type(model).__name__}",
+            "hyper_parameters": model.get_params(),
+            "inputs": [{"name": n, "unit": _UNITS[n]} for n in learned["inputs"]],
+            "output": {"name": output[0], "unit": output[1]},
+            "fs_hz": learned["fs"],
+            "rh_range_pct": learned["rh_range"],
+            "n_init": learned["n_init"],
+            "n_parameters": model.n_parameters,
+            "normalisation": {"voltage": stats["u"], "output": stats["y"],
+                              **({"rh": stats["rh"]} if "rh" in learned["inputs"] else {})},
+            "training": {"fit_time_s": learned["fit_time_s"],
+                         "epochs": len(getattr(model, "history_", []) or [])},
+            "dataset_hash": dataset_hash,
+            "metrics": _jsonable(metrics) if metrics else {},
+            "notes": notes,
+            "package_version": _package_version(),
+            "torch_version": torch.__version__,
+            "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            "weights": {"file": WEIGHTS, "sha256": _sha256(tmp / WEIGHTS), "format": "torch state_dict"},
+        }
+        (tmp / CARD).write_text(json.dumps(_jsonable(card), indent=2, allow_nan=False) + "\n",
+                                encoding="utf-8")
+        if target.exists():
+            old = target.with_name(f".{target.name}.old-{os.getpid()}")
+            os.replace(target, old)
+            os.replace(tmp, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return target
+
+
+def _read_card(folder: Path) -> dict:
+    cp = folder / CARD
+    if not cp.is_file():
+        raise InputError(f"{folder} is not a model bundle (no {CARD})")
+    try:
+        card = json.loads(cp.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{cp}: not valid JSON ({exc})") from None
+    if not isinstance(card, dict) or card.get("format") != FORMAT:
+        raise InputError(f"{cp}: not an {FORMAT} card")
+    if card.get("format_version") != FORMAT_VERSION:
+        raise InputError(f"{cp}: bundle format version {card.get('format_version')} is not "
+                         f"supported (this package reads version {FORMAT_VERSION})")
+    if card.get("model") not in MODELS:
+        raise InputError(f"{cp}: unknown model type {card.get('model')!r}; known: {', '.join(MODELS)}")
+    return card
+
+
+def load(path: str | os.PathLike) -> "Bundle":
+    """Load a bundle saved by :func:`save` (never unpickles arbitrary code)."""
+    folder = Path(path)
+    if not folder.is_dir():
+        raise InputError(f"model bundle {folder} not found (expected a folder with {CARD} and {WEIGHTS})")
+    card = _read_card(folder)
+    wfile = folder / card.get("weights", {}).get("file", WEIGHTS)
+    if wfile.parent.resolve() != folder.resolve() or not wfile.is_file():
+        raise InputError(f"{folder}: weights file {wfile.name} missing or outside the bundle")
+    expected = card.get("weights", {}).get("sha256")
+    if expected and _sha256(wfile) != expected:
+        raise InputError(f"{wfile}: content does not match the SHA-256 in {CARD} (corrupt or altered)")
+    try:
+        state = torch.load(wfile, map_location="cpu", weights_only=True)
+    except Exception as exc:  # UnpicklingError for anything but plain tensors and containers
+        raise InputError(f"{wfile}: refused to load — only plain tensors are accepted "
+                         f"(weights_only=True): {exc}") from None
+    if not isinstance(state, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
+                                              for k, v in state.items()):
+        raise InputError(f"{wfile}: expected a flat mapping of parameter names to tensors")
+    cls = MODELS[card["model"]]
+    hp = dict(card.get("hyper_parameters") or {})
+    unknown = sorted(set(hp) - set(cls.param_names()))
+    if unknown:
+        raise InputError(f"{folder / CARD}: unknown hyper-parameter(s) {unknown} for model {card['model']!r}")
+    model = cls(**hp)
+    learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
+               "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
+               "fit_time_s": card.get("training", {}).get("fit_time_s")}
+    model.restore(learned, state)
+    return Bundle(model, card, folder)
+
+
+# ---------------------------------------------------------------------- resampling
+def resample(x: np.ndarray, fs_from: float, fs_to: float, n_out: int | None = None) -> np.ndarray:
+    """Resample a uniformly sampled signal (starting at t = 0) from ``fs_from`` to ``fs_to``:
+    zero-phase anti-alias low-pass when the rate drops, then linear interpolation."""
+    from scipy import signal
+
+    x = np.asarray(x, float)
+    n = x.size
+    if n_out is None:
+        n_out = int(np.floor((n - 1) * fs_to / fs_from + 1e-9)) + 1
+    if fs_to < fs_from and n > 30:
+        sos = signal.butter(8, 0.45 * fs_to, fs=fs_from, output="sos")
+        x = signal.sosfiltfilt(sos, x)
+    t_from = np.arange(n) / fs_from
+    t_to = np.arange(n_out) / fs_to
+    return np.interp(t_to, t_from, x)
+
+
+_resample_signal = resample  # the name ``resample`` is also an argument of Bundle.predict
+
+
+class Bundle:
+    """A loaded model: ``model`` (the estimator), ``card`` (the JSON card), ``path``."""
+
+    def __init__(self, model: NeuralModel, card: dict, path: Path | None = None):
+        self.model, self.card, self.path = model, card, path
+
+    def __repr__(self) -> str:
+        return (f"Bundle({self.card['model']!r}, fs={self.fs:g} Hz, inputs="
+                f"{[i['name'] for i in self.card['inputs']]}, rh_range={self.rh_range})")
+
+    @property
+    def fs(self) -> float:
+        return float(self.card["fs_hz"])
+
+    @property
+    def rh_range(self):
+        r = self.card.get("rh_range_pct")
+        return None if r is None else tuple(r)
+
+    @property
+    def n_parameters(self) -> int:
+        return self.model.n_parameters
+
+    def predict(self, voltage, rh=None, fs: float | None = None, steps_ahead: int | None = None,
+                resample: bool = False, deflection=None) -> np.ndarray:
+        """Predict the output (tip deflection in m) for ``voltage`` (V) sampled at ``fs`` Hz.
+
+        ``voltage`` may also be a time series (with ``voltage``, ``fs``, ``rh``,
+        ``deflection`` attributes).  ``rh`` in % (constant or one value per sample) is
+        required when the model takes humidity.  ``steps_ahead=None`` is a free run (from
+        rest, or initialised from the first samples of ``deflection`` when given);
+        ``steps_ahead=k`` needs the measured ``deflection``.  A sampling rate different from
+        the training rate is refused unless ``resample=True``, which resamples the inputs
+        to the training rate and the prediction back to ``fs``.
+        """
+        if hasattr(voltage, "voltage"):
+            ts = voltage
+            voltage = ts.voltage
+            fs = fs if fs is not None else getattr(ts, "fs", None)
+            if rh is None:
+                rh = getattr(ts, "rh", None)
+            if deflection is None and steps_ahead is not None:
+                deflection = getattr(ts, "deflection", None)
+        if fs is None:
+            raise InputError(f"give the sampling rate fs= in Hz (this model was trained at {self.fs:g} Hz)")
+        try:
+            fs = float(fs)
+        except (TypeError, ValueError):
+            raise InputError(f"fs must be a number in Hz, got {fs!r}") from None
+        if not np.isfinite(fs) or fs <= 0:
+            raise InputError(f"fs must be a positive number of Hz, got {fs}")
+        u = np.asarray(voltage, dtype=float)
+        if u.ndim != 1 or u.size == 0:
+            raise InputError(f"voltage must be a non-empty 1-D array, got shape {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise InputError(f"voltage contains NaN or infinite values (first at sample "
+                             f"{int(np.flatnonzero(~np.isfinite(u))[0])})")
+        y = None if deflection is None else np.asarray(deflection, dtype=float)
+        if y is not None and y.shape != u.shape:
+            raise InputError(f"deflection must have the same shape as the voltage {u.shape}, got {y.shape}")
+        same = abs(fs - self.fs) <= FS_RTOL * self.fs
+        if same:
+            return self.model.predict(u, rh=rh, y=y, steps_ahead=steps_ahead)
+        if not resample:
+            raise InputError(f"the input is sampled at {fs:g} Hz but the model was trained at "
+                             f"{self.fs:g} Hz; resample the input, or pass resample=True "
+                             "(eap predict --resample) to resample in and out automatically")
+        m = self.model
+        u_m = self._resample(u, fs, self.fs)
+        rh_m = rh
+        if rh is not None and np.ndim(rh) == 1:
+            rh_arr = np.asarray(rh, dtype=float)
+            if rh_arr.shape != u.shape:
+                raise InputError(f"rh must be a constant or have one value per voltage sample "
+                                 f"({u.size}), got shape {rh_arr.shape}")
+            if not np.all(np.isfinite(rh_arr)):
+                raise InputError("rh contains NaN or infinite values")
+            rh_m = self._resample(rh_arr, fs, self.fs, u_m.size)
+        y_m = None if y is None else self._resample(y, fs, self.fs, u_m.size)
+        out_m = m.predict(u_m, rh=rh_m, y=y_m, steps_ahead=steps_ahead)
+        return _resample_signal(out_m, self.fs, fs, u.size)
+
+    @staticmethod
+    def _resample(x, fs_from, fs_to, n_out=None):
+        if not np.all(np.isfinite(x)):
+            raise InputError("input contains NaN or infinite values")
+        out = _resample_signal(x, fs_from, fs_to, n_out)
+        if out.size < 2:
+            raise InputError("the record is too short to resample")
+        return out

@@ -1,0 +1,71 @@
+"""``eap benchmark``: train and compare the neural models on a benchmark suite."""
+from __future__ import annotations
+
+from physics.errors import InputError
+
+from ..benchmarks import SUITES, get_suite
+
+NAME = "benchmark"
+HELP = "compare FF / RBF / NARX / LSTM / GRU on a benchmark suite (JSON + HTML + PNG report)"
+DESCRIPTION = (HELP + ". Suites: " + "; ".join(f"{s.name}: {s.help}" for s in SUITES.values())
+               + ". Each model is trained with its recipe (configs/train/NAME.yaml) plus the "
+               "suite's settings; --set overrides any hyper-parameter.")
+
+
+def add_arguments(p):
+    p.add_argument("--suite", required=True, choices=sorted(SUITES), help="benchmark suite")
+    p.add_argument("--out", required=True, help="output folder for the report (and model bundles)")
+    p.add_argument("--models", default=None,
+                   help="comma-separated models; none = the suite's list (ff,rbf,narx,lstm,gru)")
+    p.add_argument("--quick", action="store_true", help="short training budgets (about a minute per model)")
+    p.add_argument("--max-time", type=float, default=None,
+                   help="wall-clock training budget per model [s] (overrides the suite and recipe)")
+    p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
+                   help="override one hyper-parameter, e.g. --set narx.poly_degree=1 (repeatable)")
+    p.add_argument("--data", default=None, help="suite data file (default: the shared benchmark folder)")
+    p.add_argument("--limit", type=int, default=None,
+                   help="truncate every data part to this many samples (smoke tests only: "
+                        "the figures are then not comparable)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--no-save-models", action="store_true", help="do not save model bundles")
+
+
+def parse_sets(items, models) -> dict:
+    import yaml
+
+    out: dict = {}
+    for item in items or []:
+        if "=" not in item or "." not in item.split("=", 1)[0]:
+            raise InputError(f"--set {item!r}: expected MODEL.KEY=VALUE, e.g. narx.lr=0.001")
+        key, val = item.split("=", 1)
+        model, param = key.split(".", 1)
+        if model not in models:
+            raise InputError(f"--set {item!r}: model {model!r} is not among the models run ({', '.join(models)})")
+        try:
+            out.setdefault(model, {})[param] = yaml.safe_load(val)
+        except yaml.YAMLError:
+            raise InputError(f"--set {item!r}: cannot parse the value {val!r}") from None
+    return out
+
+
+def run(args) -> int:
+    from ..benchmarks.common import parse_models
+
+    suite = get_suite(args.suite)
+    models = parse_models(args.models, suite.default_models)
+    overrides = parse_sets(args.set, models)
+    if args.max_time is not None:
+        if args.max_time <= 0:
+            raise InputError(f"--max-time must be positive, got {args.max_time}")
+        for m in models:
+            overrides.setdefault(m, {}).setdefault("max_time", args.max_time)
+    options = {}
+    if args.data:
+        options["data"] = args.data
+    if args.limit is not None:
+        if args.limit < 1:
+            raise InputError(f"--limit must be a positive number of samples, got {args.limit}")
+        options["limit"] = args.limit
+    suite.load()(models, args.out, quick=args.quick, overrides=overrides,
+                 progress=not args.no_progress, save_models=not args.no_save_models, **options)
+    return 0

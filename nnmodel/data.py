@@ -1,0 +1,241 @@
+"""Records (one experiment: input voltage, humidity, output) and training windows.
+
+A :class:`Record` holds one uniformly sampled experiment in physical units: input voltage
+``u`` (V), measured output ``y`` (tip deflection, m; ``None`` for an input-only record),
+relative humidity ``rh`` (% per sample, or ``None`` when the model does not use humidity)
+and the sampling rate ``fs`` (Hz).  Records slice like arrays (``rec[100:200]``) as in
+deepSI, so splitting data never loses the sampling rate or the humidity.
+
+The window helpers cut records into the short sequences the models are trained on: each
+window is ``n_init`` samples of measured history (used only to initialise the model state)
+followed by ``horizon`` samples over which the model is simulated and scored.
+"""
+from __future__ import annotations
+
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from physics.errors import InputError
+
+__all__ = ["Record", "check_records", "split_records", "window_starts", "cut_windows",
+           "rh_range", "rmse", "nrmse", "fit_percent"]
+
+
+def _as_1d(x, what: str, name: str, n: int | None = None) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    if a.ndim != 1:
+        raise InputError(f"record {name!r}: {what} must be a 1-D array, got shape {a.shape}")
+    if n is not None and a.shape[0] != n:
+        raise InputError(f"record {name!r}: {what} has {a.shape[0]} samples but the voltage has {n}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(f"record {name!r}: {what} contains NaN or infinite values "
+                         f"(first at sample {i}, {int(bad.sum())} in total)")
+    return a
+
+
+class Record:
+    """One uniformly sampled experiment in physical units.
+
+    Parameters
+    ----------
+    u : array (n,)
+        Input voltage in V.
+    y : array (n,) or None
+        Measured output (tip deflection in m); ``None`` for an input-only record.
+    rh : float, array (n,) or None
+        Relative humidity in %: a constant is broadcast to every sample.  ``None`` means the
+        record carries no humidity (a model trained on such records ignores humidity).
+    fs : float
+        Sampling rate in Hz (required).
+    name : str
+        Free label used in messages and reports.
+    """
+
+    __slots__ = ("u", "y", "rh", "fs", "name")
+
+    def __init__(self, u, y=None, rh=None, fs: float | None = None, name: str = ""):
+        self.name = str(name)
+        if fs is None:
+            raise InputError(f"record {self.name!r}: the sampling rate fs (Hz) is required")
+        try:
+            fs = float(fs)
+        except (TypeError, ValueError):
+            raise InputError(f"record {self.name!r}: fs must be a number in Hz, got {fs!r}") from None
+        if not np.isfinite(fs) or fs <= 0:
+            raise InputError(f"record {self.name!r}: fs must be a positive number of Hz, got {fs}")
+        self.fs = fs
+        self.u = _as_1d(u, "voltage u", self.name)
+        n = self.u.shape[0]
+        if n == 0:
+            raise InputError(f"record {self.name!r}: empty record (no samples)")
+        self.y = None if y is None else _as_1d(y, "output y", self.name, n)
+        if rh is None:
+            self.rh = None
+        else:
+            rh_arr = np.asarray(rh, dtype=float)
+            if rh_arr.ndim == 0:
+                rh_arr = np.full(n, float(rh_arr))
+            rh_arr = _as_1d(rh_arr, "relative humidity rh", self.name, n)
+            if rh_arr.min() < 0 or rh_arr.max() > 100:
+                raise InputError(f"record {self.name!r}: relative humidity must lie in 0-100 %, "
+                                 f"got {rh_arr.min():g}-{rh_arr.max():g} %")
+            self.rh = rh_arr
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_timeseries(cls, ts, name: str | None = None) -> "Record":
+        """Build a record from a time-series object with attributes ``time``, ``voltage``,
+        ``deflection`` (may be ``None``), ``rh`` (scalar, array or ``None``) and ``fs``
+        (for example :class:`physics.timeseries.TimeSeries`; duck-typed)."""
+        for attr in ("voltage", "fs"):
+            if not hasattr(ts, attr):
+                raise InputError(f"{type(ts).__name__} has no attribute {attr!r}; expected a time "
+                                 "series with time, voltage, deflection, rh and fs")
+        if name is None:
+            name = str(getattr(ts, "name", "") or getattr(ts, "source", "") or "")
+        return cls(ts.voltage, getattr(ts, "deflection", None), getattr(ts, "rh", None),
+                   ts.fs, name)
+
+    # ------------------------------------------------------------------ array-like behaviour
+    def __len__(self) -> int:
+        return int(self.u.shape[0])
+
+    def __getitem__(self, item) -> "Record":
+        if not isinstance(item, slice):
+            raise TypeError("records slice only with a slice, e.g. rec[100:200]")
+        if item.step not in (None, 1):
+            raise InputError("slicing a record with a step would change its sampling rate; "
+                             "resample explicitly instead")
+        return Record(self.u[item], None if self.y is None else self.y[item],
+                      None if self.rh is None else self.rh[item], self.fs, self.name)
+
+    def __repr__(self) -> str:
+        rh = "no RH" if self.rh is None else f"RH {self.rh.min():g}-{self.rh.max():g} %"
+        return (f"Record({self.name!r}, {len(self)} samples at {self.fs:g} Hz, "
+                f"{'with' if self.y is not None else 'no'} output, {rh})")
+
+    @property
+    def time(self) -> np.ndarray:
+        """Sample times in s, starting at 0."""
+        return np.arange(len(self)) / self.fs
+
+    @property
+    def duration(self) -> float:
+        return len(self) / self.fs
+
+    def split(self, fraction: float) -> tuple["Record", "Record"]:
+        """Split at ``fraction`` of the length: ``(first part, last part)``."""
+        k = int(round(len(self) * float(fraction)))
+        return self[:k], self[k:]
+
+
+# ---------------------------------------------------------------------- record lists
+def check_records(records: Sequence[Record] | Record, what: str = "training",
+                  need_y: bool = True) -> list[Record]:
+    """Validate a list of records for fitting: same sampling rate, outputs present and
+    humidity either on every record or on none.  Returns the list."""
+    if isinstance(records, Record):
+        records = [records]
+    records = list(records or [])
+    if not records:
+        raise InputError(f"no {what} records given")
+    for r in records:
+        if not isinstance(r, Record):
+            raise InputError(f"{what} data must be nnmodel.data.Record objects, got {type(r).__name__}")
+        if need_y and r.y is None:
+            raise InputError(f"{what} record {r.name!r} has no measured output y")
+    fs = records[0].fs
+    for r in records[1:]:
+        if abs(r.fs - fs) > 1e-9 * fs:
+            raise InputError(f"{what} records have different sampling rates ({fs:g} Hz and "
+                             f"{r.fs:g} Hz in {r.name!r}); resample them to one rate first")
+    has_rh = {r.rh is not None for r in records}
+    if len(has_rh) > 1:
+        raise InputError(f"some {what} records carry relative humidity and some do not; "
+                         "give RH for every record or for none")
+    return records
+
+
+def rh_range(records: Iterable[Record]) -> tuple[float, float] | None:
+    """(min, max) RH over records, or None if they carry no humidity."""
+    vals = [(r.rh.min(), r.rh.max()) for r in records if r.rh is not None]
+    if not vals:
+        return None
+    return float(min(v[0] for v in vals)), float(max(v[1] for v in vals))
+
+
+def split_records(records: Sequence[Record], val_fraction: float,
+                  min_len: int = 1) -> tuple[list[Record], list[Record]]:
+    """Hold out the last ``val_fraction`` of every record (at least ``min_len`` samples on
+    each side) for validation.  Records too short to split stay in training."""
+    if not 0 <= val_fraction < 1:
+        raise InputError(f"val_fraction must be in [0, 1), got {val_fraction}")
+    train, val = [], []
+    for r in records:
+        k = int(round(len(r) * (1 - val_fraction)))
+        if val_fraction > 0 and len(r) - k >= min_len and k >= min_len:
+            train.append(r[:k])
+            val.append(r[k:])
+        else:
+            train.append(r)
+    return train, val
+
+
+# ---------------------------------------------------------------------- windows
+def window_starts(n: int, length: int, stride: int) -> np.ndarray:
+    """Start indices of windows of ``length`` samples every ``stride`` samples in a
+    sequence of ``n`` samples; the last window ends exactly at ``n`` when possible."""
+    if length > n:
+        return np.zeros(0, dtype=np.int64)
+    stride = max(1, int(stride))
+    starts = np.arange(0, n - length + 1, stride, dtype=np.int64)
+    if starts[-1] != n - length:
+        starts = np.append(starts, n - length)
+    return starts
+
+
+def cut_windows(records: Sequence[Record], n_init: int, horizon: int, stride: int) -> dict:
+    """Cut records into windows of ``n_init`` history + ``horizon`` simulated samples.
+
+    Returns a dict of arrays of shape (n_windows, n_init + horizon): ``u``, ``y`` and, if
+    the records carry humidity, ``rh``.
+    """
+    L = n_init + horizon
+    out = {"u": [], "y": [], "rh": []}
+    for r in records:
+        starts = window_starts(len(r), L, stride)
+        if starts.size == 0:
+            continue
+        idx = starts[:, None] + np.arange(L)[None, :]
+        out["u"].append(r.u[idx])
+        out["y"].append(r.y[idx])
+        if r.rh is not None:
+            out["rh"].append(r.rh[idx])
+    if not out["u"]:
+        raise InputError(f"every record is shorter than one training window ({L} samples)")
+    res = {k: np.concatenate(v) for k, v in out.items() if v}
+    return res
+
+
+# ---------------------------------------------------------------------- metrics
+def rmse(y, y_hat) -> float:
+    """Root-mean-square error."""
+    y, y_hat = np.asarray(y, float), np.asarray(y_hat, float)
+    return float(np.sqrt(np.mean((y - y_hat) ** 2)))
+
+
+def nrmse(y, y_hat) -> float:
+    """RMSE divided by the standard deviation of the measured output."""
+    y = np.asarray(y, float)
+    s = float(np.std(y))
+    return rmse(y, y_hat) / s if s > 0 else float("inf")
+
+
+def fit_percent(y, y_hat) -> float:
+    """Fit in %: 100 (1 - ||y - y_hat|| / ||y - mean(y)||)."""
+    y, y_hat = np.asarray(y, float), np.asarray(y_hat, float)
+    den = float(np.linalg.norm(y - y.mean()))
+    return 100.0 * (1.0 - float(np.linalg.norm(y - y_hat)) / den) if den > 0 else float("-inf")

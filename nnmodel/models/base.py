@@ -1,0 +1,463 @@
+"""The contract every neural model follows (scikit-learn style, SysIdentPy-style predict).
+
+* Hyper-parameters are the keyword arguments of ``__init__`` (``get_params`` reads them back);
+  learned state lives in attributes ending in ``_`` and exists only after :meth:`fit`.
+* Callers use physical units: the normalisation of every channel (voltage, humidity,
+  output) is learned in :meth:`fit` and stored inside the model (:class:`Normalized`).
+* ``fit(train, val=None)`` takes lists of :class:`nnmodel.data.Record`; without ``val`` the
+  last ``val_fraction`` of every training record is held out for early stopping.
+* ``simulate(u, rh=None, y_init=None)`` is a free-run simulation: no measured output is fed
+  back; ``y_init`` (the first measured outputs) may only initialise the state.
+* ``predict(u, rh=None, y=None, steps_ahead=None | k)``: ``None`` is a free run (initialised
+  from the first ``n_init_`` samples of ``y`` when given), ``k`` is k-step-ahead
+  prediction: each output is simulated ``k`` steps from the measured past.
+
+Inside, a model is a torch *core* (:class:`SequenceCore`) working on normalised tensors
+with two methods kept apart as in torchid/dynoNet: ``init_state`` (the initial-state
+estimator: measured history -> state) and ``simulate`` (state + inputs -> outputs).  All
+models are trained with the same Lightning loop (:mod:`nnmodel.training`).
+"""
+from __future__ import annotations
+
+import contextlib
+import inspect
+import math
+import time
+import warnings
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from physics.errors import InputError
+
+from ..data import Record, check_records, rh_range, split_records
+
+__all__ = ["SequenceCore", "Normalized", "NeuralModel", "NotFittedError"]
+
+
+class NotFittedError(InputError):
+    """The model was used before :meth:`NeuralModel.fit` (or loading)."""
+
+
+class SequenceCore(nn.Module):
+    """Interface of a torch core; all tensors are normalised, shapes (batch, time).
+
+    ``n_init`` is the number of past samples ``init_state`` needs.
+    """
+
+    n_init: int = 1
+
+    def init_state(self, u_hist, y_hist, rh_hist):  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def simulate(self, state, u, rh):  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class Normalized(nn.Module):
+    """A core plus the affine normalisation of each channel (stored as buffers, so it is
+    saved with the weights)."""
+
+    def __init__(self, core: SequenceCore):
+        super().__init__()
+        self.core = core
+        for name in ("u", "y", "rh"):
+            self.register_buffer(f"{name}_mean", torch.zeros((), dtype=torch.float64))
+            self.register_buffer(f"{name}_std", torch.ones((), dtype=torch.float64))
+
+    def set_stats(self, records: list[Record], use_rh: bool) -> None:
+        def stats(x):
+            m, s = float(np.mean(x)), float(np.std(x))
+            if not np.isfinite(s) or s <= 1e-12 * max(1.0, abs(m)):
+                s = 1.0  # a constant channel: centre it, do not blow it up
+            return m, s
+        u = np.concatenate([r.u for r in records])
+        y = np.concatenate([r.y for r in records])
+        for name, x in (("u", u), ("y", y)):
+            m, s = stats(x)
+            getattr(self, f"{name}_mean").fill_(m)
+            getattr(self, f"{name}_std").fill_(s)
+        if use_rh:
+            m, s = stats(np.concatenate([r.rh for r in records]))
+            self.rh_mean.fill_(m)
+            self.rh_std.fill_(s)
+
+    def stat(self, name: str) -> tuple[float, float]:
+        return float(getattr(self, f"{name}_mean")), float(getattr(self, f"{name}_std"))
+
+    def norm(self, name: str, x: np.ndarray) -> np.ndarray:
+        m, s = self.stat(name)
+        return (np.asarray(x, float) - m) / s
+
+    def denorm(self, name: str, x: np.ndarray) -> np.ndarray:
+        m, s = self.stat(name)
+        return np.asarray(x, float) * s + m
+
+
+class _Seq:
+    """A normalised record (plain arrays) used by the training code."""
+
+    __slots__ = ("u", "y", "rh")
+
+    def __init__(self, u, y, rh):
+        self.u, self.y, self.rh = u, y, rh
+
+    def __len__(self):
+        return len(self.u)
+
+
+@contextlib.contextmanager
+def torch_threads(n: int | None):
+    """Temporarily limit torch intra-op threads and BLAS threads to ``n`` (None: leave).
+
+    The networks here are small: on a shared 2-core machine one thread is several times
+    faster than two (measured: 14 s vs 94 s for two NARX epochs on Silverbox while other
+    jobs ran), because waiting threads spin against the other processes."""
+    if not n:
+        yield
+        return
+    from threadpoolctl import threadpool_limits  # a scikit-learn dependency
+
+    old = torch.get_num_threads()
+    torch.set_num_threads(int(n))
+    try:
+        with threadpool_limits(limits=int(n), user_api="blas"):
+            yield
+    finally:
+        torch.set_num_threads(old)
+
+
+def seed_all(seed: int) -> None:
+    """Seed Python, numpy and torch (same seed -> same initial weights and batches)."""
+    import random
+    random.seed(seed)
+    np.random.seed(seed % (2 ** 32))
+    torch.manual_seed(seed)
+
+
+# Hyper-parameters shared by every model: (default, check) where check returns an error text.
+def _pos_int(v, zero=False):
+    ok = isinstance(v, (int, np.integer)) and not isinstance(v, bool) and (v >= 0 if zero else v >= 1)
+    return None if ok else ("a non-negative integer" if zero else "a positive integer")
+
+
+def _pos_float(v, zero=False):
+    ok = isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v) \
+        and (v >= 0 if zero else v > 0)
+    return None if ok else ("a non-negative number" if zero else "a positive number")
+
+
+class NeuralModel:
+    """Base class of the neural models (see the module docstring for the contract)."""
+
+    #: registry name ("ff", "rbf", ...), set by subclasses
+    kind = "base"
+    #: parameter name -> validator(value) -> error text or None (subclasses extend)
+    _checks: dict = {
+        "seed": lambda v: _pos_int(v, zero=True),
+        "lr": _pos_float,
+        "weight_decay": lambda v: _pos_float(v, zero=True),
+        "batch_size": _pos_int,
+        "max_epochs": lambda v: _pos_int(v, zero=True),
+        "max_time": lambda v: None if v is None else _pos_float(v),
+        "patience": _pos_int,
+        "val_fraction": lambda v: None if (_pos_float(v, zero=True) is None and v < 1) else "a number in [0, 1)",
+        "grad_clip": lambda v: None if v is None else _pos_float(v),
+        "progress_bar": lambda v: None if isinstance(v, bool) else "true or false",
+        "num_threads": lambda v: None if v is None else _pos_int(v),
+        "accelerator": lambda v: None if isinstance(v, str) else "a Lightning accelerator name such as 'cpu'",
+        "inputs": lambda v: None if v in ("auto", "voltage", "voltage+rh") else "'auto', 'voltage' or 'voltage+rh'",
+        "checkpoint_dir": lambda v: None if v is None or isinstance(v, str) else "a folder path or null",
+    }
+
+    # ------------------------------------------------------------------ parameters
+    @classmethod
+    def param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [p for p in sig.parameters if p != "self"]
+
+    @classmethod
+    def default_params(cls) -> dict:
+        sig = inspect.signature(cls.__init__)
+        return {k: p.default for k, p in sig.parameters.items() if k != "self"}
+
+    def get_params(self) -> dict:
+        return {k: getattr(self, k) for k in self.param_names()}
+
+    def _set_params_from(self, local_vars: dict) -> None:
+        """Store the ``__init__`` arguments as attributes and validate them (subclasses call
+        ``self._set_params_from(locals())`` at the end of ``__init__``)."""
+        for k in self.param_names():
+            setattr(self, k, local_vars[k])
+        self._validate()
+
+    def set_params(self, **params) -> "NeuralModel":
+        unknown = sorted(set(params) - set(self.param_names()))
+        if unknown:
+            raise InputError(f"unknown hyper-parameter(s) {unknown} for model {self.kind!r}; "
+                             f"known: {', '.join(self.param_names())}")
+        for k, v in params.items():
+            setattr(self, k, v)
+        self._validate()
+        return self
+
+    def _validate(self) -> None:
+        checks = {}
+        for klass in reversed(type(self).__mro__):
+            checks.update(getattr(klass, "_checks", {}))
+        for name in self.param_names():
+            chk = checks.get(name)
+            if chk is None:
+                continue
+            msg = chk(getattr(self, name))
+            if msg:
+                raise InputError(f"model {self.kind!r}: hyper-parameter {name}="
+                                 f"{getattr(self, name)!r} is invalid; expected {msg}")
+
+    def __repr__(self) -> str:
+        defaults = self.default_params()
+        diff = {k: v for k, v in self.get_params().items() if defaults.get(k) != v}
+        return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in diff.items())})"
+
+    # ------------------------------------------------------------------ to override
+    def _build_core(self, n_rh: int) -> SequenceCore:
+        raise NotImplementedError
+
+    def _initialise(self, core: SequenceCore, train: list[_Seq]) -> None:
+        """Non-gradient initialisation (least squares, k-means); default: nothing."""
+
+    def _training_settings(self) -> dict:
+        """Settings passed to :func:`nnmodel.training.fit_core`."""
+        return dict(horizon=1, stride=1)
+
+    def _gradient_epochs(self) -> int:
+        return int(self.max_epochs)
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, train, val=None) -> "NeuralModel":
+        """Train on ``train`` records (early stopping on the free-run error of ``val``)."""
+        from ..training import fit_core  # Lightning is imported only when training
+
+        self._validate()
+        train = check_records(train, "training")
+        if val is not None:
+            val = check_records(val, "validation")
+            check_records(train + val, "training + validation")
+        fs = train[0].fs
+        has_rh = train[0].rh is not None
+        if self.inputs == "voltage+rh" and not has_rh:
+            raise InputError(f"model {self.kind!r} was asked for inputs voltage+rh but the training "
+                             "records carry no relative humidity")
+        use_rh = has_rh and self.inputs != "voltage"
+        seed_all(self.seed)
+        with torch_threads(self.num_threads):
+            core = self._build_core(1 if use_rh else 0)
+            min_len = core.n_init + 2
+            if val is None and self.val_fraction > 0:
+                train, val = split_records(train, self.val_fraction, min_len=min_len)
+            val = [r for r in (val or []) if len(r) >= min_len]
+            net = Normalized(core)
+            net.set_stats(train, use_rh)
+            self.net_ = net
+            self.inputs_ = ["voltage", "rh"] if use_rh else ["voltage"]
+            self.fs_ = fs
+            self.rh_range_ = rh_range(train + val) if use_rh else None
+            self.n_init_ = int(core.n_init)
+            tr = [self._norm_record(r) for r in train]
+            va = [self._norm_record(r) for r in val]
+            t0 = time.perf_counter()
+            self._initialise(core, tr)
+            history: list[dict] = []
+            if self._gradient_epochs() > 0:
+                settings = dict(seed=self.seed, lr=self.lr, weight_decay=self.weight_decay,
+                                batch_size=self.batch_size, max_epochs=self._gradient_epochs(),
+                                max_time=self.max_time, patience=self.patience,
+                                grad_clip=self.grad_clip, accelerator=self.accelerator,
+                                progress_bar=self.progress_bar, checkpoint_dir=self.checkpoint_dir)
+                settings.update(self._training_settings())
+                history = fit_core(core, tr, va, **settings)
+            self.fit_time_ = time.perf_counter() - t0
+            self.history_ = history
+            core.eval()
+        return self
+
+    def _norm_record(self, r: Record) -> _Seq:
+        n = self.net_
+        rh = n.norm("rh", r.rh) if "rh" in self.inputs_ else None
+        return _Seq(n.norm("u", r.u), n.norm("y", r.y), rh)
+
+    # ------------------------------------------------------------------ inference
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "net_"):
+            raise NotFittedError(f"model {self.kind!r} is not trained yet: call fit() or load a bundle")
+
+    @property
+    def uses_rh(self) -> bool:
+        self._check_fitted()
+        return "rh" in self.inputs_
+
+    def _prepare(self, u, rh, y=None, y_name="y"):
+        """Validate inputs in physical units; returns (u, rh or None, y or None) arrays."""
+        self._check_fitted()
+        u = np.asarray(u, dtype=float)
+        if u.ndim != 1 or u.size == 0:
+            raise InputError(f"voltage must be a non-empty 1-D array, got shape {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise InputError(f"voltage contains NaN or infinite values (first at sample "
+                             f"{int(np.flatnonzero(~np.isfinite(u))[0])})")
+        n = u.size
+        if self.uses_rh:
+            if rh is None:
+                lo, hi = self.rh_range_
+                raise InputError(f"this model takes relative humidity as an input (trained on "
+                                 f"{lo:g}-{hi:g} %RH); pass rh= (a constant or one value per sample)")
+            rh = np.asarray(rh, dtype=float)
+            if rh.ndim == 0:
+                rh = np.full(n, float(rh))
+            if rh.shape != (n,):
+                raise InputError(f"rh must be a constant or have one value per voltage sample "
+                                 f"({n}), got shape {rh.shape}")
+            if not np.all(np.isfinite(rh)):
+                raise InputError("rh contains NaN or infinite values")
+            if rh.min() < 0 or rh.max() > 100:
+                raise InputError(f"relative humidity must lie in 0-100 %, got {rh.min():g}-{rh.max():g} %")
+            lo, hi = self.rh_range_
+            tol = 1e-9 * max(1.0, hi)
+            if rh.min() < lo - tol or rh.max() > hi + tol:
+                warnings.warn(f"relative humidity {rh.min():g}-{rh.max():g} % is outside the range "
+                              f"seen in training ({lo:g}-{hi:g} %RH): the model extrapolates and "
+                              "its predictions are not validated there", RuntimeWarning, stacklevel=3)
+        elif rh is not None:
+            warnings.warn("this model was trained without humidity; the rh argument is ignored",
+                          RuntimeWarning, stacklevel=3)
+            rh = None
+        if y is not None:
+            y = np.asarray(y, dtype=float)
+            if y.ndim != 1:
+                raise InputError(f"{y_name} must be a 1-D array, got shape {y.shape}")
+            if not np.all(np.isfinite(y)):
+                raise InputError(f"{y_name} contains NaN or infinite values")
+        return u, rh, y
+
+    def _padded(self, u, rh, y, pad: int):
+        """Normalised arrays with ``pad`` samples of rest (u = 0 V, y = 0) in front."""
+        n = self.net_
+        u0, y0 = n.norm("u", 0.0), n.norm("y", 0.0)
+        un = np.concatenate([np.full(pad, u0), n.norm("u", u)])
+        yn = None if y is None else np.concatenate([np.full(pad, y0), n.norm("y", y)])
+        rhn = None
+        if rh is not None:
+            rhn = n.norm("rh", np.concatenate([np.full(pad, rh[0]), rh]))
+        return un, rhn, yn
+
+    @staticmethod
+    def _t(x):
+        return None if x is None else torch.as_tensor(np.ascontiguousarray(x), dtype=torch.float32)
+
+    def simulate(self, u, rh=None, y_init=None) -> np.ndarray:
+        """Free-run simulation in physical units.
+
+        ``y_init``: the first measured outputs (any length m < len(u)); they only initialise
+        the state (the last ``n_init_`` of them are used) and are returned unchanged as the
+        first m outputs.  Without ``y_init`` the system is assumed at rest (0 V, 0 output)
+        before the first sample.
+        """
+        u, rh, y_init = self._prepare(u, rh, y_init, "y_init")
+        m = 0 if y_init is None else y_init.size
+        if m >= u.size:
+            raise InputError(f"y_init has {m} samples but the input only {u.size}; y_init must be "
+                             "shorter than the record it initialises")
+        k = self.n_init_
+        pad = max(0, k - m)
+        yfull = None if y_init is None else y_init
+        un, rhn, yn = self._padded(u, rh, yfull if yfull is not None else np.zeros(0), pad)
+        s = pad + m  # first simulated index in padded arrays
+        core = self.net_.core
+        with torch.no_grad(), torch_threads(self.num_threads):
+            state = core.init_state(self._t(un[None, s - k:s]), self._t(yn[None, s - k:s]),
+                                    None if rhn is None else self._t(rhn[None, s - k:s]))
+            out = core.simulate(state, self._t(un[None, s:]),
+                                None if rhn is None else self._t(rhn[None, s:]))
+        y_hat = self.net_.denorm("y", out[0].double().numpy())
+        if m:
+            y_hat = np.concatenate([y_init, y_hat])
+        return y_hat
+
+    def predict(self, u, rh=None, y=None, steps_ahead: int | None = None,
+                chunk: int = 4096) -> np.ndarray:
+        """SysIdentPy-style prediction.
+
+        ``steps_ahead=None``: free run (initialised from the first ``n_init_`` samples of
+        ``y`` when ``y`` is given, else from rest).  ``steps_ahead=k``: each output ``y[t]``
+        is simulated over ``k`` steps starting from the measured ``y`` up to ``t - k``; the
+        first ``k - 1`` outputs, whose start would lie before the record, are the free run
+        from rest at the record start (so ``k >= len(u)`` is exactly the free run from
+        rest).  ``k = 1`` is one-step-ahead prediction.
+        """
+        if steps_ahead is None:
+            if y is None:
+                return self.simulate(u, rh)
+            return self.simulate(u, rh, y_init=np.asarray(y, float)[: self.n_init_])
+        if isinstance(steps_ahead, bool) or not isinstance(steps_ahead, (int, np.integer)) or steps_ahead < 1:
+            raise InputError(f"steps_ahead must be None or a positive integer, got {steps_ahead!r}")
+        if y is None:
+            raise InputError("k-step-ahead prediction needs the measured output y")
+        u, rh, y = self._prepare(u, rh, y)
+        if y.size != u.size:
+            raise InputError(f"y has {y.size} samples but the voltage has {u.size}")
+        N, n0 = u.size, self.n_init_
+        k = int(min(steps_ahead, N))
+        un, rhn, yn = self._padded(u, rh, y, n0)
+        core = self.net_.core
+        out = np.empty(N)
+        hist_idx = np.arange(-n0, 0)
+        sim_idx = np.arange(k)
+        with torch.no_grad(), torch_threads(self.num_threads):
+            for a in range(0, N, chunk):
+                t = np.arange(a, min(N, a + chunk))
+                start = np.maximum(t - k + 1, 0)  # first simulated sample of each prediction
+                s = start + n0  # ... in the padded arrays
+                H, S = s[:, None] + hist_idx, s[:, None] + sim_idx
+                state = core.init_state(self._t(un[H]), self._t(yn[H]),
+                                        None if rhn is None else self._t(rhn[H]))
+                o = core.simulate(state, self._t(un[S]), None if rhn is None else self._t(rhn[S]))
+                out[t] = o[np.arange(t.size), t - start].double().numpy()
+        return self.net_.denorm("y", out)
+
+    @property
+    def n_parameters(self) -> int:
+        """Number of learned parameters (weights, biases, centres, widths)."""
+        self._check_fitted()
+        return int(sum(p.numel() for p in self.net_.core.parameters()))
+
+    # ------------------------------------------------------------------ persistence helpers
+    def learned_state(self) -> dict[str, Any]:
+        """JSON-able learned attributes other than the weights (used by bundles)."""
+        self._check_fitted()
+        return {"inputs": list(self.inputs_), "fs": self.fs_,
+                "rh_range": None if self.rh_range_ is None else list(self.rh_range_),
+                "n_init": self.n_init_, "fit_time_s": getattr(self, "fit_time_", None)}
+
+    def restore(self, learned: dict, state_dict: dict) -> "NeuralModel":
+        """Rebuild the network from ``learned_state()`` and load its weights."""
+        self._validate()
+        inputs = list(learned["inputs"])
+        if inputs not in (["voltage"], ["voltage", "rh"]):
+            raise InputError(f"unsupported model inputs {inputs}")
+        core = self._build_core(1 if "rh" in inputs else 0)
+        net = Normalized(core)
+        missing, unexpected = net.load_state_dict(state_dict, strict=False)
+        if missing or unexpected:
+            raise InputError(f"saved weights do not match a {self.kind!r} model with these "
+                             f"hyper-parameters (missing {missing}, unexpected {unexpected})")
+        net.eval()
+        self.net_ = net
+        self.inputs_ = inputs
+        self.fs_ = float(learned["fs"])
+        self.rh_range_ = None if learned.get("rh_range") is None else tuple(learned["rh_range"])
+        self.n_init_ = int(core.n_init)
+        self.fit_time_ = learned.get("fit_time_s")
+        self.history_ = []
+        return self

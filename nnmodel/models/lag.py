@@ -1,0 +1,229 @@
+"""Tapped-delay (NARX / NFIR) simulator shared by the ``ff``, ``rbf`` and ``narx`` models.
+
+    y[k] = f(y[k-1], ..., y[k-na], u[k-d], ..., u[k-d-nb+1], rh[k]),   d = 0 or 1
+
+``f`` is a *map* (MLP or Gaussian RBF network, each with a linear bypass).  The state is
+the vector of past outputs; the input part of ``f``'s first layer does not depend on the
+state, so it is computed for the whole sequence at once and only the output-lag part runs
+in the time loop.  With ``na = 0`` (NFIR) there is no loop at all.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from .base import SequenceCore
+
+ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "gelu": nn.GELU, "silu": nn.SiLU,
+               "elu": nn.ELU, "sigmoid": nn.Sigmoid}
+
+#: bound on the normalised output during simulation, so a diverging model returns large
+#: finite numbers (and a large validation error) rather than inf/NaN
+OUTPUT_CLIP = 1e3
+
+
+class MLPMap(nn.Module):
+    """Linear bypass + MLP: f(yl, x) = a.yl + b.x + c + W_out act(... act(W_y yl + W_x x + b1))."""
+
+    def __init__(self, n_y: int, n_x: int, hidden: int, layers: int, activation: str = "tanh",
+                 linear: bool = True, poly_degree: int = 1):
+        super().__init__()
+        self.n_y, self.n_x = n_y, n_x
+        self.poly_degree = int(poly_degree)
+        self.hidden_size = hidden if layers > 0 else 0
+        self.linear = linear or self.hidden_size == 0
+        H = self.hidden_size
+        if H:
+            self.in_y = nn.Linear(n_y, H, bias=False) if n_y else None
+            self.in_x = nn.Linear(n_x, H)
+            self.hidden = nn.ModuleList(nn.Linear(H, H) for _ in range(layers - 1))
+            self.out = nn.Linear(H, 1)
+            self.act = ACTIVATIONS[activation]()
+            with torch.no_grad():  # start as the (linear / polynomial) bypass alone
+                self.out.weight.zero_()
+                self.out.bias.zero_()
+        if self.linear:
+            P = self.poly_degree
+            self.lin_y = nn.Linear(n_y * P, 1, bias=False) if n_y else None
+            self.lin_x = nn.Linear(n_x * P, 1)
+            with torch.no_grad():
+                if self.lin_y is not None:
+                    self.lin_y.weight.zero_()
+                self.lin_x.weight.zero_()
+                self.lin_x.bias.zero_()
+
+    def powers(self, z):
+        """z and its elementwise powers 2..poly_degree (the polynomial bypass terms)."""
+        if self.poly_degree == 1:
+            return z
+        return torch.cat([z ** p for p in range(1, self.poly_degree + 1)], -1)
+
+    def precompute(self, x):
+        pre = self.in_x(x) if self.hidden_size else None
+        lin = self.lin_x(self.powers(x))[..., 0] if self.linear else None
+        return pre, lin
+
+    def step(self, yl, cache):
+        pre, lin = cache
+        out = 0.0
+        if self.hidden_size:
+            if self.in_y is not None:
+                pre = pre + self.in_y(yl)
+            h = self.act(pre)
+            for layer in self.hidden:
+                h = self.act(layer(h))
+            out = self.out(h)[..., 0]
+        if self.linear:
+            out = out + lin
+            if self.lin_y is not None:
+                out = out + self.lin_y(self.powers(yl))[..., 0]
+        return out
+
+    def set_linear(self, a: np.ndarray, b: np.ndarray, c: float) -> None:
+        """Set the linear bypass: weights ``a`` of the output-lag terms and ``b`` of the input
+        terms (each ordered as :meth:`powers`: all lags, then their squares, ...), bias ``c``."""
+        with torch.no_grad():
+            if self.lin_y is not None:
+                self.lin_y.weight.copy_(torch.as_tensor(a, dtype=torch.float32)[None])
+            self.lin_x.weight.copy_(torch.as_tensor(b, dtype=torch.float32)[None])
+            self.lin_x.bias.fill_(float(c))
+
+
+class RBFMap(nn.Module):
+    """Linear bypass + Gaussian radial-basis layer:
+    f(z) = a.z + c + sum_j w_j exp(-|z - c_j|^2 / (2 s_j^2)),   z = (yl, x)."""
+
+    def __init__(self, n_y: int, n_x: int, n_centres: int):
+        super().__init__()
+        self.n_y, self.n_x = n_y, n_x
+        d = n_y + n_x
+        self.centres = nn.Parameter(torch.zeros(n_centres, d))
+        self.log_width = nn.Parameter(torch.zeros(n_centres))
+        self.weight = nn.Parameter(torch.zeros(n_centres))
+        self.lin = nn.Parameter(torch.zeros(d))
+        self.bias = nn.Parameter(torch.zeros(()))
+
+    def features(self, z):
+        """Gaussian activations (..., M) of full regressors z (..., n_y + n_x)."""
+        d2 = (z * z).sum(-1, keepdim=True) - 2 * z @ self.centres.T + (self.centres ** 2).sum(-1)
+        return torch.exp(-0.5 * d2.clamp_min(0) * torch.exp(-2 * self.log_width))
+
+    def precompute(self, x):
+        cx = self.centres[:, self.n_y:]
+        d2x = (x * x).sum(-1, keepdim=True) - 2 * x @ cx.T + (cx ** 2).sum(-1)
+        lin = x @ self.lin[self.n_y:] + self.bias
+        return d2x, lin
+
+    def step(self, yl, cache):
+        d2x, lin = cache
+        d2 = d2x
+        out = lin
+        if self.n_y:
+            cy = self.centres[:, :self.n_y]
+            d2 = d2 + (yl * yl).sum(-1, keepdim=True) - 2 * yl @ cy.T + (cy ** 2).sum(-1)
+            out = out + yl @ self.lin[:self.n_y]
+        phi = torch.exp(-0.5 * d2.clamp_min(0) * torch.exp(-2 * self.log_width))
+        return out + phi @ self.weight
+
+
+class LagSimulator(SequenceCore):
+    """NARX/NFIR core: state = the last ``na`` outputs (normalised)."""
+
+    def __init__(self, na: int, nb: int, n_rh: int, fmap: nn.Module, feedthrough: bool = True):
+        super().__init__()
+        self.na, self.nb, self.n_rh = int(na), int(nb), int(n_rh)
+        self.delay = 0 if feedthrough else 1
+        self.fmap = fmap
+        self.n_init = max(self.na, self.nb - 1 + self.delay, 1)
+
+    @property
+    def n_x(self) -> int:
+        return self.nb + self.n_rh
+
+    def exo(self, u_all, rh_all, n_hist: int):
+        """Input regressors (B, T, nb + n_rh) for the samples after ``n_hist`` history."""
+        L = u_all.shape[1]
+        cols = [u_all[:, n_hist - self.delay - j: L - self.delay - j] for j in range(self.nb)]
+        if self.n_rh:
+            cols.append(rh_all[:, n_hist:])
+        return torch.stack(cols, -1)
+
+    def init_state(self, u_hist, y_hist, rh_hist):
+        k = self.n_init
+        return (u_hist[:, -k:], y_hist[:, -k:], None if rh_hist is None else rh_hist[:, -k:])
+
+    def simulate(self, state, u, rh):
+        u_hist, y_hist, rh_hist = state
+        k = self.n_init
+        u_all = torch.cat([u_hist, u], 1)
+        rh_all = None if rh is None or not self.n_rh else torch.cat([rh_hist, rh], 1)
+        x = self.exo(u_all, rh_all, k)
+        cache = self.fmap.precompute(x)
+        B, T = u.shape
+        if self.na == 0:
+            return self.fmap.step(x.new_zeros(B, T, 0), cache)
+        yl = y_hist[:, k - self.na:].flip(1)  # most recent first
+        outs = []
+        for t in range(T):
+            y = self.fmap.step(yl, tuple(None if c is None else c[:, t] for c in cache))
+            y = y.clamp(-OUTPUT_CLIP, OUTPUT_CLIP)
+            outs.append(y)
+            yl = torch.cat([y[:, None], yl[:, :-1]], 1)
+        return torch.stack(outs, 1)
+
+    # ---------------------------------------------------------------- one-step regression data
+    def regressors(self, seqs) -> tuple[np.ndarray, np.ndarray]:
+        """One-step regression data from normalised records: Z = [y lags, input regressors]
+        (n, na + nb + n_rh) and targets (n,)."""
+        Zs, ts = [], []
+        k = self.n_init
+        for s in seqs:
+            n = len(s)
+            if n <= k:
+                continue
+            idx = np.arange(k, n)
+            cols = [s.y[idx - i] for i in range(1, self.na + 1)]
+            cols += [s.u[idx - self.delay - j] for j in range(self.nb)]
+            if self.n_rh:
+                cols.append(s.rh[idx])
+            Zs.append(np.stack(cols, 1))
+            ts.append(s.y[idx])
+        return np.concatenate(Zs), np.concatenate(ts)
+
+    def is_stable_ar(self, a: np.ndarray, margin: float = 1.0) -> bool:
+        """True when the AR polynomial 1 - a1 z^-1 - ... - a_na z^-na has all roots inside
+        the unit circle (radius < margin)."""
+        if self.na == 0:
+            return True
+        roots = np.roots(np.concatenate([[1.0], -np.asarray(a, float)]))
+        return bool(np.all(np.abs(roots) < margin))
+
+
+def ridge(Z: np.ndarray, t: np.ndarray, alpha: float, penalise_from: int = 0) -> np.ndarray:
+    """Ridge regression with an unpenalised intercept: returns (weights..., intercept).
+    Columns before ``penalise_from`` are not penalised."""
+    X = np.concatenate([Z, np.ones((Z.shape[0], 1))], 1)
+    G = X.T @ X
+    reg = np.zeros(X.shape[1])
+    reg[penalise_from:-1] = alpha * Z.shape[0]
+    G[np.diag_indices_from(G)] += reg + 1e-10 * np.trace(G) / len(G)
+    return np.linalg.solve(G, X.T @ t)
+
+
+def arx_init(core: LagSimulator, seqs, alpha: float = 1e-6) -> dict:
+    """Least-squares (polynomial) ARX fit of the map's bypass on normalised one-step data,
+    written into the bypass when its linear AR part is stable.  Returns a small report."""
+    Z, t = core.regressors(seqs)
+    P = getattr(core.fmap, "poly_degree", 1)
+    na = core.na
+    Zy, Zx = Z[:, :na], Z[:, na:]
+    feats = [Zy ** p for p in range(1, P + 1)] + [Zx ** p for p in range(1, P + 1)]
+    X = np.concatenate(feats, 1)
+    w = ridge(X, t, alpha)
+    a, b, c = w[:na * P], w[na * P:-1], w[-1]
+    stable = core.is_stable_ar(a[:na])
+    if stable:
+        core.fmap.set_linear(a, b, c)
+    resid = t - np.concatenate([X, np.ones((len(X), 1))], 1) @ w
+    return {"arx_stable": stable, "arx_one_step_rmse": float(np.sqrt(np.mean(resid ** 2)))}

@@ -1,0 +1,42 @@
+"""``narx``: recurrent NARX network trained in closed loop.
+
+Same map as ``ff`` (linear bypass + MLP on past outputs, voltage delays and RH), but trained
+on its own simulated outputs: every training window starts from ``n_init`` measured samples
+and is simulated ``horizon`` steps in free run; the loss is the simulation error,
+back-propagated through the whole window (truncated back-propagation through time over
+many short windows = multiple shooting).  So the free-run error is what is optimised.
+"""
+from __future__ import annotations
+
+from .ff import _LAG_CHECKS
+from .base import NeuralModel
+from .lag import LagSimulator, MLPMap, arx_init
+
+
+class NARXModel(NeuralModel):
+    """Closed-loop-trained NARX network (simulation-error / multiple-shooting training)."""
+
+    kind = "narx"
+    _checks = _LAG_CHECKS
+
+    def __init__(self, na: int = 4, nb: int = 8, hidden: int = 32, layers: int = 2,
+                 activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
+                 horizon: int = 100, stride: int = 20,
+                 inputs: str = "auto", seed: int = 0, lr: float = 2e-3, weight_decay: float = 0.0,
+                 batch_size: int = 64, max_epochs: int = 200, max_time: float | None = 600.0,
+                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
+                 accelerator: str = "cpu", progress_bar: bool = True,
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+        self._set_params_from(locals())
+
+    def _build_core(self, n_rh):
+        fmap = MLPMap(self.na, self.nb + n_rh, self.hidden, self.layers, self.activation, linear=True,
+                      poly_degree=self.poly_degree)
+        return LagSimulator(self.na, self.nb, n_rh, fmap, self.feedthrough)
+
+    def _initialise(self, core, train):
+        if self.arx_init:
+            self.init_report_ = arx_init(core, train)
+
+    def _training_settings(self):
+        return dict(horizon=self.horizon, stride=self.stride)

@@ -1,0 +1,84 @@
+"""``rbf``: Gaussian radial-basis network on tapped delays.
+
+    y[k] = a.z + c + sum_j w_j exp(-|z - c_j|^2 / (2 s_j^2)),  z = (y[k-1..k-na], u[k-d..], rh[k])
+
+Training without gradients (seconds): centres c_j by k-means (scikit-learn) on the
+normalised one-step regressors, widths s_j = ``width_factor`` x the mean distance from c_j
+to its ``width_neighbours`` nearest centres, then the output layer (w, a, c) by ridge
+regression on one-step targets.  Optional gradient fine-tuning of everything (centres,
+widths, weights) with the shared Lightning loop: ``max_epochs > 0``, one step ahead
+(``horizon = 1``) or in closed loop (``horizon > 1``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from .base import NeuralModel, _pos_float, _pos_int
+from .ff import _LAG_CHECKS
+from .lag import LagSimulator, RBFMap, ridge
+
+
+class RBFModel(NeuralModel):
+    """Gaussian RBF network: k-means centres, spacing-based widths, ridge output layer."""
+
+    kind = "rbf"
+    _checks = {**_LAG_CHECKS,
+               "n_centres": _pos_int,
+               "width_factor": _pos_float,
+               "width_neighbours": _pos_int,
+               "alpha": lambda v: _pos_float(v, zero=True),
+               "kmeans_samples": _pos_int}
+
+    def __init__(self, na: int = 2, nb: int = 20, n_centres: int = 100, width_factor: float = 1.0,
+                 width_neighbours: int = 2, alpha: float = 1e-6, kmeans_samples: int = 20000,
+                 feedthrough: bool = True, horizon: int = 1, stride: int = 1,
+                 inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
+                 batch_size: int = 256, max_epochs: int = 0, max_time: float | None = None,
+                 patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
+                 accelerator: str = "cpu", progress_bar: bool = True,
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+        self._set_params_from(locals())
+
+    def _build_core(self, n_rh):
+        fmap = RBFMap(self.na, self.nb + n_rh, self.n_centres)
+        return LagSimulator(self.na, self.nb, n_rh, fmap, self.feedthrough)
+
+    def _initialise(self, core, train):
+        from sklearn.cluster import KMeans
+
+        Z, t = core.regressors(train)
+        rng = np.random.default_rng(self.seed)
+        sub = Z if len(Z) <= self.kmeans_samples else Z[rng.choice(len(Z), self.kmeans_samples, replace=False)]
+        M = min(self.n_centres, len(np.unique(sub, axis=0)))
+        km = KMeans(n_clusters=M, n_init=1, random_state=self.seed).fit(sub)
+        C = km.cluster_centers_
+        if M < self.n_centres:  # fewer distinct points than centres: duplicate (weights share)
+            C = np.concatenate([C, C[rng.integers(0, M, self.n_centres - M)]])
+        D = np.sqrt(((C[:, None, :] - C[None, :, :]) ** 2).sum(-1))
+        np.fill_diagonal(D, np.inf)
+        p = min(self.width_neighbours, len(C) - 1) if len(C) > 1 else 0
+        if p:
+            spacing = np.sort(D, 1)[:, :p].mean(1)
+            spacing[~np.isfinite(spacing) | (spacing <= 0)] = 1.0
+        else:
+            spacing = np.ones(len(C))
+        width = self.width_factor * spacing
+        fmap = core.fmap
+        with torch.no_grad():
+            fmap.centres.copy_(torch.as_tensor(C, dtype=torch.float32))
+            fmap.log_width.copy_(torch.as_tensor(np.log(width), dtype=torch.float32))
+            Phi = fmap.features(torch.as_tensor(Z, dtype=torch.float32)).double().numpy()
+        X = np.concatenate([Z, Phi], 1)
+        w = ridge(X, t, self.alpha, penalise_from=Z.shape[1])
+        d = Z.shape[1]
+        with torch.no_grad():
+            fmap.lin.copy_(torch.as_tensor(w[:d], dtype=torch.float32))
+            fmap.weight.copy_(torch.as_tensor(w[d:-1], dtype=torch.float32))
+            fmap.bias.fill_(float(w[-1]))
+        resid = t - np.concatenate([X, np.ones((len(X), 1))], 1) @ w
+        self.init_report_ = {"one_step_rmse": float(np.sqrt(np.mean(resid ** 2))),
+                             "mean_width": float(width.mean())}
+
+    def _training_settings(self):
+        return dict(horizon=self.horizon, stride=self.stride)

@@ -1,0 +1,92 @@
+"""``lstm`` and ``gru``: recurrent sequence models with RH as an input channel.
+
+The core keeps the two parts apart (as in SUBNET / torchid): an *encoder* (MLP) maps the
+last ``n_init`` measured inputs and outputs to the initial hidden state, and the recurrent
+network then runs on the inputs alone (voltage, and RH when the model uses humidity), with
+a linear read-out plus a direct linear input-to-output path.  Training is closed loop on
+windows of ``n_init`` + ``horizon`` samples, so the free-run error is what is optimised.
+Without measured history the encoder sees the system at rest (0 V, 0 output).
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .base import NeuralModel, SequenceCore, _pos_int
+
+
+class RNNSimulator(SequenceCore):
+    def __init__(self, cell: str, n_rh: int, hidden: int, layers: int, n_init: int,
+                 encoder_hidden: int):
+        super().__init__()
+        self.cell, self.n_rh = cell, int(n_rh)
+        self.hidden_size, self.layers, self.n_init = int(hidden), int(layers), int(n_init)
+        n_in = 1 + self.n_rh
+        rnn_cls = nn.LSTM if cell == "lstm" else nn.GRU
+        self.rnn = rnn_cls(n_in, hidden, layers, batch_first=True)
+        self.n_parts = 2 if cell == "lstm" else 1
+        self.encoder = nn.Sequential(nn.Linear(2 * n_init + self.n_rh, encoder_hidden), nn.Tanh(),
+                                     nn.Linear(encoder_hidden, self.n_parts * layers * hidden))
+        self.readout = nn.Linear(hidden, 1)
+        self.skip = nn.Linear(n_in, 1)
+
+    def init_state(self, u_hist, y_hist, rh_hist):
+        k = self.n_init
+        parts = [u_hist[:, -k:], y_hist[:, -k:]]
+        if self.n_rh:
+            parts.append(rh_hist[:, -1:])
+        s = self.encoder(torch.cat(parts, 1))
+        B = s.shape[0]
+        s = s.view(B, self.n_parts, self.layers, self.hidden_size).permute(1, 2, 0, 3)
+        if self.cell == "lstm":
+            return (torch.tanh(s[0]).contiguous(), s[1].contiguous())
+        return torch.tanh(s[0]).contiguous()
+
+    def simulate(self, state, u, rh):
+        x = u[..., None] if not self.n_rh else torch.stack([u, rh], -1)
+        out, _ = self.rnn(x, state)
+        return self.readout(out)[..., 0] + self.skip(x)[..., 0]
+
+
+class _RNNModel(NeuralModel):
+    cell = "lstm"
+    _checks = {"hidden": _pos_int, "layers": _pos_int, "n_init": _pos_int,
+               "encoder_hidden": _pos_int, "horizon": _pos_int, "stride": _pos_int}
+
+    def _build_core(self, n_rh):
+        return RNNSimulator(self.cell, n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden)
+
+    def _training_settings(self):
+        return dict(horizon=self.horizon, stride=self.stride)
+
+
+class LSTMModel(_RNNModel):
+    """LSTM sequence model (encoder-initialised state, closed-loop training)."""
+
+    kind = "lstm"
+    cell = "lstm"
+
+    def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
+                 horizon: int = 200, stride: int = 50,
+                 inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
+                 batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
+                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
+                 accelerator: str = "cpu", progress_bar: bool = True,
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+        self._set_params_from(locals())
+
+
+class GRUModel(_RNNModel):
+    """GRU sequence model (encoder-initialised state, closed-loop training)."""
+
+    kind = "gru"
+    cell = "gru"
+
+    def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
+                 horizon: int = 200, stride: int = 50,
+                 inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
+                 batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
+                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
+                 accelerator: str = "cpu", progress_bar: bool = True,
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+        self._set_params_from(locals())

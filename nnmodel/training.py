@@ -1,0 +1,333 @@
+"""Lightning pieces shared by every neural model, and the training recipes.
+
+* :class:`WindowDataModule` cuts normalised records into training windows (``n_init``
+  samples of measured history + ``horizon`` simulated samples; ``horizon = 1`` is
+  one-step-ahead / series-parallel training, longer horizons are closed-loop training by
+  truncated back-propagation through time, i.e. multiple shooting) and serves the
+  validation records whole, for a free-run validation error.
+* :class:`SimulationTask` is the LightningModule: the loss is the mean-square simulation
+  error over each window; the validation metric ``val_loss`` is the free-run NRMSE.
+* :func:`fit_core` runs the Trainer: CPU by default, early stopping and best-checkpoint on
+  the validation free-run error, learning-rate reduction on plateaus, optional wall-clock
+  budget, deterministic seeds.
+* :func:`load_recipe` reads ``configs/train/NAME.yaml`` and validates its keys.
+"""
+from __future__ import annotations
+
+import contextlib
+import datetime
+import logging
+import math
+import os
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+import lightning.pytorch as pl
+from lightning.pytorch.callbacks import Callback, EarlyStopping, ModelCheckpoint
+from torch.utils.data import BatchSampler, DataLoader, Dataset, RandomSampler
+
+from physics.errors import InputError
+
+from .data import window_starts
+
+__all__ = ["WindowDataModule", "SimulationTask", "fit_core", "load_recipe", "make_model",
+           "recipe_dir"]
+
+
+# ====================================================================== data
+class _Windows(Dataset):
+    """Windows over concatenated normalised records, fetched a whole batch at a time."""
+
+    def __init__(self, seqs, length: int, stride: int):
+        us, ys, rhs, starts, off = [], [], [], [], 0
+        for s in seqs:
+            st = window_starts(len(s), length, stride)
+            starts.append(st + off)
+            us.append(s.u)
+            ys.append(s.y)
+            if s.rh is not None:
+                rhs.append(s.rh)
+            off += len(s)
+        self.u = torch.as_tensor(np.concatenate(us), dtype=torch.float32) if us else torch.zeros(0)
+        self.y = torch.as_tensor(np.concatenate(ys), dtype=torch.float32) if ys else torch.zeros(0)
+        self.rh = torch.as_tensor(np.concatenate(rhs), dtype=torch.float32) if rhs else None
+        self.starts = torch.as_tensor(np.concatenate(starts) if starts else np.zeros(0, np.int64))
+        self.offsets = torch.arange(length)
+
+    def __len__(self):
+        return int(self.starts.numel())
+
+    def __getitem__(self, idx):
+        idx = self.starts[torch.as_tensor(idx)][:, None] + self.offsets[None, :]
+        return {"u": self.u[idx], "y": self.y[idx],
+                "rh": None if self.rh is None else self.rh[idx]}
+
+
+def _collate_none(batch):
+    return batch
+
+
+def _pad_batch(seqs, n_init: int) -> dict:
+    """Whole records as one padded batch: history = first ``n_init`` samples."""
+    L = max(len(s) for s in seqs)
+    B = len(seqs)
+    u = np.zeros((B, L), np.float32)
+    y = np.zeros((B, L), np.float32)
+    rh = np.zeros((B, L), np.float32) if seqs[0].rh is not None else None
+    mask = np.zeros((B, L), np.float32)
+    for i, s in enumerate(seqs):
+        n = len(s)
+        u[i, :n], y[i, :n] = s.u, s.y
+        u[i, n:] = s.u[-1]  # padding: hold the last input (masked out of the error anyway)
+        if rh is not None:
+            rh[i, :n] = s.rh
+            rh[i, n:] = s.rh[-1]
+        mask[i, n_init:n] = 1.0
+    t = lambda a: None if a is None else torch.as_tensor(a)  # noqa: E731
+    return {"u": t(u), "y": t(y), "rh": t(rh), "mask": t(mask)}
+
+
+class WindowDataModule(pl.LightningDataModule):
+    """Training windows and whole validation records (normalised)."""
+
+    def __init__(self, train_seqs, val_seqs, n_init: int, horizon: int, stride: int,
+                 batch_size: int, seed: int = 0):
+        super().__init__()
+        self.train_seqs, self.val_seqs = list(train_seqs), list(val_seqs or [])
+        self.n_init, self.horizon, self.stride = int(n_init), int(horizon), int(stride)
+        self.batch_size, self.seed = int(batch_size), int(seed)
+        self.train_set = None
+
+    def setup(self, stage=None):
+        if self.train_set is None:
+            self.train_set = _Windows(self.train_seqs, self.n_init + self.horizon, self.stride)
+            if len(self.train_set) == 0:
+                raise InputError(f"every training record is shorter than one training window "
+                                 f"({self.n_init + self.horizon} samples)")
+
+    def train_dataloader(self):
+        g = torch.Generator().manual_seed(self.seed)
+        sampler = BatchSampler(RandomSampler(self.train_set, generator=g), self.batch_size, drop_last=False)
+        return DataLoader(self.train_set, sampler=sampler, batch_size=None, collate_fn=_collate_none)
+
+    def val_dataloader(self):
+        if not self.val_seqs:
+            return []
+        return DataLoader([_pad_batch(self.val_seqs, self.n_init)], batch_size=None,
+                          collate_fn=_collate_none)
+
+
+# ====================================================================== module
+def _split(batch, k):
+    u, y, rh = batch["u"], batch["y"], batch["rh"]
+    hist = (u[:, :k], y[:, :k], None if rh is None else rh[:, :k])
+    return hist, u[:, k:], y[:, k:], None if rh is None else rh[:, k:]
+
+
+class SimulationTask(pl.LightningModule):
+    """Simulation-error training of a :class:`nnmodel.models.base.SequenceCore`."""
+
+    def __init__(self, core, lr: float = 1e-3, weight_decay: float = 0.0, lr_patience: int = 10,
+                 lr_factor: float = 0.3, monitor: str = "val_loss", min_lr: float = 1e-6):
+        super().__init__()
+        self.core = core
+        self.lr, self.weight_decay = lr, weight_decay
+        self.lr_patience, self.lr_factor, self.min_lr = lr_patience, lr_factor, min_lr
+        self.monitor = monitor
+        self._sse = self._cnt = 0.0
+
+    def training_step(self, batch, batch_idx):
+        k = self.core.n_init
+        hist, u, y, rh = _split(batch, k)
+        y_hat = self.core.simulate(self.core.init_state(*hist), u, rh)
+        loss = torch.mean((y_hat - y) ** 2)
+        self.log("train_loss", loss, on_step=False, on_epoch=True, prog_bar=True,
+                 batch_size=u.shape[0])
+        return loss
+
+    def on_validation_epoch_start(self):
+        self._sse, self._cnt = 0.0, 0.0
+
+    def validation_step(self, batch, batch_idx):
+        k = self.core.n_init
+        hist, u, y, rh = _split(batch, k)
+        mask = batch["mask"][:, k:]
+        y_hat = self.core.simulate(self.core.init_state(*hist), u, rh)
+        err = torch.nan_to_num((y_hat - y) ** 2, nan=1e12, posinf=1e12) * mask
+        self._sse += float(err.sum())
+        self._cnt += float(mask.sum())
+
+    def on_validation_epoch_end(self):
+        if self._cnt:
+            v = math.sqrt(self._sse / self._cnt)
+            self.log("val_loss", min(v, 1e6), prog_bar=True)
+
+    def configure_optimizers(self):
+        opt = torch.optim.Adam(self.core.parameters(), lr=self.lr, weight_decay=self.weight_decay)
+        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(
+            opt, mode="min", factor=self.lr_factor, patience=self.lr_patience, min_lr=self.min_lr)
+        return {"optimizer": opt,
+                "lr_scheduler": {"scheduler": sched, "monitor": self.monitor, "interval": "epoch"}}
+
+
+class _History(Callback):
+    def __init__(self):
+        self.rows = []
+
+    def on_train_epoch_end(self, trainer, module):
+        m = trainer.callback_metrics
+        row = {"epoch": int(trainer.current_epoch),
+               "lr": float(trainer.optimizers[0].param_groups[0]["lr"])}
+        for key in ("train_loss", "val_loss"):
+            if key in m:
+                row[key] = float(m[key])
+        self.rows.append(row)
+
+
+@contextlib.contextmanager
+def _quiet_lightning():
+    """Silence Lightning's start-up chatter (device summary, seeds, worker hints)."""
+    names = ["lightning.pytorch", "lightning.pytorch.utilities.rank_zero",
+             "lightning.pytorch.accelerators.cuda", "lightning.fabric"]
+    old = {n: logging.getLogger(n).level for n in names}
+    for n in names:
+        logging.getLogger(n).setLevel(logging.WARNING)
+    with warnings.catch_warnings():
+        for pat in (".*does not have many workers.*", ".*smaller than the logging interval.*",
+                    ".*Checkpoint directory.*exists and is not empty.*",
+                    ".*GPU available but not used.*", ".*`isinstance\\(treespec, LeafSpec\\)`.*"):
+            warnings.filterwarnings("ignore", message=pat)
+        try:
+            yield
+        finally:
+            for n, lvl in old.items():
+                logging.getLogger(n).setLevel(lvl)
+
+
+def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_size: int,
+             lr: float, max_epochs: int, seed: int = 0, weight_decay: float = 0.0,
+             max_time: float | None = None, patience: int = 20, lr_patience: int | None = None,
+             grad_clip: float | None = None, accelerator: str = "cpu", progress_bar: bool = True,
+             checkpoint_dir: str | None = None) -> list[dict]:
+    """Train ``core`` in place with Lightning; restores the best (validation free-run)
+    weights at the end and returns the per-epoch history."""
+    pl.seed_everything(seed, workers=True, verbose=False)
+    monitor = "val_loss" if val_seqs else "train_loss"
+    dm = WindowDataModule(train_seqs, val_seqs, core.n_init, horizon, stride, batch_size, seed)
+    task = SimulationTask(core, lr=lr, weight_decay=weight_decay, monitor=monitor,
+                          lr_patience=lr_patience if lr_patience is not None else max(2, patience // 3))
+    hist = _History()
+    # the starting point (least-squares initialisation) competes with the trained epochs
+    init_state = {k: v.detach().clone() for k, v in core.state_dict().items()}
+    init_val = free_run_error(core, val_seqs) if val_seqs else None
+    if init_val is not None:
+        hist.rows.append({"epoch": -1, "val_loss": init_val})
+    with contextlib.ExitStack() as stack:
+        ckdir = checkpoint_dir or stack.enter_context(tempfile.TemporaryDirectory(prefix="eap-ckpt-"))
+        Path(ckdir).mkdir(parents=True, exist_ok=True)
+        ckpt = ModelCheckpoint(dirpath=ckdir, filename="best", monitor=monitor, mode="min",
+                               save_top_k=1, save_weights_only=True, enable_version_counter=False)
+        stop = EarlyStopping(monitor=monitor, mode="min", patience=patience, check_finite=False)
+        with _quiet_lightning():
+            trainer = pl.Trainer(
+                accelerator=accelerator, devices=1, max_epochs=max_epochs,
+                max_time=None if max_time is None else datetime.timedelta(seconds=float(max_time)),
+                callbacks=[ckpt, stop, hist], enable_progress_bar=progress_bar, logger=False,
+                enable_model_summary=False, num_sanity_val_steps=0, log_every_n_steps=1,
+                gradient_clip_val=grad_clip, default_root_dir=ckdir)
+            trainer.fit(task, datamodule=dm)
+        best = ckpt.best_model_path
+        if best and os.path.exists(best):
+            # our own checkpoint, still read without unpickling arbitrary objects
+            state = torch.load(best, map_location="cpu", weights_only=True)["state_dict"]
+            task.load_state_dict(state)
+        best_score = None if ckpt.best_model_score is None else float(ckpt.best_model_score)
+        if init_val is not None and (best_score is None or not init_val > best_score):
+            core.load_state_dict(init_state)  # training did not beat the initialisation
+    core.eval()
+    return hist.rows
+
+
+def free_run_error(core, seqs) -> float:
+    """Free-run NRMSE (normalised units) of ``core`` over whole records, each initialised
+    from its first ``n_init`` samples (the validation metric, outside Lightning)."""
+    batch = _pad_batch(seqs, core.n_init)
+    k = core.n_init
+    hist, u, y, rh = _split(batch, k)
+    mask = batch["mask"][:, k:]
+    was_training = core.training
+    core.eval()
+    with torch.no_grad():
+        y_hat = core.simulate(core.init_state(*hist), u, rh)
+    core.train(was_training)
+    err = torch.nan_to_num((y_hat - y) ** 2, nan=1e12, posinf=1e12) * mask
+    return min(math.sqrt(float(err.sum()) / max(float(mask.sum()), 1.0)), 1e6)
+
+
+# ====================================================================== recipes
+def recipe_dir() -> Path:
+    """Folder of the training recipes: ``$EAP_TRAIN_RECIPES`` or ``configs/train`` of the
+    source tree."""
+    env = os.environ.get("EAP_TRAIN_RECIPES")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[1] / "configs" / "train"
+
+
+_RECIPE_KEYS = {"model", "description", "hyper_parameters"}
+
+
+def load_recipe(name: str, overrides: dict | None = None, directory: str | os.PathLike | None = None) -> dict:
+    """Read the recipe ``NAME.yaml`` and apply ``overrides`` (hyper-parameter -> value).
+
+    Returns ``{"model": kind, "description": str, "hyper_parameters": {...}}`` where the
+    hyper-parameters are the model's defaults updated by the file and then the overrides.
+    Unknown keys (in the file or in the overrides) raise :class:`InputError`.
+    """
+    from .models import MODELS
+
+    folder = Path(directory) if directory else recipe_dir()
+    path = folder / f"{name}.yaml"
+    if not path.is_file():
+        avail = sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
+        raise InputError(f"no training recipe {name!r} ({path} not found); available: "
+                         f"{', '.join(avail) or 'none'}")
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: a recipe must be a mapping with keys {sorted(_RECIPE_KEYS)}")
+    bad = sorted(set(doc) - _RECIPE_KEYS)
+    if bad:
+        raise InputError(f"{path}: unknown key(s) {bad}; a recipe has {sorted(_RECIPE_KEYS)}")
+    kind = doc.get("model", name)
+    if kind not in MODELS:
+        raise InputError(f"{path}: unknown model {kind!r}; known models: {', '.join(sorted(MODELS))}")
+    cls = MODELS[kind]
+    hp = doc.get("hyper_parameters") or {}
+    if not isinstance(hp, dict):
+        raise InputError(f"{path}: hyper_parameters must be a mapping")
+    known = set(cls.param_names())
+    for where, d in ((str(path), hp), ("overrides", overrides or {})):
+        bad = sorted(set(d) - known)
+        if bad:
+            raise InputError(f"{where}: unknown hyper-parameter(s) {bad} for model {kind!r}; "
+                             f"known: {', '.join(sorted(known))}")
+    params = cls.default_params()
+    params.update(hp)
+    params.update(overrides or {})
+    cls(**params)  # validates values (raises InputError)
+    return {"model": kind, "description": str(doc.get("description", "")), "hyper_parameters": params}
+
+
+def make_model(name: str, overrides: dict | None = None, directory=None):
+    """A model built from its recipe (see :func:`load_recipe`)."""
+    from .models import MODELS
+
+    rec = load_recipe(name, overrides, directory)
+    return MODELS[rec["model"]](**rec["hyper_parameters"])
