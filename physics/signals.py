@@ -54,7 +54,7 @@ def sweep(amplitude: float = 2.0, f_start: float = 0.1, f_stop: float = 50.0, du
     if method not in ("linear", "logarithmic"):
         raise InputError("sweep method must be 'linear' or 'logarithmic'")
     t = _time(duration, fs)
-    v = offset + amplitude * sps.chirp(t, f_start, t[-1], f_stop, method=method, phi=-90)
+    v = offset + amplitude * sps.chirp(t, f_start, duration, f_stop, method=method, phi=-90)
     return Signal(t, v, "sweep", dict(amplitude_V=amplitude, f_start_Hz=f_start, f_stop_Hz=f_stop,
                                       method=method, offset_V=offset, duration_s=duration, fs_Hz=fs))
 

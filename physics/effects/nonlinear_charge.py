@@ -44,12 +44,29 @@ class LinearCharge(Effect):
     def nu(self, p) -> float:
         return 0.0
 
+    def potential(self, Q, d: DoubleLayerProps, p):
+        """Equilibrium voltage U_eq(Q) [V] of the two double layers, and the state needed by
+        :meth:`slope` and :meth:`excess` (here nothing)."""
+        return np.asarray(Q, dtype=float) / d.C0, None
+
+    def slope(self, Q, d: DoubleLayerProps, p, state=None):
+        """dU_eq/dQ [V m²/C]."""
+        return np.broadcast_to(1.0 / d.C0, np.shape(Q)).astype(float)
+
+    def excess(self, Q, d: DoubleLayerProps, p, state=None):
+        """Interface cation excess at the upper and lower faces [mol/m³]."""
+        c = d.c0 / d.C0 * np.asarray(Q, dtype=float)
+        return c, -c
+
     def equilibrium(self, Q, d: DoubleLayerProps, p):
         """Branch law for the time stepper: (U_eq(Q) [V], dU_eq/dQ [V m²/C],
         interface excess at the upper and lower faces [mol/m³])."""
-        Q = np.asarray(Q, dtype=float)
-        c = d.c0 / d.C0 * Q
-        return Q / d.C0, np.full(Q.shape, 1.0 / d.C0), c, -c
+        U, st = self.potential(Q, d, p)
+        return (U, self.slope(Q, d, p, st)) + tuple(self.excess(Q, d, p, st))
+
+    def compiled(self, d: DoubleLayerProps, p) -> "_LinearLaw":
+        """The law with its constants evaluated once (for the stepper's inner loop)."""
+        return _LinearLaw(1.0 / d.C0, d.c0 / d.C0)
 
 
 class NonlinearCharge(LinearCharge):
@@ -71,17 +88,77 @@ class NonlinearCharge(LinearCharge):
         q = C0 / (1.0 + np.asarray(s, dtype=complex) * tau)
         return q, q * d.c0 * (1.0 - nu) / C0
 
-    def equilibrium(self, Q, d: DoubleLayerProps, p):
+    def _scale(self, d: DoubleLayerProps) -> np.ndarray:
+        return np.sqrt(2.0 * d.kappa * d.V_T * d.z * 96485.33212 * d.C_anion)  # sqrt(2 κe R T C⁻)
+
+    def potential(self, Q, d: DoubleLayerProps, p):
+        """U_eq(Q) and the dimensionless interface potentials (x_up, x_low): the upper face is
+        the cathode for Q > 0 (accumulation, x < 0), the lower face the anode (x > 0)."""
+        tab = _pb_table(round(self.nu(p), 12))
+        qh = np.asarray(Q, dtype=float) / self._scale(d)
+        x = np.interp(np.concatenate([-qh, qh]), tab.q, tab.x)
+        x_up, x_low = x[:qh.size].reshape(qh.shape), x[qh.size:].reshape(qh.shape)
+        return d.V_T * (x_low - x_up), (x_up, x_low)
+
+    def slope(self, Q, d: DoubleLayerProps, p, state=None):
+        tab = _pb_table(round(self.nu(p), 12))
+        scale = self._scale(d)
+        qh = np.asarray(Q, dtype=float) / scale
+        g = np.interp(np.concatenate([-qh, qh]), tab.q, tab.dxdq)
+        return d.V_T / scale * (g[:qh.size] + g[qh.size:]).reshape(qh.shape)
+
+    def excess(self, Q, d: DoubleLayerProps, p, state=None):
+        x_up, x_low = self.potential(Q, d, p)[1] if state is None else state
         nu = self.nu(p)
+        return d.C_anion * _excess_ratio(x_up, nu), d.C_anion * _excess_ratio(x_low, nu)
+
+    def compiled(self, d: DoubleLayerProps, p) -> "_PBLaw":
+        return _PBLaw(self.nu(p), d.V_T, self._scale(d), d.C_anion)
+
+
+class _LinearLaw:
+    """U_eq = Q/C0 with precomputed constants; ``evaluate`` returns (U_eq, dU_eq/dQ, state)."""
+
+    def __init__(self, inv_c0, ratio):
+        self.inv_c0, self.ratio = inv_c0, ratio
+
+    def evaluate(self, Q):
+        return Q * self.inv_c0, np.broadcast_to(self.inv_c0, Q.shape), Q
+
+    def potential(self, Q):
+        return Q * self.inv_c0, Q
+
+    def excess(self, state):
+        c = self.ratio * state
+        return c, -c
+
+
+class _PBLaw:
+    """Poisson–Boltzmann law with the table and scales bound (arrays per branch allowed)."""
+
+    def __init__(self, nu, V_T, scale, C_anion):
         tab = _pb_table(round(nu, 12))
-        q_scale = np.sqrt(2.0 * d.kappa * d.V_T * d.z * 96485.33212 * d.C_anion)  # sqrt(2 κe R T C⁻)
-        qh = np.asarray(Q, dtype=float) / q_scale
-        # upper face: cathode for Q > 0 (accumulation, x < 0); lower face: anode (x > 0)
-        x_up = np.interp(-qh, tab.q, tab.x)
-        x_low = np.interp(qh, tab.q, tab.x)
-        U = d.V_T * (x_low - x_up)
-        dU = d.V_T / q_scale * (np.interp(-qh, tab.q, tab.dxdq) + np.interp(qh, tab.q, tab.dxdq))
-        return U, dU, d.C_anion * _excess_ratio(x_up, nu), d.C_anion * _excess_ratio(x_low, nu)
+        self.tq, self.tx, self.tg = tab.q, tab.x, tab.dxdq
+        self.nu, self.V_T, self.inv_scale, self.C = nu, V_T, 1.0 / scale, C_anion
+        self.slope_scale = V_T / scale
+
+    def potential(self, Q):
+        qh = Q * self.inv_scale
+        x = np.interp(np.concatenate((-qh, qh)), self.tq, self.tx)
+        n = Q.size
+        return self.V_T * (x[n:] - x[:n]), x
+
+    def evaluate(self, Q):
+        qh = Q * self.inv_scale
+        both = np.concatenate((-qh, qh))
+        x = np.interp(both, self.tq, self.tx)
+        g = np.interp(both, self.tq, self.tg)
+        n = Q.size
+        return self.V_T * (x[n:] - x[:n]), self.slope_scale * (g[:n] + g[n:]), x
+
+    def excess(self, x):
+        n = x.size // 2
+        return self.C * _excess_ratio(x[:n], self.nu), self.C * _excess_ratio(x[n:], self.nu)
 
 
 def _excess_ratio(x, nu):
