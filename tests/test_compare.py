@@ -1,0 +1,209 @@
+"""Model-vs-measurement comparison: metrics that tell a right model from a wrong one, J_err
+of eq. 13, errors by band and by RH, predictors (physics, callables, bundles), the CLI."""
+from __future__ import annotations
+
+import json
+import math
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+from physics import metrics, signals, simulate
+from physics.compare import (CallablePredictor, FRFOptions, PhysicsPredictor, cluster_rh, compare,
+                             default_bands, load_measurements, model_rh, parse_bands, residual_by_band,
+                             thin_log, write_comparison_report)
+from physics.errors import InputError
+from physics.frequency import frequency_response
+from physics.frfdata import FRFData, write_frf
+from physics.model import ActuatorModel
+from physics.sensor import SensorModel
+from physics.timeseries import TimeSeries, write_timeseries
+
+
+def periodic_record(model, rh, *, seed=0, sensor=None, period=10.0, periods=3, fs=1000.0):
+    sig = signals.multisine(0.5, 0.1, 50.0, period, 1, fs, seed=seed)
+    y = simulate(model, None, sig.t, sig.v, rh=rh, periodic=True).deflection
+    n = periods * sig.t.size
+    ts = TimeSeries(np.arange(n) / fs, np.tile(sig.v, periods), np.tile(y, periods), rh=np.full(n, float(rh)),
+                    meta={"signal": {**sig.describe(), "periods": periods}}, source=f"rec_rh{rh:g}.csv")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return (sensor or SensorModel()).apply(ts, seed=seed + 100)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return ActuatorModel("ipmc_pt_eg", "default")
+
+
+@pytest.fixture(scope="module")
+def records(model):
+    return [periodic_record(model, rh, seed=i) for i, rh in enumerate((40.0, 80.0))]
+
+
+@pytest.fixture(scope="module")
+def result(model, records):
+    return compare(records, PhysicsPredictor(model))
+
+
+def test_right_model_scores_well_and_wrong_model_badly(model, records, result):
+    wrong = PhysicsPredictor(ActuatorModel(model.device.with_params(kf=1.5 * model.device["kf"]), "default"))
+    bad = compare(records, wrong)
+    for good_r, bad_r in zip(result.records, bad.records):
+        g, b = good_r.summary, bad_r.summary
+        assert g["time_metrics"]["correlation"] > 0.999
+        assert g["time_metrics"]["fit_percent"] > 90
+        assert b["time_metrics"]["fit_percent"] < g["time_metrics"]["fit_percent"] - 30
+        # a 50 % gain error is 3.5 dB on every frequency
+        assert b["frf_metrics"]["log_mag_rms_dB"] == pytest.approx(20 * math.log10(1.5), rel=0.05)
+        assert g["frf_metrics"]["log_mag_rms_dB"] < 0.1
+        assert b["frf_metrics"]["j_err_m_per_V"] > 50 * g["frf_metrics"]["j_err_m_per_V"]
+
+
+def test_metrics_follow_their_definitions(result):
+    r = result.records[0]
+    tm = r.summary["time_metrics"]
+    assert tm["fit_percent"] == pytest.approx(metrics.fit_percent(r.measured, r.predicted))
+    assert tm["correlation"] == pytest.approx(metrics.correlation(r.measured, r.predicted))
+    assert np.mean(r.measured - r.predicted) == pytest.approx(0.0, abs=1e-12)   # best offset removed
+    v = r.valid
+    j = math.sqrt(np.mean((np.abs(r.H_meas[v]) - np.abs(r.H_model_closed[v])) ** 2))   # eq. 13
+    assert r.summary["frf_metrics"]["j_err_m_per_V"] == pytest.approx(j)
+    assert r.summary["frf_metrics"]["j_err_reference"] == "closed form"
+
+
+def test_offset_handling(model):
+    """A laser zero offset of 0.3 mm: removed by default (same fit as without it), kept
+    with offset='none' (much worse fit, same correlation)."""
+    recs = [periodic_record(model, 60.0, seed=5, sensor=SensorModel(deflection_offset=off), periods=2)
+            for off in (0.0, 3e-4)]
+    pred = PhysicsPredictor(model)
+    clean, shifted = (compare([r], pred).records[0].summary["time_metrics"] for r in recs)
+    raw = compare([recs[1]], pred, offset="none").records[0].summary["time_metrics"]
+    assert shifted["offset_removed_m"] - clean["offset_removed_m"] == pytest.approx(3e-4, rel=1e-3)
+    assert shifted["fit_percent"] == pytest.approx(clean["fit_percent"], abs=0.05)
+    assert raw["fit_percent"] < shifted["fit_percent"] - 20
+    assert raw["correlation"] == pytest.approx(shifted["correlation"])    # correlation ignores offsets
+
+
+def test_errors_by_rh_and_band(result):
+    assert [row["rh_pct"] for row in result.by_rh] == [40.0, 80.0]
+    assert all(row["records"] == 1 for row in result.by_rh)
+    bands = result.settings["bands_Hz"]
+    assert bands[0][0] == pytest.approx(0.1) and bands[-1][1] == pytest.approx(50.0)
+    rows = result.records[0].summary["bands"]
+    assert [row["band_Hz"] for row in rows] == bands
+    assert sum(row["n_points"] for row in rows) == result.records[0].summary["frf_metrics"]["n_points"]
+
+
+def test_residual_by_band_is_parseval():
+    fs, n = 100.0, 1000
+    t = np.arange(n) / fs
+    e = 1.0 * np.sin(2 * np.pi * 2.0 * t) + 0.1 * np.sin(2 * np.pi * 20.0 * t)
+    rows = residual_by_band(e, 10 * e, fs, [(0.5, 5.0), (5.0, 50.0)])
+    assert rows[0]["residual_rms_m"] == pytest.approx(1 / math.sqrt(2), rel=1e-9)
+    assert rows[1]["residual_rms_m"] == pytest.approx(0.1 / math.sqrt(2), rel=1e-9)
+    assert rows[0]["nrmse_in_band"] == pytest.approx(0.1)
+
+
+def test_callable_predictor_and_frf_files(model, records, tmp_path):
+    """A model without a closed form (e.g. a neural bundle) is compared through the H1
+    estimate of its simulated output; an FRF file then cannot be compared."""
+    physics_model = PhysicsPredictor(model)
+    half = CallablePredictor(lambda u, rh, fs: 0.5 * physics_model(u, rh, fs), name="half", info={"k": 1})
+    f = np.logspace(-1, np.log10(50), 50)
+    H = frequency_response(model, None, f, rh=60.0).deflection
+    frf_path = write_frf(FRFData(f, H, rh=60.0), tmp_path / "frf.csv")
+    ms = load_measurements([records[0], str(frf_path)])
+    res = compare(ms, half)
+    assert len(res.records) == 1 and "skipped" in res.warnings[0]
+    s = res.records[0].summary
+    assert s["frf_metrics"]["j_err_reference"] == "H1 estimate of the simulated output"
+    assert s["frf_metrics"]["log_mag_rms_dB"] == pytest.approx(20 * math.log10(2), rel=0.02)
+    assert s["time_metrics"]["correlation"] > 0.999
+    assert res.predictor == {"name": "half", "kind": "callable", "k": 1}
+    # the FRF file with the physics model: exact
+    res2 = compare(ms[1:], physics_model)
+    assert res2.records[0].summary["frf_metrics"]["j_err_m_per_V"] < 1e-12
+
+
+def test_bad_inputs(model, records):
+    with pytest.raises(InputError, match="needs a Predictor"):
+        compare(records, model)
+    bad_len = CallablePredictor(lambda u, rh, fs: u[:-1], name="short")
+    with pytest.raises(InputError, match="returned .* samples"):
+        compare(records[:1], bad_len)
+    nan_out = CallablePredictor(lambda u, rh, fs: u * np.nan, name="nan")
+    with pytest.raises(InputError, match="NaN"):
+        compare(records[:1], nan_out)
+    no_defl = TimeSeries(records[0].time, records[0].voltage, rh=records[0].rh, source="x.csv")
+    with pytest.raises(InputError, match="x.csv: has no deflection"):
+        compare([no_defl], PhysicsPredictor(model))
+    with pytest.raises(InputError, match="offset"):
+        compare(records, PhysicsPredictor(model), offset="median")
+    with pytest.raises(InputError, match="band edges"):
+        parse_bands("0.1,a")
+    with pytest.raises(InputError, match="increasing"):
+        parse_bands("10,1")
+    with pytest.raises(InputError, match="no measurement"):
+        load_measurements([])
+
+
+def test_helpers():
+    assert cluster_rh([40.2, 59.8, 40.0, 60.6, 80.0], 2.5) == [40.1, 60.2, 40.1, 60.2, 80.0]
+    assert default_bands(0.1, 50) == [(0.1, 1.0), (1.0, 10.0), (10.0, 50)]
+    f = np.linspace(0.1, 50, 500)
+    idx = thin_log(f, 100)
+    assert 50 < idx.size <= 100 and idx[0] == 0 and idx[-1] == 499
+    rh = np.full(1000, 60.0)
+    rh[::2] = 60.3
+    assert model_rh(rh, 100.0) == pytest.approx(60.15)                 # sensor noise: one value
+    ramp = np.linspace(40, 80, 2000)
+    out = model_rh(ramp, 10.0)
+    assert out.shape == ramp.shape and np.all(np.diff(out) >= 0) and np.all(np.mod(out, 0.5) == 0)
+
+
+def test_report_files(result, tmp_path):
+    out = write_comparison_report(result, tmp_path, provenance={"command": "test"})
+    data = json.loads((tmp_path / "report.json").read_text())
+    assert data["overall"]["records"] == 2 and len(data["records"]) == 2
+    for rec in data["records"]:
+        for png in rec["plots"]:
+            assert (tmp_path / png).read_bytes().startswith(b"\x89PNG")
+    html = (tmp_path / "report.html").read_text()
+    srcs = re.findall(r"src='([^']*)'", html)
+    assert srcs and all(s.startswith("data:image/png;base64,") for s in srcs)   # self-contained
+    assert "rh.png" in out["plots"] and (tmp_path / "metrics.csv").is_file()
+
+
+def test_cli_compare_device_and_bundle(model, records, tmp_path, capsys, monkeypatch):
+    from nnmodel.cli import main
+    paths = [write_timeseries(r, tmp_path / f"m{i}.csv") for i, r in enumerate(records)]
+    code = main(["compare", str(paths[0]), "--model", "ipmc_pt_eg", "--points", "100",
+                 "--out", str(tmp_path / "dev")])
+    text = capsys.readouterr().out
+    assert code == 0 and "fit" in text and "J_err" in text
+    assert (tmp_path / "dev" / "report.html").is_file()
+    # a folder that is not a bundle: a clear error, no traceback
+    empty = tmp_path / "notabundle"
+    empty.mkdir()
+    assert main(["compare", str(paths[0]), "--model", str(empty), "--out", str(tmp_path / "x")]) == 2
+    assert str(empty) in capsys.readouterr().err
+    # the bundle extension point: anything nnmodel.load returns with .predict(voltage, rh=, fs=)
+    import nnmodel
+    physics_model = PhysicsPredictor(model)
+
+    class FakeBundle:
+        card = {"model": "fake", "fs_hz": 1000.0}
+
+        def predict(self, voltage, rh=None, fs=None, resample=False):
+            return physics_model(voltage, rh, fs)
+
+    monkeypatch.setattr(nnmodel, "load", lambda path: FakeBundle(), raising=False)
+    code = main(["compare", str(paths[0]), "--model", str(empty), "--points", "100", "--out", str(tmp_path / "nn")])
+    assert code == 0
+    data = json.loads((tmp_path / "nn" / "report.json").read_text())
+    assert data["model"]["kind"] == "neural bundle" and data["model"]["model"] == "fake"
+    assert data["records"][0]["time_metrics"]["fit_percent"] > 90

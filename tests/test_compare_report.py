@@ -1,0 +1,74 @@
+"""The self-contained HTML report helper (physics.report)."""
+from __future__ import annotations
+
+import base64
+import csv
+import json
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from physics.errors import InputError  # noqa: E402
+from physics.report import Report, format_value, jsonable, png_data_uri, write_csv  # noqa: E402
+
+
+def _png(tmp_path):
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    p = tmp_path / "a.png"
+    fig.savefig(p)
+    plt.close(fig)
+    return p
+
+
+def test_report_embeds_images_and_escapes_text(tmp_path):
+    png = _png(tmp_path)
+    rep = Report("Title <&>", subtitle="sub")
+    rep.heading("Section").paragraph("a < b").warning("careful & quick")
+    rep.table([{"name": "x<y", "value": 1.234567}, {"name": "z", "extra": None}], caption="cap")
+    rep.table({"fit": 97.5})
+    rep.image(png, caption="file png")
+    fig, ax = plt.subplots()
+    rep.figure(fig, caption="in memory")
+    rep.json_block({"k": [1, 2]})
+    path = rep.write(tmp_path / "r.html")
+    html = path.read_text()
+    assert "Title &lt;&amp;&gt;" in html and "a &lt; b" in html and "x&lt;y" in html
+    assert "<script" not in html and "http" not in html.split("<style>")[0]
+    uris = [s.split("'")[0] for s in html.split("src='")[1:]]
+    assert len(uris) == 2
+    for u in uris:
+        assert u.startswith("data:image/png;base64,")
+        assert base64.b64decode(u.split(",", 1)[1]).startswith(b"\x89PNG")
+    assert base64.b64decode(uris[0].split(",", 1)[1]) == png.read_bytes()
+    assert "1.235" in html                               # 4 significant digits
+    assert "<th class='t'>name</th><th class=''>value</th><th class=''>extra</th>" in html
+
+
+def test_image_errors(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        png_data_uri(tmp_path / "missing.png")
+    (tmp_path / "x.png").write_text("not a png")
+    with pytest.raises(InputError, match="not a PNG"):
+        Report("t").image(tmp_path / "x.png")
+
+
+def test_format_and_json():
+    assert format_value(float("nan")) == "nan" and format_value(math.inf) == "inf"
+    assert format_value(None) == "" and format_value(True) == "yes" and format_value([1.0, 2.5]) == "1, 2.5"
+    obj = jsonable({"a": np.float64(np.nan), "b": np.arange(2), "c": (1, math.inf), "d": 1 + 2j})
+    assert obj == {"a": None, "b": [0, 1], "c": [1, None], "d": {"re": 1.0, "im": 2.0}}
+    json.dumps(obj, allow_nan=False)
+
+
+def test_write_csv(tmp_path):
+    p = write_csv([{"a": 0.1, "b": [1.0, 2.0]}, {"a": None, "c": "x"}], tmp_path / "t.csv")
+    rows = list(csv.reader(p.open()))
+    assert rows == [["a", "b", "c"], ["0.1", "1.0;2.0", ""], ["", "", "x"]]
+    with pytest.raises(InputError, match="row 0"):
+        write_csv([1], tmp_path / "u.csv")
