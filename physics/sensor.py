@@ -132,9 +132,10 @@ class SensorModel:
                 x = self._lowpass(x, ts.fs) + self.deflection_offset \
                     + self._drift(x.size, rngs["drift"])
             out[name], clipped[name] = _measure(x, rngs[name], noise, step, lo, hi)
-        if any(clipped.values()):
-            warnings.warn(f"{where}: sensor range exceeded, samples clipped: "
-                          f"{ {k: v for k, v in clipped.items() if v} }", stacklevel=2)
+        # RH readings pinned at 0 or 100 % are physics, not a saturated sensor: no warning
+        over_range = {k: v for k, v in clipped.items() if v and k != "rh"}
+        if over_range:
+            warnings.warn(f"{where}: sensor range exceeded, samples clipped: {over_range}", stacklevel=2)
         meta = copy.deepcopy(ts.meta)
         meta["sensor"] = {**dataclasses.asdict(self), "seed": int(seed),
                           "noise_floor_m": self.noise_floor(), "clipped_samples": clipped}
