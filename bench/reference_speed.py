@@ -49,8 +49,8 @@ def main(argv=None) -> int:
                 w_nl, _ = _timed(lambda: simulate(d, fx + ["nonlinear_charge"], t, v, rh=100, hold=hold), repeat=3)
                 rows.append(f"  {label:24s} reference {w_ref:7.2f} s ({rr.stats['steps']} steps, "
                             f"{ref.edges.size if ref.line else 1} slab(s) × {ref.slab.N} nodes) | reduced linear "
-                            f"{1e3 * w_lin:7.1f} ms (×{w_ref / w_lin:6.0f}) | reduced + nonlinear_charge "
-                            f"{1e3 * w_nl:7.1f} ms (×{w_ref / w_nl:5.0f})")
+                            f"{1e3 * w_lin:7.1f} ms (reference/reduced {w_ref / w_lin:.3g}×) | reduced + nonlinear_charge "
+                            f"{1e3 * w_nl:7.1f} ms (reference/reduced {w_ref / w_nl:.3g}×)")
             print(f"{dev}, {name} ({t.size} samples):")
             print("\n".join(rows))
     return 0

@@ -104,9 +104,9 @@ class SlabParams:
 def graded_mesh(h: float, lam: float, first: float | None = None, growth: float = 1.08,
                 max_cell: float | None = None) -> np.ndarray:
     """Nodes on [−h, h] [m], symmetric, with a node at 0: cells grow geometrically by ``growth``
-    from ``first`` (default λ/50) at both faces up to ``max_cell`` (default h/100), uniform in
+    from ``first`` (default λ/100) at both faces up to ``max_cell`` (default h/100), uniform in
     between."""
-    first = lam / 50.0 if first is None else float(first)
+    first = lam / 100.0 if first is None else float(first)
     max_cell = h / 100.0 if max_cell is None else float(max_cell)
     if not (0 < first <= max_cell < h) or growth < 1.0:
         raise InputError("mesh: need 0 < first cell <= max cell < h and growth >= 1")
@@ -189,12 +189,13 @@ class Slab:
         return J, G, (Bp, Bm, dBp, dBm, c)
 
     def rates(self, y):
-        """Time derivative of the differential rows (zeros on the Poisson rows), (S, 3N) [1/s]."""
+        """(Time derivative of the balance rows, zeros on the Poisson rows, (S, 3N) [1/s]; the
+        cation fluxes Ĵ, (S, N−1) [m/s])."""
         J, G, _ = self.fluxes(y)
         f = np.zeros_like(y)
         f[:, 1::3] = -self._div(J)
         f[:, 2::3] = -self._div(G)
-        return f
+        return f, J
 
     def _div(self, F):
         out = np.zeros((F.shape[0], self.N), dtype=F.dtype)
@@ -411,7 +412,7 @@ class Integrator:
             U[:] = vin
         else:
             U[0] = vin
-        for it in range(tol.max_newton):
+        for _ in range(tol.max_newton):
             R, ab, J = self.slab.system(y, U, a, dh)
             lus = self._factor(ab)
             if lus is None or not np.all(np.isfinite(R)):
@@ -452,10 +453,7 @@ class Integrator:
         the state, its rates f and cation fluxes J (those of the Newton state, consistent with
         its potential: re-evaluating them after the projection would amplify it by the double
         layer's stiffness K = D/λ² ≈ 1e10 1/s)."""
-        J, G, _ = self.slab.fluxes(y)
-        f = np.zeros_like(y)
-        f[:, 1::3] = -self.slab._div(J)
-        f[:, 2::3] = -self.slab._div(G)
+        f, J = self.slab.rates(y)
         y = y.copy()
         V = self.slab.V
         y[:, 1::3] *= (self._tc / (y[:, 1::3] @ V))[:, None]
@@ -519,8 +517,7 @@ class Integrator:
         self._tc, self._ts = y[:, 1::3] @ slab.V, y[:, 2::3] @ slab.V
         t = float(t_in[0])
         v_scale = max(float(np.max(np.abs(v_in))), 1e-12)
-        f = slab.rates(y)
-        Jn = slab.fluxes(y)[0]
+        f, Jn = slab.rates(y)
         h = tol.h_restart
         i_out = 1
         y_prev = None
