@@ -1,0 +1,282 @@
+"""Synthetic datasets for the neural models: generation (``eap generate``) and loading.
+
+A dataset (``DATA_FORMAT.md``) is a folder of time-series CSV files plus ``dataset.json``
+with the generator and its configuration, the random seed, the split of every file
+(train / validation / test), which RH levels are held out, and a SHA-256 of each file.
+Records span RH 40–100 %: training RH levels, held-out RH levels (test only), records
+whose RH drifts slowly, and "measurement-like" records simulated with physics the
+generator's model lacks (e.g. ``nonlinear_charge``), scored separately.  Excitations
+cover the operating range: log sweeps 0.1–50 Hz, random-phase multisines, band-limited
+noise and square pulses, amplitudes up to 2 V.  The sensor model adds laser noise,
+quantisation and drift so that records look like lab records.  Everything follows
+from one seed.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from physics import signals
+from physics.device import config_dir
+from physics.errors import InputError
+from physics.fileio import write_json
+from physics.model import ActuatorModel
+from physics.progress import Progress
+from physics.sensor import SensorModel
+from physics.timeseries import read_timeseries, write_timeseries
+
+from .data import Record
+
+SCHEMA = "eap-dataset/1"
+SPLITS = ("train", "validation", "test")
+
+_DEFAULTS: dict[str, Any] = {
+    "device": "ip2c_pedot_water", "effects": "default", "fs_Hz": 250.0, "duration_s": 40.0, "seed": 0,
+    "train_rh_pct": [40, 60, 80, 100], "heldout_rh_pct": [50, 70, 90],
+    "excitations": ["sweep", "multisine", "noise", "square"], "amplitude_V": [0.5, 2.0], "f_max_Hz": 50.0,
+    "validation_per_rh": 1, "test_per_train_rh": 1, "test_per_heldout_rh": 2,
+    "varying_rh": {"train": 2, "test": 2, "range_pct": [40, 100]},
+    "measurement_like": {"effects": ["nonlinear_charge"], "count": 2, "rh_pct": [55, 85]},
+    "sensor": "default",
+}
+
+
+def load_config(name_or_path: str = "default", overrides: dict | None = None) -> dict:
+    """A dataset configuration: ``configs/datasets/NAME.yaml`` or a YAML path, with overrides.
+    Unknown keys are rejected."""
+    p = Path(name_or_path)
+    if p.suffix not in (".yaml", ".yml"):
+        p = config_dir() / "datasets" / f"{name_or_path}.yaml"
+    if not p.is_file():
+        raise InputError(f"dataset configuration {name_or_path!r} not found ({p})")
+    raw = yaml.safe_load(p.read_text(encoding="utf-8")) or {}
+    if not isinstance(raw, dict):
+        raise InputError(f"{p}: a dataset configuration must be a mapping")
+    cfg = dict(_DEFAULTS)
+    for src, where in ((raw, str(p)), (overrides or {}, "overrides")):
+        unknown = set(src) - set(_DEFAULTS)
+        if unknown:
+            raise InputError(f"{where}: unknown dataset option(s) {sorted(unknown)}; known: {sorted(_DEFAULTS)}")
+        cfg.update({k: v for k, v in src.items() if v is not None})
+    if not (cfg["fs_Hz"] > 2 * cfg["f_max_Hz"] and cfg["duration_s"] > 0):
+        raise InputError(f"dataset: need fs_Hz > 2 f_max_Hz and a positive duration_s "
+                         f"(got fs_Hz={cfg['fs_Hz']}, f_max_Hz={cfg['f_max_Hz']}, duration_s={cfg['duration_s']})")
+    bad = set(cfg["excitations"]) - {"sweep", "multisine", "noise", "square"}
+    if bad:
+        raise InputError(f"dataset: unknown excitation(s) {sorted(bad)}")
+    return cfg
+
+
+def _sensor(spec) -> SensorModel:
+    if spec in (None, "default"):
+        return SensorModel(deflection_range=0.02)   # ±20 mm: the laser's range, no clipping
+    if spec == "ideal":
+        return SensorModel.ideal()
+    if isinstance(spec, dict):
+        try:
+            return SensorModel(**spec)
+        except TypeError as exc:
+            raise InputError(f"dataset sensor: {exc}") from None
+    raise InputError("dataset sensor must be 'default', 'ideal' or a mapping of SensorModel settings")
+
+
+@dataclass
+class _Spec:
+    name: str
+    split: str
+    kind: str
+    rh: float | tuple[float, float]   # constant, or (low, high) range for a drifting RH
+    heldout: bool = False
+    extra_effects: tuple[str, ...] = ()
+    seed: int = 0
+    excitation: dict = field(default_factory=dict)
+
+
+def _plan(cfg: dict, rng: np.random.Generator) -> list[_Spec]:
+    specs: list[_Spec] = []
+    exc = list(cfg["excitations"])
+
+    def add(split, kind, rh, **kw):
+        i = len(specs)
+        label = f"rh{rh:g}" if np.ndim(rh) == 0 else "rhvar"
+        specs.append(_Spec(f"{split}/r{i:03d}_{kind}_{label}", split, kind, rh, seed=int(rng.integers(2**31)), **kw))
+
+    for rh in cfg["train_rh_pct"]:
+        for kind in exc:
+            add("train", kind, float(rh))
+        for _ in range(cfg["validation_per_rh"]):
+            add("validation", str(rng.choice(exc)), float(rh))
+        for _ in range(cfg["test_per_train_rh"]):
+            add("test", str(rng.choice(exc)), float(rh))
+    for rh in cfg["heldout_rh_pct"]:
+        for _ in range(cfg["test_per_heldout_rh"]):
+            add("test", str(rng.choice(exc)), float(rh), heldout=True)
+    var = cfg["varying_rh"]
+    for split in ("train", "test"):
+        for _ in range(int(var.get(split, 0))):
+            add(split, str(rng.choice(exc)), tuple(var["range_pct"]))
+    ml = cfg["measurement_like"] or {}
+    rhs = ml.get("rh_pct", [])
+    for k in range(int(ml.get("count", 0))):
+        add("test", str(rng.choice(exc)), float(rhs[k % len(rhs)]), extra_effects=tuple(ml.get("effects", [])))
+    return specs
+
+
+def _excitation(spec: _Spec, cfg: dict) -> signals.Signal:
+    rng = np.random.default_rng(spec.seed)
+    fs, T, fmax = cfg["fs_Hz"], cfg["duration_s"], cfg["f_max_Hz"]
+    amp = float(rng.uniform(*cfg["amplitude_V"]))
+    if spec.kind == "sweep":
+        return signals.sweep(amp, 0.1, fmax, T, fs)
+    if spec.kind == "multisine":
+        return signals.multisine(amp / 2.5, max(0.1, 1.0 / T), float(rng.uniform(0.5, 1.0)) * fmax, T, 1, fs,
+                                 seed=spec.seed)
+    if spec.kind == "noise":
+        return signals.noise(amp / 2.5, 0.1, float(rng.uniform(0.3, 1.0)) * fmax, T, fs, seed=spec.seed)
+    t_on = float(rng.uniform(0.5, 3.0))
+    t_off = float(rng.uniform(1.0, 5.0))
+    cycles = max(1, int(T // (t_on + t_off)))
+    sig = signals.square(amp, t_on, t_off, cycles, fs, rise_time=2.0 / fs, bipolar=bool(rng.integers(2)))
+    n = int(round(T * fs))   # pad with rest, or cut, to the record length
+    v = np.concatenate([sig.v, np.zeros(max(0, n - sig.v.size))])[:n]
+    return signals.Signal(np.arange(n) / fs, v, sig.kind, sig.params)
+
+
+def _rh_series(spec: _Spec, t: np.ndarray) -> np.ndarray | float:
+    if np.ndim(spec.rh) == 0:
+        return float(spec.rh)
+    lo, hi = spec.rh
+    rng = np.random.default_rng(spec.seed + 1)
+    ph = rng.uniform(0, 2 * np.pi)
+    frac = 0.5 + 0.5 * np.sin(2 * np.pi * t / (t[-1] + t[1]) * rng.uniform(0.5, 1.0) + ph)
+    return lo + (hi - lo) * frac
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool = False,
+             progress: bool = True, **overrides) -> Path:
+    """Generate a dataset folder (written to a temporary folder, then renamed into place)."""
+    cfg = load_config(config, overrides) if isinstance(config, str) else load_config("default", config)
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise InputError(f"{out} already exists; choose another folder or pass overwrite")
+    rng = np.random.default_rng(cfg["seed"])
+    specs = _plan(cfg, rng)
+    sensor = _sensor(cfg["sensor"])
+    base = ActuatorModel(cfg["device"], cfg["effects"])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    t0 = time.perf_counter()
+    try:
+        entries = []
+        with Progress(len(specs), "generating dataset", enabled=progress) as bar:
+            for spec in specs:
+                model = base if not spec.extra_effects else ActuatorModel(
+                    cfg["device"], list(base.effect_ids) + list(spec.extra_effects))
+                sig = _excitation(spec, cfg)
+                rh = _rh_series(spec, sig.t)
+                hold = "linear" if spec.kind == "square" else "cubic"
+                res = model.simulate(sig.t, sig.v, rh=rh, hold=hold)
+                ts = sensor.apply(res.to_timeseries(), seed=spec.seed)
+                ts.meta.update({"excitation": sig.describe(), "split": spec.split})
+                path = tmp / f"{spec.name}.csv"
+                path.parent.mkdir(parents=True, exist_ok=True)
+                write_timeseries(ts, path)
+                entries.append({
+                    "path": f"{spec.name}.csv", "split": spec.split, "excitation": sig.describe(),
+                    "rh_pct": spec.rh if np.ndim(spec.rh) == 0 else {"varying": list(spec.rh)},
+                    "heldout_rh": spec.heldout, "extra_effects": list(spec.extra_effects),
+                    "effects": list(model.effect_ids), "seed": spec.seed, "samples": int(sig.t.size),
+                    "sha256": _sha256(path)})
+                bar.update()
+        meta = {"schema": SCHEMA, "name": out.name, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                "generator": {"tool": "eap generate", "device": cfg["device"], "effects": list(base.effect_ids),
+                              "config": cfg}, "seed": cfg["seed"], "fs_Hz": cfg["fs_Hz"],
+                "rh_levels": {"train": cfg["train_rh_pct"], "held_out": cfg["heldout_rh_pct"]},
+                "noise_floor_m": sensor.noise_floor(), "generation_time_s": time.perf_counter() - t0,
+                "files": entries}
+        write_json(tmp / "dataset.json", meta)
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return out
+
+
+@dataclass
+class Dataset:
+    """A loaded dataset: ``meta`` (dataset.json) and ``path``; files are checked against their hashes."""
+
+    path: Path
+    meta: dict
+
+    @property
+    def fs(self) -> float:
+        return float(self.meta["fs_Hz"])
+
+    @property
+    def hash(self) -> str:
+        """Content hash of the whole dataset (hash of the per-file hashes)."""
+        return hashlib.sha256("".join(e["sha256"] for e in self.meta["files"]).encode()).hexdigest()
+
+    def entries(self, split: str | None = None, *, heldout: bool | None = None,
+                measurement_like: bool | None = None) -> list[dict]:
+        out = []
+        for e in self.meta["files"]:
+            if split is not None and e["split"] != split:
+                continue
+            if heldout is not None and bool(e["heldout_rh"]) != heldout:
+                continue
+            if measurement_like is not None and bool(e["extra_effects"]) != measurement_like:
+                continue
+            out.append(e)
+        return out
+
+    def records(self, split: str | None = None, **filters) -> list[Record]:
+        return [self.record(e) for e in self.entries(split, **filters)]
+
+    def record(self, entry: dict) -> Record:
+        ts = read_timeseries(self.path / entry["path"])
+        return Record(ts.voltage, ts.deflection, ts.rh, ts.fs, name=entry["path"])
+
+
+def load_dataset(path: str | Path, verify: bool = True) -> Dataset:
+    """Load ``dataset.json`` of a dataset folder; with ``verify`` every file's SHA-256 is checked."""
+    path = Path(path)
+    mf = path / "dataset.json"
+    if not mf.is_file():
+        raise InputError(f"{path} is not a dataset folder (no dataset.json)")
+    try:
+        meta = json.loads(mf.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{mf}: not valid JSON ({exc})") from None
+    if meta.get("schema") != SCHEMA:
+        raise InputError(f"{mf}: schema {meta.get('schema')!r} is not {SCHEMA!r}")
+    for e in meta.get("files", []):
+        f = path / e["path"]
+        if not f.is_file():
+            raise InputError(f"{mf}: listed file {e['path']} is missing")
+        if e.get("split") not in SPLITS:
+            raise InputError(f"{mf}: file {e['path']} has split {e.get('split')!r}; expected one of {SPLITS}")
+        if verify and _sha256(f) != e["sha256"]:
+            raise InputError(f"{f}: content differs from the SHA-256 recorded in dataset.json "
+                             f"(modified after generation)")
+    return Dataset(path, meta)
