@@ -8,9 +8,10 @@ data are fitted by a generalised Maxwell (Prony) model
 
 which is causal and passive (loss ≥ 0 at every frequency) and has an exact state-space
 form, so both solvers use the same modulus.  Relaxation times are spread over the
-measured band (non-negative least squares on the relative error of E' and E'').  The
-fit quality is reported by ``fit_report``.  Off: an elastic modulus (``Y``, or
-``Y_polymer`` with ``layered_beam``), no loss besides Rayleigh damping.
+measured band (non-negative least squares on the relative error of E' and E'').  An
+optional ``dma_scale`` (default 1) multiplies the tabulated modulus, so a sample stiffer or
+softer than the one measured by DMA can be identified.  Off: an elastic modulus (``Y``,
+or ``Y_polymer`` with ``layered_beam``), no loss besides Rayleigh damping.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from ..errors import InputError
-from ..parameters import TableSpec
+from ..parameters import ParamSpec, TableSpec
 from .base import Effect
 
 
@@ -61,6 +62,7 @@ class Viscoelastic(ElasticModulus):
     enabled = True
     summary = "frequency-dependent storage/loss modulus fitted (Prony) to DMA tables"
     explanation = __doc__
+    params = (ParamSpec("dma_scale", "1", 1e-3, 1e3, "factor on the tabulated DMA modulus", optional=True),)
     tables = (
         TableSpec("dma", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
                   "DMA storage and loss modulus of the whole strip vs frequency", optional=False),
@@ -74,7 +76,7 @@ class Viscoelastic(ElasticModulus):
             raise InputError(f"viscoelastic with layered_beam needs the table {name!r} in section "
                              f"'viscoelastic' of device {self.device.name!r}")
         t = self.device.tables[name]
-        return fit_prony(tuple(t["freq"]), tuple(t["storage"]), tuple(t["loss"]))
+        return fit_prony(tuple(t["freq"]), tuple(t["storage"]), tuple(t["loss"])).scaled(p.get("dma_scale", 1.0))
 
 
 @lru_cache(maxsize=64)
