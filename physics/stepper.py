@@ -64,6 +64,7 @@ class BranchNetwork:
         self.Rb = np.broadcast_to(self.d.R_bulk, (self.n,)).astype(float)
         self.inv_Rb = 1.0 / self.Rb
         self.G = float(self.d.G_leak)
+        self.load_ratio = self.d.c0 / self.d.C0   # first-moment-equivalent excess per charge
         self.q_scale = float(np.max(self.d.C0) * np.max(self.d.V_T))  # charge of a thermal voltage
         if self.g is not None:
             g = self.g
@@ -134,9 +135,10 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
         want: set[str], progress: bool = False) -> dict[str, np.ndarray]:
     """Integrate the branch network.  ``params_at(rh)`` gives the parameters at an RH.
 
-    Returns per-sample arrays: ``current`` (A), ``c_up``/``c_low`` (interface cation
-    excess of every branch, mol/m³, branch 0 = clamp) and, if requested in ``want``,
-    ``U`` (V), ``Q`` (C/m²) and ``T`` (K) per branch."""
+    Returns per-sample arrays: ``current`` (A), ``load`` (first-moment-equivalent interface
+    cation excess (c0/C0)·Q, mol/m³), ``c_up``/``c_low`` (cation excess at the faces, mol/m³),
+    all per branch (branch 0 = clamp), and, if requested in ``want``, ``U`` (V), ``Q``
+    (C/m²) and ``T`` (K) per branch."""
     N = t.size
     dt = float(t[1] - t[0])
     rh_key = np.round(rh / 0.25) * 0.25
@@ -144,7 +146,8 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
     lumped = not thermal and not model.components["line"].enabled
     net = BranchNetwork(model, params_at(float(rh_key[0])), edges, lumped)
     nb = net.n
-    out = {"current": np.empty(N), "c_up": np.empty((nb, N)), "c_low": np.empty((nb, N))}
+    out = {"current": np.empty(N), "load": np.empty((nb, N)), "c_up": np.empty((nb, N)),
+           "c_low": np.empty((nb, N))}
     for k in ("U", "Q", "T"):
         if k in want:
             out[k] = np.empty((nb, N))
@@ -253,6 +256,7 @@ def _quadratic(v0: float, vg: float, v1: float):
 def _record(out, i, net, Q, vin, ev, T):
     _, U, Ueq, st = ev
     out["current"][i] = net.current(U, Ueq, vin)
+    out["load"][:, i] = net.load_ratio * Q
     out["c_up"][:, i], out["c_low"][:, i] = net.law.excess(st)
     if "U" in out:
         out["U"][:, i] = U

@@ -43,9 +43,11 @@ _W_LO = 2.0 * np.pi * 1e-5  # lowest frequency the realisations are accurate at 
 @dataclass
 class SimulationResult:
     """Time series of a simulation (SI units).  ``fields`` hold (n_segments, N) arrays on
-    the segment centres ``z`` [m] from the clamp; ``cation_upper``/``cation_lower`` for the
-    field ``cation``.  Cs_up/Cs_low: thesis eq. 8, interface solvent excess averaged over
-    the electrode length [mol/m³]."""
+    the segment centres ``z`` [m] from the clamp; ``cation_upper``/``cation_lower`` (the
+    cation excess at the faces) for the field ``cation``.  Cs_up/Cs_low: thesis eq. 8, the
+    interface solvent excess averaged over the electrode length [mol/m³], as the
+    first-moment-equivalent value that bends the strip (equal to the face value in the
+    linear regime; with ``nonlinear_charge`` the face values are in the ``cation`` field)."""
 
     time: np.ndarray
     voltage: np.ndarray
@@ -118,8 +120,7 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
         want = {"voltage": "U", "charge": "Q", "temperature": "T"}
         out = stepper.run(model, model.params_at, t, v, rh_t, edges,
                           {want[f] for f in fields if f in want}, progress=progress)
-        c_up, c_low, current = out["c_up"], out["c_low"], out["current"]
-        ell = 0.5 * (c_up[1:] - c_low[1:])
+        load, c_up, c_low, current = out["load"], out["c_up"], out["c_low"], out["current"]
         flds = {}
         if "voltage" in fields:
             flds["voltage"] = out["U"][1:]
@@ -129,7 +130,8 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
             flds["temperature"] = out["T"][1:]
     else:
         p = model.params_at(float(rh_t[0]))
-        ell, c_up, c_low, current, flds = _electrochemistry_lti(model, p, edges, v, dt, hold, fields, periodic)
+        load, current, flds = _electrochemistry_lti(model, p, edges, v, dt, hold, fields, periodic)
+        c_up, c_low = load, -load
         if "temperature" in fields:
             flds["temperature"] = np.full((edges.size - 1, t.size), p["T_ext"])
     if "cation" in fields:
@@ -137,12 +139,12 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
 
     # 2.–4. projection, load filter, mechanics
     lengths = np.concatenate([[base["L_clamp"]], np.diff(edges)])
-    cs_pre = base["n_solvation"] * np.vstack([lengths @ c_up, lengths @ c_low]) / base["L_total"]
+    cs_pre = base["n_solvation"] * (lengths @ load)[None, :] / base["L_total"]
     load_filter, cs_filter = _load_filters(model, base, w_hi)
-    cs = _apply_filter(cs_filter, cs_pre, dt, hold, periodic)
-    tip = _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic)
-    return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs[0],
-                            cs_low=cs[1], device=model.device.name, effects=model.effect_ids,
+    cs = _apply_filter(cs_filter, cs_pre, dt, hold, periodic)[0]
+    tip = _tip(model, base, load[1:], edges, rh_t, load_filter, dt, hold, periodic)
+    return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs,
+                            cs_low=-cs, device=model.device.name, effects=model.effect_ids,
                             z=0.5 * (edges[1:] + edges[:-1]), fields=flds)
 
 
@@ -151,8 +153,8 @@ def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_fa
                               hold: str = "cubic", periodic: bool = False) -> np.ndarray:
     """Tip deflection [m] for a given load history, through the same beam as :func:`simulate`.
 
-    ``ell`` (n_seg, N) is the antisymmetric interface cation excess (C⁺(h) − C⁺(−h))/2
-    [mol/m³] on the free segments with ``edges`` [m] (from the clamp), sampled at ``t`` [s];
+    ``ell`` (n_seg, N) is the first-moment-equivalent interface cation excess [mol/m³] (the
+    face excess (C⁺(h) − C⁺(−h))/2 in the linear regime) on the free segments with ``edges`` [m] (from the clamp), sampled at ``t`` [s];
     the couple is mu = 2 h w n⁺ kf ℓ with kf(s) and the humidity factors of ``model`` at ``rh``
     [%].  ``apply_solvent_factor=False`` skips the solvent factor B(s), for loads that already
     contain the solvent's back-diffusion."""
@@ -207,8 +209,8 @@ def _check_record(t, voltage):
 # Stage 1: electrochemistry as an LTI system
 # ----------------------------------------------------------------------------------------
 def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fields, periodic=False):
-    """Linear electrochemistry.  Returns (ell (n_seg, N) antisymmetric interface cation
-    excess, c_up/c_low with the clamp branch first (n_seg+1, N), current (N), fields)."""
+    """Linear electrochemistry.  Returns (interface cation excess per branch, clamp branch
+    first (n_seg+1, N) [mol/m³], current (N) [A], fields)."""
     d = model.double_layer_props(p)
     branch = model.components["double_layer"].realize(d, np.pi / dt)
     nc = branch.n_states
@@ -269,8 +271,7 @@ def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fie
         flds["voltage"], k = y[k:k + n], k + n
     if "charge" in fields:
         flds["charge"] = y[k:k + n]
-    c_up = np.vstack([c_clamp, c_seg])
-    return c_seg, c_up, -c_up, current, flds
+    return np.vstack([c_clamp, c_seg]), current, flds
 
 
 def _steady_state(ss: StateSpace, u0: float) -> np.ndarray:
