@@ -1,0 +1,56 @@
+"""``eap train-compare``: train FF / RBF / NARX / LSTM (/GRU) on a dataset and compare them."""
+from __future__ import annotations
+
+import yaml
+
+from physics.errors import InputError
+
+NAME = "train-compare"
+HELP = "train neural models on a dataset and compare them (free run, held-out RH, physics reference)"
+
+
+def add_arguments(p):
+    p.add_argument("dataset", help="dataset folder (from `eap generate`)")
+    p.add_argument("--models", default="ff,rbf,narx,lstm", help="comma-separated: ff, rbf, narx, lstm, gru")
+    p.add_argument("--out", default="runs/compare", help="run folder (models/, compare.json, report.html)")
+    p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
+                   help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
+    p.add_argument("--max-time-s", type=float, default=None, help="training budget per model [s]")
+
+
+def parse_overrides(items) -> dict:
+    out: dict[str, dict] = {}
+    for it in items:
+        if "=" not in it or "." not in it.split("=", 1)[0]:
+            raise InputError(f"--set expects MODEL.KEY=VALUE, got {it!r}")
+        key, val = it.split("=", 1)
+        model, hp = key.split(".", 1)
+        out.setdefault(model, {})[hp] = _value(val)
+    return out
+
+
+def _value(text: str):
+    """A number if it reads as one (YAML would keep '1e-3' a string), else YAML."""
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return yaml.safe_load(text)
+
+
+def run(args) -> int:
+    from nnmodel.models import MODELS
+    from nnmodel.traincompare import format_table, train_compare
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    bad = [m for m in models if m not in MODELS]
+    if bad:
+        raise InputError(f"unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
+    summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
+                            max_time_s=args.max_time_s)
+    print(format_table(summary))
+    best = summary["best_heldout"]
+    if best:
+        print(f"best free-run NRMSE on held-out RH: {best['model']} {100 * best['nrmse']:.2f} %")
+    print(f"report: {args.out}/report.html")
+    return 0

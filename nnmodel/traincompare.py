@@ -1,0 +1,287 @@
+"""Train several neural models on one dataset and compare them honestly (``eap train-compare``).
+
+Every model is trained with its recipe (``configs/train/NAME.yaml``), saved as a bundle,
+then scored in **free-run simulation** (only the first ``n_init`` measured samples may
+initialise the state; they are excluded from every score) and in one-step-ahead
+prediction on the test records, grouped as
+
+- ``train_rh``: test records at the training RH levels,
+- ``heldout_rh``: RH levels never seen in training (the generalisation the issue asks for),
+- ``varying_rh``: records whose RH drifts during the record,
+- ``measurement_like``: records simulated with physics the generator's model lacked.
+
+The physics simulator that generated the data is scored on the same records: it is the
+reference the networks learned from (its error is the sensor noise, except on the
+measurement-like records).  Scores are pooled over records: NRMSE = sqrt(Σe²/Σ(y−ȳ)²)
+(ȳ per record), fit % = 100 (1 − NRMSE) as MATLAB ``compare``.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from physics.compare import PhysicsPredictor, model_rh
+from physics.errors import InputError
+from physics.fileio import write_json
+from physics.frequency import frequency_response
+from physics.plotting import plt, save
+from physics.progress import Progress
+from physics.report import Report, write_csv
+from physics import signals
+
+from .bundle import save as save_bundle
+from .dataset import Dataset, load_dataset
+from .training import make_model
+
+GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
+SKIP = 50   # samples at the start of each test record used only for initialisation
+
+
+def group_of(entry: dict) -> str:
+    if entry["extra_effects"]:
+        return "measurement_like"
+    if isinstance(entry["rh_pct"], dict):
+        return "varying_rh"
+    return "heldout_rh" if entry["heldout_rh"] else "train_rh"
+
+
+def _pooled(ys, yhats) -> dict:
+    e2 = sum(float(np.sum((y - yh) ** 2)) for y, yh in zip(ys, yhats))
+    v2 = sum(float(np.sum((y - np.mean(y)) ** 2)) for y in ys)
+    n = sum(y.size for y in ys)
+    nr = float(np.sqrt(e2 / v2)) if v2 > 0 else float("nan")
+    corr = float(np.mean([np.corrcoef(y, yh)[0, 1] for y, yh in zip(ys, yhats)]))
+    return {"rmse_m": float(np.sqrt(e2 / n)), "nrmse": nr, "fit_pct": 100.0 * (1.0 - nr), "correlation": corr,
+            "records": len(ys)}
+
+
+def _score(predict, ds: Dataset, entries: list[dict], skip: int) -> dict:
+    """Pooled metrics per group and per RH level for ``predict(record) -> y_hat``."""
+    by_group: dict[str, tuple[list, list]] = {g: ([], []) for g in GROUPS}
+    by_rh: dict[float, tuple[list, list]] = {}
+    for e in entries:
+        rec = ds.record(e)
+        yh = predict(rec)
+        y, yh = rec.y[skip:], yh[skip:]
+        g = group_of(e)
+        by_group[g][0].append(y)
+        by_group[g][1].append(yh)
+        if g in ("train_rh", "heldout_rh"):
+            by_rh.setdefault(float(e["rh_pct"]), ([], []))
+            by_rh[float(e["rh_pct"])][0].append(y)
+            by_rh[float(e["rh_pct"])][1].append(yh)
+    out = {g: _pooled(*v) for g, v in by_group.items() if v[0]}
+    core = [g for g in ("train_rh", "heldout_rh", "varying_rh") if g in out]
+    ys = [y for g in core for y in by_group[g][0]]
+    yhs = [y for g in core for y in by_group[g][1]]
+    out["test"] = _pooled(ys, yhs)
+    out["by_rh"] = {f"{rh:g}": _pooled(*v)["nrmse"] for rh, v in sorted(by_rh.items())}
+    return out
+
+
+def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: float = 40.0):
+    """FRF of any simulator from a periodic multisine (3 periods, the last 2 analysed)."""
+    period = 40.0
+    sig = signals.multisine(rms=rms, f_start=1.0 / period, f_stop=f_max, period=period, periods=3, fs=fs, seed=7)
+    y = simulate(sig.v, np.full(sig.v.size, rh))
+    n = int(round(period * fs))
+    seg = slice(sig.v.size - 2 * n, sig.v.size)
+    U, Y = np.fft.rfft(sig.v[seg]), np.fft.rfft(y[seg])
+    k = 2 * np.arange(1, int(f_max * period) + 1)
+    return k / (2 * period), Y[k] / U[k]
+
+
+def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/compare", *,
+                  overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
+                  progress: bool = True) -> dict:
+    """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
+    ``compare.json``, ``metrics.csv``, plots and ``report.html`` in ``out``."""
+    ds = load_dataset(dataset)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    train, val = ds.records("train"), ds.records("validation")
+    if not train:
+        raise InputError(f"{dataset}: no training records")
+    test_entries = ds.entries("test")
+    gen = ds.meta["generator"]
+    physics_model = PhysicsPredictor.from_device(gen["device"], gen["effects"])
+    results: dict[str, dict] = {}
+
+    def physics_predict(rec):   # measured RH is noisy: the physics gets the slow RH (compare.model_rh)
+        return physics_model(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
+
+    t0 = time.perf_counter()
+    results["physics"] = {"kind": "physics simulator (generator)", "effects": gen["effects"],
+                          "free_run": _score(physics_predict, ds, test_entries, SKIP),
+                          "n_parameters": None, "train_time_s": 0.0}
+    results["physics"]["inference_samples_per_s"] = _speed(lambda r: physics_predict(r), ds, test_entries)
+    results["physics"]["eval_time_s"] = time.perf_counter() - t0
+    trained = {}
+    for name in models:
+        ov = dict((overrides or {}).get(name, {}))
+        if max_time_s is not None:
+            ov["max_time"] = float(max_time_s)
+        model = make_model(name, ov)
+        if progress:
+            print(f"training {name} ...", flush=True)
+        t1 = time.perf_counter()
+        model.fit(train, val)
+        fit_time = time.perf_counter() - t1
+        skip = max(SKIP, int(model.n_init_))
+
+        def free(rec, m=model):
+            return m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])
+
+        def one_step(rec, m=model):
+            return m.predict(rec.u, rec.rh, y=rec.y, steps_ahead=1)
+
+        res = {"kind": name, "n_parameters": int(model.n_parameters), "train_time_s": fit_time,
+               "free_run": _score(free, ds, test_entries, skip),
+               "one_step": _score(one_step, ds, test_entries, skip),
+               "inference_samples_per_s": _speed(free, ds, test_entries),
+               "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None}
+        save_bundle(model, out / "models" / name, dataset_hash=ds.hash, overwrite=True,
+                    metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
+                    notes=f"trained by eap train-compare on {ds.path}")
+        results[name] = res
+        trained[name] = model
+        if progress:
+            fr = res["free_run"]
+            print(f"  {name}: {fit_time:.1f} s, free-run NRMSE test {100 * fr['test']['nrmse']:.2f} %, "
+                  f"held-out RH {100 * fr.get('heldout_rh', {}).get('nrmse', float('nan')):.2f} %", flush=True)
+    summary = {"dataset": str(ds.path), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
+               "generator": {"device": gen["device"], "effects": gen["effects"]},
+               "noise_floor_m": ds.meta["noise_floor_m"], "skip_samples": SKIP, "models": results,
+               "best_heldout": _best(results)}
+    _plots(ds, test_entries, physics_predict, trained, results, out)
+    write_json(out / "compare.json", summary)
+    write_csv(_table_rows(results), out / "metrics.csv")
+    _report(summary, out)
+    return summary
+
+
+def _speed(predict, ds: Dataset, entries) -> float:
+    rec = ds.record(max(entries, key=lambda e: e["samples"]))
+    t0 = time.perf_counter()
+    predict(rec)
+    return rec.u.size / (time.perf_counter() - t0)
+
+
+def _best(results: dict) -> dict:
+    nets = {k: v for k, v in results.items() if k != "physics" and "heldout_rh" in v["free_run"]}
+    if not nets:
+        return {}
+    k = min(nets, key=lambda n: nets[n]["free_run"]["heldout_rh"]["nrmse"])
+    return {"model": k, "nrmse": nets[k]["free_run"]["heldout_rh"]["nrmse"]}
+
+
+def _table_rows(results: dict) -> list[dict]:
+    rows = []
+    for name, r in results.items():
+        fr = r["free_run"]
+        rows.append({"model": name, "parameters": r["n_parameters"], "train_time_s": r["train_time_s"],
+                     "samples_per_s": r["inference_samples_per_s"],
+                     "nrmse_test_pct": 100 * fr["test"]["nrmse"],
+                     "nrmse_heldout_rh_pct": 100 * fr.get("heldout_rh", {}).get("nrmse", float("nan")),
+                     "nrmse_varying_rh_pct": 100 * fr.get("varying_rh", {}).get("nrmse", float("nan")),
+                     "nrmse_measurement_like_pct": 100 * fr.get("measurement_like", {}).get("nrmse", float("nan")),
+                     "fit_heldout_pct": fr.get("heldout_rh", {}).get("fit_pct", float("nan")),
+                     "corr_heldout": fr.get("heldout_rh", {}).get("correlation", float("nan")),
+                     "one_step_nrmse_test_pct": 100 * r["one_step"]["test"]["nrmse"] if "one_step" in r else None})
+    return rows
+
+
+def format_table(summary: dict) -> str:
+    rows = _table_rows(summary["models"])
+    head = (f"{'model':8s} {'params':>8s} {'train s':>8s} {'samples/s':>10s} {'test %':>8s} {'held-out %':>10s} "
+            f"{'varying %':>9s} {'meas-like %':>11s} {'1-step %':>8s}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        p = "-" if r["parameters"] is None else str(r["parameters"])
+        one = "-" if r["one_step_nrmse_test_pct"] is None else f"{r['one_step_nrmse_test_pct']:.2f}"
+        lines.append(f"{r['model']:8s} {p:>8s} {r['train_time_s']:8.1f} {r['samples_per_s']:10.3g} "
+                     f"{r['nrmse_test_pct']:8.2f} {r['nrmse_heldout_rh_pct']:10.2f} {r['nrmse_varying_rh_pct']:9.2f} "
+                     f"{r['nrmse_measurement_like_pct']:11.2f} {one:>8s}")
+    lines.append("free-run NRMSE (RMSE/std of the measurement, pooled over records); the physics row is the "
+                 "simulator that generated the data")
+    return "\n".join(lines)
+
+
+def _plots(ds, entries, physics_predict, trained, results, out: Path) -> None:
+    # time overlays: one record of each group
+    for g in GROUPS:
+        es = [e for e in entries if group_of(e) == g]
+        if not es:
+            continue
+        rec = ds.record(es[0])
+        t = np.arange(rec.u.size) / rec.fs
+        fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+        ax[0].plot(t, 1e3 * rec.y, "k", lw=1.0, label="measurement")
+        ax[0].plot(t, 1e3 * physics_predict(rec), lw=0.8, label="physics")
+        for name, m in trained.items():
+            yh = m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])
+            ax[0].plot(t, 1e3 * yh, lw=0.8, label=name)
+            ax[1].plot(t, 1e3 * (rec.y - yh), lw=0.6, label=name)
+        ax[0].set_ylabel("deflection [mm]")
+        ax[1].set_ylabel("residual [mm]")
+        ax[1].set_xlabel("time [s]")
+        ax[0].legend(fontsize=7, ncol=3)
+        ax[0].set_title(f"{g}: {es[0]['path']}")
+        save(fig, out / f"overlay_{g}.png")
+    # error by RH
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for name, r in results.items():
+        rh = r["free_run"]["by_rh"]
+        if rh:
+            xs = [float(k) for k in rh]
+            ax.plot(xs, [100 * v for v in rh.values()], "o-", label=name)
+    held = ds.meta["rh_levels"]["held_out"]
+    for h in held:
+        ax.axvline(h, color="0.85", zorder=0)
+    ax.set_xlabel("RH [%] (grey: held out)")
+    ax.set_ylabel("free-run NRMSE [%]")
+    ax.set_yscale("log")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, out / "error_by_rh.png")
+    # small-signal Bode: networks vs the physics closed form
+    gen = ds.meta["generator"]
+    rh = float(np.median(ds.meta["rh_levels"]["train"]))
+    fmax = min(40.0, 0.4 * ds.fs)
+    resp = {}
+    for name, m in trained.items():
+        f, H = _small_signal_frf(lambda v, r, m=m: m.simulate(v, r), ds.fs, rh, f_max=fmax)
+        resp[name] = H
+    f_ref, _ = _small_signal_frf(lambda v, r: v, ds.fs, rh, f_max=fmax)
+    resp_phys = frequency_response(gen["device"], gen["effects"], f_ref, rh=rh).deflection
+    fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    ax[0].loglog(f_ref, np.abs(resp_phys), "k", lw=1.5, label="physics (closed form)")
+    ax[1].semilogx(f_ref, np.degrees(np.unwrap(np.angle(resp_phys))), "k", lw=1.5)
+    for name, H in resp.items():
+        ax[0].loglog(f_ref, np.abs(H), lw=0.9, label=name)
+        ax[1].semilogx(f_ref, np.degrees(np.unwrap(np.angle(H))), lw=0.9)
+    ax[0].set_ylabel("|H| [m/V]")
+    ax[1].set_ylabel("phase [deg]")
+    ax[1].set_xlabel("frequency [Hz]")
+    ax[0].legend(fontsize=7)
+    ax[0].set_title(f"small-signal response at RH {rh:g} % (multisine 0.3 V rms)")
+    for a in ax:
+        a.grid(alpha=0.3, which="both")
+    save(fig, out / "bode.png")
+
+
+def _report(summary: dict, out: Path) -> None:
+    rep = Report("eap train-compare", f"dataset {summary['dataset']} (hash {summary['dataset_hash'][:12]})")
+    rep.paragraph(__doc__.strip().split("\n\n")[0])
+    rep.table(_table_rows(summary["models"]))
+    best = summary["best_heldout"]
+    if best:
+        rep.paragraph(f"Best free-run NRMSE on held-out RH: {best['model']} {100 * best['nrmse']:.2f} %.")
+    for img, cap in (("error_by_rh.png", "free-run error by RH"), ("bode.png", "small-signal Bode"),
+                     *[(f"overlay_{g}.png", g) for g in GROUPS]):
+        if (out / img).is_file():
+            rep.image(out / img, cap)
+    rep.json_block(summary, "compare.json")
+    rep.write(out / "report.html")

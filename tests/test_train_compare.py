@@ -1,0 +1,66 @@
+"""eap train-compare on a tiny dataset (structure, physics reference, bundles)."""
+import json
+
+import numpy as np
+import pytest
+
+from nnmodel.commands.train_compare import parse_overrides
+from nnmodel.dataset import generate
+from nnmodel.traincompare import format_table, train_compare
+from physics.errors import InputError
+
+TINY = dict(fs_Hz=100.0, f_max_Hz=20.0, duration_s=6.0, train_rh_pct=[40, 100], heldout_rh_pct=[70],
+            excitations=["sweep", "noise"], validation_per_rh=1, test_per_train_rh=1, test_per_heldout_rh=1,
+            varying_rh={"train": 0, "test": 1, "range_pct": [40, 100]},
+            measurement_like={"effects": ["nonlinear_charge"], "count": 1, "rh_pct": [55]})
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("tc")
+    ds = generate(d / "ds", dict(TINY), progress=False)
+    summary = train_compare(ds, ["rbf", "ff"], d / "run", progress=False,
+                            overrides={"rbf": {"n_centres": 20, "nb": 10},
+                                       "ff": {"max_epochs": 2, "hidden": 8, "nb": 10}})
+    return d / "run", summary
+
+
+def test_outputs_and_groups(run):
+    out, summary = run
+    for f in ("compare.json", "metrics.csv", "report.html", "bode.png", "error_by_rh.png", "overlay_heldout_rh.png"):
+        assert (out / f).is_file(), f
+    data = json.loads((out / "compare.json").read_text())
+    assert set(data["models"]) == {"physics", "rbf", "ff"}
+    for name in ("rbf", "ff"):
+        m = data["models"][name]
+        assert {"train_rh", "heldout_rh", "varying_rh", "measurement_like", "test"} <= set(m["free_run"])
+        assert m["n_parameters"] > 0 and m["inference_samples_per_s"] > 0 and m["train_time_s"] > 0
+        assert m["rh_range_trained_pct"] == [pytest.approx(40, abs=1), pytest.approx(100, abs=1)]
+    assert "model" in data["best_heldout"]
+    assert "physics" in format_table(summary)
+
+
+def test_physics_reference_scores_at_the_noise_floor_except_measurement_like(run):
+    _, summary = run
+    ph = summary["models"]["physics"]["free_run"]
+    floor = summary["noise_floor_m"]
+    # the simulator that generated the data: its residual is the sensor (noise + drift)
+    assert ph["heldout_rh"]["rmse_m"] < 3 * floor
+    # the measurement-like record has physics (nonlinear_charge) the generator lacked
+    assert ph["measurement_like"]["rmse_m"] > 10 * ph["heldout_rh"]["rmse_m"]
+
+
+def test_bundles_are_saved_with_the_dataset_hash_and_reload(run):
+    import nnmodel
+    out, summary = run
+    b = nnmodel.load(out / "models" / "rbf")
+    card = json.loads((out / "models" / "rbf" / "card.json").read_text())
+    assert card["dataset_hash"] == summary["dataset_hash"]
+    y = b.predict(np.zeros(300), rh=60.0, fs=100.0)
+    assert y.shape == (300,) and np.all(np.isfinite(y))
+
+
+def test_override_parsing():
+    assert parse_overrides(["narx.hidden=64", "ff.lr=1e-3"]) == {"narx": {"hidden": 64}, "ff": {"lr": 1e-3}}
+    with pytest.raises(InputError, match="MODEL.KEY=VALUE"):
+        parse_overrides(["hidden=3"])
