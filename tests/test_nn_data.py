@@ -64,3 +64,13 @@ def test_windows_cover_records_and_hold_the_right_samples():
     assert np.array_equal(w["u"][1], [5, 6, 7, 8, 9]) and np.array_equal(w["y"][1], 105 + np.arange(5.0))
     tr, va = split_records([r], 0.25, min_len=3)
     assert len(tr[0]) == 15 and len(va[0]) == 5 and va[0].u[0] == 15
+
+
+def test_from_the_physics_timeseries_class():
+    from physics.timeseries import TimeSeries
+
+    ts = TimeSeries(time=np.arange(50) / 200.0, voltage=np.sin(np.arange(50)),
+                    deflection=np.zeros(50), rh=np.full(50, 65.0))
+    r = Record.from_timeseries(ts)
+    assert r.fs == pytest.approx(200.0) and len(r) == 50 and np.all(r.rh == 65.0)
+    assert np.array_equal(r.u, ts.voltage)

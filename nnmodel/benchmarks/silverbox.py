@@ -71,7 +71,7 @@ TRAIN_BUDGET_S = 15 * 60
 OVERRIDES: dict[str, dict] = {
     "ff": dict(na=10, nb=10, hidden=32, layers=2, poly_degree=3, max_epochs=60, max_time=300,
                patience=8, val_fraction=0.15),
-    "rbf": dict(na=10, nb=10, n_centres=200, width_factor=2.0, alpha=1e-7, val_fraction=0.15),
+    "rbf": dict(na=10, nb=10, n_centres=400, width_factor=3.0, alpha=1e-8, val_fraction=0.15),
     "narx": dict(na=10, nb=10, hidden=32, layers=2, poly_degree=3, horizon=100, stride=20,
                  lr=1e-3, batch_size=64, max_epochs=500, max_time=600, patience=30,
                  val_fraction=0.15),
@@ -85,7 +85,7 @@ OVERRIDES: dict[str, dict] = {
 #: ``--quick``: the same structures with a one-minute budget each
 QUICK: dict[str, dict] = {
     "ff": dict(max_time=60, max_epochs=20),
-    "rbf": dict(n_centres=100),
+    "rbf": dict(n_centres=200),
     "narx": dict(max_time=60),
     "lstm": dict(max_time=60),
     "gru": dict(max_time=60),
@@ -307,8 +307,10 @@ HEADER = ["model", "multisine mV", "arrow full mV", "arrow no-extrap mV", "train
 def _table_rows(report: dict) -> list[list]:
     rows = []
     for r in report["results"]:
+        sps = r["samples_per_s"]
         rows.append([r["model"]] + [r["rmse_mv"].get(t) for t in TESTS]
-                    + [r["train_time_s"], r["samples_per_s"], r["n_parameters"]])
+                    + [f"{r['train_time_s']:.1f}", "-" if sps is None else f"{sps:,.0f}",
+                       int(r["n_parameters"])])
     for p in report["published"]["rows"]:
         rows.append([p["model"]] + [p["rmse_mv"][t] for t in TESTS] + ["-", "-", "-"])
     lo, hi = report["published"]["best_published_mv"]
@@ -336,7 +338,7 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
     labels = [r["model"] for r in rows] + [p["model"] for p in PUBLISHED]
     vals = [[(r["rmse_mv"].get(t) or np.nan) for t in TESTS] for r in rows] + \
            [[p["rmse_mv"][t] for t in TESTS] for p in PUBLISHED]
-    fig, ax = plt.subplots(figsize=(10, 4.8))
+    fig, ax = plt.subplots(figsize=(10, 5.5))
     x = np.arange(len(TESTS))
     w = 0.8 / max(1, len(labels))
     for i, (lab, v) in enumerate(zip(labels, vals)):
@@ -350,28 +352,36 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
     ax.set_ylabel("free-run RMSE (mV)")
     ax.set_title("Silverbox: simulation RMSE, ours vs published")
     ax.grid(axis="y", which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))
     fig.tight_layout()
     with atomic_path(out / "silverbox_rmse.png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
 
-    # error traces on each test
-    fig, axes = plt.subplots(len(TESTS), 1, figsize=(10, 8))
+    # error traces on each test (errors on the left axis, the measured output faintly on the right)
+    fig, axes = plt.subplots(len(TESTS), 1, figsize=(10, 8.5))
+    ours = [r["model"] for r in rows if r["role"] == "ours"] or [r["model"] for r in rows]
     for ax, t in zip(axes, TESTS):
         rec = tests[t]
         tt = np.arange(len(rec)) / FS
-        ax.plot(tt, rec.y * 1e3, color="0.8", lw=0.5, label="measured output (mV)")
-        for lab, p in preds.items():
-            e = (p[t] - rec.y) * 1e3
+        ax2 = ax.twinx()
+        ax2.plot(tt, rec.y * 1e3, color="0.85", lw=0.4)
+        ax2.set_ylabel("measured output (mV)", color="0.6", fontsize=8)
+        ax2.tick_params(axis="y", colors="0.6", labelsize=7)
+        ax.set_zorder(ax2.get_zorder() + 1)
+        ax.patch.set_visible(False)
+        for lab in ours:
+            e = (preds[lab][t] - rec.y) * 1e3
             e[:N_INIT] = np.nan
-            ax.plot(tt, e, lw=0.5, label=f"error {lab}")
-        ax.set_title(TEST_LABELS[t], fontsize=9)
-        ax.set_ylabel("mV")
-        rng = np.nanmax(np.abs(rec.y)) * 1e3
-        ax.set_ylim(-rng * 1.1, rng * 1.1)
+            rms = np.sqrt(np.nanmean(e ** 2))
+            ax.plot(tt, e, lw=0.5, alpha=0.8, label=f"{lab} ({rms:.3g} mV RMS)")
+        if t == "arrow_full" and len(rec) > N_ARROW_NO_EXTRAP:
+            ax.axvspan(N_ARROW_NO_EXTRAP / FS, tt[-1], color="orange", alpha=0.1,
+                       label="extrapolation region")
+        ax.set_title(f"{TEST_LABELS[t]}: simulation error", fontsize=9)
+        ax.set_ylabel("error (mV)")
+        ax.legend(fontsize=6, ncol=3, loc="upper left")
     axes[-1].set_xlabel("time (s)")
-    axes[0].legend(fontsize=6, ncol=3, loc="upper left")
     fig.tight_layout()
     with atomic_path(out / "silverbox_errors.png") as tmp:
         fig.savefig(tmp, dpi=100, format="png")

@@ -72,12 +72,17 @@ def run(args) -> int:
     }
     line = (f"predicted {ts.n} samples at {ts.fs:g} Hz with {bundle.card['model']} "
             f"({'free run' if k is None else f'{k}-step-ahead'})")
-    if ts.deflection is not None:
-        fit = {"rmse": rmse(ts.deflection, pred), "fit_percent": fit_percent(ts.deflection, pred)}
-        meta["prediction"]["against_measured"] = fit
-        line += f"; against the measured deflection: RMSE {fit['rmse']:.4g}, fit {fit['fit_percent']:.1f} %"
     if not np.all(np.isfinite(pred)):
         raise InputError("the model produced non-finite values for this input (diverged)")
+    if ts.deflection is not None:
+        fit = {"rmse": rmse(ts.deflection, pred)}
+        line += f"; against the measured deflection: RMSE {fit['rmse']:.4g}"
+        try:
+            fit["fit_percent"] = fit_percent(ts.deflection, pred)
+            line += f", fit {fit['fit_percent']:.1f} %"
+        except InputError:  # constant measured deflection: relative fit undefined
+            pass
+        meta["prediction"]["against_measured"] = fit
     out = TimeSeries(time=ts.time, voltage=ts.voltage, deflection=pred,
                      rh=ts.rh if (rh_read or uses_rh) else None, meta=meta, source=str(args.out))
     path = write_timeseries(out, args.out, overwrite=True, protect=(args.input,))

@@ -130,6 +130,10 @@ class RBFMap(nn.Module):
 class LagSimulator(SequenceCore):
     """NARX/NFIR core: state = the last ``na`` outputs (normalised)."""
 
+    #: free-run one sequence (batch 1, no gradient) with a float64 numpy loop: ~5x fewer
+    #: per-step overheads than small torch ops; same maths (tested against the torch loop)
+    fast_inference = True
+
     def __init__(self, na: int, nb: int, n_rh: int, fmap: nn.Module, feedthrough: bool = True):
         super().__init__()
         self.na, self.nb, self.n_rh = int(na), int(nb), int(n_rh)
@@ -164,6 +168,11 @@ class LagSimulator(SequenceCore):
         if self.na == 0:
             return self.fmap.step(x.new_zeros(B, T, 0), cache)
         yl = y_hist[:, k - self.na:].flip(1)  # most recent first
+        if B == 1 and self.fast_inference and not torch.is_grad_enabled():
+            if isinstance(self.fmap, MLPMap):
+                return _mlp_free_run_numpy(self.fmap, yl, cache).to(u.dtype)
+            if isinstance(self.fmap, RBFMap):
+                return _rbf_free_run_numpy(self.fmap, yl, cache).to(u.dtype)
         outs = []
         for t in range(T):
             y = self.fmap.step(yl, tuple(None if c is None else c[:, t] for c in cache))
@@ -227,3 +236,73 @@ def arx_init(core: LagSimulator, seqs, alpha: float = 1e-6) -> dict:
         core.fmap.set_linear(a, b, c)
     resid = t - np.concatenate([X, np.ones((len(X), 1))], 1) @ w
     return {"arx_stable": stable, "arx_one_step_rmse": float(np.sqrt(np.mean(resid ** 2)))}
+
+
+def _np_activation(act: nn.Module):
+    from scipy.special import erf
+
+    table = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, 0.0),
+             nn.Sigmoid: lambda x: 1.0 / (1.0 + np.exp(-x)),
+             nn.SiLU: lambda x: x / (1.0 + np.exp(-x)),
+             nn.ELU: lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
+             nn.GELU: lambda x: 0.5 * x * (1.0 + erf(x / np.sqrt(2.0)))}
+    return table[type(act)]
+
+
+def _mlp_free_run_numpy(fmap: MLPMap, yl, cache):
+    """Free run of one sequence through an :class:`MLPMap` (see LagSimulator.simulate)."""
+    def arr(t):
+        return t.detach().double().numpy()
+    pre, lin = cache
+    T = (pre if pre is not None else lin).shape[1]
+    pre = None if pre is None else arr(pre[0])
+    lin = None if lin is None else arr(lin[0])
+    H = fmap.hidden_size
+    if H:
+        Wy = arr(fmap.in_y.weight) if fmap.in_y is not None else None
+        hidden = [(arr(layer.weight), arr(layer.bias)) for layer in fmap.hidden]
+        wo, bo = arr(fmap.out.weight)[0], float(fmap.out.bias)
+        act = _np_activation(fmap.act)
+    a = arr(fmap.lin_y.weight)[0] if fmap.linear and fmap.lin_y is not None else None
+    P = fmap.poly_degree
+    z = arr(yl[0]).copy()
+    out = np.empty(T)
+    for t in range(T):
+        y = 0.0
+        if H:
+            p = pre[t] + Wy @ z if Wy is not None else pre[t]
+            h = act(p)
+            for W, b in hidden:
+                h = act(W @ h + b)
+            y = wo @ h + bo
+        if lin is not None:
+            y += lin[t]
+            if a is not None:
+                y += a @ (z if P == 1 else np.concatenate([z ** q for q in range(1, P + 1)]))
+        y = min(max(y, -OUTPUT_CLIP), OUTPUT_CLIP)
+        out[t] = y
+        z[1:] = z[:-1]
+        z[0] = y
+    return torch.from_numpy(out)[None]
+
+
+def _rbf_free_run_numpy(fmap: RBFMap, yl, cache):
+    """Free run of one sequence through an :class:`RBFMap` (see LagSimulator.simulate)."""
+    def arr(t):
+        return t.detach().double().numpy()
+    d2x, lin = arr(cache[0][0]), arr(cache[1][0])
+    n_y = fmap.n_y
+    cy = arr(fmap.centres)[:, :n_y]
+    a = arr(fmap.lin)[:n_y]
+    w = arr(fmap.weight)
+    g = 0.5 * np.exp(-2.0 * arr(fmap.log_width))
+    z = arr(yl[0]).copy()
+    out = np.empty(lin.shape[0])
+    for t in range(out.size):
+        d2 = d2x[t] + ((cy - z) ** 2).sum(1)
+        y = lin[t] + a @ z + np.exp(-np.maximum(d2, 0.0) * g) @ w
+        y = min(max(y, -OUTPUT_CLIP), OUTPUT_CLIP)
+        out[t] = y
+        z[1:] = z[:-1]
+        z[0] = y
+    return torch.from_numpy(out)[None]
