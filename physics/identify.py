@@ -756,13 +756,21 @@ def _interior(x, lo, hi):
 
 
 def fit_lsq(problem: IdentificationProblem, *, n_starts: int = 5, seed: int = 0, start_spread: float = 1.0,
-            max_nfev: int | None = None) -> Fit:
-    """Bounded multi-start least squares (see the module doc)."""
+            max_nfev: int | None = None, extra_starts: Sequence[Sequence[float]] = ()) -> Fit:
+    """Bounded multi-start least squares (see the module doc).  ``extra_starts``: further
+    start points θ (SI, one value per free parameter, in ``problem.labels`` order) tried
+    after the usual ones (e.g. a grid over a parameter whose scale is unknown)."""
     t0 = time.perf_counter()
     n0 = problem.n_eval
     lo, hi = problem.x_bounds
     best, starts = None, []
-    for k, xs in enumerate(_starts(problem, n_starts, seed, start_spread)):
+    points = _starts(problem, n_starts, seed, start_spread)
+    for th in extra_starts:
+        th = np.asarray(th, dtype=float)
+        if th.shape != (len(problem.params),):
+            raise InputError(f"extra start {th.tolist()} needs one value per free parameter ({', '.join(problem.labels)})")
+        points.append(problem.to_x(th))
+    for k, xs in enumerate(points):
         xs = _interior(xs, lo, hi)
         try:
             res = optimize.least_squares(problem.residuals_x, xs, bounds=(lo, hi), method="trf",

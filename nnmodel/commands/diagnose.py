@@ -1,0 +1,104 @@
+"""``eap diagnose``: where a model fails, which physical effect is missing, add it, watch the error fall."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from physics.diagnose import diagnose, write_diagnosis
+from physics.errors import InputError
+
+from ._common import out_dir, provenance
+from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
+
+NAME = "diagnose"
+HELP = "diagnose a model against measurements: where it fails, which effect is missing (ranked, with statistics)"
+DESCRIPTION = (HELP + ". MEASUREMENT files are time-series records (DATA_FORMAT.md): several records may differ "
+               "in signal, amplitude and RH. Writes diagnosis.json, PNGs and report.html into --out; --apply also "
+               "writes the extended device file (fitted values, the missing effect added to its effect list).")
+
+
+def add_arguments(p):
+    add_measurement_arguments(p)
+    p.add_argument("--device", default="ipmc_pt_eg", help="device: name in configs/devices or a YAML path")
+    p.add_argument("--effects", default="default",
+                   help="the model's effects: comma-separated ids, or default / linear / all / none (see `eap effects`)")
+    p.add_argument("--free", default="",
+                   help="the model's free parameters (default: coupling gain kf/kf0, stiffness Y/dma_scale/Y_polymer, beta_f)")
+    p.add_argument("--per-rh", default="", help="model parameters fitted once per RH level (with humidity)")
+    p.add_argument("--candidates", default="default",
+                   help="effects to try: comma-separated ids (default: every catalog effect the model lacks but thermal)")
+    p.add_argument("--force", action="store_true", help="also try effects the data cannot reveal (flagged as such)")
+    p.add_argument("--no-support", action="store_true", help="skip checking that the data support the model's own effects")
+    p.add_argument("--start", default=None, help="start values of the free parameters, e.g. kf=0.004,Y=0.2 GPa")
+    p.add_argument("--bounds", default=None, help="search ranges, e.g. kf=1e-4:1e-1")
+    p.add_argument("--starts", type=int, default=4, help="multi-start count of each fit")
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start points")
+    p.add_argument("--n-modes", type=int, default=4, help="retained bending modes")
+    p.add_argument("--noise-floor-um", type=float, default=None,
+                   help="deflection noise floor [µm] (default: from the records' sensor metadata, else estimated)")
+    p.add_argument("--fs-max-Hz", type=float, default=None,
+                   help="cap on the analysis sampling rate (default: ≥ 5× the highest excited frequency)")
+    add_frf_arguments(p)
+    p.add_argument("--out", default="runs/diagnose", help="output folder")
+    p.add_argument("--apply", action="store_true", help="write the extended device file NAME.yaml into --out")
+    p.add_argument("--name", default=None, help="name of the extended device (default: DEVICE_EFFECT)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def print_summary(res, file=None) -> None:
+    file = file or sys.stdout
+    b = res.base
+    nf = f"{1e6 * res.noise_floor:.3g} µm" if math.isfinite(res.noise_floor) else "unknown"
+    print(f"base {res.device.name} [{', '.join(b.effects)}], free {', '.join(b.spec.free + b.spec.per_rh)}: "
+          f"RMS error {1e6 * b.rmse:.4g} µm, fit {b.fit_pct:.2f} % (noise floor {nf})", file=file)
+    print("where it fails:", file=file)
+    for f in res.analysis_base.findings:
+        print(f"  - {f}", file=file)
+    print("ranking (most to least supported):", file=file)
+    print(f"  {'effect':22s} {'RMS after [µm]':>15s} {'fit after %':>11s} {'ΔBIC':>11s} {'p-value':>9s}  evidence",
+          file=file)
+    for c in res.ranking:
+        cmp = c.comparison
+        tag = "  <- missing" if c.effect == res.verdict.missing_effect else ""
+        apart = f"  (cannot be told apart from {', '.join(c.indistinguishable_from)})" if c.indistinguishable_from else ""
+        from physics.diagnose.stats import evidence_label
+        print(f"  {c.effect:22s} {1e6 * c.fit.rmse:15.4g} {c.fit.fit_pct:11.2f} {cmp.delta_bic:11.4g} "
+              f"{cmp.p_value:9.2g}  {evidence_label(cmp.delta_bic)}{tag}{apart}", file=file)
+    for c in res.candidates:
+        if not c.evaluated:
+            print(f"  {c.effect:22s} not evaluated: {c.reason}", file=file)
+    for s in res.support:
+        print(f"  model effect {s.effect}: {s.explanation}", file=file)
+    v = res.verdict
+    print(f"verdict: missing effect = {v.missing_effect}, confidence {v.confidence:.3g} ({v.label}); {v.reason}",
+          file=file)
+    w = res.winner
+    if w is not None:
+        print(f"error before/after adding {w.effect}: RMS {1e6 * b.rmse:.4g} -> {1e6 * w.fit.rmse:.4g} µm "
+              f"({100 * (1 - w.fit.rmse / b.rmse):.1f} % lower), fit {b.fit_pct:.2f} -> {w.fit.fit_pct:.2f} %", file=file)
+
+
+def run(args) -> int:
+    if args.noise_floor_um is not None and not (args.noise_floor_um > 0):
+        raise InputError(f"--noise-floor-um {args.noise_floor_um!r}: must be a positive number of µm")
+    if args.fs_max_Hz is not None and not (args.fs_max_Hz > 0):
+        raise InputError(f"--fs-max-Hz {args.fs_max_Hz!r}: must be a positive frequency")
+    ms = read_measurements(args)
+    log = None if args.quiet else (lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True))
+    res = diagnose(ms, args.device, args.effects, args.free or None, per_rh=args.per_rh,
+                   candidates=args.candidates, force=args.force, check_support=not args.no_support,
+                   rh=args.rh, start=args.start, bounds=args.bounds, frf_options=frf_options(args),
+                   sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), rh_tolerance=args.rh_tolerance,
+                   noise_floor=None if args.noise_floor_um is None else 1e-6 * args.noise_floor_um,
+                   fs_max=args.fs_max_Hz, n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, progress=log)
+    d = out_dir(args.out)
+    protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
+    out = write_diagnosis(res, d, apply=args.apply, name=args.name, provenance=provenance(), protect=protect)
+    print_summary(res)
+    if args.apply:
+        ap = out["applied"]
+        print(f"applied: {d / ap['written']} ({ap['usage']})" if ap.get("written") else f"applied: {ap['reason']}")
+    print(f"wrote {d}/diagnosis.json, {d}/report.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
+          f"in {res.timings['total']:.1f} s")
+    return 0

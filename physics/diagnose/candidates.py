@@ -1,0 +1,562 @@
+"""Candidate models: switch an effect on (or off), refit, score on the time records.
+
+**Which parameters are fitted.**  A model's free parameters are the *base's* — by default
+its coupling gain (``kf``, or ``kf0`` with ``fractional_coupling``), its stiffness
+(``Y``; ``dma_scale`` with ``viscoelastic``; ``Y_polymer`` with ``layered_beam``) and the
+Rayleigh damping ``beta_f`` — plus the parameters of the effect switched on:
+
+==========================  =====================================================  ==========
+effect                      extra free parameters (bounds)                         nested?
+==========================  =====================================================  ==========
+``electrode_resistance``    ``Rs`` (0.1–10⁴ Ω/□)                                    yes (Rs→0)
+``fractional_coupling``     ``frac_a`` (0–0.95); ``kf0`` replaces ``kf``            yes (a→0)
+``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→∞)
+``viscoelastic``            none: ``dma_scale`` replaces ``Y`` (the DMA table's      no
+                            shape is prior knowledge)
+``layered_beam``            ``Y_electrode``; ``Y_polymer`` replaces ``Y``           no
+``humidity``                ``kf`` and ``Y`` once per RH level (Table V style)      yes
+                            instead of shared values (needs ≥ 2 RH levels)
+``nonlinear_charge``        ``C_max`` when the data can determine it (see below)    no
+==========================  =====================================================  ==========
+
+A parameter that moves between roles (``kf`` ↔ ``kf0``, ``Y`` ↔ ``dma_scale`` ↔
+``Y_polymer``) starts from the base's fitted value translated to the new role (same
+gain at the band's geometric mid-frequency, same modulus).  Each fit is bounded
+least squares on the complex log FRF (:func:`physics.identify.fit_lsq`, multi-start, plus a
+grid of starts over the effect's own parameter, whose scale is unknown); linear models
+cost milliseconds per evaluation.  ``nonlinear_charge`` uses the describing function of
+:mod:`.describing` in the FRF fit.  Its ``C_max`` is fitted only when it changes the
+large-signal gain by more than 10 % across its range; otherwise (the Poisson–Boltzmann
+layers alone set the compression, C_max only scales the small-signal gain like kf) it is
+held at the device value and the report says so.
+
+**Scoring.**  Every fitted model is simulated on every record (decimated, see
+:mod:`.records`; the sensor's low-pass applied; the model starts at rest at the record's
+first voltage).  The deflection is exactly proportional to the coupling gain, so that
+free parameter is then refined on the time records in closed form (:func:`_refine_gain`).
+The residual (measured minus model, best offset removed) gives the RMS error and fit %
+at the full rate (the prediction interpolated back) and, on the decimated samples, the
+likelihood with the effective sample size of :mod:`.stats`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .. import metrics
+from ..device import Device
+from ..errors import InputError, ModelError
+from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
+from ..model import ActuatorModel, resolve_effects
+from ..timedomain import simulate
+from . import stats
+from .describing import DescribingFunction
+from .records import Record, sensor_filter, upsample
+
+ER, FC, SD, VE, LB, HUM, NLC, TH = ("electrode_resistance", "fractional_coupling", "solvent_diffusion",
+                                    "viscoelastic", "layered_beam", "humidity", "nonlinear_charge", "thermal")
+#: Effects a diagnosis tries by default (``thermal`` only on request, see :data:`NOT_BY_DEFAULT`).
+CANDIDATES = (ER, FC, SD, VE, LB, HUM, NLC)
+NOT_BY_DEFAULT = {TH: "thermal is not tried by default: Joule heating of ~1 °C changes the ion mobility by "
+                      "well under 1 % (eq. 6), below what a deflection record resolves, and it needs a large-"
+                      "signal time-domain fit; ask for it with --candidates thermal"}
+EFFECT_PARAMS = {ER: ("Rs",), FC: ("frac_a",), SD: ("D_solvent",), VE: (), LB: ("Y_electrode",), HUM: (),
+                 NLC: ("C_max",), TH: ()}
+NESTED = {ER: True, FC: True, SD: True, VE: False, LB: False, HUM: True, NLC: False, TH: True}
+ROLE_GAIN = ("kf", "kf0")
+ROLE_STIFF = ("Y", "Y_polymer", "dma_scale")
+#: Values of optional parameters when a device file leaves them out (their documented defaults).
+OPTIONAL_DEFAULTS = {"dma_scale": 1.0, "frac_f_lo": 1e-4, "C_max": 5000.0, "E_a": 0.0}
+#: C_max is fitted when it changes the large-signal gain by more than this (relative).
+C_MAX_MIN_SENSITIVITY = 0.10
+
+
+def gain_param(ids) -> str:
+    return "kf0" if FC in ids else "kf"
+
+
+def stiffness_param(ids) -> str:
+    if VE in ids:
+        return "dma_scale"
+    return "Y_polymer" if LB in ids else "Y"
+
+
+def default_free(ids) -> list[str]:
+    """The base's free parameters by default: gain, stiffness, damping."""
+    return [gain_param(ids), stiffness_param(ids), "beta_f"]
+
+
+def param_used(name: str, ids) -> bool:
+    """Whether parameter ``name`` acts in a model with effects ``ids`` (FRF or time)."""
+    ids = set(ids)
+    rules = {"kf": FC not in ids, "kf0": FC in ids, "frac_a": FC in ids, "frac_b": FC in ids, "frac_p": FC in ids,
+             "frac_f_lo": FC in ids, "Rs": ER in ids, "D_solvent": SD in ids, "dma_scale": VE in ids,
+             "Y": VE not in ids and LB not in ids, "Y_polymer": LB in ids and VE not in ids,
+             "Y_electrode": LB in ids, "C_max": NLC in ids, "h_trans": TH in ids, "E_a": TH in ids}
+    return rules.get(name, True)
+
+
+def param_bounds(name: str, device: Device) -> tuple[float, float] | None:
+    """Physical search ranges for the effect parameters (None: identify's default)."""
+    p = device.params
+    h = 0.5 * p["t_polymer"]
+    table = {"Rs": (0.1, 1e4), "D_solvent": (h * h / 1e5, h * h / 0.2), "frac_a": (0.0, 0.95),
+             "dma_scale": (0.05, 20.0), "Y_electrode": (1e7, 2e11), "h_trans": (0.5, 1e4)}
+    if name == "C_max":
+        return (p["C_anion"] / 0.96, p["C_anion"] / 0.005)
+    return table.get(name)
+
+
+# ============================================================================ specs
+
+
+@dataclass
+class ModelSpec:
+    """A model to fit: effects, free and per-RH parameters, start values, bounds."""
+
+    label: str
+    effects: tuple[str, ...]
+    free: list[str]
+    per_rh: list[str] = field(default_factory=list)
+    start: dict = field(default_factory=dict)
+    bounds: dict = field(default_factory=dict)
+    extra_starts: list[dict] = field(default_factory=list)
+    added: str | None = None
+    removed: str | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n_params_hint(self) -> int:
+        return len(self.free) + len(self.per_rh)
+
+
+def _ref_omega(band) -> float:
+    return 2 * math.pi * math.sqrt(band[0] * band[1])
+
+
+def _frac_gain(p: dict, w: float, a: float) -> float:
+    w_lo = 2 * math.pi * p.get("frac_f_lo", 1e-4)
+    s = 1j * w
+    return abs((s + w_lo) ** a * (s + max(p.get("frac_p", 0.0), w_lo)) ** p.get("frac_b", 0.0))
+
+
+def _storage(device: Device, table: str, f: float) -> float | None:
+    t = device.tables.get(table)
+    if t is None:
+        return None
+    return float(np.exp(np.interp(math.log(f), np.log(t["freq"]), np.log(t["storage"]))))
+
+
+def _layer_modulus(p: dict) -> float:
+    """Electrode layers' bending stiffness as an added modulus of the polymer section [Pa]."""
+    if not all(k in p for k in ("t_electrode", "Y_electrode")):
+        return 0.0
+    h, te = 0.5 * p["t_polymer"], p["t_electrode"]
+    return p["Y_electrode"] * 8.0 * ((h + te) ** 3 - h ** 3) / p["t_polymer"] ** 3
+
+
+def translate_start(device: Device, from_ids, to_ids, band) -> dict:
+    """Start values for the gain and stiffness roles of ``to_ids`` from the fitted values
+    of ``from_ids`` in ``device`` (see the module doc)."""
+    p = device.params
+    out: dict = {}
+    w = _ref_omega(band)
+    g0, g1 = gain_param(from_ids), gain_param(to_ids)
+    if g0 != g1:
+        if g1 == "kf0":
+            a = 0.3
+            out["frac_a"] = a
+            out["kf0"] = p["kf"] * _frac_gain(p, w, a)
+        else:
+            out["kf"] = p["kf0"] / _frac_gain(p, w, p.get("frac_a", 0.0))
+    s0, s1 = stiffness_param(from_ids), stiffness_param(to_ids)
+    f_ref = math.sqrt(band[0] * band[1])
+    if s0 != s1:
+        # the modulus of an equivalent homogeneous strip the base found [Pa]
+        layers0 = _layer_modulus(p) if LB in from_ids else 0.0
+        layers1 = _layer_modulus(p) if LB in to_ids else 0.0
+        if s0 == "dma_scale":
+            table0 = "dma_membrane" if LB in from_ids else "dma"
+            E = p.get("dma_scale", 1.0) * (_storage(device, table0, f_ref) or p["Y"]) + layers0
+        else:
+            E = p[s0] + layers0
+        polymer = max(E - layers1, 0.2 * E)
+        if s1 in ("Y", "Y_polymer"):
+            out[s1] = polymer
+        else:
+            table = "dma_membrane" if LB in to_ids else "dma"
+            st = _storage(device, table, f_ref)
+            out["dma_scale"] = float(np.clip(polymer / st, 0.06, 15.0)) if st else 1.0
+    return out
+
+
+def map_free(free: Sequence[str], from_ids, to_ids) -> list[str]:
+    """The base's free parameters translated to a model with effects ``to_ids``: roles
+    follow their effect (kf ↔ kf0, Y ↔ dma_scale ↔ Y_polymer), unused ones are dropped."""
+    out = []
+    for name in free:
+        if name in ROLE_GAIN:
+            name = gain_param(to_ids)
+        elif name in ROLE_STIFF:
+            name = stiffness_param(to_ids)
+        if param_used(name, to_ids) and name not in out:
+            out.append(name)
+    return out
+
+
+def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh: Sequence[str],
+                   device: Device, band, n_rh_levels: int) -> ModelSpec:
+    """The base plus ``effect`` (see the module doc)."""
+    to_ids = resolve_effects(list(base_ids) + [effect], device)
+    free = map_free(base_free, base_ids, to_ids)
+    per_rh = list(base_per_rh)
+    start = {k: v for k, v in translate_start(device, base_ids, to_ids, band).items()}
+    notes = []
+    for name in EFFECT_PARAMS[effect]:
+        if name == "C_max":
+            continue          # decided after the describing-function probe
+        if name not in free:
+            free.append(name)
+    if effect == HUM:
+        if n_rh_levels >= 2:
+            for role in (gain_param(to_ids), stiffness_param(to_ids)):
+                if role in free:
+                    free.remove(role)
+            for name in ("kf", "Y"):
+                if name not in per_rh:
+                    per_rh.append(name)
+            notes.append("humidity: kf and Y fitted once per RH level (Table V style), replacing the shared values")
+        else:
+            notes.append("humidity: one RH level, so the device's humidity maps are used as they are")
+    bounds, extra = {}, []
+    for name in free:
+        b = param_bounds(name, device)
+        if b is not None:
+            bounds[name] = b
+    for name, b in bounds.items():
+        if name not in start:
+            v = device.params.get(name)
+            if v is None or not (b[0] <= v <= b[1]) or (name == "Rs" and v <= 0):
+                v = math.sqrt(b[0] * b[1]) if b[0] > 0 else 0.5 * (b[0] + b[1])
+            start[name] = v
+        start[name] = float(np.clip(start[name], b[0], b[1]))
+    if "dma_scale" in free and "dma_scale" not in start:
+        start["dma_scale"] = float(device.params.get("dma_scale", 1.0))
+    # starts over the effect's own parameter (unknown scale)
+    h = 0.5 * device.params["t_polymer"]
+    grids = {ER: ("Rs", [10.0, 100.0, 1000.0]), SD: ("D_solvent", [h * h / x for x in (3.0, 30.0, 300.0, 3000.0)]),
+             FC: ("frac_a", [0.1, 0.5, 0.8]), LB: ("Y_electrode", [1e8, 1e10])}
+    if effect in grids:
+        name, vals = grids[effect]
+        if name in free:
+            extra = [{name: v} for v in vals]
+    return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)
+
+
+def removal_spec(effect: str, base_ids, base_free, base_per_rh, device: Device, band) -> ModelSpec:
+    """The base without ``effect`` (to check that the data support it)."""
+    to_ids = resolve_effects([e for e in base_ids if e != effect], device)
+    shared = list(base_free) + ([p for p in base_per_rh] if effect == HUM else [])
+    per_rh = [] if effect == HUM else list(base_per_rh)
+    free = map_free(shared, base_ids, to_ids)
+    if effect == HUM:
+        free = map_free([p if p not in ("kf", "Y") else {"kf": gain_param(to_ids), "Y": stiffness_param(to_ids)}[p]
+                         for p in shared], base_ids, to_ids)
+    start = translate_start(device, base_ids, to_ids, band)
+    start = {k: v for k, v in start.items() if k in free}
+    return ModelSpec(f"-{effect}", to_ids, free, per_rh, start, {}, [], removed=effect)
+
+
+# ============================================================================ fitting
+
+
+class DescribingFunctionProblem(IdentificationProblem):
+    """An identification problem whose model response for each target is multiplied by
+    the describing function N(A, f) of the large-signal double layer (see :mod:`.describing`)."""
+
+    def __init__(self, *args, amplitudes: Sequence[float], df: DescribingFunction, **kw):
+        self.amplitudes = list(amplitudes)
+        self.df = df
+        super().__init__(*args, **kw)
+
+    def responses(self, theta):
+        out = super().responses(theta)
+        names = [p.name for p in self.params]
+        c_max = float(theta[names.index("C_max")]) if "C_max" in names else float(self.device.params.get("C_max", np.inf))
+        return [H * self.df(a, t.freq, c_max) for H, a, t in zip(out, self.amplitudes, self.targets)]
+
+
+@dataclass
+class ModelFit:
+    """A fitted, scored model (see the module doc); arrays per record."""
+
+    spec: ModelSpec
+    result: IdentificationResult | None
+    device: Device | None
+    model: ActuatorModel | None
+    values: dict = field(default_factory=dict)
+    std_errors: dict = field(default_factory=dict)
+    rel_std_errors: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    k: int = 0
+    pred_d: list = field(default_factory=list)
+    resid_d: list = field(default_factory=list)
+    rss: list = field(default_factory=list)
+    n: list = field(default_factory=list)
+    taus: list = field(default_factory=list)
+    rmse_records: list = field(default_factory=list)
+    rmse: float = math.nan
+    fit_pct: float = math.nan
+    bic: float = math.nan
+    aic: float = math.nan
+    frf_cost: float = math.nan
+    fit_s: float = 0.0
+    score_s: float = 0.0
+    error: str | None = None
+    df_info: dict | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        return self.spec.effects
+
+
+def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence[Record], *, n_starts: int = 4,
+              seed: int = 0, n_modes: int = 4, df_cache: dict | None = None) -> ModelFit:
+    """Fit ``spec`` on the FRF ``targets`` (one record each in ``target_records``)."""
+    t0 = time.perf_counter()
+    try:
+        kw = dict(start={k: v for k, v in spec.start.items() if k in spec.free},
+                  bounds={k: v for k, v in spec.bounds.items() if k in spec.free}, n_modes=n_modes)
+        if NLC in spec.effects:
+            problem, df_info = _df_problem(spec, device, targets, target_records, kw, df_cache)
+        else:
+            problem, df_info = IdentificationProblem(device, spec.effects, targets, spec.free, spec.per_rh, **kw), None
+        extra = []
+        for e in spec.extra_starts:
+            th = problem.theta0.copy()
+            for i, prm in enumerate(problem.params):
+                if prm.name in e:
+                    th[i] = float(np.clip(e[prm.name], prm.lower, prm.upper))
+            extra.append(th)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IdentifiabilityWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            j0 = problem.j_err(problem.theta0)
+            fit = fit_lsq(problem, n_starts=n_starts, seed=seed, extra_starts=extra)
+        res = IdentificationResult(problem, {"lsq": fit}, "lsq", problem.device_for(fit.theta), j0,
+                                   [t.source for t in targets], {"method": "lsq", "diagnosis": spec.label},
+                                   time.perf_counter() - t0)
+    except (InputError, ModelError, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+        return ModelFit(spec, None, None, None, error=str(exc), fit_s=time.perf_counter() - t0)
+    labels = problem.labels
+    mf = ModelFit(spec, res, res.device, ActuatorModel(res.device, spec.effects, n_modes=n_modes),
+                  values=dict(zip(labels, fit.theta.tolist())), std_errors=dict(zip(labels, fit.std_error.tolist())),
+                  rel_std_errors=dict(zip(labels, fit.rel_std_error.tolist())), warnings=list(fit.warnings),
+                  k=len(labels), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0, df_info=df_info)
+    return mf
+
+
+def _df_problem(spec, device, targets, target_records, kw, df_cache):
+    amps = [r.amplitude for r in target_records]
+    lo = min(float(t.freq.min()) for t in targets)
+    hi = max(float(t.freq.max()) for t in targets)
+    rh = target_records[0].rh
+    key = (tuple(spec.effects), round(device.params.get("Rs", 0.0), 9), tuple(sorted(set(round(a, 9) for a in amps))),
+           round(lo, 6), round(hi, 6))
+    cache = df_cache if df_cache is not None else {}
+    if key not in cache:
+        probe = DescribingFunction(device, spec.effects, [max(amps)], (lo, hi), rh=rh, n_freqs=1)
+        sens = probe.c_max_sensitivity
+        if sens > C_MAX_MIN_SENSITIVITY:
+            df = DescribingFunction(device, spec.effects, amps, (lo, hi), rh=rh)
+        else:
+            nu = device.params["C_anion"] / device.params.get("C_max", np.inf)
+            df = DescribingFunction(device, spec.effects, amps, (lo, hi), rh=rh, nu_grid=[nu])
+        cache[key] = (df, sens)
+    df, sens = cache[key]
+    free = list(spec.free)
+    note = None
+    if sens > C_MAX_MIN_SENSITIVITY and "C_max" not in free and len({round(a, 9) for a in amps}) >= 2:
+        free.append("C_max")
+        kw["bounds"] = {**kw.get("bounds", {}), "C_max": param_bounds("C_max", device)}
+    elif "C_max" in free and sens <= C_MAX_MIN_SENSITIVITY:
+        free.remove("C_max")
+    if "C_max" not in free:
+        note = (f"C_max held at {device.params.get('C_max', np.inf):.4g} mol/m³: across its range it changes the "
+                f"large-signal gain by only {100 * sens:.2g} % and otherwise scales the gain like kf, so these data "
+                "cannot determine it")
+        if note not in spec.notes:
+            spec.notes.append(note)
+    spec.free = free
+    problem = DescribingFunctionProblem(device, spec.effects, targets, free, spec.per_rh, amplitudes=amps, df=df, **kw)
+    info = {"c_max_sensitivity": sens, "c_max_fitted": "C_max" in free, **df.gain_table()}
+    return problem, info
+
+
+# ============================================================================ scoring
+
+
+def predict(model: ActuatorModel, rec: Record) -> np.ndarray:
+    """Model deflection [m] at the record's analysis rate, sensor response applied."""
+    res = simulate(model, None, rec.t_sim, rec.v_sim, rh=rec.rh_model, hold=rec.hold)
+    return sensor_filter(res.deflection, rec.fs_d, rec.sensor_bandwidth)[rec.i0:]
+
+
+def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None) -> ModelFit:
+    """Simulate ``mf`` on every record and fill in its residuals and metrics (in place)."""
+    if not mf.ok:
+        return mf
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            preds = [predict(mf.model, r) for r in records]
+    except (InputError, ModelError, np.linalg.LinAlgError, FloatingPointError) as exc:
+        mf.error = f"time simulation failed: {exc}"
+        return mf
+    preds = _refine_gain(mf, records, preds)
+    mf.pred_d, mf.resid_d, mf.rss, mf.n, mf.taus, mf.rmse_records = [], [], [], [], [], []
+    num, den, sq, cnt = 0.0, 0.0, 0.0, 0
+    for r, yh in zip(records, preds):
+        e = r.y_d - yh
+        e = e - e.mean()
+        mf.pred_d.append(yh)
+        mf.resid_d.append(e)
+        mf.rss.append(float(e @ e))
+        mf.n.append(int(e.size))
+        mf.taus.append(stats.integrated_time(e))
+        y = r.ts.deflection
+        yf = upsample(yh, r.q, y.size)
+        ef = y - yf
+        ef = ef - ef.mean()
+        mf.rmse_records.append(float(np.sqrt(np.mean(ef ** 2))))
+        sq += float(ef @ ef)
+        cnt += ef.size
+        num += float(ef @ ef)
+        den += float(np.sum((y - y.mean()) ** 2))
+    mf.rmse = math.sqrt(sq / cnt)
+    mf.fit_pct = 100.0 * (1.0 - math.sqrt(num / den)) if den > 0 else math.nan
+    k = mf.k + (len(records) if n_offsets is None else n_offsets)
+    n_eff = [n / t for n, t in zip(mf.n, mf.taus)]
+    mf.bic = stats.bic(mf.rss, mf.n, n_eff, k)
+    mf.aic = stats.aic(mf.rss, mf.n, n_eff, k)
+    mf.score_s = time.perf_counter() - t0
+    return mf
+
+
+def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
+    """Refine the free coupling gain (kf, kf0 or the per-RH kf) on the time records.
+
+    The deflection is exactly proportional to the coupling gain (everything upstream of
+    the load — the charge law included — does not depend on it), so the least-squares
+    factor α = Σ⟨ŷ, y⟩/Σ⟨ŷ, ŷ⟩ (offsets removed) is the time-domain optimum of that
+    parameter given the others.  It absorbs what the frequency-domain fit misses in gain
+    (e.g. the describing-function approximation of a large-signal sweep); the fitted
+    values and device are updated so that the applied device reproduces the score."""
+    gain = gain_param(mf.effects)
+    names = [p.name for p in mf.result.problem.params]
+    if gain not in names and "kf" not in mf.spec.per_rh:
+        return preds
+    num = den = 0.0
+    for r, p in zip(records, preds):
+        pc = p - p.mean()
+        num += float(pc @ (r.y_d - r.y_d.mean()))
+        den += float(pc @ pc)
+    if den <= 0 or not math.isfinite(num / den) or num / den <= 0:
+        return preds
+    a = num / den
+    fit = mf.result.fit
+    dev = mf.device
+    for i, prm in enumerate(mf.result.problem.params):
+        if prm.name == gain and prm.rh is None or (prm.name == "kf" and prm.rh is not None):
+            fit.theta[i] *= a
+            fit.std_error[i] *= a
+            fit.ci95[i] *= a
+            mf.values[prm.label] *= a
+            mf.std_errors[prm.label] *= a
+    if gain in names:
+        dev = dev.with_params(**{gain: dev.params[gain] * a})
+    if "kf" in mf.spec.per_rh and "kf" in dev.humidity_maps:
+        m = dev.humidity_maps["kf"]
+        dev = dataclasses.replace(dev, humidity_maps={**dev.humidity_maps, "kf": dataclasses.replace(m, values=m.values * a)})
+    mf.device = dev
+    mf.result.device = dev
+    mf.model = ActuatorModel(dev, mf.effects, n_modes=mf.model.n_modes)
+    if abs(a - 1) > 1e-3:
+        mf.spec.notes.append(f"coupling gain refined on the time records (×{a:.5g})")
+    return [a * p for p in preds]
+
+
+@dataclass
+class Comparison:
+    """Candidate against base on the same records (see :mod:`.stats`)."""
+
+    delta_bic: float
+    delta_aic: float
+    p_value: float
+    test: str
+    n_eff: float
+    tau: float
+    dk: int
+
+
+def compare_fits(base: ModelFit, cand: ModelFit, nested: bool, taus: Sequence[float] | None = None) -> Comparison:
+    """ΔBIC, ΔAIC and p-value of ``cand`` against ``base``, both with the same effective
+    sample sizes n_r/τ_r: ``taus`` per record (the diagnosis passes those of the residual
+    closest to noise, the best-fitting model's, so that every comparison uses one noise
+    model), by default those of the candidate's residuals (module doc of :mod:`.stats`)."""
+    taus = list(cand.taus if taus is None else taus)
+    n_eff = [n / t for n, t in zip(cand.n, taus)]
+    dk = cand.k - base.k
+    kb = base.k + len(base.n)
+    kc = cand.k + len(cand.n)
+    bb = stats.bic(base.rss, base.n, n_eff, kb)
+    bc = stats.bic(cand.rss, cand.n, n_eff, kc)
+    ab = stats.aic(base.rss, base.n, n_eff, kb)
+    ac = stats.aic(cand.rss, cand.n, n_eff, kc)
+    if nested and dk > 0:
+        p = stats.lr_pvalue(base.rss, cand.rss, n_eff, dk)
+        test = f"likelihood ratio, χ²({dk})"
+    else:
+        p = stats.vuong_pvalue(base.resid_d, cand.resid_d, taus, dk)
+        test = "Vuong (non-nested)"
+    tau = float(sum(cand.n) / sum(n_eff))
+    return Comparison(bc - bb, ac - ab, p, test, float(sum(n_eff)), tau, dk)
+
+
+def effect_values(mf: ModelFit, effect: str) -> dict:
+    """Fitted values of an effect's own parameters (and of the per-RH ones for humidity)."""
+    names = set(EFFECT_PARAMS.get(effect, ()))
+    if effect == HUM:
+        return {k: v for k, v in mf.values.items() if "@RH" in k}
+    if effect == FC:
+        names |= {"kf0"}
+    if effect == VE:
+        names |= {"dma_scale"}
+    if effect == LB:
+        names |= {"Y_polymer"}
+    return {k: v for k, v in mf.values.items() if k in names}
+
+
+def prediction_distance(a: ModelFit, b: ModelFit) -> float:
+    """RMS difference [m] between two fitted models' predictions (decimated, offsets removed)."""
+    sq, cnt = 0.0, 0
+    for pa, pb in zip(a.pred_d, b.pred_d):
+        d = (pa - pa.mean()) - (pb - pb.mean())
+        sq += float(d @ d)
+        cnt += d.size
+    return math.sqrt(sq / max(cnt, 1))
+
+
+__all__ = ["CANDIDATES", "ModelSpec", "ModelFit", "Comparison", "candidate_spec", "removal_spec", "fit_model",
+           "score", "compare_fits", "default_free", "map_free", "param_used", "predict", "prediction_distance"]

@@ -1,0 +1,333 @@
+"""Measurement records as the diagnosis uses them.
+
+Each time-series record is
+
+* **classified** by its excitation — ``broadband`` (swept sine, multisine, noise: an H1
+  frequency response over a band), ``tone`` (one sine: a stepped-sine point), ``steps``
+  (square pulses, steps: time only) — from the metadata written by ``eap simulate`` /
+  :mod:`physics.signals` when present, otherwise from the voltage itself;
+* given an **amplitude level** [V] (robust peak of |v − median v|; records whose
+  amplitudes differ by less than a factor :data:`AMPLITUDE_RATIO` share a level) and an
+  **RH level** [%] (:func:`physics.compare.cluster_rh`);
+* **decimated** for the time-domain work to ``fs_d`` ≥ :data:`OVERSAMPLING` × the highest
+  excited frequency (scipy's polyphase FIR with zero phase, applied to the voltage and
+  the deflection alike, so a linear model driven by the decimated voltage is compared
+  with the equally filtered measurement);
+* given its **noise floor** [m]: the RMS of measurement minus sensor-filtered truth, from
+  the record's sensor metadata (``meta["sensor"]["noise_floor_m"]``, written by
+  :class:`physics.sensor.SensorModel`) or, failing that, estimated from the deflection
+  spectrum above the excitation band (white-noise level × Nyquist band; drift and
+  quantisation below that level are missed, so the estimate is a lower bound).
+
+Frequency-response targets for the fits come from the broadband records through
+:func:`physics.identify.build_targets` (H1, thinned to log-spaced lines) and from tone
+records through :func:`physics.frf_estimation.stepped_sine`.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy import signal as sps
+
+from ..compare import (FRFOptions, cluster_rh, load_measurements, model_rh, sensor_bandwidth_of,
+                       sensor_response, source_name)
+from ..errors import InputError
+from ..frf_estimation import stepped_sine
+from ..frfdata import FRFData
+from ..timeseries import TimeSeries
+
+#: fs_d / highest excited frequency after decimation.
+OVERSAMPLING = 5.0
+#: Amplitudes within this ratio form one amplitude level.
+AMPLITUDE_RATIO = 1.25
+#: Minimum span [%] between two RH levels for them to count as different humidities.
+RH_SPAN = 10.0
+
+_BROADBAND = ("sweep", "multisine", "noise")
+_STEPS = ("square", "steps")
+
+
+@dataclass
+class Record:
+    """One time-series measurement prepared for diagnosis (SI units)."""
+
+    source: str
+    ts: TimeSeries                 # as read (full rate)
+    kind: str                      # broadband | tone | steps | other
+    amplitude: float               # V, robust peak of |v − median|
+    rh: float                      # RH level [%]
+    rh_model: object               # RH given to the time solver (constant or series at fs_d)
+    band: tuple[float, float]      # excited band [Hz]
+    tone_hz: float | None
+    q: int                         # decimation factor
+    v_sim: np.ndarray              # decimated voltage with the pre-roll [V] (what the model is driven with)
+    y_d: np.ndarray                # decimated deflection [m]
+    sensor_bandwidth: float | None
+    noise_floor: float             # m, full rate
+    noise_source: str
+    i0: int = 0                    # pre-roll samples at fs_d before the record starts
+    amplitude_level: float = 0.0   # V (set by prepare_records)
+    steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))   # step indices at fs_d
+
+    @property
+    def fs(self) -> float:
+        return self.ts.fs
+
+    @property
+    def fs_d(self) -> float:
+        return self.ts.fs / self.q
+
+    @property
+    def v_d(self) -> np.ndarray:
+        """Decimated voltage over the record [V]."""
+        return self.v_sim[self.i0:]
+
+    @property
+    def t_sim(self) -> np.ndarray:
+        return np.arange(self.v_sim.size) / self.fs_d
+
+    @property
+    def hold(self) -> str:
+        return "linear" if self.kind == "steps" else "cubic"
+
+    @property
+    def noise_floor_d(self) -> float:
+        """Noise floor after decimation: white noise and quantisation scale with the kept
+        bandwidth (1/q of the power), the slow drift does not."""
+        meta = self.ts.meta.get("sensor") if isinstance(self.ts.meta.get("sensor"), dict) else None
+        if meta and all(k in meta for k in ("deflection_noise", "deflection_step", "deflection_drift")):
+            white = meta["deflection_noise"] ** 2 + meta["deflection_step"] ** 2 / 12.0
+            return math.sqrt(white / self.q + meta["deflection_drift"] ** 2 / 2.0)
+        return self.noise_floor / math.sqrt(self.q)
+
+    def describe(self) -> dict:
+        return {"source": self.source, "kind": self.kind, "samples": self.ts.n, "fs_Hz": self.fs,
+                "duration_s": self.ts.duration, "amplitude_V": self.amplitude,
+                "amplitude_level_V": self.amplitude_level, "rh_pct": self.rh,
+                "band_Hz": list(self.band), "tone_Hz": self.tone_hz, "decimation": self.q,
+                "fs_analysis_Hz": self.fs_d, "sensor_bandwidth_Hz": self.sensor_bandwidth,
+                "noise_floor_m": self.noise_floor, "noise_floor_source": self.noise_source,
+                "steps": int(self.steps.size)}
+
+
+def classify(ts: TimeSeries) -> tuple[str, tuple[float, float], float | None]:
+    """(kind, excited band [Hz], tone frequency [Hz] or None) of a record's excitation."""
+    sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
+    kind = str(sig.get("kind", ""))
+    nyq = ts.fs / 2
+    if kind in _BROADBAND and "f_start_Hz" in sig and "f_stop_Hz" in sig:
+        return "broadband", (float(sig["f_start_Hz"]), float(sig["f_stop_Hz"])), None
+    if kind == "tone" and "frequency_Hz" in sig:
+        f0 = float(sig["frequency_Hz"])
+        return "tone", (f0, f0), f0
+    v = ts.voltage - np.median(ts.voltage)
+    if kind in _STEPS or _looks_piecewise_constant(v):
+        return "steps", _steps_band(ts), None
+    # from the input spectrum: one dominant line is a tone, otherwise a band
+    V = np.abs(np.fft.rfft(v - v.mean())) ** 2
+    f = np.fft.rfftfreq(v.size, 1.0 / ts.fs)
+    if V[1:].sum() <= 0:
+        raise InputError(f"{ts.source or 'record'}: the voltage is constant; nothing is excited")
+    k = int(np.argmax(V[1:])) + 1
+    near = np.abs(f - f[k]) <= 2.5 * ts.fs / v.size
+    if V[near].sum() > 0.9 * V[1:].sum():
+        return "tone", (float(f[k]), float(f[k])), float(f[k])
+    cum = np.cumsum(V[1:]) / V[1:].sum()
+    lo = float(f[1:][np.searchsorted(cum, 0.005)])
+    hi = float(f[1:][min(np.searchsorted(cum, 0.995), cum.size - 1)])
+    return ("broadband" if hi > 2 * max(lo, f[1]) else "other"), (max(lo, f[1]), min(hi, nyq)), None
+
+
+def _looks_piecewise_constant(v: np.ndarray) -> bool:
+    dv = np.abs(np.diff(v))
+    span = np.ptp(v)
+    if span <= 0:
+        return False
+    return bool(np.mean(dv < 1e-3 * span) > 0.95 and np.any(dv > 0.3 * span))
+
+
+def _steps_band(ts: TimeSeries) -> tuple[float, float]:
+    return (1.0 / max(ts.duration, 1e-9), min(ts.fs / 2, 50.0))
+
+
+def find_steps(v: np.ndarray, fs: float) -> np.ndarray:
+    """Indices where the voltage jumps by more than 30 % of its range within 20 ms."""
+    span = np.ptp(v)
+    if span <= 0:
+        return np.zeros(0, int)
+    k = max(1, int(round(0.02 * fs)))
+    jump = np.abs(v[k:] - v[:-k]) > 0.3 * span
+    idx = np.flatnonzero(jump[1:] & ~jump[:-1]) + 1
+    return idx
+
+
+def _decimation(fs: float, f_hi: float, fs_max: float | None) -> int:
+    target = max(OVERSAMPLING * f_hi, 1e-9)
+    if fs_max is not None:
+        target = min(max(target, 2.5 * f_hi), fs_max)
+    return max(1, int(math.floor(fs / target)))
+
+
+#: Pre-roll and post-roll [samples at fs_d]: the record is extended by its first and last
+#: values (the device at rest before the record, held after it) so that the zero-phase
+#: anti-aliasing filter has no edge transient inside the record and the model starts at
+#: rest at the record's true first voltage (a step at t = 0 stays a step).
+PAD = 32
+
+
+def _decimate(x: np.ndarray, q: int) -> np.ndarray:
+    """[x[0]]*PAD·q + x + [x[-1]]*PAD·q, decimated by q; the pre-roll is the first PAD samples."""
+    x = np.asarray(x, dtype=float)
+    xp = np.concatenate([np.full(PAD * q, x[0]), x, np.full(PAD * q, x[-1])])
+    if q == 1:
+        return xp[:PAD + x.size]
+    xd = sps.resample_poly(xp, 1, q, padtype="line")
+    return xd[:PAD + int(math.ceil(x.size / q))]
+
+
+def estimate_noise_floor(ts: TimeSeries, f_hi: float) -> tuple[float, str]:
+    """(noise floor [m], how it was obtained) — see the module doc."""
+    sensor = ts.meta.get("sensor") if isinstance(ts.meta.get("sensor"), dict) else None
+    if sensor and isinstance(sensor.get("noise_floor_m"), (int, float)) and sensor["noise_floor_m"] > 0:
+        return float(sensor["noise_floor_m"]), "sensor metadata"
+    y = ts.deflection - np.mean(ts.deflection)
+    f, P = sps.welch(y, fs=ts.fs, nperseg=min(y.size, 4096))
+    lo = max(4.0 * f_hi, 0.4 * ts.fs / 2)
+    hi_band = (f > lo) & (f < 0.95 * ts.fs / 2)
+    if hi_band.sum() < 4:
+        return float("nan"), "unknown (no band above the excitation to estimate it from)"
+    level = float(np.median(P[hi_band]))
+    return math.sqrt(level * ts.fs / 2), f"estimated from the deflection spectrum above {lo:.3g} Hz (white part only)"
+
+
+def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_bandwidth="auto",
+                    fs_max: float | None = None, noise_floor: float | None = None,
+                    rh_tolerance: float = 2.5) -> list[Record]:
+    """Prepare loaded time series (see the module doc).  FRF files are refused: the
+    diagnosis needs time records (residuals in time, steps, amplitudes)."""
+    ms = load_measurements(measurements, rh=rh)
+    out: list[Record] = []
+    rhs = []
+    for k, m in enumerate(ms):
+        where = source_name(m, k)
+        if isinstance(m, FRFData):
+            raise InputError(f"{where}: a frequency-response file; eap diagnose needs time-series records "
+                             "(voltage_V, deflection_m, rh_pct) to analyse residuals in time")
+        if m.deflection is None:
+            raise InputError(f"{where}: no deflection; the diagnosis needs measured deflection_m")
+        if m.rh is None and rh is None:
+            raise InputError(f"{where}: no relative humidity; add an rh_pct column or give --rh")
+        rh_series = m.rh if m.rh is not None else np.full(m.n, float(rh))
+        if m.n < 64:
+            raise InputError(f"{where}: only {m.n} samples; a diagnosis needs a record of at least 64")
+        kind, band, tone_hz = classify(m)
+        q = _decimation(m.fs, band[1], fs_max)
+        v_sim, y_d = _decimate(m.voltage, q), _decimate(m.deflection, q)[PAD:]
+        n_d = int(math.ceil(m.n / q))
+        rm = model_rh(rh_series, m.fs, rh_tolerance)
+        if np.ndim(rm):
+            rm = np.concatenate([np.full(PAD, rm[0]), np.asarray(rm)[::q][:n_d]])
+        if noise_floor is not None:
+            nf, src = float(noise_floor), "given"
+        else:
+            nf, src = estimate_noise_floor(m, band[1])
+        amp = float(np.percentile(np.abs(m.voltage - np.median(m.voltage)), 99.5))
+        if amp <= 0:
+            raise InputError(f"{where}: the voltage is constant; nothing is excited")
+        rec = Record(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
+                     sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD)
+        rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
+        out.append(rec)
+        rhs.append(float(np.median(rh_series)))
+    if not out:
+        raise InputError("no measurement given")
+    for rec, lv in zip(out, cluster_rh(rhs, rh_tolerance)):
+        rec.rh = lv
+    for rec, lv in zip(out, amplitude_levels([r.amplitude for r in out])):
+        rec.amplitude_level = lv
+    return out
+
+
+def amplitude_levels(amps: Sequence[float]) -> list[float]:
+    """Group amplitudes [V] whose ratio to the previous (sorted) one is below
+    :data:`AMPLITUDE_RATIO`; each level is its group's geometric mean."""
+    a = np.asarray(amps, dtype=float)
+    order = np.argsort(a)
+    groups: list[list[int]] = []
+    for i in order:
+        if groups and a[i] / a[groups[-1][-1]] < AMPLITUDE_RATIO:
+            groups[-1].append(int(i))
+        else:
+            groups.append([int(i)])
+    lv = np.empty(a.size)
+    for g in groups:
+        lv[g] = float(np.exp(np.mean(np.log(a[g]))))
+    return lv.tolist()
+
+
+def frf_measurements(records: Sequence[Record]) -> tuple[list, list[Record]]:
+    """Measurements for FRF targets (broadband TimeSeries, stepped-sine FRFData per tone
+    record) and the records they come from, in the same order."""
+    ms, src = [], []
+    for r in records:
+        if r.kind == "broadband":
+            ms.append(r.ts)
+            src.append(r)
+        elif r.kind == "tone" and r.tone_hz is not None:
+            settle = min(0.5 * r.ts.duration, max(3.0 / r.tone_hz, 1.0))
+            est = stepped_sine([(r.ts.voltage, r.ts.deflection, r.fs, r.tone_hz)], settle=settle)
+            if not est.excited[0]:
+                continue
+            meta = {"sensor": r.ts.meta.get("sensor")} if isinstance(r.ts.meta.get("sensor"), dict) else {}
+            eps = float(est.rel_error[0])
+            coh = 1.0 / (1.0 + 2.0 * eps ** 2)          # γ² with ε = sqrt((1−γ²)/(2γ²))
+            ms.append(FRFData(est.freq, est.response, np.array([coh]), rh=r.rh, meta=meta,
+                              source=r.source))
+            src.append(r)
+    return ms, src
+
+
+def sensor_filter(y: np.ndarray, fs: float, bandwidth: float | None) -> np.ndarray:
+    """Apply the first-order sensor response 1/(1 + j f/f_c) in the frequency domain
+    (zero-padded FFT: the response time ≪ the record, so there is no wrap-around)."""
+    if bandwidth is None:
+        return y
+    n = y.size
+    nfft = 1 << int(math.ceil(math.log2(2 * n)))
+    Y = np.fft.rfft(y - y[0], nfft)
+    out = np.fft.irfft(Y * sensor_response(np.fft.rfftfreq(nfft, 1.0 / fs), bandwidth), nfft)[:n]
+    return out + y[0]
+
+
+def upsample(y_d: np.ndarray, q: int, n: int) -> np.ndarray:
+    """A decimated, band-limited prediction back at the full rate (polyphase FIR)."""
+    if q == 1:
+        return y_d[:n]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        y = sps.resample_poly(y_d, q, 1, padtype="line")
+    if y.size < n:
+        y = np.concatenate([y, np.full(n - y.size, y[-1])])
+    return y[:n]
+
+
+def rh_levels(records: Sequence[Record]) -> list[float]:
+    return sorted({r.rh for r in records})
+
+
+def amplitude_groups(records: Sequence[Record]) -> dict[float, list[float]]:
+    """{RH level: sorted amplitude levels} over records that give frequency information."""
+    out: dict[float, set] = {}
+    for r in records:
+        if r.kind in ("broadband", "tone", "steps"):
+            out.setdefault(r.rh, set()).add(r.amplitude_level)
+    return {k: sorted(v) for k, v in out.items()}
+
+
+__all__ = ["Record", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
+           "upsample", "estimate_noise_floor", "amplitude_levels", "rh_levels", "amplitude_groups",
+           "FRFOptions"]

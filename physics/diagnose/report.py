@@ -1,0 +1,303 @@
+"""Diagnosis outputs: ``diagnosis.json``, PNG figures, one self-contained HTML page and,
+with ``apply``, the extended device file.
+
+Figures: ``where_it_fails.png`` (residual FRF against its 1 % noise floor, measured/model
+gain and phase, residual autocorrelation and input–residual cross-correlation with 99 %
+bands — before and after the winner), ``ranking.png`` (ΔBIC and RMS error per
+candidate), ``overlay.png`` (measured, base and winner in time, zoomed where the base
+fails, and the errors over whole records), ``error_breakdown.png`` (error by frequency
+band, amplitude and RH, before and after).  All files are written atomically
+(:mod:`physics.fileio`); inputs are never overwritten.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..fileio import write_json, write_text
+from ..identify import write_device
+from ..report import Report, jsonable
+from .diagnosis import DiagnosisResult
+from .signatures import EXCITATION
+
+
+def _plot_where(res: DiagnosisResult, path) -> None:
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    fig, ax = plt.subplots(2, 2, figsize=(11, 7))
+    sets = [("base", res.analysis_base, "C3")]
+    if res.analysis_after is not None:
+        sets.append((res.analysis_after.label, res.analysis_after, "C2"))
+    a = ax[0, 0]
+    for lab, ra, col in sets:
+        if ra.frf is not None:
+            a.loglog(ra.frf.freq, np.abs(ra.frf.H_e), color=col, label=f"|residual FRF| {lab}")
+            a.loglog(ra.frf.freq, ra.frf.floor, color=col, ls=":", lw=1, label=f"1 % noise floor {lab}")
+            sig = ra.frf.significant
+            a.loglog(ra.frf.freq[sig], np.abs(ra.frf.H_e[sig]), "o", ms=3, color=col)
+    a.set_xlabel("frequency [Hz]")
+    a.set_ylabel("input → residual [m/V]")
+    a.set_title("residual frequency response (dots: above the noise floor)", fontsize=9)
+    a.legend(fontsize=7)
+    a.grid(alpha=0.3, which="both")
+    a = ax[0, 1]
+    a2 = a.twinx()
+    for lab, ra, col in sets:
+        if ra.frf is not None:
+            a.semilogx(ra.frf.freq, 100 * (np.abs(ra.frf.ratio) - 1), color=col, label=f"gain error {lab}")
+            a2.semilogx(ra.frf.freq, np.degrees(np.angle(ra.frf.ratio)), color=col, ls="--", lw=0.9,
+                        label=f"phase {lab}")
+    a.set_xlabel("frequency [Hz]")
+    a.set_ylabel("measured/model gain − 1 [%]")
+    a2.set_ylabel("measured − model phase [deg] (dashed)")
+    a.axhline(0, color="k", lw=0.6)
+    a.legend(fontsize=7, loc="upper left")
+    a.grid(alpha=0.3, which="both")
+    a = ax[1, 0]
+    for lab, ra, col in sets:
+        a.plot(ra.lag_s, ra.acf, color=col, label=lab)
+        a.axhline(ra.acf_band, color=col, ls=":", lw=0.8)
+        a.axhline(-ra.acf_band, color=col, ls=":", lw=0.8)
+    a.set_xlabel("lag [s]")
+    a.set_ylabel("ρ_ee")
+    a.set_title("residual autocorrelation, 99 % band (MATLAB resid)", fontsize=9)
+    a.legend(fontsize=7)
+    a.grid(alpha=0.3)
+    a = ax[1, 1]
+    for lab, ra, col in sets:
+        a.plot(ra.ccf_lag_s, ra.ccf, color=col, label=lab)
+        a.axhline(ra.ccf_band, color=col, ls=":", lw=0.8)
+        a.axhline(-ra.ccf_band, color=col, ls=":", lw=0.8)
+    a.set_xlabel("lag [s] (positive: residual after input)")
+    a.set_ylabel("ρ_ue")
+    a.set_title("input–residual cross-correlation, 99 % band", fontsize=9)
+    a.legend(fontsize=7)
+    a.grid(alpha=0.3)
+    fig.tight_layout()
+    save(fig, path)
+
+
+def _plot_ranking(res: DiagnosisResult, path) -> None:
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    rk = res.ranking
+    fig, ax = plt.subplots(1, 2, figsize=(11, 0.6 + 0.45 * max(len(rk), 1)), sharey=True)
+    names = [c.effect for c in rk]
+    y = np.arange(len(rk))[::-1]
+    d = [c.comparison.delta_bic for c in rk]
+    col = ["C2" if c.effect == res.verdict.missing_effect else ("C1" if c.comparison.delta_bic <= -10 else "C7")
+           for c in rk]
+    ax[0].barh(y, d, color=col)
+    ax[0].set_xscale("symlog", linthresh=10)
+    ax[0].axvline(-10, color="k", ls=":", lw=0.8)
+    ax[0].set_yticks(y)
+    ax[0].set_yticklabels(names)
+    ax[0].set_xlabel("ΔBIC vs base (negative: supported; dotted: −10)")
+    ax[0].grid(alpha=0.3, axis="x")
+    ax[1].barh(y, [1e6 * c.fit.rmse for c in rk], color=col)
+    ax[1].axvline(1e6 * res.base.rmse, color="C3", lw=1.2, label="base")
+    if math.isfinite(res.noise_floor):
+        ax[1].axvline(1e6 * res.noise_floor, color="k", ls="--", lw=0.9, label="noise floor")
+    ax[1].set_xscale("log")
+    ax[1].set_xlabel("RMS error after adding [µm]")
+    ax[1].legend(fontsize=8)
+    ax[1].grid(alpha=0.3, axis="x", which="both")
+    fig.tight_layout()
+    save(fig, path)
+
+
+def _plot_overlay(res: DiagnosisResult, path) -> None:
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    recs = res.records[:4]
+    shown = res.winner or res.best
+    fig, axes = plt.subplots(len(recs), 2, figsize=(12, 2.6 * len(recs)), squeeze=False)
+    for k, r in enumerate(recs):
+        t = np.arange(r.y_d.size) / r.fs_d
+        eb = res.base.resid_d[k]
+        ym = r.y_d - r.y_d.mean()
+        # zoom: 4 s (or 10 periods) around the base's largest error
+        i = int(np.argmax(np.convolve(eb ** 2, np.ones(max(1, int(r.fs_d))), mode="same")))
+        w = max(int(2.0 * r.fs_d), 10)
+        sl = slice(max(0, i - w), min(t.size, i + w))
+        a = axes[k, 0]
+        a.plot(t[sl], 1e6 * ym[sl], color="k", lw=1.2, label="measured")
+        a.plot(t[sl], 1e6 * (ym - eb)[sl], color="C3", lw=1, label="base")
+        if shown is not None:
+            a.plot(t[sl], 1e6 * (ym - shown.fit.resid_d[k])[sl], color="C2", lw=1, ls="--", label=f"+{shown.effect}")
+        a.set_ylabel("deflection [µm]")
+        a.set_title(f"{Path(r.source).name}: zoom where the base fails most", fontsize=9)
+        a.legend(fontsize=7)
+        a.grid(alpha=0.3)
+        a = axes[k, 1]
+        a.plot(t, 1e6 * eb, color="C3", lw=0.7, label=f"error base ({1e6 * res.base.rmse_records[k]:.3g} µm RMS)")
+        if shown is not None:
+            a.plot(t, 1e6 * shown.fit.resid_d[k], color="C2", lw=0.7,
+                   label=f"error +{shown.effect} ({1e6 * shown.fit.rmse_records[k]:.3g} µm RMS)")
+        a.set_ylabel("error [µm]")
+        a.legend(fontsize=7)
+        a.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 1].set_xlabel("time [s]")
+    fig.tight_layout()
+    save(fig, path)
+
+
+def _plot_breakdown(res: DiagnosisResult, path) -> None:
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    sets = [("base", res.analysis_base, "C3")]
+    if res.analysis_after is not None:
+        sets.append((res.analysis_after.label, res.analysis_after, "C2"))
+    fig, ax = plt.subplots(1, 3, figsize=(12, 3.2))
+    width = 0.38
+    for j, (lab, ra, col) in enumerate(sets):
+        x = np.arange(len(ra.by_band))
+        ax[0].bar(x + (j - 0.5) * width, [1e6 * b["residual_rms_m"] for b in ra.by_band], width, color=col, label=lab)
+        ax[0].set_xticks(x)
+        ax[0].set_xticklabels([f"{b['band_Hz'][0]:.3g}–{b['band_Hz'][1]:.3g}" for b in ra.by_band], fontsize=7)
+        xa = np.arange(len(ra.by_amplitude))
+        ax[1].bar(xa + (j - 0.5) * width, [1e6 * b["residual_rms_m"] for b in ra.by_amplitude], width, color=col,
+                  label=lab)
+        ax[1].set_xticks(xa)
+        ax[1].set_xticklabels([f"{b['amplitude_V']:.3g} V" for b in ra.by_amplitude], fontsize=7)
+        xr = np.arange(len(ra.by_rh))
+        ax[2].bar(xr + (j - 0.5) * width, [1e6 * b["residual_rms_m"] for b in ra.by_rh], width, color=col, label=lab)
+        ax[2].set_xticks(xr)
+        ax[2].set_xticklabels([f"RH {b['rh_pct']:g} %" for b in ra.by_rh], fontsize=7)
+    for a, t in zip(ax, ("by frequency band [Hz]", "by amplitude", "by RH")):
+        a.set_title(f"RMS error {t}", fontsize=9)
+        a.set_ylabel("µm")
+        a.set_yscale("log")
+        a.grid(alpha=0.3, axis="y")
+        a.legend(fontsize=7)
+    fig.tight_layout()
+    save(fig, path)
+
+
+def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name: str | None = None,
+                    provenance: dict | None = None, protect=()) -> dict:
+    """Write ``diagnosis.json``, the PNGs and ``report.html`` into ``out_dir``; with
+    ``apply`` also the extended device file ``NAME.yaml`` (the fitted device with the
+    missing effect added to its ``default_effects``; nothing when the verdict is null).
+    Returns the JSON dict."""
+    d = Path(out_dir)
+    if d.exists() and not d.is_dir():
+        raise InputError(f"--out {d} exists and is not a folder")
+    d.mkdir(parents=True, exist_ok=True)
+    out = res.to_dict()
+    pngs = {"where_it_fails.png": _plot_where, "ranking.png": _plot_ranking, "overlay.png": _plot_overlay,
+            "error_breakdown.png": _plot_breakdown}
+    written = []
+    for fn, fun in pngs.items():
+        if fn == "ranking.png" and not res.ranking:
+            continue
+        fun(res, d / fn)
+        written.append(fn)
+    applied = None
+    w = res.winner
+    if apply:
+        if w is None:
+            applied = {"written": None, "reason": "no missing effect was found (verdict null): nothing to apply"}
+        else:
+            dev_name = name or f"{res.device.name}_{w.effect}"
+            path = write_device(w.fit.result, d / f"{dev_name}.yaml", name=dev_name,
+                                date=_dt.date.today().isoformat(), protect=protect)
+            text = path.read_text(encoding="utf-8").replace(
+                "written by eap identify on", f"written by eap diagnose --apply ({w.effect} added) on", 1)
+            write_text(path, text, protect=tuple(protect))
+            applied = {"written": path.name, "effects": [e for e in w.fit.effects if e != "double_layer"],
+                       "usage": f"eap compare MEASUREMENT --model {path} --effects default"}
+            written.append(path.name)
+    out["applied"] = applied
+    out["files"] = ["diagnosis.json", "report.html"] + written
+    if provenance:
+        out["provenance"] = provenance
+    write_json(d / "diagnosis.json", jsonable(out))
+    _html(res, d, out, provenance)
+    return out
+
+
+def _fmt(x, unit="", scale=1.0, digits=4):
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    return f"{x * scale:.{digits}g}{(' ' + unit) if unit else ''}"
+
+
+def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
+    v = res.verdict
+    b = res.base
+    rep = Report("Diagnosis: where the model fails and which effect is missing",
+                 subtitle=f"{res.device.name} [{', '.join(b.effects)}] against {len(res.records)} record(s)")
+    rep.heading("Verdict")
+    if v.missing_effect:
+        w = res.winner
+        rep.paragraph(f"Missing effect: {v.missing_effect} (confidence {v.confidence:.3g}, {v.label}). "
+                      f"RMS error {_fmt(b.rmse, 'µm', 1e6)} → {_fmt(w.fit.rmse, 'µm', 1e6)}, fit "
+                      f"{b.fit_pct:.2f} % → {w.fit.fit_pct:.2f} %.")
+    else:
+        rep.paragraph(f"No missing effect identified (confidence {v.confidence:.3g}, {v.label}).")
+    rep.paragraph(v.reason, note=True)
+    if v.ambiguous:
+        rep.warning(f"cannot be told apart: {', '.join(v.ambiguous)}")
+    if out.get("applied") and out["applied"].get("written"):
+        rep.paragraph(f"Extended device written: {out['applied']['written']} ({out['applied']['usage']}).")
+    rep.table({"base effects": ", ".join(b.effects), "free parameters": ", ".join(b.spec.free + b.spec.per_rh),
+               "RMS error [µm]": 1e6 * b.rmse, "fit [%]": b.fit_pct, "BIC (effective n)": b.bic,
+               "noise floor [µm]": 1e6 * res.noise_floor if math.isfinite(res.noise_floor) else None,
+               "first resonance [Hz]": res.resonance_hz, "wall time [s]": res.timings.get("total")},
+              caption="base model")
+    rep.heading("Where the base model fails")
+    rep.bullets(res.analysis_base.findings)
+    rep.image(d / "where_it_fails.png", caption="residual FRF vs its 1 % coherence-based noise floor; measured/model "
+                                                "gain and phase; residual auto- and cross-correlation with 99 % bands")
+    rep.image(d / "error_breakdown.png", caption="RMS error by frequency band, amplitude and RH, before and after")
+    lb = res.analysis_base.ljung_box
+    rep.paragraph(f"Ljung–Box on 20 lags of the base residual: Q = {lb['Q']:.4g}, p = {lb['p_value']:.2g} "
+                  "(a sensor drift alone also makes the residual coloured; the cross-correlation with the input is "
+                  "what points to missing dynamics).", note=True)
+    rep.heading("Candidate effects, ranked")
+    if res.ranking:
+        rep.image(d / "ranking.png", caption="ΔBIC (effective sample size) and RMS error after adding each effect")
+        rep.table([{"effect": c.effect, "RMS after [µm]": 1e6 * c.fit.rmse, "fit after [%]": c.fit.fit_pct,
+                    "ΔBIC": c.comparison.delta_bic, "p": c.comparison.p_value, "test": c.comparison.test,
+                    "evidence": _evidence(c), "signature": (c.signature or {}).get("score"),
+                    "cannot be told apart from": ", ".join(c.indistinguishable_from)} for c in res.ranking])
+        for c in res.ranking:
+            rep.paragraph(f"{c.effect}: {c.explanation}")
+    ne = [c for c in res.candidates if not c.evaluated]
+    if ne:
+        rep.table([{"effect": c.effect, "status": c.status, "why": c.reason,
+                    "excitation that would reveal it": EXCITATION.get(c.effect, "")} for c in ne],
+                  caption="effects not evaluated")
+    rep.heading("Before and after")
+    rep.image(d / "overlay.png", caption="measured, base and the top candidate; errors over the whole records")
+    if res.support:
+        rep.heading("Effects in the model: do the data support them?")
+        rep.table([{"effect": s.effect, "supported": s.supported, "ΔBIC if removed": s.delta_bic_if_removed,
+                    "RMS without [µm]": None if s.rmse_without is None else 1e6 * s.rmse_without,
+                    "explanation": s.explanation} for s in res.support])
+    if b.warnings:
+        rep.heading("Identifiability of the base fit")
+        for w_ in b.warnings:
+            rep.warning(w_)
+    rep.heading("Records")
+    rep.table([{k: r.describe()[k] for k in ("source", "kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct",
+                                               "band_Hz", "fs_analysis_Hz", "noise_floor_m", "noise_floor_source")}
+               for r in res.records])
+    rep.heading("How the statistics work")
+    rep.bullets([f"{k}: {t}" for k, t in out["statistics"].items()])
+    rep.json_block(out["verdict"], "verdict (JSON)")
+    rep.json_block(out["settings"], "settings")
+    if provenance:
+        rep.json_block(jsonable(provenance), "provenance")
+    rep.write(d / "report.html")
+
+
+def _evidence(c) -> str:
+    from .stats import evidence_label
+    return evidence_label(c.comparison.delta_bic)

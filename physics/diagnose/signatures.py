@@ -1,0 +1,263 @@
+"""What each effect leaves in a base model's residuals, and what data can show it.
+
+**Excitation needed** (:data:`EXCITATION`; :func:`revealable` applies these rules to the
+records and says why when the data cannot reveal an effect):
+
+==========================  ===========================================================================
+effect                      data that expose it
+==========================  ===========================================================================
+electrode_resistance        a swept sine / multisine reaching ≥ 10 Hz: the phase lag that grows with
+                            frequency as the voltage falls along the strip
+fractional_coupling         a broadband record spanning ≥ 1 decade (constant log-log slope and
+                            constant phase), ideally down to 0.1 Hz; a step shows the creep
+solvent_diffusion           low frequencies: a swept sine starting at ≤ 0.5 Hz, or a square pulse /
+                            step holding ≥ 5 s (back-relaxation)
+viscoelastic                a broadband record spanning the first resonance (peak shape, stiffness
+                            that rises with frequency, loss below resonance)
+layered_beam                a broadband record spanning the first resonance; usually cannot be told
+                            apart from a stiffer Y (both set EI/ρA), reported as such
+humidity                    records at two or more RH levels ≥ 10 % apart
+nonlinear_charge            the same excitation at two or more amplitudes (ratio ≥ 1.25) at one RH:
+                            the gain falls with amplitude; harmonics show at the larger one
+thermal                     (not by default) long large-amplitude records
+==========================  ===========================================================================
+
+**Signatures** (:func:`signatures`): features of the base's residual frequency response
+(measured/model ratio R(f) in the bands where the residual exceeds its noise floor, see
+:mod:`.residuals`), of its dependence on amplitude and RH, and of the residual after steps:
+
+* ``lf_droop_lead`` — below ~5× the lowest excited frequency the model overestimates the
+  gain and the measurement leads it (|R| < 0.97, arg R > 0.5°): ``solvent_diffusion``;
+* ``lf_excess_lag`` — the opposite (|R| > 1.03, arg R < −0.5°): ``fractional_coupling``;
+* ``constant_slope_phase`` — log|R| falls (or rises) linearly in log f with a phase
+  offset ≈ 90° × slope (decades per decade) away from the resonance: a constant-phase
+  element, ``fractional_coupling``;
+* ``hf_phase_lag`` — arg R decreases with frequency in the upper decade (≥ 2° per
+  decade, ending below −1°): ``electrode_resistance``;
+* ``resonance_error`` — the error peaks within ±40 % of the first resonance (peak height,
+  width or frequency): ``viscoelastic`` (``layered_beam``);
+* ``lf_small_lag`` — a nearly constant small phase lag (−0.5° to −10°) below resonance:
+  material loss, ``viscoelastic``;
+* ``amplitude_dependence`` — the measured/model gain differs by > 3 % between amplitude
+  levels: ``nonlinear_charge``; ``harmonics`` — > 5 % of the residual at harmonics;
+* ``rh_dependence`` — the measured/model gain differs by > 5 % between RH levels: ``humidity``;
+* ``step_back_relaxation`` / ``step_creep`` — after steps the measurement relaxes back
+  (``solvent_diffusion``) or keeps creeping (``fractional_coupling``) relative to the model.
+
+Each effect's score is the weighted share of its expected features that are present,
+counting only features the data can show; it is a plausibility check on a candidate
+whose fit improved, not evidence by itself.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from .records import RH_SPAN, Record, amplitude_groups, rh_levels
+from .residuals import ResidualAnalysis
+
+EXCITATION = {
+    "electrode_resistance": "a swept sine or multisine reaching at least 10 Hz (phase lag growing with frequency)",
+    "fractional_coupling": "a broadband record spanning at least one decade (constant log-log slope and phase), "
+                           "ideally down to 0.1 Hz",
+    "solvent_diffusion": "a swept sine starting at 0.5 Hz or lower, or a square pulse/step holding at least 5 s "
+                         "(back-relaxation)",
+    "viscoelastic": "a broadband record spanning the first bending resonance (peak shape, frequency-dependent "
+                    "stiffness, loss below resonance)",
+    "layered_beam": "a broadband record spanning the first resonance; even then usually not distinguishable "
+                    "from a stiffer Y",
+    "humidity": "records at two or more RH levels at least 10 % apart",
+    "nonlinear_charge": "the same excitation at two or more amplitudes (ratio at least 1.25) at one RH level",
+    "thermal": "long large-amplitude records (Joule heating); not tried by default",
+}
+
+#: effect -> [(feature, weight)]
+EXPECTED = {
+    "electrode_resistance": [("hf_phase_lag", 1.0)],
+    "fractional_coupling": [("constant_slope_phase", 1.0), ("lf_excess_lag", 0.5), ("step_creep", 0.5)],
+    "solvent_diffusion": [("lf_droop_lead", 1.0), ("step_back_relaxation", 1.0)],
+    "viscoelastic": [("resonance_error", 1.0), ("lf_small_lag", 0.5)],
+    "layered_beam": [("resonance_error", 1.0)],
+    "humidity": [("rh_dependence", 1.0)],
+    "nonlinear_charge": [("amplitude_dependence", 1.0), ("harmonics", 0.5)],
+    "thermal": [("amplitude_dependence", 1.0)],
+}
+
+FEATURE_TEXT = {
+    "lf_droop_lead": "low-frequency droop with phase lead",
+    "lf_excess_lag": "low-frequency excess gain with phase lag",
+    "constant_slope_phase": "constant log-log slope with matching constant phase",
+    "hf_phase_lag": "phase lag growing with frequency",
+    "resonance_error": "error concentrated at the resonance",
+    "lf_small_lag": "small constant phase lag below resonance (material loss)",
+    "amplitude_dependence": "gain that depends on amplitude",
+    "harmonics": "harmonic distortion",
+    "rh_dependence": "gain that depends on RH",
+    "step_back_relaxation": "back-relaxation after steps",
+    "step_creep": "creep after steps",
+}
+
+
+def _broadband(records) -> list[Record]:
+    return [r for r in records if r.kind == "broadband"]
+
+
+def revealable(effect: str, records: Sequence[Record], resonance_hz: float | None = None) -> tuple[bool, str]:
+    """(can the records reveal ``effect``?, why / why not) — rules of :data:`EXCITATION`."""
+    bb = _broadband(records)
+    tones = sorted({r.tone_hz for r in records if r.kind == "tone" and r.tone_hz})
+    f_lo = min([r.band[0] for r in bb] + tones) if (bb or tones) else math.inf
+    f_hi = max([r.band[1] for r in bb] + tones) if (bb or tones) else 0.0
+    steps = [r for r in records if r.kind == "steps"]
+    long_hold = any(r.steps.size and np.max(np.diff(np.concatenate([r.steps, [r.v_d.size]]))) / r.fs_d >= 5.0
+                    for r in steps)
+    need = EXCITATION.get(effect, "")
+    if effect == "electrode_resistance":
+        ok = f_hi >= 10.0
+        return ok, (f"excitation reaches {f_hi:.3g} Hz" if ok else f"the excitation stops at {f_hi:.3g} Hz; needs {need}")
+    if effect == "fractional_coupling":
+        ok = f_hi / f_lo >= 10.0 if f_lo > 0 and math.isfinite(f_lo) else False
+        return ok, (f"broadband over {f_lo:.3g}–{f_hi:.3g} Hz" if ok else f"needs {need}")
+    if effect == "solvent_diffusion":
+        ok = f_lo <= 0.5 or long_hold
+        why = []
+        if f_lo <= 0.5:
+            why.append(f"excitation down to {f_lo:.3g} Hz")
+        if long_hold:
+            why.append("steps with long holds")
+        return ok, ("; ".join(why) if ok else f"nothing below {f_lo:.3g} Hz and no long step; needs {need}")
+    if effect in ("viscoelastic", "layered_beam"):
+        if resonance_hz is None:
+            ok = f_hi / max(f_lo, 1e-9) >= 10.0
+            return ok, ("broadband (resonance not located)" if ok else f"needs {need}")
+        ok = f_lo < 0.7 * resonance_hz and f_hi > 1.3 * resonance_hz
+        return ok, (f"the excitation spans the first resonance ({resonance_hz:.3g} Hz)" if ok
+                    else f"the excitation ({f_lo:.3g}–{f_hi:.3g} Hz) does not span the first resonance "
+                         f"({resonance_hz:.3g} Hz); needs {need}")
+    if effect == "humidity":
+        lv = rh_levels(records)
+        ok = len(lv) >= 2 and lv[-1] - lv[0] >= RH_SPAN
+        return ok, (f"RH levels {', '.join(f'{x:g}' for x in lv)} %" if ok else
+                    f"all records are at RH {', '.join(f'{x:g}' for x in lv)} %: one RH level cannot reveal "
+                    f"humidity; needs {need}")
+    if effect in ("nonlinear_charge", "thermal"):
+        groups = amplitude_groups(records)
+        multi = {rh: a for rh, a in groups.items() if len(a) >= 2}
+        if multi:
+            rh, a = next(iter(multi.items()))
+            return True, f"amplitudes {', '.join(f'{x:.3g}' for x in a)} V at RH {rh:g} %"
+        amps = sorted({r.amplitude_level for r in records})
+        return False, (f"one amplitude level ({', '.join(f'{x:.3g}' for x in amps)} V) per RH: one amplitude cannot "
+                       f"reveal {effect} (its gain change is absorbed by kf); needs {need}")
+    return True, ""
+
+
+def features(ra: ResidualAnalysis, records: Sequence[Record], resonance_hz: float | None) -> dict:
+    """{feature: {"present": bool | None, "value": ...}} (None: the data cannot show it)."""
+    out: dict = {}
+    frf = ra.frf
+    if frf is not None and frf.freq.size >= 3:
+        R = frf.ratio
+        sig = frf.significant & np.isfinite(R)
+        f = frf.freq
+        lg, ph = np.log10(np.abs(R)), np.degrees(np.angle(R))
+        lo_edge = f[0] * 10 ** 0.7
+        lf = sig & (f <= lo_edge)
+        if resonance_hz:
+            lf &= f < 0.5 * resonance_hz
+        if lf.sum() >= 1:
+            g, p = float(np.median(np.abs(R[lf]))), float(np.median(ph[lf]))
+            out["lf_droop_lead"] = {"present": bool(g < 0.97 and p > 0.5), "gain": g, "phase_deg": p}
+            out["lf_excess_lag"] = {"present": bool(g > 1.03 and p < -0.5), "gain": g, "phase_deg": p}
+        else:
+            avail = f[0] <= 1.0
+            out["lf_droop_lead"] = {"present": False if avail else None}
+            out["lf_excess_lag"] = {"present": False if avail else None}
+        away = sig.copy()
+        if resonance_hz:
+            away &= (f < 0.6 * resonance_hz) | (f > 1.6 * resonance_hz)
+            away &= f < 2.0 * resonance_hz
+        if away.sum() >= 4 and np.ptp(np.log10(f[away])) >= 0.7:
+            x = np.log10(f[away])
+            slope, icpt = np.polyfit(x, lg[away], 1)
+            lin = np.std(lg[away] - (slope * x + icpt))
+            pm, ps = float(np.mean(ph[away])), float(np.std(ph[away]))
+            match = abs(slope) > 0.02 and np.sign(pm) == np.sign(slope) and \
+                abs(pm - 90.0 * slope) < 0.5 * abs(90.0 * slope) + 2.0 and lin < 0.3 * abs(slope) + 0.01 and \
+                ps < 0.5 * abs(pm) + 2.0
+            out["constant_slope_phase"] = {"present": bool(match), "slope_dec_per_dec": float(slope),
+                                           "phase_deg": pm}
+        else:
+            out["constant_slope_phase"] = {"present": False if f[-1] / f[0] >= 10 else None}
+        hi = sig & (f >= f[-1] / 10 ** 0.7)
+        if f[-1] >= 10 and hi.sum() >= 3:
+            s_ph = float(np.polyfit(np.log10(f[hi]), np.unwrap(np.radians(ph[hi])), 1)[0] * 180 / np.pi)
+            out["hf_phase_lag"] = {"present": bool(s_ph < -2.0 and ph[hi][-1] < -1.0), "phase_slope_deg_per_dec": s_ph,
+                                   "phase_top_deg": float(ph[hi][-1])}
+        else:
+            out["hf_phase_lag"] = {"present": False if f[-1] >= 10 else None}
+        if resonance_hz and f[0] < 0.7 * resonance_hz and f[-1] > 1.3 * resonance_hz:
+            err = np.abs(np.log(np.where(np.isfinite(R), R, 1.0)))
+            near = (f > 0.7 * resonance_hz) & (f < 1.4 * resonance_hz)
+            present = bool((sig & near).any() and err[near].max() >= 0.99 * err[np.isfinite(err)].max())
+            out["resonance_error"] = {"present": present, "max_log_error_near": float(err[near].max()) if near.any() else None}
+            below = sig & (f < 0.5 * resonance_hz)
+            if below.sum() >= 2:
+                p = float(np.median(ph[below]))
+                out["lf_small_lag"] = {"present": bool(-10.0 < p < -0.5 and np.std(ph[below]) < 3.0), "phase_deg": p}
+            else:
+                out["lf_small_lag"] = {"present": False}
+        else:
+            out["resonance_error"] = {"present": None}
+            out["lf_small_lag"] = {"present": None}
+    if len(ra.by_amplitude) >= 2 and len({r.rh for r in records}) >= 1:
+        g = [a.get("gain_ratio_meas_over_model") for a in ra.by_amplitude]
+        g = [x for x in g if x]
+        out["amplitude_dependence"] = {"present": bool(len(g) >= 2 and abs(g[-1] / g[0] - 1) > 0.03),
+                                       "gain_ratios": g}
+        d = [a.get("distortion_share_of_residual") for a in ra.by_amplitude]
+        d = [x for x in d if x is not None]
+        out["harmonics"] = {"present": bool(d and max(d) > 0.05) if d else None, "share": max(d) if d else None}
+    else:
+        out["amplitude_dependence"] = {"present": None}
+        out["harmonics"] = {"present": None}
+    if len(ra.by_rh) >= 2:
+        g = [row.get("gain_ratio_meas_over_model") for row in ra.by_rh]
+        g = [x for x in g if x]
+        out["rh_dependence"] = {"present": bool(len(g) >= 2 and max(g) / min(g) > 1.05), "gain_ratios": g}
+    else:
+        out["rh_dependence"] = {"present": None}
+    steps = ra.after_steps
+    if steps:
+        d = float(np.median([s["back_drift_m"] for s in steps]))
+        sig_any = any(s["significant"] for s in steps)
+        out["step_back_relaxation"] = {"present": bool(sig_any and d > 0), "drift_m": d}
+        out["step_creep"] = {"present": bool(sig_any and d < 0), "drift_m": d}
+    else:
+        out["step_back_relaxation"] = {"present": None}
+        out["step_creep"] = {"present": None}
+    return out
+
+
+def signatures(feats: dict, effects: Sequence[str]) -> dict:
+    """{effect: {"score": 0–1 or None, "observed": [...], "expected": [...]}} (module doc)."""
+    out = {}
+    for e in effects:
+        exp = EXPECTED.get(e, [])
+        num = den = 0.0
+        observed, missing = [], []
+        for name, w in exp:
+            st = feats.get(name, {}).get("present")
+            if st is None:
+                continue
+            den += w
+            if st:
+                num += w
+                observed.append(FEATURE_TEXT[name])
+            else:
+                missing.append(FEATURE_TEXT[name])
+        out[e] = {"score": (num / den) if den > 0 else None, "observed": observed, "not_observed": missing,
+                  "expected": [FEATURE_TEXT[n] for n, _ in exp]}
+    return out

@@ -1,0 +1,339 @@
+"""Diagnosis: a hidden effect in sensor-corrupted synthetic measurements must rank first and
+its addition must cut the error; no hidden effect, no verdict; the statistics, the residual
+checks and the command line behave."""
+from __future__ import annotations
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+import yaml
+
+from physics import signals
+from physics.device import load_device
+from physics.diagnose import EXCITATION, diagnose, write_diagnosis
+from physics.diagnose import stats
+from physics.diagnose.candidates import candidate_spec, default_free, map_free, translate_start
+from physics.diagnose.demo import HIDDEN, hidden_effect_case
+from physics.diagnose.records import amplitude_levels, classify, find_steps, prepare_records
+from physics.diagnose.residuals import analyse
+from physics.diagnose.signatures import revealable
+from physics.errors import InputError
+from physics.frfdata import FRFData, write_frf
+from physics.timeseries import TimeSeries, write_timeseries
+
+
+def _diagnose(case, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return diagnose(case.measurements, case.device, case.base_effects, **kw)
+
+
+def _check_found(case, res):
+    """The contract of the issue: the hidden effect ranks first, the error after adding it
+    falls by at least half (or to within 1.2× the noise floor), and the verdict names it."""
+    top = res.ranking[0]
+    assert top.effect == case.hidden, [(c.effect, c.comparison.delta_bic) for c in res.ranking]
+    assert top.fit.rmse <= 0.5 * res.base.rmse or top.fit.rmse <= 1.2 * case.noise_floor
+    assert res.verdict.missing_effect == case.hidden, res.verdict.reason
+    assert res.verdict.confidence > 0.99
+    assert top.comparison.delta_bic < -10 and top.comparison.p_value < 0.01 / len(res.ranking)
+
+
+# ---------------------------------------------------------------------------- hidden effects (one seed each)
+
+
+@pytest.mark.parametrize("effect", [e for e in HIDDEN])
+def test_hidden_effect_is_found(effect):
+    case = hidden_effect_case(effect, seed=0)
+    res = _diagnose(case, check_support=False)
+    _check_found(case, res)
+    # the base fails far above the noise, the winner brings it near the noise floor
+    assert res.base.rmse > 5 * case.noise_floor
+    assert res.best.fit.rmse < 3 * case.noise_floor
+    # its own parameters are recovered (where they are identifiable)
+    truth = case.truth_params
+    vals = res.best.fit.values
+    for name in ("Rs", "D_solvent", "frac_a", "dma_scale"):
+        if name in truth and name in vals:
+            assert vals[name] == pytest.approx(truth[name], rel=0.05), name
+
+
+def test_no_hidden_effect_gives_no_verdict():
+    case = hidden_effect_case(None, seed=0)
+    res = _diagnose(case)
+    assert res.verdict.missing_effect is None
+    assert "noise floor" in res.verdict.reason
+    # no candidate is even close to very strong evidence
+    assert all(c.comparison.delta_bic > -10 for c in res.ranking)
+
+
+def test_base_with_effects_support_and_the_missing_one():
+    """A richer base (the IPMC's electrode line, solvent, DMA) lacking fractional coupling:
+    the missing one is found and the model's own effects are checked for support."""
+    case = hidden_effect_case("fractional_coupling", seed=1,
+                              base_effects="electrode_resistance,solvent_diffusion,viscoelastic")
+    res = _diagnose(case)
+    _check_found(case, res)
+    sup = {s.effect: s for s in res.support}
+    assert set(sup) == {"electrode_resistance", "solvent_diffusion", "viscoelastic"}
+    assert sup["electrode_resistance"].supported and sup["viscoelastic"].supported
+
+
+def test_effect_the_data_do_not_support_is_reported():
+    """The model has electrode_resistance but the device truly has equipotential electrodes:
+    removing it costs nothing, so it is reported as not supported."""
+    case = hidden_effect_case(None, seed=2)
+    res = _diagnose(case, candidates="solvent_diffusion")
+    assert res.support == []                       # the base has no effect to check
+    res = _diagnose(type(case)(**{**case.__dict__, "base_effects": ("double_layer", "electrode_resistance")}),
+                    candidates="solvent_diffusion")
+    sup = {s.effect: s for s in res.support}
+    assert sup["electrode_resistance"].supported is False
+    assert "not supported" in sup["electrode_resistance"].explanation
+
+
+# ---------------------------------------------------------------------------- what the data can reveal
+
+
+def test_one_rh_level_and_one_amplitude_cannot_reveal_humidity_or_nonlinear_charge():
+    case = hidden_effect_case("humidity", seed=0, design=("sweep",))
+    res = _diagnose(case, check_support=False)
+    ne = {c.effect: c for c in res.candidates if not c.evaluated}
+    assert "one RH level cannot reveal humidity" in ne["humidity"].reason
+    assert "one amplitude cannot reveal nonlinear_charge" in ne["nonlinear_charge"].reason
+    assert ne["humidity"].row(res.base)["excitation_needed"] == EXCITATION["humidity"]
+    # and the verdict does not guess another effect for what is really an RH change it cannot see
+    assert res.verdict.missing_effect in (None,)
+
+
+def test_revealable_rules():
+    case = hidden_effect_case("solvent_diffusion", seed=0)
+    recs = prepare_records(case.measurements)
+    assert revealable("solvent_diffusion", recs)[0]
+    assert revealable("electrode_resistance", recs)[0]
+    assert not revealable("humidity", recs)[0]
+    assert revealable("viscoelastic", recs, resonance_hz=20.0)[0]
+    ok, why = revealable("viscoelastic", recs, resonance_hz=200.0)
+    assert not ok and "does not span the first resonance" in why
+    pulse_only = [r for r in recs if r.kind == "steps"]
+    ok, why = revealable("electrode_resistance", pulse_only)
+    assert not ok
+
+
+# ---------------------------------------------------------------------------- statistics
+
+
+def test_integrated_time_of_ar1():
+    """τ_int of an AR(1) process with coefficient φ is (1 + φ)/(1 − φ)."""
+    rng = np.random.default_rng(0)
+    for phi in (0.0, 0.5, 0.9):
+        e = np.zeros(200_000)
+        w = rng.standard_normal(e.size)
+        for i in range(1, e.size):
+            e[i] = phi * e[i - 1] + w[i]
+        assert stats.integrated_time(e) == pytest.approx((1 + phi) / (1 - phi), rel=0.1)
+
+
+def test_bic_does_not_reward_a_useless_parameter():
+    """Noise-only data: a model with an extra regressor fits a little better, but ΔBIC must
+    (almost always) be positive and the LR p-value uniform-ish (not small)."""
+    rng = np.random.default_rng(1)
+    wins, ps = 0, []
+    for _ in range(200):
+        n = 400
+        y = rng.standard_normal(n)
+        x = rng.standard_normal(n)
+        rss0 = float(np.sum((y - y.mean()) ** 2))
+        X = np.column_stack([np.ones(n), x])
+        r = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+        rss1 = float(r @ r)
+        d = stats.bic([rss1], [n], [n], 2) - stats.bic([rss0], [n], [n], 1)
+        wins += d < -10
+        ps.append(stats.lr_pvalue([rss0], [rss1], [n], 1))
+    assert wins == 0
+    assert 0.35 < np.mean(ps) < 0.65            # p-values ~ U(0, 1) under the null
+    assert np.mean(np.array(ps) < 0.01) < 0.03
+
+
+def test_vuong_is_symmetric_and_detects_a_better_model():
+    rng = np.random.default_rng(2)
+    e = rng.standard_normal(5000)
+    assert stats.vuong_pvalue([e], [e], [1.0]) == pytest.approx(0.5)
+    better = 0.5 * e
+    assert stats.vuong_pvalue([e], [better + 0.01 * rng.standard_normal(5000)], [1.0]) < 1e-6
+
+
+def test_coherence_threshold_matches_simulation():
+    rng = np.random.default_rng(3)
+    n_avg = 8
+    g = []
+    for _ in range(4000):
+        a = rng.standard_normal(n_avg) + 1j * rng.standard_normal(n_avg)
+        b = rng.standard_normal(n_avg) + 1j * rng.standard_normal(n_avg)
+        g.append(abs(np.sum(a * np.conj(b))) ** 2 / (np.sum(abs(a) ** 2) * np.sum(abs(b) ** 2)))
+    thr = float(stats.coherence_threshold(n_avg, 0.01))
+    assert np.mean(np.array(g) > thr) == pytest.approx(0.01, abs=0.006)
+
+
+def test_evidence_labels():
+    assert stats.evidence_label(-50) == "very strong"
+    assert stats.evidence_label(-7) == "strong"
+    assert stats.evidence_label(-3) == "positive"
+    assert stats.evidence_label(5).startswith("against")
+    w = stats.bic_weights([0.0, -20.0])
+    assert w[1] > 0.99
+
+
+# ---------------------------------------------------------------------------- residual analysis
+
+
+def test_residual_checks_white_vs_missing_dynamics():
+    """A white residual stays in the 99 % bands; a residual that is a filtered copy of the
+    input leaves them and shows above its noise floor in the residual FRF."""
+    case = hidden_effect_case(None, seed=3)
+    recs = prepare_records(case.measurements)
+    r = recs[0]
+    rng = np.random.default_rng(4)
+    white = rng.standard_normal(r.y_d.size) * 1e-6
+    ra = analyse("white", recs, [white], [r.y_d - white])
+    assert ra.acf_outside < 0.05 and ra.ccf_outside < 0.05
+    assert not ra.frf.significant.any() or ra.frf.significant.mean() < 0.1
+    assert any("passes the whiteness" in f or "no systematic" in f for f in ra.findings)
+    from scipy.signal import lfilter
+    leak = lfilter([0.0, 2e-5], [1.0, -0.9], r.v_d) + white
+    ra2 = analyse("leaky", recs, [leak - leak.mean()], [r.y_d - leak])
+    assert ra2.ccf_outside > 0.05
+    assert ra2.frf.significant.mean() > 0.5
+    assert any("correlated with the input" in f for f in ra2.findings)
+
+
+def test_findings_are_phrased_for_a_person():
+    case = hidden_effect_case("solvent_diffusion", seed=0)
+    res = _diagnose(case, candidates="solvent_diffusion", check_support=False)
+    text = " ".join(res.analysis_base.findings)
+    assert "overestimates the gain" in text and "leads the model" in text      # droop + phase lead at low f
+    assert "relaxes back" in text                                              # back-relaxation after the step
+
+
+# ---------------------------------------------------------------------------- records and specs
+
+
+def test_records_classification_and_levels():
+    s = signals.sweep(0.3, 0.1, 50.0, 20.0, 500.0)
+    ts = TimeSeries(s.t, s.v, 0 * s.v, rh=np.full(s.t.size, 50.0))       # no metadata: from the voltage
+    kind, band, _ = classify(ts)
+    assert kind == "broadband" and band[0] < 0.2 and 40 < band[1] <= 60
+    q = signals.square(1.0, t_on=5.0, t_off=5.0, cycles=2, fs=200.0)
+    ts2 = TimeSeries(q.t, q.v, 0 * q.v, rh=np.full(q.t.size, 50.0))
+    assert classify(ts2)[0] == "steps"
+    assert find_steps(q.v, 200.0).size == 4 - 1 or find_steps(q.v, 200.0).size == 3
+    t = signals.tone(0.5, 2.0, 10.0, 200.0)
+    assert classify(TimeSeries(t.t, t.v, 0 * t.v, rh=np.full(t.t.size, 50.0)))[0] == "tone"
+    assert amplitude_levels([0.1, 0.11, 0.4]) == pytest.approx([math.sqrt(0.1 * 0.11)] * 2 + [0.4])
+
+
+def test_parameter_roles_follow_the_effects():
+    dev = load_device("ipmc_pt_eg")
+    assert default_free(("double_layer",)) == ["kf", "Y", "beta_f"]
+    assert map_free(["kf", "Y", "beta_f", "Rs"], ("double_layer", "electrode_resistance"),
+                    ("double_layer", "fractional_coupling", "viscoelastic")) == ["kf0", "dma_scale", "beta_f"]
+    st = translate_start(dev, ("double_layer",), ("double_layer", "fractional_coupling"), (0.1, 50.0))
+    assert st["frac_a"] == 0.3 and st["kf0"] > dev["kf"]
+    spec = candidate_spec("humidity", ("double_layer",), ["kf", "Y", "beta_f"], [], dev, (0.1, 50.0), 3)
+    assert spec.per_rh == ["kf", "Y"] and spec.free == ["beta_f"]
+    spec = candidate_spec("solvent_diffusion", ("double_layer",), ["kf", "Y", "beta_f"], [], dev, (0.1, 50.0), 1)
+    lo, hi = spec.bounds["D_solvent"]
+    h = 0.5 * dev["t_polymer"]
+    assert h * h / hi == pytest.approx(0.2) and h * h / lo == pytest.approx(1e5)
+
+
+# ---------------------------------------------------------------------------- bad input
+
+
+def test_bad_input_messages(tmp_path):
+    case = hidden_effect_case(None, seed=0)
+    with pytest.raises(InputError, match="--free: Rs has no effect"):
+        diagnose(case.measurements, "ipmc_pt_eg", "none", free="kf,Rs")
+    with pytest.raises(InputError, match="--candidates: unknown"):
+        diagnose(case.measurements, "ipmc_pt_eg", "none", candidates="electrode_resistence")
+    with pytest.raises(InputError, match="already in the model"):
+        diagnose(case.measurements, "ipmc_pt_eg", "electrode_resistance", candidates="electrode_resistance")
+    f = np.geomspace(0.1, 50, 20)
+    path = write_frf(FRFData(f, np.ones(20, complex) * 1e-3, rh=50.0), tmp_path / "frf.csv")
+    with pytest.raises(InputError, match="frequency-response file"):
+        diagnose([path], "ipmc_pt_eg", "none")
+    sq = signals.square(0.2, t_on=5.0, t_off=5.0, cycles=1, fs=200.0)
+    ts = TimeSeries(sq.t, sq.v, 1e-3 * sq.v, rh=np.full(sq.t.size, 50.0), meta={"signal": sq.describe()})
+    with pytest.raises(InputError, match="at least one broadband"):
+        diagnose([ts], "ipmc_pt_eg", "none")
+
+
+# ---------------------------------------------------------------------------- outputs and command line
+
+
+def test_report_and_apply(tmp_path):
+    case = hidden_effect_case("electrode_resistance", seed=1)
+    res = _diagnose(case)
+    out = write_diagnosis(res, tmp_path / "d", apply=True)
+    d = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
+    assert set(d["base"]) >= {"effects", "rmse", "fit_pct", "bic"}
+    for row in d["ranking"]:
+        assert set(row) >= {"effect", "rmse_after", "fit_pct_after", "delta_bic", "p_value", "evidence", "explanation"}
+    assert [r["delta_bic"] for r in d["ranking"]] == sorted(r["delta_bic"] for r in d["ranking"])
+    assert d["verdict"]["missing_effect"] == "electrode_resistance" and 0 <= d["verdict"]["confidence"] <= 1
+    html = (tmp_path / "d" / "report.html").read_text()
+    assert "data:image/png;base64" in html and "src='http" not in html
+    for f in ("where_it_fails.png", "ranking.png", "overlay.png", "error_breakdown.png"):
+        assert (tmp_path / "d" / f).stat().st_size > 1000
+    dev = load_device(tmp_path / "d" / out["applied"]["written"])
+    assert "electrode_resistance" in dev.default_effects
+    assert dev["Rs"] == pytest.approx(case.truth_params["Rs"], rel=0.05)
+
+
+def test_cli_diagnose(tmp_path, capsys):
+    from nnmodel.cli import main
+    case = hidden_effect_case("solvent_diffusion", seed=2)
+    paths = []
+    for k, m in enumerate(case.measurements):
+        paths.append(str(write_timeseries(m, tmp_path / f"rec{k}.csv")))
+    rc = main(["diagnose", *paths, "--device", "ipmc_pt_eg", "--effects", "none", "--out", str(tmp_path / "o"),
+               "--apply", "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "verdict: missing effect = solvent_diffusion" in text
+    assert "error before/after adding solvent_diffusion" in text
+    raw = yaml.safe_load(next((tmp_path / "o").glob("*.yaml")).read_text())
+    assert "solvent_diffusion" in raw["default_effects"]
+    rc = main(["diagnose", paths[0], "--effects", "none", "--free", "kf,nonsense", "--out", str(tmp_path / "x")])
+    assert rc == 2
+    assert "unknown parameter 'nonsense'" in capsys.readouterr().err
+
+
+def test_cli_demo(tmp_path, capsys):
+    from nnmodel.cli import main
+    rc = main(["demo", "hidden-effect", "--effect", "viscoelastic", "--seed", "1", "--out", str(tmp_path / "demo")])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "ranking (most to least supported)" in text
+    assert "error before/after adding viscoelastic" in text
+    assert "-> correct" in text
+    assert (tmp_path / "demo" / "report.html").exists()
+
+
+def test_identify_extra_starts_backwards_compatible():
+    """The one addition to physics.identify: fit_lsq(..., extra_starts=[θ, ...])."""
+    from physics.compare import FRFOptions
+    from physics.identify import IdentificationProblem, build_targets, fit_lsq
+    case = hidden_effect_case(None, seed=0)
+    targets = build_targets(case.measurements, frf_options=FRFOptions())
+    prob = IdentificationProblem("ipmc_pt_eg", "none", targets, ["kf", "beta_f"])
+    f1 = fit_lsq(prob, n_starts=2)
+    f2 = fit_lsq(prob, n_starts=2, extra_starts=[[0.002, 1e-3]])
+    assert len(f2.starts) == len(f1.starts) + 1
+    assert f2.starts[-1]["theta_start"] == pytest.approx([0.002, 1e-3])
+    assert f2.theta == pytest.approx(f1.theta, rel=1e-4)
+    with pytest.raises(InputError, match="one value per free parameter"):
+        fit_lsq(prob, n_starts=1, extra_starts=[[0.002]])
