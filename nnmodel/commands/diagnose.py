@@ -62,9 +62,8 @@ def print_summary(res, file=None) -> None:
         cmp = c.comparison
         tag = "  <- missing" if c.effect == res.verdict.missing_effect else ""
         apart = f"  (cannot be told apart from {', '.join(c.indistinguishable_from)})" if c.indistinguishable_from else ""
-        from physics.diagnose.stats import evidence_label
         print(f"  {c.effect:22s} {1e6 * c.fit.rmse:15.4g} {c.fit.fit_pct:11.2f} {cmp.delta_bic:11.4g} "
-              f"{cmp.p_value:9.2g}  {evidence_label(cmp.delta_bic)}{tag}{apart}", file=file)
+              f"{cmp.p_value:9.2g}  {c.evidence(b)}{tag}{apart}", file=file)
     for c in res.candidates:
         if not c.evaluated:
             print(f"  {c.effect:22s} not evaluated: {c.reason}", file=file)

@@ -80,13 +80,23 @@ class CandidateResult:
     def evaluated(self) -> bool:
         return self.status == "evaluated"
 
+    def evidence(self, base: C.ModelFit) -> str:
+        """Kass–Raftery grade of ΔBIC — unless the error falls by less than 10 %: with
+        records far above their noise floor a tiny, irrelevant improvement can be
+        statistically detectable, and is then called what it is."""
+        d = self.comparison.delta_bic
+        gain = 1.0 - self.fit.rmse / base.rmse if base.rmse > 0 else 0.0
+        if d <= -2 and gain < MIN_IMPROVEMENT:
+            return f"detectable but negligible ({100 * gain:.2g} % lower error)"
+        return stats.evidence_label(d)
+
     def row(self, base: C.ModelFit) -> dict:
         f, c = self.fit, self.comparison
         out = {"effect": self.effect, "status": self.status}
         if self.evaluated:
             out.update({"rmse_after": f.rmse, "fit_pct_after": f.fit_pct, "delta_bic": c.delta_bic,
                         "delta_aic": c.delta_aic, "p_value": c.p_value, "test": c.test,
-                        "evidence": stats.evidence_label(c.delta_bic), "explanation": self.explanation,
+                        "evidence": self.evidence(base), "explanation": self.explanation,
                         "rmse_ratio": f.rmse / base.rmse if base.rmse > 0 else None,
                         "n_eff": c.n_eff, "tau_samples": c.tau, "extra_parameters": c.dk,
                         "parameters": {k: {"value": v, "std_error": f.std_errors.get(k),
@@ -487,7 +497,7 @@ def _explain(c: CandidateResult, base: C.ModelFit, noise: float) -> str:
     txt = (f"Adding {c.effect}" + (f" ({_fmt_params(vals, f.std_errors)})" if vals else "") +
            f" changes the RMS error from {1e6 * base.rmse:.4g} to {1e6 * f.rmse:.4g} µm (fit {base.fit_pct:.2f} → "
            f"{f.fit_pct:.2f} %); ΔBIC = {cmp.delta_bic:.4g} with n_eff = {cmp.n_eff:.4g} (τ = {cmp.tau:.3g} samples): "
-           f"{stats.evidence_label(cmp.delta_bic)} evidence; p = {cmp.p_value:.2g} ({cmp.test}).")
+           f"evidence: {c.evidence(base)}; p = {cmp.p_value:.2g} ({cmp.test}).")
     if c.effect == "humidity" and vals:
         txt += " Per-RH values: " + _fmt_params(vals, f.std_errors) + "."
     sig = c.signature or {}

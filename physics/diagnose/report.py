@@ -265,7 +265,7 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
         rep.image(d / "ranking.png", caption="ΔBIC (effective sample size) and RMS error after adding each effect")
         rep.table([{"effect": c.effect, "RMS after [µm]": 1e6 * c.fit.rmse, "fit after [%]": c.fit.fit_pct,
                     "ΔBIC": c.comparison.delta_bic, "p": c.comparison.p_value, "test": c.comparison.test,
-                    "evidence": _evidence(c), "signature": (c.signature or {}).get("score"),
+                    "evidence": c.evidence(res.base), "signature": (c.signature or {}).get("score"),
                     "cannot be told apart from": ", ".join(c.indistinguishable_from)} for c in res.ranking])
         for c in res.ranking:
             rep.paragraph(f"{c.effect}: {c.explanation}")
@@ -297,7 +297,3 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
         rep.json_block(jsonable(provenance), "provenance")
     rep.write(d / "report.html")
 
-
-def _evidence(c) -> str:
-    from .stats import evidence_label
-    return evidence_label(c.comparison.delta_bic)
