@@ -15,12 +15,6 @@ pytestmark = pytest.mark.slow
 SEEDS = (1, 2, 3, 4)
 
 
-@pytest.fixture(autouse=True)
-def _only_when_asked(request):
-    if "slow" not in (request.config.getoption("markexpr") or ""):
-        pytest.skip("heavy: run with -m slow")
-
-
 def _run(effect, seed, design):
     case = hidden_effect_case(effect, seed, design=design)
     with warnings.catch_warnings():

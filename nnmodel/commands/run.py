@@ -21,6 +21,10 @@ HELP = "run the end-to-end job on built-in defaults and write a report folder"
 
 def add_arguments(p):
     p.add_argument("--out", default="runs/quickstart", help="report folder")
+    p.add_argument("--models", default="ff,rbf,narx,lstm", help="neural models to train and compare")
+    p.add_argument("--dataset-config", default="quick", help="dataset preset (configs/datasets)")
+    p.add_argument("--max-time-s", type=float, default=75.0, help="training budget per neural model [s]")
+    p.add_argument("--physics-only", action="store_true", help="skip the dataset and neural-model stages")
 
 
 def _physics_stage(d: Path) -> dict:
@@ -52,10 +56,24 @@ def _physics_stage(d: Path) -> dict:
     return out
 
 
+def _neural_stage(d: Path, args) -> dict:
+    """generate (preset) → train-compare; returns the comparison summary."""
+    from nnmodel.dataset import generate
+    from nnmodel.traincompare import format_table, train_compare
+    ds = generate(d / "dataset", args.dataset_config, overwrite=True)
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    summary = train_compare(ds, models, d / "compare", max_time_s=args.max_time_s)
+    print(format_table(summary))
+    return summary
+
+
 def run(args) -> int:
     d = out_dir(args.out)
     t0 = time.perf_counter()
     report = {"physics": _physics_stage(d)}
+    if not args.physics_only:
+        report["neural"] = {k: v for k, v in _neural_stage(d, args).items() if k != "models"}
+        report["neural"]["report"] = "compare/report.html"
     report["runtime_s"] = time.perf_counter() - t0
     report["provenance"] = provenance()
     write_json(d / "report.json", report)
@@ -65,7 +83,13 @@ def run(args) -> int:
     for dev, r in report["physics"].items():
         html.append(f"{dev}: effects {', '.join(r['effects'])}\n  resonance by RH [Hz]: "
                     + ", ".join(f"{k} %: {v:.1f}" for k, v in r["resonance_Hz_by_rh"].items()))
+    if "neural" in report:
+        best = report["neural"].get("best_heldout", {})
+        html.append(f"neural models: best free-run NRMSE on held-out RH {best.get('model')} "
+                    f"{100 * best.get('nrmse', float('nan')):.2f} %; full comparison: compare/report.html")
     html.append("</pre>")
+    if "neural" in report:
+        html.append("<p><a href='compare/report.html'>neural-model comparison (train-compare report)</a></p>")
     html += [f"<h3>{name}</h3><img src='{name}' width='700'>" for name in imgs]
     html.append("</body></html>")
     write_text(d / "index.html", "\n".join(html))
