@@ -194,6 +194,10 @@ def test_hyper_parameters_follow_the_estimator_conventions():
         MODELS["ff"](activation="swish2")
     with pytest.raises(InputError, match="humidity"):
         MODELS["ff"](inputs="voltage+rh", **QUIET).fit(toy.records("linear2", 300))
+    short = MODELS["narx"](horizon=500, **QUIET)
+    with pytest.raises(InputError, match="shorter than one training window"):
+        short.fit(toy.records("linear2", 300))
+    assert not [k for k in vars(short) if k.endswith("_")]  # no half-trained state left
 
 
 def test_parameter_counts_match_the_architecture(linear_models):

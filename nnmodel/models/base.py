@@ -238,8 +238,6 @@ class NeuralModel:
     # ------------------------------------------------------------------ fitting
     def fit(self, train, val=None) -> "NeuralModel":
         """Train on ``train`` records (early stopping on the free-run error of ``val``)."""
-        from ..training import fit_core  # Lightning is imported only when training
-
         self._validate()
         train = check_records(train, "training")
         if val is not None:
@@ -252,6 +250,20 @@ class NeuralModel:
                              "records carry no relative humidity")
         use_rh = has_rh and self.inputs != "voltage"
         seed_all(self.seed)
+        try:
+            self._fit(train, val, fs, use_rh)
+        except BaseException:
+            for attr in self._LEARNED:  # never leave a half-trained model behind
+                self.__dict__.pop(attr, None)
+            raise
+        return self
+
+    _LEARNED = ("net_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
+                "init_report_")
+
+    def _fit(self, train, val, fs, use_rh) -> None:
+        from ..training import fit_core  # Lightning is imported only when training
+
         with torch_threads(self.num_threads):
             core = self._build_core(1 if use_rh else 0)
             min_len = core.n_init + 2
@@ -263,7 +275,7 @@ class NeuralModel:
             self.net_ = net
             self.inputs_ = ["voltage", "rh"] if use_rh else ["voltage"]
             self.fs_ = fs
-            self.rh_range_ = rh_range(train + val) if use_rh else None
+            self.rh_range_ = rh_range(train) if use_rh else None
             self.n_init_ = int(core.n_init)
             tr = [self._norm_record(r) for r in train]
             va = [self._norm_record(r) for r in val]
@@ -281,7 +293,6 @@ class NeuralModel:
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history
             core.eval()
-        return self
 
     def _norm_record(self, r: Record) -> _Seq:
         n = self.net_
