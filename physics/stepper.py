@@ -210,10 +210,12 @@ def _equilibrium_charge(net: BranchNetwork, vin: float) -> np.ndarray:
 
 
 def _newton(net, base, hg, vin, Z, tol):
-    """Solve Z = base + hg f(Z) by Newton's method (absolute step tolerance ``tol``, C/m²).
-    Convergence is quadratic, so the error left after a step below ``tol`` is ~tol²/|Z|.
+    """Solve Z = base + hg f(Z) by Newton's method (absolute tolerance ``tol``, C/m²).
+    Stops when the estimated remaining error θ/(1−θ)·|ΔZ| is below ``tol``, θ being the
+    observed contraction |ΔZ_k|/|ΔZ_k−1| (Hairer & Wanner, Solving ODEs II, §IV.8).
     Returns (Z, evaluation at the last iterate) or (None, None)."""
     n1 = net.n + 1
+    prev = np.inf
     for _ in range(20):
         ev = net.rhs_jacobian(Z, vin)
         J = ev[1]
@@ -221,8 +223,11 @@ def _newton(net, base, hg, vin, Z, tol):
         J.flat[::n1] += 1.0
         dZ = dgesv(J, base + hg * ev[0] - Z, overwrite_a=1, overwrite_b=1)[2]
         Z = Z + dZ
-        if np.abs(dZ).max() <= tol:
+        size = np.abs(dZ).max()
+        theta = size / prev
+        if size <= tol or (prev < np.inf and theta < 0.5 and theta / (1.0 - theta) * size <= tol):
             return Z, (ev[0],) + ev[2:]
+        prev = size
     return None, None
 
 
