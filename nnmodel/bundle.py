@@ -17,7 +17,6 @@ Loading never unpickles arbitrary objects: the card is JSON, the weights are rea
 from __future__ import annotations
 
 import datetime
-import hashlib
 import json
 import os
 import shutil
@@ -28,6 +27,7 @@ import numpy as np
 import torch
 
 from physics.errors import InputError
+from physics.fileio import sha256_file
 
 from .models import MODELS
 from .models.base import NeuralModel
@@ -52,13 +52,6 @@ def _package_version() -> str:
     except Exception:  # pragma: no cover - not installed
         return "unknown"
 
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _jsonable(obj):
@@ -121,7 +114,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             "package_version": _package_version(),
             "torch_version": torch.__version__,
             "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "weights": {"file": WEIGHTS, "sha256": _sha256(tmp / WEIGHTS), "format": "torch state_dict"},
+            "weights": {"file": WEIGHTS, "sha256": sha256_file(tmp / WEIGHTS), "format": "torch state_dict"},
         }
         (tmp / CARD).write_text(json.dumps(_jsonable(card), indent=2, allow_nan=False) + "\n",
                                 encoding="utf-8")
@@ -166,7 +159,7 @@ def load(path: str | os.PathLike) -> "Bundle":
     if wfile.parent.resolve() != folder.resolve() or not wfile.is_file():
         raise InputError(f"{folder}: weights file {wfile.name} missing or outside the bundle")
     expected = card.get("weights", {}).get("sha256")
-    if expected and _sha256(wfile) != expected:
+    if expected and sha256_file(wfile) != expected:
         raise InputError(f"{wfile}: content does not match the SHA-256 in {CARD} (corrupt or altered)")
     try:
         state = torch.load(wfile, map_location="cpu", weights_only=True)

@@ -28,7 +28,7 @@ import yaml
 from physics import signals
 from physics.device import config_dir
 from physics.errors import InputError
-from physics.fileio import write_json
+from physics.fileio import sha256_file, write_json
 from physics.model import ActuatorModel
 from physics.progress import Progress
 from physics.sensor import SensorModel
@@ -161,13 +161,6 @@ def _rh_series(spec: _Spec, t: np.ndarray) -> np.ndarray | float:
     return lo + (hi - lo) * frac
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
 
 def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool = False,
              progress: bool = True, **overrides) -> Path:
@@ -203,7 +196,7 @@ def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool
                     "rh_pct": spec.rh if np.ndim(spec.rh) == 0 else {"varying": list(spec.rh)},
                     "heldout_rh": spec.heldout, "extra_effects": list(spec.extra_effects),
                     "effects": list(model.effect_ids), "seed": spec.seed, "samples": int(sig.t.size),
-                    "sha256": _sha256(path)})
+                    "sha256": sha256_file(path)})
                 bar.update()
         meta = {"schema": SCHEMA, "name": out.name, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
                 "generator": {"tool": "eap generate", "device": cfg["device"], "effects": list(base.effect_ids),
@@ -276,7 +269,7 @@ def load_dataset(path: str | Path, verify: bool = True) -> Dataset:
             raise InputError(f"{mf}: listed file {e['path']} is missing")
         if e.get("split") not in SPLITS:
             raise InputError(f"{mf}: file {e['path']} has split {e.get('split')!r}; expected one of {SPLITS}")
-        if verify and _sha256(f) != e["sha256"]:
+        if verify and sha256_file(f) != e["sha256"]:
             raise InputError(f"{f}: content differs from the SHA-256 recorded in dataset.json "
                              f"(modified after generation)")
     return Dataset(path, meta)

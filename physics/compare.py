@@ -700,42 +700,8 @@ def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float 
     save(fig, path)
 
 
-def plot_bode_comparison(freq, curves: dict, path, *, coherence=None, bounds=None, title: str = "") -> None:
-    """Bode magnitude [mm/V] and phase [deg] of several complex responses on their own
-    masks; ``curves`` maps label → (freq, H, style dict); optional coherence panel and
-    magnitude confidence bounds (freq, lo, hi) of the measurement."""
-    import matplotlib.pyplot as plt
-    from .plotting import save
-    rows = 3 if coherence is not None else 2
-    fig, ax = plt.subplots(rows, 1, figsize=(7.5, 2.5 * rows), sharex=True)
-    for label, (f, H, style) in curves.items():
-        ok = np.isfinite(H) & (f > 0)
-        if not ok.any():
-            continue
-        ax[0].loglog(f[ok], 1e3 * np.abs(H[ok]), label=label, **style)
-        ax[1].semilogx(f[ok], np.degrees(np.unwrap(np.angle(H[ok]))), label=label, **style)
-    if bounds is not None:
-        fb, lo, hi = bounds
-        ok = np.isfinite(lo) & np.isfinite(hi) & (fb > 0)
-        ax[0].fill_between(fb[ok], 1e3 * np.maximum(lo[ok], 1e-30), 1e3 * hi[ok], color="C0", alpha=0.15,
-                           lw=0, label="95 % bounds")
-    ax[0].set_ylabel("|H| [mm/V]")
-    ax[1].set_ylabel("phase [deg]")
-    if coherence is not None:
-        fc, coh = coherence
-        ax[2].semilogx(fc[fc > 0], coh[fc > 0], color="k", lw=0.7)
-        ax[2].set_ylabel("coherence γ²")
-        ax[2].set_ylim(0, 1.05)
-    for a in ax:
-        a.grid(alpha=0.3, which="both")
-    ax[0].legend(fontsize=8)
-    ax[-1].set_xlabel("frequency [Hz]")
-    if title:
-        ax[0].set_title(title, fontsize=10)
-    save(fig, path)
-
-
 def _plot_bode_record(r: RecordComparison, path):
+    from .plotting import plot_bode_curves
     v = r.valid
     curves = {"measured (H1)" if r.kind == "timeseries" else "measured": (r.freq[v], r.H_meas[v], {"lw": 1.2})}
     if r.H_model_est is not None:
@@ -748,7 +714,7 @@ def _plot_bode_record(r: RecordComparison, path):
     fe = r.summary["frf_metrics"]
     je = fe.get("j_err_m_per_V")
     title = f"{Path(r.source).name}, RH {r.rh:.3g} %" + (f": J_err {1e3 * je:.3g} mm/V" if je is not None else "")
-    plot_bode_comparison(r.freq, curves, path, coherence=coh, bounds=bounds, title=title)
+    plot_bode_curves(curves, path, coherence=coh, bounds=bounds, title=title)
 
 
 def _plot_bands(res: ComparisonResult, path):

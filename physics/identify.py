@@ -1144,7 +1144,7 @@ def write_device(result: IdentificationResult, path, *, name: str | None = None,
 
 
 def _plot_target(result: IdentificationResult, k: int, path) -> None:
-    from .compare import plot_bode_comparison
+    from .plotting import plot_bode_curves
     prob = result.problem
     t = prob.targets[k]
     H0 = prob.responses(prob.theta0)[k]
@@ -1153,7 +1153,7 @@ def _plot_target(result: IdentificationResult, k: int, path) -> None:
     for name, f in result.fits.items():
         curves[f"fitted ({name})"] = (t.freq, prob.responses(f.theta)[k], {"lw": 1.1})
     coh = (t.freq, t.coherence) if t.coherence is not None else None
-    plot_bode_comparison(t.freq, curves, path, coherence=coh,
+    plot_bode_curves(curves, path, coherence=coh,
                          title=f"{Path(t.source).name}, RH {t.rh:g} %")
 
 

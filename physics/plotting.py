@@ -29,24 +29,45 @@ def plot_timeseries(t, channels: dict[str, tuple[np.ndarray, str]], path, title:
     save(fig, path)
 
 
-def plot_bode(freq, responses: dict[str, np.ndarray], path, unit: str = "m/V", title: str = "",
+def plot_bode(freq, responses: dict[str, np.ndarray], path, unit: str = "mm/V", title: str = "",
               coherence: np.ndarray | None = None) -> None:
-    """Bode magnitude and phase of complex responses ``{label: H(freq)}``; optional coherence."""
+    """Bode magnitude and phase of complex responses ``{label: H(freq)}`` in m/V (plotted in
+    ``unit``: mm/V or m/V); optional coherence on the same frequencies."""
+    curves = {label: (np.asarray(freq), np.asarray(H), {}) for label, H in responses.items()}
+    plot_bode_curves(curves, path, unit=unit, title=title,
+                     coherence=None if coherence is None else (np.asarray(freq), coherence))
+
+
+def plot_bode_curves(curves: dict, path, *, unit: str = "mm/V", coherence=None, bounds=None,
+                     title: str = "") -> None:
+    """Bode magnitude and phase [deg] of several complex responses [m/V] on their own
+    frequencies: ``curves`` maps label → (freq [Hz], H, matplotlib style dict).  Optional
+    coherence panel (freq, γ²) and magnitude confidence bounds (freq, lo, hi) [m/V]."""
+    scale = {"mm/V": 1e3, "m/V": 1.0, "um/V": 1e6}[unit]
     rows = 3 if coherence is not None else 2
-    fig, axes = plt.subplots(rows, 1, figsize=(7, 2.4 * rows), sharex=True)
-    for label, H in responses.items():
-        axes[0].loglog(freq, np.abs(H), label=label)
-        axes[1].semilogx(freq, np.degrees(np.unwrap(np.angle(H))), label=label)
-    axes[0].set_ylabel(f"|H| [{unit}]")
-    axes[1].set_ylabel("phase [deg]")
+    fig, ax = plt.subplots(rows, 1, figsize=(7.5, 2.5 * rows), sharex=True)
+    for label, (f, H, style) in curves.items():
+        ok = np.isfinite(H) & (f > 0)
+        if not ok.any():
+            continue
+        ax[0].loglog(f[ok], scale * np.abs(H[ok]), label=label, **style)
+        ax[1].semilogx(f[ok], np.degrees(np.unwrap(np.angle(H[ok]))), label=label, **style)
+    if bounds is not None:
+        fb, lo, hi = bounds
+        ok = np.isfinite(lo) & np.isfinite(hi) & (fb > 0)
+        ax[0].fill_between(fb[ok], scale * np.maximum(lo[ok], 1e-30), scale * hi[ok], color="C0", alpha=0.15,
+                           lw=0, label="95 % bounds")
+    ax[0].set_ylabel(f"|H| [{unit}]")
+    ax[1].set_ylabel("phase [deg]")
     if coherence is not None:
-        axes[2].semilogx(freq, coherence, color="k", lw=0.8)
-        axes[2].set_ylabel("coherence")
-        axes[2].set_ylim(0, 1.05)
-    for ax in axes:
-        ax.grid(alpha=0.3, which="both")
-    axes[0].legend(fontsize=8)
-    axes[-1].set_xlabel("frequency [Hz]")
+        fc, coh = coherence
+        ax[2].semilogx(fc[fc > 0], coh[fc > 0], color="k", lw=0.7)
+        ax[2].set_ylabel("coherence γ²")
+        ax[2].set_ylim(0, 1.05)
+    for a in ax:
+        a.grid(alpha=0.3, which="both")
+    ax[0].legend(fontsize=8)
+    ax[-1].set_xlabel("frequency [Hz]")
     if title:
-        axes[0].set_title(title)
+        ax[0].set_title(title, fontsize=10)
     save(fig, path)

@@ -18,7 +18,6 @@ Published figures (Champneys et al. 2024, arXiv:2405.10779, as quoted in
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time
@@ -28,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from physics.errors import InputError
-from physics.fileio import atomic_path, write_json, write_text
+from physics.fileio import atomic_path, sha256_file, write_json, write_text
 
 from ..data import Record
 from . import common
@@ -124,13 +123,6 @@ def find_data(path: str | os.PathLike | None = None) -> Path:
                      + "); pass --data PATH or set EAP_SILVERBOX")
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
 
 def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
     """The standard split as records: ``{"train": Record, "tests": {name: Record},
@@ -139,7 +131,7 @@ def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
     import pandas as pd
 
     p = find_data(path)
-    digest = _sha256(p)
+    digest = sha256_file(p)
     if verify and digest != SHA256:
         raise InputError(f"{p}: SHA-256 {digest} differs from the reference {SHA256}; "
                          "not the standard Silverbox file")
