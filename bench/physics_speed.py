@@ -14,7 +14,6 @@ import time
 
 import numpy as np
 
-import physics
 from physics import signals
 from physics.model import ActuatorModel
 

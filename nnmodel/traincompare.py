@@ -27,7 +27,6 @@ from physics.errors import InputError
 from physics.fileio import write_json
 from physics.frequency import frequency_response
 from physics.plotting import plt, save
-from physics.progress import Progress
 from physics.report import Report, write_csv
 from physics import signals
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from physics import metrics, signals, simulate
-from physics.compare import (CallablePredictor, FRFOptions, PhysicsPredictor, cluster_rh, compare,
+from physics.compare import (CallablePredictor, PhysicsPredictor, cluster_rh, compare,
                              default_bands, load_measurements, model_rh, parse_bands, residual_by_band,
                              thin_log, write_comparison_report)
 from physics.errors import InputError

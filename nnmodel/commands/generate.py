@@ -1,7 +1,6 @@
 """``eap generate``: synthetic training dataset from the physics simulator."""
 from __future__ import annotations
 
-import numpy as np
 
 from nnmodel.dataset import generate, load_dataset
 

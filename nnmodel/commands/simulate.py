@@ -6,7 +6,6 @@ import time
 import numpy as np
 
 from physics import signals
-from physics.errors import InputError
 from physics.fileio import atomic_path, write_json
 from physics.model import ActuatorModel
 from physics.plotting import plot_timeseries

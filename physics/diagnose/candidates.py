@@ -49,7 +49,6 @@ from typing import Sequence
 
 import numpy as np
 
-from .. import metrics
 from ..device import Device
 from ..errors import InputError, ModelError
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)

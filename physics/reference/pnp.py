@@ -520,7 +520,7 @@ class Integrator:
         f, Jn = slab.rates(y)
         h = tol.h_restart
         i_out = 1
-        y_prev = None
+        y_prev, h_last = None, None
         while t < t_in[-1] - 1e-12 * max(1.0, abs(t_in[-1])):
             stop = stops[np.searchsorted(stops, t + 1e-12 * max(1.0, abs(t)), side="right")]
             h = min(h, tol.h_max, stop - t)

@@ -1,0 +1,247 @@
+"""Fitting (bounded least squares, the thesis Nelder–Mead) and Jacobian-based uncertainty."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy import optimize, stats
+
+from ..errors import InputError, ModelError
+from .problem import IdentificationProblem
+from .settings import COND_LIMIT, CORR_LIMIT, REL_SE_LIMIT, THESIS_MAX_ITER, THESIS_TOL
+
+
+
+
+@dataclass
+class Fit:
+    """One fit's result: values θ (SI), search coordinates x, uncertainties and diagnostics."""
+
+    method: str
+    theta: np.ndarray
+    x: np.ndarray
+    cost: float                     # 0.5‖r‖² of the method's own residual (J_err for Nelder–Mead)
+    j_err: float                    # eq. 13 at θ [m/V]
+    nfev: int                       # model evaluations (finite-difference ones included)
+    nit: int | None
+    success: bool
+    message: str
+    wall_s: float
+    std_error: np.ndarray           # SI, 1σ (inf when not determined)
+    rel_std_error: np.ndarray
+    ci95: np.ndarray                # (p, 2) SI
+    correlation: np.ndarray         # (p, p), NaN when undetermined
+    singular_values: np.ndarray
+    condition: float
+    s2: float                       # residual variance (reduced chi-square with coherence weights)
+    dof: int
+    warnings: list[str] = field(default_factory=list)
+    starts: list[dict] = field(default_factory=list)
+    residual_kind: str = ""
+
+
+def jacobian(fun, x, steps) -> tuple[np.ndarray, np.ndarray]:
+    """(r(x), central-difference Jacobian ∂r/∂x) with per-coordinate ``steps``."""
+    r0 = fun(x)
+    J = np.empty((r0.size, x.size))
+    for i in range(x.size):
+        xp, xm = x.copy(), x.copy()
+        xp[i] += steps[i]
+        xm[i] -= steps[i]
+        J[:, i] = (fun(xp) - fun(xm)) / (2 * steps[i])
+    return r0, J
+
+
+def _autocorr_time(e: np.ndarray, max_lag: int = 2000) -> float:
+    """Integrated autocorrelation time 1 + 2 Σ ρ_k (summed until ρ first drops below 0.05)."""
+    e = e - e.mean()
+    n = e.size
+    if n < 4 or not np.any(e):
+        return 1.0
+    f = np.fft.rfft(e, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[:min(n, max_lag)]
+    ac /= ac[0]
+    tau = 1.0
+    for k in range(1, ac.size):
+        if ac[k] < 0.05:
+            break
+        tau += 2 * ac[k]
+    return float(tau)
+
+
+def uncertainty(problem: IdentificationProblem, x: np.ndarray, fun, *, inflate: float = 1.0,
+                labels: Sequence[str] | None = None) -> dict:
+    """Bates–Watts linearised uncertainty at ``x`` for residual function ``fun(x)`` (see
+    the module doc).  Returns std errors (x and SI), correlations, s², singular values,
+    condition number and the list of identifiability warnings."""
+    params = problem.params
+    labels = list(labels or problem.labels)
+    lo, hi = problem.x_bounds
+    steps = np.array([1e-4 if p.scale == "log" else 1e-4 * max(hi[i] - lo[i], 1e-12)
+                      for i, p in enumerate(params)])
+    # keep the stencil inside the bounds
+    xc = np.clip(x, lo + steps, hi - steps)
+    r, J = jacobian(fun, xc, steps)
+    n, p = J.shape
+    dof = n - p
+    if dof <= 0:
+        raise InputError(f"{n} residuals cannot determine {p} parameters; give more frequencies or records")
+    s2 = float(r @ r / dof) * inflate
+    U, S, Vt = np.linalg.svd(J, full_matrices=False)
+    smax = S[0] if S.size and S[0] > 0 else 1.0
+    good = S > smax * 1e-12
+    inv_s2 = np.where(good, 1.0 / np.where(good, S, 1.0) ** 2, np.inf)
+    cond = float(smax / S[-1]) if S[-1] > 0 else math.inf
+    with np.errstate(invalid="ignore", over="ignore"):
+        if np.all(good):
+            cov = s2 * (Vt.T * inv_s2) @ Vt
+        else:
+            cov = np.full((p, p), np.nan)
+            cov_g = s2 * (Vt[good].T * inv_s2[good]) @ Vt[good]
+            for i in range(p):
+                for j in range(p):
+                    cov[i, j] = cov_g[i, j]
+            weak = np.abs(Vt[~good]).max(axis=0) > 1e-3
+            for i in np.flatnonzero(weak):
+                cov[i, :] = np.nan
+                cov[:, i] = np.nan
+                cov[i, i] = np.inf
+    se_x = np.sqrt(np.diag(cov))
+    theta = problem.from_x(x)
+    tq = float(stats.t.ppf(0.975, dof))
+    se, rel, ci = np.empty(p), np.empty(p), np.empty((p, 2))
+    for i, par in enumerate(params):
+        if par.scale == "log":
+            se[i] = theta[i] * se_x[i]
+            rel[i] = se_x[i]
+            with np.errstate(over="ignore", invalid="ignore"):
+                ci[i] = theta[i] * np.exp(-tq * se_x[i]), theta[i] * np.exp(tq * se_x[i])
+        else:
+            se[i] = se_x[i]
+            ref = abs(theta[i]) if abs(theta[i]) > 1e-3 * (par.upper - par.lower) else (par.upper - par.lower)
+            rel[i] = se_x[i] / ref
+            ci[i] = theta[i] - tq * se_x[i], theta[i] + tq * se_x[i]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(d, d)
+    corr[~np.isfinite(corr)] = np.nan
+    np.fill_diagonal(corr, 1.0)
+    warns = []
+    for i, lab in enumerate(labels):
+        if not np.isfinite(rel[i]) or rel[i] > REL_SE_LIMIT:
+            warns.append(f"{lab} is not identifiable from these data: relative standard error "
+                         f"{'∞' if not np.isfinite(rel[i]) else f'{100 * rel[i]:.3g} %'} (> {100 * REL_SE_LIMIT:g} %)")
+        if x[i] <= lo[i] + 1e-6 * max(1.0, abs(lo[i])) or x[i] >= hi[i] - 1e-6 * max(1.0, abs(hi[i])):
+            warns.append(f"{lab} ended on a bound of its search range [{params[i].lower:g}, {params[i].upper:g}] "
+                         f"{params[i].unit}: widen the bounds or fix it; its interval is not meaningful")
+    for i in range(p):
+        for j in range(i + 1, p):
+            if np.isfinite(corr[i, j]) and abs(corr[i, j]) > CORR_LIMIT:
+                warns.append(f"{labels[i]} and {labels[j]} are strongly correlated (ρ = {corr[i, j]:+.4f}): "
+                             "only a combination of them is determined by these data")
+    if not math.isfinite(cond) or cond > COND_LIMIT:
+        v = Vt[-1]
+        names = [labels[i] for i in np.argsort(-np.abs(v)) if abs(v[i]) > 0.2]
+        warns.append(f"the Jacobian is near-singular (condition number {cond:.3g}); the weakest direction "
+                     f"involves {', '.join(names)}")
+    return {"r": r, "J": J, "s2": s2, "dof": dof, "se_x": se_x, "std_error": se, "rel_std_error": rel,
+            "ci95": ci, "correlation": corr, "singular_values": S, "condition": cond, "warnings": warns}
+
+
+def _starts(problem: IdentificationProblem, n_starts: int, seed: int, spread: float) -> list[np.ndarray]:
+    x0 = problem.to_x(problem.theta0)
+    lo, hi = problem.x_bounds
+    out = [x0]
+    if n_starts <= 1:
+        return out
+    sampler = stats.qmc.LatinHypercube(d=x0.size, seed=seed)
+    u = sampler.random(n_starts - 1)
+    for row in u:
+        x = np.empty_like(x0)
+        for i, p in enumerate(problem.params):
+            if p.scale == "log":
+                a = max(lo[i], x0[i] - spread * math.log(10))
+                b = min(hi[i], x0[i] + spread * math.log(10))
+            else:
+                a, b = lo[i], hi[i]
+            x[i] = a + row[i] * (b - a)
+        out.append(x)
+    return out
+
+
+def _interior(x, lo, hi):
+    span = hi - lo
+    return np.clip(x, lo + 1e-9 * span, hi - 1e-9 * span)
+
+
+def fit_lsq(problem: IdentificationProblem, *, n_starts: int = 5, seed: int = 0, start_spread: float = 1.0,
+            max_nfev: int | None = None, extra_starts: Sequence[Sequence[float]] = ()) -> Fit:
+    """Bounded multi-start least squares (see the module doc).  ``extra_starts``: further
+    start points θ (SI, one value per free parameter, in ``problem.labels`` order) tried
+    after the usual ones (e.g. a grid over a parameter whose scale is unknown)."""
+    t0 = time.perf_counter()
+    n0 = problem.n_eval
+    lo, hi = problem.x_bounds
+    best, starts = None, []
+    points = _starts(problem, n_starts, seed, start_spread)
+    for th in extra_starts:
+        th = np.asarray(th, dtype=float)
+        if th.shape != (len(problem.params),):
+            raise InputError(f"extra start {th.tolist()} needs one value per free parameter ({', '.join(problem.labels)})")
+        points.append(problem.to_x(th))
+    for k, xs in enumerate(points):
+        xs = _interior(xs, lo, hi)
+        try:
+            res = optimize.least_squares(problem.residuals_x, xs, bounds=(lo, hi), method="trf",
+                                         x_scale=1.0, max_nfev=max_nfev or 100 * xs.size)
+        except (ModelError, FloatingPointError) as exc:  # a start where the model cannot be solved
+            starts.append({"start": k, "theta_start": problem.from_x(xs).tolist(), "error": str(exc)})
+            continue
+        starts.append({"start": k, "theta_start": problem.from_x(xs).tolist(),
+                       "theta": problem.from_x(res.x).tolist(), "cost": float(res.cost),
+                       "nfev": int(res.nfev), "status": int(res.status)})
+        if best is None or res.cost < best.cost:
+            best = res
+    if best is None:
+        raise ModelError("every start of the least-squares fit failed: " + "; ".join(s.get("error", "") for s in starts))
+    x = best.x
+    inflate = 1.0
+    if problem.residual == "time":
+        inflate = _autocorr_time(problem.residuals_x(x))
+    unc = uncertainty(problem, x, problem.residuals_x, inflate=inflate)
+    theta = problem.from_x(x)
+    return Fit("lsq", theta, x, float(best.cost), problem.j_err(theta), problem.n_eval - n0, None,
+               bool(best.success), str(best.message), time.perf_counter() - t0, unc["std_error"],
+               unc["rel_std_error"], unc["ci95"], unc["correlation"], unc["singular_values"], unc["condition"],
+               unc["s2"], unc["dof"], unc["warnings"], starts,
+               {"frf": "complex log FRF", "time": "time record", "both": "complex log FRF + time record"}[problem.residual]
+               + (f" (covariance × {inflate:.3g}, residual autocorrelation time)" if inflate != 1.0 else ""))
+
+
+def fit_nelder_mead(problem: IdentificationProblem, *, max_iter: int = THESIS_MAX_ITER,
+                    tol: float = THESIS_TOL) -> Fit:
+    """The thesis procedure: Nelder–Mead on J_err (eq. 13), see the module doc."""
+    t0 = time.perf_counter()
+    n0 = problem.n_eval
+    theta0 = problem.theta0
+    scale = np.where(theta0 != 0, np.abs(theta0), 1.0)
+    bnds = [(p.lower / s, p.upper / s) for p, s in zip(problem.params, scale)]
+    res = optimize.minimize(lambda z: problem.normalised_jerr(z, scale), theta0 / scale, method="Nelder-Mead",
+                            bounds=bnds, options={"maxiter": max_iter, "xatol": tol, "fatol": tol,
+                                                  "adaptive": False})
+    theta = res.x * scale
+    # uncertainty with the residuals of eq. 13 (|H_model| − |H_meas|), in the search coordinates
+    unc = uncertainty(problem, problem.to_x(theta), lambda x: problem.magnitude_residuals(problem.from_x(x)))
+    return Fit("nelder-mead", theta, problem.to_x(theta), float(res.fun * problem._mag_rms), problem.j_err(theta),
+               problem.n_eval - n0, int(res.nit), bool(res.success), str(res.message), time.perf_counter() - t0,
+               unc["std_error"], unc["rel_std_error"], unc["ci95"], unc["correlation"], unc["singular_values"],
+               unc["condition"], unc["s2"], unc["dof"], unc["warnings"], [],
+               "FRF magnitude, eq. 13 (|H_model| − |H_meas|)")
+
+
+# ============================================================================ driver
+
+

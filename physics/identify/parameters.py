@@ -1,0 +1,182 @@
+"""Free parameters: names, starting values, bounds and log/linear scaling."""
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..device import all_param_specs
+from ..errors import InputError
+from ..parameters import BASE_SECTIONS
+from ..units import to_si
+from .settings import DEFAULT_DECADES
+
+
+
+
+_HINTS = {
+    "Y": "Y sets the modulus only with viscoelastic off (the DMA table does otherwise) and "
+         "without layered_beam (Y_polymer then); with humidity it can be fitted per RH (per_rh)",
+    "Y_polymer": "Y_polymer is used only with layered_beam and viscoelastic off",
+    "Y_electrode": "Y_electrode is used only with layered_beam",
+    "kf": "with fractional_coupling on, the load is kf0/((j2πf)^a (j2πf+p)^b) and kf is unused "
+          "(a humidity map on kf then acts as a ratio on kf0)",
+    "kf0": "kf0 is used only with fractional_coupling",
+    "frac_a": "fractional orders are used only with fractional_coupling",
+    "frac_b": "frac_b is used only with fractional_coupling",
+    "frac_p": "frac_p has no effect when frac_b = 0",
+    "D_solvent": "D_solvent is used only with solvent_diffusion",
+    "Rs": "Rs is used only with electrode_resistance",
+    "C_max": "C_max acts only in the large-signal (time-domain) response of nonlinear_charge",
+}
+
+
+class IdentifiabilityWarning(UserWarning):
+    """A parameter is not (or poorly) determined by the data."""
+
+
+# ============================================================================ parameters
+
+
+def _section_of() -> dict[str, str]:
+    from ..effects import EFFECTS
+    out = {}
+    for sec, specs in BASE_SECTIONS.items():
+        for k in specs:
+            out[k] = sec
+    for eff in EFFECTS.values():
+        for p in eff.params:
+            out[p.name] = eff.id
+    return out
+
+
+@dataclass
+class FreeParameter:
+    """A free parameter in SI units. ``scale`` ``"log"`` searches x = ln θ, ``"linear"``
+    x = θ; ``rh`` is the RH level [%] of a per-RH value (None: shared)."""
+
+    name: str
+    initial: float
+    lower: float
+    upper: float
+    scale: str
+    unit: str
+    rh: float | None = None
+
+    @property
+    def label(self) -> str:
+        return self.name if self.rh is None else f"{self.name}@RH{self.rh:g}"
+
+    def to_x(self, theta):
+        return np.log(theta) if self.scale == "log" else np.asarray(theta, dtype=float)
+
+    def from_x(self, x):
+        return np.exp(x) if self.scale == "log" else np.asarray(x, dtype=float)
+
+    @property
+    def x_bounds(self) -> tuple[float, float]:
+        return float(self.to_x(self.lower)), float(self.to_x(self.upper))
+
+
+def parse_names(text: str | Sequence[str] | None, what: str = "--free") -> list[str]:
+    """``"kf,beta_f"`` or a list → names (duplicates refused)."""
+    if text is None:
+        return []
+    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if str(n).strip()]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(f"{what}: parameter(s) {', '.join(dup)} given twice")
+    return names
+
+
+def _value_with_unit(text: str, name: str, spec_unit: str, where: str) -> float:
+    parts = text.strip().split(None, 1)
+    try:
+        v = float(parts[0])
+    except (ValueError, IndexError):
+        raise InputError(f"{where}: {name}={text!r}: expected a number, optionally followed by a unit "
+                         f"(SI unit {spec_unit!r})") from None
+    if len(parts) == 2:
+        try:
+            v = to_si(v, parts[1], spec_unit)
+        except Exception as exc:
+            raise InputError(f"{where}: {name}={text!r}: {exc}") from None
+    if not math.isfinite(v):
+        raise InputError(f"{where}: {name}={text!r} is not finite")
+    return float(v)
+
+
+def parse_assignments(text: str | Mapping | None, *, ranges: bool = False, what: str = "--start") -> dict:
+    """``"kf=0.004,Y=0.2 GPa"`` → {name: SI value}; with ``ranges`` ``"kf=1e-4:1e-1"`` →
+    {name: (lo, hi)} (a unit after the range applies to both ends).  SI when no unit."""
+    if text is None:
+        return {}
+    specs = all_param_specs()
+    items = text.items() if isinstance(text, Mapping) else \
+        [tuple(s.split("=", 1)) if "=" in s else (s, None) for s in text.split(",") if s.strip()]
+    out = {}
+    for name, val in items:
+        name = str(name).strip()
+        if val is None:
+            raise InputError(f"{what}: item {name!r} must look like name=value")
+        if name not in specs:
+            raise InputError(f"{what}: unknown parameter {name!r}{_suggest(name, specs)}")
+        unit = specs[name].unit
+        if ranges:
+            if isinstance(val, (tuple, list)):
+                lo, hi = (float(v) for v in val)
+            else:
+                body, _, u = str(val).strip().partition(" ")
+                if ":" not in body:
+                    raise InputError(f"{what}: {name}={val!r}: expected lo:hi, e.g. {name}=1e-4:1e-1")
+                a, b = body.split(":", 1)
+                lo = _value_with_unit(f"{a} {u}".strip(), name, unit, what)
+                hi = _value_with_unit(f"{b} {u}".strip(), name, unit, what)
+            if not lo < hi:
+                raise InputError(f"{what}: {name}: lower bound {lo:g} must be below upper bound {hi:g}")
+            out[name] = (lo, hi)
+        else:
+            out[name] = float(val) if isinstance(val, (int, float)) else _value_with_unit(str(val), name, unit, what)
+    return out
+
+
+def _suggest(key: str, known) -> str:
+    close = difflib.get_close_matches(key, list(known), n=3)
+    return f" (did you mean {', '.join(close)}?)" if close else ""
+
+
+def _default_scale(spec) -> str:
+    return "linear" if (spec.unit == "1" and spec.lo >= 0 and spec.hi <= 1) else "log"
+
+
+def _make_param(name, initial, spec, bounds, rh=None) -> FreeParameter:
+    scale = _default_scale(spec)
+    where = f"parameter {name}" + (f" at RH {rh:g} %" if rh is not None else "")
+    if bounds is not None:
+        lo, hi = bounds
+        if lo < spec.lo or hi > spec.hi:
+            raise InputError(f"bounds of {name}: [{lo:g}, {hi:g}] {spec.unit} leave the admissible range "
+                             f"[{spec.lo:g}, {spec.hi:g}] {spec.unit}")
+    elif scale == "log":
+        if initial <= 0:
+            raise InputError(f"{where}: start value {initial:g} {spec.unit} is not positive; it is searched "
+                             f"in log space: give a positive start value (start={{'{name}': ...}} / --start)")
+        lo = max(spec.lo, initial * 10 ** -DEFAULT_DECADES)
+        hi = min(spec.hi, initial * 10 ** DEFAULT_DECADES)
+    else:
+        lo, hi = spec.lo, spec.hi
+    if scale == "log" and lo <= 0:
+        if bounds is not None:
+            raise InputError(f"bounds of {name}: the lower bound must be positive (log-space search)")
+    if not (lo <= initial <= hi):
+        raise InputError(f"{where}: start value {initial:g} {spec.unit} is outside its bounds "
+                         f"[{lo:g}, {hi:g}] {spec.unit}")
+    return FreeParameter(name, float(initial), float(lo), float(hi), scale, spec.unit, rh)
+
+
+# ============================================================================ targets
+
+

@@ -1,0 +1,152 @@
+"""Plots and the report folder of an identification."""
+from __future__ import annotations
+
+import datetime as _dt
+from pathlib import Path
+
+import numpy as np
+
+from .devicefile import write_device
+from .result import IdentificationResult
+
+
+
+
+def _plot_target(result: IdentificationResult, k: int, path) -> None:
+    from ..plotting import plot_bode_curves
+    prob = result.problem
+    t = prob.targets[k]
+    H0 = prob.responses(prob.theta0)[k]
+    curves = {"measured": (t.freq, t.response, {"lw": 1.3, "marker": ".", "ms": 3, "ls": "none"}),
+              "start": (t.freq, H0, {"lw": 0.9, "ls": ":"})}
+    for name, f in result.fits.items():
+        curves[f"fitted ({name})"] = (t.freq, prob.responses(f.theta)[k], {"lw": 1.1})
+    coh = (t.freq, t.coherence) if t.coherence is not None else None
+    plot_bode_curves(curves, path, coherence=coh,
+                         title=f"{Path(t.source).name}, RH {t.rh:g} %")
+
+
+def _plot_corr(labels, corr, path) -> None:
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    p = len(labels)
+    fig, ax = plt.subplots(figsize=(1.0 + 0.7 * p, 0.8 + 0.6 * p))
+    im = ax.imshow(np.nan_to_num(corr), vmin=-1, vmax=1, cmap="RdBu_r")
+    ax.set_xticks(range(p))
+    ax.set_yticks(range(p))
+    ax.set_xticklabels(labels, rotation=45, ha="right", fontsize=8)
+    ax.set_yticklabels(labels, fontsize=8)
+    for i in range(p):
+        for j in range(p):
+            c = corr[i, j]
+            ax.text(j, i, "–" if not np.isfinite(c) else f"{c:.2f}", ha="center", va="center", fontsize=7,
+                    color="white" if np.isfinite(c) and abs(c) > 0.6 else "black")
+    fig.colorbar(im, ax=ax, shrink=0.8)
+    ax.set_title("parameter correlation", fontsize=9)
+    save(fig, path)
+
+
+def _plot_rh_maps(result: IdentificationResult, path) -> None:
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    prob, fit = result.problem, result.fit
+    names = prob.per_rh
+    fig, axes = plt.subplots(1, len(names), figsize=(4 * len(names), 3.2), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        idx = [i for i, p in enumerate(prob.params) if p.name == name]
+        rh = [prob.params[i].rh for i in idx]
+        ax.errorbar(rh, fit.theta[idx], yerr=1.96 * fit.std_error[idx], fmt="o-", capsize=3, label="identified")
+        ax.plot(rh, [prob.params[i].initial for i in idx], "x:", color="gray", label="start")
+        ax.set_xlabel("RH [%]")
+        ax.set_ylabel(f"{name} [{prob.params[idx[0]].unit}]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    save(fig, path)
+
+
+def write_identification(result: IdentificationResult, out_dir, *, name: str | None = None,
+                         provenance: dict | None = None, protect=()) -> dict:
+    """Write the fitted device ``NAME.yaml``, ``report.json``, ``parameters.csv``, PNGs and
+    ``report.html`` into ``out_dir``; returns the JSON dict (with the file names)."""
+    from ..fileio import write_json
+    from ..report import Report, jsonable, write_csv
+    d = Path(out_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    date = _dt.date.today().isoformat()
+    dev_name = name or f"{result.problem.device.name}_identified"
+    dev_path = write_device(result, d / f"{dev_name}.yaml", name=dev_name, date=date, protect=protect)
+    files = [dev_path.name]
+    pngs = []
+    for k, t in enumerate(result.problem.targets):
+        fn = f"bode_{k:02d}_{Path(t.source).stem[:40]}.png".replace(" ", "_")
+        _plot_target(result, k, d / fn)
+        pngs.append(fn)
+    if len(result.problem.params) > 1:
+        _plot_corr(result.problem.labels, result.fit.correlation, d / "correlation.png")
+        pngs.append("correlation.png")
+    if result.problem.per_rh:
+        _plot_rh_maps(result, d / "rh_maps.png")
+        pngs.append("rh_maps.png")
+    rows = result.param_rows()
+    write_csv(rows, d / "parameters.csv")
+    files += ["parameters.csv", "report.json", "report.html"] + pngs
+    out = result.to_dict()
+    out["files"] = files
+    out["device_written"] = dev_path.name
+    if provenance:
+        out["provenance"] = provenance
+    write_json(d / "report.json", jsonable(out))
+    # HTML
+    fit = result.fit
+    rep = Report("Parameter identification",
+                 subtitle=f"{result.problem.device.name} [{', '.join(result.problem.effects)}] from "
+                          f"{len(result.sources)} measurement(s); fitted device: {dev_path.name}")
+    for w in result.warnings:
+        rep.warning(w)
+    rep.heading("Result")
+    rep.table({"method": fit.method, "residual": fit.residual_kind, "J_err start (eq. 13) [m/V]": result.j_err_initial,
+               "J_err fitted [m/V]": fit.j_err, "model evaluations": result.n_evaluations,
+               "wall time [s]": result.wall_s, "residual variance s²": fit.s2, "degrees of freedom": fit.dof,
+               "condition number of J": fit.condition, "converged": fit.success, "message": fit.message,
+               "thesis loop, same data [days]": result.thesis_equivalent_s() / 86400})
+    rep.table([{k: r[k] for k in ("parameter", "unit", "initial", "value", "std_error", "rel_std_error",
+                                  "ci95_lo", "ci95_hi", "scale", "lower_bound", "upper_bound")} for r in rows],
+              caption="identified parameters (SI; std_error 1σ, Bates & Watts linear approximation scaled by s²; "
+                      "95 % interval)")
+    if result.problem.per_rh:
+        table_v = []
+        for lv in result.problem.levels:
+            row = {"RH [%]": lv}
+            for i, p in enumerate(result.problem.params):
+                if p.rh == lv:
+                    row[f"{p.name} [{p.unit}]"] = float(fit.theta[i])
+                    row[f"± {p.name}"] = float(fit.std_error[i])
+            table_v.append(row)
+        rep.heading("Per-RH values (Table V style)")
+        rep.table(table_v)
+        rep.image(d / "rh_maps.png", caption="per-RH values with 95 % intervals")
+    if "correlation.png" in pngs:
+        rep.image(d / "correlation.png", caption="correlation matrix of the estimates")
+    for name_, f in result.fits.items():
+        if name_ != result.primary:
+            rep.heading(f"Also fitted: {name_}")
+            rep.table([{k: r[k] for k in ("parameter", "value", "std_error", "rel_std_error")}
+                       for r in result.param_rows(f)],
+                      caption=f"{f.method}: J_err {f.j_err:.4g} m/V, {f.nfev} evaluations, {f.nit} iterations, "
+                              f"{f.message}")
+            for w in f.warnings:
+                rep.warning(f"{name_}: {w}")
+    if fit.starts:
+        rep.heading("Multi-start")
+        rep.table([{"start": s["start"], "cost": s.get("cost"), "evaluations": s.get("nfev"),
+                    **{lab: v for lab, v in zip(result.problem.labels, s.get("theta", []))}} for s in fit.starts])
+    rep.heading("Measured and fitted frequency responses")
+    for fn in pngs:
+        if fn.startswith("bode_"):
+            rep.image(d / fn, caption=fn)
+    rep.heading("Settings")
+    rep.json_block(jsonable(result.settings), "settings")
+    if provenance:
+        rep.json_block(provenance, "provenance")
+    rep.write(d / "report.html")
+    return out

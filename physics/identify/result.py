@@ -1,0 +1,158 @@
+"""The identification result and the ``identify`` entry point."""
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+
+from ..compare import (FRFOptions, load_measurements, source_name)
+from ..device import Device
+from ..errors import InputError
+from ..threads import single_threaded
+from .fitting import Fit, fit_lsq, fit_nelder_mead
+from .parameters import IdentifiabilityWarning, parse_assignments, parse_names
+from .problem import IdentificationProblem, build_targets
+from .settings import THESIS_MAX_ITER, THESIS_SECONDS_PER_FREQUENCY, THESIS_TOL
+
+
+
+
+@dataclass
+class IdentificationResult:
+    """Everything :func:`identify` found; ``fit`` is the one the fitted ``device`` uses."""
+
+    problem: IdentificationProblem
+    fits: dict[str, Fit]
+    primary: str
+    device: Device
+    j_err_initial: float
+    sources: list[str]
+    settings: dict
+    wall_s: float
+
+    @property
+    def fit(self) -> Fit:
+        return self.fits[self.primary]
+
+    @property
+    def values(self) -> dict[str, float]:
+        """Fitted values {label: SI value}."""
+        return dict(zip(self.problem.labels, self.fit.theta.tolist()))
+
+    @property
+    def std_errors(self) -> dict[str, float]:
+        return dict(zip(self.problem.labels, self.fit.std_error.tolist()))
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self.fit.warnings)
+
+    @property
+    def n_evaluations(self) -> int:
+        return self.problem.n_eval
+
+    def thesis_equivalent_s(self, iterations: int = THESIS_MAX_ITER) -> float:
+        """Wall time of the thesis loop for the same data: ``iterations`` × 15 min per
+        frequency × number of fitted frequencies (one model evaluation per iteration —
+        a lower bound: Nelder–Mead needs 1–2 evaluations per iteration plus shrinks)."""
+        n_f = sum(t.freq.size for t in self.problem.targets)
+        return iterations * THESIS_SECONDS_PER_FREQUENCY * n_f
+
+    def param_rows(self, fit: Fit | None = None) -> list[dict]:
+        fit = fit or self.fit
+        rows = []
+        for i, p in enumerate(self.problem.params):
+            rows.append({"parameter": p.label, "name": p.name, "rh_pct": p.rh, "unit": p.unit, "scale": p.scale,
+                         "initial": p.initial, "value": float(fit.theta[i]), "std_error": float(fit.std_error[i]),
+                         "rel_std_error": float(fit.rel_std_error[i]), "ci95_lo": float(fit.ci95[i, 0]),
+                         "ci95_hi": float(fit.ci95[i, 1]), "lower_bound": p.lower, "upper_bound": p.upper})
+        return rows
+
+    def to_dict(self) -> dict:
+        from ..report import jsonable
+        fits = {}
+        for name, f in self.fits.items():
+            fits[name] = {"method": f.method, "residual": f.residual_kind, "parameters": self.param_rows(f),
+                          "correlation": {"labels": self.problem.labels, "matrix": f.correlation.tolist()},
+                          "cost": f.cost, "j_err_m_per_V": f.j_err, "model_evaluations": f.nfev,
+                          "iterations": f.nit, "success": f.success, "message": f.message, "wall_s": f.wall_s,
+                          "residual_variance_s2": f.s2, "dof": f.dof, "condition_number": f.condition,
+                          "singular_values": f.singular_values.tolist(), "warnings": f.warnings,
+                          "starts": f.starts}
+        return jsonable({
+            "device": self.problem.device.name, "device_file": self.problem.device.path,
+            "effects": list(self.problem.effects), "free": self.problem.free, "per_rh": self.problem.per_rh,
+            "rh_levels_pct": self.problem.levels, "primary": self.primary, "fits": fits,
+            "j_err_initial_m_per_V": self.j_err_initial, "j_err_final_m_per_V": self.fit.j_err,
+            "model_evaluations": self.n_evaluations, "wall_s": self.wall_s,
+            "thesis_loop_equivalent_s": self.thesis_equivalent_s(),
+            "thesis_loop_assumption": "100 Nelder-Mead iterations x 1 model evaluation x 15 min per frequency "
+                                      "point x number of fitted frequencies (COMSOL, thesis ch. 1 §5)",
+            "speedup_vs_thesis_loop": self.thesis_equivalent_s() / max(self.wall_s, 1e-9),
+            "targets": [{"source": t.source, "rh_pct": t.rh, "frequencies": int(t.freq.size),
+                         "f_min_Hz": float(t.freq.min()), "f_max_Hz": float(t.freq.max()),
+                         "sensor_bandwidth_Hz": t.sensor_bandwidth, "estimator": t.estimator}
+                        for t in self.problem.targets],
+            "settings": self.settings, "warnings": self.warnings})
+
+
+@single_threaded
+def identify(measurements: Sequence, device, effects=None, free: Sequence[str] | str = (), *,
+             per_rh: Sequence[str] | str = (), method: str = "lsq", n_starts: int | None = None, seed: int = 0,
+             start: Mapping | str | None = None, bounds: Mapping | str | None = None, residual: str = "frf",
+             fit_phase: bool = True, frf_options: FRFOptions | None = None, min_coherence: float = 0.0,
+             weighting: str = "coherence", rh_tolerance: float = 2.5, sensor_bandwidth="auto",
+             n_modes: int = 4, start_spread: float = 1.0, rh: float | None = None, skip_s: float = 0.0,
+             max_nfev: int | None = None, warn: bool = True) -> IdentificationResult:
+    """Identify ``free`` (shared) and ``per_rh`` parameters of ``device`` with ``effects``
+    from ``measurements`` (paths, :class:`TimeSeries` or :class:`FRFData`).
+
+    ``method``: ``"lsq"`` (default), ``"nelder-mead"`` (thesis) or ``"both"`` (the device
+    uses the least-squares fit).  ``start``/``bounds``: {name: SI value} / {name: (lo, hi)}
+    or the text forms ``"kf=0.004,Y=0.2 GPa"`` / ``"kf=1e-4:1e-1"``.  ``n_starts`` defaults
+    to 5 for FRF residuals and 1 for time residuals.  Identifiability problems are
+    listed in the result and, with ``warn``, issued as :class:`IdentifiabilityWarning`.
+    See the module doc for everything else."""
+    t0 = time.perf_counter()
+    if method not in ("lsq", "nelder-mead", "both"):
+        raise InputError(f"method {method!r}: expected lsq, nelder-mead or both")
+    if n_starts is None:
+        n_starts = 5 if residual == "frf" else 1
+    if int(n_starts) < 1:
+        raise InputError(f"n_starts={n_starts!r} must be at least 1")
+    ms = load_measurements(measurements, rh=rh)
+    targets = build_targets(ms, frf_options=frf_options, min_coherence=min_coherence, weighting=weighting,
+                            rh_tolerance=rh_tolerance, sensor_bandwidth=sensor_bandwidth, default_rh=rh)
+    problem = IdentificationProblem(device, effects, targets, parse_names(free), parse_names(per_rh, "--per-rh"),
+                                    start=parse_assignments(start), bounds=parse_assignments(bounds, ranges=True,
+                                                                                             what="--bounds"),
+                                    n_modes=n_modes, fit_phase=fit_phase, residual=residual, skip_s=skip_s)
+    j0 = problem.j_err(problem.theta0)
+    fits: dict[str, Fit] = {}
+    if method in ("nelder-mead", "both"):
+        fits["nelder-mead"] = fit_nelder_mead(problem)
+    if method in ("lsq", "both"):
+        fits["lsq"] = fit_lsq(problem, n_starts=int(n_starts), seed=seed, start_spread=start_spread,
+                              max_nfev=max_nfev)
+    primary = "lsq" if "lsq" in fits else "nelder-mead"
+    dev = problem.device_for(fits[primary].theta)
+    sources = [source_name(m, k) for k, m in enumerate(ms)]
+    settings = {"method": method, "n_starts": n_starts, "seed": seed, "start_spread_decades": start_spread,
+                "residual": residual, "fit_phase": fit_phase, "weighting": weighting,
+                "min_coherence": min_coherence, "rh_tolerance_pct": rh_tolerance,
+                "sensor_bandwidth": sensor_bandwidth, "n_modes": n_modes, "skip_s": skip_s,
+                "frf": vars(frf_options or FRFOptions()).copy(),
+                "thesis_nelder_mead": {"max_iter": THESIS_MAX_ITER, "xatol": THESIS_TOL, "fatol": THESIS_TOL,
+                                       "tolerance_on": "parameters / start values and J_err / RMS |H_meas|"}}
+    res = IdentificationResult(problem, fits, primary, dev, j0, sources, settings, time.perf_counter() - t0)
+    if warn:
+        for w in res.warnings:
+            warnings.warn(w, IdentifiabilityWarning, stacklevel=2)
+    return res
+
+
+# ============================================================================ device file
+
+
