@@ -1,0 +1,244 @@
+"""Model against measurement: per-record metrics, by band, by RH, overall."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .. import metrics
+from ..errors import InputError
+from ..frfdata import FRFData
+from ..timeseries import TimeSeries
+from .frf import FRFOptions, default_bands, estimate_record_frf, frf_errors, residual_by_band, sensor_bandwidth_of, sensor_lowpass, sensor_response, thin_log, valid_points
+from .measurements import cluster_rh, model_rh, source_name
+from .predictors import Predictor, _check_output
+
+
+
+@dataclass
+class RecordComparison:
+    """Result for one measurement (see :func:`compare`); arrays in SI units."""
+
+    source: str
+    kind: str                          # "timeseries" or "frf"
+    rh: float
+    time: np.ndarray | None = None
+    measured: np.ndarray | None = None     # offset-aligned measurement [m]
+    predicted: np.ndarray | None = None    # model output [m]
+    freq: np.ndarray | None = None
+    H_meas: np.ndarray | None = None
+    H_model_est: np.ndarray | None = None
+    H_model_closed: np.ndarray | None = None
+    coherence: np.ndarray | None = None
+    mag_bounds: tuple[np.ndarray, np.ndarray] | None = None
+    valid: np.ndarray | None = None
+    summary: dict = field(default_factory=dict)
+
+    @property
+    def H_model(self) -> np.ndarray | None:
+        """The model response used for the FRF errors (closed form when available)."""
+        return self.H_model_closed if self.H_model_closed is not None else self.H_model_est
+
+
+@dataclass
+class ComparisonResult:
+    predictor: dict
+    records: list[RecordComparison]
+    by_rh: list[dict]
+    overall: dict
+    settings: dict
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"model": self.predictor, "settings": self.settings, "overall": self.overall,
+                "records": [dict(source=r.source, kind=r.kind, rh_pct=r.rh, **r.summary) for r in self.records],
+                "by_rh": self.by_rh, "warnings": self.warnings}
+
+
+def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOptions | None = None,
+            offset: str = "mean", skip_s: float = 0.0, min_coherence: float = 0.0,
+            bands: Sequence[tuple[float, float]] | None = None, rh_tolerance: float = 2.5,
+            sensor_bandwidth="auto") -> ComparisonResult:
+    """Compare ``predictor`` with measurements (loaded :class:`TimeSeries` /
+    :class:`FRFData`, see :func:`load_measurements`); see the module doc for the metrics.
+
+    ``offset``: ``"mean"`` removes the best constant offset between measurement and model
+    (default), ``"none"`` keeps it; ``skip_s`` [s] excludes a start-up interval from the
+    time metrics; ``min_coherence`` (γ²) excludes poorly measured frequencies from the FRF
+    errors; ``bands`` [(f_lo, f_hi), ...] Hz (default: decades over the compared range)."""
+    if not isinstance(predictor, Predictor):
+        raise InputError(f"compare needs a Predictor (PhysicsPredictor or CallablePredictor), "
+                         f"got {type(predictor).__name__}")
+    if offset not in ("mean", "none"):
+        raise InputError(f"offset {offset!r}: expected 'mean' or 'none'")
+    if not (skip_s >= 0 and math.isfinite(skip_s)):
+        raise InputError(f"skip_s={skip_s!r} must be a non-negative number of seconds")
+    if not 0 <= min_coherence <= 1:
+        raise InputError(f"min_coherence={min_coherence!r} must lie within 0–1")
+    opts = frf_options or FRFOptions()
+    ms = list(measurements)
+    if not ms:
+        raise InputError("no measurement to compare with")
+    warnings_: list[str] = []
+    recs: list[RecordComparison] = []
+    for k, m in enumerate(ms):
+        where = source_name(m, k)
+        if isinstance(m, TimeSeries):
+            recs.append(_compare_record(m, where, predictor, opts, offset, skip_s, min_coherence,
+                                        sensor_bandwidth, rh_tolerance))
+        elif isinstance(m, FRFData):
+            if not predictor.has_closed_form:
+                warnings_.append(f"{where}: a frequency-response file needs a model with a closed-form "
+                                 f"response; {predictor.name} has none, so this file was skipped")
+                continue
+            recs.append(_compare_frf(m, where, predictor, min_coherence, sensor_bandwidth))
+        else:
+            raise InputError(f"{where}: expected a TimeSeries or FRFData, got {type(m).__name__}")
+    if not recs:
+        raise InputError("nothing could be compared (see the warnings: " + "; ".join(warnings_) + ")")
+    # bands
+    if bands is None:
+        fmin = min(float(r.freq[r.valid].min()) for r in recs if r.valid is not None and r.valid.any()) \
+            if any(r.valid is not None and r.valid.any() for r in recs) else None
+        fmax = max(float(r.freq[r.valid].max()) for r in recs if r.valid is not None and r.valid.any()) \
+            if fmin is not None else None
+        bands = default_bands(fmin, fmax) if fmin is not None and fmax > fmin else []
+    bands = [(float(a), float(b)) for a, b in bands]
+    for r in recs:
+        _band_errors(r, bands)
+    levels = cluster_rh([r.rh for r in recs], rh_tolerance)
+    by_rh = _by_rh(recs, levels)
+    overall = _overall(recs)
+    settings = {"offset": offset, "skip_s": skip_s, "min_coherence": min_coherence,
+                "bands_Hz": [list(b) for b in bands], "rh_tolerance_pct": rh_tolerance,
+                "sensor_bandwidth": sensor_bandwidth, "frf": vars(opts).copy()}
+    return ComparisonResult(predictor.describe(), recs, by_rh, overall, settings, warnings_)
+
+def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_coh, sb_setting,
+                    rh_tolerance):
+    if ts.deflection is None:
+        raise InputError(f"{where}: has no deflection column; a measurement needs deflection_m")
+    rh = ts.rh if ts.rh is not None else None
+    if rh is None:
+        raise InputError(f"{where}: no relative humidity (rh_pct); give the RH explicitly")
+    rh_arg = model_rh(rh, ts.fs, rh_tolerance)
+    yhat = _check_output(predictor(ts.voltage, rh_arg, ts.fs), ts.n, predictor.name)
+    bw = sensor_bandwidth_of(ts, sb_setting)
+    yhat = sensor_lowpass(yhat, ts.fs, bw)
+    y = ts.deflection
+    i0 = int(math.ceil(skip_s * ts.fs))
+    if ts.n - i0 < 3:
+        raise InputError(f"{where}: skip_s={skip_s:g} s leaves fewer than 3 samples")
+    e_raw = y - yhat
+    c = float(np.mean(e_raw[i0:])) if offset == "mean" else 0.0
+    y_al = y - c
+    tm = metrics.summary(y_al[i0:], yhat[i0:])
+    tm["offset_removed_m"] = c
+    tm["skip_s"] = skip_s
+    # frequency domain
+    settings = opts.settings_for(ts)
+    est_m, info = estimate_record_frf(ts, y, opts, settings=settings)
+    est_p, _ = estimate_record_frf(ts, yhat, opts, settings=settings)
+    valid = valid_points(est_m, min_coh)
+    sel = np.zeros_like(valid)
+    idx = np.flatnonzero(valid)
+    if idx.size:
+        sel[idx[thin_log(est_m.freq[idx], opts.max_points)]] = True
+    f = est_m.freq
+    Hc = None
+    mean = float(np.median(rh))
+    if predictor.has_closed_form:
+        Hc = np.full(f.shape, np.nan, dtype=complex)
+        pos = f > 0
+        Hc[pos] = predictor.frequency_response(f[pos], mean) * sensor_response(f[pos], bw)
+    rec = RecordComparison(where, "timeseries", mean, time=ts.time - ts.time[0], measured=y_al,
+                           predicted=yhat, freq=f, H_meas=est_m.response, H_model_est=est_p.response,
+                           H_model_closed=Hc, coherence=est_m.coherence, mag_bounds=est_m.mag_bounds,
+                           valid=sel)
+    fe = frf_errors(f, est_m.response, rec.H_model, sel)
+    fe_est = frf_errors(f, est_m.response, est_p.response, sel)
+    fe["j_err_estimated_m_per_V"] = fe_est["j_err_m_per_V"]
+    fe["j_err_reference"] = "closed form" if Hc is not None else "H1 estimate of the simulated output"
+    fe["mean_coherence"] = float(np.mean(est_m.coherence[sel])) if sel.any() else None
+    fe["estimator"] = info
+    rec.summary = {"n_samples": ts.n, "fs_Hz": ts.fs, "duration_s": ts.duration,
+                   "sensor_bandwidth_Hz": bw, "time_metrics": tm, "frf_metrics": fe}
+    return rec
+
+
+def _compare_frf(frf: FRFData, where, predictor, min_coh, sb_setting):
+    if frf.rh is None:
+        raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH explicitly")
+    rh = float(np.mean(frf.rh))
+    bw = sensor_bandwidth_of(frf, sb_setting)
+    Hc = predictor.frequency_response(frf.freq, rh) * sensor_response(frf.freq, bw)
+    valid = np.ones(frf.freq.shape, bool)
+    if frf.coherence is not None and min_coh > 0:
+        valid &= frf.coherence >= min_coh
+    rec = RecordComparison(where, "frf", rh, freq=frf.freq, H_meas=frf.response, H_model_closed=Hc,
+                           coherence=frf.coherence, valid=valid)
+    fe = frf_errors(frf.freq, frf.response, Hc, valid)
+    fe["j_err_reference"] = "closed form"
+    fe["mean_coherence"] = float(np.mean(frf.coherence[valid])) if frf.coherence is not None and valid.any() else None
+    rec.summary = {"n_frequencies": int(frf.freq.size), "sensor_bandwidth_Hz": bw, "frf_metrics": fe}
+    return rec
+
+
+def _band_errors(r: RecordComparison, bands):
+    rows = []
+    if r.kind == "timeseries":
+        fs = r.summary["fs_Hz"]
+        e = r.measured - r.predicted
+        i0 = int(math.ceil(r.summary["time_metrics"]["skip_s"] * fs))
+        tb = residual_by_band(e[i0:], r.measured[i0:], fs, bands)
+    else:
+        tb = [{} for _ in bands]
+    for k, ((lo, hi), t) in enumerate(zip(bands, tb)):
+        upper = (r.freq <= hi) if k == len(bands) - 1 else (r.freq < hi)   # each point in one band
+        m = r.valid & (r.freq >= lo) & upper
+        row = {"band_Hz": [lo, hi], **{k: v for k, v in t.items() if k != "band_Hz"}}
+        row.update(frf_errors(r.freq, r.H_meas, r.H_model, m))
+        rows.append(row)
+    r.summary["bands"] = rows
+
+
+def _by_rh(recs, levels) -> list[dict]:
+    out = []
+    for lv in sorted(set(levels)):
+        group = [r for r, l in zip(recs, levels) if l == lv]
+        ts = [r for r in group if r.kind == "timeseries"]
+        jes = [r.summary["frf_metrics"]["j_err_m_per_V"] for r in group
+               if r.summary["frf_metrics"]["j_err_m_per_V"] is not None]
+        lm = [r.summary["frf_metrics"]["log_mag_rms_dB"] for r in group
+              if r.summary["frf_metrics"]["log_mag_rms_dB"] is not None]
+        row = {"rh_pct": lv, "records": len(group),
+               "fit_percent": float(np.mean([r.summary["time_metrics"]["fit_percent"] for r in ts])) if ts else None,
+               "nrmse": float(np.mean([r.summary["time_metrics"]["nrmse"] for r in ts])) if ts else None,
+               "correlation": float(np.mean([r.summary["time_metrics"]["correlation"] for r in ts])) if ts else None,
+               "j_err_m_per_V": float(np.sqrt(np.mean(np.square(jes)))) if jes else None,
+               "log_mag_rms_dB": float(np.sqrt(np.mean(np.square(lm)))) if lm else None}
+        out.append(row)
+    return out
+
+
+def _overall(recs) -> dict:
+    ts = [r for r in recs if r.kind == "timeseries"]
+    out: dict = {"records": len(recs)}
+    if ts:
+        tms = [r.summary["time_metrics"] for r in ts]
+        out.update({"fit_percent_mean": float(np.mean([t["fit_percent"] for t in tms])),
+                    "fit_percent_min": float(np.min([t["fit_percent"] for t in tms])),
+                    "nrmse_mean": float(np.mean([t["nrmse"] for t in tms])),
+                    "correlation_mean": float(np.mean([t["correlation"] for t in tms])),
+                    "rmse_m_rms": float(np.sqrt(np.mean([t["rmse"] ** 2 for t in tms])))})
+    # J_err over all compared frequency points of all records (eq. 13 on the union)
+    a, b = [], []
+    for r in recs:
+        if r.valid is not None and r.valid.any() and r.H_model is not None:
+            a.append(np.abs(r.H_meas[r.valid]))
+            b.append(np.abs(r.H_model[r.valid]))
+    if a:
+        out["j_err_m_per_V"] = metrics.j_err(np.concatenate(a), np.concatenate(b))
+    return out

@@ -1,0 +1,206 @@
+"""Frequency-response estimation settings, sensor dynamics, bands and FRF error measures."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal as sps
+
+from .. import metrics
+from ..errors import InputError
+from ..frf_estimation import FRFEstimate, estimate_frf
+from ..timeseries import TimeSeries
+
+
+@dataclass
+class FRFOptions:
+    """How a time record's frequency response is estimated.
+
+    ``method="auto"`` chooses from the record's excitation (``meta["signal"]``, written by
+    ``eap simulate``): a multisine of ≥ 2 periods → one period per segment, boxcar window,
+    no overlap (leakage-free H1 over the periods); a single sweep or a single multisine
+    period → the whole record, boxcar (one average: the coherence is then 1 by
+    construction and carries no information); anything else (noise, lab records) → Welch
+    with Hann windows of ``nperseg`` samples (default n/8), 50 % overlap.  ``nperseg``,
+    ``window``, ``overlap`` override the choice.  ``band`` [Hz] keeps (f_lo, f_hi); by
+    default the excitation's band from the metadata, if any.  ``max_points`` thins the
+    estimate to about that many log-spaced frequencies (nearest lines; 0 keeps all): a
+    balanced weight per decade and a bounded cost."""
+
+    method: str = "auto"
+    nperseg: int | None = None
+    window: str | None = None
+    overlap: float | None = None
+    band: tuple[float, float] | None = None
+    max_points: int = 400
+    min_input_power: float = 1e-3
+
+    def settings_for(self, ts: TimeSeries) -> dict:
+        """Keyword arguments for :func:`estimate_frf` for record ``ts``."""
+        n = ts.n
+        sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
+        kind = str(sig.get("kind", "")) if self.method == "auto" else ""
+        if self.method not in ("auto", "welch", "periodic", "whole"):
+            raise InputError(f"FRF method {self.method!r}: expected auto, welch, periodic or whole")
+        kw: dict = {}
+        chosen = self.method
+        if self.method == "periodic" or (kind == "multisine" and int(sig.get("periods", 1)) >= 2):
+            period = sig.get("period_s")
+            if period is None and self.nperseg is None:
+                raise InputError(f"{ts.source or 'record'}: periodic FRF estimation needs the period "
+                                 "(meta signal.period_s) or an explicit nperseg")
+            nper = self.nperseg or int(round(float(period) * ts.fs))
+            kw = dict(nperseg=nper, window="boxcar", overlap=0.0)
+            chosen = "periodic"
+        elif self.method == "whole" or kind in ("sweep", "multisine"):
+            kw = dict(nperseg=n, window="boxcar", overlap=0.0)
+            chosen = "whole"
+        else:
+            kw = dict(nperseg=self.nperseg or max(n // 8, 16), window="hann", overlap=0.5)
+            chosen = "welch"
+        if self.nperseg is not None:
+            kw["nperseg"] = int(self.nperseg)
+        if self.window is not None:
+            kw["window"] = self.window
+        if self.overlap is not None:
+            kw["overlap"] = float(self.overlap)
+        kw["nperseg"] = min(int(kw["nperseg"]), n)
+        band = self.band
+        if band is None and "f_start_Hz" in sig and "f_stop_Hz" in sig:
+            band = (float(sig["f_start_Hz"]), float(sig["f_stop_Hz"]))
+        if band is not None:
+            kw["band"] = (float(band[0]), float(band[1]))
+        kw["min_input_power"] = self.min_input_power
+        kw["_method"] = chosen
+        return kw
+
+
+def estimate_record_frf(ts: TimeSeries, y: np.ndarray, options: FRFOptions, *,
+                        settings: dict | None = None) -> tuple[FRFEstimate, dict]:
+    """H1 estimate from the record's voltage to ``y`` (its deflection or a model output)."""
+    kw = dict(settings or options.settings_for(ts))
+    method = kw.pop("_method", "custom")
+    try:
+        est = estimate_frf(ts.voltage, y, ts.fs, **kw)
+    except InputError as exc:
+        raise InputError(f"{ts.source or 'record'}: FRF estimation failed: {exc}") from None
+    return est, {"method": method, **{k: v for k, v in kw.items() if k != "min_input_power"}}
+
+
+def thin_log(freq: np.ndarray, max_points: int) -> np.ndarray:
+    """Indices of about ``max_points`` frequencies spread evenly in log-frequency (the
+    nearest line to each of ``max_points`` log-spaced targets, duplicates removed)."""
+    n = freq.size
+    if max_points <= 0 or n <= max_points:
+        return np.arange(n)
+    lf = np.log(freq)
+    targets = np.linspace(lf[0], lf[-1], max_points)
+    right = np.clip(np.searchsorted(lf, targets), 0, n - 1)
+    left = np.clip(right - 1, 0, n - 1)
+    nearer = np.where(np.abs(lf[left] - targets) <= np.abs(lf[right] - targets), left, right)
+    return np.unique(nearer)
+
+
+def valid_points(est: FRFEstimate, min_coherence: float) -> np.ndarray:
+    """Mask of excited, positive frequencies whose coherence reaches ``min_coherence``."""
+    ok = est.excited & (est.freq > 0) & np.isfinite(est.response)
+    if est.coherence is not None and min_coherence > 0:
+        ok &= est.coherence >= min_coherence
+    return ok
+
+
+# ============================================================================ sensor
+
+
+def sensor_bandwidth_of(m, setting) -> float | None:
+    """The sensor low-pass cut-off [Hz] to apply for measurement ``m``: ``setting`` if a
+    number, the record's ``meta["sensor"]["bandwidth"]`` if ``"auto"``, else ``None``."""
+    if setting is None or setting == "none":
+        return None
+    if setting == "auto":
+        sensor = m.meta.get("sensor") if isinstance(getattr(m, "meta", None), dict) else None
+        bw = sensor.get("bandwidth") if isinstance(sensor, dict) else None
+        return float(bw) if isinstance(bw, (int, float)) and bw > 0 else None
+    try:
+        bw = float(setting)
+    except (TypeError, ValueError):
+        raise InputError(f"sensor bandwidth {setting!r}: expected a frequency in Hz, 'auto' or 'none'") from None
+    if not (math.isfinite(bw) and bw > 0):
+        raise InputError(f"sensor bandwidth {setting!r} Hz must be positive")
+    return bw
+
+
+def sensor_response(freq, bandwidth: float | None) -> np.ndarray:
+    """First-order sensor response 1/(1 + j f/f_c) (1 when ``bandwidth`` is None)."""
+    f = np.asarray(freq, dtype=float)
+    if bandwidth is None:
+        return np.ones(f.shape, dtype=complex)
+    return 1.0 / (1.0 + 1j * f / bandwidth)
+
+
+def sensor_lowpass(y: np.ndarray, fs: float, bandwidth: float | None) -> np.ndarray:
+    """The same first-order low-pass in time (bilinear, started in steady state), as
+    :class:`physics.sensor.SensorModel` applies it."""
+    if bandwidth is None:
+        return y
+    b, a = sps.bilinear([1.0], [1.0 / (2 * np.pi * bandwidth), 1.0], fs)
+    out, _ = sps.lfilter(b, a, y, zi=sps.lfilter_zi(b, a) * y[0])
+    return out
+
+
+# ============================================================================ comparison
+
+
+def default_bands(f_lo: float, f_hi: float) -> list[tuple[float, float]]:
+    """Decade bands covering [f_lo, f_hi] Hz (edges at powers of ten)."""
+    if not (0 < f_lo < f_hi):
+        raise InputError(f"frequency bands need 0 < f_lo < f_hi, got {f_lo:g}, {f_hi:g} Hz")
+    edges = [f_lo] + [10.0 ** k for k in range(int(math.floor(math.log10(f_lo))) + 1,
+                                               int(math.ceil(math.log10(f_hi))))
+                      if f_lo < 10.0 ** k < f_hi] + [f_hi]
+    return list(zip(edges[:-1], edges[1:]))
+
+
+def parse_bands(text: str) -> list[tuple[float, float]]:
+    """``"0.1,1,10,50"`` (band edges in Hz) → [(0.1, 1), (1, 10), (10, 50)]."""
+    try:
+        edges = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"bands {text!r}: expected comma-separated band edges in Hz, e.g. 0.1,1,10,50") from None
+    if len(edges) < 2 or any(e <= 0 for e in edges) or np.any(np.diff(edges) <= 0):
+        raise InputError(f"bands {text!r}: need at least two positive, increasing edges in Hz")
+    return list(zip(edges[:-1], edges[1:]))
+
+
+def frf_errors(freq, H_meas, H_model, mask=None) -> dict:
+    """FRF error measures on the points ``mask``: J_err (eq. 13) [m/V], RMS log-magnitude
+    error [dB], RMS phase error [deg] (wrapped difference), number of points."""
+    m = np.ones(np.shape(freq), bool) if mask is None else np.asarray(mask, bool)
+    if not m.any():
+        return {"n_points": 0, "j_err_m_per_V": None, "log_mag_rms_dB": None, "phase_rms_deg": None}
+    ratio = H_model[m] / H_meas[m]
+    return {"n_points": int(m.sum()),
+            "j_err_m_per_V": metrics.j_err(np.abs(H_meas[m]), np.abs(H_model[m])),
+            "log_mag_rms_dB": float(np.sqrt(np.mean((20 * np.log10(np.abs(ratio))) ** 2))),
+            "phase_rms_deg": float(np.sqrt(np.mean(np.degrees(np.angle(ratio)) ** 2)))}
+
+
+def residual_by_band(e: np.ndarray, y: np.ndarray, fs: float, bands) -> list[dict]:
+    """RMS of the residual ``e`` [m] within each band and its ratio to the RMS of the
+    (offset-free) measurement ``y`` in that band (one-sided spectra, Parseval)."""
+    n = e.size
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    E, Y = np.fft.rfft(e), np.fft.rfft(y - y.mean())
+    w = np.full(f.size, 2.0)
+    w[0] = 1.0
+    if n % 2 == 0:
+        w[-1] = 1.0
+    out = []
+    for lo, hi in bands:
+        m = (f >= lo) & (f < hi) if hi != bands[-1][1] else (f >= lo) & (f <= hi)
+        pe = float(np.sum(w[m] * np.abs(E[m]) ** 2)) / n ** 2
+        py = float(np.sum(w[m] * np.abs(Y[m]) ** 2)) / n ** 2
+        out.append({"band_Hz": [lo, hi], "residual_rms_m": math.sqrt(pe),
+                    "nrmse_in_band": math.sqrt(pe / py) if py > 0 else None})
+    return out

@@ -1,0 +1,96 @@
+"""Measurement input: time series and FRF files, record names, RH levels and the RH given to a model."""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..errors import InputError
+from ..frfdata import FRFData, read_frf
+from ..timeseries import TimeSeries, read_timeseries
+
+
+def is_frf_file(path) -> bool:
+    """True when a CSV's header has a ``freq_Hz`` column (a frequency-response file)."""
+    p = Path(path)
+    if p.suffix.lower() != ".csv" or not p.is_file():
+        return False
+    with open(p, encoding="utf-8-sig") as fh:
+        header = fh.readline()
+    return "freq_hz" in [h.strip().lower() for h in header.split(",")]
+
+
+def load_measurements(items: Iterable, *, rh: float | None = None, columns: dict | None = None,
+                      fs: float | None = None, resample: bool = False) -> list[TimeSeries | FRFData]:
+    """Measurements from paths (time-series ``.csv``/``.mat`` or FRF ``.csv``, told apart by
+    the ``freq_Hz`` column) or ready :class:`TimeSeries`/:class:`FRFData` objects.
+
+    ``rh`` [%] for records without RH; ``columns``/``fs`` as in
+    :func:`physics.timeseries.read_timeseries` (time series only)."""
+    out: list[TimeSeries | FRFData] = []
+    for item in items:
+        if isinstance(item, (TimeSeries, FRFData)):
+            out.append(item)
+            continue
+        if not isinstance(item, (str, Path)):
+            raise InputError(f"measurement {item!r}: expected a file path, a TimeSeries or an FRFData")
+        if is_frf_file(item):
+            frf = read_frf(item)
+            if frf.rh is None and rh is not None:
+                frf = replace(frf, rh=float(rh))
+            out.append(frf)
+        else:
+            out.append(read_timeseries(item, columns=columns, fs=fs, rh=rh, resample=resample))
+    if not out:
+        raise InputError("no measurement given: pass at least one time-series or FRF file")
+    return out
+
+
+def source_name(m, k: int) -> str:
+    """The file a measurement came from, or ``record k`` for one built in memory."""
+    return str(m.source) if getattr(m, "source", None) else f"record {k}"
+
+
+def mean_rh(m, where: str) -> float:
+    """Mean RH [%] of a record (an FRF without RH is an error naming it)."""
+    rh = m.rh
+    if rh is None:
+        raise InputError(f"{where}: no relative humidity; add an rh_pct column or give the RH explicitly")
+    return float(np.mean(rh))
+
+
+def cluster_rh(values: Sequence[float], tolerance: float = 2.5) -> list[float]:
+    """Group RH values [%] into levels: sorted values closer than ``tolerance`` [%] to the
+    previous one join its group; each level is its group's mean (rounded to 0.1 %).
+    Returns the level of each input value."""
+    vals = np.asarray(values, dtype=float)
+    order = np.argsort(vals)
+    groups: list[list[int]] = []
+    for i in order:
+        if groups and vals[i] - vals[groups[-1][-1]] <= tolerance:
+            groups[-1].append(int(i))
+        else:
+            groups.append([int(i)])
+    level = np.empty(vals.size)
+    for g in groups:
+        level[g] = round(float(np.mean(vals[g])), 1)
+    return level.tolist()
+
+def model_rh(rh: np.ndarray, fs: float, tolerance: float = 2.5, window_s: float = 10.0,
+             step: float = 0.5):
+    """The RH [%] given to a model for a record's RH channel.
+
+    A humidity sensor's noise is not a humidity change, and a time solver would restart
+    its mechanics at every new RH value: when the record's RH spans no more than
+    ``tolerance`` [%] its median is used (robust to a sensor clipped at 100 %); otherwise a moving mean over ``window_s`` [s],
+    rounded to ``step`` [%] (RH changes slowly compared with the mechanics)."""
+    rh = np.asarray(rh, dtype=float)
+    if np.ptp(rh) <= tolerance:
+        return float(np.median(rh))
+    k = max(1, int(round(window_s * fs)))
+    kernel = np.ones(min(k, rh.size)) / min(k, rh.size)
+    pad = kernel.size // 2
+    smooth = np.convolve(np.pad(rh, (pad, kernel.size - 1 - pad), mode="edge"), kernel, mode="valid")
+    return np.clip(np.round(smooth / step) * step, 0.0, 100.0)

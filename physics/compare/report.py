@@ -1,0 +1,199 @@
+"""Plots and the report folder of a comparison."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .comparison import ComparisonResult, RecordComparison
+
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(text).stem)[:60] or "record"
+
+
+def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float | None = None) -> None:
+    """Measured and model deflection [mm], the residual below, and a zoom on the last
+    ``zoom_s`` seconds (default: 2 s or a tenth of the record, the shorter)."""
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
+    ax[0].plot(r.time, 1e3 * r.measured, lw=0.7, label="measured")
+    ax[0].plot(r.time, 1e3 * r.predicted, lw=0.7, label="model")
+    ax[0].set_ylabel("deflection [mm]")
+    ax[0].legend(fontsize=8, loc="upper right")
+    ax[1].plot(r.time, 1e3 * (r.measured - r.predicted), lw=0.6, color="k")
+    ax[1].set_ylabel("residual [mm]")
+    ax[1].sharex(ax[0])
+    span = float(r.time[-1] - r.time[0])
+    zoom = min(2.0, 0.1 * span) if zoom_s is None else float(zoom_s)
+    z = r.time >= r.time[-1] - zoom
+    ax[2].plot(r.time[z], 1e3 * r.measured[z], lw=0.9, label="measured")
+    ax[2].plot(r.time[z], 1e3 * r.predicted[z], lw=0.9, ls="--", label="model")
+    ax[2].set_ylabel("zoom [mm]")
+    ax[2].set_xlabel("time [s]")
+    for a in ax:
+        a.grid(alpha=0.3)
+    tm = r.summary["time_metrics"]
+    ax[0].set_title(title or f"{Path(r.source).name}: fit {tm['fit_percent']:.1f} %, "
+                    f"corr {100 * tm['correlation']:.1f} %, RH {r.rh:.3g} %", fontsize=10)
+    fig.tight_layout()
+    save(fig, path)
+
+
+def _plot_bode_record(r: RecordComparison, path):
+    from ..plotting import plot_bode_curves
+    v = r.valid
+    curves = {"measured (H1)" if r.kind == "timeseries" else "measured": (r.freq[v], r.H_meas[v], {"lw": 1.2})}
+    if r.H_model_est is not None:
+        curves["model (H1 of simulated output)"] = (r.freq[v], r.H_model_est[v], {"lw": 0.9, "ls": "--"})
+    if r.H_model_closed is not None:
+        f = r.freq[v]
+        curves["model (closed form)"] = (f, r.H_model_closed[v], {"lw": 1.0})
+    coh = (r.freq[v], r.coherence[v]) if r.coherence is not None else None
+    bounds = (r.freq[v], r.mag_bounds[0][v], r.mag_bounds[1][v]) if r.mag_bounds is not None else None
+    fe = r.summary["frf_metrics"]
+    je = fe.get("j_err_m_per_V")
+    title = f"{Path(r.source).name}, RH {r.rh:.3g} %" + (f": J_err {1e3 * je:.3g} mm/V" if je is not None else "")
+    plot_bode_curves(curves, path, coherence=coh, bounds=bounds, title=title)
+
+
+def _plot_bands(res: ComparisonResult, path):
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    bands = res.settings["bands_Hz"]
+    if not bands:
+        return False
+    labels = [f"{a:g}–{b:g} Hz" for a, b in bands]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.4))
+    width = 0.8 / max(len(res.records), 1)
+    x = np.arange(len(bands))
+    for i, r in enumerate(res.records):
+        rows = r.summary["bands"]
+        nr = [row.get("nrmse_in_band") or 0.0 for row in rows]
+        lm = [row.get("log_mag_rms_dB") or 0.0 for row in rows]
+        name = Path(r.source).name[:25]
+        if r.kind == "timeseries":
+            ax[0].bar(x + i * width, nr, width, label=name)
+        ax[1].bar(x + i * width, lm, width, label=name)
+    ax[0].set_ylabel("residual NRMSE in band")
+    ax[1].set_ylabel("FRF log-magnitude RMS error [dB]")
+    for a in ax:
+        a.set_xticks(x + 0.4 - width / 2)
+        a.set_xticklabels(labels, fontsize=8)
+        a.grid(alpha=0.3, axis="y")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    save(fig, path)
+    return True
+
+
+def _plot_rh(res: ComparisonResult, path):
+    import matplotlib.pyplot as plt
+    from ..plotting import save
+    rows = res.by_rh
+    rh = [r["rh_pct"] for r in rows]
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
+    fit = [r["fit_percent"] for r in rows]
+    if any(v is not None for v in fit):
+        ax[0].plot(rh, [np.nan if v is None else v for v in fit], "o-")
+    ax[0].set_ylabel("fit [%]")
+    je = [r["j_err_m_per_V"] for r in rows]
+    ax[1].plot(rh, [np.nan if v is None else 1e3 * v for v in je], "s-", color="C1")
+    ax[1].set_ylabel("J_err (eq. 13) [mm/V]")
+    for a in ax:
+        a.set_xlabel("RH [%]")
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    save(fig, path)
+
+
+def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict | None = None,
+                            title: str = "Model vs measurement") -> dict:
+    """Write ``report.json``, ``metrics.csv``, ``bands.csv``, PNGs and ``report.html`` into
+    ``out_dir`` (all atomically); returns the JSON dict."""
+    from ..fileio import write_json
+    from ..report import Report, jsonable, write_csv
+    d = Path(out_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    plots: dict[str, list[str]] = {}
+    for k, r in enumerate(res.records):
+        slug = f"{k:02d}_{_slug(r.source)}"
+        files = []
+        if r.kind == "timeseries":
+            plot_time_overlay(r, d / f"time_{slug}.png")
+            files.append(f"time_{slug}.png")
+        if r.valid is not None and r.valid.any():
+            _plot_bode_record(r, d / f"bode_{slug}.png")
+            files.append(f"bode_{slug}.png")
+        r.summary["plots"] = files
+        plots[r.source] = files
+    extra = []
+    if _plot_bands(res, d / "bands.png"):
+        extra.append("bands.png")
+    if len(res.by_rh) >= 2:
+        _plot_rh(res, d / "rh.png")
+        extra.append("rh.png")
+    out = jsonable(res.to_dict())
+    out["plots"] = extra
+    if provenance:
+        out["provenance"] = provenance
+    write_json(d / "report.json", out)
+    # tables
+    rows = []
+    for r in res.records:
+        tm = r.summary.get("time_metrics", {})
+        fe = r.summary["frf_metrics"]
+        rows.append({"source": r.source, "kind": r.kind, "rh_pct": r.rh, "fit_percent": tm.get("fit_percent"),
+                     "nrmse": tm.get("nrmse"), "rmse_m": tm.get("rmse"), "correlation": tm.get("correlation"),
+                     "j_err_m_per_V": fe.get("j_err_m_per_V"), "log_mag_rms_dB": fe.get("log_mag_rms_dB"),
+                     "phase_rms_deg": fe.get("phase_rms_deg"), "frf_points": fe.get("n_points")})
+    write_csv(rows, d / "metrics.csv")
+    brows = []
+    for r in res.records:
+        for b in r.summary["bands"]:
+            brows.append({"source": r.source, "rh_pct": r.rh, "f_lo_Hz": b["band_Hz"][0], "f_hi_Hz": b["band_Hz"][1],
+                          "residual_rms_m": b.get("residual_rms_m"), "nrmse_in_band": b.get("nrmse_in_band"),
+                          "j_err_m_per_V": b.get("j_err_m_per_V"), "log_mag_rms_dB": b.get("log_mag_rms_dB"),
+                          "phase_rms_deg": b.get("phase_rms_deg"), "frf_points": b.get("n_points")})
+    if brows:
+        write_csv(brows, d / "bands.csv")
+    write_csv(res.by_rh, d / "by_rh.csv")
+    # HTML
+    rep = Report(title, subtitle=f"model: {res.predictor.get('name')}; {len(res.records)} measurement(s)")
+    for w in res.warnings:
+        rep.warning(w)
+    rep.heading("Summary")
+    rep.table(jsonable(res.overall), caption="overall (fit %, NRMSE, correlation: time records; "
+                                             "J_err: eq. 13 over all compared frequencies, m/V)")
+    rep.table([{k: v for k, v in row.items() if k != "source"} | {"record": Path(row["source"]).name}
+               for row in rows], columns=["record", "kind", "rh_pct", "fit_percent", "nrmse", "rmse_m",
+                                          "correlation", "j_err_m_per_V", "log_mag_rms_dB", "phase_rms_deg",
+                                          "frf_points"], caption="metrics per measurement")
+    if len(res.by_rh) >= 2:
+        rep.heading("Error by relative humidity")
+        rep.table(res.by_rh)
+        rep.image(d / "rh.png", caption="fit and J_err by RH")
+    if brows:
+        rep.heading("Error by frequency band")
+        rep.table([{k: v for k, v in b.items() if k != "source"} | {"record": Path(b["source"]).name}
+                   for b in brows], columns=["record", "f_lo_Hz", "f_hi_Hz", "residual_rms_m", "nrmse_in_band",
+                                             "j_err_m_per_V", "log_mag_rms_dB", "phase_rms_deg", "frf_points"])
+        if "bands.png" in extra:
+            rep.image(d / "bands.png", caption="errors by frequency band")
+    for r in res.records:
+        rep.heading(f"{Path(r.source).name} (RH {r.rh:.3g} %)", level=3)
+        est = r.summary["frf_metrics"].get("estimator")
+        if est:
+            rep.paragraph(f"FRF estimate: {est}", note=True)
+        for f in r.summary["plots"]:
+            rep.image(d / f, caption=f)
+    rep.heading("Model and settings")
+    rep.json_block(jsonable(res.predictor), "model")
+    rep.json_block(jsonable(res.settings), "settings")
+    if provenance:
+        rep.json_block(provenance, "provenance")
+    rep.write(d / "report.html")
+    return out
