@@ -17,6 +17,9 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from physics.errors import InputError
+# One definition of the fit metrics for the whole package (NRMSE = RMSE / std(y), fit % =
+# 100 (1 - NRMSE)): physics.metrics, re-exported here for the neural-model code.
+from physics.metrics import fit_percent, nrmse, rmse
 
 __all__ = ["Record", "check_records", "split_records", "window_starts", "cut_windows",
            "rh_range", "rmse", "nrmse", "fit_percent"]
@@ -218,24 +221,3 @@ def cut_windows(records: Sequence[Record], n_init: int, horizon: int, stride: in
         raise InputError(f"every record is shorter than one training window ({L} samples)")
     res = {k: np.concatenate(v) for k, v in out.items() if v}
     return res
-
-
-# ---------------------------------------------------------------------- metrics
-def rmse(y, y_hat) -> float:
-    """Root-mean-square error."""
-    y, y_hat = np.asarray(y, float), np.asarray(y_hat, float)
-    return float(np.sqrt(np.mean((y - y_hat) ** 2)))
-
-
-def nrmse(y, y_hat) -> float:
-    """RMSE divided by the standard deviation of the measured output."""
-    y = np.asarray(y, float)
-    s = float(np.std(y))
-    return rmse(y, y_hat) / s if s > 0 else float("inf")
-
-
-def fit_percent(y, y_hat) -> float:
-    """Fit in %: 100 (1 - ||y - y_hat|| / ||y - mean(y)||)."""
-    y, y_hat = np.asarray(y, float), np.asarray(y_hat, float)
-    den = float(np.linalg.norm(y - y.mean()))
-    return 100.0 * (1.0 - float(np.linalg.norm(y - y_hat)) / den) if den > 0 else float("-inf")
