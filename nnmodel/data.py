@@ -21,7 +21,7 @@ from physics.errors import InputError
 # 100 (1 - NRMSE)): physics.metrics, re-exported here for the neural-model code.
 from physics.metrics import fit_percent, nrmse, rmse
 
-__all__ = ["Record", "check_records", "split_records", "window_starts", "cut_windows",
+__all__ = ["Record", "check_records", "split_index", "split_records", "window_starts", "cut_windows",
            "rh_range", "rmse", "nrmse", "fit_percent"]
 
 
@@ -170,16 +170,25 @@ def rh_range(records: Iterable[Record]) -> tuple[float, float] | None:
     return float(min(v[0] for v in vals)), float(max(v[1] for v in vals))
 
 
+def split_index(n: int, val_fraction: float, min_len: int = 1) -> int | None:
+    """Where a record of ``n`` samples is cut to hold out its last ``val_fraction`` for
+    validation, or None when either part would be shorter than ``min_len``."""
+    if not 0 <= val_fraction < 1:
+        raise InputError(f"val_fraction must be in [0, 1), got {val_fraction}")
+    k = int(round(n * (1 - val_fraction)))
+    if val_fraction > 0 and n - k >= min_len and k >= min_len:
+        return k
+    return None
+
+
 def split_records(records: Sequence[Record], val_fraction: float,
                   min_len: int = 1) -> tuple[list[Record], list[Record]]:
     """Hold out the last ``val_fraction`` of every record (at least ``min_len`` samples on
     each side) for validation.  Records too short to split stay in training."""
-    if not 0 <= val_fraction < 1:
-        raise InputError(f"val_fraction must be in [0, 1), got {val_fraction}")
     train, val = [], []
     for r in records:
-        k = int(round(len(r) * (1 - val_fraction)))
-        if val_fraction > 0 and len(r) - k >= min_len and k >= min_len:
+        k = split_index(len(r), val_fraction, min_len)
+        if k is not None:
             train.append(r[:k])
             val.append(r[k:])
         else:

@@ -52,6 +52,7 @@ class _Windows(Dataset):
             if s.rh is not None:
                 rhs.append(s.rh)
             off += len(s)
+        # u: (N,) or (N, channels); rh likewise (channels last)
         self.u = torch.as_tensor(np.concatenate(us), dtype=torch.float32) if us else torch.zeros(0)
         self.y = torch.as_tensor(np.concatenate(ys), dtype=torch.float32) if ys else torch.zeros(0)
         self.rh = torch.as_tensor(np.concatenate(rhs), dtype=torch.float32) if rhs else None
@@ -75,9 +76,9 @@ def _pad_batch(seqs, n_init: int) -> dict:
     """Whole records as one padded batch: history = first ``n_init`` samples."""
     L = max(len(s) for s in seqs)
     B = len(seqs)
-    u = np.zeros((B, L), np.float32)
+    u = np.zeros((B, L) + np.shape(seqs[0].u)[1:], np.float32)
     y = np.zeros((B, L), np.float32)
-    rh = np.zeros((B, L), np.float32) if seqs[0].rh is not None else None
+    rh = np.zeros((B, L) + np.shape(seqs[0].rh)[1:], np.float32) if seqs[0].rh is not None else None
     mask = np.zeros((B, L), np.float32)
     for i, s in enumerate(seqs):
         n = len(s)

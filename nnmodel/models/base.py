@@ -32,7 +32,7 @@ from torch import nn
 
 from physics.errors import InputError
 
-from ..data import Record, check_records, rh_range, split_records
+from ..data import Record, check_records, rh_range, split_index
 
 __all__ = ["SequenceCore", "Normalized", "NeuralModel", "NotFittedError"]
 
@@ -97,7 +97,8 @@ class Normalized(nn.Module):
 
 
 class _Seq:
-    """A normalised record (plain arrays) used by the training code."""
+    """A normalised record used by the training code: ``u`` (n, input channels), ``y``
+    (n,), ``rh`` (n, RH channels) or None."""
 
     __slots__ = ("u", "y", "rh")
 
@@ -106,6 +107,9 @@ class _Seq:
 
     def __len__(self):
         return len(self.u)
+
+    def __getitem__(self, sl: slice) -> "_Seq":
+        return _Seq(self.u[sl], self.y[sl], None if self.rh is None else self.rh[sl])
 
 
 @contextlib.contextmanager
@@ -170,6 +174,9 @@ class NeuralModel:
         "accelerator": lambda v: None if isinstance(v, str) else "a Lightning accelerator name such as 'cpu'",
         "inputs": lambda v: None if v in ("auto", "voltage", "voltage+rh") else "'auto', 'voltage' or 'voltage+rh'",
         "checkpoint_dir": lambda v: None if v is None or isinstance(v, str) else "a folder path or null",
+        "memory_filters": lambda v: _pos_int(v, zero=True),
+        "memory_min_s": _pos_float,
+        "memory_max_s": _pos_float,
     }
 
     # ------------------------------------------------------------------ parameters
@@ -265,10 +272,16 @@ class NeuralModel:
         from ..training import fit_core  # Lightning is imported only when training
 
         with torch_threads(self.num_threads):
-            core = self._build_core(1 if use_rh else 0)
+            core = self._build_core(self._n_rh_channels(use_rh))
             min_len = core.n_init + 2
+            # channels (memory filters, physics) are computed on whole records and then cut,
+            # so a validation tail continues the filter states of its record
+            cuts = None
+            full = list(train)
             if val is None and self.val_fraction > 0:
-                train, val = split_records(train, self.val_fraction, min_len=min_len)
+                cuts = [split_index(len(r), self.val_fraction, min_len) for r in full]
+                train = [r[:k] if k else r for r, k in zip(full, cuts)]
+                val = []
             val = [r for r in (val or []) if len(r) >= min_len]
             net = Normalized(core)
             net.set_stats(train, use_rh)
@@ -277,8 +290,15 @@ class NeuralModel:
             self.fs_ = fs
             self.rh_range_ = rh_range(train) if use_rh else None
             self.n_init_ = int(core.n_init)
-            tr = [self._norm_record(r) for r in train]
-            va = [self._norm_record(r) for r in val]
+            self._prepare_channels(full + val)
+            if cuts is None:
+                tr = [self._norm_record(r) for r in train]
+                va = [self._norm_record(r) for r in val]
+            else:
+                seqs = [self._norm_record(r) for r in full]
+                tr = [s[:k] if k else s for s, k in zip(seqs, cuts)]
+                va = [s[k:] for s, k in zip(seqs, cuts) if k]
+            self._release_channels()
             t0 = time.perf_counter()
             self._initialise(core, tr)
             history: list[dict] = []
@@ -294,10 +314,51 @@ class NeuralModel:
             self.history_ = history
             core.eval()
 
-    def _norm_record(self, r: Record) -> _Seq:
+    # ------------------------------------------------------------------ input channels
+    def _memory_taus(self) -> np.ndarray:
+        from .features import memory_taus
+        n = int(getattr(self, "memory_filters", 0) or 0)
+        return memory_taus(n, getattr(self, "memory_min_s", 0.02), getattr(self, "memory_max_s", 100.0))
+
+    def _n_mem(self) -> int:
+        return int(getattr(self, "memory_filters", 0) or 0)
+
+    def _rh_knots(self) -> list:
+        return list(getattr(self, "rh_knots", None) or [])
+
+    def _n_rh_channels(self, use_rh: bool) -> int:
+        """RH channels given to the core: normalised RH, then one hat per RH knot."""
+        return (1 + len(self._rh_knots())) if use_rh else 0
+
+    def _channels(self, u: np.ndarray, rh: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Normalised input channels of a record in physical units: ``u`` (n, C) = voltage,
+        then the memory filters of the normalised voltage; ``rh`` (n, C_rh) = normalised RH,
+        then the RH hat weights (or None when the model ignores humidity)."""
+        from .features import memory_filters, rh_hats
         n = self.net_
-        rh = n.norm("rh", r.rh) if "rh" in self.inputs_ else None
-        return _Seq(n.norm("u", r.u), n.norm("y", r.y), rh)
+        un = n.norm("u", u)
+        cols = [un[:, None]]
+        if self._n_mem():
+            cols.append(memory_filters(un, self._memory_taus(), self.fs_))
+        U = np.concatenate(cols, 1) if len(cols) > 1 else cols[0]
+        R = None
+        if rh is not None and "rh" in self.inputs_:
+            parts = [n.norm("rh", rh)[:, None]]
+            if self._rh_knots():
+                parts.append(rh_hats(rh, self._rh_knots()))
+            R = np.concatenate(parts, 1) if len(parts) > 1 else parts[0]
+        return U, R
+
+    def _prepare_channels(self, records: list[Record]) -> None:
+        """Hook before the training records are normalised (the hybrid runs its physics
+        here, once per record); default: nothing."""
+
+    def _release_channels(self) -> None:
+        """Hook after the training records are normalised (drop caches)."""
+
+    def _norm_record(self, r: Record) -> _Seq:
+        U, R = self._channels(r.u, r.rh if "rh" in self.inputs_ else None)
+        return _Seq(U, self.net_.norm("y", r.y), R)
 
     # ------------------------------------------------------------------ inference
     def _check_fitted(self) -> None:
@@ -353,14 +414,13 @@ class NeuralModel:
         return u, rh, y
 
     def _padded(self, u, rh, y, pad: int):
-        """Normalised arrays with ``pad`` samples of rest (u = 0 V, y = 0) in front."""
+        """Normalised channels (see :meth:`_channels`) with ``pad`` samples of rest
+        (u = 0 V, y = 0, the first RH) in front."""
         n = self.net_
-        u0, y0 = n.norm("u", 0.0), n.norm("y", 0.0)
-        un = np.concatenate([np.full(pad, u0), n.norm("u", u)])
-        yn = None if y is None else np.concatenate([np.full(pad, y0), n.norm("y", y)])
-        rhn = None
-        if rh is not None:
-            rhn = n.norm("rh", np.concatenate([np.full(pad, rh[0]), rh]))
+        up = np.concatenate([np.zeros(pad), u])
+        rhp = None if rh is None else np.concatenate([np.full(pad, rh[0]), rh])
+        un, rhn = self._channels(up, rhp)
+        yn = None if y is None else np.concatenate([np.full(pad, n.norm("y", 0.0)), n.norm("y", y)])
         return un, rhn, yn
 
     @staticmethod
@@ -457,7 +517,7 @@ class NeuralModel:
         inputs = list(learned["inputs"])
         if inputs not in (["voltage"], ["voltage", "rh"]):
             raise InputError(f"unsupported model inputs {inputs}")
-        core = self._build_core(1 if "rh" in inputs else 0)
+        core = self._build_core(self._n_rh_channels("rh" in inputs))
         net = Normalized(core)
         missing, unexpected = net.load_state_dict(state_dict, strict=False)
         if missing or unexpected:

@@ -2,14 +2,21 @@
 
     y[k] = f(y[k-1..k-na], u[k-d..k-d-nb+1], rh[k])
 
-With ``na = 0`` it is an NFIR model (input delays only); with ``na > 0`` it is a NARX model
-trained series-parallel: one step ahead, with the *measured* past outputs as regressors.
-It is evaluated (and early-stopped) in free run, where its own past outputs are fed back.
-The linear bypass starts at the least-squares ARX solution (``arx_init``).
+With ``na = 0`` it is an NFIR model (input delays only; one-step training is then exactly
+free-run training); with ``na > 0`` it is a NARX model trained series-parallel: one step
+ahead, with the *measured* past outputs as regressors.  It is evaluated (and
+early-stopped) in free run, where its own past outputs are fed back.  The linear bypass
+starts at the least-squares ARX solution (``arx_init``).
+
+Long input memory: ``memory_filters`` first-order low-pass filters of the voltage (time
+constants ``memory_min_s``..``memory_max_s``, s) join the delayed inputs (see
+:mod:`nnmodel.models.features`).  ``rh_knots`` (%) schedules the linear bypass on RH
+(coefficients interpolated linearly between knots); the MLP sees RH and the knot weights.
 """
 from __future__ import annotations
 
 from .base import NeuralModel, _pos_int
+from .features import check_knots
 from .lag import ACTIVATIONS, LagSimulator, MLPMap, arx_init
 
 _LAG_CHECKS = {
@@ -23,7 +30,18 @@ _LAG_CHECKS = {
     "horizon": _pos_int,
     "poly_degree": _pos_int,
     "stride": _pos_int,
+    "rh_knots": lambda v: None if v is None else check_knots(v),
 }
+
+
+def lag_core(model, n_rh: int, fmap_cls=None) -> LagSimulator:
+    """The LagSimulator of an ``ff`` / ``narx`` model (MLP map with linear bypass; memory
+    filters and RH scheduling as the hyper-parameters say)."""
+    n_mem = model._n_mem()
+    n_sched = len(model._rh_knots()) if n_rh else 0
+    fmap = MLPMap(model.na, model.nb + n_mem + n_rh, model.hidden, model.layers, model.activation,
+                  linear=True, poly_degree=model.poly_degree, n_sched=n_sched)
+    return LagSimulator(model.na, model.nb, n_rh, fmap, model.feedthrough, n_mem=n_mem)
 
 
 class FFModel(NeuralModel):
@@ -37,6 +55,8 @@ class FFModel(NeuralModel):
 
     def __init__(self, na: int = 2, nb: int = 20, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
+                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 rh_knots: list | None = None,
                  inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
                  batch_size: int = 256, max_epochs: int = 100, max_time: float | None = None,
                  patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = None,
@@ -45,9 +65,7 @@ class FFModel(NeuralModel):
         self._set_params_from(locals())
 
     def _build_core(self, n_rh):
-        fmap = MLPMap(self.na, self.nb + n_rh, self.hidden, self.layers, self.activation, linear=True,
-                      poly_degree=self.poly_degree)
-        return LagSimulator(self.na, self.nb, n_rh, fmap, self.feedthrough)
+        return lag_core(self, n_rh)
 
     def _initialise(self, core, train):
         if self.arx_init:

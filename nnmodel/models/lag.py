@@ -1,11 +1,20 @@
 """Tapped-delay (NARX / NFIR) simulator shared by the ``ff``, ``rbf`` and ``narx`` models.
 
-    y[k] = f(y[k-1], ..., y[k-na], u[k-d], ..., u[k-d-nb+1], rh[k]),   d = 0 or 1
+    y[k] = f(y[k-1], ..., y[k-na], u[k-d], ..., u[k-d-nb+1], m[k], rh[k]),   d = 0 or 1
 
 ``f`` is a *map* (MLP or Gaussian RBF network, each with a linear bypass).  The state is
 the vector of past outputs; the input part of ``f``'s first layer does not depend on the
 state, so it is computed for the whole sequence at once and only the output-lag part runs
 in the time loop.  With ``na = 0`` (NFIR) there is no loop at all.
+
+Input channels (all normalised; tensors (batch, time) for a single channel or
+(batch, time, channels)): the first ``n_tap`` input channels get ``nb`` delays each
+(voltage; for the grey-box hybrid also the physics output), the next ``n_mem`` are used
+at time k only (memory filters, physics states: see :mod:`nnmodel.models.features`),
+and the RH channels (normalised RH, then ``n_sched`` hat channels) at time k.  With
+``n_sched > 0`` the MLP map's linear bypass is *scheduled*: its coefficients interpolate
+linearly in RH between the hat knots (a linear-parameter-varying ARX/FIR part).  With
+``residual`` the output is input channel 1 (the physics output) plus the map.
 """
 from __future__ import annotations
 
@@ -24,12 +33,17 @@ OUTPUT_CLIP = 1e3
 
 
 class MLPMap(nn.Module):
-    """Linear bypass + MLP: f(yl, x) = a.yl + b.x + c + W_out act(... act(W_y yl + W_x x + b1))."""
+    """Linear bypass + MLP: f(yl, x) = a.yl + b.x + c + W_out act(... act(W_y yl + W_x x + b1)).
+
+    With ``n_sched = K > 0`` the last K columns of x are RH hat weights s_k (summing to 1)
+    and the bypass is sum_k s_k (a_k.yl + b_k.x' + c_k), x' = x without the hat columns.
+    """
 
     def __init__(self, n_y: int, n_x: int, hidden: int, layers: int, activation: str = "tanh",
-                 linear: bool = True, poly_degree: int = 1):
+                 linear: bool = True, poly_degree: int = 1, n_sched: int = 0):
         super().__init__()
         self.n_y, self.n_x = n_y, n_x
+        self.n_sched = int(n_sched)
         self.poly_degree = int(poly_degree)
         self.hidden_size = hidden if layers > 0 else 0
         self.linear = linear or self.hidden_size == 0
@@ -45,8 +59,9 @@ class MLPMap(nn.Module):
                 self.out.bias.zero_()
         if self.linear:
             P = self.poly_degree
-            self.lin_y = nn.Linear(n_y * P, 1, bias=False) if n_y else None
-            self.lin_x = nn.Linear(n_x * P, 1)
+            K = max(1, self.n_sched)
+            self.lin_y = nn.Linear(n_y * P, K, bias=False) if n_y else None
+            self.lin_x = nn.Linear((n_x - self.n_sched) * P, K)
             with torch.no_grad():
                 if self.lin_y is not None:
                     self.lin_y.weight.zero_()
@@ -60,12 +75,19 @@ class MLPMap(nn.Module):
         return torch.cat([z ** p for p in range(1, self.poly_degree + 1)], -1)
 
     def precompute(self, x):
+        """(first-layer input part, bypass input part, hat weights or None) for all times."""
         pre = self.in_x(x) if self.hidden_size else None
-        lin = self.lin_x(self.powers(x))[..., 0] if self.linear else None
-        return pre, lin
+        lin = sched = None
+        if self.linear:
+            if self.n_sched:
+                sched = x[..., -self.n_sched:]
+                lin = self.lin_x(self.powers(x[..., :-self.n_sched]))
+            else:
+                lin = self.lin_x(self.powers(x))[..., 0]
+        return pre, lin, sched
 
     def step(self, yl, cache):
-        pre, lin = cache
+        pre, lin, sched = cache
         out = 0.0
         if self.hidden_size:
             if self.in_y is not None:
@@ -75,34 +97,45 @@ class MLPMap(nn.Module):
                 h = self.act(layer(h))
             out = self.out(h)[..., 0]
         if self.linear:
-            out = out + lin
-            if self.lin_y is not None:
-                out = out + self.lin_y(self.powers(yl))[..., 0]
+            if sched is not None:
+                z = lin if self.lin_y is None else lin + self.lin_y(self.powers(yl))
+                out = out + (z * sched).sum(-1)
+            else:
+                out = out + lin
+                if self.lin_y is not None:
+                    out = out + self.lin_y(self.powers(yl))[..., 0]
         return out
 
-    def set_linear(self, a: np.ndarray, b: np.ndarray, c: float) -> None:
+    def set_linear(self, a: np.ndarray, b: np.ndarray, c) -> None:
         """Set the linear bypass: weights ``a`` of the output-lag terms and ``b`` of the input
-        terms (each ordered as :meth:`powers`: all lags, then their squares, ...), bias ``c``."""
+        terms (each ordered as :meth:`powers`: all lags, then their squares, ...), bias ``c``;
+        scheduled: one row of ``a``, ``b`` and one ``c`` per hat knot."""
+        K = max(1, self.n_sched)
         with torch.no_grad():
             if self.lin_y is not None:
-                self.lin_y.weight.copy_(torch.as_tensor(a, dtype=torch.float32)[None])
-            self.lin_x.weight.copy_(torch.as_tensor(b, dtype=torch.float32)[None])
-            self.lin_x.bias.fill_(float(c))
+                self.lin_y.weight.copy_(torch.as_tensor(np.reshape(a, (K, -1)), dtype=torch.float32))
+            self.lin_x.weight.copy_(torch.as_tensor(np.reshape(b, (K, -1)), dtype=torch.float32))
+            self.lin_x.bias.copy_(torch.as_tensor(np.reshape(c, (K,)), dtype=torch.float32))
 
 
 class RBFMap(nn.Module):
     """Linear bypass + Gaussian radial-basis layer:
-    f(z) = a.z + c + sum_j w_j exp(-|z - c_j|^2 / (2 s_j^2)),   z = (yl, x)."""
+    f(z) = a.z + c + sum_j w_j exp(-|z - c_j|^2 / (2 s_j^2)),   z = (yl, x).
 
-    def __init__(self, n_y: int, n_x: int, n_centres: int):
+    With ``n_sched = K > 0`` the last K columns of x are RH hat weights s_k and the bypass
+    is scheduled: sum_k s_k (a_k.z' + c_k), z' = z without the hat columns (an RBF network
+    with an RH-interpolated linear part, fitted in the same ridge regression)."""
+
+    def __init__(self, n_y: int, n_x: int, n_centres: int, n_sched: int = 0):
         super().__init__()
         self.n_y, self.n_x = n_y, n_x
+        self.n_sched = K = int(n_sched)
         d = n_y + n_x
         self.centres = nn.Parameter(torch.zeros(n_centres, d))
         self.log_width = nn.Parameter(torch.zeros(n_centres))
         self.weight = nn.Parameter(torch.zeros(n_centres))
-        self.lin = nn.Parameter(torch.zeros(d))
-        self.bias = nn.Parameter(torch.zeros(()))
+        self.lin = nn.Parameter(torch.zeros((K, d - K) if K else (d,)))
+        self.bias = nn.Parameter(torch.zeros((K,) if K else ()))
 
     def features(self, z):
         """Gaussian activations (..., M) of full regressors z (..., n_y + n_x)."""
@@ -112,46 +145,72 @@ class RBFMap(nn.Module):
     def precompute(self, x):
         cx = self.centres[:, self.n_y:]
         d2x = (x * x).sum(-1, keepdim=True) - 2 * x @ cx.T + (cx ** 2).sum(-1)
+        if self.n_sched:
+            K = self.n_sched
+            sched = x[..., -K:]
+            lin = x[..., :-K] @ self.lin[:, self.n_y:].T + self.bias     # (..., K)
+            return d2x, lin, sched
         lin = x @ self.lin[self.n_y:] + self.bias
-        return d2x, lin
+        return d2x, lin, None
 
     def step(self, yl, cache):
-        d2x, lin = cache
+        d2x, lin, sched = cache
         d2 = d2x
-        out = lin
         if self.n_y:
             cy = self.centres[:, :self.n_y]
             d2 = d2 + (yl * yl).sum(-1, keepdim=True) - 2 * yl @ cy.T + (cy ** 2).sum(-1)
-            out = out + yl @ self.lin[:self.n_y]
+        if sched is not None:
+            z = lin if not self.n_y else lin + yl @ self.lin[:, :self.n_y].T
+            out = (z * sched).sum(-1)
+        else:
+            out = lin if not self.n_y else lin + yl @ self.lin[:self.n_y]
         phi = torch.exp(-0.5 * d2.clamp_min(0) * torch.exp(-2 * self.log_width))
         return out + phi @ self.weight
 
 
+def _channels(x):
+    """(batch, time) -> (batch, time, 1); (batch, time, channels) unchanged."""
+    return None if x is None else (x[..., None] if x.dim() == 2 else x)
+
+
 class LagSimulator(SequenceCore):
-    """NARX/NFIR core: state = the last ``na`` outputs (normalised)."""
+    """NARX/NFIR core: state = the last ``na`` outputs (normalised).
+
+    Channels: see the module docstring (``n_tap`` delayed input channels, ``n_mem``
+    undelayed ones, ``n_rh`` RH channels, ``residual``: output = input channel 1 + map).
+    """
 
     #: free-run one sequence (batch 1, no gradient) with a float64 numpy loop: ~5x fewer
     #: per-step overheads than small torch ops; same maths (tested against the torch loop)
     fast_inference = True
 
-    def __init__(self, na: int, nb: int, n_rh: int, fmap: nn.Module, feedthrough: bool = True):
+    def __init__(self, na: int, nb: int, n_rh: int, fmap: nn.Module, feedthrough: bool = True,
+                 n_mem: int = 0, n_tap: int = 1, residual: bool = False):
         super().__init__()
         self.na, self.nb, self.n_rh = int(na), int(nb), int(n_rh)
+        self.n_mem, self.n_tap, self.residual = int(n_mem), int(n_tap), bool(residual)
+        if self.residual and self.n_tap < 2:
+            raise ValueError("a residual core needs the reference output as input channel 1")
         self.delay = 0 if feedthrough else 1
         self.fmap = fmap
         self.n_init = max(self.na, self.nb - 1 + self.delay, 1)
 
     @property
     def n_x(self) -> int:
-        return self.nb + self.n_rh
+        return self.n_tap * self.nb + self.n_mem + self.n_rh
 
     def exo(self, u_all, rh_all, n_hist: int):
-        """Input regressors (B, T, nb + n_rh) for the samples after ``n_hist`` history."""
+        """Input regressors (B, T, n_x) for the samples after ``n_hist`` history."""
+        u_all = _channels(u_all)
         L = u_all.shape[1]
-        cols = [u_all[:, n_hist - self.delay - j: L - self.delay - j] for j in range(self.nb)]
+        cols = [u_all[:, n_hist - self.delay - j: L - self.delay - j, c]
+                for c in range(self.n_tap) for j in range(self.nb)]
+        parts = [torch.stack(cols, -1)] if cols else []
+        if self.n_mem:
+            parts.append(u_all[:, n_hist:, self.n_tap:self.n_tap + self.n_mem])
         if self.n_rh:
-            cols.append(rh_all[:, n_hist:])
-        return torch.stack(cols, -1)
+            parts.append(_channels(rh_all)[:, n_hist:, :self.n_rh])
+        return torch.cat(parts, -1)
 
     def init_state(self, u_hist, y_hist, rh_hist):
         k = self.n_init
@@ -160,22 +219,27 @@ class LagSimulator(SequenceCore):
     def simulate(self, state, u, rh):
         u_hist, y_hist, rh_hist = state
         k = self.n_init
-        u_all = torch.cat([u_hist, u], 1)
-        rh_all = None if rh is None or not self.n_rh else torch.cat([rh_hist, rh], 1)
+        u_all = torch.cat([_channels(u_hist), _channels(u)], 1)
+        rh_all = None if rh is None or not self.n_rh else torch.cat([_channels(rh_hist), _channels(rh)], 1)
         x = self.exo(u_all, rh_all, k)
+        base = u_all[:, k:, 1] if self.residual else None
         cache = self.fmap.precompute(x)
-        B, T = u.shape
+        B, T = u.shape[:2]
         if self.na == 0:
-            return self.fmap.step(x.new_zeros(B, T, 0), cache)
+            out = self.fmap.step(x.new_zeros(B, T, 0), cache)
+            return out if base is None else out + base
         yl = y_hist[:, k - self.na:].flip(1)  # most recent first
         if B == 1 and self.fast_inference and not torch.is_grad_enabled():
+            b0 = None if base is None else base[0].detach().double().numpy()
             if isinstance(self.fmap, MLPMap):
-                return _mlp_free_run_numpy(self.fmap, yl, cache).to(u.dtype)
+                return _mlp_free_run_numpy(self.fmap, yl, cache, b0).to(u.dtype)
             if isinstance(self.fmap, RBFMap):
-                return _rbf_free_run_numpy(self.fmap, yl, cache).to(u.dtype)
+                return _rbf_free_run_numpy(self.fmap, yl, cache, b0).to(u.dtype)
         outs = []
         for t in range(T):
             y = self.fmap.step(yl, tuple(None if c is None else c[:, t] for c in cache))
+            if base is not None:
+                y = y + base[:, t]
             y = y.clamp(-OUTPUT_CLIP, OUTPUT_CLIP)
             outs.append(y)
             yl = torch.cat([y[:, None], yl[:, :-1]], 1)
@@ -184,20 +248,24 @@ class LagSimulator(SequenceCore):
     # ---------------------------------------------------------------- one-step regression data
     def regressors(self, seqs) -> tuple[np.ndarray, np.ndarray]:
         """One-step regression data from normalised records: Z = [y lags, input regressors]
-        (n, na + nb + n_rh) and targets (n,)."""
+        (n, na + n_x) in the order of :meth:`exo`, and targets (n,) (minus the reference
+        channel for a residual core)."""
         Zs, ts = [], []
         k = self.n_init
         for s in seqs:
             n = len(s)
             if n <= k:
                 continue
+            u = s.u if s.u.ndim == 2 else s.u[:, None]
             idx = np.arange(k, n)
             cols = [s.y[idx - i] for i in range(1, self.na + 1)]
-            cols += [s.u[idx - self.delay - j] for j in range(self.nb)]
+            cols += [u[idx - self.delay - j, c] for c in range(self.n_tap) for j in range(self.nb)]
+            cols += [u[idx, self.n_tap + m] for m in range(self.n_mem)]
             if self.n_rh:
-                cols.append(s.rh[idx])
+                rh = s.rh if s.rh.ndim == 2 else s.rh[:, None]
+                cols += [rh[idx, m] for m in range(self.n_rh)]
             Zs.append(np.stack(cols, 1))
-            ts.append(s.y[idx])
+            ts.append(s.y[idx] - (u[idx, 1] if self.residual else 0.0))
         return np.concatenate(Zs), np.concatenate(ts)
 
     def is_stable_ar(self, a: np.ndarray, margin: float = 1.0) -> bool:
@@ -220,21 +288,53 @@ def ridge(Z: np.ndarray, t: np.ndarray, alpha: float, penalise_from: int = 0) ->
     return np.linalg.solve(G, X.T @ t)
 
 
+def _normal_equations(blocks, t: np.ndarray, chunk: int = 20000):
+    """(X'X, X't) of X = blocks(rows) without holding all of X (row chunks)."""
+    n = t.size
+    G = c = None
+    for a in range(0, n, chunk):
+        X = blocks(slice(a, min(n, a + chunk)))
+        if G is None:
+            G, c = np.zeros((X.shape[1], X.shape[1])), np.zeros(X.shape[1])
+        G += X.T @ X
+        c += X.T @ t[a:a + chunk]
+    return G, c
+
+
 def arx_init(core: LagSimulator, seqs, alpha: float = 1e-6) -> dict:
-    """Least-squares (polynomial) ARX fit of the map's bypass on normalised one-step data,
-    written into the bypass when its linear AR part is stable.  Returns a small report."""
+    """Least-squares (polynomial, possibly RH-scheduled) ARX fit of the map's bypass on
+    normalised one-step data, written into the bypass when its linear AR part is stable
+    (at every RH knot).  Returns a small report."""
     Z, t = core.regressors(seqs)
     P = getattr(core.fmap, "poly_degree", 1)
+    K = getattr(core.fmap, "n_sched", 0)
     na = core.na
     Zy, Zx = Z[:, :na], Z[:, na:]
+    S = Zx[:, -K:] if K else None
+    if K:
+        Zx = Zx[:, :-K]
     feats = [Zy ** p for p in range(1, P + 1)] + [Zx ** p for p in range(1, P + 1)]
     X = np.concatenate(feats, 1)
-    w = ridge(X, t, alpha)
-    a, b, c = w[:na * P], w[na * P:-1], w[-1]
-    stable = core.is_stable_ar(a[:na])
+    m = X.shape[1]
+    if not K:
+        w = ridge(X, t, alpha)
+        a, b, c = w[:na * P], w[na * P:-1], w[-1]
+        resid = t - np.concatenate([X, np.ones((len(X), 1))], 1) @ w
+        stable = core.is_stable_ar(a[:na])
+    else:
+        def blocks(sl):
+            return np.concatenate([(X[sl, :, None] * S[sl, None, :]).reshape(-1, m * K), S[sl]], 1)
+        G, rhs = _normal_equations(blocks, t)
+        reg = np.full(len(G), alpha * len(t))
+        reg[-K:] = 0.0  # intercepts unpenalised
+        G[np.diag_indices_from(G)] += reg + 1e-10 * np.trace(G) / len(G)
+        w = np.linalg.solve(G, rhs)
+        W = w[:m * K].reshape(m, K).T         # (K, m): one bypass per knot
+        a, b, c = W[:, :na * P], W[:, na * P:], w[m * K:]
+        resid = t - np.einsum("nm,nk,km->n", X, S, W) - S @ c
+        stable = all(core.is_stable_ar(a[k, :na]) for k in range(K))
     if stable:
         core.fmap.set_linear(a, b, c)
-    resid = t - np.concatenate([X, np.ones((len(X), 1))], 1) @ w
     return {"arx_stable": stable, "arx_one_step_rmse": float(np.sqrt(np.mean(resid ** 2)))}
 
 
@@ -249,21 +349,24 @@ def _np_activation(act: nn.Module):
     return table[type(act)]
 
 
-def _mlp_free_run_numpy(fmap: MLPMap, yl, cache):
-    """Free run of one sequence through an :class:`MLPMap` (see LagSimulator.simulate)."""
+def _mlp_free_run_numpy(fmap: MLPMap, yl, cache, base=None):
+    """Free run of one sequence through an :class:`MLPMap` (see LagSimulator.simulate);
+    ``base``: reference output added at every step (residual cores)."""
     def arr(t):
         return t.detach().double().numpy()
-    pre, lin = cache
+    pre, lin, sched = cache
     T = (pre if pre is not None else lin).shape[1]
     pre = None if pre is None else arr(pre[0])
     lin = None if lin is None else arr(lin[0])
+    sched = None if sched is None else arr(sched[0])
     H = fmap.hidden_size
     if H:
         Wy = arr(fmap.in_y.weight) if fmap.in_y is not None else None
         hidden = [(arr(layer.weight), arr(layer.bias)) for layer in fmap.hidden]
         wo, bo = arr(fmap.out.weight)[0], float(fmap.out.bias)
         act = _np_activation(fmap.act)
-    a = arr(fmap.lin_y.weight)[0] if fmap.linear and fmap.lin_y is not None else None
+    A = arr(fmap.lin_y.weight) if fmap.linear and fmap.lin_y is not None else None
+    a = None if A is None else A[0]
     P = fmap.poly_degree
     z = arr(yl[0]).copy()
     out = np.empty(T)
@@ -276,9 +379,16 @@ def _mlp_free_run_numpy(fmap: MLPMap, yl, cache):
                 h = act(W @ h + b)
             y = wo @ h + bo
         if lin is not None:
-            y += lin[t]
-            if a is not None:
-                y += a @ (z if P == 1 else np.concatenate([z ** q for q in range(1, P + 1)]))
+            zp = z if P == 1 else np.concatenate([z ** q for q in range(1, P + 1)])
+            if sched is not None:
+                v = lin[t] if A is None else lin[t] + A @ zp
+                y += v @ sched[t]
+            else:
+                y += lin[t]
+                if a is not None:
+                    y += a @ zp
+        if base is not None:
+            y += base[t]
         y = min(max(y, -OUTPUT_CLIP), OUTPUT_CLIP)
         out[t] = y
         z[1:] = z[:-1]
@@ -286,21 +396,25 @@ def _mlp_free_run_numpy(fmap: MLPMap, yl, cache):
     return torch.from_numpy(out)[None]
 
 
-def _rbf_free_run_numpy(fmap: RBFMap, yl, cache):
+def _rbf_free_run_numpy(fmap: RBFMap, yl, cache, base=None):
     """Free run of one sequence through an :class:`RBFMap` (see LagSimulator.simulate)."""
     def arr(t):
         return t.detach().double().numpy()
     d2x, lin = arr(cache[0][0]), arr(cache[1][0])
+    sched = None if cache[2] is None else arr(cache[2][0])
     n_y = fmap.n_y
     cy = arr(fmap.centres)[:, :n_y]
-    a = arr(fmap.lin)[:n_y]
+    a = arr(fmap.lin)[..., :n_y]
     w = arr(fmap.weight)
     g = 0.5 * np.exp(-2.0 * arr(fmap.log_width))
     z = arr(yl[0]).copy()
     out = np.empty(lin.shape[0])
     for t in range(out.size):
         d2 = d2x[t] + ((cy - z) ** 2).sum(1)
-        y = lin[t] + a @ z + np.exp(-np.maximum(d2, 0.0) * g) @ w
+        lt = lin[t] + a @ z
+        y = (lt @ sched[t] if sched is not None else lt) + np.exp(-np.maximum(d2, 0.0) * g) @ w
+        if base is not None:
+            y += base[t]
         y = min(max(y, -OUTPUT_CLIP), OUTPUT_CLIP)
         out[t] = y
         z[1:] = z[:-1]

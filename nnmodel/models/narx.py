@@ -5,12 +5,13 @@ on its own simulated outputs: every training window starts from ``n_init`` measu
 and is simulated ``horizon`` steps in free run; the loss is the simulation error,
 back-propagated through the whole window (truncated back-propagation through time over
 many short windows = multiple shooting).  So the free-run error is what is optimised.
+Memory filters and RH scheduling of the bypass as for ``ff``.
 """
 from __future__ import annotations
 
-from .ff import _LAG_CHECKS
+from .ff import _LAG_CHECKS, lag_core
 from .base import NeuralModel
-from .lag import LagSimulator, MLPMap, arx_init
+from .lag import arx_init
 
 
 class NARXModel(NeuralModel):
@@ -22,6 +23,8 @@ class NARXModel(NeuralModel):
     def __init__(self, na: int = 4, nb: int = 8, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
                  horizon: int = 100, stride: int = 20,
+                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 rh_knots: list | None = None,
                  inputs: str = "auto", seed: int = 0, lr: float = 2e-3, weight_decay: float = 0.0,
                  batch_size: int = 64, max_epochs: int = 200, max_time: float | None = 600.0,
                  patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
@@ -30,9 +33,7 @@ class NARXModel(NeuralModel):
         self._set_params_from(locals())
 
     def _build_core(self, n_rh):
-        fmap = MLPMap(self.na, self.nb + n_rh, self.hidden, self.layers, self.activation, linear=True,
-                      poly_degree=self.poly_degree)
-        return LagSimulator(self.na, self.nb, n_rh, fmap, self.feedthrough)
+        return lag_core(self, n_rh)
 
     def _initialise(self, core, train):
         if self.arx_init:

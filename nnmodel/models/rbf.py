@@ -7,7 +7,8 @@ normalised one-step regressors, widths s_j = ``width_factor`` x the mean distanc
 to its ``width_neighbours`` nearest centres, then the output layer (w, a, c) by ridge
 regression on one-step targets.  Optional gradient fine-tuning of everything (centres,
 widths, weights) with the shared Lightning loop: ``max_epochs > 0``, one step ahead
-(``horizon = 1``) or in closed loop (``horizon > 1``).
+(``horizon = 1``) or in closed loop (``horizon > 1``).  With ``na = 0`` it is an NFIR
+network; ``memory_filters`` add long input memory (see :mod:`nnmodel.models.features`).
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ import torch
 
 from .base import NeuralModel, _pos_float, _pos_int
 from .ff import _LAG_CHECKS
-from .lag import LagSimulator, RBFMap, ridge
+from .lag import LagSimulator, RBFMap, _normal_equations, ridge
 
 
 class RBFModel(NeuralModel):
@@ -33,6 +34,8 @@ class RBFModel(NeuralModel):
     def __init__(self, na: int = 2, nb: int = 20, n_centres: int = 100, width_factor: float = 1.0,
                  width_neighbours: int = 2, alpha: float = 1e-6, kmeans_samples: int = 20000,
                  feedthrough: bool = True, horizon: int = 1, stride: int = 1,
+                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 rh_knots: list | None = None,
                  inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
                  batch_size: int = 256, max_epochs: int = 0, max_time: float | None = None,
                  patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
@@ -41,8 +44,10 @@ class RBFModel(NeuralModel):
         self._set_params_from(locals())
 
     def _build_core(self, n_rh):
-        fmap = RBFMap(self.na, self.nb + n_rh, self.n_centres)
-        return LagSimulator(self.na, self.nb, n_rh, fmap, self.feedthrough)
+        n_mem = self._n_mem()
+        n_sched = len(self._rh_knots()) if n_rh else 0
+        fmap = RBFMap(self.na, self.nb + n_mem + n_rh, self.n_centres, n_sched=n_sched)
+        return LagSimulator(self.na, self.nb, n_rh, fmap, self.feedthrough, n_mem=n_mem)
 
     def _initialise(self, core, train):
         from sklearn.cluster import KMeans
@@ -69,14 +74,34 @@ class RBFModel(NeuralModel):
             fmap.centres.copy_(torch.as_tensor(C, dtype=torch.float32))
             fmap.log_width.copy_(torch.as_tensor(np.log(width), dtype=torch.float32))
             Phi = fmap.features(torch.as_tensor(Z, dtype=torch.float32)).double().numpy()
-        X = np.concatenate([Z, Phi], 1)
-        w = ridge(X, t, self.alpha, penalise_from=Z.shape[1])
-        d = Z.shape[1]
-        with torch.no_grad():
-            fmap.lin.copy_(torch.as_tensor(w[:d], dtype=torch.float32))
-            fmap.weight.copy_(torch.as_tensor(w[d:-1], dtype=torch.float32))
-            fmap.bias.fill_(float(w[-1]))
-        resid = t - np.concatenate([X, np.ones((len(X), 1))], 1) @ w
+        K = fmap.n_sched
+        if not K:
+            X = np.concatenate([Z, Phi], 1)
+            w = ridge(X, t, self.alpha, penalise_from=Z.shape[1])
+            d = Z.shape[1]
+            with torch.no_grad():
+                fmap.lin.copy_(torch.as_tensor(w[:d], dtype=torch.float32))
+                fmap.weight.copy_(torch.as_tensor(w[d:-1], dtype=torch.float32))
+                fmap.bias.fill_(float(w[-1]))
+            resid = t - np.concatenate([X, np.ones((len(X), 1))], 1) @ w
+        else:  # RH-scheduled bypass: [z' (x) s, s, Gaussians] in one ridge regression
+            S, Zl = Z[:, -K:], Z[:, :-K]
+            m = Zl.shape[1]
+
+            def blocks(sl):
+                return np.concatenate([(Zl[sl, :, None] * S[sl, None, :]).reshape(-1, m * K), S[sl], Phi[sl]], 1)
+            G, rhs = _normal_equations(blocks, t)
+            reg = np.zeros(len(G))
+            reg[m * K + K:] = self.alpha * len(t)          # Gaussian weights penalised
+            reg[:m * K] = 1e-8 * len(t)                     # bypass: a whisper of ridge
+            G[np.diag_indices_from(G)] += reg + 1e-10 * np.trace(G) / len(G)
+            w = np.linalg.solve(G, rhs)
+            W = w[:m * K].reshape(m, K).T
+            with torch.no_grad():
+                fmap.lin.copy_(torch.as_tensor(W, dtype=torch.float32))
+                fmap.bias.copy_(torch.as_tensor(w[m * K:m * K + K], dtype=torch.float32))
+                fmap.weight.copy_(torch.as_tensor(w[m * K + K:], dtype=torch.float32))
+            resid = t - np.einsum("nm,nk,km->n", Zl, S, W) - S @ w[m * K:m * K + K] - Phi @ w[m * K + K:]
         self.init_report_ = {"one_step_rmse": float(np.sqrt(np.mean(resid ** 2))),
                              "mean_width": float(width.mean())}
 

@@ -6,6 +6,9 @@ network then runs on the inputs alone (voltage, and RH when the model uses humid
 a linear read-out plus a direct linear input-to-output path.  Training is closed loop on
 windows of ``n_init`` + ``horizon`` samples, so the free-run error is what is optimised.
 Without measured history the encoder sees the system at rest (0 V, 0 output).
+With ``memory_filters`` the voltage's low-pass filter bank (long input memory, see
+:mod:`nnmodel.models.features`) joins the input channels, and its state at the end of the
+history joins the encoder's input.
 """
 from __future__ import annotations
 
@@ -15,26 +18,40 @@ from torch import nn
 from .base import NeuralModel, SequenceCore, _pos_int
 
 
+def _channels(x):
+    return None if x is None else (x[..., None] if x.dim() == 2 else x)
+
+
 class RNNSimulator(SequenceCore):
+    """Recurrent core; inputs: voltage (+ ``n_mem`` memory-filter channels) and ``n_rh`` RH
+    channels, tensors (batch, time) or (batch, time, channels)."""
+
     def __init__(self, cell: str, n_rh: int, hidden: int, layers: int, n_init: int,
-                 encoder_hidden: int):
+                 encoder_hidden: int, n_mem: int = 0):
         super().__init__()
-        self.cell, self.n_rh = cell, int(n_rh)
+        self.cell, self.n_rh, self.n_mem = cell, int(n_rh), int(n_mem)
         self.hidden_size, self.layers, self.n_init = int(hidden), int(layers), int(n_init)
-        n_in = 1 + self.n_rh
+        n_in = 1 + self.n_mem + self.n_rh
         rnn_cls = nn.LSTM if cell == "lstm" else nn.GRU
         self.rnn = rnn_cls(n_in, hidden, layers, batch_first=True)
         self.n_parts = 2 if cell == "lstm" else 1
-        self.encoder = nn.Sequential(nn.Linear(2 * n_init + self.n_rh, encoder_hidden), nn.Tanh(),
+        self.encoder = nn.Sequential(nn.Linear(2 * n_init + self.n_rh + self.n_mem, encoder_hidden), nn.Tanh(),
                                      nn.Linear(encoder_hidden, self.n_parts * layers * hidden))
         self.readout = nn.Linear(hidden, 1)
         self.skip = nn.Linear(n_in, 1)
 
+    def _inputs(self, u, rh):
+        u = _channels(u)[..., :1 + self.n_mem]
+        return u if not self.n_rh else torch.cat([u, _channels(rh)[..., :self.n_rh]], -1)
+
     def init_state(self, u_hist, y_hist, rh_hist):
         k = self.n_init
-        parts = [u_hist[:, -k:], y_hist[:, -k:]]
+        u_hist = _channels(u_hist)
+        parts = [u_hist[:, -k:, 0], y_hist[:, -k:]]
         if self.n_rh:
-            parts.append(rh_hist[:, -1:])
+            parts.append(_channels(rh_hist)[:, -1, :self.n_rh])
+        if self.n_mem:
+            parts.append(u_hist[:, -1, 1:1 + self.n_mem])
         s = self.encoder(torch.cat(parts, 1))
         B = s.shape[0]
         s = s.view(B, self.n_parts, self.layers, self.hidden_size).permute(1, 2, 0, 3)
@@ -43,7 +60,7 @@ class RNNSimulator(SequenceCore):
         return torch.tanh(s[0]).contiguous()
 
     def simulate(self, state, u, rh):
-        x = u[..., None] if not self.n_rh else torch.stack([u, rh], -1)
+        x = self._inputs(u, rh)
         out, _ = self.rnn(x, state)
         return self.readout(out)[..., 0] + self.skip(x)[..., 0]
 
@@ -54,7 +71,8 @@ class _RNNModel(NeuralModel):
                "encoder_hidden": _pos_int, "horizon": _pos_int, "stride": _pos_int}
 
     def _build_core(self, n_rh):
-        return RNNSimulator(self.cell, n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden)
+        return RNNSimulator(self.cell, n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden,
+                            n_mem=self._n_mem())
 
     def _training_settings(self):
         return dict(horizon=self.horizon, stride=self.stride)
@@ -68,6 +86,7 @@ class LSTMModel(_RNNModel):
 
     def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
                  horizon: int = 200, stride: int = 50,
+                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
                  inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
                  batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
                  patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
@@ -84,6 +103,7 @@ class GRUModel(_RNNModel):
 
     def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
                  horizon: int = 200, stride: int = 50,
+                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
                  inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
                  batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
                  patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
