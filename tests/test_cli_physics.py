@@ -63,3 +63,19 @@ def test_bad_options_give_one_clear_error(tmp_path, capsys):
     assert "unknown effect(s) magic" in err and "Traceback" not in err
     assert main(["frf", "--device", "ipmc_pt_eg", "--effects", "humidity", "--json", str(tmp_path / "y.json")]) == 2
     assert "give rh" in capsys.readouterr().err
+
+
+def test_top_level_help_lists_every_command(capsys):
+    import pytest as _pytest
+    with _pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    commands = ("run", "simulate", "frf", "effects", "generate", "train-compare", "predict", "compare",
+                "identify", "diagnose", "validate", "benchmark", "demo")
+    for cmd in commands:
+        assert cmd in out
+    for cmd in commands:            # every command's own help renders (argparse %-formats it)
+        with _pytest.raises(SystemExit) as exc:
+            main([cmd, "--help"])
+        assert exc.value.code == 0
