@@ -60,12 +60,14 @@ class Normalized(nn.Module):
     """A core plus the affine normalisation of each channel (stored as buffers, so it is
     saved with the weights)."""
 
-    def __init__(self, core: SequenceCore):
+    def __init__(self, core: SequenceCore, n_mem: int = 0):
         super().__init__()
         self.core = core
         for name in ("u", "y", "rh"):
             self.register_buffer(f"{name}_mean", torch.zeros((), dtype=torch.float64))
             self.register_buffer(f"{name}_std", torch.ones((), dtype=torch.float64))
+        if n_mem:  # scale of each memory filter's output (they shrink with the time constant)
+            self.register_buffer("mem_std", torch.ones(int(n_mem), dtype=torch.float64))
 
     def set_stats(self, records: list[Record], use_rh: bool) -> None:
         def stats(x):
@@ -158,6 +160,9 @@ class NeuralModel:
 
     #: registry name ("ff", "rbf", ...), set by subclasses
     kind = "base"
+    #: card entries (besides the standard ones) that learned_state() may write and
+    #: restore() reads back
+    CARD_EXTRA: tuple[str, ...] = ("rh_knots_pct",)
     #: parameter name -> validator(value) -> error text or None (subclasses extend)
     _checks: dict = {
         "seed": lambda v: _pos_int(v, zero=True),
@@ -266,12 +271,15 @@ class NeuralModel:
         return self
 
     _LEARNED = ("net_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
-                "init_report_")
+                "init_report_", "rh_knots_")
 
     def _fit(self, train, val, fs, use_rh) -> None:
         from ..training import fit_core  # Lightning is imported only when training
 
         with torch_threads(self.num_threads):
+            if getattr(self, "rh_knots", None) == "auto":
+                from .features import auto_knots
+                self.rh_knots_ = auto_knots([r.rh for r in train]) if use_rh else []
             core = self._build_core(self._n_rh_channels(use_rh))
             min_len = core.n_init + 2
             # channels (memory filters, physics) are computed on whole records and then cut,
@@ -283,7 +291,7 @@ class NeuralModel:
                 train = [r[:k] if k else r for r, k in zip(full, cuts)]
                 val = []
             val = [r for r in (val or []) if len(r) >= min_len]
-            net = Normalized(core)
+            net = Normalized(core, self._n_mem())
             net.set_stats(train, use_rh)
             self.net_ = net
             self.inputs_ = ["voltage", "rh"] if use_rh else ["voltage"]
@@ -324,7 +332,12 @@ class NeuralModel:
         return int(getattr(self, "memory_filters", 0) or 0)
 
     def _rh_knots(self) -> list:
-        return list(getattr(self, "rh_knots", None) or [])
+        """RH knots of the scheduled bypass (%): the hyper-parameter, or for ``"auto"`` the
+        knots found in the training data (:func:`features.auto_knots`)."""
+        k = getattr(self, "rh_knots", None)
+        if k == "auto":
+            return list(getattr(self, "rh_knots_", None) or [])
+        return list(k or [])
 
     def _n_rh_channels(self, use_rh: bool) -> int:
         """RH channels given to the core: normalised RH, then one hat per RH knot."""
@@ -334,12 +347,12 @@ class NeuralModel:
         """Normalised input channels of a record in physical units: ``u`` (n, C) = voltage,
         then the memory filters of the normalised voltage; ``rh`` (n, C_rh) = normalised RH,
         then the RH hat weights (or None when the model ignores humidity)."""
-        from .features import memory_filters, rh_hats
+        from .features import rh_hats
         n = self.net_
         un = n.norm("u", u)
         cols = [un[:, None]]
         if self._n_mem():
-            cols.append(memory_filters(un, self._memory_taus(), self.fs_))
+            cols.append(self._memory(un))
         U = np.concatenate(cols, 1) if len(cols) > 1 else cols[0]
         R = None
         if rh is not None and "rh" in self.inputs_:
@@ -349,9 +362,24 @@ class NeuralModel:
             R = np.concatenate(parts, 1) if len(parts) > 1 else parts[0]
         return U, R
 
+    def _memory(self, un: np.ndarray) -> np.ndarray:
+        """Memory-filter channels of the normalised voltage ``un``, each divided by its
+        standard deviation over the training records (so that every channel has unit
+        scale for the gradient-trained networks)."""
+        from .features import memory_filters
+        m = memory_filters(un, self._memory_taus(), self.fs_)
+        return m / self.net_.mem_std.numpy() if hasattr(self.net_, "mem_std") else m
+
     def _prepare_channels(self, records: list[Record]) -> None:
-        """Hook before the training records are normalised (the hybrid runs its physics
-        here, once per record); default: nothing."""
+        """Hook before the training records are normalised: sets the scale of the memory
+        filters (the hybrid also runs its physics here, once per record)."""
+        if self._n_mem():
+            from .features import memory_filters
+            M = np.concatenate([memory_filters(self.net_.norm("u", r.u), self._memory_taus(), self.fs_)
+                                for r in records])
+            sd = M.std(0)
+            sd[~np.isfinite(sd) | (sd <= 1e-12)] = 1.0
+            self.net_.mem_std.copy_(torch.as_tensor(sd))
 
     def _release_channels(self) -> None:
         """Hook after the training records are normalised (drop caches)."""
@@ -507,9 +535,12 @@ class NeuralModel:
     def learned_state(self) -> dict[str, Any]:
         """JSON-able learned attributes other than the weights (used by bundles)."""
         self._check_fitted()
-        return {"inputs": list(self.inputs_), "fs": self.fs_,
-                "rh_range": None if self.rh_range_ is None else list(self.rh_range_),
-                "n_init": self.n_init_, "fit_time_s": getattr(self, "fit_time_", None)}
+        out = {"inputs": list(self.inputs_), "fs": self.fs_,
+               "rh_range": None if self.rh_range_ is None else list(self.rh_range_),
+               "n_init": self.n_init_, "fit_time_s": getattr(self, "fit_time_", None)}
+        if getattr(self, "rh_knots", None) == "auto":
+            out["card_extra"] = {"rh_knots_pct": self._rh_knots()}
+        return out
 
     def restore(self, learned: dict, state_dict: dict) -> "NeuralModel":
         """Rebuild the network from ``learned_state()`` and load its weights."""
@@ -517,8 +548,14 @@ class NeuralModel:
         inputs = list(learned["inputs"])
         if inputs not in (["voltage"], ["voltage", "rh"]):
             raise InputError(f"unsupported model inputs {inputs}")
+        if getattr(self, "rh_knots", None) == "auto":
+            knots = (learned.get("card_extra") or {}).get("rh_knots_pct")
+            if knots is None:
+                raise InputError(f"model {self.kind!r} with rh_knots 'auto' needs the knots found in "
+                                 "training (card entry rh_knots_pct); the bundle lacks them")
+            self.rh_knots_ = [float(k) for k in knots]
         core = self._build_core(self._n_rh_channels("rh" in inputs))
-        net = Normalized(core)
+        net = Normalized(core, self._n_mem())
         missing, unexpected = net.load_state_dict(state_dict, strict=False)
         if missing or unexpected:
             raise InputError(f"saved weights do not match a {self.kind!r} model with these "

@@ -28,7 +28,7 @@ import math
 import numpy as np
 from scipy import signal
 
-__all__ = ["memory_taus", "memory_filters", "rh_hats", "check_knots"]
+__all__ = ["memory_taus", "memory_filters", "rh_hats", "check_knots", "auto_knots"]
 
 
 def memory_taus(n: int, min_s: float, max_s: float) -> np.ndarray:
@@ -53,8 +53,10 @@ def memory_filters(u: np.ndarray, taus: np.ndarray, fs: float) -> np.ndarray:
 
 
 def check_knots(knots) -> str | None:
-    """Validation message for ``rh_knots`` (None when valid): a list of increasing RH
-    values (%) in 0-100, empty or at least two of them."""
+    """Validation message for ``rh_knots`` (None when valid): ``"auto"`` or a list of
+    increasing RH values (%) in 0-100, empty or at least two of them."""
+    if knots == "auto":
+        return None
     if not isinstance(knots, (list, tuple)):
         return "a list of increasing relative humidities in % (e.g. [40, 60, 80, 100]) or []"
     try:
@@ -81,3 +83,31 @@ def rh_hats(rh: np.ndarray, knots) -> np.ndarray:
     out[rows, i] = 1.0 - w
     out[rows, i + 1] += w
     return out
+
+
+def auto_knots(rh_series, tol: float = 2.5) -> list[float]:
+    """Knots for ``rh_knots: auto`` from the training records' RH (one array per record,
+    %): the distinct levels of the records whose RH stays within ``tol`` % (rounded to
+    1 %; levels closer than ``tol`` merged), widened to the RH range of all records.
+    Fewer than two levels: four knots spread over the range (none if the range is
+    narrower than ``tol``)."""
+    levels: list[float] = []
+    lo, hi = np.inf, -np.inf
+    for rh in rh_series:
+        rh = np.asarray(rh, dtype=float)
+        lo, hi = min(lo, float(rh.min())), max(hi, float(rh.max()))
+        if np.ptp(rh) <= tol:
+            lev = float(np.round(np.median(rh)))
+            if all(abs(lev - v) > tol for v in levels):
+                levels.append(lev)
+    levels.sort()
+    if len(levels) < 2:
+        if not np.isfinite(lo) or hi - lo <= tol:
+            return []
+        return [float(v) for v in np.round(np.linspace(lo, hi, 4), 1)]
+    if lo < levels[0] - tol:
+        levels.insert(0, float(np.floor(lo)))
+    if hi > levels[-1] + tol:
+        levels.append(float(np.ceil(hi)))
+    return levels
+

@@ -8,14 +8,20 @@ windows of ``n_init`` + ``horizon`` samples, so the free-run error is what is op
 Without measured history the encoder sees the system at rest (0 V, 0 output).
 With ``memory_filters`` the voltage's low-pass filter bank (long input memory, see
 :mod:`nnmodel.models.features`) joins the input channels, and its state at the end of the
-history joins the encoder's input.
+history joins the encoder's input.  ``rh_knots`` schedules the direct linear path on RH
+(coefficients interpolated between knots) and ``skip_init`` starts that path at its
+least-squares fit with the recurrent read-out at zero, so that training refines a
+linear-parameter-varying model instead of starting from scratch.
 """
 from __future__ import annotations
 
 import torch
 from torch import nn
 
+import numpy as np
+
 from .base import NeuralModel, SequenceCore, _pos_int
+from .features import check_knots
 
 
 def _channels(x):
@@ -27,9 +33,10 @@ class RNNSimulator(SequenceCore):
     channels, tensors (batch, time) or (batch, time, channels)."""
 
     def __init__(self, cell: str, n_rh: int, hidden: int, layers: int, n_init: int,
-                 encoder_hidden: int, n_mem: int = 0):
+                 encoder_hidden: int, n_mem: int = 0, n_sched: int = 0):
         super().__init__()
         self.cell, self.n_rh, self.n_mem = cell, int(n_rh), int(n_mem)
+        self.n_sched = int(n_sched)
         self.hidden_size, self.layers, self.n_init = int(hidden), int(layers), int(n_init)
         n_in = 1 + self.n_mem + self.n_rh
         rnn_cls = nn.LSTM if cell == "lstm" else nn.GRU
@@ -38,7 +45,15 @@ class RNNSimulator(SequenceCore):
         self.encoder = nn.Sequential(nn.Linear(2 * n_init + self.n_rh + self.n_mem, encoder_hidden), nn.Tanh(),
                                      nn.Linear(encoder_hidden, self.n_parts * layers * hidden))
         self.readout = nn.Linear(hidden, 1)
-        self.skip = nn.Linear(n_in, 1)
+        # direct linear path; scheduled: one set of weights per RH knot (last n_sched inputs)
+        self.skip = nn.Linear(n_in - self.n_sched, max(1, self.n_sched))
+
+    def direct(self, x):
+        """The direct linear input-to-output path (scheduled on the RH hats if any)."""
+        if not self.n_sched:
+            return self.skip(x)[..., 0]
+        K = self.n_sched
+        return (self.skip(x[..., :-K]) * x[..., -K:]).sum(-1)
 
     def _inputs(self, u, rh):
         u = _channels(u)[..., :1 + self.n_mem]
@@ -62,17 +77,60 @@ class RNNSimulator(SequenceCore):
     def simulate(self, state, u, rh):
         x = self._inputs(u, rh)
         out, _ = self.rnn(x, state)
-        return self.readout(out)[..., 0] + self.skip(x)[..., 0]
+        return self.readout(out)[..., 0] + self.direct(x)
 
 
 class _RNNModel(NeuralModel):
     cell = "lstm"
     _checks = {"hidden": _pos_int, "layers": _pos_int, "n_init": _pos_int,
-               "encoder_hidden": _pos_int, "horizon": _pos_int, "stride": _pos_int}
+               "encoder_hidden": _pos_int, "horizon": _pos_int, "stride": _pos_int,
+               "rh_knots": lambda v: None if v is None else check_knots(v),
+               "skip_init": lambda v: None if isinstance(v, bool) else "true or false"}
 
     def _build_core(self, n_rh):
+        n_sched = len(self._rh_knots()) if n_rh else 0
         return RNNSimulator(self.cell, n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden,
-                            n_mem=self._n_mem())
+                            n_mem=self._n_mem(), n_sched=n_sched)
+
+    def _initialise(self, core, train):
+        """``skip_init``: least-squares fit of the direct path on the training records
+        (normalised), recurrent read-out set to zero."""
+        if not self.skip_init:
+            return
+        import torch
+        from .lag import _normal_equations
+
+        xs = [np.concatenate([s.u if s.u.ndim == 2 else s.u[:, None]]
+                             + ([s.rh if s.rh.ndim == 2 else s.rh[:, None]] if core.n_rh else []), 1)
+              for s in train]
+        X = np.concatenate(xs)
+        t = np.concatenate([s.y for s in train])
+        K = core.n_sched
+        if K:
+            S, Xl = X[:, -K:], X[:, :-K]
+            m = Xl.shape[1]
+
+            def blocks(sl):
+                return np.concatenate([(Xl[sl, :, None] * S[sl, None, :]).reshape(-1, m * K), S[sl]], 1)
+        else:
+            m = X.shape[1]
+
+            def blocks(sl):
+                return np.concatenate([X[sl], np.ones((X[sl].shape[0], 1))], 1)
+        G, rhs = _normal_equations(blocks, t)
+        G[np.diag_indices_from(G)] += 1e-8 * len(t) + 1e-10 * np.trace(G) / len(G)
+        w = np.linalg.solve(G, rhs)
+        with torch.no_grad():
+            if K:
+                core.skip.weight.copy_(torch.as_tensor(w[:m * K].reshape(m, K).T, dtype=torch.float32))
+                core.skip.bias.copy_(torch.as_tensor(w[m * K:], dtype=torch.float32))
+            else:
+                core.skip.weight.copy_(torch.as_tensor(w[None, :m], dtype=torch.float32))
+                core.skip.bias.fill_(float(w[m]))
+            core.readout.weight.zero_()
+            core.readout.bias.zero_()
+        resid = t - np.concatenate([blocks(slice(a, a + 20000)) for a in range(0, len(t), 20000)]) @ w
+        self.init_report_ = {"skip_one_step_rmse": float(np.sqrt(np.mean(resid ** 2)))}
 
     def _training_settings(self):
         return dict(horizon=self.horizon, stride=self.stride)
@@ -87,6 +145,7 @@ class LSTMModel(_RNNModel):
     def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
                  horizon: int = 200, stride: int = 50,
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 rh_knots: list | None = None, skip_init: bool = False,
                  inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
                  batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
                  patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
@@ -104,6 +163,7 @@ class GRUModel(_RNNModel):
     def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
                  horizon: int = 200, stride: int = 50,
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 rh_knots: list | None = None, skip_init: bool = False,
                  inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
                  batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
                  patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
