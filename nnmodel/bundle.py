@@ -116,6 +116,10 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "weights": {"file": WEIGHTS, "sha256": sha256_file(tmp / WEIGHTS), "format": "torch state_dict"},
         }
+        for key, value in (learned.get("card_extra") or {}).items():  # e.g. the hybrid's physics
+            if key in card:
+                raise InputError(f"model {model.kind!r}: card entry {key!r} would overwrite a standard field")
+            card[key] = value
         (tmp / CARD).write_text(json.dumps(_jsonable(card), indent=2, allow_nan=False) + "\n",
                                 encoding="utf-8")
         if target.exists():
@@ -177,7 +181,8 @@ def load(path: str | os.PathLike) -> "Bundle":
     model = cls(**hp)
     learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
                "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
-               "fit_time_s": card.get("training", {}).get("fit_time_s")}
+               "fit_time_s": card.get("training", {}).get("fit_time_s"),
+               "card_extra": {k: card[k] for k in getattr(cls, "CARD_EXTRA", ()) if k in card}}
     model.restore(learned, state)
     return Bundle(model, card, folder)
 

@@ -117,12 +117,19 @@ def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out
                           "n_parameters": None, "train_time_s": 0.0}
     results["physics"]["inference_samples_per_s"] = _speed(lambda r: physics_predict(r), ds, test_entries)
     results["physics"]["eval_time_s"] = time.perf_counter() - t0
+    physics_rows = {"physics": physics_predict}
     trained = {}
     for name in models:
         ov = dict((overrides or {}).get(name, {}))
         if max_time_s is not None:
             ov["max_time"] = float(max_time_s)
+        if name == "hybrid":
+            ov.setdefault("device", gen["device"])   # the hybrid's physics: the dataset's device
         model = make_model(name, ov)
+        if name == "hybrid":
+            base = _physics_base_row(model, gen, ds, test_entries)
+            if base is not None:   # the physics the hybrid starts from, alone
+                results["physics_base"], physics_rows["physics_base"] = base
         if progress:
             print(f"training {name} ...", flush=True)
         t1 = time.perf_counter()
@@ -154,11 +161,31 @@ def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out
                "generator": {"device": gen["device"], "effects": gen["effects"]},
                "noise_floor_m": ds.meta["noise_floor_m"], "skip_samples": SKIP, "models": results,
                "best_heldout": _best(results)}
-    _plots(ds, test_entries, physics_predict, trained, results, out)
+    _plots(ds, test_entries, physics_rows, trained, results, out)
     write_json(out / "compare.json", summary)
     write_csv(_table_rows(results), out / "metrics.csv")
     _report(summary, out)
     return summary
+
+
+def _physics_base_row(model, gen: dict, ds: Dataset, entries):
+    """Score of the hybrid's own physics part (its device and effects, without the
+    network) when it differs from the generator: (result row, predict) or None."""
+    pm = model._physics_model()
+    if pm.device.name == gen["device"] and list(pm.effect_ids) == list(gen["effects"]):
+        return None
+    pred = PhysicsPredictor(pm)
+
+    def predict(rec):
+        return pred(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
+    row = {"kind": "physics part of the hybrid (no network)", "effects": list(pm.effect_ids),
+           "free_run": _score(predict, ds, entries, SKIP), "n_parameters": None, "train_time_s": 0.0,
+           "inference_samples_per_s": _speed(predict, ds, entries)}
+    return row, predict
+
+
+def _is_physics(name: str, row: dict) -> bool:
+    return row.get("n_parameters") is None and str(row.get("kind", "")).startswith("physics")
 
 
 def _speed(predict, ds: Dataset, entries) -> float:
@@ -169,7 +196,7 @@ def _speed(predict, ds: Dataset, entries) -> float:
 
 
 def _best(results: dict) -> dict:
-    nets = {k: v for k, v in results.items() if k != "physics" and "heldout_rh" in v["free_run"]}
+    nets = {k: v for k, v in results.items() if not _is_physics(k, v) and "heldout_rh" in v["free_run"]}
     if not nets:
         return {}
     k = min(nets, key=lambda n: nets[n]["free_run"]["heldout_rh"]["nrmse"])
@@ -208,7 +235,7 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def _plots(ds, entries, physics_predict, trained, results, out: Path) -> None:
+def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
     # time overlays: one record of each group
     for g in GROUPS:
         es = [e for e in entries if group_of(e) == g]
@@ -218,7 +245,8 @@ def _plots(ds, entries, physics_predict, trained, results, out: Path) -> None:
         t = np.arange(rec.u.size) / rec.fs
         fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
         ax[0].plot(t, 1e3 * rec.y, "k", lw=1.0, label="measurement")
-        ax[0].plot(t, 1e3 * physics_predict(rec), lw=0.8, label="physics")
+        for label, predict in physics_rows.items():
+            ax[0].plot(t, 1e3 * predict(rec), lw=0.8, label=label)
         for name, m in trained.items():
             yh = m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])
             ax[0].plot(t, 1e3 * yh, lw=0.8, label=name)

@@ -1,4 +1,4 @@
-"""Neural models of the actuator (one module per model family).
+"""Neural and grey-box models of the actuator (one module per model family).
 
 ``MODELS`` maps the registry name used in recipes and on the command line to the class;
 every class follows the contract of :class:`nnmodel.models.base.NeuralModel`.
@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from .base import NeuralModel, NotFittedError
 from .ff import FFModel
+from .hybrid import HybridModel
 from .narx import NARXModel
 from .rbf import RBFModel
 from .rnn import GRUModel, LSTMModel
@@ -17,7 +18,8 @@ MODELS: dict[str, type[NeuralModel]] = {
     "narx": NARXModel,
     "lstm": LSTMModel,
     "gru": GRUModel,
+    "hybrid": HybridModel,
 }
 
 __all__ = ["MODELS", "NeuralModel", "NotFittedError", "FFModel", "RBFModel", "NARXModel",
-           "LSTMModel", "GRUModel"]
+           "LSTMModel", "GRUModel", "HybridModel"]

@@ -1,0 +1,238 @@
+"""``hybrid``: grey-box model — the physics simulator plus a learned correction.
+
+    y[k] = y_phys[k] + f(y[k-1..k-na], u[k..k-nb+1], y_phys[k..k-nb+1], s[k], m[k], rh[k])
+
+``y_phys`` is the tip deflection (m) that :func:`physics.timedomain.simulate` computes for
+the voltage record (device ``device`` with effects ``effects``, input interpolation
+``hold`` between samples, RH smoothed by
+:func:`physics.compare.model_rh` as for any physics prediction of a measured record);
+``s`` are optional internal physics states (``physics_states``: ``cs_up``, the interface
+solvent excess in mol/m³, and/or ``current``, the clamp current in A), ``m`` optional
+memory filters (:mod:`nnmodel.models.features`) of the voltage *and of the physics
+output* (so the correction can be a frequency-dependent gain on y_phys), ``rh`` the
+relative humidity (and its hat weights).  The
+correction ``f`` is the ``ff`` / ``narx`` map (linear bypass, least-squares initialised,
+plus an MLP) on the *residual* y - y_phys.  With ``na = 0`` the correction is a static map
+of delayed inputs and physics outputs (one-step training is then free-run training); with
+``na > 0`` it feeds back its own outputs and ``horizon > 1`` trains it in closed loop.
+
+The physics is part of the model: a bundle's card stores the device document (the
+parsed YAML of the device file), the effect list and every parameter value, and loading
+rebuilds the simulator from the card, not from whatever device file is installed.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from physics.errors import InputError
+
+from .base import NeuralModel
+from .features import memory_filters
+from .ff import _LAG_CHECKS
+from .lag import LagSimulator, MLPMap, arx_init
+
+#: internal physics signals the correction may see: name -> (SimulationResult attribute, unit)
+PHYSICS_STATES = {"cs_up": ("cs_up", "mol/m^3"), "current": ("current", "A")}
+
+
+def _check_states(v):
+    if v is None:
+        return None
+    if not isinstance(v, (list, tuple)) or any(s not in PHYSICS_STATES for s in v) or len(set(v)) != len(v):
+        return f"a list of distinct names among {sorted(PHYSICS_STATES)} (or [])"
+    return None
+
+
+def _check_effects(v):
+    if isinstance(v, str) or (isinstance(v, (list, tuple)) and all(isinstance(e, str) for e in v)):
+        return None
+    return "an effect list (e.g. 'default' or [electrode_resistance, humidity])"
+
+
+class HybridCore(LagSimulator):
+    """Residual lag core with the normalisation of the physics states (buffers, saved
+    with the weights)."""
+
+    def __init__(self, *args, n_states: int = 0, n_phys_mem: int = 0, **kw):
+        super().__init__(*args, **kw)
+        self.register_buffer("state_mean", torch.zeros(n_states, dtype=torch.float64))
+        self.register_buffer("state_std", torch.ones(n_states, dtype=torch.float64))
+        self.register_buffer("phys_mem_std", torch.ones(n_phys_mem, dtype=torch.float64))
+
+
+class HybridModel(NeuralModel):
+    """Physics simulator + neural correction of its output (grey box)."""
+
+    kind = "hybrid"
+    _checks = {**_LAG_CHECKS,
+               "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
+               "effects": _check_effects,
+               "physics_states": _check_states,
+               "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'"}
+
+    def __init__(self, device: str = "ip2c_pedot_water", effects="default", physics_states: list | None = None,
+                 hold: str = "cubic",
+                 na: int = 0, nb: int = 20, hidden: int = 32, layers: int = 2, activation: str = "tanh",
+                 poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
+                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 rh_knots: list | None = None, horizon: int = 1, stride: int = 1,
+                 inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
+                 batch_size: int = 256, max_epochs: int = 100, max_time: float | None = 600.0,
+                 patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
+                 accelerator: str = "cpu", progress_bar: bool = True,
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+        self._set_params_from(locals())
+
+    _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")
+    #: card entries (besides the standard ones) written by learned_state and read back on load
+    CARD_EXTRA = ("physics", "rh_knots_pct")
+
+    # ------------------------------------------------------------------ physics
+    def _states(self) -> list[str]:
+        return list(self.physics_states or [])
+
+    def _physics_model(self):
+        if getattr(self, "physics_", None) is None:
+            from physics.model import ActuatorModel
+            self.physics_ = ActuatorModel(self.device, self.effects)
+            self.physics_card_ = _physics_card(self.physics_)
+        return self.physics_
+
+    def physics_output(self, u, rh, fs: float | None = None):
+        """(deflection [m], states (n, len(physics_states)) in SI units) of the physics part
+        for voltage ``u`` [V] and RH ``rh`` [%] (constant, per sample or None)."""
+        from physics.compare import model_rh
+        from physics.timedomain import simulate
+
+        model = self._physics_model()
+        fs = float(fs or self.fs_)
+        u = np.asarray(u, dtype=float)
+        if rh is not None and np.ndim(rh) == 1:
+            rh = model_rh(np.asarray(rh, dtype=float), fs)
+        if rh is None and model.components["humidity"].enabled:
+            raise InputError(f"the hybrid's physics ({model.device.name}, humidity effect on) needs the "
+                             "relative humidity: give rh=")
+        t = np.arange(u.size) / fs
+        res = simulate(model, None, t, u, rh=rh, hold=self.hold)
+        states = [getattr(res, PHYSICS_STATES[s][0]) for s in self._states()]
+        return res.deflection, (np.stack(states, 1) if states else np.zeros((u.size, 0)))
+
+    def _prepare_channels(self, records):
+        super()._prepare_channels(records)
+        self._physics_model()
+        self._cache = {}
+        for r in records:
+            if r.rh is None and self.physics_.components["humidity"].enabled:
+                raise InputError(f"record {r.name!r} has no relative humidity, which the hybrid's physics "
+                                 f"({self.physics_.device.name}, humidity effect on) needs")
+            self._cache[id(r.u)] = (r.u, self.physics_output(r.u, r.rh))
+        core = self.net_.core
+        if self._n_mem():
+            M = np.concatenate([memory_filters(self.net_.norm("y", v[1][0]), self._memory_taus(), self.fs_)
+                                for v in self._cache.values()])
+            sd = M.std(0)
+            sd[~np.isfinite(sd) | (sd <= 1e-12)] = 1.0
+            core.phys_mem_std.copy_(torch.as_tensor(sd))
+        if self._states():
+            S = np.concatenate([v[1][1] for v in self._cache.values()])
+            sd = S.std(0)
+            sd[~np.isfinite(sd) | (sd <= 0)] = 1.0
+            core.state_mean.copy_(torch.as_tensor(S.mean(0)))
+            core.state_std.copy_(torch.as_tensor(sd))
+
+    def _release_channels(self):
+        self._cache = {}
+
+    def _channels(self, u, rh):
+        from .features import rh_hats
+        n = self.net_
+        hit = getattr(self, "_cache", {}).get(id(u))
+        yp, S = hit[1] if hit is not None and hit[0] is u else self.physics_output(u, rh)
+        un, ypn = n.norm("u", u), n.norm("y", yp)
+        cols = [un[:, None], ypn[:, None]]
+        core = n.core
+        if S.shape[1]:
+            cols.append((S - core.state_mean.numpy()) / core.state_std.numpy())
+        if self._n_mem():   # memory of the voltage and of the physics output
+            cols.append(self._memory(un))
+            cols.append(memory_filters(ypn, self._memory_taus(), self.fs_) / core.phys_mem_std.numpy())
+        U = np.concatenate(cols, 1)
+        R = None
+        if rh is not None and "rh" in self.inputs_:
+            parts = [n.norm("rh", rh)[:, None]]
+            if self._rh_knots():
+                parts.append(rh_hats(rh, self._rh_knots()))
+            R = np.concatenate(parts, 1)
+        return U, R
+
+    # ------------------------------------------------------------------ network
+    def _build_core(self, n_rh):
+        n_states = len(self._states())
+        n_mem = n_states + 2 * self._n_mem()
+        n_sched = len(self._rh_knots()) if n_rh else 0
+        fmap = MLPMap(self.na, 2 * self.nb + n_mem + n_rh, self.hidden, self.layers, self.activation,
+                      linear=True, poly_degree=self.poly_degree, n_sched=n_sched)
+        return HybridCore(self.na, self.nb, n_rh, fmap, self.feedthrough, n_mem=n_mem, n_tap=2,
+                          residual=True, n_states=n_states, n_phys_mem=self._n_mem())
+
+    def _initialise(self, core, train):
+        if self.arx_init:
+            self.init_report_ = arx_init(core, train)
+
+    def _training_settings(self):
+        return dict(horizon=self.horizon, stride=self.stride)
+
+    def fit(self, train, val=None):
+        if self.inputs == "voltage":
+            raise InputError("model 'hybrid': inputs must be 'auto' or 'voltage+rh' (its physics part "
+                             "needs the relative humidity of every record)")
+        return super().fit(train, val)
+
+    # ------------------------------------------------------------------ persistence
+    def learned_state(self):
+        out = super().learned_state()
+        self._physics_model()
+        out["card_extra"] = {**out.get("card_extra", {}), "physics": self.physics_card_}
+        return out
+
+    def restore(self, learned, state_dict):
+        card = (learned.get("card_extra") or {}).get("physics")
+        if card is not None:
+            self.physics_, self.physics_card_ = _physics_from_card(card)
+        return super().restore(learned, state_dict)
+
+
+# ---------------------------------------------------------------------- physics in the card
+def _physics_card(model) -> dict:
+    """JSON description of the physics part: device name and document, effects, the SI
+    value of every parameter (for reading and for checking on load)."""
+    import yaml
+    from pathlib import Path
+
+    dev = model.device
+    doc = None
+    if dev.path and Path(str(dev.path)).is_file():
+        doc = yaml.safe_load(Path(str(dev.path)).read_text(encoding="utf-8"))
+    return {"device": dev.name, "device_file": str(dev.path) if dev.path else None,
+            "device_document": doc, "effects": list(model.effect_ids), "n_modes": model.n_modes,
+            "parameters_SI": {k: float(v) for k, v in dev.params.items()},
+            "reference_rh_pct": float(dev.reference_rh)}
+
+
+def _physics_from_card(card: dict):
+    """Rebuild the physics part from a bundle card (the stored device document when
+    present, so the bundle does not depend on the installed device files)."""
+    from physics.device import load_device, parse_device
+    from physics.model import ActuatorModel
+
+    doc = card.get("device_document")
+    dev = parse_device(doc, where="bundle card physics.device_document") if doc else load_device(card["device"])
+    saved = card.get("parameters_SI") or {}
+    diff = sorted(k for k, v in saved.items()
+                  if k not in dev.params or not np.isclose(dev.params[k], v, rtol=1e-12, atol=0.0))
+    if diff:
+        raise InputError(f"the physics parameters {diff} of the bundle card differ from its device "
+                         f"{dev.name!r}; the bundle is inconsistent")
+    model = ActuatorModel(dev, card["effects"], n_modes=int(card.get("n_modes", 4)))
+    return model, dict(card)
