@@ -182,6 +182,7 @@ class NeuralModel:
         "memory_filters": lambda v: _pos_int(v, zero=True),
         "memory_min_s": _pos_float,
         "memory_max_s": _pos_float,
+        "memory_abs": lambda v: None if isinstance(v, bool) else "true or false",
     }
 
     # ------------------------------------------------------------------ parameters
@@ -329,7 +330,10 @@ class NeuralModel:
         return memory_taus(n, getattr(self, "memory_min_s", 0.02), getattr(self, "memory_max_s", 100.0))
 
     def _n_mem(self) -> int:
-        return int(getattr(self, "memory_filters", 0) or 0)
+        """Number of memory channels: the filters of the voltage, and with ``memory_abs``
+        the same filters of its magnitude |V| (slow measures of the drive level)."""
+        n = int(getattr(self, "memory_filters", 0) or 0)
+        return 2 * n if getattr(self, "memory_abs", False) else n
 
     def _rh_knots(self) -> list:
         """RH knots of the scheduled bypass (%): the hyper-parameter, or for ``"auto"`` the
@@ -352,7 +356,7 @@ class NeuralModel:
         un = n.norm("u", u)
         cols = [un[:, None]]
         if self._n_mem():
-            cols.append(self._memory(un))
+            cols.append(self._memory(u))
         U = np.concatenate(cols, 1) if len(cols) > 1 else cols[0]
         R = None
         if rh is not None and "rh" in self.inputs_:
@@ -362,21 +366,28 @@ class NeuralModel:
             R = np.concatenate(parts, 1) if len(parts) > 1 else parts[0]
         return U, R
 
-    def _memory(self, un: np.ndarray) -> np.ndarray:
-        """Memory-filter channels of the normalised voltage ``un``, each divided by its
-        standard deviation over the training records (so that every channel has unit
-        scale for the gradient-trained networks)."""
+    def _memory_raw(self, u: np.ndarray) -> np.ndarray:
+        """Memory filters of the normalised voltage (and of |V| / std(V) with
+        ``memory_abs``) for a voltage record ``u`` in V, unscaled."""
         from .features import memory_filters
-        m = memory_filters(un, self._memory_taus(), self.fs_)
+        n = self.net_
+        m = memory_filters(n.norm("u", u), self._memory_taus(), self.fs_)
+        if getattr(self, "memory_abs", False):
+            _, sd = n.stat("u")
+            m = np.concatenate([m, memory_filters(np.abs(u) / sd, self._memory_taus(), self.fs_)], 1)
+        return m
+
+    def _memory(self, u: np.ndarray) -> np.ndarray:
+        """Memory channels of a voltage record ``u`` (V), each divided by its standard
+        deviation over the training records (unit scale for the gradient-trained networks)."""
+        m = self._memory_raw(u)
         return m / self.net_.mem_std.numpy() if hasattr(self.net_, "mem_std") else m
 
     def _prepare_channels(self, records: list[Record]) -> None:
         """Hook before the training records are normalised: sets the scale of the memory
         filters (the hybrid also runs its physics here, once per record)."""
         if self._n_mem():
-            from .features import memory_filters
-            M = np.concatenate([memory_filters(self.net_.norm("u", r.u), self._memory_taus(), self.fs_)
-                                for r in records])
+            M = np.concatenate([self._memory_raw(r.u) for r in records])
             sd = M.std(0)
             sd[~np.isfinite(sd) | (sd <= 1e-12)] = 1.0
             self.net_.mem_std.copy_(torch.as_tensor(sd))

@@ -11,7 +11,9 @@
   past inputs.  Each filter is discretised exactly for a zero-order hold,
   x[k] = a x[k-1] + (1 - a) u[k] with a = exp(-1/(fs tau)), and starts in equilibrium
   with the first input sample (the record starts from steady state, the convention of
-  the physics simulator and of ``eap generate``).
+  the physics simulator and of ``eap generate``).  With ``memory_abs`` the same filters
+  of the voltage's magnitude |V| are added: slow measures of the drive level, for
+  behaviour that depends on how hard the actuator is driven (a saturating double layer).
 * **RH hat channels**: a piecewise-linear ("hat") encoding of the relative humidity on
   knots ``rh_knots`` (%): channel k is 1 at knot k and falls linearly to 0 at the
   neighbouring knots; outside the knots the end channels stay at 1.  The lag models use

@@ -56,6 +56,7 @@ class FFModel(NeuralModel):
     def __init__(self, na: int = 2, nb: int = 20, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 memory_abs: bool = False,
                  rh_knots: list | None = None,
                  inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
                  batch_size: int = 256, max_epochs: int = 100, max_time: float | None = None,

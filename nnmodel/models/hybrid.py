@@ -7,10 +7,16 @@ the voltage record (device ``device`` with effects ``effects``, input interpolat
 ``hold`` between samples, RH smoothed by
 :func:`physics.compare.model_rh` as for any physics prediction of a measured record);
 ``s`` are optional internal physics states (``physics_states``: ``cs_up``, the interface
-solvent excess in mol/m³, and/or ``current``, the clamp current in A), ``m`` optional
+solvent excess in mol/m³, and/or ``current``, the clamp current in A) and the physics
+outputs for extra drives (``physics_inputs``: ``v|v|``, ``v^3``; since the physics is
+linear in its input, their weighted sum is the physics behind a static odd input
+nonlinearity, a Hammerstein front-end the least-squares bypass identifies), ``m`` optional
 memory filters (:mod:`nnmodel.models.features`) of the voltage *and of the physics
 output* (so the correction can be a frequency-dependent gain on y_phys), ``rh`` the
-relative humidity (and its hat weights).  The
+relative humidity (and its hat weights).  With ``gain_hidden > 0`` a second small MLP G
+scales the physics output, y = y_phys (1 + G(x)) + f(...): a missing effect that mostly
+changes how far the actuator bends for a given drive (e.g. a saturating double layer)
+is then a gain the network learns rather than a signal it must synthesise.  The
 correction ``f`` is the ``ff`` / ``narx`` map (linear bypass, least-squares initialised,
 plus an MLP) on the *residual* y - y_phys.  With ``na = 0`` the correction is a static map
 of delayed inputs and physics outputs (one-step training is then free-run training); with
@@ -24,16 +30,31 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from torch import nn
 
 from physics.errors import InputError
 
-from .base import NeuralModel
+from .base import NeuralModel, _pos_int
 from .features import memory_filters
 from .ff import _LAG_CHECKS
 from .lag import LagSimulator, MLPMap, arx_init
 
 #: internal physics signals the correction may see: name -> (SimulationResult attribute, unit)
 PHYSICS_STATES = {"cs_up": ("cs_up", "mol/m^3"), "current": ("current", "A")}
+#: extra inputs the physics is also driven with (V0 = std of the training voltage): the
+#: physics is linear in its input, so a weighted sum of these runs is the physics driven
+#: through a static odd nonlinearity phi(V) = w1 V + w2 V|V|/V0 + w3 V^3/V0^2 (a
+#: Hammerstein front-end, e.g. a saturating double layer), and the least-squares bypass
+#: of the correction finds the weights
+PHYSICS_INPUTS = {"v|v|": lambda u, v0: u * np.abs(u) / v0, "v^3": lambda u, v0: u ** 3 / v0 ** 2}
+
+
+def _check_inputs(v):
+    if v is None:
+        return None
+    if not isinstance(v, (list, tuple)) or any(s not in PHYSICS_INPUTS for s in v) or len(set(v)) != len(v):
+        return f"a list of distinct names among {sorted(PHYSICS_INPUTS)} (or [])"
+    return None
 
 
 def _check_states(v):
@@ -52,13 +73,28 @@ def _check_effects(v):
 
 class HybridCore(LagSimulator):
     """Residual lag core with the normalisation of the physics states (buffers, saved
-    with the weights)."""
+    with the weights) and an optional multiplicative gain head:
+    y = y_phys (1 + G(x)) + f(...), G an MLP of the exogenous regressors x started at 0."""
 
-    def __init__(self, *args, n_states: int = 0, n_phys_mem: int = 0, **kw):
+    def __init__(self, *args, n_states: int = 0, n_phys_mem: int = 0, gain_hidden: int = 0, **kw):
         super().__init__(*args, **kw)
         self.register_buffer("state_mean", torch.zeros(n_states, dtype=torch.float64))
         self.register_buffer("state_std", torch.ones(n_states, dtype=torch.float64))
         self.register_buffer("phys_mem_std", torch.ones(n_phys_mem, dtype=torch.float64))
+        # normalised y_phys + y_offset = y_phys / std(y): the physical output in output-std units
+        self.register_buffer("y_offset", torch.zeros((), dtype=torch.float64))
+        self.gain = None
+        if gain_hidden:
+            self.gain = nn.Sequential(nn.Linear(self.n_x, gain_hidden), nn.Tanh(), nn.Linear(gain_hidden, 1))
+            with torch.no_grad():
+                self.gain[-1].weight.zero_()
+                self.gain[-1].bias.zero_()
+
+    def reference(self, u_all, x, k: int):
+        base = u_all[:, k:, 1]
+        if self.gain is None:
+            return base
+        return base + (base + self.y_offset.to(base.dtype)) * self.gain(x)[..., 0]
 
 
 class HybridModel(NeuralModel):
@@ -69,14 +105,17 @@ class HybridModel(NeuralModel):
                "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
                "effects": _check_effects,
                "physics_states": _check_states,
-               "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'"}
+               "physics_inputs": _check_inputs,
+               "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'",
+               "gain_hidden": lambda v: _pos_int(v, zero=True)}
 
     def __init__(self, device: str = "ip2c_pedot_water", effects="default", physics_states: list | None = None,
-                 hold: str = "cubic",
+                 physics_inputs: list | None = None, hold: str = "cubic",
                  na: int = 0, nb: int = 20, hidden: int = 32, layers: int = 2, activation: str = "tanh",
                  poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
-                 rh_knots: list | None = None, horizon: int = 1, stride: int = 1,
+                 memory_abs: bool = False,
+                 rh_knots: list | None = None, gain_hidden: int = 0, horizon: int = 1, stride: int = 1,
                  inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
                  batch_size: int = 256, max_epochs: int = 100, max_time: float | None = 600.0,
                  patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
@@ -92,6 +131,10 @@ class HybridModel(NeuralModel):
     def _states(self) -> list[str]:
         return list(self.physics_states or [])
 
+    def _n_extra(self) -> int:
+        """Physics channels besides the output: states, then the runs with extra inputs."""
+        return len(self._states()) + len(self.physics_inputs or [])
+
     def _physics_model(self):
         if getattr(self, "physics_", None) is None:
             from physics.model import ActuatorModel
@@ -100,8 +143,9 @@ class HybridModel(NeuralModel):
         return self.physics_
 
     def physics_output(self, u, rh, fs: float | None = None):
-        """(deflection [m], states (n, len(physics_states)) in SI units) of the physics part
-        for voltage ``u`` [V] and RH ``rh`` [%] (constant, per sample or None)."""
+        """(deflection [m], extra (n, states + extra inputs)) of the physics part for voltage
+        ``u`` [V] and RH ``rh`` [%] (constant, per sample or None): the states in SI units,
+        then the deflection [m] for each of ``physics_inputs`` as the drive."""
         from physics.compare import model_rh
         from physics.timedomain import simulate
 
@@ -115,8 +159,12 @@ class HybridModel(NeuralModel):
                              "relative humidity: give rh=")
         t = np.arange(u.size) / fs
         res = simulate(model, None, t, u, rh=rh, hold=self.hold)
-        states = [getattr(res, PHYSICS_STATES[s][0]) for s in self._states()]
-        return res.deflection, (np.stack(states, 1) if states else np.zeros((u.size, 0)))
+        extra = [getattr(res, PHYSICS_STATES[s][0]) for s in self._states()]
+        if self.physics_inputs:
+            v0 = self.net_.stat("u")[1]
+            for name in self.physics_inputs:
+                extra.append(simulate(model, None, t, PHYSICS_INPUTS[name](u, v0), rh=rh, hold=self.hold).deflection)
+        return res.deflection, (np.stack(extra, 1) if extra else np.zeros((u.size, 0)))
 
     def _prepare_channels(self, records):
         super()._prepare_channels(records)
@@ -126,16 +174,19 @@ class HybridModel(NeuralModel):
             if r.rh is None and self.physics_.components["humidity"].enabled:
                 raise InputError(f"record {r.name!r} has no relative humidity, which the hybrid's physics "
                                  f"({self.physics_.device.name}, humidity effect on) needs")
-            self._cache[id(r.u)] = (r.u, self.physics_output(r.u, r.rh))
+            # keyed by the identity of both arrays: records may share one voltage array
+            self._cache[(id(r.u), id(r.rh))] = (r.u, r.rh, self.physics_output(r.u, r.rh))
         core = self.net_.core
+        m, sd = self.net_.stat("y")
+        core.y_offset.fill_(m / sd)
         if self._n_mem():
-            M = np.concatenate([memory_filters(self.net_.norm("y", v[1][0]), self._memory_taus(), self.fs_)
+            M = np.concatenate([memory_filters(self.net_.norm("y", v[2][0]), self._memory_taus(), self.fs_)
                                 for v in self._cache.values()])
             sd = M.std(0)
             sd[~np.isfinite(sd) | (sd <= 1e-12)] = 1.0
             core.phys_mem_std.copy_(torch.as_tensor(sd))
-        if self._states():
-            S = np.concatenate([v[1][1] for v in self._cache.values()])
+        if self._n_extra():
+            S = np.concatenate([v[2][1] for v in self._cache.values()])
             sd = S.std(0)
             sd[~np.isfinite(sd) | (sd <= 0)] = 1.0
             core.state_mean.copy_(torch.as_tensor(S.mean(0)))
@@ -147,15 +198,15 @@ class HybridModel(NeuralModel):
     def _channels(self, u, rh):
         from .features import rh_hats
         n = self.net_
-        hit = getattr(self, "_cache", {}).get(id(u))
-        yp, S = hit[1] if hit is not None and hit[0] is u else self.physics_output(u, rh)
+        hit = getattr(self, "_cache", {}).get((id(u), id(rh)))
+        yp, S = hit[2] if hit is not None and hit[0] is u and hit[1] is rh else self.physics_output(u, rh)
         un, ypn = n.norm("u", u), n.norm("y", yp)
         cols = [un[:, None], ypn[:, None]]
         core = n.core
         if S.shape[1]:
             cols.append((S - core.state_mean.numpy()) / core.state_std.numpy())
-        if self._n_mem():   # memory of the voltage and of the physics output
-            cols.append(self._memory(un))
+        if self._n_mem():   # memory of the voltage (and |V|) and of the physics output
+            cols.append(self._memory(u))
             cols.append(memory_filters(ypn, self._memory_taus(), self.fs_) / core.phys_mem_std.numpy())
         U = np.concatenate(cols, 1)
         R = None
@@ -168,13 +219,14 @@ class HybridModel(NeuralModel):
 
     # ------------------------------------------------------------------ network
     def _build_core(self, n_rh):
-        n_states = len(self._states())
-        n_mem = n_states + 2 * self._n_mem()
+        n_states = self._n_extra()
+        n_mem = n_states + self._n_mem() + len(self._memory_taus())
         n_sched = len(self._rh_knots()) if n_rh else 0
         fmap = MLPMap(self.na, 2 * self.nb + n_mem + n_rh, self.hidden, self.layers, self.activation,
                       linear=True, poly_degree=self.poly_degree, n_sched=n_sched)
         return HybridCore(self.na, self.nb, n_rh, fmap, self.feedthrough, n_mem=n_mem, n_tap=2,
-                          residual=True, n_states=n_states, n_phys_mem=self._n_mem())
+                          residual=True, n_states=n_states, n_phys_mem=len(self._memory_taus()),
+                          gain_hidden=self.gain_hidden)
 
     def _initialise(self, core, train):
         if self.arx_init:

@@ -216,13 +216,17 @@ class LagSimulator(SequenceCore):
         k = self.n_init
         return (u_hist[:, -k:], y_hist[:, -k:], None if rh_hist is None else rh_hist[:, -k:])
 
+    def reference(self, u_all, x, k: int):
+        """The output the map is added to: input channel 1 for a residual core, else None."""
+        return u_all[:, k:, 1] if self.residual else None
+
     def simulate(self, state, u, rh):
         u_hist, y_hist, rh_hist = state
         k = self.n_init
         u_all = torch.cat([_channels(u_hist), _channels(u)], 1)
         rh_all = None if rh is None or not self.n_rh else torch.cat([_channels(rh_hist), _channels(rh)], 1)
         x = self.exo(u_all, rh_all, k)
-        base = u_all[:, k:, 1] if self.residual else None
+        base = self.reference(u_all, x, k)
         cache = self.fmap.precompute(x)
         B, T = u.shape[:2]
         if self.na == 0:

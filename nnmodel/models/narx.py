@@ -24,6 +24,7 @@ class NARXModel(NeuralModel):
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
                  horizon: int = 100, stride: int = 20,
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 memory_abs: bool = False,
                  rh_knots: list | None = None,
                  inputs: str = "auto", seed: int = 0, lr: float = 2e-3, weight_decay: float = 0.0,
                  batch_size: int = 64, max_epochs: int = 200, max_time: float | None = 600.0,

@@ -35,6 +35,7 @@ class RBFModel(NeuralModel):
                  width_neighbours: int = 2, alpha: float = 1e-6, kmeans_samples: int = 20000,
                  feedthrough: bool = True, horizon: int = 1, stride: int = 1,
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 memory_abs: bool = False,
                  rh_knots: list | None = None,
                  inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
                  batch_size: int = 256, max_epochs: int = 0, max_time: float | None = None,
