@@ -43,6 +43,14 @@ def get_suite(name: str) -> Suite:
     return SUITES[name]
 
 
+register(Suite("eap", "nnmodel.benchmarks.eap:run",
+               "FF, RBF, NARX, LSTM and the grey-box hybrid on the default humidity dataset "
+               "(generated unless --data DATASET), free-run NRMSE on held-out RH",
+               default_models=("ff", "rbf", "narx", "lstm", "hybrid")))
+register(Suite("greybox", "nnmodel.benchmarks.greybox:run",
+               "grey-box hybrid vs its physics alone vs pure networks on data with an effect the "
+               "physics lacks (configs/datasets/greybox.yaml), and a data-efficiency curve",
+               default_models=("hybrid", "narx", "ff")))
 register(Suite("silverbox", "nnmodel.benchmarks.silverbox:run",
                "real measured Silverbox data (Wigren & Schoukens 2013), standard split, "
                "free-run RMSE in mV beside published results"))
