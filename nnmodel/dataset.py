@@ -7,7 +7,8 @@ Records span RH 40–100 %: training RH levels, held-out RH levels (test only), 
 whose RH drifts slowly, and "measurement-like" records simulated with physics the
 generator's model lacks (e.g. ``nonlinear_charge``), scored separately.  Excitations
 cover the operating range: log sweeps 0.1–50 Hz, random-phase multisines, band-limited
-noise and square pulses, amplitudes up to 2 V.  The sensor model adds laser noise,
+noise and square pulses, amplitudes up to 2 V, each ramped in from 0 V over the first
+``fade_in_s`` (1 s) so that every record starts at rest, as a lab record does.  The sensor model adds laser noise,
 quantisation and drift so that records look like lab records.  Everything follows
 from one seed.
 """
@@ -46,7 +47,7 @@ _DEFAULTS: dict[str, Any] = {
     "validation_per_rh": 1, "test_per_train_rh": 1, "test_per_heldout_rh": 2,
     "varying_rh": {"train": 2, "test": 2, "range_pct": [40, 100]},
     "measurement_like": {"effects": ["nonlinear_charge"], "count": 2, "rh_pct": [55, 85]},
-    "sensor": "default",
+    "sensor": "default", "fade_in_s": 1.0,
 }
 
 
@@ -70,6 +71,9 @@ def load_config(name_or_path: str = "default", overrides: dict | None = None) ->
     if not (cfg["fs_Hz"] > 2 * cfg["f_max_Hz"] and cfg["duration_s"] > 0):
         raise InputError(f"dataset: need fs_Hz > 2 f_max_Hz and a positive duration_s "
                          f"(got fs_Hz={cfg['fs_Hz']}, f_max_Hz={cfg['f_max_Hz']}, duration_s={cfg['duration_s']})")
+    if not (isinstance(cfg["fade_in_s"], (int, float)) and 0 <= cfg["fade_in_s"] < cfg["duration_s"]):
+        raise InputError(f"dataset: fade_in_s must be a number of seconds in [0, duration_s), "
+                         f"got {cfg['fade_in_s']!r}")
     bad = set(cfg["excitations"]) - {"sweep", "multisine", "noise", "square"}
     if bad:
         raise InputError(f"dataset: unknown excitation(s) {sorted(bad)}")
@@ -132,6 +136,12 @@ def _plan(cfg: dict, rng: np.random.Generator) -> list[_Spec]:
 
 
 def _excitation(spec: _Spec, cfg: dict) -> signals.Signal:
+    """The excitation of one record, ramped in from 0 V over ``fade_in_s`` (records start
+    at rest)."""
+    return signals.fade_in(_raw_excitation(spec, cfg), cfg["fade_in_s"])
+
+
+def _raw_excitation(spec: _Spec, cfg: dict) -> signals.Signal:
     rng = np.random.default_rng(spec.seed)
     fs, T, fmax = cfg["fs_Hz"], cfg["duration_s"], cfg["f_max_Hz"]
     amp = float(rng.uniform(*cfg["amplitude_V"]))

@@ -47,6 +47,21 @@ def _check_band(f0: float, f1: float, fs: float):
         raise InputError(f"f_stop = {f1:g} Hz must be below the Nyquist frequency {fs / 2:g} Hz")
 
 
+def fade_in(sig: Signal, duration: float) -> Signal:
+    """``sig`` multiplied by a raised-cosine ramp 0 → 1 over its first ``duration`` seconds,
+    so that the record starts at 0 V, from rest, as a laboratory record does (a signal that
+    starts at a non-zero voltage would otherwise imply that the actuator had been held
+    there forever).  ``duration = 0`` returns ``sig`` unchanged."""
+    duration = float(duration)
+    if not (0.0 <= duration < sig.t[-1]):
+        raise InputError(f"fade-in duration must be at least 0 s and shorter than the signal "
+                         f"({sig.t[-1]:g} s), got {duration:g} s")
+    if duration == 0.0:
+        return sig
+    w = 0.5 - 0.5 * np.cos(np.pi * np.clip(sig.t / duration, 0.0, 1.0))
+    return Signal(sig.t, sig.v * w, sig.kind, {**sig.params, "fade_in_s": duration})
+
+
 def sweep(amplitude: float = 2.0, f_start: float = 0.1, f_stop: float = 50.0, duration: float = 100.0,
           fs: float = 1000.0, method: str = "logarithmic", offset: float = 0.0) -> Signal:
     """Swept sine (chirp) from f_start to f_stop, linear or logarithmic in frequency."""

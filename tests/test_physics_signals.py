@@ -48,6 +48,18 @@ def test_noise_is_band_limited_and_seeded():
                                                   seed=8).v)
 
 
+def test_fade_in_starts_at_zero_and_leaves_the_rest_untouched():
+    s = signals.multisine(rms=0.5, f_start=0.5, f_stop=20.0, period=10.0, fs=100.0, seed=3)
+    f = signals.fade_in(s, 1.0)
+    assert f.v[0] == 0.0 and abs(s.v[0]) > 1e-3
+    np.testing.assert_array_equal(f.v[100:], s.v[100:])           # unchanged after 1 s
+    w = f.v[1:100] / s.v[1:100]
+    assert np.all((w > 0) & (w < 1)) and np.all(np.diff(w) > 0)  # a monotone ramp
+    assert signals.fade_in(s, 0.0) is s and f.params["fade_in_s"] == 1.0
+    with pytest.raises(InputError, match="fade-in"):
+        signals.fade_in(s, 20.0)
+
+
 def test_steps():
     s = signals.steps([1.0, 2.0], [0.5, -0.5], duration=3.0, fs=100.0)
     assert s.v[50] == 0.0 and s.v[150] == 0.5 and s.v[250] == -0.5

@@ -14,7 +14,7 @@ import numpy as np
 
 from physics.errors import InputError
 
-__all__ = ["build_model", "parse_models", "time_free_run", "text_table", "html_page",
+__all__ = ["build_model", "parse_models", "start", "time_free_run", "text_table", "html_page",
            "environment", "fmt"]
 
 
@@ -34,6 +34,19 @@ def parse_models(models, default: Sequence[str]) -> list[str]:
     if len(set(names)) != len(names):
         raise InputError(f"model listed twice in {names}")
     return names
+
+
+def start(models, default: Sequence[str], overrides: dict | None, out) -> tuple[list[str], dict, Path]:
+    """Common start of a suite: the model names (:func:`parse_models`), the per-model
+    overrides (refused for models not being run) and the output folder (created)."""
+    names = parse_models(models, default)
+    overrides = overrides or {}
+    bad = sorted(set(overrides) - set(names))
+    if bad:
+        raise InputError(f"overrides given for model(s) {bad} that are not being run ({names})")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    return names, overrides, out
 
 
 def build_model(name: str, *layers: dict | None):

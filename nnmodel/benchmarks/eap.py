@@ -75,13 +75,7 @@ def run(models=None, out: str | os.PathLike = "eap-benchmark", *, quick: bool = 
     if limit is not None:
         raise InputError("--limit truncates the Silverbox data only; for a small eap run pass a small "
                          "dataset folder with --data (e.g. one made with `eap generate --config quick`)")
-    names = common.parse_models(models, DEFAULT_MODELS)
-    overrides = overrides or {}
-    bad = sorted(set(overrides) - set(names))
-    if bad:
-        raise InputError(f"overrides given for model(s) {bad} that are not being run ({names})")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    names, overrides, out = common.start(models, DEFAULT_MODELS, overrides, out)
     config = config or ("quick" if quick else "default")
     t0 = time.perf_counter()
     ds_path = _dataset(out, data, config, echo)

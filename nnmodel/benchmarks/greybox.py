@@ -71,12 +71,9 @@ def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = 
 
     if limit is not None:
         raise InputError("--limit truncates the Silverbox data only; pass a small dataset with --data")
-    names = common.parse_models(models, DEFAULT_MODELS)
+    names, overrides, out = common.start(models, DEFAULT_MODELS, overrides, out)
     if "hybrid" not in names:
         raise InputError("the grey-box study compares the hybrid with pure networks: include 'hybrid' in --models")
-    overrides = overrides or {}
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     ds_path = _dataset(out, data, "greybox", echo)
     ds = load_dataset(ds_path)

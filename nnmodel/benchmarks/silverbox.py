@@ -185,13 +185,7 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
     ``save_models``) one bundle per model in ``out/models/``.  Returns the JSON content."""
     from ..bundle import save as save_bundle
 
-    names = common.parse_models(models, ("ff", "rbf", "narx", "lstm", "gru"))
-    overrides = overrides or {}
-    bad = sorted(set(overrides) - set(names))
-    if bad:
-        raise InputError(f"overrides given for model(s) {bad} that are not being run ({names})")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    names, overrides, out = common.start(models, ("ff", "rbf", "narx", "lstm", "gru"), overrides, out)
     ds = load(data, limit=limit)
     train, tests = ds["train"], ds["tests"]
     echo(f"Silverbox: {ds['path']} (SHA-256 ok), train {len(train)} samples, tests "

@@ -44,14 +44,27 @@ def lag_core(model, n_rh: int, fmap_cls=None) -> LagSimulator:
     return LagSimulator(model.na, model.nb, n_rh, fmap, model.feedthrough, n_mem=n_mem)
 
 
-class FFModel(NeuralModel):
+class LagModel(NeuralModel):
+    """Shared core of ``ff`` and ``narx``: the lag map (:func:`lag_core`) with its
+    least-squares ARX start; the subclasses differ in how they are trained."""
+
+    _checks = _LAG_CHECKS
+
+    def _build_core(self, n_rh):
+        return lag_core(self, n_rh)
+
+    def _initialise(self, core, train):
+        if self.arx_init:
+            self.init_report_ = arx_init(core, train)
+
+
+class FFModel(LagModel):
     """MLP on tapped delays of voltage (and RH, and past outputs), trained one step ahead.
 
     ``layers = 0`` gives a purely linear ARX/FIR model (least squares when ``max_epochs=0``).
     """
 
     kind = "ff"
-    _checks = _LAG_CHECKS
 
     def __init__(self, na: int = 2, nb: int = 20, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
@@ -64,13 +77,6 @@ class FFModel(NeuralModel):
                  accelerator: str = "cpu", progress_bar: bool = True,
                  num_threads: int | None = 1, checkpoint_dir: str | None = None):
         self._set_params_from(locals())
-
-    def _build_core(self, n_rh):
-        return lag_core(self, n_rh)
-
-    def _initialise(self, core, train):
-        if self.arx_init:
-            self.init_report_ = arx_init(core, train)
 
     def _training_settings(self):
         return dict(horizon=1, stride=1)

@@ -9,16 +9,13 @@ Memory filters and RH scheduling of the bypass as for ``ff``.
 """
 from __future__ import annotations
 
-from .ff import _LAG_CHECKS, lag_core
-from .base import NeuralModel
-from .lag import arx_init
+from .ff import LagModel
 
 
-class NARXModel(NeuralModel):
+class NARXModel(LagModel):
     """Closed-loop-trained NARX network (simulation-error / multiple-shooting training)."""
 
     kind = "narx"
-    _checks = _LAG_CHECKS
 
     def __init__(self, na: int = 4, nb: int = 8, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
@@ -32,13 +29,6 @@ class NARXModel(NeuralModel):
                  accelerator: str = "cpu", progress_bar: bool = True,
                  num_threads: int | None = 1, checkpoint_dir: str | None = None):
         self._set_params_from(locals())
-
-    def _build_core(self, n_rh):
-        return lag_core(self, n_rh)
-
-    def _initialise(self, core, train):
-        if self.arx_init:
-            self.init_report_ = arx_init(core, train)
 
     def _training_settings(self):
         return dict(horizon=self.horizon, stride=self.stride)

@@ -87,6 +87,18 @@ class _RNNModel(NeuralModel):
                "rh_knots": lambda v: None if v is None else check_knots(v),
                "skip_init": lambda v: None if isinstance(v, bool) else "true or false"}
 
+    def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
+                 horizon: int = 200, stride: int = 50,
+                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
+                 memory_abs: bool = False,
+                 rh_knots: list | None = None, skip_init: bool = False,
+                 inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
+                 batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
+                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
+                 accelerator: str = "cpu", progress_bar: bool = True,
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+        self._set_params_from(locals())
+
     def _build_core(self, n_rh):
         n_sched = len(self._rh_knots()) if n_rh else 0
         return RNNSimulator(self.cell, n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden,
@@ -142,33 +154,9 @@ class LSTMModel(_RNNModel):
     kind = "lstm"
     cell = "lstm"
 
-    def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
-                 horizon: int = 200, stride: int = 50,
-                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
-                 memory_abs: bool = False,
-                 rh_knots: list | None = None, skip_init: bool = False,
-                 inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
-                 batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
-                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
-                 accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
-        self._set_params_from(locals())
-
 
 class GRUModel(_RNNModel):
     """GRU sequence model (encoder-initialised state, closed-loop training)."""
 
     kind = "gru"
     cell = "gru"
-
-    def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
-                 horizon: int = 200, stride: int = 50,
-                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
-                 memory_abs: bool = False,
-                 rh_knots: list | None = None, skip_init: bool = False,
-                 inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
-                 batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
-                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
-                 accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
-        self._set_params_from(locals())
