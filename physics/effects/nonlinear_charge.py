@@ -144,6 +144,7 @@ class _PBLaw:
     def __init__(self, nu, V_T, scale, C_anion):
         tab = _pb_table(round(nu, 12))
         self.tq, self.tx, self.tg = tab.q, tab.x, tab.dxdq
+        self.txg = tab.x + 1j * tab.dxdq   # x and dx/dq in one interpolation (real, imaginary part)
         self.nu, self.V_T, self.inv_scale, self.C = nu, V_T, 1.0 / scale, C_anion
         self.slope_scale = V_T / scale
 
@@ -155,9 +156,8 @@ class _PBLaw:
 
     def evaluate(self, Q):
         qh = Q * self.inv_scale
-        both = np.concatenate((-qh, qh))
-        x = np.interp(both, self.tq, self.tx)
-        g = np.interp(both, self.tq, self.tg)
+        xg = np.interp(np.concatenate((-qh, qh)), self.tq, self.txg)
+        x, g = xg.real, xg.imag
         n = Q.size
         return self.V_T * (x[n:] - x[:n]), self.slope_scale * (g[:n] + g[n:]), x
 
