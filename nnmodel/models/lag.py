@@ -391,13 +391,19 @@ def _mlp_free_run_numpy(fmap: MLPMap, yl, cache, base=None):
                 y += lin[t]
                 if a is not None:
                     y += a @ zp
-        if base is not None:
-            y += base[t]
-        y = min(max(y, -OUTPUT_CLIP), OUTPUT_CLIP)
-        out[t] = y
-        z[1:] = z[:-1]
-        z[0] = y
+        _emit(out, z, t, y, base)
     return torch.from_numpy(out)[None]
+
+
+def _emit(out: np.ndarray, z: np.ndarray, t: int, y: float, base) -> None:
+    """Finish free-run step ``t``: add the reference output (residual cores), clip, store,
+    and push ``y`` into the output-lag buffer ``z`` (newest first)."""
+    if base is not None:
+        y += base[t]
+    y = min(max(y, -OUTPUT_CLIP), OUTPUT_CLIP)
+    out[t] = y
+    z[1:] = z[:-1]
+    z[0] = y
 
 
 def _rbf_free_run_numpy(fmap: RBFMap, yl, cache, base=None):
@@ -417,10 +423,5 @@ def _rbf_free_run_numpy(fmap: RBFMap, yl, cache, base=None):
         d2 = d2x[t] + ((cy - z) ** 2).sum(1)
         lt = lin[t] + a @ z
         y = (lt @ sched[t] if sched is not None else lt) + np.exp(-np.maximum(d2, 0.0) * g) @ w
-        if base is not None:
-            y += base[t]
-        y = min(max(y, -OUTPUT_CLIP), OUTPUT_CLIP)
-        out[t] = y
-        z[1:] = z[:-1]
-        z[0] = y
+        _emit(out, z, t, y, base)
     return torch.from_numpy(out)[None]
