@@ -29,6 +29,7 @@ import torch
 from physics.errors import InputError
 from physics.fileio import sha256_file
 
+from .data import check_fs, check_voltage
 from .models import MODELS
 from .models.base import NeuralModel
 
@@ -253,18 +254,8 @@ class Bundle:
                 deflection = getattr(ts, "deflection", None)
         if fs is None:
             raise InputError(f"give the sampling rate fs= in Hz (this model was trained at {self.fs:g} Hz)")
-        try:
-            fs = float(fs)
-        except (TypeError, ValueError):
-            raise InputError(f"fs must be a number in Hz, got {fs!r}") from None
-        if not np.isfinite(fs) or fs <= 0:
-            raise InputError(f"fs must be a positive number of Hz, got {fs}")
-        u = np.asarray(voltage, dtype=float)
-        if u.ndim != 1 or u.size == 0:
-            raise InputError(f"voltage must be a non-empty 1-D array, got shape {u.shape}")
-        if not np.all(np.isfinite(u)):
-            raise InputError(f"voltage contains NaN or infinite values (first at sample "
-                             f"{int(np.flatnonzero(~np.isfinite(u))[0])})")
+        fs = check_fs(fs)
+        u = check_voltage(voltage)
         y = None if deflection is None else np.asarray(deflection, dtype=float)
         if y is not None and y.shape != u.shape:
             raise InputError(f"deflection must have the same shape as the voltage {u.shape}, got {y.shape}")

@@ -25,6 +25,29 @@ __all__ = ["Record", "check_records", "split_index", "split_records", "window_st
            "rh_range", "rmse", "nrmse", "fit_percent"]
 
 
+def check_fs(fs, where: str = "") -> float:
+    """A sampling rate in Hz as a positive float, or an InputError naming ``where``."""
+    pre = f"{where}: " if where else ""
+    try:
+        fs = float(fs)
+    except (TypeError, ValueError):
+        raise InputError(f"{pre}fs must be a number in Hz, got {fs!r}") from None
+    if not np.isfinite(fs) or fs <= 0:
+        raise InputError(f"{pre}fs must be a positive number of Hz, got {fs}")
+    return fs
+
+
+def check_voltage(u) -> np.ndarray:
+    """A voltage record (V) as a non-empty, finite 1-D float array, or an InputError."""
+    u = np.asarray(u, dtype=float)
+    if u.ndim != 1 or u.size == 0:
+        raise InputError(f"voltage must be a non-empty 1-D array, got shape {u.shape}")
+    if not np.all(np.isfinite(u)):
+        raise InputError(f"voltage contains NaN or infinite values (first at sample "
+                         f"{int(np.flatnonzero(~np.isfinite(u))[0])})")
+    return u
+
+
 def _as_1d(x, what: str, name: str, n: int | None = None) -> np.ndarray:
     a = np.asarray(x, dtype=float)
     if a.ndim != 1:
@@ -63,13 +86,7 @@ class Record:
         self.name = str(name)
         if fs is None:
             raise InputError(f"record {self.name!r}: the sampling rate fs (Hz) is required")
-        try:
-            fs = float(fs)
-        except (TypeError, ValueError):
-            raise InputError(f"record {self.name!r}: fs must be a number in Hz, got {fs!r}") from None
-        if not np.isfinite(fs) or fs <= 0:
-            raise InputError(f"record {self.name!r}: fs must be a positive number of Hz, got {fs}")
-        self.fs = fs
+        self.fs = check_fs(fs, f"record {self.name!r}")
         self.u = _as_1d(u, "voltage u", self.name)
         n = self.u.shape[0]
         if n == 0:

@@ -36,14 +36,13 @@ def test_splits_rh_levels_and_hashes(tiny):
 
 
 def test_every_record_starts_at_rest(tiny):
-    """Excitations ramp in from 0 V (fade_in_s): the actuator starts at rest, so the first
-    samples are 0 V (up to the voltage channel's noise) and the deflection is only sensor noise and offset there."""
+    """Excitations ramp in from 0 V (fade_in_s): the first samples are 0 V up to the
+    voltage channel's noise, whatever the excitation (a bipolar square starts at -A and a
+    multisine or noise anywhere without the ramp)."""
     ds = load_dataset(tiny)
-    floor = ds.meta["noise_floor_m"]
     for e in ds.meta["files"]:
         r = ds.record(e)
-        assert np.max(np.abs(r.u[:3])) < 0.01 * np.max(np.abs(r.u)), e["path"]   # measured: quantised, noisy
-        assert abs(r.y[0]) < 20 * floor + 1e-4, e["path"]
+        assert np.max(np.abs(r.u[:3])) < 0.01 * np.max(np.abs(r.u)), e["path"]
     with pytest.raises(InputError, match="fade_in_s"):
         load_config("default", {"fade_in_s": 100.0})
 

@@ -32,7 +32,7 @@ from torch import nn
 
 from physics.errors import InputError
 
-from ..data import Record, check_records, rh_range, split_index
+from ..data import Record, check_records, check_voltage, rh_range, split_index
 
 __all__ = ["SequenceCore", "Normalized", "NeuralModel", "NotFittedError"]
 
@@ -412,12 +412,7 @@ class NeuralModel:
     def _prepare(self, u, rh, y=None, y_name="y"):
         """Validate inputs in physical units; returns (u, rh or None, y or None) arrays."""
         self._check_fitted()
-        u = np.asarray(u, dtype=float)
-        if u.ndim != 1 or u.size == 0:
-            raise InputError(f"voltage must be a non-empty 1-D array, got shape {u.shape}")
-        if not np.all(np.isfinite(u)):
-            raise InputError(f"voltage contains NaN or infinite values (first at sample "
-                             f"{int(np.flatnonzero(~np.isfinite(u))[0])})")
+        u = check_voltage(u)
         n = u.size
         if self.uses_rh:
             if rh is None:

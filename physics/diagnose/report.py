@@ -57,26 +57,11 @@ def _plot_where(res: DiagnosisResult, path) -> None:
     a.axhline(0, color="k", lw=0.6)
     a.legend(fontsize=7, loc="upper left")
     a.grid(alpha=0.3, which="both")
-    a = ax[1, 0]
-    for lab, ra, col in sets:
-        a.plot(ra.lag_s, ra.acf, color=col, label=lab)
-        a.axhline(ra.acf_band, color=col, ls=":", lw=0.8)
-        a.axhline(-ra.acf_band, color=col, ls=":", lw=0.8)
-    a.set_xlabel("lag [s]")
-    a.set_ylabel("ρ_ee")
-    a.set_title("residual autocorrelation, 99 % band (MATLAB resid)", fontsize=9)
-    a.legend(fontsize=7)
-    a.grid(alpha=0.3)
-    a = ax[1, 1]
-    for lab, ra, col in sets:
-        a.plot(ra.ccf_lag_s, ra.ccf, color=col, label=lab)
-        a.axhline(ra.ccf_band, color=col, ls=":", lw=0.8)
-        a.axhline(-ra.ccf_band, color=col, ls=":", lw=0.8)
-    a.set_xlabel("lag [s] (positive: residual after input)")
-    a.set_ylabel("ρ_ue")
-    a.set_title("input–residual cross-correlation, 99 % band", fontsize=9)
-    a.legend(fontsize=7)
-    a.grid(alpha=0.3)
+    _correlation_panel(ax[1, 0], [(lab, ra.lag_s, ra.acf, ra.acf_band, col) for lab, ra, col in sets],
+                       "lag [s]", "ρ_ee", "residual autocorrelation, 99 % band (MATLAB resid)")
+    _correlation_panel(ax[1, 1], [(lab, ra.ccf_lag_s, ra.ccf, ra.ccf_band, col) for lab, ra, col in sets],
+                       "lag [s] (positive: residual after input)", "ρ_ue",
+                       "input–residual cross-correlation, 99 % band")
     fig.tight_layout()
     save(fig, path)
 
@@ -297,3 +282,16 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
         rep.json_block(jsonable(provenance), "provenance")
     rep.write(d / "report.html")
 
+
+def _correlation_panel(a, curves, xlabel: str, ylabel: str, title: str) -> None:
+    """One correlation plot: each (label, lag [s], correlation, 99 % band, colour) curve
+    with its ± band as dotted lines."""
+    for lab, lag, rho, band, col in curves:
+        a.plot(lag, rho, color=col, label=lab)
+        a.axhline(band, color=col, ls=":", lw=0.8)
+        a.axhline(-band, color=col, ls=":", lw=0.8)
+    a.set_xlabel(xlabel)
+    a.set_ylabel(ylabel)
+    a.set_title(title, fontsize=9)
+    a.legend(fontsize=7)
+    a.grid(alpha=0.3)
