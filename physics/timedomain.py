@@ -117,10 +117,11 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     # 1. electrochemistry
     if stepper_needed:
         from . import stepper
-        want = {"voltage": "U", "charge": "Q", "temperature": "T"}
+        want = {"voltage": "U", "charge": "Q", "temperature": "T", "cation": "c"}
         out = stepper.run(model, model.params_at, t, v, rh_t, edges,
                           {want[f] for f in fields if f in want}, progress=progress)
-        load, c_up, c_low, current = out["load"], out["c_up"], out["c_low"], out["current"]
+        load, current = out["load"], out["current"]
+        c_up, c_low = out.get("c_up"), out.get("c_low")
         flds = {}
         if "voltage" in fields:
             flds["voltage"] = out["U"][1:]

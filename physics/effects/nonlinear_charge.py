@@ -118,23 +118,22 @@ class NonlinearCharge(LinearCharge):
         return d.C_anion * _excess_ratio(x_up, nu), d.C_anion * _excess_ratio(x_low, nu)
 
     def compiled(self, d: DoubleLayerProps, p) -> "_PBLaw":
-        return _PBLaw(self.nu(p), d.V_T, self._scale(d), d.C_anion)
+        return _PBLaw(round(self.nu(p), 12), d.V_T, self._scale(d), d.C_anion)
 
 
 class _LinearLaw:
-    """U_eq = Q/C0 with precomputed constants; ``evaluate`` returns (U_eq, dU_eq/dQ, state)."""
+    """U_eq = Q/C0 with precomputed constants (the stepper's inner loop)."""
 
     def __init__(self, inv_c0, ratio):
         self.inv_c0, self.ratio = inv_c0, ratio
 
     def evaluate(self, Q):
-        return Q * self.inv_c0, np.broadcast_to(self.inv_c0, Q.shape), Q
+        """(U_eq [V], dU_eq/dQ [V m²/C]) at the charge per area Q [C/m²] of each branch."""
+        return Q * self.inv_c0, np.broadcast_to(self.inv_c0, Q.shape)
 
-    def potential(self, Q):
-        return Q * self.inv_c0, Q
-
-    def excess(self, state):
-        c = self.ratio * state
+    def excess(self, Q):
+        """Cation excess at the upper and lower faces [mol/m³]; Q is (..., branches)."""
+        c = self.ratio * Q
         return c, -c
 
 
@@ -142,28 +141,23 @@ class _PBLaw:
     """Poisson–Boltzmann law with the table and scales bound (arrays per branch allowed)."""
 
     def __init__(self, nu, V_T, scale, C_anion):
-        tab = _pb_table(round(nu, 12))
-        self.tq, self.tx, self.tg = tab.q, tab.x, tab.dxdq
-        self.txg = tab.x + 1j * tab.dxdq   # x and dx/dq in one interpolation (real, imaginary part)
         self.nu, self.V_T, self.inv_scale, self.C = nu, V_T, 1.0 / scale, C_anion
         self.slope_scale = V_T / scale
-
-    def potential(self, Q):
-        qh = Q * self.inv_scale
-        x = np.interp(np.concatenate((-qh, qh)), self.tq, self.tx)
-        n = Q.size
-        return self.V_T * (x[n:] - x[:n]), x
+        branch = _pb_branch_table(nu)
+        self.tq, self.tug = branch.q, branch.ug
 
     def evaluate(self, Q):
-        qh = Q * self.inv_scale
-        xg = np.interp(np.concatenate((-qh, qh)), self.tq, self.txg)
-        x, g = xg.real, xg.imag
-        n = Q.size
-        return self.V_T * (x[n:] - x[:n]), self.slope_scale * (g[:n] + g[n:]), x
+        """(U_eq [V], dU_eq/dQ [V m²/C]): one complex interpolation in the branch table."""
+        ug = np.interp(Q * self.inv_scale, self.tq, self.tug)
+        return self.V_T * ug.real, self.slope_scale * ug.imag
 
-    def excess(self, x):
-        n = x.size // 2
-        return self.C * _excess_ratio(x[:n], self.nu), self.C * _excess_ratio(x[n:], self.nu)
+    def excess(self, Q):
+        """Cation excess at the upper (cathode for Q > 0) and lower faces [mol/m³]; Q is
+        (..., branches)."""
+        tab = _pb_table(self.nu)
+        qh = Q * self.inv_scale
+        x_up, x_low = np.interp(-qh, tab.q, tab.x), np.interp(qh, tab.q, tab.x)
+        return self.C * _excess_ratio(x_up, self.nu), self.C * _excess_ratio(x_low, self.nu)
 
 
 def _excess_ratio(x, nu):
@@ -176,8 +170,8 @@ def _excess_ratio(x, nu):
 
 
 class _Table:
-    def __init__(self, x, q, dxdq):
-        self.x, self.q, self.dxdq = x, q, dxdq
+    def __init__(self, q, x=None, dxdq=None, ug=None):
+        self.q, self.x, self.dxdq, self.ug = q, x, dxdq, ug
 
 
 @lru_cache(maxsize=16)
@@ -194,4 +188,16 @@ def _pb_table(nu: float) -> _Table:
     q = np.sign(x) * np.sqrt(G)
     with np.errstate(divide="ignore", invalid="ignore"):
         dxdq = np.where(np.abs(x) > 1e-6, 2.0 * np.abs(q) / np.abs(Gp), np.sqrt(2.0 / (1.0 - nu)))
-    return _Table(x, q, dxdq)
+    return _Table(q, x=x, dxdq=dxdq)
+
+
+@lru_cache(maxsize=16)
+def _pb_branch_table(nu: float) -> _Table:
+    """The branch law on its own grid: U_eq/V_T = x(q̂) − x(−q̂) (real part) and its slope
+    dx/dq̂(q̂) + dx/dq̂(−q̂) (imaginary part).  The grid joins ±q̂ of :func:`_pb_table`, so the
+    piecewise-linear interpolant equals the difference of the two face interpolants exactly."""
+    tab = _pb_table(nu)
+    q = np.union1d(tab.q, -tab.q)
+    u = np.interp(q, tab.q, tab.x) - np.interp(-q, tab.q, tab.x)
+    g = np.interp(q, tab.q, tab.dxdq) + np.interp(-q, tab.q, tab.dxdq)
+    return _Table(q, ug=u + 1j * g)
