@@ -14,7 +14,9 @@ is stiff: it is integrated by the L-stable, stiffly accurate two-stage SDIRK met
 Alexander (1977).  Each stage is solved by full Newton iterations (quadratic
 convergence, so a small Newton step means a small error) started from a quadratic
 extrapolation of the previous samples, halving the step when Newton fails; the current
-and Joule power of a step come from the stage equation at the converged charge.  (A
+and Joule power of a step come from the stage equation at the converged charge.  Where
+the input is constant and the charge has reached equilibrium (flat parts of pulses and
+steps) the state is held without stepping, unless ``thermal`` is on.  (A
 linearly implicit Rosenbrock method and simplified Newton were tried and rejected: at
 1 ms steps they were off by tens of per cent in the interface concentration, which
 depends exponentially on the interface potential.)  The temperature of each segment
@@ -176,22 +178,34 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
         T = np.full(nb, tn.T_ext)
         T_props = T.copy()
     v_stage = _vin_stage(vin)
+    hold_until = None if thermal else _constant_input_runs(vin, v_stage, rh_key)
     Q = _equilibrium_charge(net, vin[0])
     Q_prev, d1_prev = Q, 0.0
     f, U = net.evaluate(Q, vin[0])[:2]
     newton = _Newton()
     epochs = [(0, _Snapshot(net))]   # (first sample, law and load ratio) at every change
     key = rh_key[0]
+    n = reported = 0
     with Progress(N - 1, "electrochemistry", enabled=progress) as bar:
-        for n in range(N):
+        while True:
             Qs[n] = Q
             current[n] = net.current(f, U)
             if Us is not None:
                 Us[n] = U
             if Ts is not None and thermal:
                 Ts[n] = T
+            if n - reported >= 1000:
+                bar.update(n - reported)
+                reported = n
             if n == N - 1:
                 break
+            if hold_until is not None and hold_until[n] > n and _at_rest(net, Q, f, vin[n], dt):
+                m = hold_until[n]           # constant input, at rest: the state holds until sample m
+                Qs[n + 1:m + 1], current[n + 1:m + 1] = Q, current[n]
+                if Us is not None:
+                    Us[n + 1:m + 1] = U
+                Q_prev, d1_prev, n = Q, 0.0, m
+                continue
             if rh_key[n + 1] != key:
                 key = rh_key[n + 1]
                 Tcur = net.T
@@ -209,8 +223,8 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
                     T_props = T.copy()
                     f, U = net.evaluate(Q, vin[n + 1])[:2]
                     epochs.append((n + 1, _Snapshot(net)))
-            if n % 1000 == 0:
-                bar.update(min(1000, N - 1 - n))
+            n += 1
+        bar.update(n - reported)
     out = {"current": current, "load": np.empty_like(Qs)}
     if "c" in want:
         out["c_up"], out["c_low"] = np.empty_like(Qs), np.empty_like(Qs)
@@ -239,12 +253,35 @@ def _equilibrium_charge(net: BranchNetwork, vin: float) -> np.ndarray:
     """Charge in equilibrium with a constant Vin (the state before the record starts)."""
     Q = np.zeros(net.n)
     for _ in range(100):
-        f, _, _, dU = net.evaluate(Q, vin)
-        dQ = dgesv(net.newton_matrix(dU, 1.0, shift=0.0), f)[2]   # −J dQ = f
+        dQ = _equilibrium_step(net, Q, vin)
         Q = Q + dQ
         if np.max(np.abs(dQ)) <= 1e-12 * (np.max(np.abs(Q)) + net.q_scale):
             return Q
     raise ModelError(f"no equilibrium double-layer charge found for Vin = {vin:g} V")
+
+
+def _equilibrium_step(net: BranchNetwork, Q: np.ndarray, vin: float) -> np.ndarray:
+    """Newton step towards dQ/dt = 0 at a constant Vin: solves −J dQ = f."""
+    f, _, _, dU = net.evaluate(Q, vin)
+    return dgesv(net.newton_matrix(dU, 1.0, shift=0.0), f)[2]
+
+
+def _at_rest(net: BranchNetwork, Q, f, vin: float, dt: float) -> bool:
+    """True if the charge is within the Newton tolerance of its equilibrium at ``vin``: then
+    an SDIRK step at that constant input returns it unchanged.  ``f`` (dQ/dt) is a cheap
+    first test."""
+    tol = _TOL * (np.abs(Q).max() + net.q_scale)
+    return np.abs(f).max() * dt <= tol and np.abs(_equilibrium_step(net, Q, vin)).max() <= tol
+
+
+def _constant_input_runs(vin: np.ndarray, v_stage: np.ndarray, rh_key: np.ndarray) -> np.ndarray:
+    """For every sample n, the last sample m ≥ n such that the steps n → m have one constant
+    input (Vin at both ends and at the stage) and one RH."""
+    const = (vin[1:] == vin[:-1]) & (np.abs(v_stage - vin[:-1]) <= 1e-12 * (np.abs(vin[:-1]) + 1e-300)) \
+        & (rh_key[1:] == rh_key[:-1])
+    N = vin.size
+    stop = np.where(const, N - 1, np.arange(N - 1))          # a non-constant step stops the run
+    return np.append(np.minimum.accumulate(stop[::-1])[::-1], N - 1)
 
 
 class _Newton:

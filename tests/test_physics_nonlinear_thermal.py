@@ -159,3 +159,28 @@ def test_newton_stopping_rule_matches_newton_iterated_to_convergence(monkeypatch
     ref = physics.simulate("ipmc_pt_eg", effects, sig.t, sig.v)
     assert np.abs(r.deflection - ref.deflection).max() < 1e-6 * np.ptp(ref.deflection)
     assert np.abs(r.current - ref.current).max() < 1e-4 * np.ptp(ref.current)
+
+
+def test_constant_input_at_rest_is_held_without_stepping(monkeypatch):
+    """Between the edges of a pulse the stepper holds the state once it is at rest; the record
+    must equal the one stepped through every sample, and far fewer evaluations are made."""
+    from physics import stepper
+    sig = signals.square(2.0, 2.0, 6.0, 1, 1000.0)
+    effects = "nonlinear_charge,electrode_resistance"
+    calls = {"n": 0}
+    evaluate = stepper.BranchNetwork.evaluate
+
+    def counted(self, Q, vin):
+        calls["n"] += 1
+        return evaluate(self, Q, vin)
+
+    monkeypatch.setattr(stepper.BranchNetwork, "evaluate", counted)
+    held = physics.simulate("ipmc_pt_eg", effects, sig.t, sig.v, fields=("voltage", "cation"))
+    n_held, calls["n"] = calls["n"], 0
+    monkeypatch.setattr(stepper, "_constant_input_runs", lambda v, vs, rk: np.arange(v.size))
+    stepped = physics.simulate("ipmc_pt_eg", effects, sig.t, sig.v, fields=("voltage", "cation"))
+    assert n_held < 0.5 * calls["n"]
+    for a, b in ((held.deflection, stepped.deflection), (held.current, stepped.current),
+                 (held.fields["voltage"], stepped.fields["voltage"]),
+                 (held.fields["cation_upper"], stepped.fields["cation_upper"])):
+        assert np.abs(a - b).max() < 1e-6 * np.ptp(b)
