@@ -183,7 +183,8 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
     Q_prev, d1_prev = Q, 0.0
     f, U = net.evaluate(Q, vin[0])[:2]
     newton = _Newton()
-    epochs = [(0, _Snapshot(net))]   # (first sample, law and load ratio) at every change
+    # (first sample, law, load ratio) wherever they change; set_temperature replaces both
+    epochs = [(0, net.law, net.load_ratio)]
     key = rh_key[0]
     n = reported = 0
     with Progress(N - 1, "electrochemistry", enabled=progress) as bar:
@@ -211,7 +212,7 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
                 Tcur = net.T
                 net = BranchNetwork(model, params_at(float(key)), edges, lumped)
                 net.set_temperature(Tcur)
-                epochs.append((n + 1, _Snapshot(net)))
+                epochs.append((n + 1, net.law, net.load_ratio))
             d1 = Q - Q_prev
             Q_prev, Q, (f, U) = Q, *_step(net, newton, Q, dt, (vin[n], v_stage[n], vin[n + 1]),
                                           (d1, d1 - d1_prev))
@@ -222,16 +223,16 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
                     net.set_temperature(T)
                     T_props = T.copy()
                     f, U = net.evaluate(Q, vin[n + 1])[:2]
-                    epochs.append((n + 1, _Snapshot(net)))
+                    epochs.append((n + 1, net.law, net.load_ratio))
             n += 1
         bar.update(n - reported)
     out = {"current": current, "load": np.empty_like(Qs)}
     if "c" in want:
         out["c_up"], out["c_low"] = np.empty_like(Qs), np.empty_like(Qs)
-    for (a, state), (b, _) in zip(epochs, epochs[1:] + [(N, None)]):
-        out["load"][a:b] = state.load_ratio * Qs[a:b]
+    for (a, law, ratio), b in zip(epochs, [e[0] for e in epochs[1:]] + [N]):
+        out["load"][a:b] = ratio * Qs[a:b]
         if "c" in want:
-            out["c_up"][a:b], out["c_low"][a:b] = state.law.excess(Qs[a:b])
+            out["c_up"][a:b], out["c_low"][a:b] = law.excess(Qs[a:b])
     out.update({k: v for k, v in (("U", Us), ("Q", Qs), ("T", Ts)) if k in want})
     out = {k: v if k == "current" else np.ascontiguousarray(v.T) for k, v in out.items()}  # (branch, sample)
     if lumped:  # every free segment is the lumped free branch
@@ -240,13 +241,6 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
             if arr.ndim == 2:
                 out[k] = np.vstack([arr[:1], np.repeat(arr[1:2], nseg, axis=0)])
     return out
-
-
-class _Snapshot:
-    """The law and load ratio of a network at one temperature (set_temperature replaces them)."""
-
-    def __init__(self, net: BranchNetwork):
-        self.law, self.load_ratio = net.law, net.load_ratio
 
 
 def _equilibrium_charge(net: BranchNetwork, vin: float) -> np.ndarray:
@@ -266,11 +260,16 @@ def _equilibrium_step(net: BranchNetwork, Q: np.ndarray, vin: float) -> np.ndarr
     return dgesv(net.newton_matrix(dU, 1.0, shift=0.0), f)[2]
 
 
+def _tolerance(net: BranchNetwork, Q: np.ndarray) -> float:
+    """Newton tolerance [C/m²] at the charge Q: ``_TOL`` of max|Q| + C0·V_T."""
+    return _TOL * (np.abs(Q).max() + net.q_scale)
+
+
 def _at_rest(net: BranchNetwork, Q, f, vin: float, dt: float) -> bool:
     """True if the charge is within the Newton tolerance of its equilibrium at ``vin``: then
     an SDIRK step at that constant input returns it unchanged.  ``f`` (dQ/dt) is a cheap
     first test."""
-    tol = _TOL * (np.abs(Q).max() + net.q_scale)
+    tol = _tolerance(net, Q)
     return np.abs(f).max() * dt <= tol and np.abs(_equilibrium_step(net, Q, vin)).max() <= tol
 
 
@@ -331,7 +330,7 @@ def _step(net, newton, Q, h, v3, diffs, depth=0):
     v0, vg, v1 = v3
     d1, d2 = diffs
     hg = h * _GAMMA
-    tol = _TOL * (np.abs(Q).max() + net.q_scale)
+    tol = _tolerance(net, Q)
     Y1, _ = newton.solve(net, Q, hg, vg, Q + _GAMMA * d1 + _CURVE_1 * d2, tol, state=False)
     if Y1 is not None:
         dY = Y1 - Q

@@ -93,6 +93,8 @@ def test_the_hybrid_needs_humidity_for_its_physics(hybrid, data):
         MODELS["hybrid"](inputs="voltage", max_epochs=0, **QUIET).fit(data["train"])
     with pytest.raises(InputError, match="physics_states"):
         MODELS["hybrid"](physics_states=["temperature"])
+    with pytest.raises(InputError, match="physics_inputs"):
+        MODELS["hybrid"](physics_inputs=["v^3", "v^3"])
 
 
 def test_physics_inputs_identify_a_static_input_nonlinearity(data):

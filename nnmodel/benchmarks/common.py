@@ -49,6 +49,16 @@ def start(models, default: Sequence[str], overrides: dict | None, out) -> tuple[
     return names, overrides, out
 
 
+def finish(echo, table: str, findings: Sequence[str], report_line: str) -> None:
+    """Common end of a suite: its table, its findings and where the report was written."""
+    echo("")
+    echo(table)
+    echo("")
+    for line in findings:
+        echo(line)
+    echo(report_line)
+
+
 def build_model(name: str, *layers: dict | None):
     """Model ``name`` from its recipe, updated by each override dict in turn."""
     from ..training import load_recipe

@@ -89,12 +89,9 @@ def run(models=None, out: str | os.PathLike = "eap-benchmark", *, quick: bool = 
     summary = train_compare(ds_path, names, out / "compare", overrides=layered, progress=progress)
     report = _report(summary, names, quick, ds_path, time.perf_counter() - t0, out)
     _write_outputs(out, report)
-    echo("")
-    echo(format_table(report))
-    echo("")
-    for line in report["winners_text"]:
-        echo(line)
-    echo(f"report: {out / 'eap.html'} (JSON {out / 'eap.json'}; train-compare report {out / 'compare' / 'report.html'})")
+    common.finish(echo, format_table(report), report["winners_text"],
+                  f"report: {out / 'eap.html'} (JSON {out / 'eap.json'}; "
+                  f"train-compare report {out / 'compare' / 'report.html'})")
     return report
 
 

@@ -123,12 +123,8 @@ def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = 
                  f"{row['nrmse_pct']['heldout_rh']:.2f} %  ({fit_s:.0f} s)")
     report = _report(full, curve, names, quick, budget, ds_path, time.perf_counter() - t_start, out)
     _write_outputs(out, report)
-    echo("")
-    echo(format_table(report))
-    echo("")
-    for line in report["findings"]:
-        echo(line)
-    echo(f"report: {out / 'greybox.html'} (JSON {out / 'greybox.json'})")
+    common.finish(echo, format_table(report), report["findings"],
+                  f"report: {out / 'greybox.html'} (JSON {out / 'greybox.json'})")
     return report
 
 

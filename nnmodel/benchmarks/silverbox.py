@@ -255,11 +255,8 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
         "environment": common.environment(),
     }
     _write_outputs(out, report, rows, preds, tests)
-    echo("")
-    echo(format_table(report))
-    echo("")
-    echo(target["summary"])
-    echo(f"report: {out / 'silverbox.html'} (JSON {out / 'silverbox.json'})")
+    common.finish(echo, format_table(report), [target["summary"]],
+                  f"report: {out / 'silverbox.html'} (JSON {out / 'silverbox.json'})")
     return report
 
 

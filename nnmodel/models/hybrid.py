@@ -49,20 +49,15 @@ PHYSICS_STATES = {"cs_up": ("cs_up", "mol/m^3"), "current": ("current", "A")}
 PHYSICS_INPUTS = {"v|v|": lambda u, v0: u * np.abs(u) / v0, "v^3": lambda u, v0: u ** 3 / v0 ** 2}
 
 
-def _check_inputs(v):
-    if v is None:
+def _distinct_names(allowed):
+    """Parameter check: None, or a list of distinct names among ``allowed``."""
+    def check(v):
+        if v is None:
+            return None
+        if not isinstance(v, (list, tuple)) or any(s not in allowed for s in v) or len(set(v)) != len(v):
+            return f"a list of distinct names among {sorted(allowed)} (or [])"
         return None
-    if not isinstance(v, (list, tuple)) or any(s not in PHYSICS_INPUTS for s in v) or len(set(v)) != len(v):
-        return f"a list of distinct names among {sorted(PHYSICS_INPUTS)} (or [])"
-    return None
-
-
-def _check_states(v):
-    if v is None:
-        return None
-    if not isinstance(v, (list, tuple)) or any(s not in PHYSICS_STATES for s in v) or len(set(v)) != len(v):
-        return f"a list of distinct names among {sorted(PHYSICS_STATES)} (or [])"
-    return None
+    return check
 
 
 def _check_effects(v):
@@ -104,8 +99,8 @@ class HybridModel(NeuralModel):
     _checks = {**_LAG_CHECKS,
                "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
                "effects": _check_effects,
-               "physics_states": _check_states,
-               "physics_inputs": _check_inputs,
+               "physics_states": _distinct_names(PHYSICS_STATES),
+               "physics_inputs": _distinct_names(PHYSICS_INPUTS),
                "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'",
                "gain_hidden": lambda v: _pos_int(v, zero=True)}
 
