@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +29,7 @@ from physics.device import config_dir
 from physics.errors import InputError
 from physics.fileio import sha256_file, write_json
 from physics.model import ActuatorModel
+from physics.outputs import output_folder, preflight
 from physics.progress import Progress
 from physics.sensor import SensorModel
 from physics.timeseries import read_timeseries, write_timeseries
@@ -174,19 +173,17 @@ def _rh_series(spec: _Spec, t: np.ndarray) -> np.ndarray | float:
 
 def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool = False,
              progress: bool = True, **overrides) -> Path:
-    """Generate a dataset folder (written to a temporary folder, then renamed into place)."""
+    """Generate a dataset folder (written to a temporary folder, then renamed into place; the
+    output-folder policy of :mod:`physics.outputs`: ``overwrite`` replaces only a folder eap wrote)."""
     cfg = load_config(config, overrides) if isinstance(config, str) else load_config("default", config)
     out = Path(out)
-    if out.exists() and not overwrite:
-        raise InputError(f"{out} already exists; choose another folder or pass overwrite")
+    preflight(out, overwrite=overwrite)
     rng = np.random.default_rng(cfg["seed"])
     specs = _plan(cfg, rng)
     sensor = _sensor(cfg["sensor"])
     base = ActuatorModel(cfg["device"], cfg["effects"])
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     t0 = time.perf_counter()
-    try:
+    with output_folder(out, overwrite=overwrite) as tmp:
         entries = []
         with Progress(len(specs), "generating dataset", enabled=progress) as bar:
             for spec in specs:
@@ -215,12 +212,6 @@ def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool
                 "noise_floor_m": sensor.noise_floor(), "generation_time_s": time.perf_counter() - t0,
                 "files": entries}
         write_json(tmp / "dataset.json", meta)
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
     return out
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physics.outputs import output_folder, preflight
 from physics.compare import PhysicsPredictor, model_rh
 from physics.errors import InputError
 from physics.fileio import write_json
@@ -92,14 +93,19 @@ def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: f
     return k / (2 * period), Y[k] / U[k]
 
 
-def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/compare", *,
-                  overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
-                  progress: bool = True) -> dict:
+def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/train-compare",
+                  *, overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
+                  progress: bool = True, overwrite: bool = False) -> dict:
     """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
-    ``compare.json``, ``metrics.csv``, plots and ``report.html`` in ``out``."""
+    ``compare.json``, ``metrics.csv``, plots and ``report.html`` in ``out`` (a folder written
+    atomically under the policy of :mod:`physics.outputs`)."""
+    preflight(out, inputs=[dataset], overwrite=overwrite)
     ds = load_dataset(dataset)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    with output_folder(out, inputs=[dataset], overwrite=overwrite) as tmp:
+        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress)
+
+
+def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress) -> dict:
     train, val = ds.records("train"), ds.records("validation")
     if not train:
         raise InputError(f"{dataset}: no training records")

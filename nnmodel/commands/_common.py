@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from physics.errors import InputError
+from physics.outputs import output_folder, preflight
 
 
 def add_model_options(p: argparse.ArgumentParser, rh_required: bool = False) -> None:
@@ -20,12 +21,25 @@ def add_model_options(p: argparse.ArgumentParser, rh_required: bool = False) -> 
     p.add_argument("--n-modes", type=int, default=4, help="retained bending modes (the rest is quasi-static)")
 
 
-def out_dir(path: str, overwrite: bool = False) -> Path:
-    d = Path(path)
-    if d.exists() and not d.is_dir():
-        raise InputError(f"--out {d} exists and is not a folder")
-    d.mkdir(parents=True, exist_ok=True)
-    return d
+def add_output_options(p: argparse.ArgumentParser, default: str | None, what: str = "output folder") -> None:
+    """``--out`` (a folder written atomically, see :mod:`physics.outputs`) and ``--overwrite``."""
+    if default is None:
+        p.add_argument("--out", required=True, help=what)
+    else:
+        p.add_argument("--out", default=default, help=what)
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --out folder written by eap (never one holding other files)")
+
+
+def check_out(args, inputs=()) -> None:
+    """Refuse a bad ``--out`` before any work (see :func:`physics.outputs.preflight`)."""
+    preflight(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False))
+
+
+def writing(args, inputs=()):
+    """The output-folder context of a command: ``with writing(args, inputs) as d:`` writes into a
+    temporary folder ``d`` that replaces ``args.out`` when the block succeeds."""
+    return output_folder(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False))
 
 
 def provenance(argv=None) -> dict:

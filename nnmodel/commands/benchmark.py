@@ -4,6 +4,7 @@ from __future__ import annotations
 from physics.errors import InputError
 
 from ..benchmarks import SUITES, get_suite
+from ._common import add_output_options, check_out, writing
 
 NAME = "benchmark"
 HELP = "compare FF / RBF / NARX / LSTM / GRU / hybrid on a benchmark suite (JSON + HTML + PNG report)"
@@ -15,7 +16,7 @@ DESCRIPTION = (HELP + ". Suites: " + "; ".join(f"{s.name}: {s.help}" for s in SU
 def add_arguments(p):
     p.add_argument("--suite", required=True, choices=sorted(SUITES) + ["all"],
                    help="benchmark suite (all: every suite, each into OUT/SUITE)")
-    p.add_argument("--out", required=True, help="output folder for the report (and model bundles)")
+    add_output_options(p, None, "output folder for the report (and model bundles)")
     p.add_argument("--models", default=None,
                    help="comma-separated models; none = the suite's list (" + "; ".join(
                        f"{s.name}: {','.join(s.default_models)}" for s in SUITES.values()) + ")")
@@ -55,13 +56,18 @@ def parse_sets(items, models) -> dict:
 def run(args) -> int:
     from pathlib import Path
 
-    if args.suite == "all":
+    if args.suite == "all":  # noqa: SIM102 (checked before any work)
         if args.data or args.limit is not None:
             raise InputError("--data and --limit belong to one suite; run the suites one by one to use them")
-        for name in SUITES:
-            _run_suite(args, get_suite(name), str(Path(args.out) / name), lenient=True)
-        return 0
-    _run_suite(args, get_suite(args.suite), args.out)
+    inputs = [args.data] if args.data else []
+    check_out(args, inputs)
+    with writing(args, inputs) as tmp:
+        if args.suite == "all":
+            for name in SUITES:
+                _run_suite(args, get_suite(name), str(tmp / name), lenient=True)
+        else:
+            _run_suite(args, get_suite(args.suite), str(tmp))
+    print(f"benchmark results in {Path(args.out)}")
     return 0
 
 

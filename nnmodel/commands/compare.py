@@ -9,7 +9,7 @@ from physics.compare import (CallablePredictor, FRFOptions, PhysicsPredictor, Pr
 from physics.errors import InputError
 from physics.timeseries import parse_column_map
 
-from ._common import out_dir, provenance
+from ._common import add_output_options, check_out, provenance, writing
 
 NAME = "compare"
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
@@ -127,18 +127,26 @@ def add_arguments(p):
     p.add_argument("--bands", default=None, help="band edges [Hz] for errors by band, e.g. 0.1,1,10,50 "
                                                  "(default: decades)")
     add_frf_arguments(p)
-    p.add_argument("--out", default="runs/compare", help="output folder")
+    add_output_options(p, "runs/compare")
+
+
+def _inputs(args) -> list:
+    """Files a command reads (never to be replaced by its output folder)."""
+    model = Path(args.model)
+    return list(args.measurements) + ([model] if model.exists() else [])
 
 
 def run(args) -> int:
     t0 = time.perf_counter()
+    check_out(args, _inputs(args))
     ms = read_measurements(args)
     predictor = resolve_predictor(args.model, args.effects, args.n_modes, args.hold)
     res = compare(ms, predictor, frf_options=frf_options(args), offset=args.offset, skip_s=args.skip_s,
                   min_coherence=args.min_coherence, bands=parse_bands(args.bands) if args.bands else None,
                   rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz))
-    d = out_dir(args.out)
-    write_comparison_report(res, d, provenance=provenance(), title=f"eap compare: {predictor.name}")
+    with writing(args, inputs=_inputs(args)) as tmp:
+        write_comparison_report(res, tmp, provenance=provenance(), title=f"eap compare: {predictor.name}")
+    d = Path(args.out)
     print(f"model: {predictor.name}")
     for r in res.records:
         tm, fe = r.summary.get("time_metrics"), r.summary["frf_metrics"]

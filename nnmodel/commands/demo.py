@@ -6,7 +6,7 @@ import sys
 from physics.diagnose.demo import HIDDEN, run_hidden_effect
 from physics.errors import InputError
 
-from ._common import provenance
+from ._common import add_output_options, check_out, provenance, writing
 from .diagnose import print_summary
 
 NAME = "demo"
@@ -24,7 +24,7 @@ def add_arguments(p):
                         "2 amplitudes plus a square pulse, so every candidate is evaluated")
     p.add_argument("--duration-s", type=float, default=60.0, help="length of each record [s]")
     p.add_argument("--fs-Hz", type=float, default=500.0, help="sampling rate of the records [Hz]")
-    p.add_argument("--out", default="runs/demo_hidden_effect", help="folder for the diagnosis report")
+    add_output_options(p, "runs/demo_hidden_effect", "folder for the diagnosis report")
 
 
 def run(args) -> int:
@@ -32,8 +32,10 @@ def run(args) -> int:
     if eff not in (None, "random") and eff not in HIDDEN:
         raise InputError(f"--effect {args.effect!r}: choose one of {', '.join(HIDDEN)}, none or random")
     log = lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True)  # noqa: E731
-    case, res = run_hidden_effect(eff, args.seed, out=args.out, device=args.device, design=args.design,
-                                  fs=args.fs_Hz, duration=args.duration_s, progress=log)
+    check_out(args)
+    with writing(args) as tmp:
+        case, res = run_hidden_effect(eff, args.seed, out=tmp, device=args.device, design=args.design,
+                                      fs=args.fs_Hz, duration=args.duration_s, progress=log)
     hidden = case.hidden
     tp = ", ".join(f"{k}={v:.4g}" for k, v in case.truth_params.items())
     print(f"hidden effect: {hidden or 'none'} (seed {args.seed}); truth parameters: {tp}")

@@ -8,7 +8,7 @@ from pathlib import Path
 from physics.diagnose import diagnose, write_diagnosis
 from physics.errors import InputError
 
-from ._common import out_dir, provenance
+from ._common import add_output_options, check_out, provenance, writing
 from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
 
 NAME = "diagnose"
@@ -40,7 +40,7 @@ def add_arguments(p):
     p.add_argument("--fs-max-Hz", type=float, default=None,
                    help="cap on the analysis sampling rate (default: ≥ 5× the highest excited frequency)")
     add_frf_arguments(p)
-    p.add_argument("--out", default="runs/diagnose", help="output folder")
+    add_output_options(p, "runs/diagnose")
     p.add_argument("--apply", action="store_true", help="write the extended device file NAME.yaml into --out")
     p.add_argument("--name", default=None, help="name of the extended device (default: DEVICE_EFFECT)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -83,6 +83,8 @@ def run(args) -> int:
         raise InputError(f"--noise-floor-um {args.noise_floor_um!r}: must be a positive number of µm")
     if args.fs_max_Hz is not None and not (args.fs_max_Hz > 0):
         raise InputError(f"--fs-max-Hz {args.fs_max_Hz!r}: must be a positive frequency")
+    protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
+    check_out(args, protect)
     ms = read_measurements(args)
     log = None if args.quiet else (lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True))
     res = diagnose(ms, args.device, args.effects, args.free or None, per_rh=args.per_rh,
@@ -91,9 +93,9 @@ def run(args) -> int:
                    sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), rh_tolerance=args.rh_tolerance,
                    noise_floor=None if args.noise_floor_um is None else 1e-6 * args.noise_floor_um,
                    fs_max=args.fs_max_Hz, n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, progress=log)
-    d = out_dir(args.out)
-    protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
-    out = write_diagnosis(res, d, apply=args.apply, name=args.name, provenance=provenance(), protect=protect)
+    with writing(args, inputs=protect) as tmp:
+        out = write_diagnosis(res, tmp, apply=args.apply, name=args.name, provenance=provenance(), protect=protect)
+    d = Path(args.out)
     print_summary(res)
     if args.apply:
         ap = out["applied"]

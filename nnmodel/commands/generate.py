@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from nnmodel.dataset import generate, load_dataset
 
+from ._common import add_output_options
+
 NAME = "generate"
 HELP = "generate a dataset (RH 40–100 %, sweeps, multisines, noise, pulses, realistic sensor)"
 
@@ -13,8 +15,7 @@ def add_arguments(p):
     p.add_argument("--device", default=None, help="override the preset's device")
     p.add_argument("--effects", default=None, help="override the preset's effects")
     p.add_argument("--seed", type=int, default=None, help="override the preset's seed")
-    p.add_argument("--out", required=True, help="dataset folder to create")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing dataset folder")
+    add_output_options(p, None, "dataset folder to create")
 
 
 def run(args) -> int:

@@ -7,7 +7,7 @@ from pathlib import Path
 from physics.errors import InputError
 from physics.identify import IdentifiabilityWarning, identify, write_identification
 
-from ._common import out_dir, provenance
+from ._common import add_output_options, check_out, provenance, writing
 from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
 
 NAME = "identify"
@@ -42,12 +42,14 @@ def add_arguments(p):
     p.add_argument("--skip-s", type=float, default=0.0, help="time residuals: skip this start-up interval [s]")
     add_frf_arguments(p)
     p.add_argument("--name", default=None, help="name of the fitted device and its file NAME.yaml (default: DEVICE_identified)")
-    p.add_argument("--out", default="runs/identify", help="output folder")
+    add_output_options(p, "runs/identify")
 
 
 def run(args) -> int:
     if not args.free.strip() and not args.per_rh.strip():
         raise InputError("name the parameters to identify with --free (and/or --per-rh), e.g. --free kf,beta_f")
+    protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
+    check_out(args, protect)
     ms = read_measurements(args)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)  # printed below from the result
@@ -57,9 +59,9 @@ def run(args) -> int:
                        min_coherence=args.min_coherence, weighting=args.weighting, rh_tolerance=args.rh_tolerance,
                        sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), n_modes=args.n_modes,
                        start_spread=args.start_spread, rh=args.rh, skip_s=args.skip_s)
-    d = out_dir(args.out)
-    protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
-    out = write_identification(res, d, name=args.name, provenance=provenance(), protect=protect)
+    with writing(args, inputs=protect) as tmp:
+        out = write_identification(res, tmp, name=args.name, provenance=provenance(), protect=protect)
+    d = Path(args.out)
     prob = res.problem
     print(f"{prob.device.name} [{', '.join(prob.effects)}] from {len(res.sources)} measurement(s), "
           f"{sum(t.freq.size for t in prob.targets)} frequencies, RH levels {', '.join(f'{x:g}' for x in prob.levels)} %")

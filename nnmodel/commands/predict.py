@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -20,6 +21,7 @@ def add_arguments(p):
     p.add_argument("--model", required=True, help="model bundle folder (e.g. RUN/models/narx)")
     p.add_argument("--input", required=True, help="input time-series CSV (voltage, optional RH)")
     p.add_argument("--out", required=True, help="output CSV for the prediction (never the input file)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out CSV (and its sidecar)")
     p.add_argument("--rh", type=float, default=None,
                    help="relative humidity [%%] when the file has no rh_pct column (wins over it)")
     p.add_argument("--resample", action="store_true",
@@ -41,6 +43,18 @@ def _read(path, rh, uses_rh: bool, need_y: bool):
     return read_timeseries(path, rh=0.0, require_deflection=need_y), False
 
 
+def _check_out(args) -> None:
+    """Refuse a bad ``--out`` before any work."""
+    out, inp = Path(args.out), Path(args.input)
+    if out.suffix.lower() != ".csv":
+        raise InputError(f"--out {out}: the prediction is written as CSV; give a path ending in .csv")
+    for p in (out, out.with_suffix(".yaml")):
+        if p.resolve() in (inp.resolve(), inp.with_suffix(".yaml").resolve()):
+            raise InputError(f"--out {out} would overwrite the input {p}; choose another --out")
+        if p.exists() and not args.overwrite:
+            raise InputError(f"--out: {p} already exists; choose another --out or pass --overwrite")
+
+
 def run(args) -> int:
     from physics.timeseries import TimeSeries, write_timeseries
     from physics.metrics import fit_percent, rmse
@@ -48,6 +62,7 @@ def run(args) -> int:
     from ..bundle import load
     from ._common import provenance
 
+    _check_out(args)
     bundle = load(args.model)
     uses_rh = bundle.model.uses_rh
     k = args.steps_ahead
@@ -76,7 +91,7 @@ def run(args) -> int:
         raise InputError("the model produced non-finite values for this input (diverged)")
     if ts.deflection is not None:
         fit = {"rmse": rmse(ts.deflection, pred)}
-        line += f"; against the measured deflection: RMSE {fit['rmse']:.4g}"
+        line += f"; against the measured deflection: RMSE {fit['rmse']:.4g} {out_unit}"
         try:
             fit["fit_percent"] = fit_percent(ts.deflection, pred)
             line += f", fit {fit['fit_percent']:.1f} %"
@@ -85,6 +100,6 @@ def run(args) -> int:
         meta["prediction"]["against_measured"] = fit
     out = TimeSeries(time=ts.time, voltage=ts.voltage, deflection=pred,
                      rh=ts.rh if (rh_read or uses_rh) else None, meta=meta, source=str(args.out))
-    path = write_timeseries(out, args.out, overwrite=True, protect=(args.input,))
+    path = write_timeseries(out, args.out, overwrite=args.overwrite, protect=(args.input,))
     print(f"{line}; wrote {path}")
     return 0

@@ -13,14 +13,14 @@ from physics.model import ActuatorModel
 from physics.plotting import plot_bode, plot_timeseries
 from physics.timeseries import write_timeseries
 
-from ._common import out_dir, provenance
+from ._common import add_output_options, provenance, writing
 
 NAME = "run"
 HELP = "run the end-to-end job on built-in defaults and write a report folder"
 
 
 def add_arguments(p):
-    p.add_argument("--out", default="runs/quickstart", help="report folder")
+    add_output_options(p, "runs/quickstart", "report folder")
     p.add_argument("--models", default="ff,rbf,narx,lstm", help="neural models to train and compare")
     p.add_argument("--dataset-config", default="quick", help="dataset preset (configs/datasets)")
     p.add_argument("--max-time-s", type=float, default=75.0, help="training budget per neural model [s]")
@@ -60,7 +60,7 @@ def _neural_stage(d: Path, args) -> dict:
     """generate (preset) → train-compare; returns the comparison summary."""
     from nnmodel.dataset import generate
     from nnmodel.traincompare import format_table, train_compare
-    ds = generate(d / "dataset", args.dataset_config, overwrite=True)
+    ds = generate(d / "dataset", args.dataset_config)
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     summary = train_compare(ds, models, d / "compare", max_time_s=args.max_time_s)
     print(format_table(summary))
@@ -68,8 +68,17 @@ def _neural_stage(d: Path, args) -> dict:
 
 
 def run(args) -> int:
-    d = out_dir(args.out)
     t0 = time.perf_counter()
+    with writing(args) as d:
+        report = _write_report(d, args, t0)
+    d = Path(args.out)
+    for dev, r in report["physics"].items():
+        print(f"{dev}: resonance by RH " + ", ".join(f"{k}%→{v:.1f} Hz" for k, v in r["resonance_Hz_by_rh"].items()))
+    print(f"report: {d / 'index.html'} (JSON: {d / 'report.json'}); total {report['runtime_s']:.1f} s")
+    return 0
+
+
+def _write_report(d: Path, args, t0: float) -> dict:
     report = {"physics": _physics_stage(d)}
     if not args.physics_only:
         report["neural"] = {k: v for k, v in _neural_stage(d, args).items() if k != "models"}
@@ -93,7 +102,4 @@ def run(args) -> int:
     html += [f"<h3>{name}</h3><img src='{name}' width='700'>" for name in imgs]
     html.append("</body></html>")
     write_text(d / "index.html", "\n".join(html))
-    for dev, r in report["physics"].items():
-        print(f"{dev}: resonance by RH " + ", ".join(f"{k}%→{v:.1f} Hz" for k, v in r["resonance_Hz_by_rh"].items()))
-    print(f"report: {d / 'index.html'} (JSON: {d / 'report.json'}); total {report['runtime_s']:.1f} s")
-    return 0
+    return report

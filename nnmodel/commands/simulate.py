@@ -2,17 +2,19 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
 from physics import signals
+from physics.errors import InputError
 from physics.fileio import atomic_path, write_json
 from physics.model import ActuatorModel
 from physics.plotting import plot_timeseries
 from physics.timedomain import FIELDS, simulate
 from physics.timeseries import read_timeseries, write_timeseries
 
-from ._common import add_model_options, out_dir, provenance
+from ._common import add_model_options, add_output_options, check_out, provenance, writing
 
 NAME = "simulate"
 HELP = "simulate tip deflection and current for a voltage signal; writes CSV + plots"
@@ -36,10 +38,17 @@ def add_arguments(p):
     p.add_argument("--fields", default="", help=f"internal fields to save: {', '.join(FIELDS)}")
     p.add_argument("--hold", choices=["cubic", "linear"], default=None,
                    help="input interpolation between samples (default: linear for square/steps, else cubic)")
-    p.add_argument("--out", default="runs/simulate", help="output folder")
+    add_output_options(p, "runs/simulate")
 
 
 def make_signal(args) -> signals.Signal:
+    for flag in ("duration_s", "fs_Hz", "amplitude_V", "rms_V", "f_start_Hz", "f_stop_Hz", "frequency_Hz",
+                 "t_on_s", "t_off_s"):
+        value = getattr(args, flag)
+        if not np.isfinite(value) or value <= 0:
+            raise InputError(f"--{flag.replace('_', '-')} {value!r}: must be a positive number")
+    if args.f_start_Hz >= args.f_stop_Hz:
+        raise InputError(f"--f-start-Hz {args.f_start_Hz:g} must be below --f-stop-Hz {args.f_stop_Hz:g}")
     k = args.signal
     if k == "sweep":
         return signals.sweep(args.amplitude_V, args.f_start_Hz, args.f_stop_Hz, args.duration_s, args.fs_Hz)
@@ -57,6 +66,7 @@ def make_signal(args) -> signals.Signal:
 
 
 def run(args) -> int:
+    check_out(args, [args.input] if args.input else [])
     model = ActuatorModel(args.device, args.effects, n_modes=args.n_modes)
     fields = tuple(f.strip() for f in args.fields.split(",") if f.strip())
     if args.input:
@@ -69,29 +79,30 @@ def run(args) -> int:
         t, v, rh = sig.t, sig.v, args.rh
         sig_meta = sig.describe()
         hold = args.hold or ("linear" if args.signal in ("square", "steps") else "cubic")
-    d = out_dir(args.out)
     t0 = time.perf_counter()
     res = simulate(model, None, t, v, rh=rh, fields=fields, hold=hold, progress=True)
     elapsed = time.perf_counter() - t0
     ts = res.to_timeseries()
     ts.meta.update({"signal": sig_meta, "provenance": provenance()})
-    csv = write_timeseries(ts, d / "simulation.csv", overwrite=True,
-                           protect=(args.input,) if args.input else ())
-    plot_timeseries(res.time, {"voltage": (res.voltage, "V"), "deflection": (res.deflection * 1e3, "mm"),
-                               "current": (res.current * 1e3, "mA")}, d / "simulation.png",
-                    title=f"{model.device.name}: {', '.join(model.effect_ids)}")
-    if res.fields:
-        with atomic_path(d / "fields.npz") as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, z_m=res.z, time_s=res.time, **res.fields)
-    summary = {"device": model.device.name, "effects": list(model.effect_ids), "signal": sig_meta,
-               "rh_pct_mean": float(np.mean(res.rh)), "samples": int(t.size), "fs_Hz": res.fs,
-               "deflection_peak_to_peak_m": float(np.ptp(res.deflection)),
-               "deflection_rms_m": float(np.std(res.deflection)),
-               "current_rms_A": float(np.std(res.current)), "runtime_s": elapsed,
-               "files": [csv.name, "simulation.png"] + (["fields.npz"] if res.fields else []),
-               "provenance": provenance()}
-    write_json(d / "summary.json", summary)
+    with writing(args, inputs=[args.input] if args.input else []) as d:
+        csv = write_timeseries(ts, d / "simulation.csv", overwrite=True,
+                               protect=(args.input,) if args.input else ())
+        plot_timeseries(res.time, {"voltage": (res.voltage, "V"), "deflection": (res.deflection * 1e3, "mm"),
+                                   "current": (res.current * 1e3, "mA")}, d / "simulation.png",
+                        title=f"{model.device.name}: {', '.join(model.effect_ids)}")
+        if res.fields:
+            with atomic_path(d / "fields.npz") as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez_compressed(fh, z_m=res.z, time_s=res.time, **res.fields)
+        summary = {"device": model.device.name, "effects": list(model.effect_ids), "signal": sig_meta,
+                   "rh_pct_mean": float(np.mean(res.rh)), "samples": int(t.size), "fs_Hz": res.fs,
+                   "deflection_peak_to_peak_m": float(np.ptp(res.deflection)),
+                   "deflection_rms_m": float(np.std(res.deflection)),
+                   "current_rms_A": float(np.std(res.current)), "runtime_s": elapsed,
+                   "files": [csv.name, "simulation.png"] + (["fields.npz"] if res.fields else []),
+                   "provenance": provenance()}
+        write_json(d / "summary.json", summary)
+    d = Path(args.out)
     print(f"simulated {t[-1] - t[0]:.3g} s at {res.fs:g} Hz in {elapsed:.2f} s; "
           f"deflection {1e3 * np.ptp(res.deflection):.3g} mm peak-to-peak; wrote {d}/")
     return 0

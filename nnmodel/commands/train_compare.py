@@ -5,6 +5,8 @@ import yaml
 
 from physics.errors import InputError
 
+from ._common import add_output_options
+
 NAME = "train-compare"
 HELP = "train neural models on a dataset and compare them (free run, held-out RH, physics reference)"
 
@@ -12,7 +14,7 @@ HELP = "train neural models on a dataset and compare them (free run, held-out RH
 def add_arguments(p):
     p.add_argument("dataset", help="dataset folder (from `eap generate`)")
     p.add_argument("--models", default="ff,rbf,narx,lstm", help="comma-separated: ff, rbf, narx, lstm, gru")
-    p.add_argument("--out", default="runs/compare", help="run folder (models/, compare.json, report.html)")
+    add_output_options(p, "runs/train-compare", "run folder (models/, compare.json, report.html)")
     p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
     p.add_argument("--max-time-s", type=float, default=None, help="training budget per model [s]")
@@ -47,7 +49,7 @@ def run(args) -> int:
     if bad:
         raise InputError(f"unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
     summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
-                            max_time_s=args.max_time_s)
+                            max_time_s=args.max_time_s, overwrite=args.overwrite)
     print(format_table(summary))
     best = summary["best_heldout"]
     if best:

@@ -1,10 +1,12 @@
 """``eap validate``: the reduced model against the reference PNP + solvent solver."""
 from __future__ import annotations
 
+from pathlib import Path
+
 from physics.fileio import write_json
 from physics.reference.validate import AMPLITUDES, DEVICES, run_validation
 
-from ._common import out_dir, provenance
+from ._common import add_output_options, check_out, provenance, writing
 
 NAME = "validate"
 HELP = "validation report: reduced model vs the full nonlinear PNP + solvent reference (plots, JSON, HTML)"
@@ -20,14 +22,16 @@ def add_arguments(p):
     p.add_argument("--amplitudes-V", type=float, nargs="+", default=list(AMPLITUDES),
                    help="sine amplitudes of the sweep [V]")
     p.add_argument("--quick", action="store_true", help="three amplitudes and no square pulse (smoke run)")
-    p.add_argument("--out", default="validation", help="report folder (PNG plots, figures.json, report.html)")
+    add_output_options(p, "runs/validate", "report folder (PNG plots, figures.json, report.html)")
 
 
 def run(args) -> int:
-    d = out_dir(args.out)
-    figs = run_validation(d, devices=tuple(args.device or DEVICES), amps=tuple(sorted(args.amplitudes_V)),
-                          quick=args.quick)
-    write_json(d / "provenance.json", provenance())
+    check_out(args)
+    with writing(args) as tmp:
+        figs = run_validation(tmp, devices=tuple(args.device or DEVICES), amps=tuple(sorted(args.amplitudes_V)),
+                              quick=args.quick)
+        write_json(tmp / "provenance.json", provenance())
+    d = Path(args.out)
     ok = all(figs[dev]["small_signal"]["max_mag_err_pct"] <= 1.0 and figs[dev]["small_signal"]["max_phase_err_deg"] <= 1.0
              for dev in figs["devices"])
     print(f"small-signal criterion (1 % / 1° over 0.1–50 Hz): {'met' if ok else 'NOT met'}; "
