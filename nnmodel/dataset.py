@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from physics.yamlio import load_yaml
 from physics import signals
 from physics.device import config_dir
 from physics.errors import InputError
@@ -58,7 +59,7 @@ def load_config(name_or_path: str = "default", overrides: dict | None = None) ->
         p = config_dir() / "datasets" / f"{name_or_path}.yaml"
     if not p.is_file():
         raise InputError(f"dataset configuration {name_or_path!r} not found ({p})")
-    raw = yaml.safe_load(p.read_text(encoding="utf-8")) or {}
+    raw = load_yaml(p, "dataset configuration") or {}
     if not isinstance(raw, dict):
         raise InputError(f"{p}: a dataset configuration must be a mapping")
     cfg = dict(_DEFAULTS)

@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-import yaml
 
 from .errors import InputError
+from .yamlio import load_yaml
 from .parameters import BASE_SECTIONS, ParamSpec, TableSpec
 from .units import UnitError, to_si
 
@@ -136,10 +136,7 @@ def load_device(name_or_path: str | os.PathLike | Device) -> Device:
         p = cand
     if not p.is_file():
         raise InputError(f"device file {p} does not exist")
-    try:
-        raw = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise InputError(f"{p}: not valid YAML ({exc})") from None
+    raw = load_yaml(p, "device file")
     return parse_device(raw, where=str(p))
 
 

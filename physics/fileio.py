@@ -28,7 +28,7 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True,
         if Path(p).resolve() == target.resolve():
             raise InputError(f"refusing to overwrite the input file {target}; choose another output path")
     if target.exists() and not overwrite:
-        raise InputError(f"{target} already exists; pass an empty output location or allow overwriting")
+        raise InputError(f"{target} already exists; choose another output path or pass --overwrite")
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
     os.close(fd)

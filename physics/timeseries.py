@@ -44,6 +44,7 @@ from __future__ import annotations
 import copy
 import csv
 import os
+import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Callable, Mapping
@@ -55,6 +56,7 @@ import yaml
 
 from .errors import InputError
 from .fileio import atomic_path
+from .yamlio import load_yaml
 
 #: Largest accepted deviation of a time step from the median step, relative to it.
 UNIFORM_RTOL = 1e-2
@@ -72,6 +74,15 @@ TIMESERIES_UNITS: dict[str, dict[str, tuple[float, float]]] = {
 STORED_UNITS = {"time": "s", "voltage": "V", "deflection": "m", "rh": "pct",
                 "current": "A", "temperature": "C"}
 CHANNELS = ("voltage", "deflection", "rh", "current", "temperature")
+#: Plausible ranges (stored units) of columns named ``quantity_unit``: a value outside is
+#: a unit or export error (a tip deflection of 1e300 m, a drive of 1 MV), not a measurement.
+PLAUSIBLE = {"deflection": (-1.0, 1.0, "m (tip deflection of a strip)"),
+             "voltage": (-1e3, 1e3, "V (drive voltage)"),
+             "current": (-1e3, 1e3, "A (absorbed current)"),
+             "temperature": (-273.15, 1e3, "°C (ambient temperature)")}
+#: Magnitude bound of column-mapped values (arbitrary plants, any unit): beyond it squares
+#: and sums overflow and every metric is meaningless.
+MAPPED_LIMIT = 1e15
 Locate = Callable[[int], str]
 
 
@@ -178,8 +189,8 @@ def check_record(arrays: dict[str, np.ndarray], where: str, locate: Locate,
         i = bad[0] + 1
         raise InputError(f"{where}, {locate(i)}, {label['time']}: step {float(dt[i - 1])!r} s differs from the "
                          f"median step {step!r} s by {100 * dev[i - 1]:.3g} % (more than "
-                         f"{100 * UNIFORM_RTOL:g} %); sampling must be uniform, or ask for "
-                         "resampling")
+                         f"{100 * UNIFORM_RTOL:g} %); sampling must be uniform, or pass --resample "
+                         "to interpolate onto the median step")
     new_t = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step * (1 + 1e-12))) + 1)
     out = {name: np.interp(new_t, t, arr) for name, arr in arrays.items()}
     out["time"] = new_t
@@ -250,40 +261,109 @@ def check_input_path(path, suffixes: tuple[str, ...]) -> Path:
     return p
 
 
+#: Field separators recognised in a CSV header line, in order of preference.
+DELIMITERS = (",", ";", "\t", "|")
+#: Encodings tried in turn: UTF-8 (with or without BOM), then Latin-1 (never fails).
+ENCODINGS = ("utf-8-sig", "latin-1")
+
+
+def sniff_dialect(path: Path) -> tuple[str, str, str]:
+    """(encoding, delimiter, decimal mark) of a CSV from its first 64 kB.
+
+    The delimiter is the separator most frequent in the header line (comma, semicolon,
+    tab, bar; runs of blanks if none); a decimal comma is recognised when the separator
+    is not a comma and data cells look like ``1,5``.
+    """
+    with path.open("rb") as fh:
+        head = fh.read(1 << 16)
+    if b"\x00" in head or re.search(rb"[\x01-\x08\x0e-\x1a]", head):
+        raise InputError(f"{path}: not a UTF-8 text file (binary content); expected a CSV")
+    try:
+        text, encoding = head.decode("utf-8-sig"), "utf-8-sig"
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:  # not merely a multi-byte character cut at the chunk end
+            text, encoding = head.decode("latin-1"), "latin-1"
+        else:
+            text, encoding = head[:exc.start].decode("utf-8-sig"), "utf-8-sig"
+    lines = text.splitlines()
+    header = lines[0] if lines else ""
+    counts = {d: header.count(d) for d in DELIMITERS}
+    delim = max(DELIMITERS, key=lambda d: counts[d]) if any(counts.values()) else \
+        (r"\s+" if len(header.split()) > 1 else ",")
+    decimal = "."
+    if delim != ",":
+        body = "\n".join(lines[1:50])
+        if re.search(r"\d,\d", body) and not re.search(r"\d\.\d", body):
+            decimal = ","
+    return encoding, delim, decimal
+
+
+def csv_header(path: Path) -> list[str]:
+    """Column names of a CSV's header line (dialect sniffed as by :func:`read_table`)."""
+    encoding, delim, _ = sniff_dialect(path)
+    with open(path, encoding=encoding, newline="") as fh:
+        header_line = fh.readline()
+    if delim == r"\s+":
+        return header_line.split()
+    return [n.strip() for n in next(csv.reader([header_line], delimiter=delim), [])]
+
+
 def read_table(path: Path) -> Table:
-    """Read a CSV (header line of names) or .mat file into a :class:`Table`."""
+    """Read a CSV (header line of names) or .mat file into a :class:`Table`.
+
+    CSV dialects are sniffed (:func:`sniff_dialect`): comma, semicolon, tab or blank
+    separated, decimal point or comma, UTF-8 (BOM allowed) or Latin-1, LF or CRLF.  Numeric
+    files are parsed straight to floats (8 bytes per value); a file with a non-numeric,
+    empty or NaN cell is re-read as text to name the line and column.
+    """
     if path.suffix.lower() == ".mat":
         return _read_mat(path)
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: empty file; expected a header line of column names "
+                         "followed by data rows")
+    encoding, delim, decimal = sniff_dialect(path)
+    names = csv_header(path)
+    if not any(names):
+        raise InputError(f"{path}: empty file; expected a header line of column names "
+                         "followed by data rows")
+    opts = dict(sep=delim, header=None, skiprows=1, names=list(range(len(names))), decimal=decimal,
+                encoding=encoding, skip_blank_lines=False, engine="c")
     try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            header_line = fh.readline()
-        names = [n.strip() for n in next(csv.reader([header_line]), [])]
-        if not any(names):
-            raise InputError(f"{path}: empty file; expected a header line of column names "
-                             "followed by data rows")
-        df = pd.read_csv(path, header=None, skiprows=1, names=list(range(len(names))),
-                         dtype=str, keep_default_na=False, skip_blank_lines=False,
-                         encoding="utf-8-sig")
+        try:
+            df = pd.read_csv(path, dtype=float, **opts)
+            values = df.to_numpy()
+            if values.size and np.isnan(values).any():
+                nonblank = np.flatnonzero(~np.isnan(values).all(axis=1))
+                end = nonblank[-1] + 1 if nonblank.size else 0
+                if np.isnan(values[:end]).any() or end == 0:
+                    raise ValueError("NaN or empty cell")
+                values = values[:end]
+            raw = None
+        except ValueError:
+            df = pd.read_csv(path, dtype=str, keep_default_na=False, **opts)
+            raw = df.to_numpy(dtype=object).copy()
     except pd.errors.EmptyDataError:
-        df = pd.DataFrame(columns=list(range(len(names))))
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file; expected a CSV") from None
+        raise InputError(f"{path}: empty file; the header is not followed by any data row") from None
     except pd.errors.ParserError as exc:
         raise InputError(f"{path}: cannot be parsed as CSV ({' '.join(str(exc).split())}); "
-                         f"every line must have the {len(names)} fields of the header") from None
-    raw = df.to_numpy(dtype=object)
-    raw[pd.isna(raw)] = ""
-    end = raw.shape[0]
-    while end and not any(str(v).strip() for v in raw[end - 1]):
-        end -= 1  # drop trailing blank lines
-    raw = raw[:end]
-    if raw.shape[0] == 0:
+                         f"every line must have the {len(names)} fields of the header "
+                         f"(separator {delim!r})") from None
+    if raw is not None:
+        raw[pd.isna(raw)] = ""
+        end = raw.shape[0]
+        while end and not any(str(v).strip() for v in raw[end - 1]):
+            end -= 1  # drop trailing blank lines
+        values = raw[:end]
+        if decimal == ",":
+            values = np.vectorize(lambda v: str(v).replace(",", "."), otypes=[object])(values) \
+                if values.size else values
+    if values.shape[0] == 0:
         raise InputError(f"{path}: empty file; the header is not followed by any data row")
     columns: dict[str, np.ndarray] = {}
     for k, name in enumerate(names):
-        col = raw[:, k].astype(str)
+        col = values[:, k] if raw is None else values[:, k].astype(str)
         if not name:
-            if (np.char.strip(col) == "").all():
+            if (np.isnan(col).all() if raw is None else (np.char.strip(col) == "").all()):
                 continue  # trailing separator: nameless, empty column
             raise InputError(f"{path}: column {k + 1} has data but no name in the header")
         if name in columns:
@@ -331,19 +411,66 @@ def parse_header(name: str, units: Mapping[str, Mapping[str, object]],
 
 
 def read_sidecar(path: Path) -> dict:
-    """Metadata of the optional sidecar ``NAME.yaml`` next to ``path`` ({} if absent)."""
+    """Metadata of the optional sidecar ``NAME.yaml`` next to ``path`` ({} if absent),
+    checked by :func:`check_sidecar`."""
     side = path.with_suffix(".yaml")
     if not side.is_file():
         return {}
-    try:
-        meta = yaml.safe_load(side.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise InputError(f"{side}: invalid YAML ({exc})") from None
+    meta = load_yaml(side, "sidecar")
     if meta is None:
         return {}
     if not isinstance(meta, dict):
         raise InputError(f"{side}: expected a mapping of metadata keys, got {type(meta).__name__}")
+    check_sidecar(meta, side)
     return meta
+
+
+_TINY = float(np.finfo(float).tiny)
+#: Sidecar keys of the signal description that must be positive numbers.
+_POSITIVE_SIGNAL_KEYS = ("period_s", "duration_s", "fs_Hz", "f_start_Hz", "f_stop_Hz", "frequency_Hz")
+
+
+def check_sidecar(meta: dict, side: Path) -> None:
+    """Check the sidecar keys the package reads (types, units, ranges); errors name the
+    file and the key."""
+    def number(value, key, lo=-np.inf, hi=np.inf, allow_none=False):
+        if value is None and allow_none:
+            return
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) \
+                or not lo <= value <= hi:
+            rng = " > 0" if lo == _TINY else "" if (lo, hi) == (-np.inf, np.inf) else f" within {lo:g}–{hi:g}"
+            raise InputError(f"{side}: {key}: {value!r} is not valid; expected a finite number{rng}")
+
+    if "rh_pct" in meta:
+        number(meta["rh_pct"], "rh_pct", 0.0, 100.0)
+    for section in ("signal", "excitation"):
+        sig = meta.get(section)
+        if sig is None:
+            continue
+        if not isinstance(sig, dict):
+            raise InputError(f"{side}: {section}: expected a mapping (kind, frequencies...), got {sig!r}")
+        for key in _POSITIVE_SIGNAL_KEYS:
+            if key in sig:
+                number(sig[key], f"{section}.{key}", _TINY)
+        if "periods" in sig and (isinstance(sig["periods"], bool) or not isinstance(sig["periods"], int)
+                                 or sig["periods"] < 1):
+            raise InputError(f"{side}: {section}.periods: {sig['periods']!r} is not valid; expected a "
+                             "whole number of periods ≥ 1")
+    sensor = meta.get("sensor")
+    if sensor is not None:
+        if not isinstance(sensor, dict):
+            raise InputError(f"{side}: sensor: expected a mapping of sensor settings, got {sensor!r}")
+        from .sensor import SensorModel
+        known = {f.name for f in fields(SensorModel)}
+        for key in known & set(sensor):
+            number(sensor[key], f"sensor.{key}", allow_none=key in ("bandwidth", "adc_bits"))
+        try:
+            SensorModel(**{k: sensor[k] for k in known & set(sensor)})
+        except InputError as exc:
+            raise InputError(f"{side}: {exc}") from None
+        for key in ("noise_floor_m",):
+            if key in sensor:
+                number(sensor[key], f"sensor.{key}", 0.0)
 
 
 def write_table(columns: dict[str, np.ndarray], meta: dict, path, *, overwrite: bool,
@@ -361,7 +488,7 @@ def write_table(columns: dict[str, np.ndarray], meta: dict, path, *, overwrite: 
         if any(p.resolve() == q.resolve() for q in protect):
             raise InputError(f"refusing to overwrite the input file {p}; choose another output path")
         if p.exists() and not overwrite:
-            raise InputError(f"{p} already exists; choose another output path or allow overwriting")
+            raise InputError(f"{p} already exists; choose another output path or pass --overwrite")
     if meta:
         text = yaml.safe_dump(plain(meta), sort_keys=False, allow_unicode=True)
         with atomic_path(side, overwrite=True) as tmp:
@@ -451,6 +578,14 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
             labels[quantity] = f"column {name!r}"
             scale, offset = TIMESERIES_UNITS[quantity][unit]
             values[quantity] = table.floats(name) * scale + offset
+    for quantity, arr in values.items():
+        if columns is None and quantity in PLAUSIBLE:
+            lo, hi, what = PLAUSIBLE[quantity]
+        elif quantity in ("voltage", "deflection", "current"):
+            lo, hi, what = -MAPPED_LIMIT, MAPPED_LIMIT, "(mapped column; larger values overflow the metrics)"
+        else:
+            continue
+        check_range(arr, lo, hi, where, table.locate, labels[quantity], what)
     required = ["voltage"] + (["deflection"] if require_deflection else [])
     for quantity in required:
         if quantity not in values:
@@ -462,14 +597,20 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
         if "time" in values:
             raise InputError(f"{where}: has a time column, so a sampling rate must not be given too")
         if not np.isfinite(fs) or fs <= 0:
-            raise InputError(f"{where}: sampling rate fs={fs!r} Hz must be a positive number")
+            raise InputError(f"{where}: sampling rate --fs-Hz {fs!r} must be a positive number")
         values["time"] = np.arange(n) / float(fs)
     elif "time" not in values:
         raise InputError(f"{where}: missing column time_s (time in s or ms); give the "
-                         "sampling rate fs for a file without a time column")
+                         "sampling rate with --fs-Hz for a file without a time column")
     if n < 2:
         raise InputError(f"{where}: needs at least 2 samples, got {n}")
     meta = read_sidecar(p)
+    if "rh" in values and meta.get("rh_pct") is not None and rh is None:
+        col_rh = float(np.mean(values["rh"]))
+        if abs(col_rh - float(meta["rh_pct"])) > 5.0:
+            raise InputError(f"{where}: the sidecar {p.with_suffix('.yaml').name} says rh_pct={meta['rh_pct']!r} "
+                             f"but the {labels['rh']} averages {col_rh:.3g} %; correct one of them (or give "
+                             "--rh to override both)")
     if rh is not None:
         if not np.isfinite(rh) or not 0.0 <= rh <= 100.0:
             raise InputError(f"{where}: relative humidity rh={rh!r} must lie within 0–100 %")
@@ -478,7 +619,7 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
         side_rh = meta.get("rh_pct")
         if side_rh is None:
             raise InputError(f"{where}: no relative humidity: add an rh_pct column, the key "
-                             "rh_pct to the sidecar, or give the RH explicitly")
+                             "rh_pct to the sidecar, or give the RH with --rh")
         if isinstance(side_rh, bool) or not isinstance(side_rh, (int, float)) \
                 or not 0.0 <= side_rh <= 100.0:
             raise InputError(f"{p.with_suffix('.yaml')}: rh_pct={side_rh!r} must be a number "

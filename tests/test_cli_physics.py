@@ -30,9 +30,11 @@ def test_simulate_from_an_input_file_never_overwrites_it(tmp_path):
     t = np.arange(0, 1, 0.01)
     src.write_text("time_s,voltage_V,rh_pct\n" + "\n".join(f"{a},{np.sin(6 * a)},55" for a in t))
     before = src.read_text()
-    assert main(["simulate", "--device", "ipmc_pt_eg", "--input", str(src), "--out", str(tmp_path)]) == 0
+    assert main(["simulate", "--device", "ipmc_pt_eg", "--input", str(src), "--out", str(tmp_path)]) == 2
+    assert src.read_text() == before  # an output folder holding the input is refused
+    assert main(["simulate", "--device", "ipmc_pt_eg", "--input", str(src), "--out", str(tmp_path / "o")]) == 0
     assert src.read_text() == before
-    assert read_timeseries(tmp_path / "simulation.csv").rh[0] == 55.0
+    assert read_timeseries(tmp_path / "o" / "simulation.csv").rh[0] == 55.0
 
 
 def test_frf_json_csv_and_plot(tmp_path):

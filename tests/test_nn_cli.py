@@ -62,9 +62,12 @@ def test_predict_refuses_rate_mismatch_and_warns_on_humidity(bundle_dir, tmp_pat
     inp2 = tmp_path / "norh.csv"
     _write_input(inp2)
     assert main(["predict", "--model", str(bundle_dir), "--input", str(inp2), "--out", str(out)]) == 2
+    assert "already exists; choose another --out or pass --overwrite" in capsys.readouterr().err
+    assert main(["predict", "--model", str(bundle_dir), "--input", str(inp2), "--out", str(out),
+                 "--overwrite"]) == 2
     assert "relative humidity" in capsys.readouterr().err
     assert main(["predict", "--model", str(bundle_dir), "--input", str(inp2), "--out", str(out),
-                 "--rh", "55"]) == 0
+                 "--rh", "55", "--overwrite"]) == 0
 
 
 def test_benchmark_rejects_bad_options(tmp_path, capsys):

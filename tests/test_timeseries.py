@@ -60,9 +60,9 @@ def test_mm_deflection_and_trailing_blank_lines(tmp_path):
 
 def test_windows_line_endings_and_byte_order_mark(tmp_path):
     p = tmp_path / "win.csv"
-    p.write_bytes(b"\xef\xbb\xbftime_s,voltage_V,deflection_m,rh_pct\r\n0,1,2,50\r\n1,1,3,50\r\n")
+    p.write_bytes(b"\xef\xbb\xbftime_s,voltage_V,deflection_mm,rh_pct\r\n0,1,2,50\r\n1,1,3,50\r\n")
     ts = read_timeseries(p)
-    np.testing.assert_array_equal(ts.deflection, [2.0, 3.0])
+    np.testing.assert_array_equal(ts.deflection, [2e-3, 3e-3])
 
 
 def test_model_input_may_omit_deflection(tmp_path):
@@ -129,8 +129,11 @@ def test_sidecar_is_read_and_its_rh_used_when_no_column(tmp_path):
 def test_explicit_rh_wins_over_column_and_sidecar(tmp_path):
     p = write(tmp_path, GOOD)
     (tmp_path / "rec.yaml").write_text("rh_pct: 80\n")
-    np.testing.assert_array_equal(read_timeseries(p).rh, [50, 50, 50])  # column over sidecar
+    with pytest.raises(InputError, match=r"sidecar rec\.yaml says rh_pct=80 but the column 'rh_pct' averages 50"):
+        read_timeseries(p)  # a contradiction is an error naming both, never a silent choice
     np.testing.assert_array_equal(read_timeseries(p, rh=65).rh, [65, 65, 65])
+    (tmp_path / "rec.yaml").write_text("rh_pct: 52\n")  # agrees within 5 %: the column is used
+    np.testing.assert_array_equal(read_timeseries(p).rh, [50, 50, 50])
 
 
 def test_resample_to_median_step_records_it(tmp_path):
@@ -257,7 +260,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
     "missing-voltage": ("time_s,deflection_m,rh_pct\n0,1,50\n1,1,50\n", {},
                         ["missing column voltage_V"]),
     "missing-time": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {},
-                     ["missing column time_s", "sampling rate fs"]),
+                     ["missing column time_s", "sampling rate with --fs-Hz"]),
     "unknown-column": ("time_s,voltage_V,deflection_m,rh_pct,force_N\n0,1,0,50,1\n1,1,0,50,1\n", {},
                        ["unknown column 'force_N'", "deflection_mm"]),
     "unparseable-unit": ("time_s,voltage_V,deflection_cm,rh_pct\n0,1,0,50\n1,1,0,50\n", {},
@@ -302,7 +305,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
                                            "fs": 10.0, "rh": 50},
                       ["line 3", "column 'V1'", "'x' is not a number"]),
     "fs-and-time": (GOOD, {"fs": 100.0}, ["time column", "sampling rate"]),
-    "bad-fs": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {"fs": -5.0}, ["fs=-5.0"]),
+    "bad-fs": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {"fs": -5.0}, ["--fs-Hz -5.0"]),
 }
 
 
@@ -332,7 +335,7 @@ def test_wrong_extension(tmp_path):
 def test_bad_sidecar(tmp_path):
     p = write(tmp_path, "time_s,voltage_V,deflection_m\n0,1,0\n1,1,0\n")
     side = tmp_path / "rec.yaml"
-    for text, msg in [("rh_pct: 140\n", "rh_pct=140"), ("rh_pct: wet\n", "rh_pct='wet'"),
+    for text, msg in [("rh_pct: 140\n", "rh_pct: 140 is not valid"), ("rh_pct: wet\n", "rh_pct: 'wet' is not valid"),
                       ("- a\n- b\n", "expected a mapping"), ("a: [1\n", "invalid YAML")]:
         side.write_text(text)
         with pytest.raises(InputError, match=msg) as err:

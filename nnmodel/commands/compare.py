@@ -79,8 +79,17 @@ def read_measurements(args) -> list:
         if not Path(m).exists():
             raise InputError(f"measurement file {m} not found")
     columns = parse_column_map(args.columns) if args.columns else None
-    return load_measurements(args.measurements, rh=args.rh, columns=columns, fs=args.fs_Hz,
-                             resample=args.resample)
+    if args.fs_Hz is not None and not args.fs_Hz > 0:
+        raise InputError(f"--fs-Hz {args.fs_Hz!r}: the sampling rate must be a positive number of Hz")
+    ms = load_measurements(args.measurements, rh=args.rh, columns=columns, fs=args.fs_Hz,
+                           resample=args.resample)
+    for m in ms:
+        if isinstance(getattr(m, "meta", None), dict) and "geometry" in m.meta:
+            raise InputError(f"{Path(str(m.source)).with_suffix('.yaml')}: geometry: the sidecar's geometry is not "
+                             "applied to the model (it would be silently ignored); put it in a device YAML (copy "
+                             "configs/devices/*.yaml, edit geometry:) and pass that file with --device/--model, "
+                             "then remove the geometry block from the sidecar")
+    return ms
 
 
 # ------------------------------------------------------------------ model resolution

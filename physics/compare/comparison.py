@@ -122,7 +122,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
         raise InputError(f"{where}: has no deflection column; a measurement needs deflection_m")
     rh = ts.rh if ts.rh is not None else None
     if rh is None:
-        raise InputError(f"{where}: no relative humidity (rh_pct); give the RH explicitly")
+        raise InputError(f"{where}: no relative humidity (rh_pct); give the RH with --rh")
     rh_arg = model_rh(rh, ts.fs, rh_tolerance)
     yhat = _check_output(predictor(ts.voltage, rh_arg, ts.fs), ts.n, predictor.name)
     bw = sensor_bandwidth_of(ts, sb_setting)
@@ -170,7 +170,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
 
 def _compare_frf(frf: FRFData, where, predictor, min_coh, sb_setting):
     if frf.rh is None:
-        raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH explicitly")
+        raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with --rh")
     rh = float(np.mean(frf.rh))
     bw = sensor_bandwidth_of(frf, sb_setting)
     Hc = predictor.frequency_response(frf.freq, rh) * sensor_response(frf.freq, bw)

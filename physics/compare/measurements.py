@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..frfdata import FRFData, read_frf
-from ..timeseries import TimeSeries, read_timeseries
+from ..timeseries import TimeSeries, csv_header, read_timeseries
 
 
 def is_frf_file(path) -> bool:
@@ -17,9 +17,7 @@ def is_frf_file(path) -> bool:
     p = Path(path)
     if p.suffix.lower() != ".csv" or not p.is_file():
         return False
-    with open(p, encoding="utf-8-sig") as fh:
-        header = fh.readline()
-    return "freq_hz" in [h.strip().lower() for h in header.split(",")]
+    return "freq_hz" in [h.lower() for h in csv_header(p)]
 
 
 def load_measurements(items: Iterable, *, rh: float | None = None, columns: dict | None = None,
@@ -57,7 +55,7 @@ def mean_rh(m, where: str) -> float:
     """Mean RH [%] of a record (an FRF without RH is an error naming it)."""
     rh = m.rh
     if rh is None:
-        raise InputError(f"{where}: no relative humidity; add an rh_pct column or give the RH explicitly")
+        raise InputError(f"{where}: no relative humidity; add an rh_pct column or give the RH with --rh")
     return float(np.mean(rh))
 
 

@@ -87,7 +87,7 @@ def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = No
                             estimator=info, record=m, rh_series=rh))
         elif isinstance(m, FRFData):
             if m.rh is None and default_rh is None:
-                raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH explicitly")
+                raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with --rh")
             rh = float(np.mean(m.rh)) if m.rh is not None else float(default_rh)
             ok = np.ones(m.freq.size, bool)
             if m.coherence is not None and min_coherence > 0:
