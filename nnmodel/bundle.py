@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -151,6 +152,16 @@ def _read_card(folder: Path) -> dict:
                          f"supported (this package reads version {FORMAT_VERSION})")
     if card.get("model") not in MODELS:
         raise InputError(f"{cp}: unknown model type {card.get('model')!r}; known: {', '.join(MODELS)}")
+    inputs = card.get("inputs")
+    if not isinstance(inputs, list) or not all(isinstance(i, dict) and isinstance(i.get("name"), str)
+                                               for i in inputs):
+        raise InputError(f"{cp}: 'inputs' must be a list of {{name, unit}} entries, got {inputs!r}")
+    fs = card.get("fs_hz")
+    if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not math.isfinite(fs) or fs <= 0:
+        raise InputError(f"{cp}: 'fs_hz' must be a positive sampling rate in Hz, got {fs!r}")
+    for key in ("weights", "training", "output"):
+        if card.get(key) is not None and not isinstance(card[key], dict):
+            raise InputError(f"{cp}: {key!r} must be a mapping, got {card[key]!r}")
     return card
 
 
@@ -168,24 +179,53 @@ def load(path: str | os.PathLike) -> "Bundle":
         raise InputError(f"{wfile}: content does not match the SHA-256 in {CARD} (corrupt or altered)")
     try:
         state = torch.load(wfile, map_location="cpu", weights_only=True)
-    except Exception as exc:  # UnpicklingError for anything but plain tensors and containers
-        raise InputError(f"{wfile}: refused to load — only plain tensors are accepted "
-                         f"(weights_only=True): {exc}") from None
+    except Exception:  # UnpicklingError for anything but plain tensors and containers
+        raise InputError(f"{wfile}: refused to load — the file holds more than plain tensors (it may have "
+                         "been altered); only weights saved by eap are accepted, retrain or re-save the "
+                         "model") from None
     if not isinstance(state, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
                                               for k, v in state.items()):
         raise InputError(f"{wfile}: expected a flat mapping of parameter names to tensors")
+    bad = [k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all())]
+    if bad:
+        raise InputError(f"{wfile}: weights {bad[:3]} contain NaN or infinite values; the bundle is corrupt")
     cls = MODELS[card["model"]]
-    hp = dict(card.get("hyper_parameters") or {})
-    unknown = sorted(set(hp) - set(cls.param_names()))
-    if unknown:
-        raise InputError(f"{folder / CARD}: unknown hyper-parameter(s) {unknown} for model {card['model']!r}")
-    model = cls(**hp)
+    hp = _card_hyper_parameters(card, cls, folder / CARD)
     learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
                "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
-               "fit_time_s": card.get("training", {}).get("fit_time_s"),
+               "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
                "card_extra": {k: card[k] for k in getattr(cls, "CARD_EXTRA", ()) if k in card}}
-    model.restore(learned, state)
+    try:
+        with torch.device("meta"):  # shapes only: a card implying gigabytes allocates nothing
+            cls(**hp).restore(learned, state)
+        model = cls(**hp).restore(learned, state)
+    except InputError as exc:
+        raise InputError(f"{folder}: {exc}") from None
+    except (RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
+        raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's "
+                         f"hyper-parameters ({' '.join(str(exc).split())[:300]})") from None
     return Bundle(model, card, folder)
+
+
+def _card_hyper_parameters(card: dict, cls, where: Path) -> dict:
+    """The card's hyper-parameters, checked against the model's defaults (names, types)."""
+    hp = card.get("hyper_parameters") or {}
+    if not isinstance(hp, dict):
+        raise InputError(f"{where}: hyper_parameters must be a mapping, got {type(hp).__name__}")
+    defaults = cls.default_params()
+    unknown = sorted(set(hp) - set(defaults))
+    if unknown:
+        raise InputError(f"{where}: unknown hyper-parameter(s) {unknown} for model {card['model']!r}")
+    for key, value in hp.items():
+        d = defaults[key]
+        if isinstance(d, bool) or d is None or isinstance(d, str):
+            continue
+        if isinstance(d, (int, float)) and value is not None and (
+                isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)
+                or (isinstance(d, int) and value != int(value))):
+            raise InputError(f"{where}: hyper-parameter {key}={value!r} must be a finite "
+                             f"{'whole number' if isinstance(d, int) else 'number'} like the default {d!r}")
+    return dict(hp)
 
 
 # ---------------------------------------------------------------------- resampling

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import signal
 import sys
 
 from physics.errors import InputError, ModelError
@@ -50,14 +51,34 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
+    previous = signal.signal(signal.SIGTERM, _terminated)
     try:
         return int(args._run(args) or 0)
     except (InputError, ModelError) as exc:
         print(f"eap {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except (KeyboardInterrupt, Terminated) as exc:
+        out = getattr(args, "out", None)
+        where = f"; nothing written to {out}" if out else ""
+        print(f"eap {args.command}: interrupted{where}", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
+    except MemoryError:
+        print(f"eap {args.command}: error: out of memory; use a shorter record (split it) or a machine with "
+              "more memory", file=sys.stderr)
+        return 2
     except BrokenPipeError:  # output piped into e.g. `head`
         sys.stderr.close()
         return 0
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+class Terminated(BaseException):
+    """SIGTERM as an exception, so that output folders are cleaned up like on Ctrl-C."""
+
+
+def _terminated(signum, frame):
+    raise Terminated()
 
 
 if __name__ == "__main__":  # pragma: no cover
