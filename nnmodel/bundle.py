@@ -22,6 +22,7 @@ import math
 import os
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -196,7 +197,8 @@ def load(path: str | os.PathLike) -> "Bundle":
                "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
                "card_extra": {k: card[k] for k in getattr(cls, "CARD_EXTRA", ()) if k in card}}
     try:
-        with torch.device("meta"):  # shapes only: a card implying gigabytes allocates nothing
+        with torch.device("meta"), warnings.catch_warnings():  # shapes only: nothing is allocated
+            warnings.simplefilter("ignore", UserWarning)  # "copying ... to a meta parameter is a no-op"
             cls(**hp).restore(learned, state)
         model = cls(**hp).restore(learned, state)
     except InputError as exc:

@@ -17,6 +17,15 @@ from physics.errors import InputError, ModelError
 from . import commands
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows defaults, but not "(default: None)" on required or unset options."""
+
+    def _get_help_string(self, action):
+        if action.default is None or action.default is False or action.required:
+            return action.help
+        return super()._get_help_string(action)
+
+
 def _command_modules():
     mods = []
     for info in pkgutil.iter_modules(commands.__path__):
@@ -39,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
         # argparse %-formats help strings: a literal "%" (e.g. "RH 40–100 %") must be doubled
         p = sub.add_parser(mod.NAME, help=mod.HELP.replace("%", "%%"),
                            description=getattr(mod, "DESCRIPTION", mod.HELP),
-                           formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                           formatter_class=_HelpFormatter)
         mod.add_arguments(p)
         p.set_defaults(_run=mod.run)
     return parser

@@ -32,8 +32,11 @@ def resolve_effects(effects, device: Device) -> tuple[str, ...]:
             ids = list(EFFECTS)
         elif key == "linear":
             ids = [k for k, v in EFFECTS.items() if v.linear]
-        elif key in ("none", ""):
+        elif key == "none":
             ids = []
+        elif not key:
+            raise InputError("effects: an empty list is ambiguous; give 'none' for the bare double-layer "
+                             "model, 'default', or comma-separated ids (see `eap effects`)")
         else:
             ids = [e.strip() for e in key.split(",") if e.strip()]
     else:

@@ -300,6 +300,6 @@ def test_cli_identify(tmp_path, ipmc_record, capsys):
         assert (out / name).is_file()
     dev = load_device(out / "ipmc_pt_eg_identified.yaml")
     assert dev["kf"] == pytest.approx(0.0041, rel=0.05)
-    code = main(["identify", str(csv), "--device", "ipmc_pt_eg", "--free", "kff", "--out", str(out)])
+    code = main(["identify", str(csv), "--device", "ipmc_pt_eg", "--free", "kff", "--out", str(out), "--overwrite"])
     assert code == 2
     assert "unknown parameter 'kff'" in capsys.readouterr().err

@@ -7,7 +7,7 @@ from pathlib import Path
 from physics.compare import (CallablePredictor, FRFOptions, PhysicsPredictor, Predictor, compare,
                              load_measurements, parse_bands, write_comparison_report)
 from physics.errors import InputError
-from physics.timeseries import parse_column_map
+from physics.timeseries import TimeSeries, parse_column_map
 
 from ._common import add_output_options, check_out, provenance, writing
 
@@ -60,6 +60,13 @@ def frf_options(args) -> FRFOptions:
         band = (lo, hi)
     if args.points < 0:
         raise InputError("--points must be >= 0")
+    if args.window is not None:
+        from scipy.signal import get_window
+        try:
+            get_window(args.window, 16)
+        except ValueError:
+            raise InputError(f"--window {args.window!r}: not a window scipy knows; use e.g. hann, hamming, "
+                             "blackman, boxcar, flattop") from None
     return FRFOptions(method=args.frf_method, nperseg=args.nperseg, window=args.window, band=band,
                       max_points=args.points)
 
@@ -74,6 +81,10 @@ def sensor_setting(text: str):
         raise InputError(f"--sensor-bandwidth-Hz {text!r}: expected auto, none or a frequency in Hz") from None
 
 
+#: Fewest samples of a time-series record that compare / identify / diagnose accept.
+MIN_SAMPLES = 32
+
+
 def read_measurements(args) -> list:
     for m in args.measurements:
         if not Path(m).exists():
@@ -84,6 +95,10 @@ def read_measurements(args) -> list:
     ms = load_measurements(args.measurements, rh=args.rh, columns=columns, fs=args.fs_Hz,
                            resample=args.resample)
     for m in ms:
+        n = getattr(m, "n", None)
+        if isinstance(m, TimeSeries) and n < MIN_SAMPLES:
+            raise InputError(f"{m.source}: {n} samples; comparing a model with a record needs at least "
+                             f"{MIN_SAMPLES} (an FRF estimate and time metrics over a few periods)")
         if isinstance(getattr(m, "meta", None), dict) and "geometry" in m.meta:
             raise InputError(f"{Path(str(m.source)).with_suffix('.yaml')}: geometry: the sidecar's geometry is not "
                              "applied to the model (it would be silently ignored); put it in a device YAML (copy "

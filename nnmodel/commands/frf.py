@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from physics.errors import InputError
 from physics.fileio import write_json
 from physics.frequency import frequency_response
 from physics.frfdata import FRFData, write_frf
@@ -25,6 +26,9 @@ def add_arguments(p):
 
 
 def run(args) -> int:
+    if not (0 < args.f_min_Hz < args.f_max_Hz) or args.points < 2:
+        raise InputError(f"--f-min-Hz {args.f_min_Hz:g} and --f-max-Hz {args.f_max_Hz:g} must be positive and "
+                         f"increasing, with --points ≥ 2 (got {args.points})")
     f = np.logspace(np.log10(args.f_min_Hz), np.log10(args.f_max_Hz), args.points)
     fr = frequency_response(args.device, args.effects, f, rh=args.rh, n_modes=args.n_modes)
     out = fr.to_dict()
