@@ -235,7 +235,7 @@ class Table:
         raw = self.columns[name]
         label = label or f"column {name!r}"
         if raw.dtype.kind in "biuf":
-            values = raw.astype(float)
+            values = raw.astype(float, copy=False)
         else:
             values = pd.to_numeric(pd.Series(raw), errors="coerce").to_numpy(dtype=float)
             i = next((i for i in np.flatnonzero(np.isnan(values))
@@ -329,9 +329,10 @@ def read_table(path: Path) -> Table:
     opts = dict(sep=delim, header=None, skiprows=1, names=list(range(len(names))), decimal=decimal,
                 encoding=encoding, skip_blank_lines=False, engine="c")
     try:
-        try:
-            df = pd.read_csv(path, dtype=float, **opts)
-            values = df.to_numpy()
+        try:  # in chunks: the parser's buffers stay small; peak ≈ 2 × the values
+            chunks = [c.to_numpy() for c in pd.read_csv(path, dtype=float, chunksize=1 << 18, **opts)]
+            values = np.concatenate(chunks) if chunks else np.empty((0, len(names)))
+            del chunks
             if values.size and np.isnan(values).any():
                 nonblank = np.flatnonzero(~np.isnan(values).all(axis=1))
                 end = nonblank[-1] + 1 if nonblank.size else 0
@@ -361,7 +362,7 @@ def read_table(path: Path) -> Table:
         raise InputError(f"{path}: empty file; the header is not followed by any data row")
     columns: dict[str, np.ndarray] = {}
     for k, name in enumerate(names):
-        col = values[:, k] if raw is None else values[:, k].astype(str)
+        col = np.ascontiguousarray(values[:, k]) if raw is None else values[:, k].astype(str)
         if not name:
             if (np.isnan(col).all() if raw is None else (np.char.strip(col) == "").all()):
                 continue  # trailing separator: nameless, empty column
@@ -577,7 +578,9 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
             found[quantity] = name
             labels[quantity] = f"column {name!r}"
             scale, offset = TIMESERIES_UNITS[quantity][unit]
-            values[quantity] = table.floats(name) * scale + offset
+            values[quantity] = table.floats(name)
+            if (scale, offset) != (1.0, 0.0):
+                values[quantity] = values[quantity] * scale + offset
     for quantity, arr in values.items():
         if columns is None and quantity in PLAUSIBLE:
             lo, hi, what = PLAUSIBLE[quantity]

@@ -249,3 +249,24 @@ def test_fast_numpy_free_run_matches_the_torch_loop_for_rbf():
         core.fast_inference = False
         slow = core.simulate(state, u[:, k:], None)
     np.testing.assert_allclose(fast.numpy(), slow.numpy(), rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("kind", ["ff", "narx", "lstm", "rbf"])
+def test_free_run_in_chunks_equals_one_piece(kind, monkeypatch):
+    """Long records are simulated in pieces (bounded memory); the pieces must continue exactly."""
+    import nnmodel.models.base as base
+    from nnmodel.data import Record
+    from nnmodel.models import MODELS
+    from scipy.signal import lfilter
+    rng = np.random.default_rng(1)
+    u = np.convolve(rng.normal(size=2000), np.ones(5) / 5, "same")
+    y = lfilter([0.05], [1, -0.95], np.tanh(u)) * 1e-3
+    rec = Record(u=u, y=y, rh=np.full(u.size, 50.0), fs=100.0)
+    kw = {"ff": dict(max_epochs=2), "narx": dict(max_epochs=1, horizon=20, stride=20),
+          "lstm": dict(max_epochs=1, horizon=50, stride=50), "rbf": dict(n_centres=8)}[kind]
+    m = MODELS[kind](progress_bar=False, **kw)
+    m.fit([rec], [rec])
+    whole = m.simulate(u, 50.0)
+    monkeypatch.setattr(base, "SIM_CHUNK", 37)
+    pieces = m.simulate(u, 50.0)
+    assert np.max(np.abs(pieces - whole)) <= 1e-5 * np.max(np.abs(whole))

@@ -37,6 +37,10 @@ from ..data import Record, check_records, check_voltage, rh_range, split_index
 __all__ = ["SequenceCore", "Normalized", "NeuralModel", "NotFittedError"]
 
 
+#: Samples per piece of a free run (bounds the activations held at once on long records).
+SIM_CHUNK = 1 << 16
+
+
 class NotFittedError(InputError):
     """The model was used before :meth:`NeuralModel.fit` (or loading)."""
 
@@ -54,6 +58,12 @@ class SequenceCore(nn.Module):
 
     def simulate(self, state, u, rh):  # pragma: no cover - interface
         raise NotImplementedError
+
+    def advance(self, state, u, rh):
+        """(outputs, state after the last sample) of :meth:`simulate`, so that a long record
+        can be simulated in chunks with the same result; ``None`` as the state means the
+        core cannot continue (the caller then simulates in one piece)."""
+        return self.simulate(state, u, rh), None
 
 
 class Normalized(nn.Module):
@@ -480,12 +490,18 @@ class NeuralModel:
         un, rhn, yn = self._padded(u, rh, yfull if yfull is not None else np.zeros(0), pad)
         s = pad + m  # first simulated index in padded arrays
         core = self.net_.core
+        out = np.empty(un.shape[0] - s)
         with torch.no_grad(), torch_threads(self.num_threads):
             state = core.init_state(self._t(un[None, s - k:s]), self._t(yn[None, s - k:s]),
                                     None if rhn is None else self._t(rhn[None, s - k:s]))
-            out = core.simulate(state, self._t(un[None, s:]),
-                                None if rhn is None else self._t(rhn[None, s:]))
-        y_hat = self.net_.denorm("y", out[0].double().numpy())
+            # chunks bound the memory of long records (same result); a core that cannot
+            # continue from a state (no advance) runs in one piece
+            step = SIM_CHUNK if type(core).advance is not SequenceCore.advance else un.shape[0]
+            for a in range(s, un.shape[0], step):
+                b = min(un.shape[0], a + step)
+                o, state = core.advance(state, self._t(un[None, a:b]), None if rhn is None else self._t(rhn[None, a:b]))
+                out[a - s:b - s] = o[0].double().numpy()
+        y_hat = self.net_.denorm("y", out)
         if m:
             y_hat = np.concatenate([y_init, y_hat])
         return y_hat

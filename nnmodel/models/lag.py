@@ -220,6 +220,13 @@ class LagSimulator(SequenceCore):
         """The output the map is added to: input channel 1 for a residual core, else None."""
         return u_all[:, k:, 1] if self.residual else None
 
+    def advance(self, state, u, rh):
+        out = self.simulate(state, u, rh)
+        k = self.n_init
+        u_hist, y_hist, rh_hist = state
+        return out, (torch.cat([u_hist, u], 1)[:, -k:], torch.cat([y_hist, out.to(y_hist.dtype)], 1)[:, -k:],
+                     None if rh_hist is None or rh is None else torch.cat([rh_hist, rh], 1)[:, -k:])
+
     def simulate(self, state, u, rh):
         u_hist, y_hist, rh_hist = state
         k = self.n_init

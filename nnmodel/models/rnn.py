@@ -75,9 +75,12 @@ class RNNSimulator(SequenceCore):
         return torch.tanh(s[0]).contiguous()
 
     def simulate(self, state, u, rh):
+        return self.advance(state, u, rh)[0]
+
+    def advance(self, state, u, rh):
         x = self._inputs(u, rh)
-        out, _ = self.rnn(x, state)
-        return self.readout(out)[..., 0] + self.direct(x)
+        out, state = self.rnn(x, state)
+        return self.readout(out)[..., 0] + self.direct(x), state
 
 
 class _RNNModel(NeuralModel):
