@@ -303,7 +303,7 @@ def test_cli_diagnose(tmp_path, capsys):
                "--apply", "--quiet"])
     assert rc == 0
     text = capsys.readouterr().out
-    assert "verdict: missing effect = solvent_diffusion" in text
+    assert "verdict (explained): missing effect = solvent_diffusion" in text, text
     assert "error before/after adding solvent_diffusion" in text
     raw = yaml.safe_load(next((tmp_path / "o").glob("*.yaml")).read_text())
     assert "solvent_diffusion" in raw["default_effects"]

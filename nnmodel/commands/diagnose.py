@@ -70,8 +70,12 @@ def print_summary(res, file=None) -> None:
     for s in res.support:
         print(f"  model effect {s.effect}: {s.explanation}", file=file)
     v = res.verdict
-    print(f"verdict: missing effect = {v.missing_effect}, confidence {v.confidence:.3g} ({v.label}); {v.reason}",
-          file=file)
+    print(f"verdict ({v.status}): missing effect = {v.missing_effect}, confidence {v.confidence:.3g} ({v.label}); "
+          f"{v.reason}", file=file)
+    if res.adequacy is not None:
+        print(f"adequacy: {res.adequacy.summary()}", file=file)
+    if v.remaining:
+        print(f"what remains: {v.remaining}", file=file)
     w = res.winner
     if w is not None:
         print(f"error before/after adding {w.effect}: RMS {1e6 * b.rmse:.4g} -> {1e6 * w.fit.rmse:.4g} µm "

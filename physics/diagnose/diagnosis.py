@@ -51,6 +51,7 @@ from ..threads import single_threaded
 from . import candidates as C
 from . import stats
 from .records import Record, frf_measurements, prepare_records
+from .adequacy import ADEQUATE_RATIO, Adequacy, assess
 from .residuals import ResidualAnalysis, analyse
 from .signatures import EXCITATION, features, revealable, signatures
 
@@ -126,6 +127,10 @@ class SupportResult:
                 "rmse_without": self.rmse_without, "explanation": self.explanation}
 
 
+#: Verdict statuses (:func:`_apply_adequacy`).
+STATUSES = ("explained", "partly explained", "ambiguous", "not explained by the catalog", "nothing to explain")
+
+
 @dataclass
 class Verdict:
     missing_effect: str | None
@@ -134,10 +139,13 @@ class Verdict:
     reason: str
     ambiguous: list[str] = field(default_factory=list)
     alpha_bonferroni: float = ALPHA
+    status: str = ""
+    remaining: str = ""
 
     def to_dict(self) -> dict:
-        return {"missing_effect": self.missing_effect, "confidence": self.confidence, "confidence_label": self.label,
-                "reason": self.reason, "ambiguous": self.ambiguous, "alpha_bonferroni": self.alpha_bonferroni,
+        return {"status": self.status, "missing_effect": self.missing_effect, "confidence": self.confidence,
+                "confidence_label": self.label, "reason": self.reason, "remaining": self.remaining,
+                "ambiguous": self.ambiguous, "alpha_bonferroni": self.alpha_bonferroni,
                 "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA,
                              "min_rmse_reduction": MIN_IMPROVEMENT, "noise_margin": NOISE_MARGIN,
                              "distinct_delta_bic": DISTINCT_BIC}}
@@ -161,6 +169,7 @@ class DiagnosisResult:
     settings: dict
     timings: dict
     warnings: list[str] = field(default_factory=list)
+    adequacy: Adequacy | None = None
 
     @property
     def ranking(self) -> list[CandidateResult]:
@@ -195,6 +204,7 @@ class DiagnosisResult:
             "not_evaluated": [c.row(b) for c in self.candidates if not c.evaluated],
             "support": [s.row() for s in self.support],
             "verdict": self.verdict.to_dict(),
+            "adequacy": self.adequacy.to_dict() if self.adequacy else None,
             "where_it_fails": self.analysis_base.to_dict(),
             "after_winner": self.analysis_after.to_dict() if self.analysis_after else None,
             "signature_features": self.features,
@@ -370,6 +380,9 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
         if c.comparison.delta_bic > -DELTA_BIC_MIN and math.isfinite(noise_d) and d < noise_d:
             c.indistinguishable_from.append("base")
     verdict = _verdict(base, ranked, noise, noise_d, taus_ref)
+    win = next((c for c in ranked if c.effect == verdict.missing_effect), None)
+    adequacy = assess(f"base + {win.effect}" if win else "base", win.fit if win else base, records, noise)
+    _apply_adequacy(verdict, adequacy, base, noise)
     for c in ranked:
         c.explanation = _explain(c, base, noise)
     support: list[SupportResult] = []
@@ -397,7 +410,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
                 "tau_reference": {"model": ref.spec.label, "tau_samples": taus_ref}}
     warns = list(base.warnings)
     return DiagnosisResult(dev, records, base, ranked + others, support, verdict, ra_base, ra_after, feats, noise,
-                           resonance, settings, timings, warns)
+                           resonance, settings, timings, warns, adequacy)
 
 
 def _resonance(mf: C.ModelFit, band, records) -> float | None:
@@ -470,6 +483,34 @@ def _verdict(base: C.ModelFit, ranked: list[CandidateResult], noise: float, nois
         label = {"high": "medium", "medium": "low"}.get(label, label)
         reason += "; but its residual signature is not observed, so the confidence label is lowered"
     return Verdict(top.effect, conf, label, reason, alpha_bonferroni=alpha)
+
+
+def _apply_adequacy(v: Verdict, ad: Adequacy, base: C.ModelFit, noise: float) -> None:
+    """Set the verdict's status from the adequacy of the final model (module doc of
+    :mod:`.adequacy`): a winner that leaves more than noise only partly explains the
+    failure (confidence label "low"); no winner with a base above the noise is a failure
+    the catalog does not explain, described by the residual's descriptors."""
+    found = [d["text"] for d in ad.descriptors if d.get("significant")]
+    described = ("; what remains looks like " + "; and ".join(found)) if found else \
+        "; no simple descriptor (slow pole, hysteresis, amplitude or RH dependence) fits what remains"
+    template = " — to model it, write an effect like examples/effects/creep.py and pass it with --effects-path"
+    if math.isfinite(noise) and base.rmse <= NOISE_MARGIN * noise:
+        v.status = "nothing to explain"
+    elif v.ambiguous:
+        v.status = "ambiguous"
+    elif v.missing_effect is not None:
+        if ad.adequate is False:
+            v.status = "partly explained"
+            v.label = "low"
+            v.remaining = (f"after adding {v.missing_effect} the RMS error is still {ad.ratio:.2f}× the noise floor "
+                           f"(adequate: ≤ {ADEQUATE_RATIO}×): the catalog explains part of the failure and something "
+                           f"else remains" + described + template)
+        else:
+            v.status = "explained"
+    else:
+        v.status = "not explained by the catalog"
+        v.remaining = (f"no catalog effect explains the failure (RMS error {ad.ratio:.2f}× the noise floor)"
+                       + described + template)
 
 
 def _label(w: float) -> str:
