@@ -50,6 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
                            description=getattr(mod, "DESCRIPTION", mod.HELP),
                            formatter_class=_HelpFormatter)
         mod.add_arguments(p)
+        if "--effects" in p._option_string_actions or mod.NAME == "effects":
+            p.add_argument("--effects-path", action="append", default=[], metavar="FILE.py",
+                           help="a Python file defining user effects (physics.effects.OutputEffect subclasses, "
+                                "see examples/effects/creep.py); repeatable")
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -62,6 +66,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     previous = signal.signal(signal.SIGTERM, _terminated)
     try:
+        _load_effects(getattr(args, "effects_path", []))
         return int(args._run(args) or 0)
     except (InputError, ModelError) as exc:
         print(f"eap {args.command}: error: {exc}", file=sys.stderr)
@@ -80,6 +85,15 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def _load_effects(paths) -> None:
+    """Register the effects of installed packages (entry points ``eap.effects``) and of
+    the files given with ``--effects-path``."""
+    from physics.effects import load_effects_file, load_plugins
+    load_plugins()
+    for path in paths:
+        load_effects_file(path)
 
 
 class Terminated(BaseException):

@@ -109,7 +109,7 @@ def response_per_volt(model: ActuatorModel, s: np.ndarray, rh: float):
     k_unit = modes.beta ** 4 * L
     qm = Q / (s[:, None] ** 2 * rhoA * L + EIs[:, None] * k_unit[None, :])
     resid = (stat - Q @ (modes.tip / k_unit)) / EIs
-    tip = qm @ modes.tip + resid
+    tip = (qm @ modes.tip + resid) * model.output_response(s, p)
     current = w * Yp * (Lc + intU)
     cs = n * c["solvent"].factor(s, p) * cint * (Lc + intU) / Lt
     fn = modes.natural_frequencies(float(EI(np.array([0.0]))[0].real), rhoA)

@@ -15,37 +15,55 @@ import numpy as np
 
 from .beam import CantileverModes
 from .device import Device, load_device
-from .effects import EFFECTS, SLOTS, Effect
+from .effects import EFFECTS, SLOTS, Effect, OutputEffect
 from .effects.double_layer import DoubleLayer, DoubleLayerProps
 from .errors import InputError
 
 
+_GROUPS = ("default", "all", "linear", "none")
+
+
+def _group(key: str, device: Device) -> list[str]:
+    if key == "default":
+        return list(device.default_effects)
+    if key == "all":
+        return list(EFFECTS)
+    if key == "linear":
+        return [k for k, v in EFFECTS.items() if v.linear]
+    return []
+
+
 def resolve_effects(effects, device: Device) -> tuple[str, ...]:
-    """Effect ids from a list, a comma-separated string, ``"default"`` (the device's
-    ``default_effects``), ``"all"``, ``"linear"`` or ``"none"``; ``double_layer`` is
-    always included."""
-    if effects is None or effects == "default":
-        ids = list(device.default_effects)
-    elif isinstance(effects, str):
-        key = effects.strip()
-        if key == "all":
-            ids = list(EFFECTS)
-        elif key == "linear":
-            ids = [k for k, v in EFFECTS.items() if v.linear]
-        elif key == "none":
-            ids = []
-        elif not key:
+    """Effect ids from a list or a comma-separated string: ids, the groups ``default`` (the
+    device's ``default_effects``), ``all``, ``linear``, ``none``, and ``+id`` / ``-id`` to add or
+    remove (e.g. ``default,+creep,-thermal``); ``double_layer`` is always included."""
+    if effects is None:
+        effects = "default"
+    if isinstance(effects, str):
+        if not effects.strip():
             raise InputError("effects: an empty list is ambiguous; give 'none' for the bare double-layer "
                              "model, 'default', or comma-separated ids (see `eap effects`)")
-        else:
-            ids = [e.strip() for e in key.split(",") if e.strip()]
+        tokens = [e.strip() for e in effects.split(",") if e.strip()]
     else:
-        ids = [e.id if isinstance(e, Effect) else str(e) for e in effects]
-    unknown = [e for e in ids if e not in EFFECTS]
-    if unknown:
-        raise InputError(f"unknown effect(s) {', '.join(unknown)}; known effects: {', '.join(EFFECTS)}")
-    ids = set(ids) | {"double_layer"}
-    return tuple(k for k in EFFECTS if k in ids)
+        tokens = [e.id if isinstance(e, Effect) else str(e) for e in effects]
+    ids: list[str] = []
+    for tok in tokens:
+        sign, name = (tok[0], tok[1:].strip()) if tok[:1] in "+-" else ("+", tok)
+        names = _group(name, device) if name in _GROUPS else [name]
+        if sign == "-" and name in _GROUPS:
+            raise InputError(f"effects: cannot remove the group {name!r}; remove single effects, e.g. -thermal")
+        unknown = [e for e in names if e not in EFFECTS]
+        if unknown:
+            raise InputError(f"unknown effect(s) {', '.join(unknown)}; known effects: {', '.join(EFFECTS)} "
+                             "(a user effect needs --effects-path FILE.py)")
+        if sign == "-":
+            if name == "double_layer":
+                raise InputError("effects: double_layer cannot be removed (it is the model's core)")
+            ids = [e for e in ids if e != name]
+        else:
+            ids += [e for e in names if e not in ids]
+    ids_set = set(ids) | {"double_layer"}
+    return tuple(k for k in EFFECTS if k in ids_set)
 
 
 class ActuatorModel:
@@ -61,6 +79,11 @@ class ActuatorModel:
         for slot, (on, off) in SLOTS.items():
             cls = on if (on.id in self.effect_ids or off is None) else off
             self.components[slot] = cls(self.device)
+        slotted = {on.id for on, _ in SLOTS.values()}
+        #: user effects on the deflection (:class:`~physics.effects.OutputEffect`), in order
+        self.outputs: list[OutputEffect] = [EFFECTS[e](self.device) for e in self.effect_ids if e not in slotted]
+        for e in self.outputs:
+            self.components[e.id] = e
 
     # --- the effect list, as the user reads it back --------------------------------------
     @property
@@ -118,6 +141,19 @@ class ActuatorModel:
         for slot, e in self.components.items():
             lines.append(f"  {slot:12s} {e.label:24s} {e.summary}")
         return "\n".join(lines)
+
+    def output_response(self, s: np.ndarray, p: dict) -> np.ndarray | float:
+        """Product of the user effects' factors on the deflection at ``s`` [rad/s] (1 if none)."""
+        out = 1.0
+        for e in self.outputs:
+            out = out * e.output_response(s, p)
+        return out
+
+    def filter_output(self, y: np.ndarray, fs: float, p: dict) -> np.ndarray:
+        """The simulated deflection ``y`` [m] at ``fs`` [Hz] through the user effects."""
+        for e in self.outputs:
+            y = e.filter_output(y, fs, p)
+        return y
 
     # --- solvers --------------------------------------------------------------------------
     def frequency_response(self, freqs, rh=None):

@@ -19,6 +19,7 @@ class ParamSpec:
     hi: float
     description: str
     optional: bool = False
+    default: float | None = None   # value used when a device file leaves an optional parameter out
 
     def check(self, value: float, where: str) -> float:
         from .errors import InputError

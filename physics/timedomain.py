@@ -144,6 +144,8 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     load_filter, cs_filter = _load_filters(model, base, w_hi)
     cs = _apply_filter(cs_filter, cs_pre, dt, hold, periodic)[0]
     tip = _tip(model, base, load[1:], edges, rh_t, load_filter, dt, hold, periodic)
+    if model.outputs:
+        tip = model.filter_output(tip, 1.0 / dt, model.params_at(float(np.mean(rh_t))))
     return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs,
                             cs_low=-cs, device=model.device.name, effects=model.effect_ids,
                             z=0.5 * (edges[1:] + edges[:-1]), fields=flds)

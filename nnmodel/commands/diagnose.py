@@ -70,8 +70,12 @@ def print_summary(res, file=None) -> None:
     for s in res.support:
         print(f"  model effect {s.effect}: {s.explanation}", file=file)
     v = res.verdict
-    print(f"verdict ({v.status}): missing effect = {v.missing_effect}, confidence {v.confidence:.3g} ({v.label}); "
-          f"{v.reason}", file=file)
+    if v.missing_effect is not None:
+        print(f"verdict ({v.status}): missing effect = {v.missing_effect}, confidence {v.confidence:.3g} ({v.label}); "
+              f"{v.reason}", file=file)
+    else:
+        print(f"verdict ({v.status}): no catalog effect named" + (f" (ambiguous: {' or '.join(v.ambiguous)})"
+                                                                  if v.ambiguous else "") + f"; {v.reason}", file=file)
     if res.adequacy is not None:
         print(f"adequacy: {res.adequacy.summary()}", file=file)
     if v.remaining:

@@ -37,5 +37,15 @@ def run(args) -> int:
         if on.id == "humidity" and dev is not None:
             for m in dev.humidity_maps.values():
                 print(f"{'':24s}map {m.param} ({m.mode}) over RH {m.rh[0]:g}-{m.rh[-1]:g} %: {m.source}")
-    print("\n`eap effects --explain ID` prints the physics and references of one effect.")
+    slotted = {on.id for on, _ in SLOTS.values()}
+    for eid, cls in EFFECTS.items():
+        if eid in slotted:
+            continue
+        print(f"{eid:22s} {cls.summary}  (user effect, {cls.__module__})")
+        for sp in cls.params:
+            val = f" = {dev.params[sp.name]:.4g}" if dev is not None and sp.name in dev.params else \
+                f" (default {sp.default:g})"
+            print(f"{'':24s}{sp.name}{val} [{sp.unit}]: {sp.description}")
+    print("\n`eap effects --explain ID` prints the physics and references of one effect; add your own with "
+          "--effects-path FILE.py (see examples/effects/creep.py).")
     return 0

@@ -168,11 +168,13 @@ def describe_missing(fit, records: Sequence) -> list[dict]:
     finish("hysteresis", {"width_m": float(w * a), "play_width_m": float(w), "gain": float(a)}, rss1, d_bic,
            f"a rate-independent loop (backlash/play) on the output of width ≈ {1e6 * abs(w * a):.3g} µm")
 
-    # amplitude and RH dependence of the relative residual
+    # amplitude and RH dependence of the relative residual (records of one kind only:
+    # a pulse and a sweep differ in relative residual whatever their amplitudes)
     for key, attr, unit in (("amplitude", "amplitude_level", "V"), ("rh", "rh", "%")):
-        groups: dict = {}
+        by_kind: dict = {}
         for r, e, p in zip(records, resid, preds):
-            groups.setdefault(round(float(getattr(r, attr)), 6), []).append((e, p))
+            by_kind.setdefault(r.kind, {}).setdefault(round(float(getattr(r, attr)), 6), []).append((e, p))
+        groups = max(by_kind.values(), key=len)
         if len(groups) < 2:
             continue
         rel = {k: math.sqrt(sum(float(e @ e) for e, _ in v) / max(sum(float(p @ p) for _, p in v), 1e-300))
@@ -182,5 +184,5 @@ def describe_missing(fit, records: Sequence) -> list[dict]:
         sig = bool(ratio >= DEPENDENCE_RATIO or ratio <= 1 / DEPENDENCE_RATIO)
         out.append({"kind": f"{key}_dependence", "levels": sorted(groups), "relative_residual": rel,
                     "ratio_high_to_low": ratio, "significant": sig,
-                    "text": f"the relative residual at {key} {hi:g} {unit} is {ratio:.2g}× that at {lo:g} {unit}"})
+                    "text": f"the relative residual at {key} {hi:.3g} {unit} is {ratio:.2g}× that at {lo:.3g} {unit}"})
     return out

@@ -76,6 +76,37 @@ OPTIONAL_DEFAULTS = {"dma_scale": 1.0, "frac_f_lo": 1e-4, "C_max": 5000.0, "E_a"
 C_MAX_MIN_SENSITIVITY = 0.10
 
 
+def user_spec(effect: str) -> dict | None:
+    """The diagnosis spec of a user effect (:class:`physics.effects.OutputEffect`), else None."""
+    from ..effects import BUILT_IN, EFFECTS
+    return None if effect in BUILT_IN else getattr(EFFECTS.get(effect), "diagnosis", None)
+
+
+def default_candidates() -> list[str]:
+    """Catalog candidates tried by default, plus every registered user effect with a spec."""
+    from ..effects import EFFECTS
+    return list(CANDIDATES) + [e for e in EFFECTS if user_spec(e)]
+
+
+def effect_params(effect: str) -> tuple[str, ...]:
+    """The effect's own parameters fitted when it is added."""
+    spec = user_spec(effect)
+    return tuple(spec["free"]) if spec else EFFECT_PARAMS.get(effect, ())
+
+
+def is_nested(effect: str) -> bool:
+    """True when some value of the effect's parameters gives the model without it."""
+    spec = user_spec(effect)
+    return bool(spec.get("nested", False)) if spec else NESTED.get(effect, False)
+
+
+def _owner(name: str) -> str | None:
+    """The user effect declaring parameter ``name`` (None for base and built-in parameters)."""
+    from ..effects import BUILT_IN, EFFECTS
+    return next((e for e, cls in EFFECTS.items() if e not in BUILT_IN and any(p.name == name for p in cls.params)),
+                None)
+
+
 def gain_param(ids) -> str:
     return "kf0" if FC in ids else "kf"
 
@@ -98,7 +129,10 @@ def param_used(name: str, ids) -> bool:
              "frac_f_lo": FC in ids, "Rs": ER in ids, "D_solvent": SD in ids, "dma_scale": VE in ids,
              "Y": VE not in ids and LB not in ids, "Y_polymer": LB in ids and VE not in ids,
              "Y_electrode": LB in ids, "C_max": NLC in ids, "h_trans": TH in ids, "E_a": TH in ids}
-    return rules.get(name, True)
+    if name in rules:
+        return rules[name]
+    owner = _owner(name)
+    return owner is None or owner in ids
 
 
 def param_bounds(name: str, device: Device) -> tuple[float, float] | None:
@@ -109,6 +143,10 @@ def param_bounds(name: str, device: Device) -> tuple[float, float] | None:
              "dma_scale": (0.05, 20.0), "Y_electrode": (1e7, 2e11), "h_trans": (0.5, 1e4)}
     if name == "C_max":
         return (p["C_anion"] / 0.96, p["C_anion"] / 0.005)
+    owner = _owner(name)
+    if owner is not None:
+        b = (user_spec(owner) or {}).get("bounds", {}).get(name)
+        return None if b is None else (float(b[0]), float(b[1]))
     return table.get(name)
 
 
@@ -217,7 +255,7 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
     per_rh = list(base_per_rh)
     start = {k: v for k, v in translate_start(device, base_ids, to_ids, band).items()}
     notes = []
-    for name in EFFECT_PARAMS[effect]:
+    for name in effect_params(effect):
         if name == "C_max":
             continue          # decided after the describing-function probe
         if name not in free:
@@ -240,7 +278,7 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
             bounds[name] = b
     for name, b in bounds.items():
         if name not in start:
-            v = device.params.get(name)
+            v = device.params.get(name, _declared_default(name))
             if v is None or not (b[0] <= v <= b[1]) or (name == "Rs" and v <= 0):
                 v = math.sqrt(b[0] * b[1]) if b[0] > 0 else 0.5 * (b[0] + b[1])
             start[name] = v
@@ -255,7 +293,15 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
         name, vals = grids[effect]
         if name in free:
             extra = [{name: v} for v in vals]
+    elif user_spec(effect):
+        extra = [{k: float(v) for k, v in st.items() if k in free} for st in user_spec(effect).get("starts", [])]
     return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)
+
+
+def _declared_default(name: str) -> float | None:
+    from ..effects import EFFECTS
+    owner = _owner(name)
+    return None if owner is None else next(p.default for p in EFFECTS[owner].params if p.name == name)
 
 
 def removal_spec(effect: str, base_ids, base_free, base_per_rh, device: Device, band) -> ModelSpec:
@@ -419,6 +465,7 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
+            _refine_output_effects(mf, records)
             preds = [predict(mf.model, r) for r in records]
     except (InputError, ModelError, np.linalg.LinAlgError, FloatingPointError) as exc:
         mf.error = f"time simulation failed: {exc}"
@@ -451,6 +498,63 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
     mf.aic = stats.aic(mf.rss, mf.n, n_eff, k)
     mf.score_s = time.perf_counter() - t0
     return mf
+
+
+def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
+    """Refit the free parameters of user output effects on the time records (in place).
+
+    An output effect (:class:`physics.effects.OutputEffect`) filters the deflection of the
+    rest of the model, so the rest is simulated once and each evaluation only filters it
+    (milliseconds): bounded least squares over the effect's parameters, the coupling gain
+    solved in closed form at each step, from the FRF estimate and the spec's starts.  Slow
+    effects (creep) that a frequency response over 0.1–50 Hz cannot determine are then set
+    by the steps and holds of the records."""
+    from scipy.optimize import least_squares
+    outs = [e for e in mf.model.outputs if user_spec(e.id)]
+    names = [n for e in outs for n in effect_params(e.id) if n in mf.spec.free]
+    if not names:
+        return
+    core = ActuatorModel(mf.device, [e for e in mf.effects if e not in {o.id for o in outs}],
+                         n_modes=mf.model.n_modes)
+    raw = [simulate(core, None, r.t_sim, r.v_sim, rh=r.rh_model, hold=r.hold).deflection for r in records]
+    p0 = mf.model.params_at(records[0].rh if np.ndim(records[0].rh_model) == 0 else None)
+    ys = [r.y_d - r.y_d.mean() for r in records]
+    scale = [1.0 / (np.std(y) * math.sqrt(y.size) or 1.0) for y in ys]
+
+    def resid(theta):
+        q = {**p0, **dict(zip(names, theta))}
+        preds = []
+        for r, y in zip(records, raw):
+            for e in outs:
+                y = e.filter_output(y, r.fs_d, q)
+            yh = sensor_filter(y, r.fs_d, r.sensor_bandwidth)[r.i0:]
+            preds.append(yh - yh.mean())
+        num = sum(float(ph @ y) for ph, y in zip(preds, ys))
+        den = sum(float(ph @ ph) for ph in preds)
+        a = num / den if den > 0 else 1.0
+        return np.concatenate([(y - a * ph) * c for y, ph, c in zip(ys, preds, scale)])
+
+    bounds = [param_bounds(n, mf.device) or (-np.inf, np.inf) for n in names]
+    lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
+    x_now = np.array([float(mf.device.params.get(n, _declared_default(n))) for n in names])
+    starts = [x_now] + [np.array([float(st.get(n, x)) for n, x in zip(names, x_now)])
+                        for e in outs for st in (user_spec(e.id) or {}).get("starts", [])]
+    best = None
+    for x0 in starts:
+        x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+        sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=200)
+        if best is None or sol.cost < best.cost:
+            best = sol
+    vals = dict(zip(names, best.x.tolist()))
+    mf.device = mf.device.with_params(**vals)
+    mf.result.device = mf.device
+    mf.model = ActuatorModel(mf.device, mf.effects, n_modes=mf.model.n_modes)
+    for i, prm in enumerate(mf.result.problem.params):
+        if prm.name in vals and prm.rh is None:
+            mf.result.fit.theta[i] = vals[prm.name]
+            mf.values[prm.label] = vals[prm.name]
+    mf.spec.notes.append("parameters of " + ", ".join(e.id for e in outs) + " refined on the time records: "
+                         + ", ".join(f"{k} = {v:.4g}" for k, v in vals.items()))
 
 
 def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
@@ -535,7 +639,7 @@ def compare_fits(base: ModelFit, cand: ModelFit, nested: bool, taus: Sequence[fl
 
 def effect_values(mf: ModelFit, effect: str) -> dict:
     """Fitted values of an effect's own parameters (and of the per-RH ones for humidity)."""
-    names = set(EFFECT_PARAMS.get(effect, ()))
+    names = set(effect_params(effect))
     if effect == HUM:
         return {k: v for k, v in mf.values.items() if "@RH" in k}
     if effect == FC:

@@ -53,7 +53,7 @@ from . import stats
 from .records import Record, frf_measurements, prepare_records
 from .adequacy import ADEQUATE_RATIO, Adequacy, assess
 from .residuals import ResidualAnalysis, analyse
-from .signatures import EXCITATION, features, revealable, signatures
+from .signatures import EXCITATION, excitation, features, revealable, signatures
 
 DELTA_BIC_MIN = 10.0
 ALPHA = 0.01
@@ -107,7 +107,7 @@ class CandidateResult:
                         "identifiability_warnings": f.warnings, "notes": f.spec.notes,
                         "passes": self.passes, "fit_s": f.fit_s, "score_s": f.score_s})
         else:
-            out.update({"explanation": self.reason, "excitation_needed": EXCITATION.get(self.effect, "")})
+            out.update({"explanation": self.reason, "excitation_needed": excitation(self.effect)})
         return out
 
 
@@ -260,7 +260,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
             raise InputError(f"--free: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
                              f"free parameters of this model by default: {', '.join(C.default_free(base_ids))}")
     if candidates in (None, "", "default"):
-        cand_ids = [e for e in C.CANDIDATES if e not in base_ids]
+        cand_ids = [e for e in C.default_candidates() if e not in base_ids]
     else:
         cand_ids = parse_names(candidates, "--candidates")
         from ..effects import EFFECTS
@@ -363,7 +363,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     base.aic = stats.aic(base.rss, base.n, n_eff_ref, base.k + len(records))
     for c in results:
         if c.evaluated:
-            nested = C.NESTED[c.effect] and (c.effect != "humidity" or bool(c.fit.spec.per_rh))
+            nested = C.is_nested(c.effect) and (c.effect != "humidity" or bool(c.fit.spec.per_rh))
             c.comparison = C.compare_fits(base, c.fit, nested, taus_ref)
             c.fit.bic = base.bic + c.comparison.delta_bic
             c.fit.aic = base.aic + c.comparison.delta_aic
@@ -518,7 +518,7 @@ def _label(w: float) -> str:
 
 
 def _design_hint(a: str, b: str) -> str:
-    return (f"to separate them: {a} needs {EXCITATION.get(a, '?')}; {b} needs {EXCITATION.get(b, '?')}")
+    return (f"to separate them: {a} needs {excitation(a) or '?'}; {b} needs {excitation(b) or '?'}")
 
 
 def _fmt_params(values: dict, errors: dict) -> str:
@@ -555,7 +555,7 @@ def _explain(c: CandidateResult, base: C.ModelFit, noise: float) -> str:
     others = [x for x in c.indistinguishable_from if x != "base"]
     if others:
         txt += f" Cannot be told apart from {', '.join(others)} with these data."
-    eff_params = set(C.EFFECT_PARAMS.get(c.effect, ()))
+    eff_params = set(C.effect_params(c.effect))
     weak = [w for w in f.warnings if any(p in w for p in eff_params)]
     if weak:
         txt += " Identifiability: " + "; ".join(weak) + "."
@@ -592,7 +592,7 @@ def _support(base, check_ids, dev_fit, targets, trecs, records, band, resonance,
         if not mf.ok:
             out.append(SupportResult(eff, "failed", explanation=f"the model without {eff} failed: {mf.error}"))
             continue
-        cmp = C.compare_fits(mf, base, C.NESTED.get(eff, False))
+        cmp = C.compare_fits(mf, base, C.is_nested(eff))
         supported = cmp.delta_bic <= -SUPPORT_BIC
         if supported:
             txt = (f"supported: removing {eff} raises the RMS error from {1e6 * base.rmse:.4g} to {1e6 * mf.rmse:.4g} µm "

@@ -22,7 +22,7 @@ from ..fileio import write_json, write_text
 from ..identify import write_device
 from ..report import Report, jsonable
 from .diagnosis import DiagnosisResult
-from .signatures import EXCITATION
+from .signatures import excitation
 
 
 def _plot_where(res: DiagnosisResult, path) -> None:
@@ -257,7 +257,7 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     ne = [c for c in res.candidates if not c.evaluated]
     if ne:
         rep.table([{"effect": c.effect, "status": c.status, "why": c.reason,
-                    "excitation that would reveal it": EXCITATION.get(c.effect, "")} for c in ne],
+                    "excitation that would reveal it": excitation(c.effect)} for c in ne],
                   caption="effects not evaluated")
     rep.heading("Before and after")
     rep.image(d / "overlay.png", caption="measured, base and the top candidate; errors over the whole records")

@@ -100,6 +100,14 @@ FEATURE_TEXT = {
 }
 
 
+def excitation(effect: str) -> str:
+    """The excitation that reveals ``effect`` (catalog table, or a user effect's spec)."""
+    if effect in EXCITATION:
+        return EXCITATION[effect]
+    from .candidates import user_spec
+    return str((user_spec(effect) or {}).get("excitation", ""))
+
+
 def _broadband(records) -> list[Record]:
     return [r for r in records if r.kind == "broadband"]
 
@@ -113,7 +121,9 @@ def revealable(effect: str, records: Sequence[Record], resonance_hz: float | Non
     steps = [r for r in records if r.kind == "steps"]
     long_hold = any(r.steps.size and np.max(np.diff(np.concatenate([r.steps, [r.v_d.size]]))) / r.fs_d >= 5.0
                     for r in steps)
-    need = EXCITATION.get(effect, "")
+    need = excitation(effect)
+    if effect not in EXCITATION:
+        return True, "a user effect (no revealability rule; tried on every record)"
     if effect == "electrode_resistance":
         ok = f_hi >= 10.0
         return ok, (f"excitation reaches {f_hi:.3g} Hz" if ok else f"the excitation stops at {f_hi:.3g} Hz; needs {need}")

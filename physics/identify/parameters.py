@@ -149,7 +149,8 @@ def _suggest(key: str, known) -> str:
 
 
 def _default_scale(spec) -> str:
-    return "linear" if (spec.unit == "1" and spec.lo >= 0 and spec.hi <= 1) else "log"
+    """Linear search for fractions in [0, 1] and for parameters that may be negative, else log."""
+    return "linear" if spec.lo < 0 or (spec.unit == "1" and spec.lo >= 0 and spec.hi <= 1) else "log"
 
 
 def _make_param(name, initial, spec, bounds, rh=None) -> FreeParameter:
