@@ -1,0 +1,168 @@
+"""User effects: the contract (both solvers, nesting, parameters), the command line, and
+the diagnosis loop with an effect outside the catalog (issue: effects as the unit of change)."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from physics import signals
+from physics.diagnose.adequacy import play
+from physics.diagnose.diagnosis import diagnose
+from physics.effects import BUILT_IN, EFFECTS, OutputEffect, effect_classes_in_file, register, unregister
+from physics.errors import InputError
+from physics.frequency import frequency_response
+from physics.model import ActuatorModel, resolve_effects
+from physics.sensor import SensorModel
+from physics.timedomain import simulate
+from physics.timeseries import TimeSeries
+
+CREEP = Path(__file__).resolve().parents[1] / "examples" / "effects" / "creep.py"
+
+
+@pytest.fixture
+def creep():
+    """The shipped example registered for one test, removed afterwards."""
+    (cls,) = effect_classes_in_file(CREEP)
+    register(cls)
+    yield cls
+    unregister(cls.id)
+
+
+def test_example_is_one_file_and_registers(creep):
+    assert "creep" in EFFECTS and "creep" not in BUILT_IN
+    assert resolve_effects("default,+creep,-humidity", ActuatorModel("ipmc_pt_eg").device) == \
+        ("double_layer", "electrode_resistance", "solvent_diffusion", "viscoelastic", "creep")
+
+
+def test_frequency_and_time_solvers_agree(creep):
+    """The same factor in both solvers: a tone's response vs the closed form (≤ 1 %, 1°)."""
+    m = ActuatorModel("ipmc_pt_eg", "linear,+creep")
+    fs = 200.0
+    for f0 in (0.05, 0.5, 5.0):
+        periods = 6
+        sig = signals.tone(0.5, f0, max(periods / f0, 200.0), fs)
+        y = m.simulate(sig.t, sig.v, rh=60.0).deflection
+        n = int(round(periods / f0 * fs))  # whole periods at the end (transient gone)
+        u_last, y_last = sig.v[-n:], y[-n:]
+        k = periods
+        H_time = np.fft.rfft(y_last)[k] / np.fft.rfft(u_last)[k]
+        H = frequency_response(m, None, [f0], rh=60.0).deflection[0]
+        assert abs(abs(H_time) / abs(H) - 1) < 0.01, f0
+        assert abs(np.degrees(np.angle(H_time / H))) < 1.0, f0
+
+
+def test_switched_off_value_is_exactly_the_base(creep):
+    base = ActuatorModel("ipmc_pt_eg", "default")
+    off = ActuatorModel(base.device.with_params(creep_r=0.0), "default,+creep")
+    f = np.geomspace(0.01, 50, 40)
+    np.testing.assert_allclose(frequency_response(off, None, f, rh=60).deflection,
+                               frequency_response(base, None, f, rh=60).deflection, rtol=1e-12)
+    sig = signals.square(1.0, t_on=2.0, t_off=2.0, cycles=1, fs=200.0)
+    np.testing.assert_allclose(simulate(off, None, sig.t, sig.v, rh=60).deflection,
+                               simulate(base, None, sig.t, sig.v, rh=60).deflection, rtol=1e-9, atol=1e-15)
+
+
+def test_static_gain_and_passivity_of_the_factor(creep):
+    """Closed form: the factor tends to 1 + r at DC and to 1 at high frequency."""
+    m = ActuatorModel("ipmc_pt_eg", "default,+creep")
+    p = m.params_at(60.0)
+    r = p.get("creep_r", 0.3)
+    s = 2j * np.pi * np.array([1e-6, 1e4])
+    np.testing.assert_allclose(np.abs(m.output_response(s, p)), [1 + r, 1.0], rtol=1e-4)
+
+
+def test_bad_effect_files_are_clear_errors(tmp_path):
+    bad = tmp_path / "nothing.py"
+    bad.write_text("x = 1\n")
+    with pytest.raises(InputError, match="defines no subclass"):
+        effect_classes_in_file(bad)
+    broken = tmp_path / "broken.py"
+    broken.write_text("raise RuntimeError('oops')\n")
+    with pytest.raises(InputError, match="importing it failed: RuntimeError: oops"):
+        effect_classes_in_file(broken)
+
+    class NoDefault(OutputEffect):
+        id = "nodefault"
+        from physics.parameters import ParamSpec
+        params = (ParamSpec("nd_x", "1", 0, 1, "x"),)
+
+        def output_tf(self, p):
+            return [1.0], [1.0]
+    with pytest.raises(InputError, match="needs a default"):
+        register(NoDefault)
+
+    class Clash(OutputEffect):
+        id = "humidity"
+
+        def output_tf(self, p):
+            return [1.0], [1.0]
+    with pytest.raises(InputError, match="built-in"):
+        register(Clash)
+
+
+def test_command_line(tmp_path, capsys):
+    from nnmodel.cli import main
+    assert main(["simulate", "--effects", "default,+creep", "--rh", "50", "--out", str(tmp_path / "a")]) == 2
+    assert "--effects-path" in capsys.readouterr().err
+    assert main(["frf", "--effects", "default,+creep", "--rh", "50", "--effects-path", str(CREEP),
+                 "--json", str(tmp_path / "f.json")]) == 0
+    assert "creep" in capsys.readouterr().out
+    assert main(["effects", "--effects-path", str(CREEP)]) == 0
+    assert "creep_tau (default 20)" in capsys.readouterr().out
+    unregister("creep")
+
+
+# ------------------------------------------------------------------ the diagnosis loop
+
+def _records(kind: str, seed: int = 0, r: float = 0.32, tau: float = 18.0):
+    """A sweep and a pulse of the bare IPMC model; the truth adds an effect that only this
+    test defines (creep as an output filter, or backlash), measured by the realistic sensor."""
+    rng = np.random.default_rng(seed)
+    truth = ActuatorModel("ipmc_pt_eg", "none")
+    out = []
+    plan = [(signals.sweep(1.0, 0.1, 50.0, 60.0, 500.0), "cubic"),
+            (signals.square(1.0, t_on=20.0, t_off=40.0, cycles=1, fs=500.0), "linear")]
+    for k, (sig, hold) in enumerate(plan):
+        y = simulate(truth, None, sig.t, sig.v, rh=60.0, hold=hold).deflection
+        g = min(1.0, 2e-3 / np.max(np.abs(y)))
+        v, y = sig.v * g, y * g
+        if kind == "creep":
+            a = np.exp(-1 / (tau * 500.0))
+            y = y + r * lfilter([1 - a], [1, -a], y)
+        else:
+            y = play(y, 80e-6)
+        ts = TimeSeries(sig.t, v, y, rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe()},
+                        source=f"{kind}{k}")
+        out.append(SensorModel().apply(ts, seed=int(rng.integers(2 ** 31))))
+    return out
+
+
+def test_creep_outside_the_catalog_is_not_named_then_found_with_the_example():
+    ms = _records("creep")
+    before = diagnose(ms, "ipmc_pt_eg", "none")
+    v = before.verdict
+    assert v.missing_effect is None or v.label != "high"
+    assert v.status in ("not explained by the catalog", "partly explained")
+    pole = next(d for d in before.adequacy.descriptors if d["kind"] == "slow_pole")
+    assert pole["significant"] and 9.0 <= pole["tau_s"] <= 36.0 and 0.16 <= pole["gain"] <= 0.64
+    assert "examples/effects/creep.py" in v.remaining
+    (cls,) = effect_classes_in_file(CREEP)
+    register(cls)
+    try:
+        after = diagnose(ms, "ipmc_pt_eg", "none")
+    finally:
+        unregister("creep")
+    assert after.verdict.missing_effect == "creep" and after.verdict.status == "explained"
+    assert after.winner.fit.rmse <= 1.3 * after.noise_floor
+    assert after.winner.fit.values["creep_tau"] == pytest.approx(18.0, rel=0.15)
+    assert after.winner.fit.values["creep_r"] == pytest.approx(0.32, rel=0.15)
+
+
+def test_output_backlash_gets_no_confident_catalog_name():
+    res = diagnose(_records("backlash"), "ipmc_pt_eg", "none")
+    v = res.verdict
+    assert v.missing_effect is None or v.label != "high", v
+    assert v.status != "explained"
+    loop = next(d for d in res.adequacy.descriptors if d["kind"] == "hysteresis")
+    assert loop["significant"] and 20e-6 <= loop["width_m"] <= 160e-6
