@@ -127,6 +127,8 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     trained = {}
     for name in models:
         ov = dict((overrides or {}).get(name, {}))
+        if not progress:
+            ov.setdefault("progress_bar", False)
         if max_time_s is not None:
             ov["max_time"] = float(max_time_s)
         if name == "hybrid":

@@ -19,7 +19,9 @@ import datetime
 import logging
 import math
 import os
+import sys
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -189,6 +191,27 @@ class _History(Callback):
         self.rows.append(row)
 
 
+class _LineProgress(Callback):
+    """Progress for a non-terminal (log files, CI): one line per epoch, at most one every
+    :data:`LOG_EVERY_S` seconds, instead of Lightning's carriage-return bar."""
+
+    def __init__(self):
+        self._last = -math.inf
+
+    def on_train_epoch_end(self, trainer, module):
+        now = time.monotonic()
+        if now - self._last < LOG_EVERY_S and trainer.current_epoch + 1 < trainer.max_epochs:
+            return
+        self._last = now
+        m = trainer.callback_metrics
+        losses = ", ".join(f"{k} {float(m[k]):.4g}" for k in ("train_loss", "val_loss") if k in m)
+        print(f"  epoch {trainer.current_epoch + 1}/{trainer.max_epochs}: {losses}", file=sys.stderr, flush=True)
+
+
+#: Seconds between progress lines when stderr is not a terminal.
+LOG_EVERY_S = 10.0
+
+
 @contextlib.contextmanager
 def _quiet_lightning():
     """Silence Lightning's start-up chatter (device summary, seeds, worker hints)."""
@@ -233,11 +256,13 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
         ckpt = ModelCheckpoint(dirpath=ckdir, filename="best", monitor=monitor, mode="min",
                                save_top_k=1, save_weights_only=True, enable_version_counter=False)
         stop = EarlyStopping(monitor=monitor, mode="min", patience=patience, check_finite=False)
+        tty = sys.stderr.isatty()
         with _quiet_lightning():
             trainer = pl.Trainer(
                 accelerator=accelerator, devices=1, max_epochs=max_epochs,
                 max_time=None if max_time is None else datetime.timedelta(seconds=float(max_time)),
-                callbacks=[ckpt, stop, hist], enable_progress_bar=progress_bar, logger=False,
+                callbacks=[ckpt, stop, hist] + ([_LineProgress()] if progress_bar and not tty else []),
+                enable_progress_bar=progress_bar and tty, logger=False,
                 enable_model_summary=False, num_sanity_val_steps=0, log_every_n_steps=1,
                 gradient_clip_val=grad_clip, default_root_dir=ckdir)
             trainer.fit(task, datamodule=dm)

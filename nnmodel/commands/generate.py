@@ -16,10 +16,11 @@ def add_arguments(p):
     p.add_argument("--effects", default=None, help="override the preset's effects")
     p.add_argument("--seed", type=int, default=None, help="override the preset's seed")
     add_output_options(p, None, "dataset folder to create")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args) -> int:
-    out = generate(args.out, args.config, overwrite=args.overwrite, device=args.device, effects=args.effects,
+    out = generate(args.out, args.config, overwrite=args.overwrite, progress=not args.quiet, device=args.device, effects=args.effects,
                    seed=args.seed)
     ds = load_dataset(out)
     counts = {s: len(ds.entries(s)) for s in ("train", "validation", "test")}

@@ -25,6 +25,7 @@ def add_arguments(p):
     p.add_argument("--dataset-config", default="quick", help="dataset preset (configs/datasets)")
     p.add_argument("--max-time-s", type=float, default=75.0, help="training budget per neural model [s]")
     p.add_argument("--physics-only", action="store_true", help="skip the dataset and neural-model stages")
+    p.add_argument("--quiet", action="store_true", help="no progress output (the summary is still printed)")
 
 
 def _physics_stage(d: Path) -> dict:
@@ -60,9 +61,9 @@ def _neural_stage(d: Path, args) -> dict:
     """generate (preset) → train-compare; returns the comparison summary."""
     from nnmodel.dataset import generate
     from nnmodel.traincompare import format_table, train_compare
-    ds = generate(d / "dataset", args.dataset_config)
+    ds = generate(d / "dataset", args.dataset_config, progress=not args.quiet)
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    summary = train_compare(ds, models, d / "compare", max_time_s=args.max_time_s)
+    summary = train_compare(ds, models, d / "compare", max_time_s=args.max_time_s, progress=not args.quiet)
     print(format_table(summary))
     return summary
 

@@ -18,6 +18,7 @@ def add_arguments(p):
     p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
     p.add_argument("--max-time-s", type=float, default=None, help="training budget per model [s]")
+    p.add_argument("--quiet", action="store_true", help="no progress output (the table is still printed)")
 
 
 def parse_overrides(items) -> dict:
@@ -49,7 +50,7 @@ def run(args) -> int:
     if bad:
         raise InputError(f"unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
     summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
-                            max_time_s=args.max_time_s, overwrite=args.overwrite)
+                            max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet)
     print(format_table(summary))
     best = summary["best_heldout"]
     if best:
