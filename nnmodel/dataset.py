@@ -248,9 +248,14 @@ class Dataset:
     def records(self, split: str | None = None, **filters) -> list[Record]:
         return [self.record(e) for e in self.entries(split, **filters)]
 
+    @property
+    def has_rh(self) -> bool:
+        """False for a dataset of measurements without relative humidity (``rh_levels`` null)."""
+        return self.meta.get("rh_levels") is not None
+
     def record(self, entry: dict) -> Record:
-        ts = read_timeseries(self.path / entry["path"])
-        return Record(ts.voltage, ts.deflection, ts.rh, ts.fs, name=entry["path"])
+        ts = read_timeseries(self.path / entry["path"], rh=None if self.has_rh else 0.0)
+        return Record(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
 
 
 def load_dataset(path: str | Path, verify: bool = True) -> Dataset:

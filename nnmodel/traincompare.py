@@ -68,7 +68,7 @@ def _score(predict, ds: Dataset, entries: list[dict], skip: int) -> dict:
         g = group_of(e)
         by_group[g][0].append(y)
         by_group[g][1].append(yh)
-        if g in ("train_rh", "heldout_rh"):
+        if g in ("train_rh", "heldout_rh") and e["rh_pct"] is not None:
             by_rh.setdefault(float(e["rh_pct"]), ([], []))
             by_rh[float(e["rh_pct"])][0].append(y)
             by_rh[float(e["rh_pct"])][1].append(yh)
@@ -95,35 +95,48 @@ def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: f
 
 def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/train-compare",
                   *, overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
-                  progress: bool = True, overwrite: bool = False) -> dict:
+                  progress: bool = True, overwrite: bool = False, physics: str | None = None) -> dict:
     """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
     ``compare.json``, ``metrics.csv``, plots and ``report.html`` in ``out`` (a folder written
-    atomically under the policy of :mod:`physics.outputs`)."""
+    atomically under the policy of :mod:`physics.outputs`).  ``physics``: a device (name or
+    YAML) whose simulator is scored beside the networks — by default the dataset's generator,
+    none for measured data."""
     preflight(out, inputs=[dataset], overwrite=overwrite)
     ds = load_dataset(dataset)
     with output_folder(out, inputs=[dataset], overwrite=overwrite) as tmp:
-        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress)
+        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress, physics)
 
 
-def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress) -> dict:
-    train, val = ds.records("train"), ds.records("validation")
+def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress, physics) -> dict:
+    train, val = ds.records("train"), ds.records("validation") or None
     if not train:
         raise InputError(f"{dataset}: no training records")
     test_entries = ds.entries("test")
+    if not test_entries:
+        raise InputError(f"{dataset}: no test records to compare the models on; add some with "
+                         "`eap dataset --test FILE`")
     gen = ds.meta["generator"]
-    physics_model = PhysicsPredictor.from_device(gen["device"], gen["effects"])
+    device = physics or gen.get("device")
+    effects = gen.get("effects") if physics is None else "default"
     results: dict[str, dict] = {}
+    physics_rows = {}
+    if device is not None:
+        if not ds.has_rh:
+            raise InputError(f"--physics {device}: the dataset has no relative humidity, which the physics "
+                             "model needs; build it with --rh")
+        physics_model = PhysicsPredictor.from_device(device, effects)
 
-    def physics_predict(rec):   # measured RH is noisy: the physics gets the slow RH (compare.model_rh)
-        return physics_model(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
+        def physics_predict(rec):   # measured RH is noisy: the physics gets the slow RH (compare.model_rh)
+            return physics_model(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
 
-    t0 = time.perf_counter()
-    results["physics"] = {"kind": "physics simulator (generator)", "effects": gen["effects"],
-                          "free_run": _score(physics_predict, ds, test_entries, SKIP),
-                          "n_parameters": None, "train_time_s": 0.0}
-    results["physics"]["inference_samples_per_s"] = _speed(lambda r: physics_predict(r), ds, test_entries)
-    results["physics"]["eval_time_s"] = time.perf_counter() - t0
-    physics_rows = {"physics": physics_predict}
+        t0 = time.perf_counter()
+        kind = "physics simulator (generator)" if physics is None else f"physics model {device} (--physics)"
+        results["physics"] = {"kind": kind, "effects": list(physics_model.model.effect_ids),
+                              "free_run": _score(physics_predict, ds, test_entries, SKIP),
+                              "n_parameters": None, "train_time_s": 0.0}
+        results["physics"]["inference_samples_per_s"] = _speed(lambda r: physics_predict(r), ds, test_entries)
+        results["physics"]["eval_time_s"] = time.perf_counter() - t0
+        physics_rows["physics"] = physics_predict
     trained = {}
     for name in models:
         ov = dict((overrides or {}).get(name, {}))
@@ -132,7 +145,9 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         if max_time_s is not None:
             ov["max_time"] = float(max_time_s)
         if name == "hybrid":
-            ov.setdefault("device", gen["device"])   # the hybrid's physics: the dataset's device
+            if device is None and "device" not in ov:
+                raise InputError("the hybrid needs a physics model: give --physics DEVICE (or --set hybrid.device=...)")
+            ov.setdefault("device", device)   # the hybrid's physics: the dataset's (or --physics) device
         model = make_model(name, ov)
         if name == "hybrid":
             base = _physics_base_row(model, gen, ds, test_entries)
@@ -163,11 +178,14 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         trained[name] = model
         if progress:
             fr = res["free_run"]
-            print(f"  {name}: {fit_time:.1f} s, free-run NRMSE test {100 * fr['test']['nrmse']:.2f} %, "
-                  f"held-out RH {100 * fr.get('heldout_rh', {}).get('nrmse', float('nan')):.2f} %", flush=True)
+            held = (f", held-out RH {100 * fr['heldout_rh']['nrmse']:.2f} %" if "heldout_rh" in fr else "")
+            print(f"  {name}: {fit_time:.1f} s, free-run NRMSE test {100 * fr['test']['nrmse']:.2f} %{held}",
+                  flush=True)
     summary = {"dataset": str(ds.path), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
-               "generator": {"device": gen["device"], "effects": gen["effects"]},
-               "noise_floor_m": ds.meta["noise_floor_m"], "skip_samples": SKIP, "models": results,
+               "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
+               "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
+               "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
+               "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
                "best_heldout": _best(results)}
     _plots(ds, test_entries, physics_rows, trained, results, out)
     write_json(out / "compare.json", summary)
@@ -180,7 +198,7 @@ def _physics_base_row(model, gen: dict, ds: Dataset, entries):
     """Score of the hybrid's own physics part (its device and effects, without the
     network) when it differs from the generator: (result row, predict) or None."""
     pm = model._physics_model()
-    if pm.device.name == gen["device"] and list(pm.effect_ids) == list(gen["effects"]):
+    if pm.device.name == gen.get("device") and list(pm.effect_ids) == list(gen.get("effects") or []):
         return None
     pred = PhysicsPredictor(pm)
 
@@ -204,11 +222,15 @@ def _speed(predict, ds: Dataset, entries) -> float:
 
 
 def _best(results: dict) -> dict:
-    nets = {k: v for k, v in results.items() if not _is_physics(k, v) and "heldout_rh" in v["free_run"]}
+    """The best network on held-out RH (or on the whole test set when nothing is held out)."""
+    nets = {k: v for k, v in results.items() if not _is_physics(k, v)}
+    group = "heldout_rh" if any("heldout_rh" in v["free_run"] for v in nets.values()) else "test"
+    nets = {k: v for k, v in nets.items() if group in v["free_run"]}
     if not nets:
         return {}
-    k = min(nets, key=lambda n: nets[n]["free_run"]["heldout_rh"]["nrmse"])
-    return {"model": k, "nrmse": nets[k]["free_run"]["heldout_rh"]["nrmse"]}
+    k = min(nets, key=lambda n: nets[n]["free_run"][group]["nrmse"])
+    return {"model": k, "nrmse": nets[k]["free_run"][group]["nrmse"],
+            "group": "held-out RH" if group == "heldout_rh" else "test records"}
 
 
 def _table_rows(results: dict) -> list[dict]:
@@ -229,21 +251,29 @@ def _table_rows(results: dict) -> list[dict]:
 
 def format_table(summary: dict) -> str:
     rows = _table_rows(summary["models"])
-    head = (f"{'model':8s} {'params':>8s} {'train s':>8s} {'samples/s':>10s} {'test %':>8s} {'held-out %':>10s} "
-            f"{'varying %':>9s} {'meas-like %':>11s} {'1-step %':>8s}")
+    cols = [("test %", "nrmse_test_pct", 8), ("held-out %", "nrmse_heldout_rh_pct", 10),
+            ("varying %", "nrmse_varying_rh_pct", 9), ("meas-like %", "nrmse_measurement_like_pct", 11)]
+    cols = [c for c in cols if c[1] == "nrmse_test_pct" or any(np.isfinite(r[c[1]]) for r in rows)]
+    head = f"{'model':8s} {'params':>8s} {'train s':>8s} {'samples/s':>10s} " + \
+        " ".join(f"{h:>{w}s}" for h, _, w in cols) + f" {'1-step %':>8s}"
     lines = [head, "-" * len(head)]
     for r in rows:
         p = "-" if r["parameters"] is None else str(r["parameters"])
         one = "-" if r["one_step_nrmse_test_pct"] is None else f"{r['one_step_nrmse_test_pct']:.2f}"
         lines.append(f"{r['model']:8s} {p:>8s} {r['train_time_s']:8.1f} {r['samples_per_s']:10.3g} "
-                     f"{r['nrmse_test_pct']:8.2f} {r['nrmse_heldout_rh_pct']:10.2f} {r['nrmse_varying_rh_pct']:9.2f} "
-                     f"{r['nrmse_measurement_like_pct']:11.2f} {one:>8s}")
-    lines.append("free-run NRMSE (RMSE/std of the measurement, pooled over records); the physics row is the "
-                 "simulator that generated the data")
+                     + " ".join(f"{r[k]:{w}.2f}" for _, k, w in cols) + f" {one:>8s}")
+    phys = summary.get("physics")
+    note = "" if phys is None else ("; the physics row is the simulator that generated the data" if phys["is_generator"]
+                                    else f"; the physics row is the device {phys['device']} named with --physics")
+    lines.append("free-run NRMSE (RMSE/std of the measurement, pooled over records)" + note)
     return "\n".join(lines)
 
 
 def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
+    output = ds.meta.get("output") or {"name": "deflection", "unit": "m"}
+    qty, unit, k = output["name"], output["unit"], 1.0
+    if unit == "m":
+        unit, k = "mm", 1e3
     # time overlays: one record of each group
     for g in GROUPS:
         es = [e for e in entries if group_of(e) == g]
@@ -252,19 +282,21 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
         rec = ds.record(es[0])
         t = np.arange(rec.u.size) / rec.fs
         fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
-        ax[0].plot(t, 1e3 * rec.y, "k", lw=1.0, label="measurement")
+        ax[0].plot(t, k * rec.y, "k", lw=1.0, label="measurement")
         for label, predict in physics_rows.items():
-            ax[0].plot(t, 1e3 * predict(rec), lw=0.8, label=label)
+            ax[0].plot(t, k * predict(rec), lw=0.8, label=label)
         for name, m in trained.items():
             yh = m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])
-            ax[0].plot(t, 1e3 * yh, lw=0.8, label=name)
-            ax[1].plot(t, 1e3 * (rec.y - yh), lw=0.6, label=name)
-        ax[0].set_ylabel("deflection [mm]")
-        ax[1].set_ylabel("residual [mm]")
+            ax[0].plot(t, k * yh, lw=0.8, label=name)
+            ax[1].plot(t, k * (rec.y - yh), lw=0.6, label=name)
+        ax[0].set_ylabel(f"{qty} [{unit}]")
+        ax[1].set_ylabel(f"residual [{unit}]")
         ax[1].set_xlabel("time [s]")
         ax[0].legend(fontsize=7, ncol=3)
         ax[0].set_title(f"{g}: {es[0]['path']}")
         save(fig, out / f"overlay_{g}.png")
+    if not ds.has_rh or not physics_rows:
+        return  # no RH levels to plot against, no closed form to compare with
     # error by RH
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for name, r in results.items():
@@ -283,6 +315,8 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
     save(fig, out / "error_by_rh.png")
     # small-signal Bode: networks vs the physics closed form
     gen = ds.meta["generator"]
+    if gen.get("device") is None:
+        return
     rh = float(np.median(ds.meta["rh_levels"]["train"]))
     fmax = min(40.0, 0.4 * ds.fs)
     resp = {}
@@ -313,7 +347,8 @@ def _report(summary: dict, out: Path) -> None:
     rep.table(_table_rows(summary["models"]))
     best = summary["best_heldout"]
     if best:
-        rep.paragraph(f"Best free-run NRMSE on held-out RH: {best['model']} {100 * best['nrmse']:.2f} %.")
+        rep.paragraph(f"Best free-run NRMSE on {best.get('group', 'held-out RH')}: {best['model']} "
+                      f"{100 * best['nrmse']:.2f} %.")
     for img, cap in (("error_by_rh.png", "free-run error by RH"), ("bode.png", "small-signal Bode"),
                      *[(f"overlay_{g}.png", g) for g in GROUPS]):
         if (out / img).is_file():

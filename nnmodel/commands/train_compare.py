@@ -19,6 +19,9 @@ def add_arguments(p):
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
     p.add_argument("--max-time-s", type=float, default=None, help="training budget per model [s]")
     p.add_argument("--quiet", action="store_true", help="no progress output (the table is still printed)")
+    p.add_argument("--physics", default=None, metavar="DEVICE_OR_YAML",
+                   help="score this device's simulator beside the networks (default: the dataset's generator; "
+                        "none for measured data)")
 
 
 def parse_overrides(items) -> dict:
@@ -50,10 +53,11 @@ def run(args) -> int:
     if bad:
         raise InputError(f"unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
     summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
-                            max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet)
+                            max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet,
+                            physics=args.physics)
     print(format_table(summary))
     best = summary["best_heldout"]
     if best:
-        print(f"best free-run NRMSE on held-out RH: {best['model']} {100 * best['nrmse']:.2f} %")
+        print(f"best free-run NRMSE on {best['group']}: {best['model']} {100 * best['nrmse']:.2f} %")
     print(f"report: {args.out}/report.html")
     return 0
