@@ -33,10 +33,19 @@ def test_predict_writes_a_readable_prediction(bundle_dir, tmp_path, capsys):
     u, y = _write_input(inp, rh=np.full(300, 55.0), with_y=True)
     assert main(["predict", "--model", str(bundle_dir), "--input", str(inp), "--out", str(out)]) == 0
     pred = read_timeseries(out)
-    np.testing.assert_allclose(pred.deflection, load(bundle_dir).predict(u, rh=55.0, fs=toy.FS))
+    # an honest start: the free run is initialised from the measured outputs in the file
+    b = load(bundle_dir)
+    np.testing.assert_allclose(pred.deflection, b.predict(u, rh=55.0, fs=toy.FS, deflection=y))
+    np.testing.assert_array_equal(pred.deflection[:b.model.n_init_], y[:b.model.n_init_])
     np.testing.assert_allclose(pred.voltage, u)
     msg = capsys.readouterr().out
     assert "fit" in msg and str(out) in msg
+    rest = tmp_path / "rest.csv"   # --init-samples 0: from rest, as without a measured deflection
+    assert main(["predict", "--model", str(bundle_dir), "--input", str(inp), "--out", str(rest),
+                 "--init-samples", "0"]) == 0
+    np.testing.assert_allclose(read_timeseries(rest).deflection, b.predict(u, rh=55.0, fs=toy.FS))
+    assert main(["predict", "--model", str(bundle_dir), "--input", str(inp), "--out", str(tmp_path / "p1.csv"),
+                 "--init-samples", "1"]) == (0 if b.model.n_init_ <= 1 else 2)
     # k-step-ahead uses the measured deflection of the input
     out3 = tmp_path / "pred3.csv"
     assert main(["predict", "--model", str(bundle_dir), "--input", str(inp), "--out", str(out3),

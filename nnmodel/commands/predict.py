@@ -26,6 +26,10 @@ def add_arguments(p):
                    help="relative humidity [%%] when the file has no rh_pct column (wins over it)")
     p.add_argument("--resample", action="store_true",
                    help="allow a sampling rate different from the model's: resample in and out")
+    p.add_argument("--init-samples", type=int, default=None,
+                   help="free run: initialise the model from the first N measured outputs of the input file "
+                        "(default: as many as the model uses when the file has a deflection column; 0: start "
+                        "from rest)")
     p.add_argument("--steps-ahead", type=int, default=None,
                    help="k-step-ahead prediction from the measured deflection in the input "
                         "(default: free-run simulation)")
@@ -68,11 +72,19 @@ def run(args) -> int:
     k = args.steps_ahead
     if k is not None and k < 1:
         raise InputError(f"--steps-ahead must be a positive integer, got {k}")
-    ts, rh_read = _read(args.input, args.rh, uses_rh, need_y=k is not None)
+    n_init = args.init_samples
+    if n_init is not None and n_init < 0:
+        raise InputError(f"--init-samples {n_init}: must be 0 (start from rest) or a positive number of samples")
+    if n_init and n_init < bundle.model.n_init_:
+        raise InputError(f"--init-samples {n_init}: this model starts from its last {bundle.model.n_init_} "
+                         "outputs; give at least that many, or 0 to start from rest")
+    ts, rh_read = _read(args.input, args.rh, uses_rh, need_y=k is not None or bool(n_init))
+    # free run: initialised from the first measured outputs when the file has them (honest start)
+    init = ts.deflection if (k is None and n_init != 0) else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         pred = bundle.predict(ts.voltage, rh=ts.rh if uses_rh else None, fs=ts.fs, steps_ahead=k,
-                              resample=args.resample, deflection=ts.deflection if k else None)
+                              resample=args.resample, deflection=ts.deflection if k else init)
     notes = [str(w.message) for w in caught if issubclass(w.category, (RuntimeWarning, UserWarning))]
     for n in notes:
         print(f"eap predict: warning: {n}")
@@ -83,6 +95,7 @@ def run(args) -> int:
         "output_unit_of_model": out_unit, "fs_hz_model": bundle.fs, "fs_hz_input": ts.fs,
         "resampled": bool(abs(ts.fs - bundle.fs) > 1e-4 * bundle.fs),
         "mode": "free run" if k is None else f"{k}-step-ahead", "warnings": notes,
+        "initialised_from_measured_samples": (bundle.model.n_init_ if init is not None else 0) if k is None else None,
         "rh_range_trained_pct": bundle.rh_range, "provenance": provenance(),
     }
     line = (f"predicted {ts.n} samples at {ts.fs:g} Hz with {bundle.card['model']} "
