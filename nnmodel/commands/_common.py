@@ -31,6 +31,19 @@ def add_output_options(p: argparse.ArgumentParser, default: str | None, what: st
                    help="replace an existing --out folder written by eap (never one holding other files)")
 
 
+def add_parallel_options(p: argparse.ArgumentParser) -> None:
+    """``--workers`` and ``--scheduler`` of :mod:`physics.parallel`."""
+    p.add_argument("--workers", type=int, default=1,
+                   help="local worker processes (1: in this process; results are identical for any count)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="an existing Dask scheduler, e.g. tcp://host:8786 (default: $EAP_SCHEDULER if set)")
+
+
+def parallel_settings(args):
+    from physics.parallel import ParallelSettings
+    return ParallelSettings.resolve(args.workers, args.scheduler)
+
+
 def check_out(args, inputs=()) -> None:
     """Refuse a bad ``--out`` before any work (see :func:`physics.outputs.preflight`)."""
     preflight(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False))

@@ -1,0 +1,59 @@
+"""Parameter sweeps and the execution layer: closed-form beam scaling, identical results for
+any worker count, clear errors."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from nnmodel.cli import main
+from physics.errors import InputError, ModelError
+from physics.parallel import ParallelSettings, map_tasks
+from physics.sweep import parse_grid, run_sweep
+
+
+def test_first_resonance_follows_euler_bernoulli_scaling():
+    """f1 = (1.8751²/2π) √(EI/ρA) / L²: ∝ √Y at fixed geometry and ∝ 1/L² in the free length."""
+    t = run_sweep("ipmc_pt_eg", "none", {"Y": [1e8, 4e8]}, rh=60.0, progress=False)
+    assert t.resonance_Hz[1] / t.resonance_Hz[0] == pytest.approx(2.0, rel=2e-3)
+    from physics.device import load_device
+    d = load_device("ipmc_pt_eg")
+    Lc = d["L_clamp"]
+    L1, L2 = 0.02, 0.03
+    t = run_sweep("ipmc_pt_eg", "none", {"L_total": [Lc + L1, Lc + L2]}, rh=60.0, f_range=(0.1, 400.0),
+                  progress=False)
+    assert t.resonance_Hz[0] / t.resonance_Hz[1] == pytest.approx((L2 / L1) ** 2, rel=5e-3)
+
+
+def test_two_workers_give_the_same_table():
+    grid = {"Y": [1e8, 2e8, 3e8], "rh": [40.0, 80.0]}
+    serial = run_sweep("ipmc_pt_eg", "none", grid, progress=False)
+    parallel = run_sweep("ipmc_pt_eg", "none", grid, settings=ParallelSettings(2), progress=False)
+    pd.testing.assert_frame_equal(serial, parallel)
+    assert list(serial.columns[:2]) == ["Y", "rh"] and len(serial) == 6
+
+
+def _fails_on_three(task):
+    if task["x"] == 3:
+        raise ValueError("bad x")
+    return task["x"]
+
+
+def test_failed_task_names_its_inputs():
+    with pytest.raises(ModelError, match=r"task \{'x': 3\} failed: ValueError: bad x"):
+        map_tasks(_fails_on_three, [{"x": i} for i in range(5)], progress=False)
+    with pytest.raises(InputError, match="--workers"):
+        ParallelSettings(0)
+
+
+def test_grid_errors_and_command(tmp_path, capsys):
+    from physics.device import load_device
+    dev = load_device("ipmc_pt_eg")
+    for item, msg in [("Yy=1,2", "unknown parameter"), ("Y=abc", "expected numbers"),
+                      ("rh=120", "0–100"), ("Y=log:0:1:3", "positive ends"), ("Y", "NAME=VALUES")]:
+        with pytest.raises(InputError, match=msg):
+            parse_grid([item], dev)
+    out = tmp_path / "s.csv"
+    assert main(["sweep", "--effects", "none", "--grid", "Y=lin:1e8:2e8:3", "--rh", "60", "--out", str(out),
+                 "--quiet"]) == 0
+    assert len(pd.read_csv(out)) == 3 and "3 points" in capsys.readouterr().out
+    assert main(["sweep", "--grid", "Y=1e8", "--out", str(out)]) == 2
+    assert "--overwrite" in capsys.readouterr().err
