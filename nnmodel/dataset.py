@@ -26,12 +26,12 @@ import yaml
 
 from physics.yamlio import load_yaml
 from physics import signals
-from physics.device import config_dir
+from physics.device import config_dir, load_device
 from physics.errors import InputError
 from physics.fileio import sha256_file, write_json
-from physics.model import ActuatorModel
+from physics.model import ActuatorModel, resolve_effects
+from physics.parallel import ParallelSettings, map_tasks
 from physics.outputs import output_folder, preflight
-from physics.progress import Progress
 from physics.sensor import SensorModel
 from physics.timeseries import read_timeseries, write_timeseries
 
@@ -172,10 +172,34 @@ def _rh_series(spec: _Spec, t: np.ndarray) -> np.ndarray | float:
 
 
 
+def _generate_record(task: dict) -> dict:
+    """Simulate, measure and write one record of the plan (a task of :func:`generate`; runs in
+    any worker: plain data in, the file's dataset entry out)."""
+    spec, cfg = task["spec"], task["cfg"]
+    model = ActuatorModel(cfg["device"], list(resolve_effects(cfg["effects"], load_device(cfg["device"])))
+                          + list(spec.extra_effects))
+    sig = _excitation(spec, cfg)
+    rh = _rh_series(spec, sig.t)
+    hold = "linear" if spec.kind == "square" else "cubic"
+    res = model.simulate(sig.t, sig.v, rh=rh, hold=hold)
+    ts = _sensor(cfg["sensor"]).apply(res.to_timeseries(), seed=spec.seed)
+    ts.meta.update({"excitation": sig.describe(), "split": spec.split})
+    path = Path(task["folder"]) / f"{spec.name}.csv"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_timeseries(ts, path)
+    return {"path": f"{spec.name}.csv", "split": spec.split, "excitation": sig.describe(),
+            "rh_pct": spec.rh if np.ndim(spec.rh) == 0 else {"varying": list(spec.rh)},
+            "heldout_rh": spec.heldout, "extra_effects": list(spec.extra_effects),
+            "effects": list(model.effect_ids), "seed": spec.seed, "samples": int(sig.t.size),
+            "sha256": sha256_file(path)}
+
+
 def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool = False,
-             progress: bool = True, **overrides) -> Path:
+             progress: bool = True, settings: ParallelSettings | None = None, **overrides) -> Path:
     """Generate a dataset folder (written to a temporary folder, then renamed into place; the
-    output-folder policy of :mod:`physics.outputs`: ``overwrite`` replaces only a folder eap wrote)."""
+    output-folder policy of :mod:`physics.outputs`: ``overwrite`` replaces only a folder eap wrote).
+    ``settings``: where the records are simulated (:mod:`physics.parallel`; identical files for
+    any worker count, every record has its own seed)."""
     cfg = load_config(config, overrides) if isinstance(config, str) else load_config("default", config)
     out = Path(out)
     preflight(out, overwrite=overwrite)
@@ -185,27 +209,8 @@ def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool
     base = ActuatorModel(cfg["device"], cfg["effects"])
     t0 = time.perf_counter()
     with output_folder(out, overwrite=overwrite) as tmp:
-        entries = []
-        with Progress(len(specs), "generating dataset", enabled=progress) as bar:
-            for spec in specs:
-                model = base if not spec.extra_effects else ActuatorModel(
-                    cfg["device"], list(base.effect_ids) + list(spec.extra_effects))
-                sig = _excitation(spec, cfg)
-                rh = _rh_series(spec, sig.t)
-                hold = "linear" if spec.kind == "square" else "cubic"
-                res = model.simulate(sig.t, sig.v, rh=rh, hold=hold)
-                ts = sensor.apply(res.to_timeseries(), seed=spec.seed)
-                ts.meta.update({"excitation": sig.describe(), "split": spec.split})
-                path = tmp / f"{spec.name}.csv"
-                path.parent.mkdir(parents=True, exist_ok=True)
-                write_timeseries(ts, path)
-                entries.append({
-                    "path": f"{spec.name}.csv", "split": spec.split, "excitation": sig.describe(),
-                    "rh_pct": spec.rh if np.ndim(spec.rh) == 0 else {"varying": list(spec.rh)},
-                    "heldout_rh": spec.heldout, "extra_effects": list(spec.extra_effects),
-                    "effects": list(model.effect_ids), "seed": spec.seed, "samples": int(sig.t.size),
-                    "sha256": sha256_file(path)})
-                bar.update()
+        tasks = [{"spec": spec, "cfg": cfg, "folder": str(tmp)} for spec in specs]
+        entries = map_tasks(_generate_record, tasks, settings, desc="generating dataset", progress=progress)
         meta = {"schema": SCHEMA, "name": out.name, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
                 "generator": {"tool": "eap generate", "device": cfg["device"], "effects": list(base.effect_ids),
                               "config": cfg}, "seed": cfg["seed"], "fs_Hz": cfg["fs_Hz"],

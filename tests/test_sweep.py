@@ -57,3 +57,16 @@ def test_grid_errors_and_command(tmp_path, capsys):
     assert len(pd.read_csv(out)) == 3 and "3 points" in capsys.readouterr().out
     assert main(["sweep", "--grid", "Y=1e8", "--out", str(out)]) == 2
     assert "--overwrite" in capsys.readouterr().err
+
+
+def test_generate_on_two_workers_writes_identical_files(tmp_path):
+    import json
+    from nnmodel.dataset import generate
+    cfg = dict(duration_s=4.0, train_rh_pct=[40, 80], heldout_rh_pct=[60], excitations=["sweep", "noise"],
+               varying_rh={"train": 0, "test": 0, "range_pct": [40, 100]},
+               measurement_like={"effects": [], "count": 0, "rh_pct": [70]})
+    a = generate(tmp_path / "a", "quick", progress=False, **cfg)
+    b = generate(tmp_path / "b", "quick", progress=False, settings=ParallelSettings(2), **cfg)
+    ha = [e["sha256"] for e in json.loads((a / "dataset.json").read_text())["files"]]
+    hb = [e["sha256"] for e in json.loads((b / "dataset.json").read_text())["files"]]
+    assert ha == hb and len(ha) >= 6

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from nnmodel.dataset import generate, load_dataset
 
-from ._common import add_output_options
+from ._common import add_output_options, add_parallel_options, parallel_settings
 
 NAME = "generate"
 HELP = "generate a dataset (RH 40–100 %, sweeps, multisines, noise, pulses, realistic sensor)"
@@ -17,10 +17,12 @@ def add_arguments(p):
     p.add_argument("--seed", type=int, default=None, help="override the preset's seed")
     add_output_options(p, None, "dataset folder to create")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_parallel_options(p)
 
 
 def run(args) -> int:
-    out = generate(args.out, args.config, overwrite=args.overwrite, progress=not args.quiet, device=args.device, effects=args.effects,
+    out = generate(args.out, args.config, overwrite=args.overwrite, progress=not args.quiet,
+                   settings=parallel_settings(args), device=args.device, effects=args.effects,
                    seed=args.seed)
     ds = load_dataset(out)
     counts = {s: len(ds.entries(s)) for s in ("train", "validation", "test")}
