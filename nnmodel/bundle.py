@@ -109,8 +109,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             "n_parameters": model.n_parameters,
             "normalisation": {"voltage": stats["u"], "output": stats["y"],
                               **({"rh": stats["rh"]} if "rh" in learned["inputs"] else {})},
-            "training": {"fit_time_s": learned["fit_time_s"],
-                         "epochs": len(getattr(model, "history_", []) or [])},
+            "training": _training_card(model, learned),
             "dataset_hash": dataset_hash,
             "metrics": _jsonable(metrics) if metrics else {},
             "notes": notes,
@@ -164,6 +163,16 @@ def _read_card(folder: Path) -> dict:
         if card.get(key) is not None and not isinstance(card[key], dict):
             raise InputError(f"{cp}: {key!r} must be a mapping, got {card[key]!r}")
     return card
+
+
+def _training_card(model, learned: dict) -> dict:
+    """Budget actually used: epochs run, and whether the wall-clock guard ended training."""
+    hist = list(getattr(model, "history_", []) or [])
+    summary = getattr(model, "training_summary_", None) or {}
+    return {"fit_time_s": learned["fit_time_s"],
+            "epochs": summary.get("epochs_run", len([r for r in hist if r.get("epoch", 0) >= 0])),
+            "max_epochs": summary.get("max_epochs"), "max_time_s": summary.get("max_time_s"),
+            "time_guard_fired": bool(summary.get("time_guard_fired", False))}
 
 
 def load(path: str | os.PathLike) -> "Bundle":

@@ -238,7 +238,8 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
              grad_clip: float | None = None, accelerator: str = "cpu", progress_bar: bool = True,
              checkpoint_dir: str | None = None) -> list[dict]:
     """Train ``core`` in place with Lightning; restores the best (validation free-run)
-    weights at the end and returns the per-epoch history."""
+    weights at the end and returns (the per-epoch history, the budget used: epochs run and
+    whether the wall-clock guard ``max_time`` ended the training)."""
     pl.seed_everything(seed, workers=True, verbose=False)
     monitor = "val_loss" if val_seqs else "train_loss"
     dm = WindowDataModule(train_seqs, val_seqs, core.n_init, horizon, stride, batch_size, seed)
@@ -265,7 +266,9 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
                 enable_progress_bar=progress_bar and tty, logger=False,
                 enable_model_summary=False, num_sanity_val_steps=0, log_every_n_steps=1,
                 gradient_clip_val=grad_clip, default_root_dir=ckdir)
+            t_fit = time.monotonic()
             trainer.fit(task, datamodule=dm)
+            elapsed = time.monotonic() - t_fit
         best = ckpt.best_model_path
         if best and os.path.exists(best):
             # our own checkpoint, still read without unpickling arbitrary objects
@@ -275,7 +278,18 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
         if init_val is not None and (best_score is None or not init_val > best_score):
             core.load_state_dict(init_state)  # training did not beat the initialisation
     core.eval()
-    return hist.rows
+    # the wall-clock limit is a guard: record when it, not the epoch budget or early
+    # stopping, ended the training (the result then depends on the machine's speed)
+    epochs = int(trainer.current_epoch)
+    fired = bool(max_time is not None and elapsed >= float(max_time) and not stop.stopped_epoch
+                 and epochs < max_epochs)
+    summary = {"epochs_run": epochs, "time_guard_fired": fired, "max_epochs": int(max_epochs),
+               "max_time_s": max_time}
+    if fired:
+        warnings.warn(f"training stopped by the wall-clock guard max_time={max_time:g} s after {epochs} of "
+                      f"{max_epochs} epochs: the result depends on this machine's speed; raise max_time or "
+                      "lower max_epochs for a reproducible budget", RuntimeWarning, stacklevel=2)
+    return hist.rows, summary
 
 
 def free_run_error(core, seqs) -> float:

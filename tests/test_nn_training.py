@@ -80,3 +80,22 @@ def test_training_never_ends_worse_than_its_least_squares_start():
     e_ls = np.sqrt(np.mean((ls.simulate(u) - y) ** 2))
     e_bad = np.sqrt(np.mean((bad.simulate(u) - y) ** 2))
     assert e_bad <= e_ls * 1.01 + 1e-9
+
+
+def test_budget_is_epochs_and_the_time_guard_is_recorded(tmp_path):
+    """Same seed, same epochs → the same weights; a wall-clock guard that ends training is
+    recorded in the bundle card and warned about (the result then depends on the machine)."""
+    from nnmodel.bundle import save
+    train = toy.records("linear2", 1000, seeds=(1,))
+    val = toy.records("linear2", 400, seeds=(2,))
+    kw = dict(QUIET, na=2, nb=4, hidden=8, horizon=20, stride=20, max_epochs=3, patience=50, max_time=None)
+    a = MODELS["narx"](**kw).fit(train, val)
+    b = MODELS["narx"](**kw).fit(train, val)
+    for k, v in a.net_.state_dict().items():
+        assert torch.equal(v, b.net_.state_dict()[k]), k
+    card = __import__("json").loads((save(a, tmp_path / "a") / "card.json").read_text())
+    assert card["training"]["epochs"] == 3 and card["training"]["time_guard_fired"] is False
+    with pytest.warns(RuntimeWarning, match="wall-clock guard"):
+        c = MODELS["narx"](**{**kw, "max_epochs": 10000, "max_time": 1.0}).fit(train, val)
+    card = __import__("json").loads((save(c, tmp_path / "c") / "card.json").read_text())
+    assert card["training"]["time_guard_fired"] is True and card["training"]["epochs"] < 10000

@@ -281,7 +281,7 @@ class NeuralModel:
             raise
         return self
 
-    _LEARNED = ("net_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
+    _LEARNED = ("net_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_", "training_summary_",
                 "init_report_", "rh_knots_")
 
     def _fit(self, train, val, fs, use_rh) -> None:
@@ -328,7 +328,7 @@ class NeuralModel:
                                 grad_clip=self.grad_clip, accelerator=self.accelerator,
                                 progress_bar=self.progress_bar, checkpoint_dir=self.checkpoint_dir)
                 settings.update(self._training_settings())
-                history = fit_core(core, tr, va, **settings)
+                history, self.training_summary_ = fit_core(core, tr, va, **settings)
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history
             core.eval()
