@@ -3,7 +3,9 @@
 * `eap generate --config default`: serial vs 2 local workers, and whether the dataset
   hashes are identical;
 * a 1,000-point `eap sweep` of the FRF: serial vs 2 workers, the per-task cost of the
-  physics and the per-task overhead of the engine.
+  physics and the per-task overhead of the engine;
+* `eap diagnose` with every candidate forced (the "rich" hidden-effect design: sweeps at 3 RH
+  levels and 2 amplitudes plus a pulse): serial vs 2 workers, and whether the verdict is the same.
 
     python bench/scale_out.py [--config default] [--points 1000]
 """
@@ -51,6 +53,17 @@ def main() -> None:
     print(f"sweep of {len(s)} FRF points: serial {t1 - t0:.1f} s ({1e3 * task:.1f} ms per task), "
           f"{args.workers} workers {t2 - t1:.1f} s (×{(t1 - t0) / (t2 - t1):.2f}); engine overhead "
           f"≈ {1e3 * overhead:.2f} ms per task (cluster start included); tables identical: {s.equals(p)}")
+    from physics.diagnose.demo import hidden_effect_case
+    from physics.diagnose.diagnosis import diagnose
+    case = hidden_effect_case("solvent_diffusion", 0, design="rich")
+    runs = {}
+    for label, st in (("serial", None), (f"{args.workers} workers", par)):
+        t0 = time.perf_counter()
+        res = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, force=True, settings=st)
+        runs[label] = (time.perf_counter() - t0, res.verdict.missing_effect, len(res.ranking))
+    (ts, vs, n), (tp, vp, _) = runs.values()
+    print(f"diagnose, {n} candidates forced: serial {ts:.1f} s, {args.workers} workers {tp:.1f} s (×{ts / tp:.2f}); "
+          f"verdict {vs} / {vp}")
 
 
 if __name__ == "__main__":

@@ -27,6 +27,9 @@ from .progress import Progress
 
 #: Environment variable naming an existing Dask scheduler.
 SCHEDULER_ENV = "EAP_SCHEDULER"
+#: Dask tasks per worker: consecutive tasks are batched so that small tasks (a few ms)
+#: do not pay a scheduler round trip each, while the load still balances.
+BATCHES_PER_WORKER = 8
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
 
 
@@ -57,6 +60,18 @@ def _run_one(fn, task):
         return True, fn(task)
     except Exception as exc:  # reported with the task's inputs by map_tasks
         return False, f"{type(exc).__name__}: {exc}"
+
+
+def _run_batch(fn, batch):
+    """Run consecutive tasks in one worker call (fewer round trips for small tasks); stops
+    at the first failure, which is returned with its index in the batch."""
+    out = []
+    for k, task in enumerate(batch):
+        ok, value = _run_one(fn, task)
+        if not ok:
+            return False, (k, value)
+        out.append(value)
+    return True, out
 
 
 def _describe(task, limit: int = 200) -> str:
@@ -104,20 +119,23 @@ def _map_dask(fn, tasks, settings: ParallelSettings, desc: str, progress: bool) 
                 cluster = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
                                        dashboard_address=None, silence_logs=40, env=env)
                 client = Client(cluster)
-        futures = client.map(_run_one, [fn] * len(tasks), tasks, pure=False)
-        index = {f.key: i for i, f in enumerate(futures)}
+        n_workers = max(1, len(client.scheduler_info()["workers"]))
+        size = max(1, len(tasks) // (BATCHES_PER_WORKER * n_workers))
+        starts = list(range(0, len(tasks), size))
+        futures = client.map(_run_batch, [fn] * len(starts), [tasks[a:a + size] for a in starts], pure=False)
+        index = {f.key: a for f, a in zip(futures, starts)}
         results: list = [None] * len(tasks)
-        with Progress(len(tasks), f"{desc} on {len(client.scheduler_info()['workers'])} workers",
-                      enabled=progress) as bar:
+        with Progress(len(tasks), f"{desc} on {n_workers} workers", enabled=progress) as bar:
             for fut in as_completed(futures):
-                i = index[fut.key]
+                a = index[fut.key]
                 ok, value = fut.result()
                 if not ok:
                     for f in futures:
                         f.cancel()
-                    raise ModelError(f"{desc}: task {_describe(tasks[i])} failed: {value}")
-                results[i] = value
-                bar.update()
+                    k, msg = value
+                    raise ModelError(f"{desc}: task {_describe(tasks[a + k])} failed: {msg}")
+                results[a:a + len(value)] = value
+                bar.update(len(value))
         return results
     finally:
         if client is not None:

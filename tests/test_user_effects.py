@@ -166,3 +166,16 @@ def test_output_backlash_gets_no_confident_catalog_name():
     assert v.status != "explained"
     loop = next(d for d in res.adequacy.descriptors if d["kind"] == "hysteresis")
     assert loop["significant"] and 20e-6 <= loop["width_m"] <= 160e-6
+
+
+def test_diagnosis_on_two_workers_gives_the_same_ranking(creep):
+    """Candidate fits run as tasks; workers register the user effect from its file."""
+    from physics.parallel import ParallelSettings
+    ms = _records("creep", seed=1)
+    serial = diagnose(ms, "ipmc_pt_eg", "none", candidates="creep,fractional_coupling,electrode_resistance")
+    parallel = diagnose(ms, "ipmc_pt_eg", "none", candidates="creep,fractional_coupling,electrode_resistance",
+                        settings=ParallelSettings(2))
+    assert [c.effect for c in serial.ranking] == [c.effect for c in parallel.ranking]
+    for a, b in zip(serial.ranking, parallel.ranking):
+        assert a.fit.rmse == pytest.approx(b.fit.rmse, rel=1e-9)
+    assert serial.verdict.missing_effect == parallel.verdict.missing_effect == "creep"

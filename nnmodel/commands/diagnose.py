@@ -8,7 +8,7 @@ from pathlib import Path
 from physics.diagnose import diagnose, write_diagnosis
 from physics.errors import InputError
 
-from ._common import add_output_options, check_out, provenance, writing
+from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
 from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
 
 NAME = "diagnose"
@@ -41,6 +41,7 @@ def add_arguments(p):
                    help="cap on the analysis sampling rate (default: ≥ 5× the highest excited frequency)")
     add_frf_arguments(p)
     add_output_options(p, "runs/diagnose")
+    add_parallel_options(p)
     p.add_argument("--apply", action="store_true", help="write the extended device file NAME.yaml into --out")
     p.add_argument("--name", default=None, help="name of the extended device (default: DEVICE_EFFECT)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -100,7 +101,8 @@ def run(args) -> int:
                    rh=args.rh, start=args.start, bounds=args.bounds, frf_options=frf_options(args),
                    sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), rh_tolerance=args.rh_tolerance,
                    noise_floor=None if args.noise_floor_um is None else 1e-6 * args.noise_floor_um,
-                   fs_max=args.fs_max_Hz, n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, progress=log)
+                   fs_max=args.fs_max_Hz, n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, progress=log,
+                   settings=parallel_settings(args))
     with writing(args, inputs=protect) as tmp:
         out = write_diagnosis(res, tmp, apply=args.apply, name=args.name, provenance=provenance(), protect=protect)
     d = Path(args.out)

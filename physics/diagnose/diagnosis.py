@@ -46,7 +46,9 @@ from ..device import Device, all_param_specs, load_device
 from ..errors import InputError, ModelError
 from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
+from ..effects import ensure_registered, user_effect_files
 from ..model import resolve_effects
+from ..parallel import ParallelSettings, map_tasks
 from ..threads import single_threaded
 from . import candidates as C
 from . import stats
@@ -236,7 +238,8 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
              check_support: bool = True, rh: float | None = None, start=None, bounds=None,
              frf_options: FRFOptions | None = None, sensor_bandwidth="auto", rh_tolerance: float = 2.5,
              noise_floor: float | None = None, fs_max: float | None = None, n_starts: int = 4, seed: int = 0,
-             n_modes: int = 4, progress: Callable[[str], None] | None = None) -> DiagnosisResult:
+             n_modes: int = 4, progress: Callable[[str], None] | None = None,
+             settings: ParallelSettings | None = None) -> DiagnosisResult:
     """Diagnose ``device`` with ``effects`` against ``measurements`` (paths or
     :class:`~physics.timeseries.TimeSeries`); see the module doc.
 
@@ -245,7 +248,8 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     (default: every catalog effect the model lacks except ``thermal``); ``force``: also try
     effects the data cannot reveal; ``noise_floor`` [m]: overrides the records' own;
     ``fs_max`` [Hz]: cap on the analysis sampling rate (default ≥ 5× the highest excited
-    frequency); ``progress``: a callback for one-line progress messages."""
+    frequency); ``progress``: a callback for one-line progress messages; ``settings``: where
+    the candidate fits run (:mod:`physics.parallel`; the same verdict for any worker count)."""
     t_all = time.perf_counter()
     timings: dict = {}
     dev = load_device(device)
@@ -325,9 +329,10 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     feats = features(ra_base, records, resonance)
     timings["residual_analysis"] = time.perf_counter() - t0
 
-    # 4. candidates
+    # 4. candidates (fitted as independent tasks: in this process, or on workers)
     n_levels = len({t.rh for t in targets})
     results: list[CandidateResult] = []
+    tasks, slots = [], []
     for eff in cand_ids:
         ok, why = revealable(eff, records, resonance)
         if not ok and not force:
@@ -335,7 +340,6 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
             continue
         if eff in C.NOT_BY_DEFAULT and candidates in (None, "", "default"):
             continue
-        t0 = time.perf_counter()
         try:
             spec = C.candidate_spec(eff, base_ids, base.spec.free, base.spec.per_rh, dev_fit, band, n_levels)
         except (InputError, KeyError) as exc:
@@ -343,16 +347,21 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
             continue
         if not ok:
             spec.notes.append(f"forced: the data cannot reveal {eff} ({why})")
-        mf = C.fit_model(spec, dev_fit, targets, trecs, n_starts=n_starts, seed=seed, n_modes=n_modes,
-                         df_cache=df_cache)
-        if mf.ok:
-            C.score(mf, records)
+        slots.append(len(results))
+        results.append(CandidateResult(eff, "pending", reason=why if ok else f"forced ({why})"))
+        tasks.append({"spec": spec, "device": dev_fit, "targets": targets, "trecs": trecs, "records": records,
+                      "n_starts": n_starts, "seed": seed, "n_modes": n_modes, "effect_files": user_effect_files(),
+                      "df_cache": df_cache if settings is None or settings.serial else None})
+    fitted = map_tasks(_fit_candidate, tasks, settings, desc="candidates", progress=False)
+    for k, (mf, wall) in zip(slots, fitted):
+        c = results[k]
         if not mf.ok:
-            results.append(CandidateResult(eff, "failed", reason=f"{eff}: fit or simulation failed: {mf.error}", fit=mf))
+            results[k] = CandidateResult(c.effect, "failed", reason=f"{c.effect}: fit or simulation failed: {mf.error}",
+                                         fit=mf)
             continue
-        results.append(CandidateResult(eff, "evaluated", reason=why if ok else f"forced ({why})", fit=mf))
-        timings[f"candidate {eff}"] = time.perf_counter() - t0
-        _log(progress, f"  +{eff:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({time.perf_counter() - t0:.1f} s)")
+        c.status, c.fit = "evaluated", mf
+        timings[f"candidate {c.effect}"] = wall
+        _log(progress, f"  +{c.effect:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({wall:.1f} s)")
     # one noise model for every comparison: the autocorrelation of the residual closest to
     # noise (the best-fitting model's), so that n_eff does not change from candidate to candidate
     fits = [base] + [c.fit for c in results if c.evaluated]
@@ -411,6 +420,18 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     warns = list(base.warnings)
     return DiagnosisResult(dev, records, base, ranked + others, support, verdict, ra_base, ra_after, feats, noise,
                            resonance, settings, timings, warns, adequacy)
+
+
+def _fit_candidate(task: dict):
+    """Fit and score one candidate (a task of :func:`physics.parallel.map_tasks`)."""
+    ensure_registered(task["effect_files"])
+    t0 = time.perf_counter()
+    mf = C.fit_model(task["spec"], task["device"], task["targets"], task["trecs"], n_starts=task["n_starts"],
+                     seed=task["seed"], n_modes=task["n_modes"], df_cache=task["df_cache"] if task["df_cache"]
+                     is not None else {})
+    if mf.ok:
+        C.score(mf, task["records"])
+    return mf, time.perf_counter() - t0
 
 
 def _resonance(mf: C.ModelFit, band, records) -> float | None:

@@ -99,6 +99,8 @@ def effect_classes_in_file(path) -> list[type[OutputEffect]]:
         raise InputError(f"--effects-path {p}: importing it failed: {type(exc).__name__}: {exc}") from None
     classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, OutputEffect)
                and c is not OutputEffect and c.__module__ == name]
+    for c in classes:
+        c.source_file = str(p.resolve())   # so that worker processes can load it too
     if not classes:
         raise InputError(f"--effects-path {p}: defines no subclass of physics.effects.OutputEffect")
     return classes
@@ -107,6 +109,20 @@ def effect_classes_in_file(path) -> list[type[OutputEffect]]:
 def load_effects_file(path) -> list[str]:
     """Register every user effect defined in ``path``; returns their ids."""
     return [register(c).id for c in effect_classes_in_file(path)]
+
+
+def user_effect_files() -> list[str]:
+    """Files of the registered user effects (to register them again in worker processes)."""
+    return sorted({getattr(c, "source_file") for e, c in EFFECTS.items()
+                   if e not in BUILT_IN and getattr(c, "source_file", None)})
+
+
+def ensure_registered(files) -> None:
+    """Register the effects of ``files`` and of installed plugins unless already present."""
+    load_plugins()
+    for f in files:
+        if not any(getattr(c, "source_file", None) == f for c in EFFECTS.values()):
+            load_effects_file(f)
 
 
 def load_plugins() -> list[str]:
@@ -123,4 +139,4 @@ def load_plugins() -> list[str]:
 
 
 __all__ = ["Effect", "OutputEffect", "EFFECTS", "SLOTS", "BUILT_IN", "LINEAR_EFFECTS", "register", "unregister",
-           "load_effects_file", "load_plugins", "effect_classes_in_file"]
+           "load_effects_file", "load_plugins", "effect_classes_in_file", "user_effect_files", "ensure_registered"]
