@@ -189,7 +189,7 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
                "best_heldout": _best(results)}
     _plots(ds, test_entries, physics_rows, trained, results, out)
     write_json(out / "compare.json", summary)
-    write_csv(_table_rows(results), out / "metrics.csv")
+    write_csv(table_rows(results), out / "metrics.csv")
     _report(summary, out)
     return summary
 
@@ -233,7 +233,7 @@ def _best(results: dict) -> dict:
             "group": "held-out RH" if group == "heldout_rh" else "test records"}
 
 
-def _table_rows(results: dict) -> list[dict]:
+def table_rows(results: dict) -> list[dict]:
     rows = []
     for name, r in results.items():
         fr = r["free_run"]
@@ -250,7 +250,7 @@ def _table_rows(results: dict) -> list[dict]:
 
 
 def format_table(summary: dict) -> str:
-    rows = _table_rows(summary["models"])
+    rows = table_rows(summary["models"])
     cols = [("test %", "nrmse_test_pct", 8), ("held-out %", "nrmse_heldout_rh_pct", 10),
             ("varying %", "nrmse_varying_rh_pct", 9), ("meas-like %", "nrmse_measurement_like_pct", 11)]
     cols = [c for c in cols if c[1] == "nrmse_test_pct" or any(np.isfinite(r[c[1]]) for r in rows)]
@@ -344,7 +344,7 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
 def _report(summary: dict, out: Path) -> None:
     rep = Report("eap train-compare", f"dataset {summary['dataset']} (hash {summary['dataset_hash'][:12]})")
     rep.paragraph(__doc__.strip().split("\n\n")[0])
-    rep.table(_table_rows(summary["models"]))
+    rep.table(table_rows(summary["models"]))
     best = summary["best_heldout"]
     if best:
         rep.paragraph(f"Best free-run NRMSE on {best.get('group', 'held-out RH')}: {best['model']} "

@@ -48,8 +48,39 @@ figure img{max-width:100%;border:1px solid #ddd}
 figcaption{font-size:.9em;color:#555}
 .warn{background:#fff4e0;border-left:4px solid #e90;padding:.4em .8em;margin:.5em 0}
 .note{color:#555;font-size:.9em}
-pre{background:#f6f6fa;padding:.6em;overflow-x:auto;font-size:.85em}
+pre{background:#f6f6fa;padding:.6em;overflow-x:auto;font-size:.85em;white-space:pre-wrap;word-break:break-word}
+.tw{max-width:100%;overflow-x:auto}
+nav{background:#f4f4fa;border:1px solid #dde;padding:.4em .8em;font-size:.9em}
+nav a{margin-right:1em}
+.prov{font-size:.85em;color:#555;word-break:break-all}
+.lead{font-size:1.05em;font-weight:500}
 """
+
+#: Runs in the browser: collects script errors, broken images and elements wider than the
+#: viewport into ``<body data-eap-check="{json}">`` (read by the headless-browser tests).
+_CHECK_JS = """
+(function(){var errs=[];window.addEventListener('error',function(e){errs.push(String(e.message||e));});
+window.addEventListener('load',function(){var imgs=[].slice.call(document.images);
+var broken=imgs.filter(function(i){return !(i.complete&&i.naturalWidth>0);}).map(function(i){return i.alt;});
+var vw=document.documentElement.clientWidth,wide=[];
+[].slice.call(document.body.querySelectorAll('*')).forEach(function(el){var r=el.getBoundingClientRect();
+if(r.right>vw+1&&!el.closest('.tw')&&!el.closest('pre')){wide.push(el.tagName+(el.id?'#'+el.id:''));}});
+document.body.setAttribute('data-eap-check',JSON.stringify({images:imgs.length,broken:broken,errors:errs,
+too_wide:wide.slice(0,20),sections:[].slice.call(document.querySelectorAll('h2')).map(function(h){return h.textContent;})}));});})();
+"""
+
+#: The same colour for the same name in every figure of every report (matplotlib "tab10").
+COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+           "#bcbd22", "#17becf")
+_NAMED = {"measurement": "#000000", "physics": "#555555"}
+
+
+def colour(name: str) -> str:
+    """A stable colour for a model or series name (same name, same colour, in every report)."""
+    import zlib
+    if name in _NAMED:
+        return _NAMED[name]
+    return COLOURS[zlib.crc32(name.encode()) % len(COLOURS)]
 
 
 def format_value(v: Any, digits: int = 4) -> str:
@@ -111,15 +142,27 @@ def png_data_uri(image: str | os.PathLike | bytes) -> str:
 class Report:
     """An HTML page built block by block (see the module doc)."""
 
-    def __init__(self, title: str, subtitle: str | None = None):
+    def __init__(self, title: str, subtitle: str | None = None, provenance: Mapping[str, Any] | None = None):
         self.title = str(title)
         self.subtitle = subtitle
+        self.provenance = dict(provenance or {})
         self._blocks: list[str] = []
+        self._sections: list[tuple[str, str]] = []
 
     # --- blocks --------------------------------------------------------------------------
     def heading(self, text: str, level: int = 2) -> "Report":
         level = min(max(int(level), 2), 4)
-        self._blocks.append(f"<h{level}>{html.escape(str(text))}</h{level}>")
+        anchor = ""
+        if level == 2:
+            sid = f"s{len(self._sections) + 1}"
+            self._sections.append((sid, str(text)))
+            anchor = f" id='{sid}'"
+        self._blocks.append(f"<h{level}{anchor}>{html.escape(str(text))}</h{level}>")
+        return self
+
+    def lead(self, text: str) -> "Report":
+        """The one sentence that opens a section (computed from the results)."""
+        self._blocks.append(f"<p class='lead'>{html.escape(str(text))}</p>")
         return self
 
     def paragraph(self, text: str, note: bool = False) -> "Report":
@@ -159,7 +202,7 @@ class Report:
                 cells.append(f"<td{cls}>{html.escape(format_value(v, digits))}</td>")
             out.append("<tr>" + "".join(cells) + "</tr>")
         out.append("</table>")
-        self._blocks.append("\n".join(out))
+        self._blocks.append("<div class='tw'>" + "\n".join(out) + "</div>")
         return self
 
     def image(self, image: str | os.PathLike | bytes, caption: str | None = None,
@@ -195,10 +238,19 @@ class Report:
     def to_html(self) -> str:
         stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         sub = f"<p class='note'>{html.escape(self.subtitle)}</p>" if self.subtitle else ""
+        prov = ""
+        if self.provenance:
+            prov = "<p class='prov'>" + " · ".join(f"{html.escape(str(k))}: {html.escape(format_value(v))}"
+                                                  for k, v in self.provenance.items()) + "</p>"
+        nav = ""
+        if len(self._sections) > 1:
+            nav = "<nav>" + "".join(f"<a href='#{sid}'>{html.escape(t)}</a>" for sid, t in self._sections) + "</nav>"
         body = "\n".join(self._blocks)
         return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
-                f"<title>{html.escape(self.title)}</title><style>{_CSS}</style></head><body>\n"
-                f"<h1>{html.escape(self.title)}</h1>{sub}\n{body}\n"
+                f"<meta name='viewport' content='width=device-width, initial-scale=1'>"
+                f"<title>{html.escape(self.title)}</title><style>{_CSS}</style>"
+                f"<script>{_CHECK_JS}</script></head><body>\n"
+                f"<h1>{html.escape(self.title)}</h1>{sub}{prov}{nav}\n{body}\n"
                 f"<p class='note'>Generated {stamp} by eap-model.</p>\n</body></html>\n")
 
     def write(self, path: str | os.PathLike) -> Path:

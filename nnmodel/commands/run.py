@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from physics import signals
-from physics.fileio import write_json, write_text
+from physics.fileio import write_json
 from physics.frequency import frequency_response
 from physics.model import ActuatorModel
 from physics.plotting import plot_bode, plot_timeseries
@@ -24,7 +24,8 @@ def add_arguments(p):
     p.add_argument("--models", default="ff,rbf,narx,lstm", help="neural models to train and compare")
     p.add_argument("--dataset-config", default="quick", help="dataset preset (configs/datasets)")
     p.add_argument("--max-time-s", type=float, default=75.0, help="training budget per neural model [s]")
-    p.add_argument("--physics-only", action="store_true", help="skip the dataset and neural-model stages")
+    p.add_argument("--physics-only", action="store_true",
+                   help="skip the dataset and neural-model stages (the physics and the diagnosis loop only)")
     p.add_argument("--quiet", action="store_true", help="no progress output (the summary is still printed)")
 
 
@@ -69,6 +70,7 @@ def _neural_stage(d: Path, args) -> dict:
 
 
 def run(args) -> int:
+    from nnmodel.story import story_line
     t0 = time.perf_counter()
     with writing(args) as d:
         report = _write_report(d, args, t0)
@@ -76,31 +78,22 @@ def run(args) -> int:
     for dev, r in report["physics"].items():
         print(f"{dev}: resonance by RH " + ", ".join(f"{k}%→{v:.1f} Hz" for k, v in r["resonance_Hz_by_rh"].items()))
     print(f"report: {d / 'index.html'} (JSON: {d / 'report.json'}); total {report['runtime_s']:.1f} s")
+    print(story_line(report))
     return 0
 
 
 def _write_report(d: Path, args, t0: float) -> dict:
+    from nnmodel.story import dataset_facts, loop_stage, write_page
+    from nnmodel.traincompare import table_rows
     report = {"physics": _physics_stage(d)}
     if not args.physics_only:
-        report["neural"] = {k: v for k, v in _neural_stage(d, args).items() if k != "models"}
-        report["neural"]["report"] = "compare/report.html"
+        summary = _neural_stage(d, args)
+        report["neural"] = {k: v for k, v in summary.items() if k != "models"}
+        report["neural"].update({"table": table_rows(summary["models"]), "report": "compare/report.html",
+                                 "dataset": dataset_facts(d / "dataset")})
+    report["loop"] = loop_stage(d)
     report["runtime_s"] = time.perf_counter() - t0
     report["provenance"] = provenance()
     write_json(d / "report.json", report)
-    imgs = sorted(p.name for p in d.glob("*.png"))
-    html = ["<html><head><meta charset='utf-8'><title>eap-model quickstart</title></head><body>",
-            "<h1>eap-model quickstart report</h1><pre>"]
-    for dev, r in report["physics"].items():
-        html.append(f"{dev}: effects {', '.join(r['effects'])}\n  resonance by RH [Hz]: "
-                    + ", ".join(f"{k} %: {v:.1f}" for k, v in r["resonance_Hz_by_rh"].items()))
-    if "neural" in report:
-        best = report["neural"].get("best_heldout", {})
-        html.append(f"neural models: best free-run NRMSE on held-out RH {best.get('model')} "
-                    f"{100 * best.get('nrmse', float('nan')):.2f} %; full comparison: compare/report.html")
-    html.append("</pre>")
-    if "neural" in report:
-        html.append("<p><a href='compare/report.html'>neural-model comparison (train-compare report)</a></p>")
-    html += [f"<h3>{name}</h3><img src='{name}' width='700'>" for name in imgs]
-    html.append("</body></html>")
-    write_text(d / "index.html", "\n".join(html))
+    write_page(d, report, report["provenance"])
     return report

@@ -1,0 +1,153 @@
+"""The page of ``eap run``: the whole story on one self-contained page.
+
+Devices and their physics → the dataset → the networks → the loop (records of an actuator
+with an effect the user's model lacks → where the model fails → the diagnosis → the model
+with the effect added → the error before and after).  Every section opens with one
+sentence computed from the results; figures are embedded (the page works offline, alone).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from physics.plotting import plt, save
+from physics.report import Report, colour
+
+#: The loop's hidden effect and records (the demo of :mod:`physics.diagnose.demo`).
+LOOP_EFFECT, LOOP_DEVICE, LOOP_SEED, LOOP_DURATION_S = "solvent_diffusion", "ipmc_pt_eg", 0, 40.0
+
+
+def loop_stage(d: Path) -> dict:
+    """Records with a hidden effect, the diagnosis of the model without it, and the figure
+    of the error before and after (``d/loop.png``); returns the figures as a dict."""
+    from physics.diagnose.demo import hidden_effect_case
+    from physics.diagnose.diagnosis import diagnose
+    case = hidden_effect_case(LOOP_EFFECT, LOOP_SEED, device=LOOP_DEVICE, duration=LOOP_DURATION_S)
+    res = diagnose(case.measurements, LOOP_DEVICE, case.base_effects)
+    v, w, b = res.verdict, res.winner, res.base
+    after = w.fit if w is not None else None
+    _loop_figure(res, d / "loop.png")
+    return {"hidden_effect": case.hidden, "device": LOOP_DEVICE, "base_effects": list(case.base_effects),
+            "records": [m.source for m in case.measurements], "noise_floor_m": res.noise_floor,
+            "findings": list(res.analysis_base.findings),
+            "ranking": [{"effect": c.effect, "rmse_um": 1e6 * c.fit.rmse, "delta_bic": c.comparison.delta_bic,
+                         "evidence": c.evidence(b)} for c in res.ranking],
+            "verdict": v.to_dict(), "adequacy": res.adequacy.to_dict() if res.adequacy else None,
+            "rmse_before_um": 1e6 * b.rmse, "rmse_after_um": None if after is None else 1e6 * after.rmse,
+            "fit_before_pct": b.fit_pct, "fit_after_pct": None if after is None else after.fit_pct,
+            "effect_parameters": {} if w is None else {k: float(x) for k, x in w.fit.values.items()}}
+
+
+def _loop_figure(res, path: Path) -> None:
+    """Measured vs the base and vs the model with the effect added, on the first record."""
+    r = res.records[-1]
+    t = np.arange(r.y_d.size) / r.fs_d
+    fig, ax = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    ax[0].plot(t, 1e6 * (r.y_d - r.y_d.mean()), color=colour("measurement"), lw=1.0, label="measurement")
+    base_p = res.base.pred_d[-1]
+    ax[0].plot(t, 1e6 * (base_p - base_p.mean()), color=colour("base"), lw=0.9, label="model (base)")
+    ax[1].plot(t, 1e6 * res.base.resid_d[-1], color=colour("base"), lw=0.7, label="base")
+    w = res.winner
+    if w is not None:
+        p = w.fit.pred_d[-1]
+        ax[0].plot(t, 1e6 * (p - p.mean()), color=colour(f"+{w.effect}"), lw=0.9, label=f"+ {w.effect}")
+        ax[1].plot(t, 1e6 * w.fit.resid_d[-1], color=colour(f"+{w.effect}"), lw=0.7, label=f"+ {w.effect}")
+    ax[0].set_ylabel("deflection [µm]")
+    ax[1].set_ylabel("residual [µm]")
+    ax[1].set_xlabel("time [s]")
+    ax[0].legend(fontsize=8)
+    ax[1].legend(fontsize=8)
+    ax[0].set_title(f"{Path(str(r.source)).name}: measured vs model before and after")
+    save(fig, path)
+
+
+def _range_sentence(physics: dict) -> str:
+    parts = []
+    for dev, r in physics.items():
+        res = r["resonance_Hz_by_rh"]
+        lo, hi = min(res, key=float), max(res, key=float)
+        parts.append(f"{dev}: the first resonance moves from {res[lo]:.1f} Hz at {lo} % RH to {res[hi]:.1f} Hz at "
+                     f"{hi} % RH, the 1 Hz gain from {r['gain_at_1Hz_mm_per_V_by_rh'][lo]:.2f} to "
+                     f"{r['gain_at_1Hz_mm_per_V_by_rh'][hi]:.2f} mm/V")
+    return "; ".join(parts) + "."
+
+
+def story_line(report: dict) -> str:
+    """The one-line story for the console (and the page's opening)."""
+    loop = report.get("loop")
+    if not loop:
+        return "physics only"
+    v = loop["verdict"]
+    after = "" if loop["rmse_after_um"] is None else f" → {loop['rmse_after_um']:.3g} µm"
+    named = v["missing_effect"] or f"no catalog effect ({v['status']})"
+    return (f"measurement-like records: base model {loop['rmse_before_um']:.3g} µm RMS → diagnosis: {named}"
+            f"{after} (noise floor {1e6 * loop['noise_floor_m']:.3g} µm)")
+
+
+def write_page(d: Path, report: dict, provenance: dict) -> Path:
+    """``d/index.html`` from the results of ``eap run`` (``report`` as in report.json)."""
+    rep = Report("eap-model: the whole story", "what the package does, on built-in defaults",
+                 provenance={"command": provenance.get("command"), "version": provenance.get("version"),
+                             "runtime": f"{report['runtime_s']:.0f} s"})
+    rep.lead(story_line(report))
+    rep.heading("Devices and their physics")
+    rep.lead(_range_sentence(report["physics"]))
+    for dev, r in report["physics"].items():
+        rep.paragraph(f"{dev}: effects {', '.join(r['effects'])}; a 4 Vpp sweep of 100 s at 1 kHz simulates in "
+                      f"{r['sweep_simulation_runtime_s']:.2f} s.")
+        rep.image(d / f"{dev}_bode.png", f"{dev}: tip deflection per volt [m/V] and phase [deg] vs frequency [Hz] "
+                                         "at RH 40–100 %")
+    nn = report.get("neural")
+    if nn:
+        ds = nn.get("dataset", {})
+        rep.heading("The dataset")
+        rep.lead(f"{ds.get('records', '?')} records at {ds.get('fs_Hz', float('nan')):g} Hz from the physics "
+                 f"simulator with a realistic sensor: training RH {ds.get('train_rh')} %, held-out RH "
+                 f"{ds.get('heldout_rh')} % (never trained on).")
+        rows = nn["table"]
+        rep.heading("The networks")
+        best = nn.get("best_heldout") or {}
+        if best:
+            rep.lead(f"Best on held-out RH: {best['model']} at {100 * best['nrmse']:.2f} % free-run NRMSE; the "
+                     f"physics simulator itself scores {rows[0]['nrmse_heldout_rh_pct']:.2f} % on the same records.")
+        rep.table(rows, caption="free-run NRMSE [%] by group (RMSE / std of the measurement); train time [s]")
+        for img, cap in (("error_by_rh.png", "free-run NRMSE [%] by RH [%] (grey: held out)"),
+                         ("overlay_heldout_rh.png", "a held-out-RH record: measured and predicted deflection [mm]")):
+            if (d / "compare" / img).is_file():
+                rep.image(d / "compare" / img, cap)
+        rep.paragraph("Full comparison: compare/report.html.", note=True)
+    loop = report.get("loop")
+    if loop:
+        v = loop["verdict"]
+        rep.heading("The loop: a measurement the model cannot fit")
+        rep.lead(f"Records of {loop['device']} with a hidden effect ({loop['hidden_effect']}); the user's model "
+                 f"[{', '.join(loop['base_effects'])}] misses it by {loop['rmse_before_um']:.3g} µm RMS, "
+                 f"{loop['rmse_before_um'] / (1e6 * loop['noise_floor_m']):.1f}× the sensor's noise floor.")
+        rep.heading("Where the model fails")
+        rep.lead(loop["findings"][0] if loop["findings"] else "No structured residual was found.")
+        rep.bullets(loop["findings"][1:])
+        rep.heading("The diagnosis")
+        rep.lead(f"Verdict ({v['status']}): "
+                 + (f"{v['missing_effect']}, confidence {v['confidence_label']}." if v["missing_effect"]
+                    else "no catalog effect named.") + f" {v['reason']}")
+        rep.table(loop["ranking"], caption="candidates: RMS error after adding each [µm], ΔBIC (negative: better)")
+        rep.heading("Before and after")
+        if loop["rmse_after_um"] is not None:
+            rep.lead(f"Adding {v['missing_effect']} lowers the RMS error from {loop['rmse_before_um']:.3g} to "
+                     f"{loop['rmse_after_um']:.3g} µm (fit {loop['fit_before_pct']:.1f} → {loop['fit_after_pct']:.1f} %).")
+        else:
+            rep.lead(v.get("remaining") or "The error did not fall: see the diagnosis above.")
+        rep.image(d / "loop.png", "measured vs model deflection [µm] before and after, and the residuals [µm]")
+    rep.json_block(report, "report.json")
+    return rep.write(d / "index.html")
+
+
+def dataset_facts(ds_path: Path) -> dict:
+    from .dataset import load_dataset
+    ds = load_dataset(ds_path, verify=False)
+    return {"records": len(ds.meta["files"]), "fs_Hz": ds.fs, "train_rh": ds.meta["rh_levels"]["train"],
+            "heldout_rh": ds.meta["rh_levels"]["held_out"]}
+
+
+__all__ = ["loop_stage", "write_page", "story_line", "dataset_facts"]
