@@ -130,3 +130,27 @@ def test_scheduled_fast_numpy_free_run_matches_the_torch_loop():
         core.fast_inference = False
         slow = core.simulate(state, u[:, k:], rh[:, k:])
     np.testing.assert_allclose(fast.numpy(), slow.numpy(), rtol=1e-4, atol=1e-4)
+
+
+def test_memory_filters_adapt_to_the_sampling_rate_and_record_length(tmp_path):
+    """A slow plant at 0.25 Hz: filters below 2 sample periods (8 s) or above half a record
+    are not used; the chosen range is warned about, stored in the card and restored."""
+    import json
+    from scipy.signal import lfilter
+    from nnmodel.bundle import load, save
+    from nnmodel.data import Record
+    from nnmodel.models import MODELS
+    fs, n = 0.25, 1200
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.uniform(-1, 1, n // 12 + 1), 12)[:n]
+    a = np.exp(-1 / (120 * fs))
+    y = np.tanh(2 * lfilter([1 - a], [1, -a], u))
+    rec = Record(u=u, y=y, rh=None, fs=fs)
+    m = MODELS["ff"](nb=4, memory_filters=6, memory_min_s=0.01, memory_max_s=1e5, max_epochs=1, progress_bar=False)
+    with pytest.warns(UserWarning, match="memory filters 0.01–100000 s do not fit these data"):
+        m.fit([rec])
+    lo, hi = m.memory_range_
+    assert lo == pytest.approx(2 / fs) and hi == pytest.approx(0.5 * n / fs)
+    b = save(m, tmp_path / "ff")
+    assert json.loads((b / "card.json").read_text())["memory_range_s"] == [lo, hi]
+    np.testing.assert_allclose(load(b).predict(u, fs=fs), m.simulate(u), rtol=1e-6, atol=1e-9)

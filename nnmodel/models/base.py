@@ -37,6 +37,10 @@ from ..data import Record, check_records, check_voltage, rh_range, split_index
 __all__ = ["SequenceCore", "Normalized", "NeuralModel", "NotFittedError"]
 
 
+#: The fastest memory filter spans at least this many sample periods ...
+MEMORY_MIN_SAMPLES = 2.0
+#: ... and the slowest at most this fraction of the (median) training record.
+MEMORY_MAX_FRACTION = 0.5
 #: Samples per piece of a free run (bounds the activations held at once on long records).
 SIM_CHUNK = 1 << 16
 
@@ -172,7 +176,7 @@ class NeuralModel:
     kind = "base"
     #: card entries (besides the standard ones) that learned_state() may write and
     #: restore() reads back
-    CARD_EXTRA: tuple[str, ...] = ("rh_knots_pct",)
+    CARD_EXTRA: tuple[str, ...] = ("rh_knots_pct", "memory_range_s")
     #: parameter name -> validator(value) -> error text or None (subclasses extend)
     _checks: dict = {
         "seed": lambda v: _pos_int(v, zero=True),
@@ -282,6 +286,7 @@ class NeuralModel:
         return self
 
     _LEARNED = ("net_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_", "training_summary_",
+                "memory_range_",
                 "init_report_", "rh_knots_")
 
     def _fit(self, train, val, fs, use_rh) -> None:
@@ -291,6 +296,7 @@ class NeuralModel:
             if getattr(self, "rh_knots", None) == "auto":
                 from .features import auto_knots
                 self.rh_knots_ = auto_knots([r.rh for r in train]) if use_rh else []
+            self._adapt_memory(fs, train)
             core = self._build_core(self._n_rh_channels(use_rh))
             min_len = core.n_init + 2
             # channels (memory filters, physics) are computed on whole records and then cut,
@@ -337,7 +343,30 @@ class NeuralModel:
     def _memory_taus(self) -> np.ndarray:
         from .features import memory_taus
         n = int(getattr(self, "memory_filters", 0) or 0)
-        return memory_taus(n, getattr(self, "memory_min_s", 0.02), getattr(self, "memory_max_s", 100.0))
+        lo, hi = getattr(self, "memory_range_", None) or (getattr(self, "memory_min_s", 0.02),
+                                                           getattr(self, "memory_max_s", 100.0))
+        return memory_taus(n, lo, hi)
+
+    def _adapt_memory(self, fs: float, records) -> None:
+        """Fit the memory filters' time constants to the data: none faster than
+        :data:`MEMORY_MIN_SAMPLES` sample periods, none slower than :data:`MEMORY_MAX_FRACTION`
+        of the median training record; the recipe's range is kept where the data support it
+        (a warning says when it is not).  The chosen range is stored in the bundle card."""
+        if not int(getattr(self, "memory_filters", 0) or 0):
+            self.memory_range_ = None
+            return
+        want = (float(self.memory_min_s), float(self.memory_max_s))
+        floor = MEMORY_MIN_SAMPLES / fs
+        ceiling = MEMORY_MAX_FRACTION * float(np.median([len(r) for r in records])) / fs
+        lo = max(want[0], floor)
+        hi = min(want[1], ceiling)
+        if hi <= lo * 1.01:   # records too short for the range: one decade above the fastest
+            hi = lo * 10.0
+        if (lo, hi) != want:
+            warnings.warn(f"model {self.kind!r}: memory filters {want[0]:g}–{want[1]:g} s do not fit these data "
+                          f"(sample period {1 / fs:.3g} s, records of ~{ceiling / MEMORY_MAX_FRACTION:.3g} s); "
+                          f"using {lo:.3g}–{hi:.3g} s", UserWarning, stacklevel=3)
+        self.memory_range_ = (lo, hi)
 
     def _n_mem(self) -> int:
         """Number of memory channels: the filters of the voltage, and with ``memory_abs``
@@ -562,6 +591,8 @@ class NeuralModel:
                "n_init": self.n_init_, "fit_time_s": getattr(self, "fit_time_", None)}
         if getattr(self, "rh_knots", None) == "auto":
             out["card_extra"] = {"rh_knots_pct": self._rh_knots()}
+        if getattr(self, "memory_range_", None):
+            out.setdefault("card_extra", {})["memory_range_s"] = [float(x) for x in self.memory_range_]
         return out
 
     def restore(self, learned: dict, state_dict: dict) -> "NeuralModel":
@@ -576,6 +607,8 @@ class NeuralModel:
                 raise InputError(f"model {self.kind!r} with rh_knots 'auto' needs the knots found in "
                                  "training (card entry rh_knots_pct); the bundle lacks them")
             self.rh_knots_ = [float(k) for k in knots]
+        rng = (learned.get("card_extra") or {}).get("memory_range_s")
+        self.memory_range_ = None if rng is None else (float(rng[0]), float(rng[1]))
         core = self._build_core(self._n_rh_channels("rh" in inputs))
         net = Normalized(core, self._n_mem())
         missing, unexpected = net.load_state_dict(state_dict, strict=False)

@@ -120,7 +120,7 @@ class HybridModel(NeuralModel):
 
     _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")
     #: card entries (besides the standard ones) written by learned_state and read back on load
-    CARD_EXTRA = ("physics", "rh_knots_pct")
+    CARD_EXTRA = ("physics", "rh_knots_pct", "memory_range_s")
 
     # ------------------------------------------------------------------ physics
     def _states(self) -> list[str]:
