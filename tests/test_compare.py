@@ -207,3 +207,18 @@ def test_cli_compare_device_and_bundle(model, records, tmp_path, capsys, monkeyp
     data = json.loads((tmp_path / "nn" / "report.json").read_text())
     assert data["model"]["kind"] == "neural bundle" and data["model"]["model"] == "fake"
     assert data["records"][0]["time_metrics"]["fit_percent"] > 90
+
+
+def test_residual_tests_tell_white_from_structured():
+    """99 % bands ±2.576/√n: white noise passes; an AR(1) residual is not white; a residual
+    that is a filtered input is correlated with it."""
+    from scipy.signal import lfilter
+    from physics.compare.comparison import residual_tests
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=20000)
+    white = residual_tests(rng.normal(size=20000), u)
+    assert white["white"] and white["independent_of_input"]
+    ar = residual_tests(lfilter([1], [1, -0.8], rng.normal(size=20000)), u)
+    assert not ar["white"]
+    dep = residual_tests(lfilter([0.2], [1, -0.5], u) + rng.normal(size=20000), u)
+    assert not dep["independent_of_input"] and dep["cross_correlation_outside"] >= 5

@@ -176,8 +176,13 @@ def run(args) -> int:
         tm, fe = r.summary.get("time_metrics"), r.summary["frf_metrics"]
         parts = [f"{Path(r.source).name} (RH {r.rh:.3g} %):"]
         if tm:
+            rt = tm["residual_tests"]
             parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {tm['nrmse']:.3g}, corr {100 * tm['correlation']:.1f} %,"
-                         f" RMSE {1e6 * tm['rmse']:.3g} um;")
+                         f" RMSE {1e6 * tm['rmse']:.3g} um; residual "
+                         f"{'white' if rt['white'] else 'correlated'} ({rt['autocorrelation_outside']}/"
+                         f"{rt['autocorrelation_lags']} lags outside 99 %), "
+                         f"{'independent of' if rt['independent_of_input'] else 'correlated with'} the input "
+                         f"({rt['cross_correlation_outside']}/{rt['cross_correlation_lags']});")
         if fe.get("j_err_m_per_V") is not None:
             parts.append(f"J_err {1e3 * fe['j_err_m_per_V']:.3g} mm/V, |H| error {fe['log_mag_rms_dB']:.3g} dB rms, "
                          f"phase {fe['phase_rms_deg']:.3g} deg rms ({fe['n_points']} freq.)")

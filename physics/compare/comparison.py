@@ -116,6 +116,30 @@ def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOpt
                 "sensor_bandwidth": sensor_bandwidth, "frf": vars(opts).copy()}
     return ComparisonResult(predictor.describe(), recs, by_rh, overall, settings, warnings_)
 
+
+#: Lags (samples) of the residual tests, at most.
+RESIDUAL_LAGS = 50
+
+
+def residual_tests(e: np.ndarray, u: np.ndarray, lags: int = RESIDUAL_LAGS) -> dict:
+    """Whiteness and independence of the residual ``e`` (as MATLAB ``resid``): the share of
+    autocorrelations ρ_ee(1..lags) and of input–residual cross-correlations ρ_ue(−lags..lags)
+    outside the 99 % band ±2.576/√n of white noise; a model passes when at most 1 % + one
+    lag falls outside (what chance alone gives)."""
+    from ..diagnose.stats import autocorrelation, cross_correlation
+    n = e.size
+    m = int(min(lags, max(1, n // 4)))
+    band = 2.576 / math.sqrt(n)
+    acf = autocorrelation(e, m)[1:]
+    _, ccf = cross_correlation(u, e, m)
+    out_a, out_c = int(np.sum(np.abs(acf) > band)), int(np.sum(np.abs(ccf) > band))
+    return {"lags": m, "band_99pct": band, "autocorrelation_outside": out_a, "autocorrelation_lags": int(acf.size),
+            "cross_correlation_outside": out_c, "cross_correlation_lags": int(ccf.size),
+            "max_abs_autocorrelation": float(np.max(np.abs(acf))) if acf.size else 0.0,
+            "max_abs_cross_correlation": float(np.max(np.abs(ccf))) if ccf.size else 0.0,
+            "white": bool(out_a <= 0.01 * acf.size + 1), "independent_of_input": bool(out_c <= 0.01 * ccf.size + 1)}
+
+
 def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_coh, sb_setting,
                     rh_tolerance):
     if ts.deflection is None:
@@ -137,6 +161,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     tm = metrics.summary(y_al[i0:], yhat[i0:])
     tm["offset_removed_m"] = c
     tm["skip_s"] = skip_s
+    tm["residual_tests"] = residual_tests(y_al[i0:] - yhat[i0:], ts.voltage[i0:])
     # frequency domain
     settings = opts.settings_for(ts)
     est_m, info = estimate_record_frf(ts, y, opts, settings=settings)
