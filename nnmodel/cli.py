@@ -11,6 +11,10 @@ import importlib
 import pkgutil
 import signal
 import sys
+import tempfile
+from pathlib import Path
+
+import yaml
 
 from physics.errors import InputError, ModelError
 
@@ -50,6 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
                            description=getattr(mod, "DESCRIPTION", mod.HELP),
                            formatter_class=_HelpFormatter)
         mod.add_arguments(p)
+        if "--device" in p._option_string_actions or mod.NAME == "compare":
+            p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                           help="override a device parameter, with its unit, e.g. --param L_total=40mm "
+                                "--param width=10mm (repeatable; see `eap effects` for names)")
         if "--effects" in p._option_string_actions or mod.NAME == "effects":
             p.add_argument("--effects-path", action="append", default=[], metavar="FILE.py",
                            help="a Python file defining user effects (physics.effects.OutputEffect subclasses, "
@@ -67,7 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminated)
     try:
         _load_effects(getattr(args, "effects_path", []))
-        return int(args._run(args) or 0)
+        with tempfile.TemporaryDirectory(prefix="eap-param-") as tmp:
+            _apply_params(args, Path(tmp))
+            return int(args._run(args) or 0)
     except (InputError, ModelError) as exc:
         print(f"eap {args.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -85,6 +95,31 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def _apply_params(args, tmp: Path) -> None:
+    """``--param NAME=VALUE``: the device with these values, as a temporary device file that
+    replaces ``--device`` (or a device ``--model``) for this run; a notice names the changes."""
+    items = getattr(args, "param", None)
+    if not items:
+        return
+    from physics.device import load_device
+    from physics.identify.devicefile import device_to_raw
+    from physics.units import parse_quantity
+    attr = "device" if hasattr(args, "device") else "model"
+    ref = getattr(args, attr)
+    if attr == "model" and Path(ref).is_dir():
+        raise InputError("--param changes a device; --model is a neural-model bundle here")
+    dev = load_device(ref)
+    values = dict(parse_quantity(item) for item in items)
+    dev = dev.with_params(**values)
+    path = tmp / f"{dev.name}.yaml"
+    path.write_text(yaml.safe_dump(device_to_raw(dev), sort_keys=False, allow_unicode=True), encoding="utf-8")
+    setattr(args, attr, str(path))
+    from physics.device import all_param_specs
+    specs = all_param_specs()
+    print(f"eap {args.command}: device {dev.name} with "
+          + ", ".join(f"{k} = {v:g} {specs[k].unit}" for k, v in values.items()) + " (from --param)", file=sys.stderr)
 
 
 def _load_effects(paths) -> None:

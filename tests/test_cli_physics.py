@@ -81,3 +81,22 @@ def test_top_level_help_lists_every_command(capsys):
         with _pytest.raises(SystemExit) as exc:
             main([cmd, "--help"])
         assert exc.value.code == 0
+
+
+def test_param_overrides_geometry_with_units(tmp_path, capsys):
+    """--param L_total=…mm: the first resonance follows 1/L² of the free length (beam theory)."""
+    import json
+    from physics.device import load_device
+    d = load_device("ipmc_pt_eg")
+    Lc, L0 = d["L_clamp"], d["L_total"] - d["L_clamp"]
+    L1 = 1.5 * L0
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["frf", "--effects", "none", "--rh", "60", "--f-max-Hz", "300", "--json", str(a)]) == 0
+    assert main(["frf", "--effects", "none", "--rh", "60", "--f-max-Hz", "300", "--json", str(b), "--param",
+                 f"L_total={1e3 * (Lc + L1)!r}mm"]) == 0
+    assert "from --param" in capsys.readouterr().err
+    fa = json.loads(a.read_text())["natural_frequencies_Hz"][0]
+    fb = json.loads(b.read_text())["natural_frequencies_Hz"][0]
+    assert fa / fb == pytest.approx((L1 / L0) ** 2, rel=1e-6)
+    assert main(["frf", "--param", "L_total=4kg", "--json", str(b)]) == 2
+    assert "not compatible" in capsys.readouterr().err
