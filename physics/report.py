@@ -230,6 +230,11 @@ class Report:
                             f"<pre>{html.escape(text)}</pre></details>")
         return self
 
+    def raw(self, markup: str) -> "Report":
+        """Trusted HTML written by the package itself (never user text: use the other blocks)."""
+        self._blocks.append(str(markup))
+        return self
+
     def preformatted(self, text: str) -> "Report":
         self._blocks.append(f"<pre>{html.escape(str(text))}</pre>")
         return self

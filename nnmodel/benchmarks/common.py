@@ -2,8 +2,6 @@
 overrides, timing, text tables and a self-contained HTML page."""
 from __future__ import annotations
 
-import base64
-import html
 import os
 import platform
 import time
@@ -107,45 +105,30 @@ def text_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
     return "\n".join([line(cells[0]), sep] + [line(r) for r in cells[1:]])
 
 
-def _img(path: Path) -> str:
-    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
-    return f'<img alt="{html.escape(Path(path).name)}" src="data:image/png;base64,{data}">'
-
-
 def html_page(title: str, blocks: Sequence[tuple[str, object]]) -> str:
-    """A self-contained page. ``blocks`` are (kind, content): ``("h2", text)``,
-    ``("p", text)``, ``("html", raw)``, ``("table", (header, rows))``, ``("img", path)``,
-    ``("pre", text)``."""
-    out = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>",
-           "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
-           "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
-           "text-align:right}td:first-child,th:first-child{text-align:left}"
-           "tr.pub td{color:#555;font-style:italic}img{max-width:100%}"
-           "pre{background:#f6f6f6;padding:.5em;overflow-x:auto}</style></head><body>",
-           f"<h1>{html.escape(title)}</h1>"]
+    """A self-contained page through the one report builder (:class:`physics.report.Report`).
+    ``blocks`` are (kind, content): ``("h2", text)``, ``("p", text)``, ``("html", raw)``,
+    ``("table", (header, rows))``, ``("img", path)``, ``("pre", text)``."""
+    from physics.report import Report
+    rep = Report(title)
     for kind, content in blocks:
-        if kind in ("h2", "h3", "p"):
-            out.append(f"<{kind}>{html.escape(str(content))}</{kind}>")
+        if kind in ("h2", "h3"):
+            rep.heading(str(content), level=int(kind[1]))
+        elif kind == "p":
+            rep.paragraph(str(content))
         elif kind == "html":
-            out.append(str(content))
+            rep.raw(str(content))
         elif kind == "pre":
-            out.append(f"<pre>{html.escape(str(content))}</pre>")
+            rep.preformatted(str(content))
         elif kind == "img":
-            out.append(_img(content))
+            rep.image(content, Path(content).stem.replace("_", " "))
         elif kind == "table":
             header, rows = content
-            out.append("<table><tr>" + "".join(f"<th>{html.escape(str(h))}</th>" for h in header) + "</tr>")
-            for r in rows:
-                cls = ""
-                if isinstance(r, dict):
-                    cls, r = f" class='{r.get('class', '')}'", r["cells"]
-                out.append(f"<tr{cls}>" + "".join(
-                    f"<td>{html.escape(c if isinstance(c, str) else fmt(c))}</td>" for c in r) + "</tr>")
-            out.append("</table>")
+            rep.table([dict(zip(header, r["cells"] if isinstance(r, dict) else r)) for r in rows],
+                      columns=[str(h) for h in header])
         else:  # pragma: no cover - programming error
             raise ValueError(kind)
-    out.append("</body></html>")
-    return "\n".join(out)
+    return rep.to_html()
 
 
 def environment() -> dict:

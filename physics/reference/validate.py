@@ -20,7 +20,6 @@ Errors are normalised RMS differences over the last period, rms(y − y_ref)/rms
 """
 from __future__ import annotations
 
-import base64
 import html
 import time
 from pathlib import Path
@@ -560,10 +559,12 @@ def _html(figs, pngs, out: Path) -> str:
                          for a, c, e, d in zip(sq["residual_after_s"], sq["cs_up_residual_fraction"],
                                                sq["cation_excess_residual_fraction"], sq["deflection_residual_fraction"]))
             rows.append(f"<h3>Square pulse 2 V, Ton 20 s / Toff 80 s</h3><ul>{li}</ul>")
-    imgs = "".join(f"<h3>{html.escape(p.name)}</h3><img src='data:image/png;base64,"
-                   f"{base64.b64encode(p.read_bytes()).decode()}' style='max-width:100%'>" for p in pngs)
-    return ("<!doctype html><html><head><meta charset='utf-8'><title>eap validate</title></head><body>"
-            "<h1>Reduced model vs reference PNP + solvent solver</h1>"
-            f"<p>{html.escape(__doc__.strip().splitlines()[0])} See physics/reference/strip.py for how the load is "
-            "compared: ℓ_ref = ∫x(Cs − Cs0)dx / (n⁺Λ), which equals the reduced model's ℓ·B(s) in the small-signal "
-            "limit.</p>" + _NOTES + "".join(rows) + imgs + "</body></html>")
+    from ..report import Report
+    rep = Report("Reduced model vs reference PNP + solvent solver", "eap validate")
+    rep.paragraph(f"{__doc__.strip().splitlines()[0]} See physics/reference/strip.py for how the load is "
+                  "compared: ℓ_ref = ∫x(Cs − Cs0)dx / (n⁺Λ), which equals the reduced model's ℓ·B(s) in the "
+                  "small-signal limit.")
+    rep.raw(_NOTES + "".join(rows))
+    for p in pngs:
+        rep.image(p, p.stem.replace("_", " "))
+    return rep.to_html()
