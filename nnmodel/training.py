@@ -30,7 +30,7 @@ import torch
 import yaml
 import lightning.pytorch as pl
 from lightning.pytorch.callbacks import Callback, EarlyStopping, ModelCheckpoint
-from torch.utils.data import BatchSampler, DataLoader, Dataset, RandomSampler
+from torch.utils.data import BatchSampler, DataLoader, Dataset, DistributedSampler, RandomSampler
 
 from physics.errors import InputError
 
@@ -94,6 +94,25 @@ def _pad_batch(seqs, n_init: int) -> dict:
     return {"u": t(u), "y": t(y), "rh": t(rh), "mask": t(mask)}
 
 
+#: How training runs (not what is trained): processes/devices and Lightning strategy.  Set
+#: with :func:`execution` (``eap train-compare --devices 2 --strategy ddp_spawn``).
+EXECUTION = {"devices": 1, "strategy": "auto"}
+
+
+@contextlib.contextmanager
+def execution(devices: int = 1, strategy: str = "auto"):
+    """Train with ``devices`` processes/devices and a Lightning ``strategy`` (e.g. ``ddp_spawn``
+    on CPUs with the gloo backend, ``ddp`` on GPUs) inside the block."""
+    if isinstance(devices, bool) or not isinstance(devices, int) or devices < 1:
+        raise InputError(f"--devices {devices!r}: must be a positive whole number")
+    old = dict(EXECUTION)
+    EXECUTION.update(devices=devices, strategy=strategy)
+    try:
+        yield
+    finally:
+        EXECUTION.update(old)
+
+
 class WindowDataModule(pl.LightningDataModule):
     """Training windows and whole validation records (normalised)."""
 
@@ -113,8 +132,15 @@ class WindowDataModule(pl.LightningDataModule):
                                  f"({self.n_init + self.horizon} samples)")
 
     def train_dataloader(self):
-        g = torch.Generator().manual_seed(self.seed)
-        sampler = BatchSampler(RandomSampler(self.train_set, generator=g), self.batch_size, drop_last=False)
+        trainer = getattr(self, "trainer", None)
+        world = int(getattr(trainer, "world_size", 1) or 1)
+        if world > 1:   # several processes (DDP): each draws its own shard of the windows
+            base = DistributedSampler(self.train_set, num_replicas=world, rank=int(trainer.global_rank),
+                                      shuffle=True, seed=self.seed)
+            base.set_epoch(int(trainer.current_epoch))
+        else:
+            base = RandomSampler(self.train_set, generator=torch.Generator().manual_seed(self.seed))
+        sampler = BatchSampler(base, self.batch_size, drop_last=False)
         return DataLoader(self.train_set, sampler=sampler, batch_size=None, collate_fn=_collate_none)
 
     def val_dataloader(self):
@@ -149,7 +175,7 @@ class SimulationTask(pl.LightningModule):
         y_hat = self.core.simulate(self.core.init_state(*hist), u, rh)
         loss = torch.mean((y_hat - y) ** 2)
         self.log("train_loss", loss, on_step=False, on_epoch=True, prog_bar=True,
-                 batch_size=u.shape[0])
+                 batch_size=u.shape[0], sync_dist=self._distributed())
         return loss
 
     def on_validation_epoch_start(self):
@@ -167,7 +193,11 @@ class SimulationTask(pl.LightningModule):
     def on_validation_epoch_end(self):
         if self._cnt:
             v = math.sqrt(self._sse / self._cnt)
-            self.log("val_loss", min(v, 1e6), prog_bar=True)
+            self.log("val_loss", min(v, 1e6), prog_bar=True, sync_dist=self._distributed())
+
+    def _distributed(self) -> bool:
+        """True with several processes: epoch metrics are then averaged over them."""
+        return int(getattr(self.trainer, "world_size", 1) or 1) > 1
 
     def configure_optimizers(self):
         opt = torch.optim.Adam(self.core.parameters(), lr=self.lr, weight_decay=self.weight_decay)
@@ -259,8 +289,10 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
         stop = EarlyStopping(monitor=monitor, mode="min", patience=patience, check_finite=False)
         tty = sys.stderr.isatty()
         with _quiet_lightning():
+            devices, strategy = EXECUTION["devices"], EXECUTION["strategy"]
             trainer = pl.Trainer(
-                accelerator=accelerator, devices=1, max_epochs=max_epochs,
+                accelerator=accelerator, devices=devices, strategy=strategy, max_epochs=max_epochs,
+                use_distributed_sampler=False, reload_dataloaders_every_n_epochs=1 if devices > 1 else 0,
                 max_time=None if max_time is None else datetime.timedelta(seconds=float(max_time)),
                 callbacks=[ckpt, stop, hist] + ([_LineProgress()] if progress_bar and not tty else []),
                 enable_progress_bar=progress_bar and tty, logger=False,
@@ -269,12 +301,15 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
             t_fit = time.monotonic()
             trainer.fit(task, datamodule=dm)
             elapsed = time.monotonic() - t_fit
-        best = ckpt.best_model_path
+        # with spawned processes (DDP) the callback's state stays in them: the file is the record
+        best = ckpt.best_model_path or str(Path(ckdir) / "best.ckpt")
         if best and os.path.exists(best):
             # our own checkpoint, still read without unpickling arbitrary objects
             state = torch.load(best, map_location="cpu", weights_only=True)["state_dict"]
             task.load_state_dict(state)
         best_score = None if ckpt.best_model_score is None else float(ckpt.best_model_score)
+        if best_score is None and val_seqs and os.path.exists(best):
+            best_score = free_run_error(core, val_seqs)
         if init_val is not None and (best_score is None or not init_val > best_score):
             core.load_state_dict(init_state)  # training did not beat the initialisation
     core.eval()

@@ -99,3 +99,19 @@ def test_budget_is_epochs_and_the_time_guard_is_recorded(tmp_path):
         c = MODELS["narx"](**{**kw, "max_epochs": 10000, "max_time": 1.0}).fit(train, val)
     card = __import__("json").loads((save(c, tmp_path / "c") / "card.json").read_text())
     assert card["training"]["time_guard_fired"] is True and card["training"]["epochs"] < 10000
+
+
+@pytest.mark.slow
+def test_two_process_ddp_trains_a_model_of_the_same_quality():
+    """Lightning's own DDP strategy on CPU (gloo, two spawned processes), each drawing its
+    shard of the windows: the model reaches the quality of the one-process run."""
+    from nnmodel.training import execution
+    from physics.metrics import nrmse
+    train = toy.records("static_cubic", 4000, seeds=(1, 2))
+    val = toy.records("static_cubic", 1000, seeds=(3,))
+    test = toy.records("static_cubic", 2000, seeds=(4,))[0]
+    kw = dict(QUIET, na=2, nb=4, hidden=16, horizon=50, stride=10, max_epochs=40, patience=100, max_time=None)
+    one = nrmse(test.y, MODELS["narx"](**kw).fit(train, val).simulate(test.u))
+    with execution(2, "ddp_spawn"):
+        two = nrmse(test.y, MODELS["narx"](**kw).fit(train, val).simulate(test.u))
+    assert two <= 1.5 * one + 0.02, (one, two)

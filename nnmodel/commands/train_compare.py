@@ -19,6 +19,10 @@ def add_arguments(p):
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
     p.add_argument("--max-time-s", type=float, default=None, help="training budget per model [s]")
     p.add_argument("--quiet", action="store_true", help="no progress output (the table is still printed)")
+    p.add_argument("--devices", type=int, default=1,
+                   help="processes (CPU) or GPUs that train each network together (Lightning)")
+    p.add_argument("--strategy", default=None,
+                   help="Lightning strategy for --devices > 1 (default: ddp_spawn, gloo on CPUs; ddp on GPUs)")
     p.add_argument("--physics", default=None, metavar="DEVICE_OR_YAML",
                    help="score this device's simulator beside the networks (default: the dataset's generator; "
                         "none for measured data)")
@@ -52,9 +56,12 @@ def run(args) -> int:
     bad = [m for m in models if m not in MODELS]
     if bad:
         raise InputError(f"unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
-    summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
-                            max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet,
-                            physics=args.physics)
+    from nnmodel.training import execution
+    strategy = args.strategy or ("ddp_spawn" if args.devices > 1 else "auto")
+    with execution(args.devices, strategy):
+        summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
+                                max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet,
+                                physics=args.physics)
     print(format_table(summary))
     best = summary["best_heldout"]
     if best:
