@@ -179,3 +179,25 @@ def test_diagnosis_on_two_workers_gives_the_same_ranking(creep):
     for a, b in zip(serial.ranking, parallel.ranking):
         assert a.fit.rmse == pytest.approx(b.fit.rmse, rel=1e-9)
     assert serial.verdict.missing_effect == parallel.verdict.missing_effect == "creep"
+
+
+def test_near_twins_are_ambiguous_or_right():
+    """A viscoelastic polymer with another frequency law than the DMA table (storage +10 %
+    per decade, loss tangent 0.13): viscoelastic (with its free shape) and fractional_coupling
+    both bend the low-frequency slope; the verdict is ambiguous between them or viscoelastic,
+    never a confident fractional_coupling."""
+    import dataclasses
+    from physics.device import load_device
+    dev = load_device("ipmc_pt_eg")
+    t = dev.tables["dma"]
+    f = np.geomspace(0.01, 100, 25)
+    E1 = float(np.interp(0.0, np.log10(t["freq"]), t["storage"]))
+    Es = E1 * 1.1 ** np.log10(f)
+    truth = ActuatorModel(dataclasses.replace(dev, tables={**dev.tables, "dma": {"freq": f, "storage": Es,
+                                                                                  "loss": 0.13 * Es}}),
+                          "viscoelastic")
+    sig = signals.sweep(0.5, 0.1, 50.0, 60.0, 500.0)
+    y = simulate(truth, None, sig.t, sig.v, rh=60.0).deflection
+    ts = TimeSeries(sig.t, sig.v, y, rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe()}, source="twin")
+    v = diagnose([SensorModel().apply(ts, seed=5)], "ipmc_pt_eg", "none").verdict
+    assert v.missing_effect == "viscoelastic" or set(v.ambiguous) == {"viscoelastic", "fractional_coupling"}, v

@@ -65,7 +65,8 @@ CANDIDATES = (ER, FC, SD, VE, LB, HUM, NLC)
 NOT_BY_DEFAULT = {TH: "thermal is not tried by default: Joule heating of ~1 °C changes the ion mobility by "
                       "well under 1 % (eq. 6), below what a deflection record resolves, and it needs a large-"
                       "signal time-domain fit; ask for it with --candidates thermal"}
-EFFECT_PARAMS = {ER: ("Rs",), FC: ("frac_a",), SD: ("D_solvent",), VE: (), LB: ("Y_electrode",), HUM: (),
+EFFECT_PARAMS = {ER: ("Rs",), FC: ("frac_a",), SD: ("D_solvent",), VE: ("ve_slope", "ve_tan_delta"),
+                 LB: ("Y_electrode",), HUM: (),
                  NLC: ("C_max",), TH: ()}
 NESTED = {ER: True, FC: True, SD: True, VE: False, LB: False, HUM: True, NLC: False, TH: True}
 ROLE_GAIN = ("kf", "kf0")
@@ -127,6 +128,7 @@ def param_used(name: str, ids) -> bool:
     ids = set(ids)
     rules = {"kf": FC not in ids, "kf0": FC in ids, "frac_a": FC in ids, "frac_b": FC in ids, "frac_p": FC in ids,
              "frac_f_lo": FC in ids, "Rs": ER in ids, "D_solvent": SD in ids, "dma_scale": VE in ids,
+             "ve_slope": VE in ids, "ve_tan_delta": VE in ids,
              "Y": VE not in ids and LB not in ids, "Y_polymer": LB in ids and VE not in ids,
              "Y_electrode": LB in ids, "C_max": NLC in ids, "h_trans": TH in ids, "E_a": TH in ids}
     if name in rules:
@@ -140,6 +142,7 @@ def param_bounds(name: str, device: Device) -> tuple[float, float] | None:
     p = device.params
     h = 0.5 * p["t_polymer"]
     table = {"Rs": (0.1, 1e4), "D_solvent": (h * h / 1e5, h * h / 0.2), "frac_a": (0.0, 0.95),
+             "ve_slope": (0.0, 0.6), "ve_tan_delta": (0.005, 0.6),
              "dma_scale": (0.05, 20.0), "Y_electrode": (1e7, 2e11), "h_trans": (0.5, 1e4)}
     if name == "C_max":
         return (p["C_anion"] / 0.96, p["C_anion"] / 0.005)
@@ -285,6 +288,11 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
         start[name] = float(np.clip(start[name], b[0], b[1]))
     if "dma_scale" in free and "dma_scale" not in start:
         start["dma_scale"] = float(device.params.get("dma_scale", 1.0))
+    if effect == VE and "dma" in device.tables:   # the free shape starts at the table's own shape
+        from ..effects.viscoelastic import dma_shape
+        for name, v in zip(("ve_slope", "ve_tan_delta"), dma_shape(device.tables["dma"])):
+            if name in free and name in bounds:
+                start[name] = float(np.clip(device.params.get(name, v), *bounds[name]))
     # starts over the effect's own parameter (unknown scale)
     h = 0.5 * device.params["t_polymer"]
     grids = {ER: ("Rs", [10.0, 100.0, 1000.0]), SD: ("D_solvent", [h * h / x for x in (3.0, 30.0, 300.0, 3000.0)]),

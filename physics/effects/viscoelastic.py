@@ -10,7 +10,11 @@ which is causal and passive (loss ≥ 0 at every frequency) and has an exact sta
 form, so both solvers use the same modulus.  Relaxation times are spread over the
 measured band (non-negative least squares on the relative error of E' and E'').  An
 optional ``dma_scale`` (default 1) multiplies the tabulated modulus, so a sample stiffer or
-softer than the one measured by DMA can be identified.  Off: an elastic modulus (``Y``,
+softer than the one measured by DMA can be identified.  A *free shape* for a material other
+than the one measured: with ``ve_slope`` and ``ve_tan_delta`` given (device file or a fit),
+the table is replaced by E'(f) = E'(1 Hz)·(1 + ve_slope)^log10(f/1 Hz), E'' = ve_tan_delta·E'
+over the table's band (E'(1 Hz) from the table, times ``dma_scale``), fitted by the same
+Prony series — so the diagnosis can fit the slope and the loss of another polymer.  Off: an elastic modulus (``Y``,
 or ``Y_polymer`` with ``layered_beam``), no loss besides Rayleigh damping.
 """
 from __future__ import annotations
@@ -62,7 +66,10 @@ class Viscoelastic(ElasticModulus):
     enabled = True
     summary = "frequency-dependent storage/loss modulus fitted (Prony) to DMA tables"
     explanation = __doc__
-    params = (ParamSpec("dma_scale", "1", 1e-3, 1e3, "factor on the tabulated DMA modulus", optional=True),)
+    params = (ParamSpec("dma_scale", "1", 1e-3, 1e3, "factor on the tabulated DMA modulus", optional=True),
+              ParamSpec("ve_slope", "1", 0.0, 1.0, "free shape: storage modulus rise per decade (fraction)",
+                        optional=True),
+              ParamSpec("ve_tan_delta", "1", 0.0, 1.0, "free shape: loss tangent E''/E'", optional=True))
     tables = (
         TableSpec("dma", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
                   "DMA storage and loss modulus of the whole strip vs frequency", optional=False),
@@ -76,7 +83,20 @@ class Viscoelastic(ElasticModulus):
             raise InputError(f"viscoelastic with layered_beam needs the table {name!r} in section "
                              f"'viscoelastic' of device {self.device.name!r}")
         t = self.device.tables[name]
+        if "ve_slope" in p and "ve_tan_delta" in p:
+            f = np.geomspace(float(np.min(t["freq"])), float(np.max(t["freq"])), 16)
+            E1 = float(np.exp(np.interp(0.0, np.log10(t["freq"]), np.log(t["storage"]))))
+            Es = E1 * (1.0 + float(p["ve_slope"])) ** np.log10(f)
+            return fit_prony(tuple(f), tuple(Es), tuple(float(p["ve_tan_delta"]) * Es)).scaled(p.get("dma_scale", 1.0))
         return fit_prony(tuple(t["freq"]), tuple(t["storage"]), tuple(t["loss"])).scaled(p.get("dma_scale", 1.0))
+
+
+def dma_shape(table) -> tuple[float, float]:
+    """(rise per decade, median loss tangent) of a DMA table: the free shape closest to it."""
+    lf, ls = np.log10(np.asarray(table["freq"], float)), np.log10(np.asarray(table["storage"], float))
+    slope = float(10 ** np.polyfit(lf, ls, 1)[0] - 1.0) if lf.size > 1 else 0.0
+    tand = float(np.median(np.asarray(table["loss"], float) / np.asarray(table["storage"], float)))
+    return max(slope, 0.0), max(tand, 0.0)
 
 
 @lru_cache(maxsize=64)
