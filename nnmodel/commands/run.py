@@ -15,6 +15,8 @@ from physics.timeseries import write_timeseries
 
 from ._common import add_output_options, provenance, writing
 
+#: Epoch budgets of the main job (reproducible on any machine, unlike a time budget).
+RUN_SETS = ("narx.max_epochs=20",)
 NAME = "run"
 HELP = "run the end-to-end job on built-in defaults and write a report folder"
 
@@ -23,7 +25,11 @@ def add_arguments(p):
     add_output_options(p, "runs/quickstart", "report folder")
     p.add_argument("--models", default="ff,rbf,narx,lstm", help="neural models to train and compare")
     p.add_argument("--dataset-config", default="quick", help="dataset preset (configs/datasets)")
-    p.add_argument("--max-time-s", type=float, default=75.0, help="training budget per neural model [s]")
+    p.add_argument("--set", action="append", default=None, metavar="MODEL.KEY=VALUE",
+                   help="override a recipe hyper-parameter (repeatable); default: "
+                        + " ".join(RUN_SETS) + " (an epoch budget that keeps eap run near 3 minutes)")
+    p.add_argument("--max-time-s", type=float, default=None,
+                   help="wall-clock guard per model [s] (default: the recipes'; budgets are epochs)")
     p.add_argument("--physics-only", action="store_true",
                    help="skip the dataset and neural-model stages (the physics and the diagnosis loop only)")
     p.add_argument("--quiet", action="store_true", help="no progress output (the summary is still printed)")
@@ -64,7 +70,9 @@ def _neural_stage(d: Path, args) -> dict:
     from nnmodel.traincompare import format_table, train_compare
     ds = generate(d / "dataset", args.dataset_config, progress=not args.quiet)
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    summary = train_compare(ds, models, d / "compare", max_time_s=args.max_time_s, progress=not args.quiet)
+    from nnmodel.commands.train_compare import parse_overrides
+    summary = train_compare(ds, models, d / "compare", max_time_s=args.max_time_s, progress=not args.quiet,
+                            overrides=parse_overrides(RUN_SETS if args.set is None else args.set))
     print(format_table(summary))
     return summary
 

@@ -17,7 +17,8 @@ def add_arguments(p):
     add_output_options(p, "runs/train-compare", "run folder (models/, compare.json, report.html)")
     p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
-    p.add_argument("--max-time-s", type=float, default=None, help="training budget per model [s]")
+    p.add_argument("--max-time-s", type=float, default=None,
+                   help="wall-clock guard per model [s] (default: the recipes'; budgets are epochs, the card says if it fired)")
     p.add_argument("--quiet", action="store_true", help="no progress output (the table is still printed)")
     p.add_argument("--devices", type=int, default=1,
                    help="processes (CPU) or GPUs that train each network together (Lightning)")
