@@ -4,18 +4,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
 from physics import signals
-from physics.diagnose.adequacy import play
+from physics.diagnose.demo import outside_catalog_case
 from physics.diagnose.diagnosis import diagnose
 from physics.effects import BUILT_IN, EFFECTS, OutputEffect, effect_classes_in_file, register, unregister
 from physics.errors import InputError
 from physics.frequency import frequency_response
 from physics.model import ActuatorModel, resolve_effects
-from physics.sensor import SensorModel
 from physics.timedomain import simulate
-from physics.timeseries import TimeSeries
 
 CREEP = Path(__file__).resolve().parents[1] / "examples" / "effects" / "creep.py"
 
@@ -115,37 +112,15 @@ def test_command_line(tmp_path, capsys):
 
 # ------------------------------------------------------------------ the diagnosis loop
 
-def _records(kind: str, seed: int = 0, r: float = 0.32, tau: float = 18.0):
-    """A sweep and a pulse of the bare IPMC model; the truth adds an effect that only this
-    test defines (creep as an output filter, or backlash), measured by the realistic sensor."""
-    rng = np.random.default_rng(seed)
-    truth = ActuatorModel("ipmc_pt_eg", "none")
-    out = []
-    plan = [(signals.sweep(1.0, 0.1, 50.0, 60.0, 500.0), "cubic"),
-            (signals.square(1.0, t_on=20.0, t_off=40.0, cycles=1, fs=500.0), "linear")]
-    for k, (sig, hold) in enumerate(plan):
-        y = simulate(truth, None, sig.t, sig.v, rh=60.0, hold=hold).deflection
-        g = min(1.0, 2e-3 / np.max(np.abs(y)))
-        v, y = sig.v * g, y * g
-        if kind == "creep":
-            a = np.exp(-1 / (tau * 500.0))
-            y = y + r * lfilter([1 - a], [1, -a], y)
-        else:
-            y = play(y, 80e-6)
-        ts = TimeSeries(sig.t, v, y, rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe()},
-                        source=f"{kind}{k}")
-        out.append(SensorModel().apply(ts, seed=int(rng.integers(2 ** 31))))
-    return out
-
-
 def test_creep_outside_the_catalog_is_not_named_then_found_with_the_example():
-    ms = _records("creep")
+    ms, tp = outside_catalog_case("creep", seed=0)
     before = diagnose(ms, "ipmc_pt_eg", "none")
     v = before.verdict
     assert v.missing_effect is None or v.label != "high"
     assert v.status in ("not explained by the catalog", "partly explained")
     pole = next(d for d in before.adequacy.descriptors if d["kind"] == "slow_pole")
-    assert pole["significant"] and 9.0 <= pole["tau_s"] <= 36.0 and 0.16 <= pole["gain"] <= 0.64
+    assert pole["significant"] and 0.5 <= pole["tau_s"] / tp["creep_tau_s"] <= 2.0
+    assert 0.5 <= pole["gain"] / tp["creep_r"] <= 2.0
     assert "examples/effects/creep.py" in v.remaining
     (cls,) = effect_classes_in_file(CREEP)
     register(cls)
@@ -155,23 +130,24 @@ def test_creep_outside_the_catalog_is_not_named_then_found_with_the_example():
         unregister("creep")
     assert after.verdict.missing_effect == "creep" and after.verdict.status == "explained"
     assert after.winner.fit.rmse <= 1.3 * after.noise_floor
-    assert after.winner.fit.values["creep_tau"] == pytest.approx(18.0, rel=0.15)
-    assert after.winner.fit.values["creep_r"] == pytest.approx(0.32, rel=0.15)
+    assert after.winner.fit.values["creep_tau"] == pytest.approx(tp["creep_tau_s"], rel=0.15)
+    assert after.winner.fit.values["creep_r"] == pytest.approx(tp["creep_r"], rel=0.15)
 
 
 def test_output_backlash_gets_no_confident_catalog_name():
-    res = diagnose(_records("backlash"), "ipmc_pt_eg", "none")
+    ms, tp = outside_catalog_case("backlash", seed=0)
+    res = diagnose(ms, "ipmc_pt_eg", "none")
     v = res.verdict
     assert v.missing_effect is None or v.label != "high", v
     assert v.status != "explained"
     loop = next(d for d in res.adequacy.descriptors if d["kind"] == "hysteresis")
-    assert loop["significant"] and 20e-6 <= loop["width_m"] <= 160e-6
+    assert loop["significant"] and 0.25 <= loop["width_m"] / tp["play_width_m"] <= 2.0
 
 
 def test_diagnosis_on_two_workers_gives_the_same_ranking(creep):
     """Candidate fits run as tasks; workers register the user effect from its file."""
     from physics.parallel import ParallelSettings
-    ms = _records("creep", seed=1)
+    ms, _ = outside_catalog_case("creep", seed=1)
     serial = diagnose(ms, "ipmc_pt_eg", "none", candidates="creep,fractional_coupling,electrode_resistance")
     parallel = diagnose(ms, "ipmc_pt_eg", "none", candidates="creep,fractional_coupling,electrode_resistance",
                         settings=ParallelSettings(2))
@@ -186,18 +162,6 @@ def test_near_twins_are_ambiguous_or_right():
     per decade, loss tangent 0.13): viscoelastic (with its free shape) and fractional_coupling
     both bend the low-frequency slope; the verdict is ambiguous between them or viscoelastic,
     never a confident fractional_coupling."""
-    import dataclasses
-    from physics.device import load_device
-    dev = load_device("ipmc_pt_eg")
-    t = dev.tables["dma"]
-    f = np.geomspace(0.01, 100, 25)
-    E1 = float(np.interp(0.0, np.log10(t["freq"]), t["storage"]))
-    Es = E1 * 1.1 ** np.log10(f)
-    truth = ActuatorModel(dataclasses.replace(dev, tables={**dev.tables, "dma": {"freq": f, "storage": Es,
-                                                                                  "loss": 0.13 * Es}}),
-                          "viscoelastic")
-    sig = signals.sweep(0.5, 0.1, 50.0, 60.0, 500.0)
-    y = simulate(truth, None, sig.t, sig.v, rh=60.0).deflection
-    ts = TimeSeries(sig.t, sig.v, y, rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe()}, source="twin")
-    v = diagnose([SensorModel().apply(ts, seed=5)], "ipmc_pt_eg", "none").verdict
+    ms, _ = outside_catalog_case("twin", seed=0)
+    v = diagnose(ms, "ipmc_pt_eg", "none").verdict
     assert v.missing_effect == "viscoelastic" or set(v.ambiguous) == {"viscoelastic", "fractional_coupling"}, v

@@ -177,3 +177,55 @@ def run_hidden_effect(effect: str | None = None, seed: int = 0, *, out=None, dev
     if out is not None:
         write_diagnosis(res, out, provenance={"demo": case.describe()})
     return case, res
+
+
+#: Truths outside the catalog (:func:`outside_catalog_case`), each with its randomised parameters.
+OUTSIDE = ("creep", "backlash", "twin")
+
+
+def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg", fs: float = 500.0,
+                         duration: float = 60.0) -> tuple[list[TimeSeries], dict]:
+    """Measurements of the bare ``device`` (effects none) with physics the catalog does not
+    have, made here and nowhere else: ``creep`` (tip load × (1 + r/(1+sτ)), r U(0.25, 0.4), τ
+    log-uniform 10–30 s), ``backlash`` (a play of width U(60, 100) µm on the output), ``twin``
+    (a viscoelastic polymer with another law than the DMA table: storage +U(8, 12) % per
+    decade, loss tangent U(0.10, 0.16)).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
+    sweep), ~2 mm peak, the default sensor.  Returns (records, truth parameters)."""
+    from scipy.signal import lfilter
+    from .adequacy import play
+    if kind not in OUTSIDE:
+        raise InputError(f"--kind {kind!r}: choose one of {', '.join(OUTSIDE)}")
+    rng = np.random.default_rng(seed)
+    dev = load_device(device)
+    truth, tp = ActuatorModel(dev, "none"), {}
+    if kind == "creep":
+        tp = {"creep_r": float(rng.uniform(0.25, 0.4)), "creep_tau_s": float(np.exp(rng.uniform(np.log(10), np.log(30))))}
+    elif kind == "backlash":
+        tp = {"play_width_m": float(rng.uniform(60e-6, 100e-6))}
+    else:
+        t = dev.tables["dma"]
+        f = np.geomspace(0.01, 100, 25)
+        tp = {"storage_rise_per_decade": float(rng.uniform(0.08, 0.12)), "tan_delta": float(rng.uniform(0.10, 0.16))}
+        E1 = float(np.interp(0.0, np.log10(t["freq"]), t["storage"]))
+        Es = E1 * (1 + tp["storage_rise_per_decade"]) ** np.log10(f)
+        table = {"freq": f, "storage": Es, "loss": tp["tan_delta"] * Es}
+        truth = ActuatorModel(dataclasses.replace(dev, tables={**dev.tables, "dma": table}), "viscoelastic")
+    plan = [(signals.sweep(1.0, 0.1, 50.0, duration, fs), "cubic")]
+    if kind != "twin":
+        plan.append((signals.square(1.0, t_on=20.0, t_off=40.0, cycles=1, fs=fs), "linear"))
+    out = []
+    for k, (sig, hold) in enumerate(plan):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            y = simulate(truth, None, sig.t, sig.v, rh=60.0, hold=hold).deflection
+        g = min(1.0, PEAK_M / float(np.max(np.abs(y))))
+        v, y = sig.v * g, y * g
+        if kind == "creep":
+            a = math.exp(-1.0 / (tp["creep_tau_s"] * fs))
+            y = y + tp["creep_r"] * lfilter([1 - a], [1, -a], y)
+        elif kind == "backlash":
+            y = play(y, tp["play_width_m"])
+        ts = TimeSeries(sig.t, v, y, rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe()},
+                        source=f"{kind}_{'sweep' if k == 0 else 'pulse'}")
+        out.append(SensorModel().apply(ts, seed=int(rng.integers(2 ** 31))))
+    return out, tp
