@@ -165,3 +165,12 @@ def test_near_twins_are_ambiguous_or_right():
     ms, _ = outside_catalog_case("twin", seed=0)
     v = diagnose(ms, "ipmc_pt_eg", "none").verdict
     assert v.missing_effect == "viscoelastic" or set(v.ambiguous) == {"viscoelastic", "fractional_coupling"}, v
+
+
+def test_demo_missing_physics_runs_the_loop(tmp_path, capsys):
+    from nnmodel.cli import main
+    assert main(["demo", "missing-physics", "--out", str(tmp_path / "mp"), "--duration-s", "60"]) == 0
+    out = capsys.readouterr().out
+    assert "loop: before not explained by the catalog" in out and "after adding creep: explained" in out
+    assert (tmp_path / "mp" / "before" / "report.html").is_file() and (tmp_path / "mp" / "after" / "report.html").is_file()
+    assert "creep" not in EFFECTS  # the demo leaves the registry as it found it
