@@ -117,8 +117,11 @@ def test_k_step_prediction_uses_only_the_past(linear_models, name):
     p, p_bad = m.predict(u, y=y, steps_ahead=k), m.predict(u, y=y_bad, steps_ahead=k)
     np.testing.assert_allclose(p[:t0 + k], p_bad[:t0 + k], rtol=0, atol=1e-12)
     assert np.max(np.abs(p[t0 + k:] - p_bad[t0 + k:])) > 1e-6  # and later ones do use it
-    # a horizon longer than the record is a free run from rest
-    np.testing.assert_allclose(m.predict(u, y=y, steps_ahead=len(u)), m.simulate(u),
+    # a horizon longer than the record is a free run from the steady state of the first
+    # measured samples (input u[0], output y[0] held before the record)
+    P = m.n_init_
+    held = m.simulate(np.r_[np.full(P, u[0]), u], y_init=np.full(P, y[0]))[P:]
+    np.testing.assert_allclose(m.predict(u, y=y, steps_ahead=len(u)), held,
                                rtol=1e-4, atol=1e-4 * np.std(y))  # float32 batch vs float64 fast path
 
 
@@ -270,3 +273,21 @@ def test_free_run_in_chunks_equals_one_piece(kind, monkeypatch):
     monkeypatch.setattr(base, "SIM_CHUNK", 37)
     pieces = m.simulate(u, 50.0)
     assert np.max(np.abs(pieces - whole)) <= 1e-5 * np.max(np.abs(whole))
+
+
+def test_without_output_feedback_one_step_equals_free_run_from_any_start():
+    """FF has no output feedback (na = 0): k-step prediction and free run are the same model
+    evaluation, also on a record that does not start at rest (filters start in the steady
+    state of the first input sample on both paths)."""
+    from nnmodel.data import Record
+    from nnmodel.models import MODELS
+    from scipy.signal import lfilter
+    rng = np.random.default_rng(2)
+    u = 0.8 + np.convolve(rng.normal(size=1500), np.ones(5) / 5, "same")   # far from 0 V at the start
+    y = lfilter([0.05], [1, -0.95], np.tanh(u)) * 1e-3
+    m = MODELS["ff"](na=0, nb=6, memory_filters=4, max_epochs=1, progress_bar=False)
+    m.fit([Record(u=u, y=y, rh=None, fs=100.0)])
+    k = m.n_init_
+    free = m.simulate(u, y_init=y[:k])
+    one = m.predict(u, y=y, steps_ahead=1)
+    np.testing.assert_allclose(one[k:], free[k:], rtol=1e-5, atol=1e-9)

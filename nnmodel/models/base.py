@@ -487,13 +487,17 @@ class NeuralModel:
         return u, rh, y
 
     def _padded(self, u, rh, y, pad: int):
-        """Normalised channels (see :meth:`_channels`) with ``pad`` samples of rest
-        (u = 0 V, y = 0, the first RH) in front."""
+        """Normalised channels (see :meth:`_channels`) with ``pad`` samples in front: with a
+        measured output ``y``, held at the first samples (the steady state of the first input
+        and output, so the memory filters start there whatever the record's start); without
+        one, at rest (0 V, output 0, the first RH), the documented assumption of a free run."""
         n = self.net_
-        up = np.concatenate([np.zeros(pad), u])
+        known = y is not None and y.size > 0
+        up = np.concatenate([np.full(pad, u[0] if known else 0.0), u])
         rhp = None if rh is None else np.concatenate([np.full(pad, rh[0]), rh])
         un, rhn = self._channels(up, rhp)
-        yn = None if y is None else np.concatenate([np.full(pad, n.norm("y", 0.0)), n.norm("y", y)])
+        yn = None if y is None else np.concatenate([np.full(pad, n.norm("y", float(y[0]) if known else 0.0)),
+                                                    n.norm("y", y)])
         return un, rhn, yn
 
     @staticmethod
@@ -542,9 +546,9 @@ class NeuralModel:
         ``steps_ahead=None``: free run (initialised from the first ``n_init_`` samples of
         ``y`` when ``y`` is given, else from rest).  ``steps_ahead=k``: each output ``y[t]``
         is simulated over ``k`` steps starting from the measured ``y`` up to ``t - k``; the
-        first ``k - 1`` outputs, whose start would lie before the record, are the free run
-        from rest at the record start (so ``k >= len(u)`` is exactly the free run from
-        rest).  ``k = 1`` is one-step-ahead prediction.
+        first ``k - 1`` outputs, whose start would lie before the record, are simulated from
+        the steady state of the first samples (input ``u[0]`` and output ``y[0]`` held before the
+        record), so a model without output feedback gives the same values as its free run.  ``k = 1`` is one-step-ahead prediction.
         """
         if steps_ahead is None:
             if y is None:
