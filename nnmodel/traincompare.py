@@ -28,7 +28,7 @@ from physics.errors import InputError
 from physics.fileio import write_json
 from physics.frequency import frequency_response
 from physics.plotting import plt, save
-from physics.report import Report, write_csv
+from physics.report import Report, colour, write_csv
 from physics import signals
 
 from .bundle import save as save_bundle
@@ -282,13 +282,13 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
         rec = ds.record(es[0])
         t = np.arange(rec.u.size) / rec.fs
         fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
-        ax[0].plot(t, k * rec.y, "k", lw=1.0, label="measurement")
+        ax[0].plot(t, k * rec.y, color=colour("measurement"), lw=1.0, label="measurement")
         for label, predict in physics_rows.items():
-            ax[0].plot(t, k * predict(rec), lw=0.8, label=label)
+            ax[0].plot(t, k * predict(rec), color=colour(label), lw=0.8, label=label)
         for name, m in trained.items():
             yh = m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])
-            ax[0].plot(t, k * yh, lw=0.8, label=name)
-            ax[1].plot(t, k * (rec.y - yh), lw=0.6, label=name)
+            ax[0].plot(t, k * yh, color=colour(name), lw=0.8, label=name)
+            ax[1].plot(t, k * (rec.y - yh), color=colour(name), lw=0.6, label=name)
         ax[0].set_ylabel(f"{qty} [{unit}]")
         ax[1].set_ylabel(f"residual [{unit}]")
         ax[1].set_xlabel("time [s]")
@@ -303,7 +303,7 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
         rh = r["free_run"]["by_rh"]
         if rh:
             xs = [float(k) for k in rh]
-            ax.plot(xs, [100 * v for v in rh.values()], "o-", label=name)
+            ax.plot(xs, [100 * v for v in rh.values()], "o-", color=colour(name), label=name)
     held = ds.meta["rh_levels"]["held_out"]
     for h in held:
         ax.axvline(h, color="0.85", zorder=0)
@@ -329,8 +329,8 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
     ax[0].loglog(f_ref, np.abs(resp_phys), "k", lw=1.5, label="physics (closed form)")
     ax[1].semilogx(f_ref, np.degrees(np.unwrap(np.angle(resp_phys))), "k", lw=1.5)
     for name, H in resp.items():
-        ax[0].loglog(f_ref, np.abs(H), lw=0.9, label=name)
-        ax[1].semilogx(f_ref, np.degrees(np.unwrap(np.angle(H))), lw=0.9)
+        ax[0].loglog(f_ref, np.abs(H), color=colour(name), lw=0.9, label=name)
+        ax[1].semilogx(f_ref, np.degrees(np.unwrap(np.angle(H))), color=colour(name), lw=0.9)
     ax[0].set_ylabel("|H| [m/V]")
     ax[1].set_ylabel("phase [deg]")
     ax[1].set_xlabel("frequency [Hz]")
@@ -342,7 +342,8 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
 
 
 def _report(summary: dict, out: Path) -> None:
-    rep = Report("eap train-compare", f"dataset {summary['dataset']} (hash {summary['dataset_hash'][:12]})")
+    rep = Report("eap train-compare", f"dataset {summary['dataset']}",
+                 provenance={"dataset hash": summary["dataset_hash"][:16], "fs": f"{summary['fs_Hz']:g} Hz"})
     rep.paragraph(__doc__.strip().split("\n\n")[0])
     rep.table(table_rows(summary["models"]))
     best = summary["best_heldout"]

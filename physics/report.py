@@ -123,6 +123,12 @@ def _columns(rows: list[dict], columns: Sequence[str] | None) -> list[str]:
     return cols
 
 
+def header(provenance: Mapping[str, Any] | None) -> dict:
+    """The report header's "what was run": command and package version of a provenance dict."""
+    p = dict(provenance or {})
+    return {k: p[k] for k in ("command", "version") if p.get(k)}
+
+
 def png_data_uri(image: str | os.PathLike | bytes) -> str:
     """A ``data:image/png;base64,...`` URI from a PNG file path or PNG bytes."""
     if isinstance(image, (bytes, bytearray)):

@@ -115,7 +115,7 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     """Write ``report.json``, ``metrics.csv``, ``bands.csv``, PNGs and ``report.html`` into
     ``out_dir`` (all atomically); returns the JSON dict."""
     from ..fileio import write_json
-    from ..report import Report, jsonable, write_csv
+    from ..report import Report, header, jsonable, write_csv
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     plots: dict[str, list[str]] = {}
@@ -162,7 +162,8 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
         write_csv(brows, d / "bands.csv")
     write_csv(res.by_rh, d / "by_rh.csv")
     # HTML
-    rep = Report(title, subtitle=f"model: {res.predictor.get('name')}; {len(res.records)} measurement(s)")
+    rep = Report(title, subtitle=f"model: {res.predictor.get('name')}; {len(res.records)} measurement(s)",
+                 provenance=header(provenance))
     for w in res.warnings:
         rep.warning(w)
     rep.heading("Summary")

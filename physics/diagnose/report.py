@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..fileio import write_json, write_text
 from ..identify import write_device
-from ..report import Report, jsonable
+from ..report import Report, header, jsonable
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
 
@@ -217,7 +217,8 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     v = res.verdict
     b = res.base
     rep = Report("Diagnosis: where the model fails and which effect is missing",
-                 subtitle=f"{res.device.name} [{', '.join(b.effects)}] against {len(res.records)} record(s)")
+                 subtitle=f"{res.device.name} [{', '.join(b.effects)}] against {len(res.records)} record(s)",
+                 provenance=header(provenance))
     rep.heading("Verdict")
     if v.missing_effect:
         w = res.winner

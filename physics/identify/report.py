@@ -69,7 +69,7 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
     """Write the fitted device ``NAME.yaml``, ``report.json``, ``parameters.csv``, PNGs and
     ``report.html`` into ``out_dir``; returns the JSON dict (with the file names)."""
     from ..fileio import write_json
-    from ..report import Report, jsonable, write_csv
+    from ..report import Report, header, jsonable, write_csv
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     date = _dt.date.today().isoformat()
@@ -100,7 +100,8 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
     fit = result.fit
     rep = Report("Parameter identification",
                  subtitle=f"{result.problem.device.name} [{', '.join(result.problem.effects)}] from "
-                          f"{len(result.sources)} measurement(s); fitted device: {dev_path.name}")
+                          f"{len(result.sources)} measurement(s); fitted device: {dev_path.name}",
+                 provenance=header(provenance))
     for w in result.warnings:
         rep.warning(w)
     rep.heading("Result")
