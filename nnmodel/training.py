@@ -94,6 +94,10 @@ def _pad_batch(seqs, n_init: int) -> dict:
     return {"u": t(u), "y": t(y), "rh": t(rh), "mask": t(mask)}
 
 
+#: Fewest optimizer steps per epoch: the batch shrinks on short records (a recipe's batch of
+#: 256 windows would otherwise give one step per epoch and early stopping after a few steps).
+MIN_STEPS_PER_EPOCH = 8
+
 #: How training runs (not what is trained): processes/devices and Lightning strategy.  Set
 #: with :func:`execution` (``eap train-compare --devices 2 --strategy ddp_spawn``).
 EXECUTION = {"devices": 1, "strategy": "auto"}
@@ -273,6 +277,12 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
     pl.seed_everything(seed, workers=True, verbose=False)
     monitor = "val_loss" if val_seqs else "train_loss"
     dm = WindowDataModule(train_seqs, val_seqs, core.n_init, horizon, stride, batch_size, seed)
+    dm.setup()
+    n_windows = len(dm.train_set)
+    if n_windows < MIN_STEPS_PER_EPOCH * batch_size:   # short records: keep several optimizer steps per epoch
+        dm.batch_size = max(1, n_windows // MIN_STEPS_PER_EPOCH)
+        warnings.warn(f"{n_windows} training windows: batch size {batch_size} lowered to {dm.batch_size} so that an "
+                      f"epoch has at least {MIN_STEPS_PER_EPOCH} optimizer steps", UserWarning, stacklevel=3)
     task = SimulationTask(core, lr=lr, weight_decay=weight_decay, monitor=monitor,
                           lr_patience=lr_patience if lr_patience is not None else max(2, patience // 3))
     hist = _History()
@@ -319,7 +329,7 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
     fired = bool(max_time is not None and elapsed >= float(max_time) and not stop.stopped_epoch
                  and epochs < max_epochs)
     summary = {"epochs_run": epochs, "time_guard_fired": fired, "max_epochs": int(max_epochs),
-               "max_time_s": max_time}
+               "max_time_s": max_time, "batch_size": int(dm.batch_size), "training_windows": int(n_windows)}
     if fired:
         warnings.warn(f"training stopped by the wall-clock guard max_time={max_time:g} s after {epochs} of "
                       f"{max_epochs} epochs: the result depends on this machine's speed; raise max_time or "
