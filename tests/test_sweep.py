@@ -1,6 +1,5 @@
 """Parameter sweeps and the execution layer: closed-form beam scaling, identical results for
 any worker count, clear errors."""
-import numpy as np
 import pandas as pd
 import pytest
 

@@ -5,9 +5,7 @@ import argparse
 import json
 import platform
 import sys
-from pathlib import Path
 
-from physics.errors import InputError
 from physics.outputs import output_folder, preflight
 
 
