@@ -35,6 +35,10 @@ def test_eap_suite_writes_one_table_with_every_model_and_the_physics_reference(t
     for f in ("eap.json", "eap.csv", "eap.html", "eap.png", "compare/report.html", "compare/models/hybrid/card.json"):
         assert (out / f).is_file(), f
     data = json.loads((out / "eap.json").read_text())
+    from browser_check import CHROMIUM, assert_clean, render
+    if CHROMIUM:   # the benchmark page through the one report builder, in a real browser
+        check, text = render(out / "eap.html")
+        assert_clean(check, out / "eap.html")
     names = [r["model"] for r in data["results"]]
     assert names[0] == "physics" and {"ff", "rbf", "hybrid"} <= set(names)
     for r in data["results"]:

@@ -2,38 +2,15 @@
 ``.ci/run`` installs it): every image loads, no script errors, nothing wider than the
 viewport outside the scroll boxes, and the main numbers on the page equal the JSON beside
 it.  A screenshot of each page is kept under its run folder (an artefact, not in git)."""
-import html
 import json
-import re
-import shutil
-import subprocess
 
 import pytest
 
+from browser_check import assert_clean, needs_browser, render
 from nnmodel.cli import main
 from physics.timeseries import write_timeseries
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (.ci/run installs it)")
-
-
-def render(page, width=1100):
-    """(the page's self-check dict, its text) after loading ``page`` in headless Chromium."""
-    cmd = [CHROMIUM, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-           f"--window-size={width},900", "--virtual-time-budget=5000"]
-    dom = subprocess.run(cmd + ["--dump-dom", page.resolve().as_uri()], capture_output=True, text=True,
-                         timeout=120).stdout
-    subprocess.run(cmd + [f"--screenshot={page.with_suffix('.png')}", page.resolve().as_uri()],
-                   capture_output=True, timeout=120)
-    m = re.search(r'data-eap-check="([^"]*)"', dom)
-    assert m, f"{page}: the page's self-check did not run"
-    return json.loads(html.unescape(m.group(1))), re.sub(r"<[^>]+>", " ", dom)
-
-
-def assert_clean(check, page):
-    assert check["images"] >= 1 and not check["broken"], (page, check)
-    assert not check["errors"], (page, check)
-    assert not check["too_wide"], (page, check)
+pytestmark = needs_browser
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +53,7 @@ def test_run_page_tells_the_story(tmp_path):
     assert f"{loop['rmse_before_um']:.3g} µm" in text and f"{loop['rmse_after_um']:.3g} µm" in text
     res = rep["physics"]["ipmc_pt_eg"]["resonance_Hz_by_rh"]
     assert f"{res['40']:.1f} Hz" in text
-    assert page.with_suffix(".png").is_file()
+    assert page.with_name("index.screenshot.png").is_file()
 
 
 def test_train_compare_report(tmp_path):

@@ -16,14 +16,15 @@ from physics.timeseries import write_timeseries
 from ._common import add_output_options, provenance, writing
 
 #: Epoch budgets of the main job (reproducible on any machine, unlike a time budget).
-RUN_SETS = ("narx.max_epochs=20",)
+RUN_SETS = ("narx.max_epochs=20", "hybrid.max_epochs=10")
 NAME = "run"
 HELP = "run the end-to-end job on built-in defaults and write a report folder"
 
 
 def add_arguments(p):
     add_output_options(p, "runs/quickstart", "report folder")
-    p.add_argument("--models", default="ff,rbf,narx,lstm", help="neural models to train and compare")
+    p.add_argument("--models", default="ff,rbf,narx,lstm,hybrid",
+                   help="models to train and compare (the hybrid: physics simulator + neural correction)")
     p.add_argument("--dataset-config", default="quick", help="dataset preset (configs/datasets)")
     p.add_argument("--set", action="append", default=None, metavar="MODEL.KEY=VALUE",
                    help="override a recipe hyper-parameter (repeatable); default: "
