@@ -126,7 +126,10 @@ def _columns(rows: list[dict], columns: Sequence[str] | None) -> list[str]:
 def header(provenance: Mapping[str, Any] | None) -> dict:
     """The report header's "what was run": command and package version of a provenance dict."""
     p = dict(provenance or {})
-    return {k: p[k] for k in ("command", "version") if p.get(k)}
+    out = {k: p[k] for k in ("command", "version") if p.get(k)}
+    if p.get("data_sha256"):
+        out["data"] = ", ".join(f"{name} (sha256 {h[:12]})" for name, h in p["data_sha256"].items())
+    return out
 
 
 def png_data_uri(image: str | os.PathLike | bytes) -> str:

@@ -5,6 +5,7 @@ import argparse
 import json
 import platform
 import sys
+from pathlib import Path
 
 from physics.outputs import output_folder, preflight
 
@@ -53,14 +54,19 @@ def writing(args, inputs=()):
     return output_folder(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False))
 
 
-def provenance(argv=None) -> dict:
+def provenance(argv=None, inputs=()) -> dict:
     from importlib.metadata import PackageNotFoundError, version
     try:
         ver = version("eap-model")
     except PackageNotFoundError:
         ver = "unknown"
-    return {"package": "eap-model", "version": ver, "python": platform.python_version(),
-            "command": " ".join(["eap"] + (sys.argv[1:] if argv is None else list(argv)))}
+    out = {"package": "eap-model", "version": ver, "python": platform.python_version(),
+           "command": " ".join(["eap"] + (sys.argv[1:] if argv is None else list(argv)))}
+    files = [p for p in map(Path, inputs) if p.is_file()]
+    if files:
+        from physics.fileio import sha256_file
+        out["data_sha256"] = {p.name: sha256_file(p) for p in files}
+    return out
 
 
 def dumps(obj) -> str:

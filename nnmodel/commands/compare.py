@@ -169,7 +169,8 @@ def run(args) -> int:
                   min_coherence=args.min_coherence, bands=parse_bands(args.bands) if args.bands else None,
                   rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz))
     with writing(args, inputs=_inputs(args)) as tmp:
-        write_comparison_report(res, tmp, provenance=provenance(), title=f"eap compare: {predictor.name}")
+        write_comparison_report(res, tmp, provenance=provenance(inputs=args.measurements),
+                                title=f"eap compare: {predictor.name}")
     d = Path(args.out)
     print(f"model: {predictor.name}")
     for r in res.records:

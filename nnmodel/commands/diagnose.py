@@ -104,7 +104,8 @@ def run(args) -> int:
                    fs_max=args.fs_max_Hz, n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, progress=log,
                    settings=parallel_settings(args))
     with writing(args, inputs=protect) as tmp:
-        out = write_diagnosis(res, tmp, apply=args.apply, name=args.name, provenance=provenance(), protect=protect)
+        out = write_diagnosis(res, tmp, apply=args.apply, name=args.name, provenance=provenance(inputs=protect),
+                              protect=protect)
     d = Path(args.out)
     print_summary(res)
     if args.apply:

@@ -60,7 +60,7 @@ def run(args) -> int:
                        sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), n_modes=args.n_modes,
                        start_spread=args.start_spread, rh=args.rh, skip_s=args.skip_s)
     with writing(args, inputs=protect) as tmp:
-        out = write_identification(res, tmp, name=args.name, provenance=provenance(), protect=protect)
+        out = write_identification(res, tmp, name=args.name, provenance=provenance(inputs=protect), protect=protect)
     d = Path(args.out)
     prob = res.problem
     print(f"{prob.device.name} [{', '.join(prob.effects)}] from {len(res.sources)} measurement(s), "
