@@ -97,6 +97,7 @@ def first_order_lag(tau: float) -> StateSpace:
 # ----------------------------------------------------------------------------------------
 # Exact integration for interpolated inputs
 # ----------------------------------------------------------------------------------------
+_BLOCK = 1 << 16   # time samples per block of the modal recursion (memory ∝ modes × block)
 _HOLD_NODES = {"linear": (0, 1), "cubic": (-1, 0, 1, 2)}
 
 
@@ -130,26 +131,37 @@ def _moments(mu: np.ndarray, order: int) -> np.ndarray:
     return M
 
 
-def _padded_input(u: np.ndarray, nodes) -> tuple[np.ndarray, int]:
-    """Input with ghost samples (linear extrapolation) so every step sees all its nodes;
-    time is the last axis."""
-    lo, hi = -min(nodes), max(nodes) - 1
-    parts = []
-    if lo:
-        parts.append(u[..., :1] - (u[..., 1:2] - u[..., :1]) * np.arange(lo, 0, -1))
-    parts.append(u)
-    if hi:
-        parts.append(u[..., -1:] + (u[..., -1:] - u[..., -2:-1]) * np.arange(1, hi + 1))
-    return np.concatenate(parts, axis=-1), lo
+class _PaddedInput:
+    """The input with ghost samples before and after (time on the last axis), read by
+    column ranges without copying the whole record: ``window(a, b)`` are columns a:b of
+    concat(head, u, tail).  ``offset`` is the padded index of sample 0.
 
+    Not periodic: ghosts extrapolate linearly so every step sees all its nodes.  Periodic:
+    one period plus sample N (= sample 0), with the ghosts wrapped around."""
 
-def _periodic_input(u: np.ndarray, nodes) -> tuple[np.ndarray, int]:
-    """One period plus sample N (= sample 0), with ghost samples wrapped around."""
-    lo, hi = -min(nodes), max(nodes) - 1
-    ext = np.concatenate([u, u[..., :1]], axis=-1)
-    parts = [u[..., u.shape[-1] - lo:]] if lo else []
-    parts += [ext, u[..., 1:1 + hi]] if hi else [ext]
-    return np.concatenate(parts, axis=-1), lo
+    def __init__(self, u: np.ndarray, nodes, periodic: bool = False):
+        lo, hi = -min(nodes), max(nodes) - 1
+        self.u, self.offset = u, lo
+        if periodic:
+            self.head = u[..., u.shape[-1] - lo:]
+            self.tail = np.concatenate([u[..., :1], u[..., 1:1 + hi]], axis=-1)
+        else:
+            self.head = u[..., :1] - (u[..., 1:2] - u[..., :1]) * np.arange(lo, 0, -1)
+            self.tail = u[..., -1:] + (u[..., -1:] - u[..., -2:-1]) * np.arange(1, hi + 1)
+
+    def full(self) -> np.ndarray:
+        return np.concatenate([self.head, self.u, self.tail], axis=-1)
+
+    def window(self, a: int, b: int) -> np.ndarray:
+        nh, N = self.head.shape[-1], self.u.shape[-1]
+        parts = []
+        if a < nh:
+            parts.append(self.head[..., a:min(b, nh)])
+        if min(b - nh, N) > max(a - nh, 0):
+            parts.append(self.u[..., max(a - nh, 0):min(b - nh, N)])
+        if b > nh + N:
+            parts.append(self.tail[..., max(a - nh - N, 0):b - nh - N])
+        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)
 
 
 def simulate(ss: StateSpace, u: np.ndarray, dt: float, x0: np.ndarray | None = None,
@@ -202,11 +214,10 @@ def simulate(ss: StateSpace, u: np.ndarray, dt: float, x0: np.ndarray | None = N
     mu = lam * dt
     M = _moments(mu, len(nodes) - 1)
     W = dt * (_lagrange_coeffs(nodes) @ M)  # (n_nodes, n_modes): weight of u[n + node]
-    up, off = _periodic_input(u, nodes) if periodic else _padded_input(u, nodes)
+    up = _PaddedInput(u, nodes, periodic)
     lead = max(nodes)
-    k0 = off + lead                          # padded index of the newest sample used for z[1]
-    x_new = up[:, :, k0:k0 + N_run - 1]      # (n_in, B, N_run-1)
-    x_past = up[:, :, k0 - len(nodes) + 1:k0][:, :, ::-1]  # older samples, newest first
+    k0 = up.offset + lead                    # padded index of the newest sample used for z[1]
+    x_past = up.window(k0 - len(nodes) + 1, k0)[:, :, ::-1]  # older samples, newest first
     # Conjugate pairs: keep one (Im > 0) and double its real part; real modes count once.
     keep = np.where(lam.imag >= -1e-12 * np.maximum(1.0, np.abs(lam)))[0]
     wgt = np.where(np.abs(lam[keep].imag) > 1e-12 * np.maximum(1.0, np.abs(lam[keep])), 2.0, 1.0)
@@ -215,9 +226,10 @@ def simulate(ss: StateSpace, u: np.ndarray, dt: float, x0: np.ndarray | None = N
     taps = W[::-1]                           # FIR taps, newest sample first (nodes descending)
     for c0 in range(0, keep.size, chunk):
         idx = keep[c0:c0 + chunk]
-        Z = np.zeros((idx.size, B, N_run), dtype=complex)
+        Cw = Ct[:, idx] * wgt[None, c0:c0 + idx.size]
+        _add_modes(y[:, :, :1], Cw, z0[idx][:, :, None])     # sample 0: the initial state
+        filters = []                                         # per mode: (row, taps, denominator, channel, zi)
         for r, k in enumerate(idx):
-            Z[r, :, 0] = z0[k]
             real = lam[k].imag == 0.0
             acc = np.array([1.0, -a[k].real]) if real else np.array([1.0, -a[k]])
             first = _first_input(Bt[k])
@@ -227,21 +239,44 @@ def simulate(ss: StateSpace, u: np.ndarray, dt: float, x0: np.ndarray | None = N
                 y0 = z0[k] if i == first else np.zeros(B)
                 zi = np.stack([lfiltic(b, acc, [y0[bb].real if real else y0[bb]], x_past[i, bb])
                                for bb in range(B)])
-                Z[r, :, 1:] += lfilter(b, acc, x_new[i], axis=-1, zi=zi)[0]
-            if first < 0 and z0[k].any():
-                Z[r, :, 1:] = z0[k][:, None] * a[k] ** np.arange(1, N_run)[None, :]
-            if periodic:  # add the homogeneous solution that makes z(N) = z(0)
-                den = 1.0 - a[k] ** N
-                zp = Z[r, :, N] / den if abs(den) > 1e-13 else np.zeros(B, dtype=complex)
-                Z[r] += zp[:, None] * a[k] ** np.arange(N_run)[None, :]
-            z_final[k] = Z[r, :, N - 1]
-        Cw = Ct[:, idx] * wgt[None, c0:c0 + idx.size]
-        Zf = Z[:, :, :N].reshape(idx.size, B * N)
-        y += (Cw.real @ Zf.real - Cw.imag @ Zf.imag).reshape(-1, B, N)
+                filters.append([r, b, acc, i, zi])
+        free = [r for r, k in enumerate(idx) if _first_input(Bt[k]) < 0 and z0[k].any()]
+        z_last = np.zeros((idx.size, B), dtype=complex)      # Z at sample N_run - 1
+        z_end = np.zeros((idx.size, B), dtype=complex)       # Z at sample N - 1
+        # time blocks keep the memory at (modes × block) whatever the record length
+        for t0 in range(1, N_run, _BLOCK):
+            t1 = min(t0 + _BLOCK, N_run)
+            Z = np.zeros((idx.size, B, t1 - t0), dtype=complex)
+            x_new = up.window(k0 + t0 - 1, k0 + t1 - 1)      # (n_in, B, t1 - t0): newest sample per step
+            for f in filters:
+                out, f[4] = lfilter(f[1], f[2], x_new[f[3]], axis=-1, zi=f[4])
+                Z[f[0]] += out
+            for r in free:
+                Z[r] = z0[idx[r]][:, None] * a[idx[r]] ** np.arange(t0, t1)[None, :]
+            z_last = Z[:, :, -1]
+            if t0 <= N - 1 < t1:
+                z_end = Z[:, :, N - 1 - t0]
+            _add_modes(y[:, :, t0:min(t1, N)], Cw, Z[:, :, :min(t1, N) - t0])
+        if periodic:  # add the homogeneous solution that makes z(N) = z(0)
+            den = 1.0 - a[idx] ** N
+            ok = np.abs(den) > 1e-13
+            zp = np.where(ok[:, None], z_last / np.where(ok, den, 1.0)[:, None], 0.0)
+            for t0 in range(0, N, _BLOCK):
+                t1 = min(t0 + _BLOCK, N)
+                _add_modes(y[:, :, t0:t1], Cw, zp[:, :, None] * a[idx][:, None, None] ** np.arange(t0, t1))
+            z_end = z_end + zp * a[idx][:, None] ** (N - 1)
+        z_final[idx] = z_end
     conj = np.setdiff1d(np.arange(n), keep)
     z_final[conj] = np.conj(z_final[_partner(lam, conj, keep)])
     xf = (V @ z_final).real
     return (y[:, 0] if single else y), (xf[:, 0] if single else xf)
+
+
+def _add_modes(y: np.ndarray, Cw: np.ndarray, Z: np.ndarray) -> None:
+    """y (n_out, B, T) += Re(Cw Z) for complex modal states Z (modes, B, T)."""
+    m, B, T = Z.shape
+    Zf = Z.reshape(m, B * T)
+    y += (Cw.real @ Zf.real - Cw.imag @ Zf.imag).reshape(-1, B, T)
 
 
 def _first_input(b: np.ndarray) -> int:
@@ -269,7 +304,8 @@ def _simulate_expm(ss: StateSpace, u, dt, x0, nodes):
     E = linalg.expm(Maug)
     Phi, Gam = E[:n, :n], E[:n, n:]
     coeff = _lagrange_coeffs(nodes)  # (node, power)
-    up, off = _padded_input(u, nodes)
+    pad = _PaddedInput(u, nodes)
+    off, up = pad.offset, pad.full()
     N = u.shape[1]
     X = np.empty((n, N))
     X[:, 0] = x0

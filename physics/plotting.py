@@ -16,11 +16,32 @@ def save(fig, path) -> None:
     plt.close(fig)
 
 
+#: Points per line beyond which a time plot draws the min–max envelope instead.
+MAX_LINE_POINTS = 20_000
+
+
+def envelope(t: np.ndarray, y: np.ndarray, max_points: int = MAX_LINE_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """(t, y) thinned for drawing: for more than ``max_points`` samples, the minimum and
+    maximum of each of ``max_points // 2`` equal buckets in time order, so the drawn line
+    covers the same band as the full one (peaks kept) at a bounded cost in memory."""
+    t, y = np.asarray(t), np.asarray(y)
+    n = y.size
+    if n <= max_points:
+        return t, y
+    k = max(1, max_points // 2)
+    edges = np.linspace(0, n, k + 1).astype(int)
+    i_lo = edges[:-1] + np.array([np.argmin(y[a:b]) for a, b in zip(edges[:-1], edges[1:])])
+    i_hi = edges[:-1] + np.array([np.argmax(y[a:b]) for a, b in zip(edges[:-1], edges[1:])])
+    first = i_lo <= i_hi                                   # keep each bucket's two points in time order
+    idx = np.column_stack([np.where(first, i_lo, i_hi), np.where(first, i_hi, i_lo)]).ravel()
+    return t[idx], y[idx]
+
+
 def plot_timeseries(t, channels: dict[str, tuple[np.ndarray, str]], path, title: str = "") -> None:
     """One panel per channel: ``{label: (values, unit)}``."""
     fig, axes = plt.subplots(len(channels), 1, figsize=(8, 2.1 * len(channels)), sharex=True, squeeze=False)
     for ax, (label, (y, unit)) in zip(axes[:, 0], channels.items()):
-        ax.plot(t, y, lw=0.8)
+        ax.plot(*envelope(t, y), lw=0.8)
         ax.set_ylabel(f"{label} [{unit}]")
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")

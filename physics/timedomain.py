@@ -114,7 +114,14 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
         edges = _line_grid(model, p_mid, w_hi, n_segments)
     base = dict(model.device.params)
 
-    # 1. electrochemistry
+    # 1. electrochemistry, reduced at once to what stages 2–4 need: the solvent excess and
+    # the modal loads (rows of `reduce`, acting on the clamp branch and the segments), so a
+    # long record never holds one row per segment unless a per-segment field is asked for
+    lengths = np.concatenate([[base["L_clamp"]], np.diff(edges)])
+    modal = _beam_projection(model, base, edges)
+    reduce = np.vstack([base["n_solvation"] * lengths / base["L_total"],
+                        np.hstack([np.zeros((modal.shape[0], 1)), modal])])
+    flds = {}
     if stepper_needed:
         from . import stepper
         want = {"voltage": "U", "charge": "Q", "temperature": "T", "cation": "c"}
@@ -122,28 +129,33 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
                           {want[f] for f in fields if f in want}, progress=progress)
         load, current = out["load"], out["current"]
         c_up, c_low = out.get("c_up"), out.get("c_low")
-        flds = {}
         if "voltage" in fields:
             flds["voltage"] = out["U"][1:]
         if "charge" in fields:
             flds["charge"] = out["Q"][1:]
         if "temperature" in fields:
             flds["temperature"] = out["T"][1:]
+        reduced = reduce @ load
     else:
         p = model.params_at(float(rh_t[0]))
-        load, current, flds = _electrochemistry_lti(model, p, edges, v, dt, hold, fields, periodic)
-        c_up, c_low = load, -load
+        per_segment = "cation" in fields
+        reduced, current, flds = _electrochemistry_lti(model, p, edges, v, dt, hold, fields, periodic,
+                                                       None if per_segment else reduce)
+        if per_segment:
+            load, reduced = reduced, reduce @ reduced
+            c_up, c_low = load, -load
         if "temperature" in fields:
             flds["temperature"] = np.full((edges.size - 1, t.size), p["T_ext"])
     if "cation" in fields:
         flds["cation_upper"], flds["cation_lower"] = c_up[1:], c_low[1:]
 
-    # 2.–4. projection, load filter, mechanics
-    lengths = np.concatenate([[base["L_clamp"]], np.diff(edges)])
-    cs_pre = base["n_solvation"] * (lengths @ load)[None, :] / base["L_total"]
+    # 2.–4. load filter, mechanics
     load_filter, cs_filter = _load_filters(model, base, w_hi)
-    cs = _apply_filter(cs_filter, cs_pre, dt, hold, periodic)[0]
-    tip = _tip(model, base, load[1:], edges, rh_t, load_filter, dt, hold, periodic)
+    cs = _apply_filter(cs_filter, reduced[:1], dt, hold, periodic)[0]
+    loads = _modal_loads(model, reduced[1:], rh_t, load_filter, dt, hold, periodic)
+    del reduced                                      # the electrochemistry rows are no longer needed
+    tip = _mechanics(model, base, loads, model.components["humidity"].stiffness_factor(rh_t), dt, hold, periodic)
+    del loads
     if model.outputs:
         tip = model.filter_output(tip, 1.0 / dt, model.params_at(float(np.mean(rh_t))))
     return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs,
@@ -180,13 +192,28 @@ def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_fa
 
 
 def _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic):
-    """Stages 2–4: projection onto the modes, load filter kf(s)(·B(s)), humidity, mechanics."""
-    hum = model.components["humidity"]
+    """Stages 2–4 for per-segment loads ``ell`` (n_seg, N): projection onto the modes,
+    load filter and humidity (:func:`_modal_loads`), mechanics."""
+    loads = _modal_loads(model, _beam_projection(model, base, edges) @ ell, rh_t, load_filter, dt, hold, periodic)
+    return _mechanics(model, base, loads, model.components["humidity"].stiffness_factor(rh_t), dt, hold, periodic)
+
+
+def _beam_projection(model, base, edges) -> np.ndarray:
+    """(n_modes + 1, n_seg): modal loads [N] and the quasi-static residual [N m²] per unit
+    first-moment-equivalent interface excess [mol/m³] on each free segment."""
     coef = 2.0 * 0.5 * base["t_polymer"] * base["width"] * base["n_solvation"]
     proj = projection(model.modes(), edges, coef)
-    pre = np.vstack([proj.modal @ ell, proj.residual @ ell])
-    loads = _apply_filter(load_filter, pre, dt, hold, periodic) * hum.coupling_factor(rh_t)[None, :]
-    return _mechanics(model, base, loads, hum.stiffness_factor(rh_t), dt, hold, periodic)
+    return np.vstack([proj.modal, proj.residual])
+
+
+def _modal_loads(model, pre, rh_t, load_filter, dt, hold, periodic) -> np.ndarray:
+    """Stage 3: projected loads ``pre`` (n_modes + 1, N) through the load filter kf(s)(·B(s))
+    and the humidity factor of the coupling, row by row in place (``pre`` is overwritten and
+    returned, so a long record needs one extra row, not a second array)."""
+    factor = model.components["humidity"].coupling_factor(rh_t)
+    for k in range(pre.shape[0]):
+        pre[k] = _apply_filter(load_filter, pre[k:k + 1], dt, hold, periodic)[0] * factor
+    return pre
 
 
 def _check_record(t, voltage):
@@ -211,9 +238,11 @@ def _check_record(t, voltage):
 # ----------------------------------------------------------------------------------------
 # Stage 1: electrochemistry as an LTI system
 # ----------------------------------------------------------------------------------------
-def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fields, periodic=False):
+def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fields, periodic=False,
+                          reduce: np.ndarray | None = None):
     """Linear electrochemistry.  Returns (interface cation excess per branch, clamp branch
-    first (n_seg+1, N) [mol/m³], current (N) [A], fields)."""
+    first (n_seg+1, N) [mol/m³] — or ``reduce`` (k, n_seg+1) applied to it, (k, N) —,
+    current (N) [A], fields)."""
     d = model.double_layer_props(p)
     branch = model.components["double_layer"].realize(d, np.pi / dt)
     nc = branch.n_states
@@ -258,8 +287,12 @@ def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fie
     Cc_blk = np.kron(np.eye(n), Cc) @ seg_state
     c_x = Cc_blk + Dc * Ufrom_x
     c_v = Dc * Ufrom_v
-    rows_C = [c_x, clamp_x, I_x]
-    rows_D = [c_v, np.array([[clamp_v]]), np.array([[I_v]])]
+    exc_C, exc_D = np.vstack([clamp_x, c_x]), np.vstack([[[clamp_v]], c_v])
+    if reduce is not None:
+        exc_C, exc_D = reduce @ exc_C, reduce @ exc_D
+    n_exc = exc_C.shape[0]
+    rows_C = [exc_C, I_x]
+    rows_D = [exc_D, np.array([[I_v]])]
     if "voltage" in fields:
         rows_C.append(Ufrom_x)
         rows_D.append(Ufrom_v)
@@ -268,13 +301,13 @@ def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fie
         rows_D.append(Dq * Ufrom_v)
     ss = StateSpace(A, B, np.vstack(rows_C), np.vstack(rows_D))
     y, _ = lti.simulate(ss, v[None, :], dt, x0=_steady_state(ss, v[0]), hold=hold, periodic=periodic)
-    c_seg, c_clamp, current = y[:n], y[n:n + 1], y[n + 1]
-    flds, k = {}, n + 2
+    excess, current = y[:n_exc], y[n_exc].copy()     # a copy, so the excess rows can be freed alone
+    flds, k = {}, n_exc + 1
     if "voltage" in fields:
         flds["voltage"], k = y[k:k + n], k + n
     if "charge" in fields:
         flds["charge"] = y[k:k + n]
-    return np.vstack([c_clamp, c_seg]), current, flds
+    return excess, current, flds
 
 
 def _steady_state(ss: StateSpace, u0: float) -> np.ndarray:
@@ -406,7 +439,7 @@ def _mechanics(model: ActuatorModel, p: dict, loads: np.ndarray, stiffness: np.n
     logk = np.log(stiffness)
     starts = [0]
     ref = logk[0]
-    for i in range(1, N):
+    for i in range(1, N if np.ptp(logk) > 2e-3 else 0):
         if abs(logk[i] - ref) > 2e-3:
             starts.append(i)
             ref = logk[i]

@@ -100,3 +100,22 @@ def test_param_overrides_geometry_with_units(tmp_path, capsys):
     assert fa / fb == pytest.approx((L1 / L0) ** 2, rel=1e-6)
     assert main(["frf", "--param", "L_total=4kg", "--json", str(b)]) == 2
     assert "not compatible" in capsys.readouterr().err
+
+
+def test_long_compare_reports_its_stages_unless_quiet(tmp_path, capsys, monkeypatch):
+    """Inputs above LONG_INPUT_BYTES get a line per stage on stderr; --quiet silences them;
+    short inputs print none (their error messages stay the first line)."""
+    from nnmodel.commands import _common
+    assert main(["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone",
+                 "--frequency-Hz", "2", "--duration-s", "3", "--fs-Hz", "200", "--out", str(tmp_path / "sim")]) == 0
+    rec = tmp_path / "sim" / "simulation.csv"
+    capsys.readouterr()
+    base = ["compare", str(rec), "--model", "ip2c_pedot_water"]
+    assert main(base + ["--out", str(tmp_path / "a")]) == 0
+    assert "[compare" not in capsys.readouterr().err
+    monkeypatch.setattr(_common, "LONG_INPUT_BYTES", 1)
+    assert main(base + ["--out", str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err
+    assert "[compare" in err and "samples" in err and "writing the report" in err
+    assert main(base + ["--out", str(tmp_path / "c"), "--quiet"]) == 0
+    assert "[compare" not in capsys.readouterr().err

@@ -73,3 +73,18 @@ def test_write_csv(tmp_path):
     assert rows == [["a", "b", "c"], ["0.1", "1.0;2.0", ""], ["", "", "x"]]
     with pytest.raises(InputError, match="row 0"):
         write_csv([1], tmp_path / "u.csv")
+
+
+def test_long_lines_are_drawn_as_their_envelope():
+    """Time plots of long records draw at most MAX_LINE_POINTS points per line, keeping
+    every bucket's extremes (the drawn band equals the full one) in time order."""
+    from physics.plotting import envelope
+    rng = np.random.default_rng(2)
+    t = np.arange(1_000_003) / 1e3
+    y = np.sin(2 * np.pi * 0.3 * t) + 0.1 * rng.normal(size=t.size)
+    y[777_777] = 9.0                                   # a single spike must survive
+    te, ye = envelope(t, y, max_points=2000)
+    assert ye.size <= 2000 and np.all(np.diff(te) >= 0)
+    assert ye.max() == 9.0 and ye.min() == y.min()
+    short_t, short_y = envelope(t[:500], y[:500], max_points=2000)
+    assert short_y is y[:500] or np.array_equal(short_y, y[:500])

@@ -337,3 +337,18 @@ def test_identify_extra_starts_backwards_compatible():
     assert f2.theta == pytest.approx(f1.theta, rel=1e-4)
     with pytest.raises(InputError, match="one value per free parameter"):
         fit_lsq(prob, n_starts=1, extra_starts=[[0.002]])
+
+
+def test_lag_by_lag_correlations_equal_the_fft_ones(monkeypatch):
+    """Long records with few lags are correlated lag by lag (no 2n FFT buffers); both
+    routes are the same estimator."""
+    rng = np.random.default_rng(4)
+    e = rng.normal(size=20_000)
+    u = np.convolve(rng.normal(size=e.size), np.ones(7), "same") + 0.5 * e
+    assert stats._direct(e.size, 30) and not stats._direct(e.size, 5000)
+    direct = stats.autocorrelation(e, 30), stats.cross_correlation(u, e, 30)[1]
+    monkeypatch.setattr(stats, "_direct", lambda n, m: False)
+    fft = stats.autocorrelation(e, 30), stats.cross_correlation(u, e, 30)[1]
+    np.testing.assert_allclose(direct[0], fft[0], atol=1e-12)
+    np.testing.assert_allclose(direct[1], fft[1], atol=1e-12)
+    assert abs(direct[1][30]) > 5 * 2.576 / np.sqrt(e.size)   # lag 0: u contains e, far outside the 99 % band

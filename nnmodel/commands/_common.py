@@ -5,6 +5,7 @@ import argparse
 import json
 import platform
 import sys
+import time
 from pathlib import Path
 
 from physics.outputs import output_folder, preflight
@@ -28,6 +29,28 @@ def add_output_options(p: argparse.ArgumentParser, default: str | None, what: st
         p.add_argument("--out", default=default, help=what)
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing --out folder written by eap (never one holding other files)")
+
+
+def add_quiet_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr (the summary is still printed)")
+
+
+#: Input size [bytes] from which a command reports its stages (~250,000 CSV rows, a few seconds).
+LONG_INPUT_BYTES = 10_000_000
+
+
+def stage_log(args, inputs=()):
+    """``log(message)``: one line per stage on stderr, with the elapsed time (``[compare
+    12.3 s] simulating …``), when the ``inputs`` (paths) add up to at least
+    :data:`LONG_INPUT_BYTES`; silent for short work and with ``--quiet``."""
+    size = sum(Path(p).stat().st_size for p in inputs if Path(p).is_file())
+    if getattr(args, "quiet", False) or size < LONG_INPUT_BYTES:
+        return lambda message: None
+    t0 = time.perf_counter()
+
+    def log(message: str) -> None:
+        print(f"[{args.command} {time.perf_counter() - t0:.1f} s] {message}", file=sys.stderr, flush=True)
+    return log
 
 
 def add_parallel_options(p: argparse.ArgumentParser) -> None:

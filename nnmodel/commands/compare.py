@@ -9,7 +9,7 @@ from physics.compare import (CallablePredictor, FRFOptions, PhysicsPredictor, Pr
 from physics.errors import InputError
 from physics.timeseries import TimeSeries, parse_column_map
 
-from ._common import add_output_options, check_out, provenance, writing
+from ._common import add_output_options, add_quiet_option, check_out, provenance, stage_log, writing
 
 NAME = "compare"
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
@@ -152,6 +152,7 @@ def add_arguments(p):
                                                  "(default: decades)")
     add_frf_arguments(p)
     add_output_options(p, "runs/compare")
+    add_quiet_option(p)
 
 
 def _inputs(args) -> list:
@@ -162,12 +163,16 @@ def _inputs(args) -> list:
 
 def run(args) -> int:
     t0 = time.perf_counter()
+    log = stage_log(args, args.measurements)
     check_out(args, _inputs(args))
+    log(f"reading {len(args.measurements)} measurement file(s)")
     ms = read_measurements(args)
     predictor = resolve_predictor(args.model, args.effects, args.n_modes, args.hold)
     res = compare(ms, predictor, frf_options=frf_options(args), offset=args.offset, skip_s=args.skip_s,
                   min_coherence=args.min_coherence, bands=parse_bands(args.bands) if args.bands else None,
-                  rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz))
+                  rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
+                  log=log)
+    log("writing the report")
     with writing(args, inputs=_inputs(args)) as tmp:
         write_comparison_report(res, tmp, provenance=provenance(inputs=args.measurements),
                                 title=f"eap compare: {predictor.name}")

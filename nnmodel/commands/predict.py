@@ -8,6 +8,8 @@ import numpy as np
 
 from physics.errors import InputError
 
+from ._common import add_quiet_option, provenance, stage_log
+
 NAME = "predict"
 HELP = "predict tip deflection with a trained model bundle for a voltage (+RH) record"
 DESCRIPTION = (HELP + ". The input CSV follows DATA_FORMAT.md (time_s, voltage_V, optional rh_pct, "
@@ -22,6 +24,7 @@ def add_arguments(p):
     p.add_argument("--input", required=True, help="input time-series CSV (voltage, optional RH)")
     p.add_argument("--out", required=True, help="output CSV for the prediction (never the input file)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out CSV (and its sidecar)")
+    add_quiet_option(p)
     p.add_argument("--rh", type=float, default=None,
                    help="relative humidity [%%] when the file has no rh_pct column (wins over it)")
     p.add_argument("--resample", action="store_true",
@@ -64,8 +67,8 @@ def run(args) -> int:
     from physics.metrics import fit_percent, rmse
 
     from ..bundle import load
-    from ._common import provenance
 
+    log = stage_log(args, [args.input])
     _check_out(args)
     bundle = load(args.model)
     uses_rh = bundle.model.uses_rh
@@ -78,7 +81,9 @@ def run(args) -> int:
     if n_init and n_init < bundle.model.n_init_:
         raise InputError(f"--init-samples {n_init}: this model starts from its last {bundle.model.n_init_} "
                          "outputs; give at least that many, or 0 to start from rest")
+    log(f"reading {args.input}")
     ts, rh_read = _read(args.input, args.rh, uses_rh, need_y=k is not None or bool(n_init))
+    log(f"predicting {ts.n:,} samples with {bundle.card['model']}")
     # free run: initialised from the first measured outputs when the file has them (honest start)
     init = ts.deflection if (k is None and n_init != 0) else None
     with warnings.catch_warnings(record=True) as caught:
@@ -113,6 +118,7 @@ def run(args) -> int:
         meta["prediction"]["against_measured"] = fit
     out = TimeSeries(time=ts.time, voltage=ts.voltage, deflection=pred,
                      rh=ts.rh if (rh_read or uses_rh) else None, meta=meta, source=str(args.out))
+    log(f"writing {args.out}")
     path = write_timeseries(out, args.out, overwrite=args.overwrite, protect=(args.input,))
     print(f"{line}; wrote {path}")
     return 0

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -60,14 +61,15 @@ class ComparisonResult:
 def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOptions | None = None,
             offset: str = "mean", skip_s: float = 0.0, min_coherence: float = 0.0,
             bands: Sequence[tuple[float, float]] | None = None, rh_tolerance: float = 2.5,
-            sensor_bandwidth="auto") -> ComparisonResult:
+            sensor_bandwidth="auto", log=None) -> ComparisonResult:
     """Compare ``predictor`` with measurements (loaded :class:`TimeSeries` /
     :class:`FRFData`, see :func:`load_measurements`); see the module doc for the metrics.
 
     ``offset``: ``"mean"`` removes the best constant offset between measurement and model
     (default), ``"none"`` keeps it; ``skip_s`` [s] excludes a start-up interval from the
     time metrics; ``min_coherence`` (γ²) excludes poorly measured frequencies from the FRF
-    errors; ``bands`` [(f_lo, f_hi), ...] Hz (default: decades over the compared range)."""
+    errors; ``bands`` [(f_lo, f_hi), ...] Hz (default: decades over the compared range);
+    ``log(message)`` is told each stage of each record."""
     if not isinstance(predictor, Predictor):
         raise InputError(f"compare needs a Predictor (PhysicsPredictor or CallablePredictor), "
                          f"got {type(predictor).__name__}")
@@ -83,11 +85,12 @@ def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOpt
         raise InputError("no measurement to compare with")
     warnings_: list[str] = []
     recs: list[RecordComparison] = []
+    log = log or (lambda message: None)
     for k, m in enumerate(ms):
         where = source_name(m, k)
         if isinstance(m, TimeSeries):
             recs.append(_compare_record(m, where, predictor, opts, offset, skip_s, min_coherence,
-                                        sensor_bandwidth, rh_tolerance))
+                                        sensor_bandwidth, rh_tolerance, log))
         elif isinstance(m, FRFData):
             if not predictor.has_closed_form:
                 warnings_.append(f"{where}: a frequency-response file needs a model with a closed-form "
@@ -141,13 +144,14 @@ def residual_tests(e: np.ndarray, u: np.ndarray, lags: int = RESIDUAL_LAGS) -> d
 
 
 def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_coh, sb_setting,
-                    rh_tolerance):
+                    rh_tolerance, log):
     if ts.deflection is None:
         raise InputError(f"{where}: has no deflection column; a measurement needs deflection_m")
     rh = ts.rh if ts.rh is not None else None
     if rh is None:
         raise InputError(f"{where}: no relative humidity (rh_pct); give the RH with --rh")
     rh_arg = model_rh(rh, ts.fs, rh_tolerance)
+    log(f"{Path(where).name}: {predictor.name} on {ts.n:,} samples")
     yhat = _check_output(predictor(ts.voltage, rh_arg, ts.fs), ts.n, predictor.name)
     bw = sensor_bandwidth_of(ts, sb_setting)
     yhat = sensor_lowpass(yhat, ts.fs, bw)
@@ -163,6 +167,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     tm["skip_s"] = skip_s
     tm["residual_tests"] = residual_tests(y_al[i0:] - yhat[i0:], ts.voltage[i0:])
     # frequency domain
+    log(f"{Path(where).name}: residual tests done; frequency-response estimates")
     settings = opts.settings_for(ts)
     est_m, info = estimate_record_frf(ts, y, opts, settings=settings)
     est_p, _ = estimate_record_frf(ts, yhat, opts, settings=settings)
@@ -175,8 +180,8 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     Hc = None
     mean = float(np.median(rh))
     if predictor.has_closed_form:
-        Hc = np.full(f.shape, np.nan, dtype=complex)
-        pos = f > 0
+        Hc = np.full(f.shape, np.nan, dtype=complex)     # only where compared and plotted
+        pos = sel & (f > 0)
         Hc[pos] = predictor.frequency_response(f[pos], mean) * sensor_response(f[pos], bw)
     rec = RecordComparison(where, "timeseries", mean, time=ts.time - ts.time[0], measured=y_al,
                            predicted=yhat, freq=f, H_meas=est_m.response, H_model_est=est_p.response,

@@ -18,20 +18,20 @@ def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float 
     """Measured and model deflection [mm], the residual below, and a zoom on the last
     ``zoom_s`` seconds (default: 2 s or a tenth of the record, the shorter)."""
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..plotting import envelope, save
     fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
-    ax[0].plot(r.time, 1e3 * r.measured, lw=0.7, label="measured")
-    ax[0].plot(r.time, 1e3 * r.predicted, lw=0.7, label="model")
+    ax[0].plot(*envelope(r.time, 1e3 * r.measured), lw=0.7, label="measured")
+    ax[0].plot(*envelope(r.time, 1e3 * r.predicted), lw=0.7, label="model")
     ax[0].set_ylabel("deflection [mm]")
     ax[0].legend(fontsize=8, loc="upper right")
-    ax[1].plot(r.time, 1e3 * (r.measured - r.predicted), lw=0.6, color="k")
+    ax[1].plot(*envelope(r.time, 1e3 * (r.measured - r.predicted)), lw=0.6, color="k")
     ax[1].set_ylabel("residual [mm]")
     ax[1].sharex(ax[0])
     span = float(r.time[-1] - r.time[0])
     zoom = min(2.0, 0.1 * span) if zoom_s is None else float(zoom_s)
     z = r.time >= r.time[-1] - zoom
-    ax[2].plot(r.time[z], 1e3 * r.measured[z], lw=0.9, label="measured")
-    ax[2].plot(r.time[z], 1e3 * r.predicted[z], lw=0.9, ls="--", label="model")
+    ax[2].plot(*envelope(r.time[z], 1e3 * r.measured[z]), lw=0.9, label="measured")
+    ax[2].plot(*envelope(r.time[z], 1e3 * r.predicted[z]), lw=0.9, ls="--", label="model")
     ax[2].set_ylabel("zoom [mm]")
     ax[2].set_xlabel("time [s]")
     for a in ax:

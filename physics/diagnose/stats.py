@@ -58,10 +58,19 @@ def autocorrelation(e: np.ndarray, max_lag: int | None = None) -> np.ndarray:
         out = np.zeros(m + 1)
         out[0] = 1.0
         return out
-    nfft = 1 << int(math.ceil(math.log2(2 * n)))
-    f = np.fft.rfft(e, nfft)
-    ac = np.fft.irfft(f * np.conj(f), nfft)[:m + 1]
+    if _direct(n, m):
+        ac = np.array([np.dot(e[:n - k], e[k:]) for k in range(m + 1)])
+    else:
+        nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        f = np.fft.rfft(e, nfft)
+        ac = np.fft.irfft(f * np.conj(f), nfft)[:m + 1]
     return ac / ac[0]
+
+
+def _direct(n: int, max_lag: int) -> bool:
+    """Sum lag by lag (no FFT buffers of 2n complex values) when few lags of a long record
+    are wanted: it costs fewer operations and memory stays at the record itself."""
+    return n > 4096 and max_lag + 1 <= 8 * math.log2(n)
 
 
 def cross_correlation(u: np.ndarray, e: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
@@ -70,10 +79,13 @@ def cross_correlation(u: np.ndarray, e: np.ndarray, max_lag: int) -> tuple[np.nd
     u = np.asarray(u, float) - np.mean(u)
     e = np.asarray(e, float) - np.mean(e)
     n = u.size
-    nfft = 1 << int(math.ceil(math.log2(2 * n)))
-    c = np.fft.irfft(np.conj(np.fft.rfft(u, nfft)) * np.fft.rfft(e, nfft), nfft)
     lags = np.arange(-max_lag, max_lag + 1)
-    vals = c[lags % nfft]
+    if _direct(n, 2 * max_lag):
+        vals = np.array([np.dot(u[:n - k], e[k:]) if k >= 0 else np.dot(u[-k:], e[:n + k]) for k in lags])
+    else:
+        nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        c = np.fft.irfft(np.conj(np.fft.rfft(u, nfft)) * np.fft.rfft(e, nfft), nfft)
+        vals = c[lags % nfft]
     den = n * np.std(u) * np.std(e)
     return lags, (vals / den if den > 0 else np.zeros(lags.size))
 
