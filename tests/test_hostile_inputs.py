@@ -194,3 +194,45 @@ def test_reader_reads_exactly_or_raises_its_own_error(tmp_path, sep, decimal, un
         return  # the package's own error: fine
     assert ts.n == n
     np.testing.assert_allclose(ts.deflection * scale, y, rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["compare", "{rec}", "--model", "ip2c_pedot_water", "--window", "bogus"], "--window 'bogus': not a window"),
+    (["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone", "--frequency-Hz", "2",
+      "--duration-s", "3", "--fs-Hz", "0"], "--fs-Hz 0.0: must be a positive number"),
+    (["frf", "--device", "ip2c_pedot_water", "--rh", "60", "--f-min-Hz", "10", "--f-max-Hz", "1"],
+     "--f-min-Hz 10 and --f-max-Hz 1 must be positive and increasing"),
+    (["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone", "--frequency-Hz", "2",
+      "--duration-s", "3", "--fs-Hz", "100", "--effects", ""], "an empty list is ambiguous"),
+])
+def test_bad_options_are_named_with_their_flag(tmp_path, capsys, argv, message):
+    """Case 10 of the reliability review: bad option values are one line naming the flag."""
+    rec = _write(tmp_path / "rec.csv")
+    out = tmp_path / "o"
+    argv = [a.replace("{rec}", str(rec)) for a in argv]
+    argv += ["--json", str(tmp_path / "f.json")] if argv[0] == "frf" else ["--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() and not (tmp_path / "f.json").exists()
+
+
+def test_required_options_do_not_advertise_a_default(capsys):
+    for cmd in ("predict", "compare", "identify", "dataset", "train-compare"):
+        with pytest.raises(SystemExit):
+            main([cmd, "--help"])
+        assert "default: None" not in capsys.readouterr().out, cmd
+
+
+def test_a_sidecar_sensor_bandwidth_inside_the_band_is_announced(tmp_path, capsys):
+    """Case 7: a wrong sensor.bandwidth used to change the fit silently; it is now named
+    with the flag that ignores it, and flagged when it lies inside the compared band."""
+    rec = _write(tmp_path / "rec.csv")
+    (tmp_path / "rec.yaml").write_text("sensor: {bandwidth: 0.5}\n")
+    assert main(["compare", str(rec), "--model", "ip2c_pedot_water", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "sensor.bandwidth 0.5 Hz low-passes the model output (--sensor-bandwidth-Hz none" in out
+    assert "inside the compared band" in out
+    assert main(["compare", str(rec), "--model", "ip2c_pedot_water", "--out", str(tmp_path / "p"),
+                 "--sensor-bandwidth-Hz", "none"]) == 0
+    assert "sensor.bandwidth" not in capsys.readouterr().out

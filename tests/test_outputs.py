@@ -34,6 +34,9 @@ def test_folder_is_written_atomically_with_marker(tmp_path):
     assert (tmp_path / "o" / "a.txt").read_text() == "x"
     assert json.loads((tmp_path / "o" / MARKER).read_text())["pid"] == os.getpid()
     assert not list(tmp_path.glob(".o.*"))  # no temp folder or lock left
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (tmp_path / "o").stat().st_mode & 0o777 == 0o777 & ~umask   # the usual mode, not mkdtemp's 0700
 
 
 def test_failure_leaves_nothing_and_keeps_the_old_result(tmp_path):
@@ -116,14 +119,17 @@ def test_temp_folders_of_killed_runs_are_cleaned(tmp_path):
 
 
 def test_unwritable_out_fails_before_any_work(tmp_path, capsys):
-    if os.geteuid() == 0:
-        pytest.skip("root can write anywhere")
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    ro.chmod(0o500)
     rec = _record(tmp_path / "rec.csv")
-    assert _compare(rec, ro / "out") == 2
-    assert "not writable" in capsys.readouterr().err
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    assert _compare(rec, blocker / "out") == 2            # a parent that is a file: unwritable even as root
+    assert "choose a writable --out" in capsys.readouterr().err
+    if os.geteuid() != 0:                                 # a read-only folder (root writes anywhere)
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o500)
+        assert _compare(rec, ro / "out") == 2
+        assert "not writable" in capsys.readouterr().err
 
 
 def test_generate_never_deletes_a_users_folder(tmp_path, monkeypatch, capsys):

@@ -90,8 +90,7 @@ def run(models=None, out: str | os.PathLike = "eap-benchmark", *, quick: bool = 
     report = _report(summary, names, quick, ds_path, time.perf_counter() - t0, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["winners_text"],
-                  f"report: {out / 'eap.html'} (JSON {out / 'eap.json'}; "
-                  f"train-compare report {out / 'compare' / 'report.html'})")
+                  "report: eap.html (JSON eap.json; train-compare report compare/report.html) in the output folder")
     return report
 
 

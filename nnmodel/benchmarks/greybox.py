@@ -124,7 +124,7 @@ def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = 
     report = _report(full, curve, names, quick, budget, ds_path, time.perf_counter() - t_start, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["findings"],
-                  f"report: {out / 'greybox.html'} (JSON {out / 'greybox.json'})")
+                  "report: greybox.html (JSON greybox.json) in the output folder")
     return report
 
 

@@ -256,7 +256,7 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
     }
     _write_outputs(out, report, rows, preds, tests)
     common.finish(echo, format_table(report), [target["summary"]],
-                  f"report: {out / 'silverbox.html'} (JSON {out / 'silverbox.json'})")
+                  "report: silverbox.html (JSON silverbox.json) in the output folder")
     return report
 
 

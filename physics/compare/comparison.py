@@ -91,12 +91,14 @@ def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOpt
         if isinstance(m, TimeSeries):
             recs.append(_compare_record(m, where, predictor, opts, offset, skip_s, min_coherence,
                                         sensor_bandwidth, rh_tolerance, log))
+            warnings_ += _sensor_notes(recs[-1], sensor_bandwidth)
         elif isinstance(m, FRFData):
             if not predictor.has_closed_form:
                 warnings_.append(f"{where}: a frequency-response file needs a model with a closed-form "
                                  f"response; {predictor.name} has none, so this file was skipped")
                 continue
             recs.append(_compare_frf(m, where, predictor, min_coherence, sensor_bandwidth))
+            warnings_ += _sensor_notes(recs[-1], sensor_bandwidth)
         else:
             raise InputError(f"{where}: expected a TimeSeries or FRFData, got {type(m).__name__}")
     if not recs:
@@ -196,6 +198,21 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     rec.summary = {"n_samples": ts.n, "fs_Hz": ts.fs, "duration_s": ts.duration,
                    "sensor_bandwidth_Hz": bw, "time_metrics": tm, "frf_metrics": fe}
     return rec
+
+
+def _sensor_notes(rec: "RecordComparison", setting) -> list[str]:
+    """Say when a record's own sensor bandwidth (sidecar ``sensor.bandwidth``) low-passes
+    the model, and warn when it lies inside the compared band (it then shapes the result)."""
+    bw = rec.summary.get("sensor_bandwidth_Hz")
+    if bw is None or setting != "auto":
+        return []
+    name = Path(rec.source).name
+    note = f"{name}: the sidecar's sensor.bandwidth {bw:g} Hz low-passes the model output (--sensor-bandwidth-Hz none to ignore it)"
+    f = rec.freq[rec.valid] if rec.valid is not None and rec.valid.any() else np.zeros(0)
+    if f.size and bw < f.max():
+        note += (f"; it lies inside the compared band (up to {f.max():.3g} Hz), so it shapes every figure: "
+                 "check that it is the sensor's real cut-off")
+    return [note]
 
 
 def _compare_frf(frf: FRFData, where, predictor, min_coh, sb_setting):
