@@ -201,18 +201,16 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
 
 
 def _sensor_notes(rec: "RecordComparison", setting) -> list[str]:
-    """Say when a record's own sensor bandwidth (sidecar ``sensor.bandwidth``) low-passes
-    the model, and warn when it lies inside the compared band (it then shapes the result)."""
+    """Warn when a record's own sensor bandwidth (sidecar ``sensor.bandwidth``), applied to
+    the model as a low-pass, lies inside the compared band: it then shapes every figure, and
+    a wrong value would change them silently."""
     bw = rec.summary.get("sensor_bandwidth_Hz")
-    if bw is None or setting != "auto":
-        return []
-    name = Path(rec.source).name
-    note = f"{name}: the sidecar's sensor.bandwidth {bw:g} Hz low-passes the model output (--sensor-bandwidth-Hz none to ignore it)"
     f = rec.freq[rec.valid] if rec.valid is not None and rec.valid.any() else np.zeros(0)
-    if f.size and bw < f.max():
-        note += (f"; it lies inside the compared band (up to {f.max():.3g} Hz), so it shapes every figure: "
-                 "check that it is the sensor's real cut-off")
-    return [note]
+    if bw is None or setting != "auto" or not f.size or bw >= f.max():
+        return []
+    return [f"{Path(rec.source).name}: the sidecar's sensor.bandwidth {bw:g} Hz low-passes the model output inside "
+            f"the compared band (up to {f.max():.3g} Hz), so it shapes every figure: check that it is the sensor's "
+            "real cut-off (--sensor-bandwidth-Hz none ignores it)"]
 
 
 def _compare_frf(frf: FRFData, where, predictor, min_coh, sb_setting):
