@@ -76,7 +76,7 @@ def main() -> None:
         wall = time.perf_counter() - t0
         yh = m.simulate(us, y_init=ys[:m.n_init_])
         e = rmse(ys[skip:], yh[skip:])
-        print(f"{name:6s} test free-run RMSE {e:.4f} ({100 * (1 - e / e_arx):+.0f} % vs ARX), trained in {wall:.0f} s",
+        print(f"{name:6s} test free-run RMSE {e:.4f} ({100 * abs(1 - e / e_arx):.0f} % {'below' if e < e_arx else 'above'} ARX), trained in {wall:.0f} s",
               flush=True)
 
 

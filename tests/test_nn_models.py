@@ -291,3 +291,48 @@ def test_without_output_feedback_one_step_equals_free_run_from_any_start():
     free = m.simulate(u, y_init=y[:k])
     one = m.predict(u, y=y, steps_ahead=1)
     np.testing.assert_allclose(one[k:], free[k:], rtol=1e-5, atol=1e-9)
+
+
+def _resonant_records(n=3000, fs=100.0):
+    """A lightly damped resonance (10 Hz, ζ = 0.05) driven by filtered noise: an input
+    delay line of 5 samples cannot hold its memory, output feedback can."""
+    b, a = signal.cheby1(2, 1, 5.0, fs=fs)
+    wn, z = 2 * np.pi * 10.0, 0.05
+    bd, ad = signal.cont2discrete(([wn ** 2], [1, 2 * z * wn, wn ** 2]), 1 / fs)[:2]
+    out = []
+    for seed in (1, 2):
+        u = signal.lfilter(b, a, np.random.default_rng(seed).normal(size=n))
+        y = signal.lfilter(np.ravel(bd), ad, u)
+        out.append(Record(u=u, y=y + 1e-3 * np.std(y) * np.random.default_rng(seed + 10).normal(size=n),
+                          rh=None, fs=fs))
+    return out
+
+
+def test_structure_selection_keeps_the_best_free_run_on_validation(tmp_path):
+    """`structures` are each fitted; the one with the lowest free-run validation NRMSE is
+    kept, every score is in the card, and a bundle round trip keeps the chosen form."""
+    from nnmodel.bundle import load, save
+    train, test = _resonant_records()
+    m = MODELS["rbf"](na=0, nb=5, n_centres=20, memory_filters=0, progress_bar=False,
+                      structures=[{}, {"na": 4, "nb": 4}])
+    m.fit([train])
+    search = m.structure_search_
+    assert [s["structure"] for s in search] == [{}, {"na": 4, "nb": 4}]
+    scores = [s["validation_free_run_nrmse"] for s in search]
+    assert scores[1] < 0.5 * scores[0]                     # the resonance needs feedback ...
+    assert m.na == 4 and m.structures == [{}, {"na": 4, "nb": 4}]   # ... and that form was kept
+    fixed = MODELS["rbf"](na=4, nb=4, n_centres=20, memory_filters=0, progress_bar=False).fit([train])
+    y_sel = m.simulate(test.u, y_init=test.y[:m.n_init_])
+    np.testing.assert_allclose(y_sel, fixed.simulate(test.u, y_init=test.y[:fixed.n_init_]), rtol=1e-6, atol=1e-9)
+    b = load(save(m, tmp_path / "rbf"))
+    assert b.card["structure_search"][1]["validation_free_run_nrmse"] == pytest.approx(scores[1])
+    np.testing.assert_allclose(b.model.simulate(test.u, y_init=test.y[:4]), y_sel, rtol=1e-6, atol=1e-9)
+
+
+def test_structures_naming_unknown_parameters_are_refused_before_fitting():
+    train, _ = _resonant_records(n=600)
+    m = MODELS["rbf"](n_centres=10, progress_bar=False, structures=[{}, {"na": 3, "nx": 4}])
+    with pytest.raises(InputError, match=r"structures entry .* unknown hyper-parameter\(s\) \['nx'\]"):
+        m.fit([train])
+    with pytest.raises(InputError, match="structures"):
+        MODELS["ff"](structures="na=3")

@@ -20,6 +20,7 @@ models are trained with the same Lightning loop (:mod:`nnmodel.training`).
 from __future__ import annotations
 
 import contextlib
+import copy
 import inspect
 import math
 import time
@@ -197,6 +198,8 @@ class NeuralModel:
         "memory_min_s": _pos_float,
         "memory_max_s": _pos_float,
         "memory_abs": lambda v: None if isinstance(v, bool) else "true or false",
+        "structures": lambda v: None if v is None or (isinstance(v, list) and all(isinstance(c, dict) for c in v))
+        else "null or a list of hyper-parameter mappings, e.g. [{}, {na: 10, nb: 10}]",
     }
 
     # ------------------------------------------------------------------ parameters
@@ -278,15 +281,64 @@ class NeuralModel:
         use_rh = has_rh and self.inputs != "voltage"
         seed_all(self.seed)
         try:
-            self._fit(train, val, fs, use_rh)
+            if len(getattr(self, "structures", None) or []) > 1:
+                self._select_structure(train, val)
+            else:
+                self._fit(train, val, fs, use_rh)
         except BaseException:
             for attr in self._LEARNED:  # never leave a half-trained model behind
                 self.__dict__.pop(attr, None)
             raise
         return self
 
+    def _select_structure(self, train, val) -> None:
+        """Fit one copy per entry of ``structures`` (hyper-parameter overrides, e.g. with and
+        without output feedback) and keep the one whose free-run NRMSE on the validation data
+        is lowest; every candidate's score goes into the card (``structure_search``).  The
+        choice is made on validation data only, so one recipe can serve plants that need
+        output feedback (a resonance) and plants where feedback drifts."""
+        known = set(self.param_names()) - {"structures"}
+        for over in self.structures:
+            if set(over) - known:
+                raise InputError(f"model {self.kind!r}: structures entry {over} names unknown hyper-parameter(s) "
+                                 f"{sorted(set(over) - known)}; known: {', '.join(sorted(known))}")
+        tried, best = [], None
+        for over in self.structures:
+            cand = copy.deepcopy(self)
+            cand.set_params(**{**over, "structures": None})
+            cand.fit(train, val)
+            score = cand._validation_nrmse(train, val)
+            tried.append({"structure": dict(over), "validation_free_run_nrmse": score,
+                          "fit_time_s": cand.fit_time_})
+            if best is None or score < best[0]:
+                best = (score, cand)
+        structures = self.structures
+        self.__dict__.update(best[1].__dict__)
+        self.structures = structures
+        self.structure_search_ = tried
+
+    def _validation_nrmse(self, train, val) -> float:
+        """Pooled free-run NRMSE on ``val`` records, or (without them) on the last
+        ``val_fraction`` of each training record simulated from its start; inf when the
+        simulation diverges."""
+        if val:
+            parts = [(r, 0) for r in val]
+        else:
+            parts = [(r, split_index(len(r), self.val_fraction, self.n_init_ + 2) or 0) for r in train]
+        e2 = v2 = 0.0
+        for r, k in parts:
+            with np.errstate(all="ignore"):
+                yh = self.simulate(r.u, r.rh, y_init=r.y[:self.n_init_])
+            s = max(k, self.n_init_)
+            y, e = r.y[s:], yh[s:] - r.y[s:]
+            if not np.all(np.isfinite(e)):
+                return math.inf
+            e2 += float(np.sum(e ** 2))
+            v2 += float(np.sum((y - y.mean()) ** 2))
+        return math.sqrt(e2 / v2) if v2 > 0 else math.inf
+
     _LEARNED = ("net_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_", "training_summary_",
-                "memory_range_",
+                "memory_range_", "structure_search_",
                 "init_report_", "rh_knots_")
 
     def _fit(self, train, val, fs, use_rh) -> None:
@@ -597,6 +649,8 @@ class NeuralModel:
             out["card_extra"] = {"rh_knots_pct": self._rh_knots()}
         if getattr(self, "memory_range_", None):
             out.setdefault("card_extra", {})["memory_range_s"] = [float(x) for x in self.memory_range_]
+        if getattr(self, "structure_search_", None):
+            out.setdefault("card_extra", {})["structure_search"] = self.structure_search_
         return out
 
     def restore(self, learned: dict, state_dict: dict) -> "NeuralModel":

@@ -12,6 +12,11 @@ Long input memory: ``memory_filters`` first-order low-pass filters of the voltag
 constants ``memory_min_s``..``memory_max_s``, s) join the delayed inputs (see
 :mod:`nnmodel.models.features`).  ``rh_knots`` (%) schedules the linear bypass on RH
 (coefficients interpolated linearly between knots); the MLP sees RH and the knot weights.
+
+``structures``: a list of hyper-parameter overrides (e.g. ``[{}, {na: 10, nb: 10}]``); each
+is fitted and the one with the lowest free-run NRMSE on the validation data is kept
+(:meth:`NeuralModel._select_structure`), so one recipe serves plants that need output
+feedback and plants where it drifts.
 """
 from __future__ import annotations
 
@@ -75,7 +80,8 @@ class FFModel(LagModel):
                  batch_size: int = 256, max_epochs: int = 100, max_time: float | None = None,
                  patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = None,
                  accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None,
+                 structures: list | None = None):
         self._set_params_from(locals())
 
     def _training_settings(self):

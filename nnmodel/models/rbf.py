@@ -41,7 +41,8 @@ class RBFModel(NeuralModel):
                  batch_size: int = 256, max_epochs: int = 0, max_time: float | None = None,
                  patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
                  accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+                 num_threads: int | None = 1, checkpoint_dir: str | None = None,
+                 structures: list | None = None):
         self._set_params_from(locals())
 
     def _build_core(self, n_rh):
