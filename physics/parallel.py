@@ -3,8 +3,9 @@
 :func:`map_tasks` runs ``fn(task)`` for every task and returns the results in task order:
 
 * ``workers=1`` (the default) runs in this process, without importing Dask;
-* ``workers=N`` starts a local cluster of N worker *processes* (one thread each; BLAS,
-  OpenMP and torch threads per worker are set so that workers × threads ≤ cores);
+* ``workers=N`` runs tasks in this process and, beside it, on a local cluster of N − 1
+  worker *processes* started in the background (one thread each; BLAS, OpenMP and torch
+  threads per worker are set so that workers × threads ≤ cores), all drawing from one queue;
 * ``scheduler="tcp://HOST:8786"`` (or the environment variable ``EAP_SCHEDULER``) uses an
   existing Dask cluster — started by hand (``dask scheduler`` / ``dask worker``), or on
   SLURM/PBS with ``dask-jobqueue`` or on Kubernetes with ``dask-kubernetes`` (bring your
@@ -19,6 +20,7 @@ count.  A failing task raises :class:`~physics.errors.ModelError` naming the tas
 from __future__ import annotations
 
 import os
+import threading
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -80,8 +82,11 @@ def _describe(task, limit: int = 200) -> str:
 
 
 def map_tasks(fn: Callable, tasks: Sequence, settings: ParallelSettings | None = None, *,
-              desc: str = "tasks", progress: bool = True) -> list:
-    """``[fn(t) for t in tasks]``, in order, run as ``settings`` says (module doc)."""
+              desc: str = "tasks", progress: bool = True, cost: Callable | None = None) -> list:
+    """``[fn(t) for t in tasks]``, in order, run as ``settings`` says (module doc).
+
+    ``cost(task)``: a relative cost estimate; the dearest tasks are started first (the
+    results still come back in task order), so one long task does not finish alone."""
     settings = settings or ParallelSettings()
     tasks = list(tasks)
     if settings.serial or len(tasks) <= 1 and not settings.scheduler:
@@ -94,51 +99,133 @@ def map_tasks(fn: Callable, tasks: Sequence, settings: ParallelSettings | None =
                 out.append(value)
                 bar.update()
         return out
-    return _map_dask(fn, tasks, settings, desc, progress)
+    order = list(range(len(tasks)))
+    if cost is not None:
+        order.sort(key=lambda i: -float(cost(tasks[i])))
+    return _map_dask(fn, tasks, order, settings, desc, progress)
 
 
-def _map_dask(fn, tasks, settings: ParallelSettings, desc: str, progress: bool) -> list:
-    import dask
-    from distributed import Client, LocalCluster, as_completed
+class _Work:
+    """Batches of task indices shared by this process and the Dask workers (thread-safe)."""
 
-    cluster = client = None
-    cores = os.cpu_count() or 1
-    threads = max(1, cores // settings.workers)
-    env = {v: str(threads) for v in _THREAD_VARS}
-    try:
-        if settings.scheduler:
-            try:
-                client = Client(settings.scheduler, timeout="20s")
-            except (OSError, TimeoutError) as exc:
-                raise InputError(f"--scheduler {settings.scheduler}: cannot connect ({exc}); start a scheduler "
-                                 f"there or unset {SCHEDULER_ENV}") from None
-        else:
-            with dask.config.set({"distributed.nanny.pre-spawn-environ": env,
-                                  "distributed.worker.daemon": False,
-                                  "distributed.logging.distributed": "error"}):
-                cluster = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=40, env=env)
-                client = Client(cluster)
-        n_workers = max(1, len(client.scheduler_info()["workers"]))
+    def __init__(self, tasks, order, n_workers: int):
         size = max(1, len(tasks) // (BATCHES_PER_WORKER * n_workers))
-        starts = list(range(0, len(tasks), size))
-        futures = client.map(_run_batch, [fn] * len(starts), [tasks[a:a + size] for a in starts], pure=False)
-        index = {f.key: a for f, a in zip(futures, starts)}
-        results: list = [None] * len(tasks)
-        with Progress(len(tasks), f"{desc} on {n_workers} workers", enabled=progress) as bar:
-            for fut in as_completed(futures):
-                a = index[fut.key]
-                ok, value = fut.result()
-                if not ok:
-                    for f in futures:
-                        f.cancel()
-                    k, msg = value
-                    raise ModelError(f"{desc}: task {_describe(tasks[a + k])} failed: {msg}")
-                results[a:a + len(value)] = value
-                bar.update(len(value))
-        return results
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        self.tasks = tasks
+        self.batches = [order[a:a + size] for a in range(0, len(order), size)]
+        self.results: list = [None] * len(tasks)
+        self.lock = threading.Lock()
+        self.failure: str | None = None
+        self.done = 0
+
+    def take(self):
+        with self.lock:
+            return None if self.failure or not self.batches else self.batches.pop(0)
+
+    def give_back(self, batch):
+        with self.lock:
+            self.batches.insert(0, batch)
+
+    def store(self, batch, ok, value, desc) -> int:
+        with self.lock:
+            if not ok:
+                k, msg = value
+                self.failure = self.failure or f"{desc}: task {_describe(self.tasks[batch[k]])} failed: {msg}"
+                return 0
+            for i, v in zip(batch, value):
+                self.results[i] = v
+            self.done += len(batch)
+            return len(batch)
+
+
+def _map_dask(fn, tasks, order, settings: ParallelSettings, desc: str, progress: bool) -> list:
+    """Local runs: this process works through the tasks at once while a cluster of
+    ``workers - 1`` processes starts beside it and then shares the queue (the cluster's
+    start-up and the workers' first imports overlap useful work).  ``--scheduler``: every
+    task goes to the existing cluster."""
+    local = not settings.scheduler
+    work = _Work(tasks, order, settings.workers if local else 1)
+    remote = _Remote(fn, work, settings, settings.workers - 1 if local else None, desc)
+    label = f"{desc} on {settings.workers} workers" if local else f"{desc} on the cluster"
+    with Progress(len(tasks), label, enabled=progress) as bar:
+        seen = 0
+        remote.start()
+        try:
+            while True:
+                batch = work.take() if local else None
+                if batch is not None:
+                    work.store(batch, *_run_batch(fn, [tasks[i] for i in batch]), desc)
+                elif remote.is_alive():
+                    remote.join(0.2)
+                elif not (local and work.batches and not work.failure):   # else: batches handed back
+                    break
+                bar.update(work.done - seen)
+                seen = work.done
+        finally:
+            remote.stop.set()
+            remote.join()
+    if work.failure:
+        raise ModelError(work.failure)
+    if work.done < len(tasks):
+        raise remote.error or ModelError(f"{desc}: {len(tasks) - work.done} task(s) were not run")
+    return work.results
+
+
+class _Remote(threading.Thread):
+    """The Dask side of :func:`_map_dask`: start (or join) the cluster, keep two batches in
+    flight per worker until the queue is empty, store the results; on an error, hand the
+    unfinished batches back (this process then runs them) and keep the error."""
+
+    def __init__(self, fn, work: _Work, settings: ParallelSettings, n_remote: int | None, desc: str):
+        super().__init__(daemon=True)
+        self.fn, self.work, self.settings, self.n_remote, self.desc = fn, work, settings, n_remote, desc
+        self.stop = threading.Event()
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        if self.n_remote == 0:
+            return
+        cluster = client = None
+        flying: dict = {}
+        try:
+            cluster, client = self._connect()
+            n_workers = max(1, len(client.scheduler_info()["workers"]))
+            from distributed import wait
+            while not self.stop.is_set():
+                while len(flying) < 2 * n_workers:
+                    batch = self.work.take()
+                    if batch is None:
+                        break
+                    fut = client.submit(_run_batch, self.fn, [self.work.tasks[i] for i in batch], pure=False)
+                    flying[fut] = batch
+                if not flying:
+                    break
+                for fut in wait(list(flying), timeout=0.2, return_when="FIRST_COMPLETED").done:
+                    self.work.store(flying.pop(fut), *fut.result(), self.desc)
+        except BaseException as exc:  # raised by the main thread if work is left undone
+            self.error = exc
+        finally:
+            for fut, batch in flying.items():
+                fut.cancel()
+                self.work.give_back(batch)
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+
+    def _connect(self):
+        import dask
+        from distributed import Client, LocalCluster
+        st = self.settings
+        if st.scheduler:
+            try:
+                return None, Client(st.scheduler, timeout="20s")
+            except (OSError, TimeoutError) as exc:
+                raise InputError(f"--scheduler {st.scheduler}: cannot connect ({exc}); start a scheduler "
+                                 f"there or unset {SCHEDULER_ENV}") from None
+        cores = os.cpu_count() or 1
+        env = {v: str(max(1, cores // st.workers)) for v in _THREAD_VARS}
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": env, "distributed.worker.daemon": False,
+                              "distributed.logging.distributed": "error"}):
+            cluster = LocalCluster(n_workers=self.n_remote, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40, env=env)
+            return cluster, Client(cluster)

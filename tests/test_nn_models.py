@@ -336,3 +336,13 @@ def test_structures_naming_unknown_parameters_are_refused_before_fitting():
         m.fit([train])
     with pytest.raises(InputError, match="structures"):
         MODELS["ff"](structures="na=3")
+
+
+def test_ff_scores_structures_by_their_least_squares_start_and_trains_only_the_winner():
+    train, _ = _resonant_records(n=1500)
+    m = MODELS["ff"](na=0, nb=5, hidden=8, layers=1, memory_filters=0, max_epochs=2, progress_bar=False,
+                     structures=[{}, {"na": 4, "nb": 4}])
+    m.fit([train])
+    assert all(s["scored_as"] == "linear least-squares start" for s in m.structure_search_)
+    assert m.na == 4 and m.layers == 1 and m.max_epochs == 2   # the winner, with the recipe's own training
+    assert m.training_summary_["epochs_run"] >= 1

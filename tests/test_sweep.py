@@ -36,9 +36,16 @@ def _fails_on_three(task):
     return task["x"]
 
 
-def test_failed_task_names_its_inputs():
+def _slow_square(task):
+    import time
+    time.sleep(task.get("sleep", 0.0))
+    return task["x"] ** 2
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_failed_task_names_its_inputs(workers):
     with pytest.raises(ModelError, match=r"task \{'x': 3\} failed: ValueError: bad x"):
-        map_tasks(_fails_on_three, [{"x": i} for i in range(5)], progress=False)
+        map_tasks(_fails_on_three, [{"x": i} for i in range(5)], ParallelSettings(workers), progress=False)
     with pytest.raises(InputError, match="--workers"):
         ParallelSettings(0)
 
@@ -69,3 +76,11 @@ def test_generate_on_two_workers_writes_identical_files(tmp_path):
     ha = [e["sha256"] for e in json.loads((a / "dataset.json").read_text())["files"]]
     hb = [e["sha256"] for e in json.loads((b / "dataset.json").read_text())["files"]]
     assert ha == hb and len(ha) >= 6
+
+
+def test_this_process_and_the_workers_share_the_queue_in_task_order():
+    """With 2 workers this process starts at once and a worker joins when its cluster is up;
+    the dearest tasks (by `cost`) start first; results come back in task order."""
+    tasks = [{"x": i, "sleep": 0.05} for i in range(40)]
+    out = map_tasks(_slow_square, tasks, ParallelSettings(2), progress=False, cost=lambda t: t["x"] % 7)
+    assert out == [i ** 2 for i in range(40)]

@@ -291,29 +291,47 @@ class NeuralModel:
             raise
         return self
 
+    #: Overrides that turn a candidate structure into a cheap stand-in for scoring it (e.g.
+    #: the linear least-squares start of a network); ``None``: candidates are fitted in full.
+    _SELECTION_PROXY: dict | None = None
+
     def _select_structure(self, train, val) -> None:
-        """Fit one copy per entry of ``structures`` (hyper-parameter overrides, e.g. with and
-        without output feedback) and keep the one whose free-run NRMSE on the validation data
-        is lowest; every candidate's score goes into the card (``structure_search``).  The
-        choice is made on validation data only, so one recipe can serve plants that need
-        output feedback (a resonance) and plants where feedback drifts."""
+        """Choose among ``structures`` (hyper-parameter overrides, e.g. with and without
+        output feedback) the one with the lowest free-run NRMSE on the validation data, and
+        fit it.  Each candidate is scored as fitted in full, or — for models with a
+        :attr:`_SELECTION_PROXY` — as its cheap stand-in (the FF network's linear
+        least-squares start), and only the winner is then trained.  Every score goes into
+        the card (``structure_search``).  The choice uses validation data only, so one recipe
+        serves plants that need output feedback (a resonance) and plants where it drifts."""
         known = set(self.param_names()) - {"structures"}
         for over in self.structures:
             if set(over) - known:
                 raise InputError(f"model {self.kind!r}: structures entry {over} names unknown hyper-parameter(s) "
                                  f"{sorted(set(over) - known)}; known: {', '.join(sorted(known))}")
+        proxy = self._SELECTION_PROXY or {}
         tried, best = [], None
         for over in self.structures:
             cand = copy.deepcopy(self)
-            cand.set_params(**{**over, "structures": None})
-            cand.fit(train, val)
+            cand.set_params(**{**over, **proxy, "structures": None})
+            with warnings.catch_warnings():
+                if best is not None:        # the data-fit warnings were already given once
+                    warnings.simplefilter("ignore", UserWarning)
+                cand.fit(train, val)
             score = cand._validation_nrmse(train, val)
             tried.append({"structure": dict(over), "validation_free_run_nrmse": score,
+                          "scored_as": "linear least-squares start" if proxy else "fitted model",
                           "fit_time_s": cand.fit_time_})
             if best is None or score < best[0]:
-                best = (score, cand)
+                best = (score, over, cand)
+        chosen = best[2]
+        if proxy:
+            chosen = copy.deepcopy(self)
+            chosen.set_params(**{**best[1], "structures": None})
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                chosen.fit(train, val)
         structures = self.structures
-        self.__dict__.update(best[1].__dict__)
+        self.__dict__.update(chosen.__dict__)
         self.structures = structures
         self.structure_search_ = tried
 

@@ -14,9 +14,9 @@ constants ``memory_min_s``..``memory_max_s``, s) join the delayed inputs (see
 (coefficients interpolated linearly between knots); the MLP sees RH and the knot weights.
 
 ``structures``: a list of hyper-parameter overrides (e.g. ``[{}, {na: 10, nb: 10}]``); each
-is fitted and the one with the lowest free-run NRMSE on the validation data is kept
-(:meth:`NeuralModel._select_structure`), so one recipe serves plants that need output
-feedback and plants where it drifts.
+is scored by the free-run NRMSE of its linear least-squares start on the validation data
+and the best one is trained (:meth:`NeuralModel._select_structure`), so one recipe serves
+plants that need output feedback and plants where it drifts.
 """
 from __future__ import annotations
 
@@ -70,6 +70,7 @@ class FFModel(LagModel):
     """
 
     kind = "ff"
+    _SELECTION_PROXY = {"layers": 0, "max_epochs": 0}    # structures are scored as linear least squares
 
     def __init__(self, na: int = 2, nb: int = 20, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,

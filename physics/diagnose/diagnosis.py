@@ -47,7 +47,7 @@ from ..errors import InputError, ModelError
 from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
 from ..effects import ensure_registered, user_effect_files
-from ..model import resolve_effects
+from ..model import ActuatorModel, resolve_effects
 from ..parallel import ParallelSettings, map_tasks
 from ..threads import single_threaded
 from . import candidates as C
@@ -352,7 +352,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
         tasks.append({"spec": spec, "device": dev_fit, "targets": targets, "trecs": trecs, "records": records,
                       "n_starts": n_starts, "seed": seed, "n_modes": n_modes, "effect_files": user_effect_files(),
                       "df_cache": df_cache if settings is None or settings.serial else None})
-    fitted = map_tasks(_fit_candidate, tasks, settings, desc="candidates", progress=False)
+    fitted = map_tasks(_fit_candidate, tasks, settings, desc="candidates", progress=False, cost=_candidate_cost)
     for k, (mf, wall) in zip(slots, fitted):
         c = results[k]
         if not mf.ok:
@@ -420,6 +420,14 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     warns = list(base.warnings)
     return DiagnosisResult(dev, records, base, ranked + others, support, verdict, ra_base, ra_after, feats, noise,
                            resonance, settings, timings, warns, adequacy)
+
+
+def _candidate_cost(task: dict) -> float:
+    """Relative cost of a candidate fit, to start the dearest first: a nonlinear model runs
+    the implicit time stepper (~5–10× a linear one); each free parameter adds evaluations."""
+    spec = task["spec"]
+    linear = ActuatorModel(task["device"], list(spec.effects), n_modes=task["n_modes"]).is_linear
+    return (1.0 if linear else 8.0) * (len(spec.free) + len(spec.per_rh) + 1)
 
 
 def _fit_candidate(task: dict):
