@@ -44,3 +44,24 @@ def test_registered_model_honours_the_contract(kind, tmp_path):
         m.simulate(bad, rh)
     again = MODELS[kind](**kw).fit(recs[:1], recs[1:])
     np.testing.assert_array_equal(again.simulate(u, rh), free)
+
+
+@pytest.mark.parametrize("kind", sorted(MODELS))
+def test_training_settings_live_in_one_config(kind):
+    """No constructor repeats the training settings: they are one TrainingConfig
+    (model.training), still read, written and validated as flat hyper-parameters."""
+    import inspect
+
+    from nnmodel.models.config import TRAINING_FIELDS, TrainingConfig
+    cls = MODELS[kind]
+    own = set(inspect.signature(cls.__init__).parameters) - {"self", "training"}
+    assert not own & set(TRAINING_FIELDS), sorted(own & set(TRAINING_FIELDS))
+    m = cls(max_epochs=3, lr=5e-4)
+    assert isinstance(m.training, TrainingConfig) and m.training.max_epochs == 3 and m.lr == 5e-4
+    m.set_params(patience=4)
+    assert m.training.patience == 4 and m.get_params()["patience"] == 4
+    assert set(TRAINING_FIELDS) <= set(cls.param_names()) and set(cls.default_params()) == set(cls.param_names())
+    with pytest.raises(InputError, match="max_epochs"):
+        cls(max_epochs=-1)
+    with pytest.raises(InputError, match="unknown hyper-parameter"):
+        cls(epochs=3)

@@ -25,6 +25,7 @@ import inspect
 import math
 import time
 import warnings
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,7 @@ from torch import nn
 from physics.errors import InputError
 
 from ..data import Record, check_records, check_voltage, rh_range, split_index
+from .config import TRAINING_FIELDS, TrainingConfig, training_config
 
 __all__ = ["SequenceCore", "Normalized", "NeuralModel", "NotFittedError"]
 
@@ -202,26 +204,49 @@ class NeuralModel:
         else "null or a list of hyper-parameter mappings, e.g. [{}, {na: 10, nb: 10}]",
     }
 
+    #: where this model's training defaults differ from :class:`TrainingConfig`'s
+    TRAINING_DEFAULTS: dict = {}
+
     # ------------------------------------------------------------------ parameters
     @classmethod
-    def param_names(cls) -> list[str]:
+    def _model_params(cls) -> dict:
+        """The constructor's own (model) parameters with their defaults."""
         sig = inspect.signature(cls.__init__)
-        return [p for p in sig.parameters if p != "self"]
+        return {k: p.default for k, p in sig.parameters.items()
+                if k != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD}
+
+    @classmethod
+    def param_names(cls) -> list[str]:
+        """Every hyper-parameter: the model's own, then the training settings."""
+        return list(cls._model_params()) + list(TRAINING_FIELDS)
 
     @classmethod
     def default_params(cls) -> dict:
-        sig = inspect.signature(cls.__init__)
-        return {k: p.default for k, p in sig.parameters.items() if k != "self"}
+        return {**cls._model_params(), **asdict(TrainingConfig(**cls.TRAINING_DEFAULTS))}
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in self.param_names()}
 
     def _set_params_from(self, local_vars: dict) -> None:
-        """Store the ``__init__`` arguments as attributes and validate them (subclasses call
-        ``self._set_params_from(locals())`` at the end of ``__init__``)."""
-        for k in self.param_names():
+        """Store the ``__init__`` arguments (the model's own as attributes, the training
+        settings given as ``**training`` in :attr:`training`) and validate them
+        (subclasses call ``self._set_params_from(locals())`` at the end of ``__init__``)."""
+        self.training = training_config(self.kind, self.TRAINING_DEFAULTS, local_vars.get("training", {}))
+        for k in self._model_params():
             setattr(self, k, local_vars[k])
         self._validate()
+
+    def __getattr__(self, name):
+        # training settings read as attributes (only called when normal lookup fails)
+        if name in TRAINING_FIELDS and "training" in self.__dict__:
+            return getattr(self.__dict__["training"], name)
+        raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
+
+    def __setattr__(self, name, value):
+        if name in TRAINING_FIELDS:
+            setattr(self.training, name, value)
+        else:
+            super().__setattr__(name, value)
 
     def set_params(self, **params) -> "NeuralModel":
         unknown = sorted(set(params) - set(self.param_names()))
@@ -398,12 +423,8 @@ class NeuralModel:
             self._initialise(core, tr)
             history: list[dict] = []
             if self._gradient_epochs() > 0:
-                settings = dict(seed=self.seed, lr=self.lr, weight_decay=self.weight_decay,
-                                batch_size=self.batch_size, max_epochs=self._gradient_epochs(),
-                                max_time=self.max_time, patience=self.patience,
-                                grad_clip=self.grad_clip, accelerator=self.accelerator,
-                                progress_bar=self.progress_bar, checkpoint_dir=self.checkpoint_dir)
-                settings.update(self._training_settings())
+                settings = {**self.training.fit_settings(), "max_epochs": self._gradient_epochs(),
+                            **self._training_settings()}
                 history, self.training_summary_ = fit_core(core, tr, va, **settings)
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history

@@ -77,12 +77,7 @@ class FFModel(LagModel):
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
                  memory_abs: bool = False,
                  rh_knots: list | None = None,
-                 inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
-                 batch_size: int = 256, max_epochs: int = 100, max_time: float | None = None,
-                 patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = None,
-                 accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None,
-                 structures: list | None = None):
+                 inputs: str = "auto", structures: list | None = None, **training):
         self._set_params_from(locals())
 
     def _training_settings(self):

@@ -96,6 +96,7 @@ class HybridModel(NeuralModel):
     """Physics simulator + neural correction of its output (grey box)."""
 
     kind = "hybrid"
+    TRAINING_DEFAULTS = {"max_time": 600.0, "grad_clip": 1.0}
     _checks = {**_LAG_CHECKS,
                "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
                "effects": _check_effects,
@@ -111,11 +112,7 @@ class HybridModel(NeuralModel):
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
                  memory_abs: bool = False,
                  rh_knots: list | None = None, gain_hidden: int = 0, horizon: int = 1, stride: int = 1,
-                 inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
-                 batch_size: int = 256, max_epochs: int = 100, max_time: float | None = 600.0,
-                 patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
-                 accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+                 inputs: str = "auto", **training):
         self._set_params_from(locals())
 
     _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")

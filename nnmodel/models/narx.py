@@ -16,6 +16,8 @@ class NARXModel(LagModel):
     """Closed-loop-trained NARX network (simulation-error / multiple-shooting training)."""
 
     kind = "narx"
+    TRAINING_DEFAULTS = {"lr": 2e-3, "batch_size": 64, "max_epochs": 200, "max_time": 600.0, "patience": 20,
+                         "grad_clip": 1.0}
 
     def __init__(self, na: int = 4, nb: int = 8, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
@@ -23,11 +25,7 @@ class NARXModel(LagModel):
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
                  memory_abs: bool = False,
                  rh_knots: list | None = None,
-                 inputs: str = "auto", seed: int = 0, lr: float = 2e-3, weight_decay: float = 0.0,
-                 batch_size: int = 64, max_epochs: int = 200, max_time: float | None = 600.0,
-                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
-                 accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+                 inputs: str = "auto", **training):
         self._set_params_from(locals())
 
     def _training_settings(self):

@@ -24,6 +24,7 @@ class RBFModel(NeuralModel):
     """Gaussian RBF network: k-means centres, spacing-based widths, ridge output layer."""
 
     kind = "rbf"
+    TRAINING_DEFAULTS = {"max_epochs": 0, "grad_clip": 1.0}
     _checks = {**_LAG_CHECKS,
                "n_centres": _pos_int,
                "width_factor": _pos_float,
@@ -37,12 +38,7 @@ class RBFModel(NeuralModel):
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
                  memory_abs: bool = False,
                  rh_knots: list | None = None,
-                 inputs: str = "auto", seed: int = 0, lr: float = 1e-3, weight_decay: float = 0.0,
-                 batch_size: int = 256, max_epochs: int = 0, max_time: float | None = None,
-                 patience: int = 10, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
-                 accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None,
-                 structures: list | None = None):
+                 inputs: str = "auto", structures: list | None = None, **training):
         self._set_params_from(locals())
 
     def _build_core(self, n_rh):

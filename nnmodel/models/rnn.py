@@ -85,6 +85,8 @@ class RNNSimulator(SequenceCore):
 
 class _RNNModel(NeuralModel):
     cell = "lstm"
+    TRAINING_DEFAULTS = {"lr": 3e-3, "batch_size": 32, "max_epochs": 300, "max_time": 600.0, "patience": 20,
+                         "grad_clip": 1.0}
     _checks = {"hidden": _pos_int, "layers": _pos_int, "n_init": _pos_int,
                "encoder_hidden": _pos_int, "horizon": _pos_int, "stride": _pos_int,
                "rh_knots": lambda v: None if v is None else check_knots(v),
@@ -95,11 +97,7 @@ class _RNNModel(NeuralModel):
                  memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
                  memory_abs: bool = False,
                  rh_knots: list | None = None, skip_init: bool = False,
-                 inputs: str = "auto", seed: int = 0, lr: float = 3e-3, weight_decay: float = 0.0,
-                 batch_size: int = 32, max_epochs: int = 300, max_time: float | None = 600.0,
-                 patience: int = 20, val_fraction: float = 0.2, grad_clip: float | None = 1.0,
-                 accelerator: str = "cpu", progress_bar: bool = True,
-                 num_threads: int | None = 1, checkpoint_dir: str | None = None):
+                 inputs: str = "auto", **training):
         self._set_params_from(locals())
 
     def _build_core(self, n_rh):
