@@ -303,3 +303,15 @@ def test_cli_identify(tmp_path, ipmc_record, capsys):
     code = main(["identify", str(csv), "--device", "ipmc_pt_eg", "--free", "kff", "--out", str(out), "--overwrite"])
     assert code == 2
     assert "unknown parameter 'kff'" in capsys.readouterr().err
+
+
+def test_multistarts_on_two_workers_give_the_serial_fit(ipmc, ipmc_record):
+    """The least-squares starts are tasks of the execution layer: the fit, every start's
+    record and the evaluation count do not depend on where they ran."""
+    from physics.parallel import ParallelSettings
+    kw = dict(start={"kf": 1.5 * ipmc.device["kf"], "beta_f": 0.6 * ipmc.device["beta_f"]}, n_starts=3)
+    serial = identify([ipmc_record], "ipmc_pt_eg", "default", "kf,beta_f", **kw)
+    par = identify([ipmc_record], "ipmc_pt_eg", "default", "kf,beta_f", settings=ParallelSettings(2), **kw)
+    assert len(par.fit.starts) == 3 and par.fit.starts == serial.fit.starts
+    np.testing.assert_array_equal(par.fit.theta, serial.fit.theta)
+    assert par.n_evaluations == serial.n_evaluations > 3

@@ -7,7 +7,7 @@ from pathlib import Path
 from physics.errors import InputError
 from physics.identify import IdentifiabilityWarning, identify, write_identification
 
-from ._common import add_output_options, check_out, provenance, writing
+from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
 from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
 
 NAME = "identify"
@@ -41,6 +41,7 @@ def add_arguments(p):
                    help="weights of the FRF residuals: 1/random error from the coherence, or uniform")
     p.add_argument("--skip-s", type=float, default=0.0, help="time residuals: skip this start-up interval [s]")
     add_frf_arguments(p)
+    add_parallel_options(p)
     p.add_argument("--name", default=None, help="name of the fitted device and its file NAME.yaml (default: DEVICE_identified)")
     add_output_options(p, "runs/identify")
 
@@ -58,7 +59,8 @@ def run(args) -> int:
                        residual=args.residual, fit_phase=not args.no_phase, frf_options=frf_options(args),
                        min_coherence=args.min_coherence, weighting=args.weighting, rh_tolerance=args.rh_tolerance,
                        sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), n_modes=args.n_modes,
-                       start_spread=args.start_spread, rh=args.rh, skip_s=args.skip_s)
+                       start_spread=args.start_spread, rh=args.rh, skip_s=args.skip_s,
+                       settings=parallel_settings(args))
     with writing(args, inputs=protect) as tmp:
         out = write_identification(res, tmp, name=args.name, provenance=provenance(inputs=protect), protect=protect)
     d = Path(args.out)

@@ -9,7 +9,9 @@ from typing import Sequence
 import numpy as np
 from scipy import optimize, stats
 
+from ..effects import ensure_registered, user_effect_files
 from ..errors import InputError, ModelError
+from ..parallel import ParallelSettings, map_tasks
 from .problem import IdentificationProblem
 from .settings import COND_LIMIT, CORR_LIMIT, REL_SE_LIMIT, THESIS_MAX_ITER, THESIS_TOL
 
@@ -177,34 +179,46 @@ def _interior(x, lo, hi):
     return np.clip(x, lo + 1e-9 * span, hi - 1e-9 * span)
 
 
+def _fit_start(task: dict):
+    """One start of :func:`fit_lsq` (a task of :func:`physics.parallel.map_tasks`): (record
+    for the card, the optimiser's result or None, model evaluations spent)."""
+    ensure_registered(task["effect_files"])
+    problem, xs = task["problem"], task["x"]
+    n0 = problem.n_eval
+    rec = {"start": task["start"], "theta_start": problem.from_x(xs).tolist()}
+    try:
+        res = optimize.least_squares(problem.residuals_x, xs, bounds=problem.x_bounds, method="trf",
+                                     x_scale=1.0, max_nfev=task["max_nfev"] or 100 * xs.size)
+    except (ModelError, FloatingPointError) as exc:  # a start where the model cannot be solved
+        return {**rec, "error": str(exc)}, None, problem.n_eval - n0
+    rec.update(theta=problem.from_x(res.x).tolist(), cost=float(res.cost), nfev=int(res.nfev), status=int(res.status))
+    return rec, res, problem.n_eval - n0
+
+
 def fit_lsq(problem: IdentificationProblem, *, n_starts: int = 5, seed: int = 0, start_spread: float = 1.0,
-            max_nfev: int | None = None, extra_starts: Sequence[Sequence[float]] = ()) -> Fit:
+            max_nfev: int | None = None, extra_starts: Sequence[Sequence[float]] = (),
+            settings: ParallelSettings | None = None) -> Fit:
     """Bounded multi-start least squares (see the module doc).  ``extra_starts``: further
     start points θ (SI, one value per free parameter, in ``problem.labels`` order) tried
-    after the usual ones (e.g. a grid over a parameter whose scale is unknown)."""
+    after the usual ones (e.g. a grid over a parameter whose scale is unknown).  The starts
+    are independent tasks of :func:`physics.parallel.map_tasks` (``settings``: workers or a
+    Dask scheduler); the result does not depend on where they ran."""
     t0 = time.perf_counter()
     n0 = problem.n_eval
     lo, hi = problem.x_bounds
-    best, starts = None, []
     points = _starts(problem, n_starts, seed, start_spread)
     for th in extra_starts:
         th = np.asarray(th, dtype=float)
         if th.shape != (len(problem.params),):
             raise InputError(f"extra start {th.tolist()} needs one value per free parameter ({', '.join(problem.labels)})")
         points.append(problem.to_x(th))
-    for k, xs in enumerate(points):
-        xs = _interior(xs, lo, hi)
-        try:
-            res = optimize.least_squares(problem.residuals_x, xs, bounds=(lo, hi), method="trf",
-                                         x_scale=1.0, max_nfev=max_nfev or 100 * xs.size)
-        except (ModelError, FloatingPointError) as exc:  # a start where the model cannot be solved
-            starts.append({"start": k, "theta_start": problem.from_x(xs).tolist(), "error": str(exc)})
-            continue
-        starts.append({"start": k, "theta_start": problem.from_x(xs).tolist(),
-                       "theta": problem.from_x(res.x).tolist(), "cost": float(res.cost),
-                       "nfev": int(res.nfev), "status": int(res.status)})
-        if best is None or res.cost < best.cost:
-            best = res
+    remote = settings is not None and not settings.serial
+    tasks = [{"problem": problem, "x": _interior(xs, lo, hi), "max_nfev": max_nfev, "start": k,
+              "effect_files": user_effect_files() if remote else []} for k, xs in enumerate(points)]
+    runs = map_tasks(_fit_start, tasks, settings, desc="starts", progress=False)
+    problem.n_eval = n0 + sum(n for _, _, n in runs)
+    starts = [rec for rec, _, _ in runs]
+    best = min((res for _, res, _ in runs if res is not None), key=lambda r: r.cost, default=None)
     if best is None:
         raise ModelError("every start of the least-squares fit failed: " + "; ".join(s.get("error", "") for s in starts))
     x = best.x

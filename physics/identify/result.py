@@ -10,6 +10,7 @@ from typing import Mapping, Sequence
 from ..compare import (FRFOptions, load_measurements, source_name)
 from ..device import Device
 from ..errors import InputError
+from ..parallel import ParallelSettings
 from ..threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
 from .parameters import IdentifiabilityWarning, parse_assignments, parse_names
@@ -105,7 +106,8 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
              fit_phase: bool = True, frf_options: FRFOptions | None = None, min_coherence: float = 0.0,
              weighting: str = "coherence", rh_tolerance: float = 2.5, sensor_bandwidth="auto",
              n_modes: int = 4, start_spread: float = 1.0, rh: float | None = None, skip_s: float = 0.0,
-             max_nfev: int | None = None, warn: bool = True) -> IdentificationResult:
+             max_nfev: int | None = None, warn: bool = True,
+             settings: ParallelSettings | None = None) -> IdentificationResult:
     """Identify ``free`` (shared) and ``per_rh`` parameters of ``device`` with ``effects``
     from ``measurements`` (paths, :class:`TimeSeries` or :class:`FRFData`).
 
@@ -114,6 +116,7 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
     or the text forms ``"kf=0.004,Y=0.2 GPa"`` / ``"kf=1e-4:1e-1"``.  ``n_starts`` defaults
     to 5 for FRF residuals and 1 for time residuals.  Identifiability problems are
     listed in the result and, with ``warn``, issued as :class:`IdentifiabilityWarning`.
+    ``settings``: where the least-squares starts run (:mod:`physics.parallel`; default here).
     See the module doc for everything else."""
     t0 = time.perf_counter()
     if method not in ("lsq", "nelder-mead", "both"):
@@ -135,7 +138,7 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
         fits["nelder-mead"] = fit_nelder_mead(problem)
     if method in ("lsq", "both"):
         fits["lsq"] = fit_lsq(problem, n_starts=int(n_starts), seed=seed, start_spread=start_spread,
-                              max_nfev=max_nfev)
+                              max_nfev=max_nfev, settings=settings)
     primary = "lsq" if "lsq" in fits else "nelder-mead"
     dev = problem.device_for(fits[primary].theta)
     sources = [source_name(m, k) for k, m in enumerate(ms)]
