@@ -199,7 +199,11 @@ class _Remote(threading.Thread):
                     flying[fut] = batch
                 if not flying:
                     break
-                for fut in wait(list(flying), timeout=0.2, return_when="FIRST_COMPLETED").done:
+                try:
+                    done = wait(list(flying), timeout=0.2, return_when="FIRST_COMPLETED").done
+                except TimeoutError:   # nothing finished within the poll interval
+                    continue
+                for fut in done:
                     self.work.store(flying.pop(fut), *fut.result(), self.desc)
         except BaseException as exc:  # raised by the main thread if work is left undone
             self.error = exc

@@ -42,6 +42,11 @@ def _slow_square(task):
     return task["x"] ** 2
 
 
+def _square_and_pid(task):
+    import os
+    return _slow_square(task), os.getpid()
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_failed_task_names_its_inputs(workers):
     with pytest.raises(ModelError, match=r"task \{'x': 3\} failed: ValueError: bad x"):
@@ -81,6 +86,11 @@ def test_generate_on_two_workers_writes_identical_files(tmp_path):
 def test_this_process_and_the_workers_share_the_queue_in_task_order():
     """With 2 workers this process starts at once and a worker joins when its cluster is up;
     the dearest tasks (by `cost`) start first; results come back in task order."""
-    tasks = [{"x": i, "sleep": 0.05} for i in range(40)]
-    out = map_tasks(_slow_square, tasks, ParallelSettings(2), progress=False, cost=lambda t: t["x"] % 7)
-    assert out == [i ** 2 for i in range(40)]
+    import os
+    tasks = [{"x": i, "sleep": 0.1} for i in range(60)]
+    out = map_tasks(_square_and_pid, tasks, ParallelSettings(2), progress=False, cost=lambda t: t["x"] % 7)
+    assert [v for v, _ in out] == [i ** 2 for i in range(60)]
+    pids = [p for _, p in out]
+    mine = pids.count(os.getpid())
+    assert 0 < mine < len(pids), f"this process ran {mine} of {len(pids)} tasks: the worker never joined"
+    assert len(set(pids)) == 2
