@@ -7,6 +7,9 @@
 * `eap diagnose` with every candidate forced (the "rich" hidden-effect design: sweeps at 3 RH
   levels and 2 amplitudes plus a pulse): serial vs 2 workers, and whether the verdict is the same.
 
+Every parallel run starts its local cluster cold, as one command of the CLI does (the
+cluster start and the workers' imports are inside the timed interval).
+
     python bench/scale_out.py [--config default] [--points 1000]
 """
 from __future__ import annotations
@@ -27,7 +30,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     from nnmodel.dataset import generate
-    from physics.parallel import ParallelSettings
+    from physics.parallel import ParallelSettings, shutdown
     from physics.sweep import run_sweep
     par = ParallelSettings(args.workers)
     with tempfile.TemporaryDirectory() as tmp:
@@ -36,6 +39,7 @@ def main() -> None:
         t1 = time.perf_counter()
         b = generate(Path(tmp) / "parallel", args.config, progress=False, settings=par)
         t2 = time.perf_counter()
+        shutdown()
         ha = [e["sha256"] for e in json.loads((a / "dataset.json").read_text())["files"]]
         hb = [e["sha256"] for e in json.loads((b / "dataset.json").read_text())["files"]]
     print(f"generate --config {args.config}: serial {t1 - t0:.1f} s, {args.workers} workers {t2 - t1:.1f} s "
@@ -47,6 +51,7 @@ def main() -> None:
     t1 = time.perf_counter()
     p = run_sweep("ipmc_pt_eg", "none", grid, settings=par, progress=False)
     t2 = time.perf_counter()
+    shutdown()
     task = (t1 - t0) / len(s)
     ideal = (t1 - t0) / args.workers
     overhead = max(0.0, (t2 - t1) - ideal) / len(s)
@@ -61,6 +66,7 @@ def main() -> None:
         t0 = time.perf_counter()
         res = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, force=True, settings=st)
         runs[label] = (time.perf_counter() - t0, res.verdict.missing_effect, len(res.ranking))
+        shutdown()
     (ts, vs, n), (tp, vp, _) = runs.values()
     print(f"diagnose, {n} candidates forced: serial {ts:.1f} s, {args.workers} workers {tp:.1f} s (×{ts / tp:.2f}); "
           f"verdict {vs} / {vp}")

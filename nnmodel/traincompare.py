@@ -31,9 +31,12 @@ from physics.plotting import plt, save
 from physics.report import Report, colour, write_csv
 from physics import signals
 
-from .bundle import save as save_bundle
+from physics.effects import ensure_registered, user_effect_files
+from physics.parallel import ParallelSettings, map_tasks, warm_up
+
+from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
-from .training import make_model
+from .training import load_recipe, make_model
 
 GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
 SKIP = 50   # samples at the start of each test record used only for initialisation
@@ -95,21 +98,23 @@ def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: f
 
 def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/train-compare",
                   *, overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
-                  progress: bool = True, overwrite: bool = False, physics: str | None = None) -> dict:
+                  progress: bool = True, overwrite: bool = False, physics: str | None = None,
+                  settings: ParallelSettings | None = None) -> dict:
     """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
     ``compare.json``, ``metrics.csv``, plots and ``report.html`` in ``out`` (a folder written
     atomically under the policy of :mod:`physics.outputs`).  ``physics``: a device (name or
     YAML) whose simulator is scored beside the networks — by default the dataset's generator,
-    none for measured data."""
+    none for measured data.  ``settings``: where the models train (:mod:`physics.parallel`:
+    one task per model, each reading the dataset from its path; default here)."""
     preflight(out, inputs=[dataset], overwrite=overwrite)
+    warm_up(settings)   # the workers start while the dataset is read and the physics scored
     ds = load_dataset(dataset)
     with output_folder(out, inputs=[dataset], overwrite=overwrite) as tmp:
-        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress, physics)
+        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress, physics, settings)
 
 
-def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress, physics) -> dict:
-    train, val = ds.records("train"), ds.records("validation") or None
-    if not train:
+def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress, physics, settings) -> dict:
+    if not ds.entries("train"):
         raise InputError(f"{dataset}: no training records")
     test_entries = ds.entries("test")
     if not test_entries:
@@ -137,10 +142,11 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         results["physics"]["inference_samples_per_s"] = _speed(lambda r: physics_predict(r), ds, test_entries)
         results["physics"]["eval_time_s"] = time.perf_counter() - t0
         physics_rows["physics"] = physics_predict
-    trained = {}
+    local = settings is None or settings.serial
+    tasks = []
     for name in models:
         ov = dict((overrides or {}).get(name, {}))
-        if not progress:
+        if not progress or not local:
             ov.setdefault("progress_bar", False)
         if max_time_s is not None:
             ov["max_time"] = float(max_time_s)
@@ -148,39 +154,25 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
             if device is None and "device" not in ov:
                 raise InputError("the hybrid needs a physics model: give --physics DEVICE (or --set hybrid.device=...)")
             ov.setdefault("device", device)   # the hybrid's physics: the dataset's (or --physics) device
-        model = make_model(name, ov)
+        make_model(name, ov)                  # a bad recipe or --set fails here, before any training
+        tasks.append({"name": name, "overrides": ov, "dataset": str(ds.path), "bundle": str(out / "models" / name),
+                      "echo": progress and local, "effect_files": user_effect_files()})
+    if progress and not local:
+        print(f"training {', '.join(models)} on {settings.workers if not settings.scheduler else 'the cluster'} "
+              f"worker(s) ...", flush=True)
+    runs = map_tasks(_train_one, tasks, settings, desc="models", progress=False, cost=_training_cost)
+    trained = {}
+    for task, res in zip(tasks, runs):
+        name = task["name"]
+        model = load_bundle(task["bundle"]).model
         if name == "hybrid":
             base = _physics_base_row(model, gen, ds, test_entries)
             if base is not None:   # the physics the hybrid starts from, alone
                 results["physics_base"], physics_rows["physics_base"] = base
-        if progress:
-            print(f"training {name} ...", flush=True)
-        t1 = time.perf_counter()
-        model.fit(train, val)
-        fit_time = time.perf_counter() - t1
-        skip = max(SKIP, int(model.n_init_))
-
-        def free(rec, m=model):
-            return m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])
-
-        def one_step(rec, m=model):
-            return m.predict(rec.u, rec.rh, y=rec.y, steps_ahead=1)
-
-        res = {"kind": name, "n_parameters": int(model.n_parameters), "train_time_s": fit_time,
-               "free_run": _score(free, ds, test_entries, skip),
-               "one_step": _score(one_step, ds, test_entries, skip),
-               "inference_samples_per_s": _speed(free, ds, test_entries),
-               "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None}
-        save_bundle(model, out / "models" / name, dataset_hash=ds.hash, overwrite=True,
-                    metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
-                    notes=f"trained by eap train-compare on {ds.path}")
         results[name] = res
         trained[name] = model
-        if progress:
-            fr = res["free_run"]
-            held = (f", held-out RH {100 * fr['heldout_rh']['nrmse']:.2f} %" if "heldout_rh" in fr else "")
-            print(f"  {name}: {fit_time:.1f} s, free-run NRMSE test {100 * fr['test']['nrmse']:.2f} %{held}",
-                  flush=True)
+        if progress and not local:
+            _echo_result(name, res)
     summary = {"dataset": str(ds.path), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
                "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
@@ -192,6 +184,54 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     write_csv(table_rows(results), out / "metrics.csv")
     _report(summary, out)
     return summary
+
+
+def _train_one(task: dict) -> dict:
+    """Train, score and save one model (a task of :func:`physics.parallel.map_tasks`: in this
+    process or on a worker, which reads the dataset from its path); returns its result row."""
+    ensure_registered(task["effect_files"])
+    ds = load_dataset(task["dataset"])
+    train, val = ds.records("train"), ds.records("validation") or None
+    entries = ds.entries("test")
+    name = task["name"]
+    model = make_model(name, task["overrides"])
+    if task["echo"]:
+        print(f"training {name} ...", flush=True)
+    t1 = time.perf_counter()
+    model.fit(train, val)
+    fit_time = time.perf_counter() - t1
+    skip = max(SKIP, int(model.n_init_))
+
+    def free(rec):
+        return model.simulate(rec.u, rec.rh, y_init=rec.y[:model.n_init_])
+
+    def one_step(rec):
+        return model.predict(rec.u, rec.rh, y=rec.y, steps_ahead=1)
+
+    res = {"kind": name, "n_parameters": int(model.n_parameters), "train_time_s": fit_time,
+           "free_run": _score(free, ds, entries, skip),
+           "one_step": _score(one_step, ds, entries, skip),
+           "inference_samples_per_s": _speed(free, ds, entries),
+           "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None}
+    save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True,
+                metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
+                notes=f"trained by eap train-compare on {ds.path}")
+    if task["echo"]:
+        _echo_result(name, res)
+    return res
+
+
+def _training_cost(task: dict) -> float:
+    """Relative training cost, to start the dearest models first: recurrent and hybrid
+    models train by back-propagation through time, FF/RBF mostly by least squares."""
+    return 1.0 if load_recipe(task["name"], task["overrides"])["model"] in ("ff", "rbf") else 4.0
+
+
+def _echo_result(name: str, res: dict) -> None:
+    fr = res["free_run"]
+    held = f", held-out RH {100 * fr['heldout_rh']['nrmse']:.2f} %" if "heldout_rh" in fr else ""
+    print(f"  {name}: {res['train_time_s']:.1f} s, free-run NRMSE test {100 * fr['test']['nrmse']:.2f} %{held}",
+          flush=True)
 
 
 def _physics_base_row(model, gen: dict, ds: Dataset, entries):

@@ -6,6 +6,8 @@
 * ``workers=N`` runs tasks in this process and, beside it, on a local cluster of N − 1
   worker *processes* started in the background (one thread each; BLAS, OpenMP and torch
   threads per worker are set so that workers × threads ≤ cores), all drawing from one queue;
+  the cluster is started once per process and kept until exit, and :func:`warm_up` starts
+  it early (beside serial work) so that it is ready when the tasks come;
 * ``scheduler="tcp://HOST:8786"`` (or the environment variable ``EAP_SCHEDULER``) uses an
   existing Dask cluster — started by hand (``dask scheduler`` / ``dask worker``), or on
   SLURM/PBS with ``dask-jobqueue`` or on Kubernetes with ``dask-kubernetes`` (bring your
@@ -19,8 +21,10 @@ count.  A failing task raises :class:`~physics.errors.ModelError` naming the tas
 """
 from __future__ import annotations
 
+import atexit
 import os
 import threading
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -29,9 +33,9 @@ from .progress import Progress
 
 #: Environment variable naming an existing Dask scheduler.
 SCHEDULER_ENV = "EAP_SCHEDULER"
-#: Dask tasks per worker: consecutive tasks are batched so that small tasks (a few ms)
+#: Batches per worker: consecutive tasks are batched (by cost) so that small tasks (a few ms)
 #: do not pay a scheduler round trip each, while the load still balances.
-BATCHES_PER_WORKER = 8
+BATCHES_PER_WORKER = 16
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
 
 
@@ -99,19 +103,17 @@ def map_tasks(fn: Callable, tasks: Sequence, settings: ParallelSettings | None =
                 out.append(value)
                 bar.update()
         return out
-    order = list(range(len(tasks)))
-    if cost is not None:
-        order.sort(key=lambda i: -float(cost(tasks[i])))
-    return _map_dask(fn, tasks, order, settings, desc, progress)
+    costs = [1.0] * len(tasks) if cost is None else [float(cost(t)) for t in tasks]
+    order = sorted(range(len(tasks)), key=lambda i: -costs[i])
+    return _map_dask(fn, tasks, order, costs, settings, desc, progress)
 
 
 class _Work:
     """Batches of task indices shared by this process and the Dask workers (thread-safe)."""
 
-    def __init__(self, tasks, order, n_workers: int):
-        size = max(1, len(tasks) // (BATCHES_PER_WORKER * n_workers))
+    def __init__(self, tasks, order, costs, n_workers: int):
         self.tasks = tasks
-        self.batches = [order[a:a + size] for a in range(0, len(order), size)]
+        self.batches = _batches(order, costs, BATCHES_PER_WORKER * n_workers)
         self.results: list = [None] * len(tasks)
         self.lock = threading.Lock()
         self.failure: str | None = None
@@ -120,6 +122,10 @@ class _Work:
     def take(self):
         with self.lock:
             return None if self.failure or not self.batches else self.batches.pop(0)
+
+    def pending(self) -> bool:
+        with self.lock:
+            return bool(self.batches) and not self.failure
 
     def give_back(self, batch):
         with self.lock:
@@ -137,13 +143,27 @@ class _Work:
             return len(batch)
 
 
-def _map_dask(fn, tasks, order, settings: ParallelSettings, desc: str, progress: bool) -> list:
+def _batches(order, costs, n: int) -> list[list[int]]:
+    """Consecutive tasks of ``order`` grouped into about ``n`` batches of similar total cost
+    (a dear task alone, cheap ones together)."""
+    target = sum(costs) / max(1, n)
+    out, cur, acc = [], [], 0.0
+    for i in order:
+        cur.append(i)
+        acc += costs[i]
+        if acc >= target:
+            out.append(cur)
+            cur, acc = [], 0.0
+    return out + ([cur] if cur else [])
+
+
+def _map_dask(fn, tasks, order, costs, settings: ParallelSettings, desc: str, progress: bool) -> list:
     """Local runs: this process works through the tasks at once while a cluster of
     ``workers - 1`` processes starts beside it and then shares the queue (the cluster's
     start-up and the workers' first imports overlap useful work).  ``--scheduler``: every
     task goes to the existing cluster."""
     local = not settings.scheduler
-    work = _Work(tasks, order, settings.workers if local else 1)
+    work = _Work(tasks, order, costs, settings.workers if local else 1)
     remote = _Remote(fn, work, settings, settings.workers - 1 if local else None, desc)
     label = f"{desc} on {settings.workers} workers" if local else f"{desc} on the cluster"
     with Progress(len(tasks), label, enabled=progress) as bar:
@@ -184,10 +204,17 @@ class _Remote(threading.Thread):
     def run(self) -> None:
         if self.n_remote == 0:
             return
-        cluster = client = None
+        client = None
         flying: dict = {}
         try:
-            cluster, client = self._connect()
+            if self.settings.scheduler:
+                client = _connect(self.settings.scheduler)
+            else:
+                starting = _local_cluster(self.settings.workers)
+                while not starting.done():   # this process works meanwhile; stop when nothing is left
+                    if self.stop.wait(0.1) or not self.work.pending():
+                        return
+                client = starting.result()
             n_workers = max(1, len(client.scheduler_info()["workers"]))
             from distributed import wait
             while not self.stop.is_set():
@@ -211,25 +238,69 @@ class _Remote(threading.Thread):
             for fut, batch in flying.items():
                 fut.cancel()
                 self.work.give_back(batch)
-            if client is not None:
-                client.close()
-            if cluster is not None:
-                cluster.close()
+            if client is not None and self.settings.scheduler:
+                client.close()   # a local cluster is kept for this process's next map_tasks
 
-    def _connect(self):
+
+def _connect(address: str):
+    """A client of the existing Dask scheduler at ``address``."""
+    from distributed import Client
+    try:
+        return Client(address, timeout="20s")
+    except (OSError, TimeoutError) as exc:
+        raise InputError(f"--scheduler {address}: cannot connect ({exc}); start a scheduler there or unset "
+                         f"{SCHEDULER_ENV}") from None
+
+
+_CLUSTERS: dict[int, Future] = {}
+_CLUSTERS_LOCK = threading.Lock()
+
+
+def warm_up(settings: ParallelSettings | None) -> None:
+    """Start the local cluster of ``settings`` now, in the background, so that it is ready
+    when the first :func:`map_tasks` needs it (call it before serial work that precedes the
+    parallel part, e.g. the diagnosis's base fit).  No-op when serial or on ``--scheduler``."""
+    if settings is not None and not settings.serial and not settings.scheduler:
+        _local_cluster(settings.workers)
+
+
+def _local_cluster(workers: int) -> Future:
+    """The client of this process's local cluster of ``workers − 1`` worker processes,
+    started once in a background thread and kept (closed at exit) for later calls."""
+    with _CLUSTERS_LOCK:
+        fut = _CLUSTERS.get(workers)
+        if fut is None:
+            if not _CLUSTERS:
+                atexit.register(shutdown)
+            fut = _CLUSTERS[workers] = Future()
+            threading.Thread(target=_start_cluster, args=(workers, fut), daemon=True).start()
+        return fut
+
+
+def _start_cluster(workers: int, fut: Future) -> None:
+    try:
         import dask
         from distributed import Client, LocalCluster
-        st = self.settings
-        if st.scheduler:
-            try:
-                return None, Client(st.scheduler, timeout="20s")
-            except (OSError, TimeoutError) as exc:
-                raise InputError(f"--scheduler {st.scheduler}: cannot connect ({exc}); start a scheduler "
-                                 f"there or unset {SCHEDULER_ENV}") from None
         cores = os.cpu_count() or 1
-        env = {v: str(max(1, cores // st.workers)) for v in _THREAD_VARS}
+        env = {v: str(max(1, cores // workers)) for v in _THREAD_VARS}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env, "distributed.worker.daemon": False,
                               "distributed.logging.distributed": "error"}):
-            cluster = LocalCluster(n_workers=self.n_remote, threads_per_worker=1, processes=True,
+            cluster = LocalCluster(n_workers=workers - 1, threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40, env=env)
-            return cluster, Client(cluster)
+        client = Client(cluster)
+        client.eap_cluster = cluster
+        fut.set_result(client)
+    except BaseException as exc:   # every later map_tasks then runs in this process
+        fut.set_exception(exc)
+
+
+def shutdown() -> None:
+    """Close the local clusters this process started (also done at exit)."""
+    with _CLUSTERS_LOCK:
+        started = list(_CLUSTERS.values())
+        _CLUSTERS.clear()
+    for fut in started:
+        if fut.done() and fut.exception() is None:
+            client = fut.result()
+            client.close()
+            client.eap_cluster.close()

@@ -114,3 +114,20 @@ def test_silverbox_suite_smoke_on_a_slice_of_the_real_file(tmp_path, capsys):
     assert "data:image/png;base64," in (out / "silverbox.html").read_text()
     b = load(out / "models" / "narx")
     assert b.card["output"] == {"name": "V2", "unit": "V"} and b.fs == silverbox.FS
+
+
+def test_silverbox_suite_on_two_workers_gives_the_serial_figures(tmp_path, capsys):
+    """`eap benchmark --workers 2`: one task per model (and reference), the same figures."""
+    from nnmodel.benchmarks import silverbox
+    try:
+        silverbox.find_data()
+    except Exception as exc:  # InputError with the places looked at
+        pytest.skip(f"Silverbox data file absent: {exc}")
+    reps = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}"
+        assert main(["benchmark", "--suite", "silverbox", "--out", str(out), "--models", "ff", "--limit", "1500",
+                     "--no-progress", "--no-save-models", "--set", "ff.max_epochs=1", "--set", "ff.hidden=4",
+                     "--workers", workers]) == 0
+        reps.append({r["model"]: r["rmse_mv"] for r in json.loads((out / "silverbox.json").read_text())["results"]})
+    assert len(reps[0]) >= 3 and reps[0] == reps[1]

@@ -64,3 +64,25 @@ def test_override_parsing():
     assert parse_overrides(["narx.hidden=64", "ff.lr=1e-3"]) == {"narx": {"hidden": 64}, "ff": {"lr": 1e-3}}
     with pytest.raises(InputError, match="MODEL.KEY=VALUE"):
         parse_overrides(["hidden=3"])
+
+
+def test_models_trained_on_two_workers_match_the_serial_run(run, tmp_path):
+    """One task per model on the execution layer: same scores, same weights as in one process."""
+    from physics.parallel import ParallelSettings
+    out, summary = run
+    data = json.loads((out / "compare.json").read_text())["dataset"]
+    par = train_compare(data, ["rbf", "ff"], tmp_path / "par", progress=False, settings=ParallelSettings(2),
+                        overrides={"rbf": {"n_centres": 20, "nb": 10}, "ff": {"max_epochs": 2, "hidden": 8, "nb": 10}})
+    for name in ("rbf", "ff"):
+        assert par["models"][name]["free_run"] == summary["models"][name]["free_run"]
+        a = json.loads((out / "models" / name / "card.json").read_text())["weights"]["sha256"]
+        b = json.loads((tmp_path / "par" / "models" / name / "card.json").read_text())["weights"]["sha256"]
+        assert a == b, name
+
+
+def test_devices_and_workers_are_exclusive(run, capsys):
+    from nnmodel.cli import main
+    out, _ = run
+    data = json.loads((out / "compare.json").read_text())["dataset"]
+    assert main(["train-compare", data, "--devices", "2", "--workers", "2", "--out", str(out.parent / "x")]) == 2
+    assert "use one of them" in capsys.readouterr().err

@@ -63,7 +63,7 @@ def _dataset(out: Path, data, config: str, echo) -> Path:
 def run(models=None, out: str | os.PathLike = "eap-benchmark", *, quick: bool = False,
         overrides: dict[str, dict] | None = None, progress: bool = True,
         data: str | os.PathLike | None = None, limit: int | None = None, save_models: bool = True,
-        config: str | None = None, echo=print) -> dict:
+        config: str | None = None, settings=None, echo=print) -> dict:
     """Run the humidity suite into ``out`` and return the report (also ``out/eap.json``).
 
     ``data``: an existing dataset folder (default: generate ``config``, i.e. ``default``,
@@ -86,7 +86,8 @@ def run(models=None, out: str | os.PathLike = "eap-benchmark", *, quick: bool = 
             layer["max_time"] = QUICK_BUDGET_S
         layer.update(overrides.get(n, {}))
         layered[n] = layer
-    summary = train_compare(ds_path, names, out / "compare", overrides=layered, progress=progress)
+    summary = train_compare(ds_path, names, out / "compare", overrides=layered, progress=progress,
+                            settings=settings)
     report = _report(summary, names, quick, ds_path, time.perf_counter() - t0, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["winners_text"],

@@ -26,6 +26,7 @@ import warnings
 from pathlib import Path
 
 from physics.errors import InputError
+from physics.parallel import map_tasks
 from physics.fileio import atomic_path, write_json, write_text
 
 from . import common
@@ -62,11 +63,10 @@ def subset_order(entries: list[dict]) -> list[dict]:
 def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = False,
         overrides: dict[str, dict] | None = None, progress: bool = True,
         data: str | os.PathLike | None = None, limit: int | None = None, save_models: bool = True,
-        sizes=None, curve_budget_s: float | None = None, echo=print) -> dict:
+        sizes=None, curve_budget_s: float | None = None, settings=None, echo=print) -> dict:
     """Run the grey-box study into ``out``; returns the report (``out/greybox.json``)."""
     from ..dataset import load_dataset
-    from ..traincompare import SKIP, _score, train_compare
-    from ..training import make_model
+    from ..traincompare import train_compare
     from .eap import _dataset
 
     if limit is not None:
@@ -83,49 +83,58 @@ def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = 
 
     # 1. full data, recipes
     echo("== full training data, recipes ==")
-    full = train_compare(ds_path, names, out / "compare", overrides=layered, progress=progress)
+    full = train_compare(ds_path, names, out / "compare", overrides=layered, progress=progress,
+                         settings=settings)
 
     # 2. data efficiency
     sizes = tuple(sizes) if sizes is not None else (QUICK_SIZES if quick else SIZES)
     budget = float(curve_budget_s if curve_budget_s is not None else
                    (QUICK_CURVE_BUDGET_S if quick else CURVE_BUDGET_S))
     order = subset_order(ds.entries("train"))
-    val = ds.records("validation")
-    tests = ds.entries("test")
-    curve = []
+    tasks = []
     for size in sizes:
         n = len(order) if size is None else min(int(size), len(order))
-        chosen = order[:n]
-        recs = [ds.record(e) for e in chosen]
-        seconds = sum(len(r) for r in recs) / ds.fs
         for name in names:
             ov = {**layered[name], "progress_bar": False}
             ov["max_time"] = min(float(ov.get("max_time") or budget), budget)
             if name == "hybrid":
                 ov.setdefault("device", gen["device"])
-            model = make_model(name, ov)
-            t0 = time.perf_counter()
-            model.fit(recs, val)
-            fit_s = time.perf_counter() - t0
-            skip = max(SKIP, int(model.n_init_))
-            with warnings.catch_warnings():   # small subsets see few RH levels: extrapolation is the point
-                warnings.filterwarnings("ignore", message=".*outside the range seen in training.*")
-                sc = _score(lambda rec, m=model: m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_]),
-                            ds, tests, skip)
-            row = {"model": name, "n_records": n, "train_seconds_of_data": seconds,
-                   "rh_levels": sorted({float(e["rh_pct"]) for e in chosen if not isinstance(e["rh_pct"], dict)}),
-                   "drifting_rh_records": sum(isinstance(e["rh_pct"], dict) for e in chosen),
-                   "records": [e["path"] for e in chosen], "fit_time_s": fit_s,
-                   "nrmse_pct": {g: 100 * sc[g]["nrmse"] for g in ("heldout_rh", "train_rh", "varying_rh", "test")
-                                 if g in sc}}
-            curve.append(row)
-            echo(f"[{n} record(s), {seconds:.0f} s of data] {name}: held-out RH "
-                 f"{row['nrmse_pct']['heldout_rh']:.2f} %  ({fit_s:.0f} s)")
+            tasks.append({"model": name, "overrides": ov, "dataset": str(ds_path), "records": order[:n]})
+    curve = map_tasks(_curve_point, tasks, settings, desc="data-efficiency curve", progress=False)
+    for row in curve:
+        echo(f"[{row['n_records']} record(s), {row['train_seconds_of_data']:.0f} s of data] {row['model']}: "
+             f"held-out RH {row['nrmse_pct']['heldout_rh']:.2f} %  ({row['fit_time_s']:.0f} s)")
     report = _report(full, curve, names, quick, budget, ds_path, time.perf_counter() - t_start, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["findings"],
                   "report: greybox.html (JSON greybox.json) in the output folder")
     return report
+
+
+def _curve_point(task: dict) -> dict:
+    """Train one model on the first records of the subset order and score it (a task of
+    :func:`physics.parallel.map_tasks`; the dataset is read from its path)."""
+    from ..dataset import load_dataset
+    from ..traincompare import SKIP, _score
+    from ..training import make_model
+
+    ds = load_dataset(task["dataset"])
+    chosen = task["records"]
+    recs = [ds.record(e) for e in chosen]
+    model = make_model(task["model"], task["overrides"])
+    t0 = time.perf_counter()
+    model.fit(recs, ds.records("validation"))
+    fit_s = time.perf_counter() - t0
+    skip = max(SKIP, int(model.n_init_))
+    with warnings.catch_warnings():   # small subsets see few RH levels: extrapolation is the point
+        warnings.filterwarnings("ignore", message=".*outside the range seen in training.*")
+        sc = _score(lambda rec: model.simulate(rec.u, rec.rh, y_init=rec.y[:model.n_init_]),
+                    ds, ds.entries("test"), skip)
+    return {"model": task["model"], "n_records": len(chosen), "train_seconds_of_data": sum(len(r) for r in recs) / ds.fs,
+            "rh_levels": sorted({float(e["rh_pct"]) for e in chosen if not isinstance(e["rh_pct"], dict)}),
+            "drifting_rh_records": sum(isinstance(e["rh_pct"], dict) for e in chosen),
+            "records": [e["path"] for e in chosen], "fit_time_s": fit_s,
+            "nrmse_pct": {g: 100 * sc[g]["nrmse"] for g in ("heldout_rh", "train_rh", "varying_rh", "test") if g in sc}}
 
 
 def _report(full: dict, curve: list, names, quick, budget, ds_path, wall, out) -> dict:

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from physics.errors import InputError
+from physics.parallel import ParallelSettings, map_tasks
 from physics.fileio import atomic_path, sha256_file, write_json, write_text
 
 from ..data import Record
@@ -161,6 +162,33 @@ def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
             "sha256": digest, "limited": limit is not None}
 
 
+def _train_one(task: dict):
+    """Train and score one model of the suite (a task of :func:`physics.parallel.map_tasks`;
+    the data are read from their path): (result row, free-run predictions)."""
+    from ..bundle import save as save_bundle
+
+    ds = load(task["data"], limit=task["limit"])
+    model = common.build_model(task["kind"], task["overrides"])
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", category=UserWarning)
+        model.fit([ds["train"]])
+    wall = time.perf_counter() - t0
+    sc = score(model, ds["tests"])
+    pred = sc.pop("pred")
+    row = {"model": task["label"], "kind": task["kind"], "role": task["role"],
+           "rmse_mv": sc["rmse_mv"], "train_time_s": wall,
+           "epochs": sum(1 for h in model.history_ if h.get("epoch", 0) >= 0),
+           "samples_per_s": sc["samples_per_s"],
+           "n_parameters": model.n_parameters, "hyper_parameters": model.get_params()}
+    if task["bundle"]:
+        row["bundle"] = str(save_bundle(model, task["bundle"], output=("V2", "V"), dataset_hash=ds["sha256"],
+                                        metrics={"silverbox_rmse_mv": sc["rmse_mv"]},
+                                        notes="Silverbox benchmark model (input V1, output V2, volts)",
+                                        overwrite=True))
+    return row, pred
+
+
 def score(model, tests: dict) -> dict:
     """Free-run RMSE (mV) on each test, first ``N_INIT`` samples for initialisation only;
     also the predictions and the free-run speed on the multisine test."""
@@ -180,11 +208,12 @@ def score(model, tests: dict) -> dict:
 def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: bool = False,
         overrides: dict[str, dict] | None = None, progress: bool = True,
         data: str | os.PathLike | None = None, limit: int | None = None,
-        save_models: bool = True, references: bool = True, echo=print) -> dict:
+        save_models: bool = True, references: bool = True, settings: ParallelSettings | None = None,
+        echo=print) -> dict:
     """Train ``models`` (default: all) on the Silverbox training data and write the report
     to ``out``: ``silverbox.json``, ``silverbox.csv``, ``silverbox.html``, two PNGs and (with
-    ``save_models``) one bundle per model in ``out/models/``.  Returns the JSON content."""
-    from ..bundle import save as save_bundle
+    ``save_models``) one bundle per model in ``out/models/``.  Returns the JSON content.
+    ``settings``: where the models train (:mod:`physics.parallel`, one task per model)."""
 
     names, overrides, out = common.start(models, ("ff", "rbf", "narx", "lstm", "gru"), overrides, out)
     ds = load(data, limit=limit)
@@ -207,31 +236,19 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
         for layer in layers:
             merged.update(layer)
         jobs.append((name, name, merged, "ours"))
-    for label, kind, ov, role in jobs:
-        model = common.build_model(kind, ov if role == "ours" else {**ov, "progress_bar": False})
-        echo(f"[{label}] training {type(model).__name__} "
-             f"(budget {model.max_time or '-'} s, max {model.max_epochs} epochs)...")
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", category=UserWarning)
-            model.fit([train])
-        wall = time.perf_counter() - t0
-        sc = score(model, tests)
-        preds[label] = sc.pop("pred")
-        row = {"model": label, "kind": kind, "role": role,
-               "rmse_mv": sc["rmse_mv"], "train_time_s": wall,
-               "epochs": sum(1 for h in model.history_ if h.get("epoch", 0) >= 0),
-               "samples_per_s": sc["samples_per_s"],
-               "n_parameters": model.n_parameters, "hyper_parameters": model.get_params()}
-        if role == "ours" and save_models:
-            bundle = save_bundle(model, out / "models" / label, output=("V2", "V"),
-                                 dataset_hash=ds["sha256"], metrics={"silverbox_rmse_mv": sc["rmse_mv"]},
-                                 notes="Silverbox benchmark model (input V1, output V2, volts)",
-                                 overwrite=True)
-            row["bundle"] = str(bundle)
+    tasks = [{"label": label, "kind": kind, "role": role, "data": str(ds["path"]), "limit": limit,
+              "overrides": ov if role == "ours" and (settings is None or settings.serial)
+              else {**ov, "progress_bar": False},
+              "bundle": str(out / "models" / label) if role == "ours" and save_models else None}
+             for label, kind, ov, role in jobs]
+    for t in tasks:
+        model = common.build_model(t["kind"], t["overrides"])   # a bad --set fails before any training
+        echo(f"[{t['label']}] {type(model).__name__} (budget {model.max_time or '-'} s, max {model.max_epochs} epochs)")
+    for t, (row, pred) in zip(tasks, map_tasks(_train_one, tasks, settings, desc="models", progress=False)):
+        preds[t["label"]] = pred
         rows.append(row)
-        echo(f"[{label}] {wall:.1f} s, RMSE mV: "
-             + ", ".join(f"{TEST_LABELS[t]} {common.fmt(sc['rmse_mv'][t])}" for t in TESTS))
+        echo(f"[{t['label']}] {row['train_time_s']:.1f} s, RMSE mV: "
+             + ", ".join(f"{TEST_LABELS[k]} {common.fmt(row['rmse_mv'][k])}" for k in TESTS))
 
     target = _target(rows)
     if ds["limited"]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 from physics.errors import InputError
 
 from ..benchmarks import SUITES, get_suite
-from ._common import add_output_options, check_out, writing
+from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, writing
 
 NAME = "benchmark"
 HELP = "compare FF / RBF / NARX / LSTM / GRU / hybrid on a benchmark suite (JSON + HTML + PNG report)"
@@ -31,6 +31,7 @@ def add_arguments(p):
     p.add_argument("--limit", type=int, default=None,
                    help="truncate every data part to this many samples (smoke tests only: "
                         "the figures are then not comparable)")
+    add_parallel_options(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--no-save-models", action="store_true", help="do not save model bundles")
 
@@ -94,4 +95,5 @@ def _run_suite(args, suite, out: str, lenient: bool = False) -> None:
             raise InputError(f"--limit must be a positive number of samples, got {args.limit}")
         options["limit"] = args.limit
     suite.load()(models, out, quick=args.quick, overrides=overrides,
-                 progress=not args.no_progress, save_models=not args.no_save_models, **options)
+                 progress=not args.no_progress, save_models=not args.no_save_models,
+                 settings=parallel_settings(args), **options)

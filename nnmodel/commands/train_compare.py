@@ -5,7 +5,7 @@ import yaml
 
 from physics.errors import InputError
 
-from ._common import add_output_options
+from ._common import add_output_options, add_parallel_options, parallel_settings
 
 NAME = "train-compare"
 HELP = "train neural models on a dataset and compare them (free run, held-out RH, physics reference)"
@@ -24,6 +24,7 @@ def add_arguments(p):
                    help="processes (CPU) or GPUs that train each network together (Lightning)")
     p.add_argument("--strategy", default=None,
                    help="Lightning strategy for --devices > 1 (default: ddp_spawn, gloo on CPUs; ddp on GPUs)")
+    add_parallel_options(p)
     p.add_argument("--physics", default=None, metavar="DEVICE_OR_YAML",
                    help="score this device's simulator beside the networks (default: the dataset's generator; "
                         "none for measured data)")
@@ -58,11 +59,15 @@ def run(args) -> int:
     if bad:
         raise InputError(f"unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
     from nnmodel.training import execution
+    settings = parallel_settings(args)
+    if args.devices > 1 and not settings.serial:
+        raise InputError("--devices trains one network on several processes, --workers/--scheduler trains several "
+                         "networks side by side; use one of them")
     strategy = args.strategy or ("ddp_spawn" if args.devices > 1 else "auto")
     with execution(args.devices, strategy):
         summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
                                 max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet,
-                                physics=args.physics)
+                                physics=args.physics, settings=settings)
     print(format_table(summary))
     best = summary["best_heldout"]
     if best:

@@ -48,7 +48,7 @@ from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
 from ..effects import ensure_registered, user_effect_files
 from ..model import ActuatorModel, resolve_effects
-from ..parallel import ParallelSettings, map_tasks
+from ..parallel import ParallelSettings, map_tasks, warm_up
 from ..threads import single_threaded
 from . import candidates as C
 from . import stats
@@ -251,6 +251,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     frequency); ``progress``: a callback for one-line progress messages; ``settings``: where
     the candidate fits run (:mod:`physics.parallel`; the same verdict for any worker count)."""
     t_all = time.perf_counter()
+    warm_up(settings)   # the workers start beside the base fit and the residual analysis
     timings: dict = {}
     dev = load_device(device)
     base_ids = resolve_effects(effects, dev)

@@ -10,7 +10,7 @@ from typing import Mapping, Sequence
 from ..compare import (FRFOptions, load_measurements, source_name)
 from ..device import Device
 from ..errors import InputError
-from ..parallel import ParallelSettings
+from ..parallel import ParallelSettings, warm_up
 from ..threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
 from .parameters import IdentifiabilityWarning, parse_assignments, parse_names
@@ -125,6 +125,7 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
         n_starts = 5 if residual == "frf" else 1
     if int(n_starts) < 1:
         raise InputError(f"n_starts={n_starts!r} must be at least 1")
+    warm_up(settings)   # the workers start while the measurements are read and the FRFs estimated
     ms = load_measurements(measurements, rh=rh)
     targets = build_targets(ms, frf_options=frf_options, min_coherence=min_coherence, weighting=weighting,
                             rh_tolerance=rh_tolerance, sensor_bandwidth=sensor_bandwidth, default_rh=rh)
