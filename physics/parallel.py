@@ -164,7 +164,7 @@ def _map_dask(fn, tasks, order, costs, settings: ParallelSettings, desc: str, pr
     task goes to the existing cluster."""
     local = not settings.scheduler
     work = _Work(tasks, order, costs, settings.workers if local else 1)
-    remote = _Remote(fn, work, settings, settings.workers - 1 if local else None, desc)
+    remote = _Remote(fn, work, settings, desc)
     label = f"{desc} on {settings.workers} workers" if local else f"{desc} on the cluster"
     with Progress(len(tasks), label, enabled=progress) as bar:
         seen = 0
@@ -195,15 +195,13 @@ class _Remote(threading.Thread):
     flight per worker until the queue is empty, store the results; on an error, hand the
     unfinished batches back (this process then runs them) and keep the error."""
 
-    def __init__(self, fn, work: _Work, settings: ParallelSettings, n_remote: int | None, desc: str):
+    def __init__(self, fn, work: _Work, settings: ParallelSettings, desc: str):
         super().__init__(daemon=True)
-        self.fn, self.work, self.settings, self.n_remote, self.desc = fn, work, settings, n_remote, desc
+        self.fn, self.work, self.settings, self.desc = fn, work, settings, desc
         self.stop = threading.Event()
         self.error: BaseException | None = None
 
     def run(self) -> None:
-        if self.n_remote == 0:
-            return
         client = None
         flying: dict = {}
         try:
