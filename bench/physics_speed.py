@@ -15,7 +15,9 @@ import time
 import numpy as np
 
 from physics import signals
+from physics.frequency import frequency_response
 from physics.model import ActuatorModel
+from physics.timedomain import simulate
 
 THESIS_S_PER_POINT = 15 * 60.0
 
@@ -41,8 +43,8 @@ def main(argv=None):
     print(f"{'case':58s} {'median':>10s} {'best':>10s} {'target':>8s}  speed-up vs thesis")
     for dev in ("ipmc_pt_eg", "ip2c_pedot_water"):
         m = ActuatorModel(dev, "linear")
-        m.frequency_response(f, rh=60)           # warm caches (Prony fit)
-        med, best = timed(lambda: m.frequency_response(f, rh=60), 20)
+        frequency_response(m, None, f, rh=60)           # warm caches (Prony fit)
+        med, best = timed(lambda: frequency_response(m, None, f, rh=60), 20)
         ratio = 500 * THESIS_S_PER_POINT / med
         print(f"{dev + ': FRF, all linear effects, 500 points':58s} {1e3 * med:8.2f} ms {1e3 * best:8.2f} ms"
               f" {'20 ms':>8s}  {ratio:.2e}x")
@@ -51,7 +53,7 @@ def main(argv=None):
         for label, eff, target in (("all linear effects", "linear", 2.0 * duration / 100),
                                    ("linear + nonlinear_charge + thermal", "all", 20.0 * duration / 100)):
             m = ActuatorModel(dev, eff)
-            med, best = timed(lambda: m.simulate(sig.t, sig.v, rh=60), 3 if eff == "linear" else 1)
+            med, best = timed(lambda: simulate(m, None, sig.t, sig.v, rh=60), 3 if eff == "linear" else 1)
             ratio = THESIS_S_PER_POINT / med
             print(f"{dev + f': {duration:g} s sweep, ' + label:58s} {med:8.2f} s  {best:8.2f} s "
                   f"{target:6.1f} s  {ratio:.2e}x (vs one thesis frequency point)")

@@ -32,6 +32,7 @@ from physics.model import ActuatorModel, resolve_effects
 from physics.parallel import ParallelSettings, map_tasks, warm_up
 from physics.outputs import output_folder, preflight
 from physics.sensor import SensorModel
+from physics.timedomain import simulate
 from physics.timeseries import read_timeseries, write_timeseries
 
 from .data import Record
@@ -180,7 +181,7 @@ def _generate_record(task: dict) -> dict:
     sig = _excitation(spec, cfg)
     rh = _rh_series(spec, sig.t)
     hold = "linear" if spec.kind == "square" else "cubic"
-    res = model.simulate(sig.t, sig.v, rh=rh, hold=hold)
+    res = simulate(model, None, sig.t, sig.v, rh=rh, hold=hold)
     ts = _sensor(cfg["sensor"]).apply(res.to_timeseries(), seed=spec.seed)
     ts.meta.update({"excitation": sig.describe(), "split": spec.split})
     path = Path(task["folder"]) / f"{spec.name}.csv"

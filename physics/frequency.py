@@ -89,28 +89,27 @@ def frequency_response(device, effects=None, freqs=None, rh=None, *, n_modes: in
 
 def response_per_volt(model: ActuatorModel, s: np.ndarray, rh: float):
     """(tip [m/V], current [A/V], Cs_up [mol/m³/V], natural frequencies [Hz]) at ``s`` [rad/s]."""
-    c = model.components
     p = model.params_at(rh)
     d = model.double_layer_props(p)
-    q, cint = c["charge_law"].small_signal(s, d, p)
+    q, cint = model.hook("small_signal")(s, d, p)
     Yp = s * q + d.G_leak
     L, Lc, Lt = model.free_length, p["L_clamp"], p["L_total"]
     w, h, n = p["width"], 0.5 * p["t_polymer"], p["n_solvation"]
     zq, wq = quadrature(L)
-    U = c["line"].distribution(s, Yp, p, zq)                     # (n_s, n_q) per volt
+    U = model.hook("distribution")(s, Yp, p, zq)                 # (n_s, n_q) per volt
     intU = U @ wq
-    load = c["solvent"].factor(s, p) * c["coupling"].kf(s, p) * cint
+    load = model.load_response(s, p) * cint
     mu = (2.0 * h * w * n * load)[:, None] * U                     # couple per volt [N m/m/V]
     modes = model.modes()
     Q = (mu * wq[None, :]) @ modes.dphi(zq).T                       # generalised loads (n_s, n_modes)
     stat = (mu * wq[None, :]) @ (zq * (L - 0.5 * zq))
-    EI, rhoA = model.section(p, float(c["humidity"].stiffness_factor(rh)))
+    EI, rhoA = model.section(p, float(model.hook("stiffness_factor")(rh)))
     EIs = EI(s) * (1.0 + s * p["beta_f"])
     k_unit = modes.beta ** 4 * L
     qm = Q / (s[:, None] ** 2 * rhoA * L + EIs[:, None] * k_unit[None, :])
     resid = (stat - Q @ (modes.tip / k_unit)) / EIs
     tip = (qm @ modes.tip + resid) * model.output_response(s, p)
     current = w * Yp * (Lc + intU)
-    cs = n * c["solvent"].factor(s, p) * cint * (Lc + intU) / Lt
+    cs = n * model.hook("solvent_factor")(s, p) * cint * (Lc + intU) / Lt
     fn = modes.natural_frequencies(float(EI(np.array([0.0]))[0].real), rhoA)
     return tip, current, cs, fn

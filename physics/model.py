@@ -1,13 +1,17 @@
 """The actuator model: a device plus a list of effects, assembled into one chain.
 
-Chain (each stage is one slot of :data:`physics.effects.SLOTS`)::
+Chain (each stage is one entry of :data:`physics.effects.CHAIN`, filled by its default
+variant or by the switched-on effect that replaces it)::
 
     Vin ─▶ double layer / charge law (per area) ─▶ line (voltage along the strip)
-        ─▶ interface cation excess ─▶ solvent factor × kf  ─▶ couple along the strip
-        ─▶ beam section (EI*(s), ρA) ─▶ modal cantilever + quasi-static residual ─▶ tip
+        ─▶ interface cation excess ─▶ solvent factor × kf × added load factors
+        ─▶ couple along the strip ─▶ beam section (EI*(s), ρA)
+        ─▶ modal cantilever + quasi-static residual ─▶ tip ─▶ added output factors
 
-Both solvers (:mod:`physics.frequency`, :mod:`physics.timedomain`) walk this chain
-through the same effect objects, so they cannot drift apart.
+Both solvers (:mod:`physics.frequency`, :mod:`physics.timedomain`) walk this chain through
+the same effect objects, by the hooks of :mod:`physics.effects.base` (:meth:`ActuatorModel.hook`,
+:meth:`ActuatorModel.product`), so they cannot drift apart and never name an effect.  This
+module does not import the solvers (the layering is one way: effects ← model ← solvers).
 """
 from __future__ import annotations
 
@@ -15,8 +19,8 @@ import numpy as np
 
 from .beam import CantileverModes
 from .device import Device, load_device
-from .effects import EFFECTS, SLOTS, Effect, OutputEffect
-from .effects.double_layer import DoubleLayer, DoubleLayerProps
+from .effects import CHAIN, EFFECTS, Effect, stage_of
+from .effects.double_layer import DoubleLayerProps
 from .errors import InputError
 
 
@@ -67,7 +71,8 @@ def resolve_effects(effects, device: Device) -> tuple[str, ...]:
 
 
 class ActuatorModel:
-    """A device with a set of effects switched on (every other slot uses its "off" variant)."""
+    """A device with a set of effects switched on: every stage of the chain filled by its
+    default variant or by the effect replacing it, then the added effects (factors)."""
 
     def __init__(self, device, effects=None, *, n_modes: int = 4):
         self.device: Device = load_device(device)
@@ -75,15 +80,20 @@ class ActuatorModel:
         self.n_modes = int(n_modes)
         if self.n_modes < 1:
             raise InputError("n_modes must be at least 1")
+        on = [EFFECTS[e] for e in self.effect_ids]
         self.components: dict[str, Effect] = {}
-        for slot, (on, off) in SLOTS.items():
-            cls = on if (on.id in self.effect_ids or off is None) else off
-            self.components[slot] = cls(self.device)
-        slotted = {on.id for on, _ in SLOTS.values()}
-        #: user effects on the deflection (:class:`~physics.effects.OutputEffect`), in order
-        self.outputs: list[OutputEffect] = [EFFECTS[e](self.device) for e in self.effect_ids if e not in slotted]
-        for e in self.outputs:
+        for default in CHAIN:
+            chosen = [c for c in on if issubclass(c, default)]
+            if len(chosen) > 1:
+                raise InputError(f"effects {' and '.join(c.id for c in chosen)} both replace the {default.slot!r} "
+                                 "stage; switch one of them off")
+            self.components[default.slot] = (chosen[0] if chosen else default)(self.device)
+        self.stages: list[Effect] = list(self.components.values())
+        #: effects that add factors (load or output), in the order given
+        self.added: list[Effect] = [cls(self.device) for cls in on if stage_of(cls) is None]
+        for e in self.added:
             self.components[e.id] = e
+        self._hooks: dict = {}
 
     # --- the effect list, as the user reads it back --------------------------------------
     @property
@@ -91,8 +101,18 @@ class ActuatorModel:
         return list(self.components.values())
 
     @property
+    def outputs(self) -> list[Effect]:
+        """Added effects acting on the tip deflection (``output_response``/``filter_output``)."""
+        return [e for e in self.added if callable(getattr(e, "filter_output", None))]
+
+    @property
     def is_linear(self) -> bool:
         return all(type(e).linear for e in self.effects)
+
+    @property
+    def needs_rh(self) -> bool:
+        """True when an effect makes the response depend on the relative humidity."""
+        return any(type(e).needs_rh for e in self.effects)
 
     def __getattr__(self, slot: str) -> Effect:
         comps = self.__dict__.get("components", {})
@@ -102,6 +122,26 @@ class ActuatorModel:
 
     def __repr__(self) -> str:
         return f"ActuatorModel({self.device.name!r}, effects={list(self.effect_ids)})"
+
+    # --- the hooks the solvers call (contract: physics.effects.base) ----------------------
+    def hook(self, name: str):
+        """The stage hook ``name`` (a bound method of the stage that provides it)."""
+        fn = self._hooks.get(name)
+        if fn is None:
+            comp = next((c for c in self.stages if callable(getattr(c, name, None))), None)
+            if comp is None:
+                raise AttributeError(f"no stage of the chain provides the hook {name!r}")
+            fn = self._hooks[name] = getattr(comp, name)
+        return fn
+
+    def product(self, name: str, *args):
+        """Product of the factor hook ``name`` over the added effects (1.0 when none has it)."""
+        out = 1.0
+        for e in self.added:
+            fn = getattr(e, name, None)
+            if callable(fn):
+                out = out * fn(*args)
+        return out
 
     # --- geometry and parameters ----------------------------------------------------------
     @property
@@ -114,7 +154,7 @@ class ActuatorModel:
     def check_rh(self, rh, what: str = "rh"):
         """Validate RH [%]; None is allowed only when the humidity effect is off."""
         if rh is None:
-            if self.components["humidity"].enabled:
+            if self.needs_rh:
                 raise InputError(f"the humidity effect is on: give {what} (relative humidity, %)")
             return self.device.reference_rh
         arr = np.asarray(rh, dtype=float)
@@ -125,16 +165,22 @@ class ActuatorModel:
     def params_at(self, rh=None) -> dict:
         """Parameters (SI) at relative humidity ``rh`` [%] (Y's factor is applied by the section)."""
         rh = self.check_rh(rh)
-        return self.components["humidity"].params_at(dict(self.device.params), float(np.mean(rh)))
+        return self.hook("params_at")(dict(self.device.params), float(np.mean(rh)))
 
     def double_layer_props(self, p: dict, T=None) -> DoubleLayerProps:
-        return DoubleLayer.props(p, T)
+        return self.hook("props")(p, T)
 
     def section(self, p: dict, stiffness_factor: float = 1.0):
         """(EI*(s) Prony series [N m²], ρA [kg/m]) with the humidity stiffness factor."""
-        layered = self.components["section"].layered
-        polymer = self.components["modulus"].polymer_modulus(p, layered)
-        return self.components["section"].section(p, polymer, stiffness_factor)
+        section = self.hook("section")
+        polymer = self.hook("polymer_modulus")(p, section.__self__.layered)
+        return section(p, polymer, stiffness_factor)
+
+    def load_response(self, s: np.ndarray, p: dict, solvent: bool = True) -> np.ndarray:
+        """Bending load per unit interface cation excess at ``s`` [rad/s]: kf(s) [N m/mol] ×
+        solvent factor (unless ``solvent`` is False) × the added load factors."""
+        out = self.hook("kf")(s, p) * self.product("load_factor", s, p)
+        return out * self.hook("solvent_factor")(s, p) if solvent else out
 
     def describe(self) -> str:
         lines = [repr(self)]
@@ -143,26 +189,14 @@ class ActuatorModel:
         return "\n".join(lines)
 
     def output_response(self, s: np.ndarray, p: dict) -> np.ndarray | float:
-        """Product of the user effects' factors on the deflection at ``s`` [rad/s] (1 if none)."""
-        out = 1.0
-        for e in self.outputs:
-            out = out * e.output_response(s, p)
-        return out
+        """Product of the added effects' factors on the deflection at ``s`` [rad/s] (1 if none)."""
+        return self.product("output_response", s, p)
 
     def filter_output(self, y: np.ndarray, fs: float, p: dict) -> np.ndarray:
-        """The simulated deflection ``y`` [m] at ``fs`` [Hz] through the user effects."""
+        """The simulated deflection ``y`` [m] at ``fs`` [Hz] through the added output effects."""
         for e in self.outputs:
             y = e.filter_output(y, fs, p)
         return y
-
-    # --- solvers --------------------------------------------------------------------------
-    def frequency_response(self, freqs, rh=None):
-        from .frequency import frequency_response
-        return frequency_response(self, None, freqs, rh=rh)
-
-    def simulate(self, t, voltage, rh=None, **kw):
-        from .timedomain import simulate
-        return simulate(self, None, t, voltage, rh=rh, **kw)
 
 
 def as_model(device, effects=None, n_modes: int = 4) -> ActuatorModel:

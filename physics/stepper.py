@@ -33,7 +33,6 @@ import numpy as np
 from scipy import linalg
 from scipy.linalg.lapack import dgesv
 
-from .effects.double_layer import DoubleLayer
 from .errors import ModelError
 from .progress import Progress
 
@@ -59,20 +58,20 @@ class BranchNetwork:
 
     def __init__(self, model, p: dict, edges: np.ndarray, lumped: bool = False):
         self.model, self.p = model, p
-        self.law_effect = model.components["charge_law"]
+        self.compile_law = model.hook("compiled")
         areas = p["width"] * np.diff(edges)
         if lumped:
             areas = np.array([areas.sum()])
         self.area = np.concatenate([[p["width"] * p["L_clamp"]], areas])
-        self.g = None if lumped else model.components["line"].series_conductances(p, edges)
+        self.g = None if lumped else model.hook("series_conductances")(p, edges)
         self.half_g = None if lumped else 0.5 * self.g
         self.n = self.area.size
         self.set_temperature(np.full(self.n, p["T_ext"]))
 
     def set_temperature(self, T: np.ndarray):
         self.T = np.array(T, dtype=float)
-        self.d = DoubleLayer.props(self.p, self.T)
-        self.law = self.law_effect.compiled(self.d, self.p)
+        self.d = self.model.double_layer_props(self.p, self.T)
+        self.law = self.compile_law(self.d, self.p)
         self.Rb = np.broadcast_to(self.d.R_bulk, (self.n,)).astype(float)
         self.inv_Rb = 1.0 / self.Rb
         self.G = float(self.d.G_leak)
@@ -158,15 +157,16 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
     N = t.size
     dt = float(t[1] - t[0])
     rh_key = np.round(rh / 0.25) * 0.25
-    thermal = model.components["temperature"].enabled
-    lumped = not thermal and not model.components["line"].enabled
-    net = BranchNetwork(model, params_at(float(rh_key[0])), edges, lumped)
+    p0 = params_at(float(rh_key[0]))
+    tn = model.hook("network")(p0, edges)             # heat network (None: isothermal)
+    thermal = tn is not None
+    lumped = not thermal and model.hook("series_conductances")(p0, edges) is None
+    net = BranchNetwork(model, p0, edges, lumped)
     nb = net.n
     Qs, current = np.empty((N, nb)), np.empty(N)
     Us = np.empty((N, nb)) if "U" in want else None
     Ts = np.full((N, nb), net.p["T_ext"]) if "T" in want else None
     if thermal:
-        tn = model.components["temperature"].network(net.p, edges)
         Kt = np.diag(tn.convection)
         i = np.arange(nb - 1)
         Kt[i, i] += tn.links

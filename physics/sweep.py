@@ -106,9 +106,10 @@ def sweep_task(task: dict) -> dict:
             row[f"phase_{fq:g}Hz_deg"] = float(np.degrees(np.angle(h)))
     else:
         from . import signals
+        from .timedomain import simulate
         f0, fs = task["frequency"], task["fs"]
         sig = signals.tone(point.get("amplitude", task["amplitude"]), f0, task["periods"] / f0, fs)
-        y = model.simulate(sig.t, sig.v, rh=rh).deflection
+        y = simulate(model, None, sig.t, sig.v, rh=rh).deflection
         last = y[-int(round(fs / f0)):]
         row["deflection_pp_m"] = float(np.ptp(last))
     return row

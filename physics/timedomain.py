@@ -101,17 +101,14 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
         raise InputError(f"unknown field(s) {sorted(unknown)}; available: {', '.join(FIELDS)}")
     dt = float(t[1] - t[0])
     w_hi = np.pi / dt
-    hum = model.components["humidity"]
-    stepper_needed = (not model.is_linear) or (hum.electrochemistry_varies() and np.ptp(rh_t) > 0)
-    if periodic and (stepper_needed or (hum.enabled and np.ptp(rh_t) > 0)):
+    stepper_needed = (not model.is_linear) or (model.hook("electrochemistry_varies")() and np.ptp(rh_t) > 0)
+    if periodic and (stepper_needed or (model.needs_rh and np.ptp(rh_t) > 0)):
         raise InputError("periodic steady state needs a linear model at constant RH "
                          "(nonlinear_charge/thermal or a varying RH make the response aperiodic)")
-    line_on = model.components["line"].enabled
-    need_grid = line_on or bool(fields)
-    edges = segment_edges(model.free_length, 1) if not need_grid else None
-    if edges is None:
-        p_mid = model.params_at(float(np.median(rh_t)))
-        edges = _line_grid(model, p_mid, w_hi, n_segments)
+    p_mid = model.params_at(float(np.median(rh_t)))
+    distributed = _distributed(model, p_mid)
+    edges = _line_grid(model, p_mid, w_hi, n_segments, distributed) if (distributed or fields) \
+        else segment_edges(model.free_length, 1)
     base = dict(model.device.params)
 
     # 1. electrochemistry, reduced at once to what stages 2–4 need: the solvent excess and
@@ -154,7 +151,7 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     cs = _apply_filter(cs_filter, reduced[:1], dt, hold, periodic)[0]
     loads = _modal_loads(model, reduced[1:], rh_t, load_filter, dt, hold, periodic)
     del reduced                                      # the electrochemistry rows are no longer needed
-    tip = _mechanics(model, base, loads, model.components["humidity"].stiffness_factor(rh_t), dt, hold, periodic)
+    tip = _mechanics(model, base, loads, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
     del loads
     if model.outputs:
         tip = model.filter_output(tip, 1.0 / dt, model.params_at(float(np.mean(rh_t))))
@@ -183,11 +180,7 @@ def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_fa
     rh_t = np.full(t.size, float(rh_t)) if np.ndim(rh_t) == 0 else np.asarray(rh_t, dtype=float)
     base = dict(model.device.params)
     dt = float(t[1] - t[0])
-    filt = model
-    if not apply_solvent_factor and model.components["solvent"].enabled:
-        filt = ActuatorModel(model.device, [e for e in model.effect_ids if e != "solvent_diffusion"],
-                             n_modes=model.n_modes)
-    load_filter, _ = _load_filters(filt, base, np.pi / dt)
+    load_filter, _ = _load_filters(model, base, np.pi / dt, solvent=apply_solvent_factor)
     return _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic)
 
 
@@ -195,7 +188,7 @@ def _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic):
     """Stages 2–4 for per-segment loads ``ell`` (n_seg, N): projection onto the modes,
     load filter and humidity (:func:`_modal_loads`), mechanics."""
     loads = _modal_loads(model, _beam_projection(model, base, edges) @ ell, rh_t, load_filter, dt, hold, periodic)
-    return _mechanics(model, base, loads, model.components["humidity"].stiffness_factor(rh_t), dt, hold, periodic)
+    return _mechanics(model, base, loads, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
 
 
 def _beam_projection(model, base, edges) -> np.ndarray:
@@ -210,7 +203,7 @@ def _modal_loads(model, pre, rh_t, load_filter, dt, hold, periodic) -> np.ndarra
     """Stage 3: projected loads ``pre`` (n_modes + 1, N) through the load filter kf(s)(·B(s))
     and the humidity factor of the coupling, row by row in place (``pre`` is overwritten and
     returned, so a long record needs one extra row, not a second array)."""
-    factor = model.components["humidity"].coupling_factor(rh_t)
+    factor = model.hook("coupling_factor")(rh_t)
     for k in range(pre.shape[0]):
         pre[k] = _apply_filter(load_filter, pre[k:k + 1], dt, hold, periodic)[0] * factor
     return pre
@@ -244,11 +237,11 @@ def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fie
     first (n_seg+1, N) [mol/m³] — or ``reduce`` (k, n_seg+1) applied to it, (k, N) —,
     current (N) [A], fields)."""
     d = model.double_layer_props(p)
-    branch = model.components["double_layer"].realize(d, np.pi / dt)
+    branch = model.hook("realize")(d, np.pi / dt)
     nc = branch.n_states
     area = p["width"] * np.diff(edges)
     n = area.size
-    g = model.components["line"].series_conductances(p, edges)
+    g = model.hook("series_conductances")(p, edges)
     Ab, Bb = branch.A, branch.B
     Cj, Cc, Cq = branch.C[0:1], branch.C[1:2], branch.C[2:3]
     Dj, Dc, Dq = branch.D[0, 0], branch.D[1, 0], branch.D[2, 0]
@@ -317,22 +310,29 @@ def _steady_state(ss: StateSpace, u0: float) -> np.ndarray:
     return linalg.solve(ss.A, -ss.B[:, 0] * u0)
 
 
-def _line_grid(model: ActuatorModel, p: dict, w_hi: float, n_segments: int | None) -> np.ndarray:
+def _distributed(model: ActuatorModel, p: dict) -> bool:
+    """True when the electrode line has a resistance, so the voltage varies along the strip."""
+    return model.hook("series_conductances")(p, segment_edges(model.free_length, 2)) is not None
+
+
+def _line_grid(model: ActuatorModel, p: dict, w_hi: float, n_segments: int | None,
+               distributed: bool | None = None) -> np.ndarray:
     """Segment edges for the electrode ladder: refined until the discrete line matches the
     closed-form transmission line (modal loads and current) to 0.2 % from 0.05 Hz up to
     min(w_hi/2, 100 Hz) — twice the 50 Hz top of the actuator's band."""
     L = model.free_length
+    distributed = _distributed(model, p) if distributed is None else distributed
     if n_segments is not None:
-        return segment_edges(L, int(n_segments), 1.5 if model.components["line"].enabled else 1.0)
-    if not model.components["line"].enabled:
+        return segment_edges(L, int(n_segments), 1.5 if distributed else 1.0)
+    if not distributed:
         return segment_edges(L, 16)
     s = 1j * np.logspace(np.log10(2 * np.pi * 0.05), np.log10(max(min(w_hi / 2, 2 * np.pi * 100.0), 2 * np.pi)), 6)
     d = model.double_layer_props(p)
-    q, c = model.components["charge_law"].small_signal(s, d, p)
+    q, c = model.hook("small_signal")(s, d, p)
     Yp = s * q + d.G_leak
     modes = model.modes()
     zq, wq = quadrature(L)
-    U = model.components["line"].distribution(s, Yp, p, zq)
+    U = model.hook("distribution")(s, Yp, p, zq)
     exact_Q = (U * wq) @ modes.dphi(zq).T
     exact_I = Yp * (U @ wq)
     for n in (8, 12, 16, 24, 32, 48, 64, 96, 128):
@@ -350,7 +350,7 @@ def _line_grid(model: ActuatorModel, p: dict, w_hi: float, n_segments: int | Non
 
 def _ladder_voltage(model, p, edges, Yp) -> np.ndarray:
     """Per-volt segment voltages of the discrete ladder at each frequency (len(Yp), n)."""
-    g = model.components["line"].series_conductances(p, edges)
+    g = model.hook("series_conductances")(p, edges)
     area = p["width"] * np.diff(edges)
     n = area.size
     out = np.empty((Yp.size, n), dtype=complex)
@@ -368,22 +368,27 @@ def _ladder_voltage(model, p, edges, Yp) -> np.ndarray:
 # ----------------------------------------------------------------------------------------
 # Stage 3: load filters
 # ----------------------------------------------------------------------------------------
-def _load_filters(model: ActuatorModel, p: dict, w_hi: float):
-    """(kf(s)·B(s), B(s)) as state spaces, or plain gains when they are constant."""
-    solvent, coupling = model.components["solvent"], model.components["coupling"]
+def _load_filters(model: ActuatorModel, p: dict, w_hi: float, solvent: bool = True):
+    """(load response kf(s)·B(s)·added load factors, B(s)) as state spaces, or plain gains
+    where they are constant over the band (:meth:`physics.model.ActuatorModel.load_response`);
+    ``solvent=False`` leaves B(s) out of both."""
     band = (_W_LO, w_hi)
-    if solvent.enabled:
-        B = fit_pole_residue(lambda s: solvent.factor(s, p), band, what="solvent factor B(s)").statespace()
-    else:
-        B = 1.0
-    if coupling.enabled:
-        KB = fit_pole_residue(lambda s: coupling.kf(s, p) * solvent.factor(s, p), band,
-                              what="load filter kf(s)·B(s)").statespace()
-    elif solvent.enabled:
-        KB = B.scaled_output(p["kf"])
-    else:
-        KB = p["kf"]
-    return KB, B
+    sf = model.hook("solvent_factor")
+    B = _realize(lambda s: sf(s, p), band, "solvent factor B(s)") if solvent else 1.0
+    rest = _realize(lambda s: model.load_response(s, p, solvent=False), band, "load response kf(s)", fit=False)
+    if rest is not None:          # a constant gain times B: scale B's realisation exactly
+        return (B.scaled_output(rest) if isinstance(B, StateSpace) else rest * B), B
+    return _realize(lambda s: model.load_response(s, p, solvent=solvent), band, "load filter kf(s)·B(s)"), B
+
+
+def _realize(fn, band, what: str, fit: bool = True):
+    """``fn(s)`` as a real gain when it is constant over ``band`` [rad/s] (relative 1e-12), else
+    its real-pole realisation (None when ``fit`` is False)."""
+    s = 1j * np.geomspace(band[0], band[1], 16)
+    v = np.asarray(fn(s), dtype=complex) * np.ones(s.shape)
+    if np.all(np.abs(v - v[0]) <= 1e-12 * np.abs(v[0])) and abs(v[0].imag) <= 1e-12 * abs(v[0]):
+        return float(v[0].real)
+    return fit_pole_residue(fn, band, what=what).statespace() if fit else None
 
 
 def _apply_filter(f, u: np.ndarray, dt: float, hold: str, periodic: bool = False) -> np.ndarray:

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from physics.device import all_param_specs, load_device
-from physics.effects import EFFECTS, SLOTS
+from physics.effects import BUILT_IN, EFFECTS, stage_of
 
 NAME = "effects"
 HELP = "list the physical effects with one-line explanations and their parameters"
@@ -22,9 +22,13 @@ def run(args) -> int:
             raise InputError(f"unknown effect {args.explain!r}; known: {', '.join(EFFECTS)}")
         print(EFFECTS[args.explain].explanation.strip())
         return 0
-    for slot, (on, off) in SLOTS.items():
-        print(f"{on.id:22s} {on.summary}")
-        print(f"{'':22s} off: {off.summary if off else '(always on)'}")
+    for eid, on in EFFECTS.items():
+        default = stage_of(on)
+        if default is None:
+            continue
+        user = "" if eid in BUILT_IN else f"  (user effect, {on.__module__})"
+        print(f"{on.id:22s} {on.summary}{user}")
+        print(f"{'':22s} off: {default.summary if default is not on else '(always on)'}")
         names = [p.name for p in on.params] + [t.name for t in on.tables] + list(on.requires)
         for n in names:
             if n in specs:
@@ -37,9 +41,8 @@ def run(args) -> int:
         if on.id == "humidity" and dev is not None:
             for m in dev.humidity_maps.values():
                 print(f"{'':24s}map {m.param} ({m.mode}) over RH {m.rh[0]:g}-{m.rh[-1]:g} %: {m.source}")
-    slotted = {on.id for on, _ in SLOTS.values()}
     for eid, cls in EFFECTS.items():
-        if eid in slotted:
+        if stage_of(cls) is not None:
             continue
         print(f"{eid:22s} {cls.summary}  (user effect, {cls.__module__})")
         for sp in cls.params:

@@ -11,6 +11,7 @@ from physics.fileio import write_json
 from physics.frequency import frequency_response
 from physics.model import ActuatorModel
 from physics.plotting import plot_bode, plot_timeseries
+from physics.timedomain import simulate
 from physics.timeseries import write_timeseries
 
 from ._common import add_output_options, provenance, writing
@@ -48,7 +49,7 @@ def _physics_stage(d: Path) -> dict:
                   title=f"{dev}: {', '.join(model.effect_ids)}")
         sig = signals.sweep(2.0, 0.1, 50.0, 100.0, 1000.0)
         t0 = time.perf_counter()
-        res = model.simulate(sig.t, sig.v, rh=60.0)
+        res = simulate(model, None, sig.t, sig.v, rh=60.0)
         elapsed = time.perf_counter() - t0
         ts = res.to_timeseries()
         ts.meta.update({"signal": sig.describe(), "provenance": provenance()})

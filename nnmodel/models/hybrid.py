@@ -146,7 +146,7 @@ class HybridModel(NeuralModel):
         u = np.asarray(u, dtype=float)
         if rh is not None and np.ndim(rh) == 1:
             rh = model_rh(np.asarray(rh, dtype=float), fs)
-        if rh is None and model.components["humidity"].enabled:
+        if rh is None and model.needs_rh:
             raise InputError(f"the hybrid's physics ({model.device.name}, humidity effect on) needs the "
                              "relative humidity: give rh=")
         t = np.arange(u.size) / fs
@@ -163,7 +163,7 @@ class HybridModel(NeuralModel):
         self._physics_model()
         self._cache = {}
         for r in records:
-            if r.rh is None and self.physics_.components["humidity"].enabled:
+            if r.rh is None and self.physics_.needs_rh:
                 raise InputError(f"record {r.name!r} has no relative humidity, which the hybrid's physics "
                                  f"({self.physics_.device.name}, humidity effect on) needs")
             # keyed by the identity of both arrays: records may share one voltage array

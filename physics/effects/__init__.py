@@ -1,11 +1,11 @@
-"""Physical effects (stable ids), their explicit "off" variants, and effects added by users.
+"""Physical effects (stable ids), the model chain's "no effect" defaults, and user effects.
 
-``EFFECTS`` maps each id to its class; ``SLOTS`` lists, in chain order, the slot each
-built-in effect fills and the variant used when the effect is off.  Effects added by
-users (:class:`OutputEffect` subclasses) act on the tip deflection after the chain; they
-are registered with :func:`register`, from a file with :func:`load_effects_file`
-(``--effects-path FILE.py``) or from installed packages with :func:`load_plugins`
-(entry-point group ``eap.effects``).
+``CHAIN`` lists, in chain order, the default variant of every stage of the model (the
+contract is in :mod:`physics.effects.base`); an effect replaces the stage whose default it
+subclasses, or adds factors (``load_factor``, ``output_response``).  ``EFFECTS`` maps each id
+to its class: the built-ins of ``BUILT_IN_EFFECTS``, then those added by users with
+:func:`register`, from a file with :func:`load_effects_file` (``--effects-path FILE.py``) or
+from installed packages with :func:`load_plugins` (entry-point group ``eap.effects``).
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .base import Effect, OutputEffect
+from .base import DIAGNOSIS_KEYS, REVEAL_RULES, Effect, OutputEffect
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
 from .fractional_coupling import ConstantCoupling, FractionalCoupling
@@ -26,37 +26,52 @@ from .solvent_diffusion import SolventDiffusion, SolventDrag
 from .thermal import Isothermal, Thermal
 from .viscoelastic import ElasticModulus, Viscoelastic
 
-# slot -> (effect class when on, variant when off); DoubleLayer cannot be switched off.
-SLOTS: dict[str, tuple[type[Effect], type[Effect] | None]] = {
-    "double_layer": (DoubleLayer, None),
-    "charge_law": (NonlinearCharge, LinearCharge),
-    "line": (ElectrodeResistance, EquipotentialElectrodes),
-    "solvent": (SolventDiffusion, SolventDrag),
-    "coupling": (FractionalCoupling, ConstantCoupling),
-    "modulus": (Viscoelastic, ElasticModulus),
-    "section": (LayeredBeam, HomogeneousSection),
-    "humidity": (Humidity, HumidityInvariant),
-    "temperature": (Thermal, Isothermal),
-}
+#: The stages of the model chain, in order, each as its "no effect" variant (the double layer
+#: is the model's core and always on).
+CHAIN: tuple[type[Effect], ...] = (DoubleLayer, LinearCharge, EquipotentialElectrodes, SolventDrag, ConstantCoupling,
+                                   ElasticModulus, HomogeneousSection, HumidityInvariant, Isothermal)
+#: The effects shipped with the package.
+BUILT_IN_EFFECTS: tuple[type[Effect], ...] = (DoubleLayer, NonlinearCharge, ElectrodeResistance, SolventDiffusion,
+                                              FractionalCoupling, Viscoelastic, LayeredBeam, Humidity, Thermal)
 
-EFFECTS: dict[str, type[Effect]] = {on.id: on for on, _ in SLOTS.values()}
+EFFECTS: dict[str, type[Effect]] = {cls.id: cls for cls in BUILT_IN_EFFECTS}
 #: Ids of the effects shipped with the package (the rest were registered by users).
 BUILT_IN = tuple(EFFECTS)
+#: Factor hooks an added effect may implement (see :mod:`physics.effects.base`).
+FACTOR_HOOKS = ("load_factor", "output_response", "filter_output")
+
+
+def stage_of(cls: type[Effect]) -> type[Effect] | None:
+    """The default variant of the stage that ``cls`` fills (None: an added effect)."""
+    return next((d for d in CHAIN if issubclass(cls, d)), None)
+
+
+def adds_factors(cls: type[Effect]) -> bool:
+    """True when ``cls`` implements a factor hook."""
+    return any(callable(getattr(cls, h, None)) for h in FACTOR_HOOKS)
 LINEAR_EFFECTS = tuple(k for k, v in EFFECTS.items() if v.linear)
 ENTRY_POINT_GROUP = "eap.effects"
 
 
-def register(cls: type[OutputEffect]) -> type[OutputEffect]:
-    """Register a user effect class (checked against the contract); returns it."""
+def register(cls: type[Effect]) -> type[Effect]:
+    """Register a user effect class (checked against the contract of :mod:`.base`); returns it.
+
+    It either replaces a stage (subclasses one of :data:`CHAIN`) or adds factors
+    (:class:`OutputEffect`, or any effect with ``load_factor``)."""
     where = f"effect class {getattr(cls, '__name__', cls)!r}"
-    if not (inspect.isclass(cls) and issubclass(cls, OutputEffect)):
-        raise InputError(f"{where}: a user effect must subclass physics.effects.OutputEffect")
+    if not (inspect.isclass(cls) and issubclass(cls, Effect)):
+        raise InputError(f"{where}: a user effect must subclass physics.effects.OutputEffect (or Effect)")
     if not isinstance(cls.id, str) or not cls.id.isidentifier():
         raise InputError(f"{where}: needs an id that is a Python identifier, got {cls.id!r}")
     if cls.id in BUILT_IN:
         raise InputError(f"{where}: id {cls.id!r} is a built-in effect; choose another id")
-    if cls.output_tf is OutputEffect.output_tf and cls.filter_output is OutputEffect.filter_output:
-        raise InputError(f"{where}: define output_tf(self, p) (or filter_output and output_response)")
+    if issubclass(cls, OutputEffect):
+        if cls.output_tf is OutputEffect.output_tf and cls.filter_output is OutputEffect.filter_output:
+            raise InputError(f"{where}: define output_tf(self, p) (or filter_output and output_response)")
+    elif stage_of(cls) is None and not adds_factors(cls):
+        raise InputError(f"{where}: an effect must replace a stage (subclass one of "
+                         f"{', '.join(c.__name__ for c in CHAIN)}) or define load_factor(self, s, p); "
+                         "the simplest is a subclass of OutputEffect")
     for spec in cls.params:
         if spec.default is None:
             raise InputError(f"{where}: parameter {spec.name!r} needs a default (ParamSpec(..., default=...))")
@@ -65,9 +80,15 @@ def register(cls: type[OutputEffect]) -> type[OutputEffect]:
     if spec is not None:
         if not isinstance(spec, dict) or not spec.get("free"):
             raise InputError(f"{where}: diagnosis must be a dict with at least 'free' (parameters to fit)")
+        unknown = sorted(set(spec) - set(DIAGNOSIS_KEYS))
+        if unknown:
+            raise InputError(f"{where}: unknown diagnosis key(s) {unknown}; known: {', '.join(DIAGNOSIS_KEYS)}")
         bad = [n for n in list(spec["free"]) + list(spec.get("bounds", {})) if n not in known]
         if bad:
             raise InputError(f"{where}: diagnosis names parameters {bad} that the effect does not declare")
+        bad_rules = sorted(set(spec.get("reveal", {})) - set(REVEAL_RULES))
+        if bad_rules:
+            raise InputError(f"{where}: unknown reveal rule(s) {bad_rules}; known: {', '.join(REVEAL_RULES)}")
     old = EFFECTS.get(cls.id)
     if old is not None and old is not cls and (old.__module__, old.__qualname__) != (cls.__module__, cls.__qualname__):
         raise InputError(f"{where}: id {cls.id!r} is already registered by {old.__module__}.{old.__qualname__}")
@@ -82,7 +103,7 @@ def unregister(effect_id: str) -> None:
     EFFECTS.pop(effect_id, None)
 
 
-def effect_classes_in_file(path) -> list[type[OutputEffect]]:
+def effect_classes_in_file(path) -> list[type[Effect]]:
     """Import the Python file ``path`` and return the user effect classes it defines."""
     p = Path(path)
     if p.suffix != ".py" or not p.is_file():
@@ -97,12 +118,13 @@ def effect_classes_in_file(path) -> list[type[OutputEffect]]:
         raise
     except Exception as exc:  # a user's file: report what went wrong in it, one line
         raise InputError(f"--effects-path {p}: importing it failed: {type(exc).__name__}: {exc}") from None
-    classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, OutputEffect)
-               and c is not OutputEffect and c.__module__ == name]
+    classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, Effect)
+               and c.__module__ == name and isinstance(getattr(c, "id", None), str)]
     for c in classes:
         c.source_file = str(p.resolve())   # so that worker processes can load it too
     if not classes:
-        raise InputError(f"--effects-path {p}: defines no subclass of physics.effects.OutputEffect")
+        raise InputError(f"--effects-path {p}: defines no subclass of physics.effects.OutputEffect "
+                         "(or Effect) with an id")
     return classes
 
 
@@ -138,5 +160,6 @@ def load_plugins() -> list[str]:
     return ids
 
 
-__all__ = ["Effect", "OutputEffect", "EFFECTS", "SLOTS", "BUILT_IN", "LINEAR_EFFECTS", "register", "unregister",
-           "load_effects_file", "load_plugins", "effect_classes_in_file", "user_effect_files", "ensure_registered"]
+__all__ = ["Effect", "OutputEffect", "EFFECTS", "CHAIN", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS", "register",
+           "unregister", "stage_of", "adds_factors", "load_effects_file", "load_plugins", "effect_classes_in_file",
+           "user_effect_files", "ensure_registered"]

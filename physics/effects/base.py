@@ -1,10 +1,46 @@
-"""The effect interface.
+"""The effect interface: the one contract every effect, built in or added by a user, follows.
 
-An effect is a switchable piece of physics with a stable ``id``.  Each effect fills a
-*slot* of the model chain (see :mod:`physics.model`); every slot has an explicit
-"off" variant, so a model is always a plain list of effect objects that can be read
-back (``model.effects``).  Effects declare the parameters they need; the device loader
-validates them and the model refuses to build when an enabled effect lacks one.
+An effect is a switchable piece of physics with a stable ``id``.  It declares, in its own
+module, everything the rest of the package needs:
+
+* its parameters (``params``, ``tables``, ``requires``; validated by the device loader);
+* its contribution to the solvers, through the hooks below.  Both solvers
+  (:mod:`physics.frequency`, :mod:`physics.timedomain`) call the hooks through the model
+  (:meth:`physics.model.ActuatorModel.hook`, :meth:`~physics.model.ActuatorModel.product`)
+  and never name an effect;
+* a plain-data ``diagnosis`` spec (:data:`DIAGNOSIS_KEYS`), read by ``identify``/``diagnose``.
+
+**Stage hooks** (one provider each).  The model chain is a fixed list of stages, each with a
+"no effect" default variant living in the module of the effect that replaces it
+(:data:`physics.effects.CHAIN`).  An effect *replaces* a stage by subclassing its default
+and overriding the stage's hooks:
+
+=================  ==========================================================================
+stage (default)    hooks
+=================  ==========================================================================
+double_layer       ``props(p, T)``, ``realize(d, w_hi)`` (linearised PNP, always present)
+charge_law         ``small_signal(s, d, p)``, ``compiled(d, p)``
+line               ``distribution(s, Yp, p, z)``, ``series_conductances(p, edges)``
+solvent            ``factor(s, p)``
+coupling           ``kf(s, p)``
+modulus            ``polymer_modulus(p, layered)``
+section            ``section(p, polymer, y_factor)``, attribute ``layered``
+humidity           ``params_at(base, rh)``, ``stiffness_factor(rh)``, ``coupling_factor(rh)``,
+                   ``electrochemistry_varies()``
+temperature        ``network(p, edges)`` (None: isothermal)
+=================  ==========================================================================
+
+**Factor hooks** (any number of effects, multiplied in chain order; absent = no effect):
+
+* ``load_factor(s, p)``: a factor on the bending load (after kf and the solvent factor);
+  the time solver realises the product with real poles over the band;
+* ``output_response(s, p)`` with ``filter_output(y, fs, p)``: a factor on the tip
+  deflection (:class:`OutputEffect`: give ``output_tf`` and both follow).  ``filter_output``
+  may be nonlinear (hysteresis, saturation); the frequency solver then uses
+  ``output_response`` as its small-signal form.
+
+Effects with internal state (creep, a sensor's dynamics) are rational factors: their
+states live in the time solver's realisation (``output_tf``: a Tustin filter).
 """
 from __future__ import annotations
 
@@ -14,6 +50,25 @@ import numpy as np
 
 from ..errors import InputError
 from ..parameters import ParamSpec, TableSpec
+
+
+#: Keys of an effect's ``diagnosis`` spec (all optional except ``free`` for a candidate):
+#: ``free`` its parameters to fit; ``bounds`` {name: (lo, hi)} or (lo, hi, scale) with scale a
+#: device parameter name, optionally ``name^k`` (the bounds are multiplied by its value^k);
+#: ``starts`` a list of {name: value or (value, scale)} start points; ``nested`` True when some
+#: parameter value switches the effect off; ``excitation`` the excitation that reveals it
+#: (text); ``reveal`` the rule that says whether records can show it (:data:`REVEAL_RULES`);
+#: ``signature`` [(residual feature, weight)] it leaves in a base model's residual;
+#: ``roles`` {"gain" | "stiffness": (parameter, rank)}: the parameter that takes over the
+#: base's coupling gain ``kf`` or stiffness ``Y`` when the effect is on (highest rank wins);
+#: ``per_rh`` parameters fitted once per RH level instead of shared ones; ``describing_function``
+#: True for a large-signal effect fitted through the describing function; ``by_default`` False
+#: (with ``why_not``) to try it only on request.
+DIAGNOSIS_KEYS = ("free", "bounds", "starts", "nested", "excitation", "reveal", "signature", "roles", "per_rh",
+                  "describing_function", "by_default", "why_not")
+#: ``reveal`` rules: {"f_hi_min": Hz}, {"decades_min": n}, {"f_lo_max": Hz, "hold_s": s} (either),
+#: {"spans_resonance": True}, {"rh_levels": n}, {"amplitude_levels": n}; absent: always revealable.
+REVEAL_RULES = ("f_hi_min", "decades_min", "f_lo_max", "hold_s", "spans_resonance", "rh_levels", "amplitude_levels")
 
 
 class Effect:
@@ -28,7 +83,9 @@ class Effect:
     tables: ClassVar[tuple[TableSpec, ...]] = ()
     requires: ClassVar[tuple[str, ...]] = ()         # further parameter names needed (any section)
     linear: ClassVar[bool] = True                   # False: large-signal behaviour in the time domain only
-    #: Plain-data diagnosis spec of an effect added by a user (see :class:`OutputEffect`).
+    #: True when the effect makes the model need a relative humidity (the ``humidity`` stage).
+    needs_rh: ClassVar[bool] = False
+    #: Plain-data diagnosis spec (keys in :data:`DIAGNOSIS_KEYS`); None: not a diagnosis candidate.
     diagnosis: ClassVar[dict | None] = None
 
     def __init__(self, device):

@@ -39,6 +39,13 @@ class ElectrodeResistance(EquipotentialElectrodes):
     summary = "electrode sheet resistance: RC transmission line from the clamp, voltage falls along the strip"
     explanation = __doc__
     requires = ("Rs",)
+    diagnosis = {
+        "free": ("Rs",), "bounds": {"Rs": (0.1, 1e4)}, "starts": [{"Rs": 10.0}, {"Rs": 100.0}, {"Rs": 1000.0}],
+        "nested": True,                                      # Rs -> 0
+        "excitation": "a swept sine or multisine reaching at least 10 Hz (phase lag growing with frequency)",
+        "reveal": {"f_hi_min": 10.0},
+        "signature": [("hf_phase_lag", 1.0)],
+    }
 
     def distribution(self, s, Yp, p, z) -> np.ndarray:
         L = p["L_total"] - p["L_clamp"]

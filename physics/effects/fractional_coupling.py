@@ -40,8 +40,19 @@ class FractionalCoupling(ConstantCoupling):
         ParamSpec("frac_a", "1", 0.0, 1.0, "fractional order a of eq. 14"),
         ParamSpec("frac_b", "1", 0.0, 1.0, "fractional order b of eq. 14"),
         ParamSpec("frac_p", "1/s", 0.0, 1e6, "pole p of the second factor of eq. 14 [rad/s]"),
-        ParamSpec("frac_f_lo", "Hz", 1e-7, 1.0, "low-frequency corner below which the law flattens", optional=True),
+        ParamSpec("frac_f_lo", "Hz", 1e-7, 1.0, "low-frequency corner below which the law flattens", optional=True,
+                  default=1e-4),
     )
+    diagnosis = {
+        "free": ("frac_a",), "bounds": {"frac_a": (0.0, 0.95)},
+        "starts": [{"frac_a": 0.1}, {"frac_a": 0.5}, {"frac_a": 0.8}],
+        "nested": True,                                      # a -> 0 (with b = 0)
+        "roles": {"gain": ("kf0", 1)},                       # kf0 takes over the base's kf
+        "excitation": "a broadband record spanning at least one decade (constant log-log slope and phase), "
+                      "ideally down to 0.1 Hz",
+        "reveal": {"decades_min": 1.0},
+        "signature": [("constant_slope_phase", 1.0), ("lf_excess_lag", 0.5), ("step_creep", 0.5)],
+    }
 
     def kf(self, s, p) -> np.ndarray:
         s = np.asarray(s, dtype=complex)

@@ -59,6 +59,14 @@ class HumidityInvariant(Effect):
 class Humidity(HumidityInvariant):
     id = "humidity"
     enabled = True
+    needs_rh = True
+    diagnosis = {
+        "free": (), "per_rh": ("kf", "Y"),                    # Table V style: kf, Y once per RH level
+        "nested": True,
+        "excitation": "records at two or more RH levels at least 10 % apart",
+        "reveal": {"rh_levels": 2},
+        "signature": [("rh_dependence", 1.0)],
+    }
     summary = "RH-dependent parameters: Y(RH), kf(RH) of Table V, user maps for others"
     explanation = __doc__
 

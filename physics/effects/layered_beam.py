@@ -38,6 +38,16 @@ class LayeredBeam(HomogeneousSection):
     explanation = __doc__
     params = (ParamSpec("Y_polymer", "Pa", 1e5, 5e11, "bare membrane modulus used in the layered section"),)
     requires = ("t_electrode", "rho_electrode", "Y_electrode")
+    diagnosis = {
+        "free": ("Y_electrode",), "bounds": {"Y_electrode": (1e7, 2e11)},
+        "starts": [{"Y_electrode": 1e8}, {"Y_electrode": 1e10}],
+        "nested": False,
+        "roles": {"stiffness": ("Y_polymer", 1)},            # the bare membrane's modulus takes over Y
+        "excitation": "a broadband record spanning the first resonance; even then usually not distinguishable "
+                      "from a stiffer Y",
+        "reveal": {"spans_resonance": True},
+        "signature": [("resonance_error", 1.0)],
+    }
 
     def section(self, p, polymer: Prony, y_factor: float = 1.0) -> tuple[Prony, float]:
         w, t, te = p["width"], p["t_polymer"], p["t_electrode"]

@@ -81,7 +81,16 @@ class NonlinearCharge(LinearCharge):
     summary = "large-signal double layer: voltage-dependent capacitance, asymmetric/saturating charge"
     explanation = __doc__
     params = (ParamSpec("C_max", "mol/m^3", 1.0, np.inf,
-                        "steric maximum cation concentration (.inf: plain Poisson–Boltzmann)", optional=True),)
+                        "steric maximum cation concentration (.inf: plain Poisson–Boltzmann)", optional=True,
+                        default=5000.0),)
+    # C_anion/C_max from 0.005 to 0.96; C_max is fitted only where the describing function shows it matters
+    diagnosis = {
+        "free": ("C_max",), "bounds": {"C_max": (1 / 0.96, 1 / 0.005, "C_anion")},
+        "nested": False, "describing_function": True,
+        "excitation": "the same excitation at two or more amplitudes (ratio at least 1.25) at one RH level",
+        "reveal": {"amplitude_levels": 2},
+        "signature": [("amplitude_dependence", 1.0), ("harmonics", 0.5)],
+    }
 
     def nu(self, p) -> float:
         return float(p["C_anion"] / p.get("C_max", np.inf))

@@ -25,7 +25,8 @@ class SolventDrag(Effect):
     enabled = False
     summary = "solvent moves with the cations only (no back-diffusion)"
 
-    def factor(self, s, p) -> np.ndarray:
+    def solvent_factor(self, s, p) -> np.ndarray:
+        """B(s): first moment of the solvent excess relative to no back-diffusion."""
         return np.ones(np.shape(s), dtype=complex)
 
 
@@ -35,8 +36,18 @@ class SolventDiffusion(SolventDrag):
     summary = "solvent dragged by cations (n+) and diffusing back (Ds): back-relaxation, time scale h²/Ds"
     explanation = __doc__
     requires = ("D_solvent", "n_solvation")
+    # h²/Ds from 0.2 s to 1e5 s, with h² = t_polymer²/4
+    diagnosis = {
+        "free": ("D_solvent",), "bounds": {"D_solvent": (0.25 / 1e5, 0.25 / 0.2, "t_polymer^2")},
+        "starts": [{"D_solvent": (0.25 / x, "t_polymer^2")} for x in (3.0, 30.0, 300.0, 3000.0)],
+        "nested": True,                                      # Ds -> inf
+        "excitation": "a swept sine starting at 0.5 Hz or lower, or a square pulse/step holding at least 5 s "
+                      "(back-relaxation)",
+        "reveal": {"f_lo_max": 0.5, "hold_s": 5.0},
+        "signature": [("lf_droop_lead", 1.0), ("step_back_relaxation", 1.0)],
+    }
 
-    def factor(self, s, p) -> np.ndarray:
+    def solvent_factor(self, s, p) -> np.ndarray:
         g = 0.5 * p["t_polymer"] * np.sqrt(np.asarray(s, dtype=complex) / p["D_solvent"])
         out = np.empty_like(g)
         small = np.abs(g) < 1e-2

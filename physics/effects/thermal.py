@@ -38,6 +38,10 @@ class Isothermal(Effect):
     enabled = False
     summary = "isothermal at T_ext"
 
+    def network(self, p, edges) -> "ThermalNetwork | None":
+        """The heat network of the strip (None: isothermal, no heat balance)."""
+        return None
+
 
 class Thermal(Isothermal):
     id = "thermal"
@@ -53,8 +57,19 @@ class Thermal(Isothermal):
         ParamSpec("k_contact", "W/(m K)", 1e-3, 1e4, "contact thermal conductivity"),
         ParamSpec("rho_contact", "kg/m^3", 100.0, 3e4, "contact density"),
         ParamSpec("cp_contact", "J/(kg K)", 1.0, 1e5, "contact specific heat capacity"),
-        ParamSpec("E_a", "J/mol", 0.0, 2e5, "activation energy of D+ (0: mobility by eq. 6 only)", optional=True),
+        ParamSpec("E_a", "J/mol", 0.0, 2e5, "activation energy of D+ (0: mobility by eq. 6 only)", optional=True,
+                  default=0.0),
     )
+    diagnosis = {
+        "free": (), "bounds": {"h_trans": (0.5, 1e4)}, "nested": True,
+        "by_default": False,
+        "why_not": "thermal is not tried by default: Joule heating of ~1 °C changes the ion mobility by well under "
+                   "1 % (eq. 6), below what a deflection record resolves, and it needs a large-signal time-domain "
+                   "fit; ask for it with --candidates thermal",
+        "excitation": "long large-amplitude records (Joule heating); not tried by default",
+        "reveal": {"amplitude_levels": 2},
+        "signature": [("amplitude_dependence", 1.0)],
+    }
     requires = ("t_electrode", "rho_electrode", "k_electrode", "cp_electrode", "rho_polymer")
 
     def network(self, p, edges) -> ThermalNetwork:

@@ -66,16 +66,34 @@ class Viscoelastic(ElasticModulus):
     enabled = True
     summary = "frequency-dependent storage/loss modulus fitted (Prony) to DMA tables"
     explanation = __doc__
-    params = (ParamSpec("dma_scale", "1", 1e-3, 1e3, "factor on the tabulated DMA modulus", optional=True),
+    params = (ParamSpec("dma_scale", "1", 1e-3, 1e3, "factor on the tabulated DMA modulus", optional=True,
+                        default=1.0),
               ParamSpec("ve_slope", "1", 0.0, 1.0, "free shape: storage modulus rise per decade (fraction)",
                         optional=True),
               ParamSpec("ve_tan_delta", "1", 0.0, 1.0, "free shape: loss tangent E''/E'", optional=True))
+    diagnosis = {
+        "free": ("ve_slope", "ve_tan_delta"),               # the free shape (starts: the DMA table's own)
+        "bounds": {"ve_slope": (0.0, 0.6), "ve_tan_delta": (0.005, 0.6), "dma_scale": (0.05, 20.0)},
+        "nested": False,
+        "roles": {"stiffness": ("dma_scale", 2)},            # dma_scale takes over Y (and Y_polymer)
+        "excitation": "a broadband record spanning the first bending resonance (peak shape, frequency-dependent "
+                      "stiffness, loss below resonance)",
+        "reveal": {"spans_resonance": True},
+        "signature": [("resonance_error", 1.0), ("lf_small_lag", 0.5)],
+    }
     tables = (
         TableSpec("dma", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
                   "DMA storage and loss modulus of the whole strip vs frequency", optional=False),
         TableSpec("dma_membrane", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
                   "DMA of the bare membrane (used with layered_beam)", optional=True),
     )
+
+    @classmethod
+    def diagnosis_start(cls, device) -> dict:
+        """Start of the free shape: the shape of the device's DMA table (:func:`dma_shape`)."""
+        if "dma" not in device.tables:
+            return {}
+        return dict(zip(("ve_slope", "ve_tan_delta"), dma_shape(device.tables["dma"])))
 
     def polymer_modulus(self, p, layered: bool) -> Prony:
         name = "dma_membrane" if layered else "dma"

@@ -165,7 +165,7 @@ class IdentificationProblem:
         # RH levels
         self.levels = sorted({t.rh for t in self.targets})
         self.model0 = ActuatorModel(self.device, self.effects, n_modes=self.n_modes)
-        hum_on = self.model0.components["humidity"].enabled
+        hum_on = self.model0.needs_rh
         if per_rh:
             if not hum_on:
                 raise InputError(f"per-RH parameters ({', '.join(per_rh)}) need the humidity effect: add "
@@ -219,7 +219,7 @@ class IdentificationProblem:
         if name not in self.device.params:
             raise InputError(f"device {self.device.name!r} has no value for {name!r}; give a start value")
         if name == "Y":
-            return float(self.device.params["Y"] * self.model0.components["humidity"].stiffness_factor(rh))
+            return float(self.device.params["Y"] * self.model0.hook("stiffness_factor")(rh))
         return float(self.model0.params_at(rh)[name])
 
     def device_for(self, theta) -> Device:

@@ -89,10 +89,9 @@ class ReferenceStrip:
         self.rh = float(self.model.check_rh(rh))
         p = self.model.params_at(self.rh)
         self.p = p
-        comp = self.model.components
-        self.prm = SlabParams.from_params(p, T, solvent_diffusion=comp["solvent"].enabled)
+        self.prm = SlabParams.from_params(p, T, solvent_diffusion="solvent_diffusion" in self.model.effect_ids)
         self.slab = Slab(self.prm, graded_mesh(self.prm.h, self.prm.lam, **(mesh or {})))
-        self.line = comp["line"].enabled and p["Rs"] > 0
+        self.line = "electrode_resistance" in self.model.effect_ids and p["Rs"] > 0
         L = self.model.free_length
         n = (8 if n_segments is None else int(n_segments)) if self.line else 1
         self.edges = segment_edges(L, n, 1.5 if self.line else 1.0)
@@ -122,13 +121,12 @@ class ReferenceStrip:
         edges = segment_edges(L, n_segments, 1.5) if self.line else self.edges
         area = p["width"] * np.diff(edges)
         U = _ladder(self.p, edges, area, slab["Y"]) if self.line else np.ones((s.size, 1), dtype=complex)
-        hum = m.components["humidity"]
-        kf = m.components["coupling"].kf(s, p) * float(hum.coupling_factor(self.rh))
+        kf = m.hook("kf")(s, p) * float(m.hook("coupling_factor")(self.rh))
         coef = 2.0 * 0.5 * p["t_polymer"] * p["width"] * p["n_solvation"]
         proj = projection(m.modes(), edges, coef)
         ell = slab["ell"][:, None] * U                                   # (n_s, n_seg)
         pre = np.hstack([ell @ proj.modal.T, (ell @ proj.residual)[:, None]])
-        beam = beam_statespace(m, p, float(hum.stiffness_factor(self.rh))).freqresp(s)[0]   # (inputs, n_s)
+        beam = beam_statespace(m, p, float(m.hook("stiffness_factor")(self.rh))).freqresp(s)[0]   # (inputs, n_s)
         tip = kf * np.einsum("ki,ik->k", pre, beam)
         Lc, Lt = p["L_clamp"], p["L_total"]
         current = slab["Y"] * (p["width"] * Lc + U @ area)

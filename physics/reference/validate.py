@@ -93,7 +93,7 @@ def small_signal(device: str, rh: float = 100.0, n_freq: int = 60) -> dict:
     sw = 2j * np.pi * fw
     slab = ref.slab_response(sw)
     q, c = DoubleLayer.charge_per_volt(sw, d)
-    B = ref.model.components["solvent"].factor(sw, p)
+    B = ref.model.hook("solvent_factor")(sw, p)
     ph = np.angle(slab["Q"] / slab["Q"][0])
     corner = float(np.exp(np.interp(-np.pi / 4, -ph, np.log(fw)) if False else np.interp(np.pi / 4, -ph, np.log(fw))))
     return {
