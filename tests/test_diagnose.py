@@ -13,7 +13,7 @@ import yaml
 
 from physics import signals
 from physics.device import load_device
-from physics.diagnose import EXCITATION, diagnose, write_diagnosis
+from physics.diagnose import diagnose, excitation, write_diagnosis
 from physics.diagnose import stats
 from physics.diagnose.candidates import candidate_spec, default_free, map_free, translate_start
 from physics.diagnose.demo import HIDDEN, hidden_effect_case
@@ -104,7 +104,7 @@ def test_one_rh_level_and_one_amplitude_cannot_reveal_humidity_or_nonlinear_char
     ne = {c.effect: c for c in res.candidates if not c.evaluated}
     assert "one RH level cannot reveal humidity" in ne["humidity"].reason
     assert "one amplitude cannot reveal nonlinear_charge" in ne["nonlinear_charge"].reason
-    assert ne["humidity"].row(res.base)["excitation_needed"] == EXCITATION["humidity"]
+    assert ne["humidity"].row(res.base)["excitation_needed"] == excitation("humidity")
     # and the verdict does not guess another effect for what is really an RH change it cannot see
     assert res.verdict.missing_effect in (None,)
 

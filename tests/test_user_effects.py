@@ -174,3 +174,34 @@ def test_demo_missing_physics_runs_the_loop(tmp_path, capsys):
     assert "loop: before not explained by the catalog" in out and "after adding creep: explained" in out
     assert (tmp_path / "mp" / "before" / "report.html").is_file() and (tmp_path / "mp" / "after" / "report.html").is_file()
     assert "creep" not in EFFECTS  # the demo leaves the registry as it found it
+
+
+def test_a_load_side_user_effect_works_in_both_solvers():
+    """An effect that is not an OutputEffect: a factor on the bending load (``load_factor``),
+    here a first-order lag, reaches both solvers through the generic hooks."""
+    from physics.effects import Effect
+    from physics.parameters import ParamSpec
+
+    class LoadLag(Effect):
+        id = "load_lag"
+        summary = "test: the bending load lags by tau"
+        params = (ParamSpec("lag_tau", "s", 0.0, 10.0, "lag", optional=True, default=0.02),)
+
+        def load_factor(self, s, p):
+            return 1.0 / (1.0 + s * self.value(p, "lag_tau"))
+
+    register(LoadLag)
+    try:
+        m, base = ActuatorModel("ipmc_pt_eg", "none,+load_lag"), ActuatorModel("ipmc_pt_eg", "none")
+        f = np.array([0.5, 8.0, 30.0])
+        H, H0 = (frequency_response(x, None, f, rh=60.0).deflection for x in (m, base))
+        np.testing.assert_allclose(H / H0, 1.0 / (1.0 + 2j * np.pi * f * 0.02), rtol=1e-10)
+        sig = signals.multisine(rms=0.02, f_start=0.5, f_stop=30.0, period=10.0, fs=500.0, seed=1)
+        y = simulate(m, None, sig.t, sig.v, rh=60.0, periodic=True).deflection
+        k = np.arange(5, 301)
+        Ht = np.fft.rfft(y)[k] / np.fft.rfft(sig.v)[k]
+        Hc = frequency_response(m, None, k / 10.0, rh=60.0).deflection
+        assert np.max(np.abs(np.abs(Ht / Hc) - 1)) < 0.01
+        assert np.max(np.abs(np.degrees(np.angle(Ht / Hc)))) < 1.0
+    finally:
+        unregister("load_lag")

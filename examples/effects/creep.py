@@ -30,8 +30,10 @@ class Creep(OutputEffect):
         "free": ("creep_r", "creep_tau"),
         "bounds": {"creep_r": (-0.9, 5.0), "creep_tau": (0.05, 1e4)},
         "starts": [{"creep_tau": 1.0}, {"creep_tau": 10.0}, {"creep_tau": 100.0}],
-        "nested": True,
+        "nested": True, "off": {"creep_r": 0.0},
         "excitation": "a step or pulse held longer than the creep time (≥ 10 s), or a sweep down to 1/(2πτ)",
+        "reveal": {"f_lo_max": 0.05, "hold_s": 10.0},
+        "signature": [("step_creep", 1.0), ("lf_excess_lag", 0.5)],
     }
 
     def output_tf(self, p):

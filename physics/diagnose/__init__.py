@@ -18,6 +18,6 @@ file), :mod:`.demo` (synthetic measurements with a hidden effect).
 """
 from .diagnosis import DiagnosisResult, Verdict, diagnose
 from .report import write_diagnosis
-from .signatures import EXCITATION
+from .specs import excitation
 
-__all__ = ["diagnose", "DiagnosisResult", "Verdict", "write_diagnosis", "EXCITATION"]
+__all__ = ["diagnose", "DiagnosisResult", "Verdict", "write_diagnosis", "excitation"]

@@ -3,14 +3,16 @@
 **Which parameters are fitted.**  A model's free parameters are the *base's* — by default
 its coupling gain (``kf``, or ``kf0`` with ``fractional_coupling``), its stiffness
 (``Y``; ``dma_scale`` with ``viscoelastic``; ``Y_polymer`` with ``layered_beam``) and the
-Rayleigh damping ``beta_f`` — plus the parameters of the effect switched on:
+Rayleigh damping ``beta_f`` — plus the parameters of the effect switched on.  All of it is
+read from the effect's ``diagnosis`` spec in its own module (:mod:`.specs`); for the
+built-in effects:
 
 ==========================  =====================================================  ==========
 effect                      extra free parameters (bounds)                         nested?
 ==========================  =====================================================  ==========
 ``electrode_resistance``    ``Rs`` (0.1–10⁴ Ω/□)                                    yes (Rs→0)
 ``fractional_coupling``     ``frac_a`` (0–0.95); ``kf0`` replaces ``kf``            yes (a→0)
-``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→∞)
+``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→0)
 ``viscoelastic``            none: ``dma_scale`` replaces ``Y`` (the DMA table's      no
                             shape is prior knowledge)
 ``layered_beam``            ``Y_electrode``; ``Y_polymer`` replaces ``Y``           no
@@ -52,70 +54,26 @@ import numpy as np
 from ..device import Device
 from ..errors import InputError, ModelError
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
+from ..effects import EFFECTS
 from ..model import ActuatorModel, resolve_effects
 from ..timedomain import simulate
 from . import stats
 from .describing import DescribingFunction
 from .records import Record, sensor_filter, upsample
+from .specs import (declared_default, default_candidates, effect_params, is_nested, param_bounds, param_used,
+                    role_family, role_param, spec_of, start_points)
 
-ER, FC, SD, VE, LB, HUM, NLC, TH = ("electrode_resistance", "fractional_coupling", "solvent_diffusion",
-                                    "viscoelastic", "layered_beam", "humidity", "nonlinear_charge", "thermal")
-#: Effects a diagnosis tries by default (``thermal`` only on request, see :data:`NOT_BY_DEFAULT`).
-CANDIDATES = (ER, FC, SD, VE, LB, HUM, NLC)
-NOT_BY_DEFAULT = {TH: "thermal is not tried by default: Joule heating of ~1 °C changes the ion mobility by "
-                      "well under 1 % (eq. 6), below what a deflection record resolves, and it needs a large-"
-                      "signal time-domain fit; ask for it with --candidates thermal"}
-EFFECT_PARAMS = {ER: ("Rs",), FC: ("frac_a",), SD: ("D_solvent",), VE: ("ve_slope", "ve_tan_delta"),
-                 LB: ("Y_electrode",), HUM: (),
-                 NLC: ("C_max",), TH: ()}
-NESTED = {ER: True, FC: True, SD: True, VE: False, LB: False, HUM: True, NLC: False, TH: True}
-ROLE_GAIN = ("kf", "kf0")
-ROLE_STIFF = ("Y", "Y_polymer", "dma_scale")
-#: Values of optional parameters when a device file leaves them out (their documented defaults).
-OPTIONAL_DEFAULTS = {"dma_scale": 1.0, "frac_f_lo": 1e-4, "C_max": 5000.0, "E_a": 0.0}
+ROLE_GAIN, ROLE_STIFF = "gain", "stiffness"
 #: C_max is fitted when it changes the large-signal gain by more than this (relative).
 C_MAX_MIN_SENSITIVITY = 0.10
 
 
-def user_spec(effect: str) -> dict | None:
-    """The diagnosis spec of a user effect (:class:`physics.effects.OutputEffect`), else None."""
-    from ..effects import BUILT_IN, EFFECTS
-    return None if effect in BUILT_IN else getattr(EFFECTS.get(effect), "diagnosis", None)
-
-
-def default_candidates() -> list[str]:
-    """Catalog candidates tried by default, plus every registered user effect with a spec."""
-    from ..effects import EFFECTS
-    return list(CANDIDATES) + [e for e in EFFECTS if user_spec(e)]
-
-
-def effect_params(effect: str) -> tuple[str, ...]:
-    """The effect's own parameters fitted when it is added."""
-    spec = user_spec(effect)
-    return tuple(spec["free"]) if spec else EFFECT_PARAMS.get(effect, ())
-
-
-def is_nested(effect: str) -> bool:
-    """True when some value of the effect's parameters gives the model without it."""
-    spec = user_spec(effect)
-    return bool(spec.get("nested", False)) if spec else NESTED.get(effect, False)
-
-
-def _owner(name: str) -> str | None:
-    """The user effect declaring parameter ``name`` (None for base and built-in parameters)."""
-    from ..effects import BUILT_IN, EFFECTS
-    return next((e for e, cls in EFFECTS.items() if e not in BUILT_IN and any(p.name == name for p in cls.params)),
-                None)
-
-
 def gain_param(ids) -> str:
-    return "kf0" if FC in ids else "kf"
+    return role_param(ROLE_GAIN, ids)
 
 
 def stiffness_param(ids) -> str:
-    if VE in ids:
-        return "dma_scale"
-    return "Y_polymer" if LB in ids else "Y"
+    return role_param(ROLE_STIFF, ids)
 
 
 def default_free(ids) -> list[str]:
@@ -123,34 +81,9 @@ def default_free(ids) -> list[str]:
     return [gain_param(ids), stiffness_param(ids), "beta_f"]
 
 
-def param_used(name: str, ids) -> bool:
-    """Whether parameter ``name`` acts in a model with effects ``ids`` (FRF or time)."""
-    ids = set(ids)
-    rules = {"kf": FC not in ids, "kf0": FC in ids, "frac_a": FC in ids, "frac_b": FC in ids, "frac_p": FC in ids,
-             "frac_f_lo": FC in ids, "Rs": ER in ids, "D_solvent": SD in ids, "dma_scale": VE in ids,
-             "ve_slope": VE in ids, "ve_tan_delta": VE in ids,
-             "Y": VE not in ids and LB not in ids, "Y_polymer": LB in ids and VE not in ids,
-             "Y_electrode": LB in ids, "C_max": NLC in ids, "h_trans": TH in ids, "E_a": TH in ids}
-    if name in rules:
-        return rules[name]
-    owner = _owner(name)
-    return owner is None or owner in ids
-
-
-def param_bounds(name: str, device: Device) -> tuple[float, float] | None:
-    """Physical search ranges for the effect parameters (None: identify's default)."""
-    p = device.params
-    h = 0.5 * p["t_polymer"]
-    table = {"Rs": (0.1, 1e4), "D_solvent": (h * h / 1e5, h * h / 0.2), "frac_a": (0.0, 0.95),
-             "ve_slope": (0.0, 0.6), "ve_tan_delta": (0.005, 0.6),
-             "dma_scale": (0.05, 20.0), "Y_electrode": (1e7, 2e11), "h_trans": (0.5, 1e4)}
-    if name == "C_max":
-        return (p["C_anion"] / 0.96, p["C_anion"] / 0.005)
-    owner = _owner(name)
-    if owner is not None:
-        b = (user_spec(owner) or {}).get("bounds", {}).get(name)
-        return None if b is None else (float(b[0]), float(b[1]))
-    return table.get(name)
+def _layered(ids) -> bool:
+    """True when the section of a model with effects ``ids`` includes the electrode layers."""
+    return any(getattr(EFFECTS[e], "layered", False) for e in ids if e in EFFECTS)
 
 
 # ============================================================================ specs
@@ -219,10 +152,10 @@ def translate_start(device: Device, from_ids, to_ids, band) -> dict:
     f_ref = math.sqrt(band[0] * band[1])
     if s0 != s1:
         # the modulus of an equivalent homogeneous strip the base found [Pa]
-        layers0 = _layer_modulus(p) if LB in from_ids else 0.0
-        layers1 = _layer_modulus(p) if LB in to_ids else 0.0
+        layers0 = _layer_modulus(p) if _layered(from_ids) else 0.0
+        layers1 = _layer_modulus(p) if _layered(to_ids) else 0.0
         if s0 == "dma_scale":
-            table0 = "dma_membrane" if LB in from_ids else "dma"
+            table0 = "dma_membrane" if _layered(from_ids) else "dma"
             E = p.get("dma_scale", 1.0) * (_storage(device, table0, f_ref) or p["Y"]) + layers0
         else:
             E = p[s0] + layers0
@@ -230,7 +163,7 @@ def translate_start(device: Device, from_ids, to_ids, band) -> dict:
         if s1 in ("Y", "Y_polymer"):
             out[s1] = polymer
         else:
-            table = "dma_membrane" if LB in to_ids else "dma"
+            table = "dma_membrane" if _layered(to_ids) else "dma"
             st = _storage(device, table, f_ref)
             out["dma_scale"] = float(np.clip(polymer / st, 0.06, 15.0)) if st else 1.0
     return out
@@ -241,9 +174,9 @@ def map_free(free: Sequence[str], from_ids, to_ids) -> list[str]:
     follow their effect (kf ↔ kf0, Y ↔ dma_scale ↔ Y_polymer), unused ones are dropped."""
     out = []
     for name in free:
-        if name in ROLE_GAIN:
+        if name in role_family(ROLE_GAIN):
             name = gain_param(to_ids)
-        elif name in ROLE_STIFF:
+        elif name in role_family(ROLE_STIFF):
             name = stiffness_param(to_ids)
         if param_used(name, to_ids) and name not in out:
             out.append(name)
@@ -258,69 +191,46 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
     per_rh = list(base_per_rh)
     start = {k: v for k, v in translate_start(device, base_ids, to_ids, band).items()}
     notes = []
-    for name in effect_params(effect):
-        if name == "C_max":
-            continue          # decided after the describing-function probe
-        if name not in free:
-            free.append(name)
-    if effect == HUM:
+    spec = spec_of(effect)
+    if not spec.get("describing_function"):    # else decided after the describing-function probe
+        free += [name for name in effect_params(effect) if name not in free]
+    per = list(spec.get("per_rh", ()))
+    if per:
         if n_rh_levels >= 2:
-            for role in (gain_param(to_ids), stiffness_param(to_ids)):
-                if role in free:
-                    free.remove(role)
-            for name in ("kf", "Y"):
-                if name not in per_rh:
-                    per_rh.append(name)
-            notes.append("humidity: kf and Y fitted once per RH level (Table V style), replacing the shared values")
+            for name in per:
+                for role in (ROLE_GAIN, ROLE_STIFF):
+                    if name in role_family(role) and role_param(role, to_ids) in free:
+                        free.remove(role_param(role, to_ids))
+            per_rh += [name for name in per if name not in per_rh]
+            notes.append(f"{effect}: {', '.join(per)} fitted once per RH level (Table V style), replacing the "
+                         "shared values")
         else:
-            notes.append("humidity: one RH level, so the device's humidity maps are used as they are")
-    bounds, extra = {}, []
-    for name in free:
-        b = param_bounds(name, device)
-        if b is not None:
-            bounds[name] = b
+            notes.append(f"{effect}: one RH level, so its per-RH parameters ({', '.join(per)}) keep the device's "
+                         "values")
+    bounds = {name: b for name in free if (b := param_bounds(name, device)) is not None}
+    derived = getattr(EFFECTS[effect], "diagnosis_start", None)
+    derived = derived(device) if callable(derived) else {}      # e.g. a DMA table's own shape
     for name, b in bounds.items():
         if name not in start:
-            v = device.params.get(name, _declared_default(name))
-            if v is None or not (b[0] <= v <= b[1]) or (name == "Rs" and v <= 0):
+            v = device.params.get(name, derived.get(name, declared_default(name)))
+            if v is None or not (b[0] <= v <= b[1]):
                 v = math.sqrt(b[0] * b[1]) if b[0] > 0 else 0.5 * (b[0] + b[1])
             start[name] = v
         start[name] = float(np.clip(start[name], b[0], b[1]))
     if "dma_scale" in free and "dma_scale" not in start:
-        start["dma_scale"] = float(device.params.get("dma_scale", 1.0))
-    if effect == VE and "dma" in device.tables:   # the free shape starts at the table's own shape
-        from ..effects.viscoelastic import dma_shape
-        for name, v in zip(("ve_slope", "ve_tan_delta"), dma_shape(device.tables["dma"])):
-            if name in free and name in bounds:
-                start[name] = float(np.clip(device.params.get(name, v), *bounds[name]))
-    # starts over the effect's own parameter (unknown scale)
-    h = 0.5 * device.params["t_polymer"]
-    grids = {ER: ("Rs", [10.0, 100.0, 1000.0]), SD: ("D_solvent", [h * h / x for x in (3.0, 30.0, 300.0, 3000.0)]),
-             FC: ("frac_a", [0.1, 0.5, 0.8]), LB: ("Y_electrode", [1e8, 1e10])}
-    if effect in grids:
-        name, vals = grids[effect]
-        if name in free:
-            extra = [{name: v} for v in vals]
-    elif user_spec(effect):
-        extra = [{k: float(v) for k, v in st.items() if k in free} for st in user_spec(effect).get("starts", [])]
+        start["dma_scale"] = float(device.params.get("dma_scale", declared_default("dma_scale")))
+    # starts over the effect's own parameters (unknown scale)
+    extra = [st for st in ({k: v for k, v in pt.items() if k in free} for pt in start_points(effect, device)) if st]
     return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)
-
-
-def _declared_default(name: str) -> float | None:
-    from ..effects import EFFECTS
-    owner = _owner(name)
-    return None if owner is None else next(p.default for p in EFFECTS[owner].params if p.name == name)
 
 
 def removal_spec(effect: str, base_ids, base_free, base_per_rh, device: Device, band) -> ModelSpec:
     """The base without ``effect`` (to check that the data support it)."""
     to_ids = resolve_effects([e for e in base_ids if e != effect], device)
-    shared = list(base_free) + ([p for p in base_per_rh] if effect == HUM else [])
-    per_rh = [] if effect == HUM else list(base_per_rh)
+    per = spec_of(effect).get("per_rh")      # its per-RH parameters become shared ones again
+    shared = list(base_free) + (list(base_per_rh) if per else [])
+    per_rh = [] if per else list(base_per_rh)
     free = map_free(shared, base_ids, to_ids)
-    if effect == HUM:
-        free = map_free([p if p not in ("kf", "Y") else {"kf": gain_param(to_ids), "Y": stiffness_param(to_ids)}[p]
-                         for p in shared], base_ids, to_ids)
     start = translate_start(device, base_ids, to_ids, band)
     start = {k: v for k, v in start.items() if k in free}
     return ModelSpec(f"-{effect}", to_ids, free, per_rh, start, {}, [], removed=effect)
@@ -390,7 +300,7 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     try:
         kw = dict(start={k: v for k, v in spec.start.items() if k in spec.free},
                   bounds={k: v for k, v in spec.bounds.items() if k in spec.free}, n_modes=n_modes)
-        if NLC in spec.effects:
+        if any(spec_of(e).get("describing_function") for e in spec.effects):
             problem, df_info = _df_problem(spec, device, targets, target_records, kw, df_cache)
         else:
             problem, df_info = IdentificationProblem(device, spec.effects, targets, spec.free, spec.per_rh, **kw), None
@@ -518,7 +428,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     effects (creep) that a frequency response over 0.1–50 Hz cannot determine are then set
     by the steps and holds of the records."""
     from scipy.optimize import least_squares
-    outs = [e for e in mf.model.outputs if user_spec(e.id)]
+    outs = [e for e in mf.model.outputs if spec_of(e.id)]
     names = [n for e in outs for n in effect_params(e.id) if n in mf.spec.free]
     if not names:
         return
@@ -544,9 +454,9 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
 
     bounds = [param_bounds(n, mf.device) or (-np.inf, np.inf) for n in names]
     lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
-    x_now = np.array([float(mf.device.params.get(n, _declared_default(n))) for n in names])
+    x_now = np.array([float(mf.device.params.get(n, declared_default(n))) for n in names])
     starts = [x_now] + [np.array([float(st.get(n, x)) for n, x in zip(names, x_now)])
-                        for e in outs for st in (user_spec(e.id) or {}).get("starts", [])]
+                        for e in outs for st in start_points(e.id, mf.device)]
     best = None
     for x0 in starts:
         x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
@@ -646,16 +556,12 @@ def compare_fits(base: ModelFit, cand: ModelFit, nested: bool, taus: Sequence[fl
 
 
 def effect_values(mf: ModelFit, effect: str) -> dict:
-    """Fitted values of an effect's own parameters (and of the per-RH ones for humidity)."""
-    names = set(effect_params(effect))
-    if effect == HUM:
+    """Fitted values of an effect's own parameters, of those taking over a role (kf0,
+    dma_scale, ...) and, for an effect with per-RH parameters, of those."""
+    spec = spec_of(effect)
+    if spec.get("per_rh"):
         return {k: v for k, v in mf.values.items() if "@RH" in k}
-    if effect == FC:
-        names |= {"kf0"}
-    if effect == VE:
-        names |= {"dma_scale"}
-    if effect == LB:
-        names |= {"Y_polymer"}
+    names = set(effect_params(effect)) | {r[0] for r in spec.get("roles", {}).values()}
     return {k: v for k, v in mf.values.items() if k in names}
 
 
@@ -669,5 +575,5 @@ def prediction_distance(a: ModelFit, b: ModelFit) -> float:
     return math.sqrt(sq / max(cnt, 1))
 
 
-__all__ = ["CANDIDATES", "ModelSpec", "ModelFit", "Comparison", "candidate_spec", "removal_spec", "fit_model",
+__all__ = ["default_candidates", "ModelSpec", "ModelFit", "Comparison", "candidate_spec", "removal_spec", "fit_model",
            "score", "compare_fits", "default_free", "map_free", "param_used", "predict", "prediction_distance"]

@@ -18,7 +18,7 @@ humidity                    Table V maps of Y and kf raised to a power U(0.7, 1.
 nonlinear_charge            C_max log-uniform 1500–8000 mol/m³
 ==========================  ===================================================================
 
-Excitation per effect (:data:`DESIGNS`; see :data:`physics.diagnose.EXCITATION` for why):
+Excitation per effect (:data:`DESIGNS`; see :func:`physics.diagnose.excitation` for why):
 a logarithmic swept sine 0.1–50 Hz at RH 60 % for every effect; plus a square pulse
 (20 s on, 40 s off) for ``solvent_diffusion``; sweeps at RH 40, 70 and 100 % for
 ``humidity``; the sweep at two amplitudes (×4) for ``nonlinear_charge``.  The amplitude

@@ -46,7 +46,7 @@ from ..device import Device, all_param_specs, load_device
 from ..errors import InputError, ModelError
 from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
-from ..effects import ensure_registered, user_effect_files
+from ..effects import EFFECTS, ensure_registered, user_effect_files
 from ..model import ActuatorModel, resolve_effects
 from ..parallel import ParallelSettings, map_tasks, warm_up
 from ..threads import single_threaded
@@ -55,7 +55,8 @@ from . import stats
 from .records import Record, frf_measurements, prepare_records
 from .adequacy import ADEQUATE_RATIO, Adequacy, assess
 from .residuals import ResidualAnalysis, analyse
-from .signatures import EXCITATION, excitation, features, revealable, signatures
+from .signatures import features, revealable, signatures
+from .specs import declared_default, excitation, spec_of
 
 DELTA_BIC_MIN = 10.0
 ALPHA = 0.01
@@ -211,7 +212,7 @@ class DiagnosisResult:
             "after_winner": self.analysis_after.to_dict() if self.analysis_after else None,
             "signature_features": self.features,
             "records": [r.describe() for r in self.records],
-            "excitation_needed": EXCITATION,
+            "excitation_needed": {e: excitation(e) for e in EFFECTS if excitation(e)},
             "statistics": {
                 "n_eff": "n / tau_int per record, tau_int from the autocorrelation (Sokal's window) of the residual "
                          "closest to noise (the best-fitting model's); one n_eff for every comparison",
@@ -268,11 +269,10 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
         cand_ids = [e for e in C.default_candidates() if e not in base_ids]
     else:
         cand_ids = parse_names(candidates, "--candidates")
-        from ..effects import EFFECTS
-        bad = [e for e in cand_ids if e not in EFFECTS or e == "double_layer"]
+        bad = [e for e in cand_ids if not spec_of(e)]
         if bad:
-            raise InputError(f"--candidates: unknown or fixed effect(s) {', '.join(bad)}; catalog: "
-                             f"{', '.join(e for e in EFFECTS if e != 'double_layer')}")
+            raise InputError(f"--candidates: unknown or fixed effect(s) {', '.join(bad)} (no diagnosis spec); "
+                             f"catalog: {', '.join(e for e in EFFECTS if spec_of(e))}")
         already = [e for e in cand_ids if e in base_ids]
         if already:
             raise InputError(f"--candidates: {', '.join(already)} already in the model (--effects)")
@@ -309,9 +309,10 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
             raise InputError(f"--start: {name} is not a free parameter")
     for name in free_l:
         if name not in dev.params and name not in base_spec.start:
-            if name not in C.OPTIONAL_DEFAULTS:
+            default = declared_default(name)
+            if default is None:
                 raise InputError(f"device {dev.name!r} has no value for free parameter {name}; give one with --start")
-            base_spec.start[name] = C.OPTIONAL_DEFAULTS[name]
+            base_spec.start[name] = default
     base = C.fit_model(base_spec, dev, targets, trecs, n_starts=n_starts, seed=seed, n_modes=n_modes,
                        df_cache=df_cache)
     if not base.ok:
@@ -338,8 +339,6 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
         ok, why = revealable(eff, records, resonance)
         if not ok and not force:
             results.append(CandidateResult(eff, "not_revealable", reason=f"the data cannot reveal {eff}: {why}"))
-            continue
-        if eff in C.NOT_BY_DEFAULT and candidates in (None, "", "default"):
             continue
         try:
             spec = C.candidate_spec(eff, base_ids, base.spec.free, base.spec.per_rh, dev_fit, band, n_levels)
@@ -373,7 +372,8 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     base.aic = stats.aic(base.rss, base.n, n_eff_ref, base.k + len(records))
     for c in results:
         if c.evaluated:
-            nested = C.is_nested(c.effect) and (c.effect != "humidity" or bool(c.fit.spec.per_rh))
+            # an effect fitted through per-RH parameters nests only when they were freed (≥ 2 RH levels)
+            nested = C.is_nested(c.effect) and (not spec_of(c.effect).get("per_rh") or bool(c.fit.spec.per_rh))
             c.comparison = C.compare_fits(base, c.fit, nested, taus_ref)
             c.fit.bic = base.bic + c.comparison.delta_bic
             c.fit.aic = base.aic + c.comparison.delta_aic
@@ -569,8 +569,6 @@ def _explain(c: CandidateResult, base: C.ModelFit, noise: float) -> str:
            f" changes the RMS error from {1e6 * base.rmse:.4g} to {1e6 * f.rmse:.4g} µm (fit {base.fit_pct:.2f} → "
            f"{f.fit_pct:.2f} %); ΔBIC = {cmp.delta_bic:.4g} with n_eff = {cmp.n_eff:.4g} (τ = {cmp.tau:.3g} samples): "
            f"evidence: {c.evidence(base)}; p = {cmp.p_value:.2g} ({cmp.test}).")
-    if c.effect == "humidity" and vals:
-        txt += " Per-RH values: " + _fmt_params(vals, f.std_errors) + "."
     sig = c.signature or {}
     if sig.get("score") is not None:
         if sig["observed"]:
@@ -581,7 +579,7 @@ def _explain(c: CandidateResult, base: C.ModelFit, noise: float) -> str:
         d = C.prediction_distance(f, base)
         txt += (f" Its fitted model predicts the same deflection as the base with re-tuned "
                 f"{', '.join(base.spec.free)} (RMS difference {1e6 * d:.3g} µm, below the noise): the data cannot "
-                "tell it apart from the base" + (" (e.g. layered_beam vs a stiffer Y)." if c.effect == "layered_beam" else "."))
+                "tell it apart from the base.")
     others = [x for x in c.indistinguishable_from if x != "base"]
     if others:
         txt += f" Cannot be told apart from {', '.join(others)} with these data."

@@ -1,7 +1,8 @@
 """What each effect leaves in a base model's residuals, and what data can show it.
 
-**Excitation needed** (:data:`EXCITATION`; :func:`revealable` applies these rules to the
-records and says why when the data cannot reveal an effect):
+**Excitation needed** (each effect's spec: ``excitation`` text and ``reveal`` rule, in its
+own module; :func:`revealable` applies the rules to the records and says why when the data
+cannot reveal an effect).  For the built-in effects:
 
 ==========================  ===========================================================================
 effect                      data that expose it
@@ -44,7 +45,8 @@ thermal                     (not by default) long large-amplitude records
 * ``step_back_relaxation`` / ``step_creep`` — after steps the measurement relaxes back
   (``solvent_diffusion``) or keeps creeping (``fractional_coupling``) relative to the model.
 
-Each effect's score is the weighted share of its expected features that are present,
+Which features each effect is expected to leave is its spec's ``signature``.  Each effect's
+score is the weighted share of its expected features that are present,
 counting only features the data can show; it is a plausibility check on a candidate
 whose fit improved, not evidence by itself.
 """
@@ -57,33 +59,7 @@ import numpy as np
 
 from .records import RH_SPAN, Record, amplitude_groups, rh_levels
 from .residuals import ResidualAnalysis
-
-EXCITATION = {
-    "electrode_resistance": "a swept sine or multisine reaching at least 10 Hz (phase lag growing with frequency)",
-    "fractional_coupling": "a broadband record spanning at least one decade (constant log-log slope and phase), "
-                           "ideally down to 0.1 Hz",
-    "solvent_diffusion": "a swept sine starting at 0.5 Hz or lower, or a square pulse/step holding at least 5 s "
-                         "(back-relaxation)",
-    "viscoelastic": "a broadband record spanning the first bending resonance (peak shape, frequency-dependent "
-                    "stiffness, loss below resonance)",
-    "layered_beam": "a broadband record spanning the first resonance; even then usually not distinguishable "
-                    "from a stiffer Y",
-    "humidity": "records at two or more RH levels at least 10 % apart",
-    "nonlinear_charge": "the same excitation at two or more amplitudes (ratio at least 1.25) at one RH level",
-    "thermal": "long large-amplitude records (Joule heating); not tried by default",
-}
-
-#: effect -> [(feature, weight)]
-EXPECTED = {
-    "electrode_resistance": [("hf_phase_lag", 1.0)],
-    "fractional_coupling": [("constant_slope_phase", 1.0), ("lf_excess_lag", 0.5), ("step_creep", 0.5)],
-    "solvent_diffusion": [("lf_droop_lead", 1.0), ("step_back_relaxation", 1.0)],
-    "viscoelastic": [("resonance_error", 1.0), ("lf_small_lag", 0.5)],
-    "layered_beam": [("resonance_error", 1.0)],
-    "humidity": [("rh_dependence", 1.0)],
-    "nonlinear_charge": [("amplitude_dependence", 1.0), ("harmonics", 0.5)],
-    "thermal": [("amplitude_dependence", 1.0)],
-}
+from .specs import excitation, signature, spec_of
 
 FEATURE_TEXT = {
     "lf_droop_lead": "low-frequency droop with phase lead",
@@ -100,45 +76,36 @@ FEATURE_TEXT = {
 }
 
 
-def excitation(effect: str) -> str:
-    """The excitation that reveals ``effect`` (catalog table, or a user effect's spec)."""
-    if effect in EXCITATION:
-        return EXCITATION[effect]
-    from .candidates import user_spec
-    return str((user_spec(effect) or {}).get("excitation", ""))
-
-
 def _broadband(records) -> list[Record]:
     return [r for r in records if r.kind == "broadband"]
 
 
 def revealable(effect: str, records: Sequence[Record], resonance_hz: float | None = None) -> tuple[bool, str]:
-    """(can the records reveal ``effect``?, why / why not) — rules of :data:`EXCITATION`."""
+    """(can the records reveal ``effect``?, why / why not): the ``reveal`` rule of its spec
+    (:data:`physics.effects.base.REVEAL_RULES`); an effect without a rule is tried on every record."""
+    rule = spec_of(effect).get("reveal")
+    if not rule:
+        return True, "no revealability rule (tried on every record)"
+    need = excitation(effect)
     bb = _broadband(records)
     tones = sorted({r.tone_hz for r in records if r.kind == "tone" and r.tone_hz})
     f_lo = min([r.band[0] for r in bb] + tones) if (bb or tones) else math.inf
     f_hi = max([r.band[1] for r in bb] + tones) if (bb or tones) else 0.0
-    steps = [r for r in records if r.kind == "steps"]
-    long_hold = any(r.steps.size and np.max(np.diff(np.concatenate([r.steps, [r.v_d.size]]))) / r.fs_d >= 5.0
-                    for r in steps)
-    need = excitation(effect)
-    if effect not in EXCITATION:
-        return True, "a user effect (no revealability rule; tried on every record)"
-    if effect == "electrode_resistance":
-        ok = f_hi >= 10.0
+    if "f_hi_min" in rule:
+        ok = f_hi >= rule["f_hi_min"]
         return ok, (f"excitation reaches {f_hi:.3g} Hz" if ok else f"the excitation stops at {f_hi:.3g} Hz; needs {need}")
-    if effect == "fractional_coupling":
-        ok = f_hi / f_lo >= 10.0 if f_lo > 0 and math.isfinite(f_lo) else False
+    if "decades_min" in rule:
+        ok = f_hi / f_lo >= 10.0 ** rule["decades_min"] if f_lo > 0 and math.isfinite(f_lo) else False
         return ok, (f"broadband over {f_lo:.3g}–{f_hi:.3g} Hz" if ok else f"needs {need}")
-    if effect == "solvent_diffusion":
-        ok = f_lo <= 0.5 or long_hold
-        why = []
-        if f_lo <= 0.5:
-            why.append(f"excitation down to {f_lo:.3g} Hz")
-        if long_hold:
-            why.append("steps with long holds")
-        return ok, ("; ".join(why) if ok else f"nothing below {f_lo:.3g} Hz and no long step; needs {need}")
-    if effect in ("viscoelastic", "layered_beam"):
+    if "f_lo_max" in rule or "hold_s" in rule:
+        low = f_lo <= rule.get("f_lo_max", -math.inf)
+        hold = rule.get("hold_s")
+        long_hold = hold is not None and any(
+            r.steps.size and np.max(np.diff(np.concatenate([r.steps, [r.v_d.size]]))) / r.fs_d >= hold
+            for r in records if r.kind == "steps")
+        why = ([f"excitation down to {f_lo:.3g} Hz"] if low else []) + (["steps with long holds"] if long_hold else [])
+        return bool(why), ("; ".join(why) if why else f"nothing below {f_lo:.3g} Hz and no long step; needs {need}")
+    if rule.get("spans_resonance"):
         if resonance_hz is None:
             ok = f_hi / max(f_lo, 1e-9) >= 10.0
             return ok, ("broadband (resonance not located)" if ok else f"needs {need}")
@@ -146,15 +113,14 @@ def revealable(effect: str, records: Sequence[Record], resonance_hz: float | Non
         return ok, (f"the excitation spans the first resonance ({resonance_hz:.3g} Hz)" if ok
                     else f"the excitation ({f_lo:.3g}–{f_hi:.3g} Hz) does not span the first resonance "
                          f"({resonance_hz:.3g} Hz); needs {need}")
-    if effect == "humidity":
+    if "rh_levels" in rule:
         lv = rh_levels(records)
-        ok = len(lv) >= 2 and lv[-1] - lv[0] >= RH_SPAN
+        ok = len(lv) >= rule["rh_levels"] and lv[-1] - lv[0] >= RH_SPAN
         return ok, (f"RH levels {', '.join(f'{x:g}' for x in lv)} %" if ok else
                     f"all records are at RH {', '.join(f'{x:g}' for x in lv)} %: one RH level cannot reveal "
-                    f"humidity; needs {need}")
-    if effect in ("nonlinear_charge", "thermal"):
-        groups = amplitude_groups(records)
-        multi = {rh: a for rh, a in groups.items() if len(a) >= 2}
+                    f"{effect}; needs {need}")
+    if "amplitude_levels" in rule:
+        multi = {rh: a for rh, a in amplitude_groups(records).items() if len(a) >= rule["amplitude_levels"]}
         if multi:
             rh, a = next(iter(multi.items()))
             return True, f"amplitudes {', '.join(f'{x:.3g}' for x in a)} V at RH {rh:g} %"
@@ -255,7 +221,7 @@ def signatures(feats: dict, effects: Sequence[str]) -> dict:
     """{effect: {"score": 0–1 or None, "observed": [...], "expected": [...]}} (module doc)."""
     out = {}
     for e in effects:
-        exp = EXPECTED.get(e, [])
+        exp = signature(e)
         num = den = 0.0
         observed, missing = [], []
         for name, w in exp:

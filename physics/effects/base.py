@@ -56,16 +56,18 @@ from ..parameters import ParamSpec, TableSpec
 #: ``free`` its parameters to fit; ``bounds`` {name: (lo, hi)} or (lo, hi, scale) with scale a
 #: device parameter name, optionally ``name^k`` (the bounds are multiplied by its value^k);
 #: ``starts`` a list of {name: value or (value, scale)} start points; ``nested`` True when some
-#: parameter value switches the effect off; ``excitation`` the excitation that reveals it
+#: parameter value switches the effect off, ``off`` those values {name: value or (value, scale)}
+#: (the contract tests check that the model is then exactly the one without it); ``excitation`` the excitation that reveals it
 #: (text); ``reveal`` the rule that says whether records can show it (:data:`REVEAL_RULES`);
 #: ``signature`` [(residual feature, weight)] it leaves in a base model's residual;
 #: ``roles`` {"gain" | "stiffness": (parameter, rank)}: the parameter that takes over the
 #: base's coupling gain ``kf`` or stiffness ``Y`` when the effect is on (highest rank wins);
 #: ``per_rh`` parameters fitted once per RH level instead of shared ones; ``describing_function``
 #: True for a large-signal effect fitted through the describing function; ``by_default`` False
-#: (with ``why_not``) to try it only on request.
-DIAGNOSIS_KEYS = ("free", "bounds", "starts", "nested", "excitation", "reveal", "signature", "roles", "per_rh",
-                  "describing_function", "by_default", "why_not")
+#: to try it only on request (``--candidates``).  An effect may also define a classmethod
+#: ``diagnosis_start(device) -> {name: value}`` for starts derived from the device (e.g. a table).
+DIAGNOSIS_KEYS = ("free", "bounds", "starts", "nested", "off", "excitation", "reveal", "signature", "roles", "per_rh",
+                  "describing_function", "by_default")
 #: ``reveal`` rules: {"f_hi_min": Hz}, {"decades_min": n}, {"f_lo_max": Hz, "hold_s": s} (either),
 #: {"spans_resonance": True}, {"rh_levels": n}, {"amplitude_levels": n}; absent: always revealable.
 REVEAL_RULES = ("f_hi_min", "decades_min", "f_lo_max", "hold_s", "spans_resonance", "rh_levels", "amplitude_levels")

@@ -41,7 +41,7 @@ class ElectrodeResistance(EquipotentialElectrodes):
     requires = ("Rs",)
     diagnosis = {
         "free": ("Rs",), "bounds": {"Rs": (0.1, 1e4)}, "starts": [{"Rs": 10.0}, {"Rs": 100.0}, {"Rs": 1000.0}],
-        "nested": True,                                      # Rs -> 0
+        "nested": True, "off": {"Rs": 0.0},
         "excitation": "a swept sine or multisine reaching at least 10 Hz (phase lag growing with frequency)",
         "reveal": {"f_hi_min": 10.0},
         "signature": [("hf_phase_lag", 1.0)],

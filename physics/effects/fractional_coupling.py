@@ -46,7 +46,7 @@ class FractionalCoupling(ConstantCoupling):
     diagnosis = {
         "free": ("frac_a",), "bounds": {"frac_a": (0.0, 0.95)},
         "starts": [{"frac_a": 0.1}, {"frac_a": 0.5}, {"frac_a": 0.8}],
-        "nested": True,                                      # a -> 0 (with b = 0)
+        "nested": True, "off": {"frac_a": 0.0, "frac_b": 0.0, "kf0": (1.0, "kf")},   # kf(s) = kf0 = kf
         "roles": {"gain": ("kf0", 1)},                       # kf0 takes over the base's kf
         "excitation": "a broadband record spanning at least one decade (constant log-log slope and phase), "
                       "ideally down to 0.1 Hz",

@@ -40,7 +40,7 @@ class SolventDiffusion(SolventDrag):
     diagnosis = {
         "free": ("D_solvent",), "bounds": {"D_solvent": (0.25 / 1e5, 0.25 / 0.2, "t_polymer^2")},
         "starts": [{"D_solvent": (0.25 / x, "t_polymer^2")} for x in (3.0, 30.0, 300.0, 3000.0)],
-        "nested": True,                                      # Ds -> inf
+        "nested": True,                      # in the limit Ds -> 0 (B(s) -> 1), outside the admissible range
         "excitation": "a swept sine starting at 0.5 Hz or lower, or a square pulse/step holding at least 5 s "
                       "(back-relaxation)",
         "reveal": {"f_lo_max": 0.5, "hold_s": 5.0},

@@ -60,12 +60,12 @@ class Thermal(Isothermal):
         ParamSpec("E_a", "J/mol", 0.0, 2e5, "activation energy of D+ (0: mobility by eq. 6 only)", optional=True,
                   default=0.0),
     )
+    # not tried by default: Joule heating of ~1 °C changes the ion mobility by well under 1 % (eq. 6), below
+    # what a deflection record resolves, and it needs a large-signal time-domain fit (--candidates thermal)
     diagnosis = {
-        "free": (), "bounds": {"h_trans": (0.5, 1e4)}, "nested": True,
+        "free": (), "bounds": {"h_trans": (0.5, 1e4)},
+        "nested": True, "off": {"h_trans": 1e5},              # strong convection: the strip stays at T_ext
         "by_default": False,
-        "why_not": "thermal is not tried by default: Joule heating of ~1 °C changes the ion mobility by well under "
-                   "1 % (eq. 6), below what a deflection record resolves, and it needs a large-signal time-domain "
-                   "fit; ask for it with --candidates thermal",
         "excitation": "long large-amplitude records (Joule heating); not tried by default",
         "reveal": {"amplitude_levels": 2},
         "signature": [("amplitude_dependence", 1.0)],
