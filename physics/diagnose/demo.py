@@ -18,7 +18,7 @@ humidity                    Table V maps of Y and kf raised to a power U(0.7, 1.
 nonlinear_charge            C_max log-uniform 1500–8000 mol/m³
 ==========================  ===================================================================
 
-Excitation per effect (:data:`DESIGNS`; see :func:`physics.diagnose.excitation` for why):
+Excitation per effect (:func:`design_for`, from the ``reveal`` rule of the effect's spec):
 a logarithmic swept sine 0.1–50 Hz at RH 60 % for every effect; plus a square pulse
 (20 s on, 40 s off) for ``solvent_diffusion``; sweeps at RH 40, 70 and 100 % for
 ``humidity``; the sweep at two amplitudes (×4) for ``nonlinear_charge``.  The amplitude
@@ -42,18 +42,12 @@ from ..model import ActuatorModel
 from ..sensor import SensorModel
 from ..timedomain import simulate
 from ..timeseries import TimeSeries
+from .specs import spec_of
 
 HIDDEN = ("electrode_resistance", "fractional_coupling", "solvent_diffusion", "viscoelastic", "humidity",
           "nonlinear_charge")
-DESIGNS = {
-    "electrode_resistance": ("sweep",),
-    "fractional_coupling": ("sweep",),
-    "solvent_diffusion": ("sweep", "pulse"),
-    "viscoelastic": ("sweep",),
-    "humidity": ("sweep", "rh"),
-    "nonlinear_charge": ("sweep", "amplitudes"),
-    None: ("sweep",),
-}
+#: record kinds that satisfy each ``reveal`` rule of an effect's spec beyond the sweep
+_RULE_RECORDS = {"hold_s": "pulse", "rh_levels": "rh", "amplitude_levels": "amplitudes"}
 RICH = ("sweep", "pulse", "rh", "amplitudes")
 PEAK_M = 2.0e-3
 
@@ -77,6 +71,13 @@ class HiddenEffectCase:
                 "truth_effects": list(self.truth_effects), "truth_params": self.truth_params,
                 "design": list(self.design), "records": [m.source for m in self.measurements],
                 "noise_floor_m": self.noise_floor}
+
+
+def design_for(effect: str | None) -> tuple[str, ...]:
+    """Records that let the diagnosis see ``effect``: the sweep, plus what its spec's ``reveal``
+    rule asks for (a long hold: the pulse; RH levels; amplitude levels)."""
+    rule = spec_of(effect).get("reveal", {}) if effect else {}
+    return ("sweep",) + tuple(kind for key, kind in _RULE_RECORDS.items() if key in rule)
 
 
 def _truth(effect, dev, rng):
@@ -128,7 +129,7 @@ def hidden_effect_case(effect: str | None = None, seed: int = 0, *, device: str 
     truth_dev, tp = _truth(effect, dev, rng)
     truth_ids = tuple(e for e in base_ids if e != "double_layer") + ((effect,) if effect else ())
     truth = ActuatorModel(truth_dev, truth_ids or "none")
-    parts = RICH if design == "rich" else (DESIGNS[effect] if design == "auto" else tuple(design))
+    parts = RICH if design == "rich" else (design_for(effect) if design == "auto" else tuple(design))
     rh_list = [60.0] + ([40.0, 100.0] if "rh" in parts else [])
     if "rh" in parts:
         rh_list = [40.0, 70.0, 100.0]
