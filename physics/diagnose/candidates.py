@@ -217,8 +217,6 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
                 v = math.sqrt(b[0] * b[1]) if b[0] > 0 else 0.5 * (b[0] + b[1])
             start[name] = v
         start[name] = float(np.clip(start[name], b[0], b[1]))
-    if "dma_scale" in free and "dma_scale" not in start:
-        start["dma_scale"] = float(device.params.get("dma_scale", declared_default("dma_scale")))
     # starts over the effect's own parameters (unknown scale)
     extra = [st for st in ({k: v for k, v in pt.items() if k in free} for pt in start_points(effect, device)) if st]
     return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)

@@ -26,7 +26,7 @@ def spec_of(effect: str) -> dict:
 
 def default_candidates() -> list[str]:
     """Effects with a spec that are tried by default, in registry order."""
-    return [e for e in EFFECTS if getattr(EFFECTS[e], "diagnosis", None) and spec_of(e).get("by_default", True)]
+    return [e for e in EFFECTS if spec_of(e) and spec_of(e).get("by_default", True)]
 
 
 def effect_params(effect: str) -> tuple[str, ...]:
