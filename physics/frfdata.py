@@ -15,8 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .timeseries import (Locate, check_finite, check_input_path, check_range, parse_header,
-                         read_sidecar, read_table, write_table)
+from .csvtable import check_input_path, read_table, write_table
+from .record import Locate, check_finite, check_range
+from .sidecar import read_sidecar
+from .timeseries import parse_header
 
 #: quantity -> {unit: scale to stored units}; ``coherence`` has no unit.
 FRF_UNITS: dict[str, dict[str, float]] = {

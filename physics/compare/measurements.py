@@ -9,7 +9,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..frfdata import FRFData, read_frf
-from ..timeseries import TimeSeries, csv_header, read_timeseries
+from ..csvtable import csv_header
+from ..timeseries import TimeSeries, read_timeseries
 
 
 def is_frf_file(path) -> bool:

@@ -1,0 +1,258 @@
+"""CSV and MATLAB tables: the file layer under time-series and FRF files.
+
+:func:`read_table` reads a CSV with a header line of column names (dialect sniffed: comma,
+semicolon, tab, bar or blank separated; decimal point or comma; UTF-8 with or without BOM,
+or Latin-1; LF or CRLF) or a ``.mat`` file of vectors into a :class:`Table` of raw columns,
+naming the line and column of every bad cell.  :func:`write_table` writes columns and a
+YAML sidecar atomically under the output policy of :mod:`physics.outputs`.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import scipy.io
+import yaml
+
+from .errors import InputError
+from .fileio import atomic_path
+from .record import Locate, check_finite
+
+
+@dataclass
+class Table:
+    """Columns of a CSV or .mat file before unit conversion.
+
+    ``columns`` maps each name (file order) to its raw values (CSV: text; .mat: array),
+    ``locate(i)`` names the line (CSV) or element (.mat) of value ``i``.
+    """
+    path: Path
+    columns: dict[str, np.ndarray]
+    locate: Locate
+
+    def floats(self, name: str, label: str | None = None) -> np.ndarray:
+        """Column ``name`` as finite floats; errors name line/element and column."""
+        raw = self.columns[name]
+        label = label or f"column {name!r}"
+        if raw.dtype.kind in "biuf":
+            values = raw.astype(float, copy=False)
+        else:
+            values = pd.to_numeric(pd.Series(raw), errors="coerce").to_numpy(dtype=float)
+            i = next((i for i in np.flatnonzero(np.isnan(values))
+                      if raw[i].strip().lower() != "nan"), None)
+            if i is not None:
+                text = raw[i].strip()
+                what = "empty cell" if not text else f"{text!r} is not a number"
+                raise InputError(f"{self.path}, {self.locate(i)}, column {name!r}: {what}; "
+                                 "expected a finite number")
+        check_finite(values, str(self.path), self.locate, label)
+        return values
+
+
+def check_input_path(path, suffixes: tuple[str, ...]) -> Path:
+    """``path`` as a :class:`Path` after checking that it is an existing file with one of
+    ``suffixes`` (lower case, with the dot)."""
+    p = Path(path)
+    if p.suffix.lower() not in suffixes:
+        raise InputError(f"{p}: unsupported file type {p.suffix or '(no extension)'!r}; "
+                         f"expected {' or '.join(suffixes)}")
+    if not p.is_file():
+        raise InputError(f"{p}: file not found")
+    return p
+
+
+#: Field separators recognised in a CSV header line, in order of preference.
+DELIMITERS = (",", ";", "\t", "|")
+#: Encodings tried in turn: UTF-8 (with or without BOM), then Latin-1 (never fails).
+ENCODINGS = ("utf-8-sig", "latin-1")
+
+
+def sniff_dialect(path: Path) -> tuple[str, str, str]:
+    """(encoding, delimiter, decimal mark) of a CSV from its first 64 kB.
+
+    The delimiter is the separator most frequent in the header line (comma, semicolon,
+    tab, bar; runs of blanks if none); a decimal comma is recognised when the separator
+    is not a comma and data cells look like ``1,5``.
+    """
+    with path.open("rb") as fh:
+        head = fh.read(1 << 16)
+    if b"\x00" in head or re.search(rb"[\x01-\x08\x0e-\x1a]", head):
+        raise InputError(f"{path}: not a UTF-8 text file (binary content); expected a CSV")
+    try:
+        text, encoding = head.decode("utf-8-sig"), "utf-8-sig"
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:  # not merely a multi-byte character cut at the chunk end
+            text, encoding = head.decode("latin-1"), "latin-1"
+        else:
+            text, encoding = head[:exc.start].decode("utf-8-sig"), "utf-8-sig"
+    lines = text.splitlines()
+    header = lines[0] if lines else ""
+    counts = {d: header.count(d) for d in DELIMITERS}
+    delim = max(DELIMITERS, key=lambda d: counts[d]) if any(counts.values()) else \
+        (r"\s+" if len(header.split()) > 1 else ",")
+    decimal = "."
+    if delim != ",":
+        body = "\n".join(lines[1:50])
+        if re.search(r"\d,\d", body) and not re.search(r"\d\.\d", body):
+            decimal = ","
+    return encoding, delim, decimal
+
+
+def csv_header(path: Path) -> list[str]:
+    """Column names of a CSV's header line (dialect sniffed as by :func:`read_table`)."""
+    encoding, delim, _ = sniff_dialect(path)
+    with open(path, encoding=encoding, newline="") as fh:
+        header_line = fh.readline()
+    if delim == r"\s+":
+        return header_line.split()
+    return [n.strip() for n in next(csv.reader([header_line], delimiter=delim), [])]
+
+
+def _parse(path: Path, opts: dict) -> tuple[np.ndarray, np.ndarray | None]:
+    """(float values, None) of a numeric file, or (None, text cells) when a cell is not a
+    number (re-read as text to name it)."""
+    try:  # in chunks: the parser's buffers stay small; peak ≈ 2 × the values
+        chunks = [c.to_numpy() for c in pd.read_csv(path, dtype=float, chunksize=1 << 18, **opts)]
+        values = np.concatenate(chunks) if chunks else np.empty((0, len(opts["names"])))
+        del chunks
+        if values.size and np.isnan(values).any():
+            nonblank = np.flatnonzero(~np.isnan(values).all(axis=1))
+            end = nonblank[-1] + 1 if nonblank.size else 0
+            if np.isnan(values[:end]).any() or end == 0:
+                raise ValueError("NaN or empty cell")
+            values = values[:end]
+        return values, None
+    except ValueError as exc:
+        if isinstance(exc, UnicodeDecodeError):
+            raise
+    df = pd.read_csv(path, dtype=str, keep_default_na=False, **opts)
+    return None, df.to_numpy(dtype=object).copy()
+
+
+def read_table(path: Path) -> Table:
+    """Read a CSV (header line of names) or .mat file into a :class:`Table`.
+
+    CSV dialects are sniffed (:func:`sniff_dialect`): comma, semicolon, tab or blank
+    separated, decimal point or comma, UTF-8 (BOM allowed) or Latin-1, LF or CRLF.  Numeric
+    files are parsed straight to floats (8 bytes per value); a file with a non-numeric,
+    empty or NaN cell is re-read as text to name the line and column.
+    """
+    if path.suffix.lower() == ".mat":
+        return _read_mat(path)
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: empty file; expected a header line of column names "
+                         "followed by data rows")
+    encoding, delim, decimal = sniff_dialect(path)
+    names = csv_header(path)
+    if not any(names):
+        raise InputError(f"{path}: empty file; expected a header line of column names "
+                         "followed by data rows")
+    opts = dict(sep=delim, header=None, skiprows=1, names=list(range(len(names))), decimal=decimal,
+                encoding=encoding, skip_blank_lines=False, engine="c")
+    try:
+        try:
+            values, raw = _parse(path, opts)
+        except UnicodeDecodeError:   # a Latin-1 byte after the sniffed head: the file is Latin-1
+            values, raw = _parse(path, dict(opts, encoding="latin-1"))
+    except pd.errors.EmptyDataError:
+        raise InputError(f"{path}: empty file; the header is not followed by any data row") from None
+    except pd.errors.ParserError as exc:
+        hint = ("; a decimal comma needs another field separator (';' or tab) — in a comma-separated file "
+                "write numbers with a decimal point") if delim == "," else ""
+        raise InputError(f"{path}: cannot be parsed as CSV ({' '.join(str(exc).split())}); "
+                         f"every line must have the {len(names)} fields of the header "
+                         f"(separator {delim!r}){hint}") from None
+    if raw is not None:
+        raw[pd.isna(raw)] = ""
+        end = raw.shape[0]
+        while end and not any(str(v).strip() for v in raw[end - 1]):
+            end -= 1  # drop trailing blank lines
+        values = raw[:end]
+        if decimal == ",":
+            values = np.vectorize(lambda v: str(v).replace(",", "."), otypes=[object])(values) \
+                if values.size else values
+    if values.shape[0] == 0:
+        raise InputError(f"{path}: empty file; the header is not followed by any data row")
+    columns: dict[str, np.ndarray] = {}
+    for k, name in enumerate(names):
+        col = np.ascontiguousarray(values[:, k]) if raw is None else values[:, k].astype(str)
+        if not name:
+            if (np.isnan(col).all() if raw is None else (np.char.strip(col) == "").all()):
+                continue  # trailing separator: nameless, empty column
+            raise InputError(f"{path}: column {k + 1} has data but no name in the header")
+        if name in columns:
+            raise InputError(f"{path}: column {name!r} appears twice in the header")
+        columns[name] = col
+    return Table(path, columns, lambda i: f"line {i + 2}")
+
+
+def _read_mat(path: Path) -> Table:
+    try:
+        data = scipy.io.loadmat(path)
+    except NotImplementedError:
+        raise InputError(f"{path}: MATLAB v7.3 (HDF5) files are not supported; save with "
+                         "-v7 or export a CSV") from None
+    except Exception as exc:  # scipy raises various types for corrupt files
+        raise InputError(f"{path}: cannot be read as a MATLAB file ({exc})") from None
+    columns = {}
+    for name, value in data.items():
+        if name.startswith("__"):
+            continue
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "biuf" or arr.ndim > 2 or (arr.ndim == 2 and min(arr.shape) != 1):
+            raise InputError(f"{path}: variable {name!r} must be a real numeric vector, got "
+                             f"{arr.dtype} array of shape {arr.shape}")
+        columns[name] = arr.ravel()
+    if not columns or all(c.size == 0 for c in columns.values()):
+        raise InputError(f"{path}: empty file; expected vectors named like the CSV columns")
+    return Table(path, columns, lambda i: f"element {i + 1}")
+
+
+def write_table(columns: dict[str, np.ndarray], meta: dict, path, *, overwrite: bool,
+                protect) -> Path:
+    """Atomically write ``columns`` as CSV (shortest round-trip float repr) to ``path``
+    (``.csv``) and ``meta`` to the sidecar ``NAME.yaml`` (removing a stale sidecar when
+    ``meta`` is empty).  Inputs in ``protect`` (and their sidecars) are never targets."""
+    target = Path(path)
+    if target.suffix.lower() != ".csv":
+        raise InputError(f"{target}: output must be a .csv file")
+    side = target.with_suffix(".yaml")
+    protect = tuple(Path(p) for p in protect)
+    protect = protect + tuple(p.with_suffix(".yaml") for p in protect)
+    for p in (target, side):  # check both before writing either
+        if any(p.resolve() == q.resolve() for q in protect):
+            raise InputError(f"refusing to overwrite the input file {p}; choose another output path")
+        if p.exists() and not overwrite:
+            raise InputError(f"{p} already exists; choose another output path or pass --overwrite")
+    if meta:
+        text = yaml.safe_dump(plain(meta), sort_keys=False, allow_unicode=True)
+        with atomic_path(side, overwrite=True) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+    elif side.exists():
+        side.unlink()
+    with atomic_path(target, overwrite=True) as tmp:
+        pd.DataFrame(columns).to_csv(tmp, index=False, lineterminator="\n")
+    return target
+
+
+def plain(obj, key: str = "meta"):
+    """``obj`` converted to plain YAML/JSON types (numpy scalars and arrays, tuples, paths)."""
+    if isinstance(obj, dict):
+        return {str(k): plain(v, f"{key}.{k}") for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [plain(v, f"{key}[{i}]") for i, v in enumerate(obj)]
+    if isinstance(obj, np.ndarray):
+        return plain(obj.tolist(), key)
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, os.PathLike):
+        return str(obj)
+    if obj is None or isinstance(obj, (bool, int, float, str)):
+        return obj
+    raise InputError(f"{key}: cannot store a {type(obj).__name__} in metadata; use numbers, "
+                     "strings, lists or mappings")
