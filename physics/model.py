@@ -22,6 +22,7 @@ from .device import Device, load_device
 from .effects import CHAIN, EFFECTS, Effect, stage_of
 from .effects.double_layer import DoubleLayerProps
 from .errors import InputError
+from .limits import MAX_MODES, check_count
 
 
 _GROUPS = ("default", "all", "linear", "none")
@@ -77,9 +78,9 @@ class ActuatorModel:
     def __init__(self, device, effects=None, *, n_modes: int = 4):
         self.device: Device = load_device(device)
         self.effect_ids = resolve_effects(effects, self.device)
-        self.n_modes = int(n_modes)
-        if self.n_modes < 1:
-            raise InputError("n_modes must be at least 1")
+        self.n_modes = check_count(n_modes if isinstance(n_modes, int) else int(n_modes), 1, MAX_MODES,
+                                   "n_modes", "higher modes lie far above any measured band; the rest is "
+                                   "kept quasi-statically")
         on = [EFFECTS[e] for e in self.effect_ids]
         self.components: dict[str, Effect] = {}
         for default in CHAIN:

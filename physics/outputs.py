@@ -13,7 +13,7 @@ Ownership, not folders: eap replaces only what it wrote.
   ``NAME.csv`` would be read as its metadata).
 * **Inputs** are never targets: every file or folder a run reads (measurements and their
   sidecars, device YAML, configuration, effect files, datasets, bundles; the command line
-  declares them with :func:`protect`) may not be an output, lie in an output folder, or
+  declares them with :func:`protecting`) may not be an output, lie in an output folder, or
   hold an output.  ``.``, the home folder, ``/`` and parents of the current folder are
   refused as output folders.
 * Writing is atomic: a folder is written into a hidden sibling ``.NAME.eap-tmp-PID`` and
@@ -50,12 +50,17 @@ _PARTIAL = ".eap-partial"
 _PROTECTED: set[Path] = set()
 
 
-def protect(paths: Iterable) -> None:
-    """Declare inputs of this run (files or folders): no output may be, hold or lie in them
-    (a CSV's or .mat's sidecar ``NAME.yaml`` included)."""
-    for p in paths:
-        if p is not None and str(p) != "" and Path(p).expanduser().exists():
-            _PROTECTED.add(Path(p).expanduser().resolve())
+@contextlib.contextmanager
+def protecting(paths: Iterable) -> Iterator[None]:
+    """Within the block, ``paths`` (files or folders the run reads) are inputs of every
+    output: none may be, hold or lie in them (a CSV's or .mat's sidecar included)."""
+    added = {Path(p).expanduser().resolve() for p in paths
+             if p is not None and str(p) != "" and Path(p).expanduser().exists()} - _PROTECTED
+    _PROTECTED.update(added)
+    try:
+        yield
+    finally:
+        _PROTECTED.difference_update(added)
 
 
 def _inputs_with_sidecars(inputs: Iterable) -> list[Path]:
@@ -254,7 +259,7 @@ def output_folder(out, *, inputs: Iterable = (), overwrite: bool = False,
     """Yield a fresh temporary folder; on success it replaces ``out`` atomically.
 
     ``inputs``: files (and folders) read by the run, never to be replaced (besides those
-    declared with :func:`protect`).  ``flag`` names the option in messages.  On any
+    declared with :func:`protecting`).  ``flag`` names the option in messages.  On any
     exception (Ctrl-C included) the temporary folder is removed and ``out`` is untouched.
     """
     res = preflight(out, inputs=inputs, overwrite=overwrite, flag=flag)
@@ -335,16 +340,10 @@ def check_file_target(path, *, overwrite: bool = False, flag: str = "--out", inp
     return res
 
 
-@contextlib.contextmanager
-def output_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[str] | str = "--out",
-                 inputs: Iterable = ()) -> Iterator[list[Path]]:
-    """Write single output files atomically under the ownership rules (module doc).
-
-    Yields one temporary path per target (``None`` targets give ``None``); whatever the
-    block writes beside them (e.g. a CSV's sidecar) is an output too.  On success every
-    file is checked again, renamed into place and recorded in its folder's
-    :data:`REGISTRY`; a CSV target's stale sidecar (written by eap) is removed.
-    """
+def preflight_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[str] | str = "--out",
+                    inputs: Iterable = ()) -> list[Path | None]:
+    """Every check of :func:`output_files` that can be made before any work; returns the
+    resolved targets (``None`` for ``None``)."""
     flags = [flags] * len(paths) if isinstance(flags, str) else list(flags)
     targets: list[Path | None] = []
     for path, flag in zip(paths, flags):
@@ -358,12 +357,28 @@ def output_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[st
             check_file_target(res.with_suffix(".yaml"), overwrite=overwrite, flag=flag, inputs=inputs)
         _writable_parent(res.parent, flag, path)
         targets.append(res)
+    return targets
+
+
+@contextlib.contextmanager
+def output_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[str] | str = "--out",
+                 inputs: Iterable = ()) -> Iterator[list[Path]]:
+    """Write single output files atomically under the ownership rules (module doc).
+
+    Yields one temporary path per target (``None`` targets give ``None``); whatever the
+    block writes beside them (e.g. a CSV's sidecar) is an output too.  On success every
+    file is checked again, renamed into place and recorded in its folder's
+    :data:`REGISTRY`; a CSV target's stale sidecar (written by eap) is removed.
+    """
+    flags = [flags] * len(paths) if isinstance(flags, str) else list(flags)
+    targets = preflight_files(paths, overwrite=overwrite, flags=flags, inputs=inputs)
     staging: dict[Path, Path] = {}
     try:
         for res, flag, path in zip(targets, flags, paths):
             if res is not None and res.parent not in staging:
+                _clean_stale_files(res.parent)
                 try:
-                    staging[res.parent] = Path(tempfile.mkdtemp(prefix=f".eap-tmp-{os.getpid()}-", dir=res.parent))
+                    staging[res.parent] = Path(tempfile.mkdtemp(prefix=f"{_TMP}{os.getpid()}-", dir=res.parent))
                 except OSError as exc:
                     raise InputError(f"{flag} {path}: cannot write in {res.parent} ({exc.strerror}); choose a "
                                      f"writable {flag}") from None
@@ -374,6 +389,14 @@ def output_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[st
     finally:
         for tmp in staging.values():
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _clean_stale_files(parent: Path) -> None:
+    """Remove staging folders of killed single-file writers in ``parent`` (their pid is gone)."""
+    for p in parent.glob(f"{_TMP}*"):
+        pid = p.name[len(_TMP):].split("-")[0]
+        if p.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
+            shutil.rmtree(p, ignore_errors=True)
 
 
 def _promote_files(parent: Path, tmp: Path, targets: list[Path], overwrite: bool, flag: str, inputs) -> None:

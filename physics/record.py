@@ -4,7 +4,7 @@ A record holds uniformly sampled channels in stored units: ``time`` s, ``voltage
 ``deflection`` (the measured output: tip deflection in m, or the quantity named in
 ``meta["output"]``), ``rh`` %, ``current`` A, ``temperature`` °C.  The checks here
 (finite values, strictly increasing and uniform time, RH within 0–100 %, a sampling rate
-within :data:`FS_RANGE_HZ`) are shared by the file reader (:mod:`physics.timeseries`),
+within :data:`~physics.limits.FS_RANGE_HZ`) are shared by the file reader (:mod:`physics.timeseries`),
 the sensor model and records built in memory; every violation is an
 :class:`~physics.errors.InputError` naming the record, the sample (or line) and the channel.
 """
@@ -18,12 +18,10 @@ from typing import Callable, Mapping
 import numpy as np
 
 from .errors import InputError
+from .limits import FS_RANGE_HZ
 
 #: Largest accepted deviation of a time step from the median step, relative to it.
 UNIFORM_RTOL = 1e-2
-#: Sampling rates a record may have [Hz]: beyond them a time step is an export error (a
-#: step of 1e288 s or 1e-302 s), and every solver and spectrum estimate breaks down.
-FS_RANGE_HZ = (1e-6, 1e9)
 #: Channels besides time.
 CHANNELS = ("voltage", "deflection", "rh", "current", "temperature")
 Locate = Callable[[int], str]

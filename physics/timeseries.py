@@ -59,6 +59,7 @@ import numpy as np
 
 from .csvtable import check_input_path, read_table, write_table
 from .errors import InputError, InputNotice
+from .limits import MAX_DRIVE_V
 from .record import (CHANNELS, DEFLECTION, OutputQuantity, TimeSeries, check_range,  # noqa: F401 (TimeSeries: public)
                      check_record)
 from .sidecar import read_sidecar
@@ -79,7 +80,7 @@ STORED_UNITS = {"time": "s", "voltage": "V", "deflection": "m", "rh": "pct",
 #: Plausible ranges (stored units): a value outside is a unit or export error (a tip
 #: deflection of 1e300 m, a drive of 1 MV), not a measurement.  The output's rule is its
 #: quantity's (:meth:`~physics.record.OutputQuantity.bounds`).
-PLAUSIBLE = {"voltage": (-1e3, 1e3, "V (drive voltage)"),
+PLAUSIBLE = {"voltage": (-MAX_DRIVE_V, MAX_DRIVE_V, "V (drive voltage)"),
              "current": (-1e3, 1e3, "A (absorbed current)"),
              "temperature": (-273.15, 1e3, "°C (ambient temperature)")}
 #: Other spellings of units in column maps and headers.
@@ -88,14 +89,15 @@ _HEADER_UNIT = re.compile(r"^(?P<name>.*?)\s*(?:\((?P<a>[^()]+)\)|\[(?P<b>[^\[\]
 
 
 def parse_header(name: str, units: Mapping[str, Mapping[str, object]],
-                 where: Path) -> tuple[str, str]:
+                 where: Path, hint: str = "") -> tuple[str, str]:
     """Split a ``quantity_unit`` column name into (quantity, unit) and check both against
-    ``units`` (quantity -> accepted units; a unitless quantity maps to ``{"": ...}``)."""
+    ``units`` (quantity -> accepted units; a unitless quantity maps to ``{"": ...}``);
+    ``hint`` ends the message of an unknown column (how to read other files)."""
     quantity, _, unit = name.partition("_")
     if quantity not in units:
         accepted = ", ".join(f"{q}_{u}" if u else q for q in units for u in units[q])
         raise InputError(f"{where}: unknown column {name!r}; expected columns named "
-                         f"quantity_unit among: {accepted} (use a column map for other files)")
+                         f"quantity_unit among: {accepted}{hint}")
     if unit not in units[quantity]:
         accepted = ", ".join(u or "(none)" for u in units[quantity])
         raise InputError(f"{where}: column {name!r}: cannot parse unit {unit or '(none)'!r} of "
@@ -299,11 +301,8 @@ def _standard_columns(table, p: Path, output: OutputQuantity | None):
                                  f"({output.unit}); name it {output.column}")
             quantity, scale = "deflection", (q, 0.0)
         else:
-            try:
-                quantity, unit = parse_header(name, TIMESERIES_UNITS, p)
-            except InputError as exc:
-                hint = f" or the output {output.column}" if other else ""
-                raise InputError(f"{exc}{hint}; read other files with a column map, --columns") from None
+            quantity, unit = parse_header(name, TIMESERIES_UNITS, p, (f" or the output {output.column}" if other else "")
+                                          + "; read other files with a column map, e.g. --columns time=t,voltage=u")
             if other and quantity == "deflection":
                 raise InputError(f"{p}: column {name!r}: the output is {output.name} ({output.column}), not the "
                                  "deflection; correct --output or the header")

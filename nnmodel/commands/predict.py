@@ -6,24 +6,29 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.errors import InputError
+from physics.errors import InputError, ModelError
 
 from ._common import add_quiet_option, provenance, stage_log
 
 NAME = "predict"
-HELP = "predict tip deflection with a trained model bundle for a voltage (+RH) record"
-DESCRIPTION = (HELP + ". The input CSV follows DATA_FORMAT.md (time_s, voltage_V, optional rh_pct, "
-               "optional deflection_m). The prediction is written as a time-series CSV whose "
-               "deflection column is the model output; if the input carries a measured deflection, "
-               "the fit is printed. A sampling rate other than the training rate is refused unless "
-               "--resample is given; RH outside the trained range gives a warning.")
+HELP = "predict the output of a trained model bundle (tip deflection, or the quantity it was trained on) for a record"
+DESCRIPTION = (HELP + ". The input CSV follows DATA_FORMAT.md (time_s, voltage_V, optional rh_pct, optional "
+               "measured output, e.g. deflection_m), or any file through --columns. The prediction is written as a "
+               "time-series CSV whose output column is named after the model's output (deflection_m, level_V, ...); "
+               "if the input carries the measured output, the fit is printed. A sampling rate other than the "
+               "training rate is refused unless --resample is given; RH outside the trained range gives a warning.")
 
 
 def add_arguments(p):
     p.add_argument("--model", required=True, help="model bundle folder (e.g. RUN/models/narx)")
     p.add_argument("--input", required=True, help="input time-series CSV (voltage, optional RH)")
+    p.add_argument("--columns", default=None,
+                   help="column map for other files, e.g. time=t,voltage=u (units as time=t:ms; the measured output "
+                        "as output=y)")
+    p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of a file without a time column")
     p.add_argument("--out", required=True, help="output CSV for the prediction (never the input file)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out CSV (and its sidecar)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --out CSV (and its sidecar) written by eap (never other files)")
     add_quiet_option(p)
     p.add_argument("--rh", type=float, default=None,
                    help="relative humidity [%%] when the file has no rh_pct column (wins over it)")
@@ -38,39 +43,35 @@ def add_arguments(p):
                         "(default: free-run simulation)")
 
 
-def _read(path, rh, uses_rh: bool, need_y: bool):
-    from physics.timeseries import read_timeseries
+def _read(args, output, uses_rh: bool, need_y: bool):
+    """The input record, and whether it carries a relative humidity."""
+    from physics.timeseries import parse_column_map, read_timeseries
 
+    columns = parse_column_map(args.columns, output) if args.columns else None
+    kw = dict(columns=columns, fs=args.fs_Hz, require_deflection=need_y, output=output)
     try:
-        return read_timeseries(path, rh=rh, require_deflection=need_y), True
+        return read_timeseries(args.input, rh=args.rh, **kw), True
     except InputError as exc:
         # a model without humidity input does not need RH: read with a placeholder, drop it
-        if uses_rh or rh is not None or "relative humidity" not in str(exc):
+        if uses_rh or args.rh is not None or "relative humidity" not in str(exc):
             raise
-    return read_timeseries(path, rh=0.0, require_deflection=need_y), False
-
-
-def _check_out(args) -> None:
-    """Refuse a bad ``--out`` before any work."""
-    out, inp = Path(args.out), Path(args.input)
-    if out.suffix.lower() != ".csv":
-        raise InputError(f"--out {out}: the prediction is written as CSV; give a path ending in .csv")
-    for p in (out, out.with_suffix(".yaml")):
-        if p.resolve() in (inp.resolve(), inp.with_suffix(".yaml").resolve()):
-            raise InputError(f"--out {out} would overwrite the input {p}; choose another --out")
-        if p.exists() and not args.overwrite:
-            raise InputError(f"--out: {p} already exists; choose another --out or pass --overwrite")
+    return read_timeseries(args.input, rh=0.0, **kw), False
 
 
 def run(args) -> int:
-    from physics.timeseries import TimeSeries, write_timeseries
     from physics.metrics import fit_percent, rmse
+    from physics.outputs import output_files, preflight_files
+    from physics.record import OutputQuantity
+    from physics.timeseries import TimeSeries, write_timeseries
 
     from ..bundle import load
 
     log = stage_log(args, [args.input])
-    _check_out(args)
+    if Path(args.out).suffix.lower() != ".csv":
+        raise InputError(f"--out {args.out}: the prediction is written as CSV; give a path ending in .csv")
+    preflight_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model])
     bundle = load(args.model)
+    output = OutputQuantity.from_dict(bundle.card.get("output"), f"{args.model}: card output")
     uses_rh = bundle.model.uses_rh
     k = args.steps_ahead
     if k is not None and k < 1:
@@ -82,7 +83,7 @@ def run(args) -> int:
         raise InputError(f"--init-samples {n_init}: this model starts from its last {bundle.model.n_init_} "
                          "outputs; give at least that many, or 0 to start from rest")
     log(f"reading {args.input}")
-    ts, rh_read = _read(args.input, args.rh, uses_rh, need_y=k is not None or bool(n_init))
+    ts, rh_read = _read(args, output, uses_rh, need_y=k is not None or bool(n_init))
     log(f"predicting {ts.n:,} samples with {bundle.card['model']}")
     # free run: initialised from the first measured outputs when the file has them (honest start)
     init = ts.deflection if (k is None and n_init != 0) else None
@@ -93,7 +94,7 @@ def run(args) -> int:
     notes = [str(w.message) for w in caught if issubclass(w.category, (RuntimeWarning, UserWarning))]
     for n in notes:
         print(f"eap predict: warning: {n}")
-    out_unit = bundle.card.get("output", {}).get("unit", "m")
+    out_unit = output.unit
     meta = dict(ts.meta)
     meta["prediction"] = {
         "model": bundle.card["model"], "bundle": str(args.model), "input": str(args.input),
@@ -106,10 +107,13 @@ def run(args) -> int:
     line = (f"predicted {ts.n} samples at {ts.fs:g} Hz with {bundle.card['model']} "
             f"({'free run' if k is None else f'{k}-step-ahead'})")
     if not np.all(np.isfinite(pred)):
-        raise InputError("the model produced non-finite values for this input (diverged)")
+        i = int(np.flatnonzero(~np.isfinite(pred))[0])
+        raise ModelError(f"{args.model}: the model's free run diverged on {args.input} (non-finite from sample {i}, "
+                         f"t = {ts.time[i]:g} s); nothing was written — the input may lie outside what it was "
+                         "trained on")
     if ts.deflection is not None:
         fit = {"rmse": rmse(ts.deflection, pred)}
-        line += f"; against the measured deflection: RMSE {fit['rmse']:.4g} {out_unit}"
+        line += f"; against the measured {output.name}: RMSE {fit['rmse']:.4g} {out_unit}"
         try:
             fit["fit_percent"] = fit_percent(ts.deflection, pred)
             line += f", fit {fit['fit_percent']:.1f} %"
@@ -117,8 +121,9 @@ def run(args) -> int:
             pass
         meta["prediction"]["against_measured"] = fit
     out = TimeSeries(time=ts.time, voltage=ts.voltage, deflection=pred,
-                     rh=ts.rh if (rh_read or uses_rh) else None, meta=meta, source=str(args.out))
+                     rh=ts.rh if (rh_read or uses_rh) else None, meta=meta, source=str(args.out), output=output)
     log(f"writing {args.out}")
-    path = write_timeseries(out, args.out, overwrite=args.overwrite, protect=(args.input,))
-    print(f"{line}; wrote {path}")
+    with output_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model]) as (tmp,):
+        write_timeseries(out, tmp)
+    print(f"{line}; wrote {args.out} ({output.column})")
     return 0

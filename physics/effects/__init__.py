@@ -116,6 +116,9 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
         spec.loader.exec_module(module)
     except InputError:
         raise
+    except SystemExit as exc:  # the file ended the program while being imported
+        raise InputError(f"--effects-path {p}: importing it called sys.exit({exc.code!r}); an effect file must "
+                         "define effects, not run a program") from None
     except Exception as exc:  # a user's file: report what went wrong in it, one line
         raise InputError(f"--effects-path {p}: importing it failed: {type(exc).__name__}: {exc}") from None
     classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, Effect)
