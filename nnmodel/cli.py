@@ -134,9 +134,14 @@ def _inputs_of(args) -> list[Path]:
 def _notice(command: str):
     """``warnings.showwarning`` for the command line: one line per warning, ``eap CMD: note: …``
     for an :class:`~physics.errors.InputNotice`, ``eap CMD: warning: …`` otherwise."""
+    said = set()
+
     def show(message, category, filename, lineno, file=None, line=None):
         kind = "note" if issubclass(category, InputNotice) else "warning"
-        print(f"eap {command}: {kind}: {' '.join(str(message).split())}", file=file or sys.stderr)
+        text = f"eap {command}: {kind}: {' '.join(str(message).split())}"
+        if text not in said:   # a file read twice (two sample ranges of it) says it once
+            said.add(text)
+            print(text, file=file or sys.stderr)
     return show
 
 
