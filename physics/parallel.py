@@ -108,11 +108,17 @@ def _run_one(fn, task):
 
 def _failure(desc: str, task, value) -> Exception:
     """The error to raise for a failed task: the user's error alone, else a ModelError
-    naming the task (its ``name`` when it has one, never its full content)."""
+    naming the task briefly (its ``name``, or its plain settings — never a dump of its data)."""
     if isinstance(value, (InputError, ModelError)):
         return value
-    label = task.get("name") if isinstance(task, dict) and isinstance(task.get("name"), str) else None
-    return ModelError(f"{desc}: {'task ' + repr(label) if label else 'a task'} failed: {value}")
+    if isinstance(task, dict) and isinstance(task.get("name"), str):
+        label = repr(task["name"])
+    else:
+        plain = {k: v for k, v in task.items() if isinstance(v, (int, float, str, bool))} \
+            if isinstance(task, dict) else task
+        label = repr(plain)
+        label = label if len(label) <= 80 else label[:80] + "…"
+    return ModelError(f"{desc}: task {label} failed: {value}")
 
 
 def _run_batch(fn, batch):

@@ -304,8 +304,9 @@ def _standard_columns(table, p: Path, output: OutputQuantity | None):
             quantity, unit = parse_header(name, TIMESERIES_UNITS, p, (f" or the output {output.column}" if other else "")
                                           + "; read other files with a column map, e.g. --columns time=t,voltage=u")
             if other and quantity == "deflection":
-                raise InputError(f"{p}: column {name!r}: the output is {output.name} ({output.column}), not the "
-                                 "deflection; correct --output or the header")
+                raise InputError(f"{p}: column {name!r}: the output here is {output.name} ({output.column}), not "
+                                 f"the deflection; name the column {output.column} or map it with --columns "
+                                 f"{output.name}=COLUMN")
             scale = TIMESERIES_UNITS[quantity][unit]
         if quantity in found:
             raise InputError(f"{p}: columns {found[quantity]!r} and {name!r} both give {quantity}; keep one")
