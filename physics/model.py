@@ -21,7 +21,7 @@ from .beam import CantileverModes
 from .device import Device, load_device
 from .effects import CHAIN, EFFECTS, Effect, stage_of
 from .effects.double_layer import DoubleLayerProps
-from .errors import InputError
+from .errors import InputError, arg
 
 
 _GROUPS = ("default", "all", "linear", "none")
@@ -58,8 +58,9 @@ def resolve_effects(effects, device: Device) -> tuple[str, ...]:
             raise InputError(f"effects: cannot remove the group {name!r}; remove single effects, e.g. -thermal")
         unknown = [e for e in names if e not in EFFECTS]
         if unknown:
+            load = arg("effects_path", "physics.effects.load_effects_file")
             raise InputError(f"unknown effect(s) {', '.join(unknown)}; known effects: {', '.join(EFFECTS)} "
-                             "(a user effect needs --effects-path FILE.py)")
+                             f"(a user effect is registered from its file: {load} FILE.py)")
         if sign == "-":
             if name == "double_layer":
                 raise InputError("effects: double_layer cannot be removed (it is the model's core)")

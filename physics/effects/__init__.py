@@ -14,7 +14,7 @@ import inspect
 import sys
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import InputError, arg
 from .base import DIAGNOSIS_KEYS, REVEAL_RULES, Effect, OutputEffect
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
@@ -51,6 +51,7 @@ def adds_factors(cls: type[Effect]) -> bool:
     return any(callable(getattr(cls, h, None)) for h in FACTOR_HOOKS)
 LINEAR_EFFECTS = tuple(k for k, v in EFFECTS.items() if v.linear)
 ENTRY_POINT_GROUP = "eap.effects"
+_PATH = arg("effects_path", "path")    # how a caller names an effect file
 
 
 def register(cls: type[Effect]) -> type[Effect]:
@@ -107,7 +108,7 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
     """Import the Python file ``path`` and return the user effect classes it defines."""
     p = Path(path)
     if p.suffix != ".py" or not p.is_file():
-        raise InputError(f"--effects-path {p}: expected an existing Python file (.py) defining an effect")
+        raise InputError(f"{_PATH} {p}: expected an existing Python file (.py) defining an effect")
     name = f"eap_user_effects_{p.stem}"
     spec = importlib.util.spec_from_file_location(name, p)
     module = importlib.util.module_from_spec(spec)
@@ -117,13 +118,13 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
     except InputError:
         raise
     except Exception as exc:  # a user's file: report what went wrong in it, one line
-        raise InputError(f"--effects-path {p}: importing it failed: {type(exc).__name__}: {exc}") from None
+        raise InputError(f"{_PATH} {p}: importing it failed: {type(exc).__name__}: {exc}") from None
     classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, Effect)
                and c.__module__ == name and isinstance(getattr(c, "id", None), str)]
     for c in classes:
         c.source_file = str(p.resolve())   # so that worker processes can load it too
     if not classes:
-        raise InputError(f"--effects-path {p}: defines no subclass of physics.effects.OutputEffect "
+        raise InputError(f"{_PATH} {p}: defines no subclass of physics.effects.OutputEffect "
                          "(or Effect) with an id")
     return classes
 
