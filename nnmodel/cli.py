@@ -57,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
         if "--device" in p._option_string_actions or mod.NAME == "compare":
             p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                            help="override a device parameter, with its unit, e.g. --param L_total=40mm "
-                                "--param width=10mm (repeatable; see `eap effects` for names)")
+                                "--param width=10mm (repeatable; `eap effects --device D` lists the names, units and values)")
         if "--effects" in p._option_string_actions or mod.NAME == "effects":
             p.add_argument("--effects-path", action="append", default=[], metavar="FILE.py",
                            help="a Python file defining user effects (physics.effects.OutputEffect subclasses, "
