@@ -19,7 +19,7 @@ import pandas as pd
 import scipy.io
 import yaml
 
-from .errors import InputError
+from .errors import InputError, arg
 from .fileio import atomic_path
 from .record import Locate, check_finite
 
@@ -228,7 +228,7 @@ def write_table(columns: dict[str, np.ndarray], meta: dict, path, *, overwrite: 
         if any(p.resolve() == q.resolve() for q in protect):
             raise InputError(f"refusing to overwrite the input file {p}; choose another output path")
         if p.exists() and not overwrite:
-            raise InputError(f"{p} already exists; choose another output path or pass --overwrite")
+            raise InputError(f"{p} already exists; choose another output path or pass {arg('overwrite')}")
     if meta:
         text = yaml.safe_dump(plain(meta), sort_keys=False, allow_unicode=True)
         with atomic_path(side, overwrite=True) as tmp:

@@ -16,7 +16,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-from .errors import InputError
+from .errors import InputError, arg
 
 
 @contextlib.contextmanager
@@ -35,7 +35,7 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True,
         if Path(p).resolve() == target.resolve():
             raise InputError(f"refusing to overwrite the input file {target}; choose another output path")
     if target.exists() and not overwrite:
-        raise InputError(f"{target} already exists; choose another output path or pass --overwrite")
+        raise InputError(f"{target} already exists; choose another output path or pass {arg('overwrite')}")
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)

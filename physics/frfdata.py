@@ -16,6 +16,7 @@ import numpy as np
 
 from .errors import InputError
 from .csvtable import check_input_path, read_table, write_table
+from .limits import MAX_GAIN_M_PER_V
 from .record import Locate, check_finite, check_range
 from .sidecar import read_sidecar
 from .timeseries import parse_header
@@ -90,6 +91,8 @@ def _check_frf(freq, response, coherence, rh, where: str, locate: Locate) -> Non
                          "increasing")
     check_finite(response.real, where, locate, "response")
     check_finite(response.imag, where, locate, "response")
+    check_range(np.abs(response), 0.0, MAX_GAIN_M_PER_V, where, locate, "|response|",
+                "m/V (a strip's gain; a larger value is a unit error)")
     if coherence is not None:
         check_finite(coherence, where, locate, "coherence")
         check_range(coherence, 0.0, 1.0, where, locate, "coherence", "(γ²)")

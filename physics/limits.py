@@ -26,6 +26,9 @@ FS_RANGE_HZ = (1e-6, 1e9)
 #: Samples of a generated excitation (simulate, generate): 2·10⁷ is 5.5 h at 1 kHz and
 #: already ~1 GB of channels in memory; split longer runs.
 MAX_SAMPLES = 20_000_000
+#: Largest plausible gain of a strip's tip deflection per volt [m/V] (measured strips give
+#: µm–mm per volt; a response beyond is a unit error or an unstable model, not physics).
+MAX_GAIN_M_PER_V = 1.0
 #: Largest drive voltage [V] (the reader's plausibility rule for a measured drive).
 MAX_DRIVE_V = 1e3
 

@@ -80,7 +80,7 @@ class ActuatorModel:
         self.device: Device = load_device(device)
         self.effect_ids = resolve_effects(effects, self.device)
         self.n_modes = check_count(n_modes if isinstance(n_modes, int) else int(n_modes), 1, MAX_MODES,
-                                   "n_modes", "higher modes lie far above any measured band; the rest is "
+                                   arg("n_modes"), "higher modes lie far above any measured band; the rest is "
                                    "kept quasi-statically")
         on = [EFFECTS[e] for e in self.effect_ids]
         #: the chain: each stage's name → the effect filling it (its default or the one replacing it)

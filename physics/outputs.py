@@ -35,7 +35,7 @@ import time
 from pathlib import Path
 from typing import Iterable, Iterator, Sequence
 
-from .errors import InputError
+from .errors import InputError, arg
 from .fileio import sha256_file
 
 #: File written into every output folder: the files eap wrote there, with their SHA-256.
@@ -47,6 +47,7 @@ LOCK_SUFFIX = ".eap-lock"
 _TMP = ".eap-tmp-"
 _OLD = ".eap-old-"
 _PARTIAL = ".eap-partial"
+_OUT = arg("out")   # how messages name an output path by default (the CLI: --out)
 _PROTECTED: set[Path] = set()
 
 
@@ -148,12 +149,12 @@ def _refuse_foreign(folder: Path, flag: str, out) -> None:
     entry = foreign_entry(folder)
     if entry is not None:
         raise InputError(f"{flag} {out} holds {entry}, which eap did not write (or which changed since); refusing "
-                         f"to replace the folder even with --overwrite — move that file out, or choose another {flag}")
+                         f"to replace the folder even with {arg('overwrite')} — move that file out, or choose another {flag}")
 
 
 # --------------------------------------------------------------------------- folders
 
-def check_target(out: Path, inputs: Iterable = (), *, flag: str = "--out") -> Path:
+def check_target(out: Path, inputs: Iterable = (), *, flag: str = _OUT) -> Path:
     """Resolve ``out`` and refuse targets that could destroy the user's files."""
     out = Path(out).expanduser()
     res = out.resolve()
@@ -234,17 +235,17 @@ def _writable_parent(parent: Path, flag: str, out) -> None:
         raise InputError(f"{flag} {out}: {parent} is not writable; choose a writable {flag}")
 
 
-def preflight(out, *, inputs: Iterable = (), overwrite: bool = False, flag: str = "--out") -> Path:
+def preflight(out, *, inputs: Iterable = (), overwrite: bool = False, flag: str = _OUT) -> Path:
     """Every check of :func:`output_folder` that can be made before any work (target, existing
     content, ownership, writability); returns the resolved target.  Commands call it first."""
     res = check_target(Path(out), inputs, flag=flag)
     if res.is_dir() and any(res.iterdir()):
         if not overwrite:
             raise InputError(f"{flag} {out} already exists and is not empty; choose another {flag} "
-                             "or pass --overwrite to replace a folder written by eap")
+                             f"or pass {arg('overwrite')} to replace a folder written by eap")
         if not (res / MARKER).is_file():
             raise InputError(f"{flag} {out} holds files eap did not write (no {MARKER}); refusing to "
-                             f"replace it even with --overwrite — choose another {flag}")
+                             f"replace it even with {arg('overwrite')} — choose another {flag}")
         _refuse_foreign(res, flag, out)
     other = _lock_holder(res.parent / f".{res.name}{LOCK_SUFFIX}")
     if other:
@@ -255,7 +256,7 @@ def preflight(out, *, inputs: Iterable = (), overwrite: bool = False, flag: str 
 
 @contextlib.contextmanager
 def output_folder(out, *, inputs: Iterable = (), overwrite: bool = False,
-                  flag: str = "--out") -> Iterator[Path]:
+                  flag: str = _OUT) -> Iterator[Path]:
     """Yield a fresh temporary folder; on success it replaces ``out`` atomically.
 
     ``inputs``: files (and folders) read by the run, never to be replaced (besides those
@@ -292,7 +293,7 @@ def _promote(tmp: Path, res: Path, overwrite: bool, flag: str, out) -> None:
     if res.exists():
         if not (overwrite and res.is_dir() and (res / MARKER).is_file()):
             raise InputError(f"{flag} {out} appeared while this run was writing and eap did not write it "
-                             "(or --overwrite was not given); nothing was written — choose another "
+                             f"(or {arg('overwrite')} was not given); nothing was written — choose another "
                              f"{flag}")
         _refuse_foreign(res, flag, out)   # checked again: files may have been added meanwhile
         old = res.parent / f".{res.name}{_OLD}{os.getpid()}"
@@ -318,7 +319,7 @@ def _owned_file(p: Path) -> bool:
     return isinstance(entry, dict) and not p.is_symlink() and p.is_file() and entry.get("sha256") == sha256_file(p)
 
 
-def check_file_target(path, *, overwrite: bool = False, flag: str = "--out", inputs: Iterable = ()) -> Path:
+def check_file_target(path, *, overwrite: bool = False, flag: str = _OUT, inputs: Iterable = ()) -> Path:
     """Refuse an output file that is a folder, an input (or its sidecar), lies in an input
     folder, or exists without ``overwrite`` or without eap having written it; returns it resolved."""
     p = Path(path).expanduser()
@@ -333,14 +334,14 @@ def check_file_target(path, *, overwrite: bool = False, flag: str = "--out", inp
             raise InputError(f"{flag} {path} lies inside the input folder {q}; choose another {flag}")
     if res.exists() or res.is_symlink():
         if not overwrite:
-            raise InputError(f"{flag} {path} already exists; choose another {flag} or pass --overwrite")
+            raise InputError(f"{flag} {path} already exists; choose another {flag} or pass {arg('overwrite')}")
         if not _owned_file(res):
             raise InputError(f"{flag} {path} was not written by eap (or changed since); refusing to replace it "
-                             f"even with --overwrite — choose another {flag}")
+                             f"even with {arg('overwrite')} — choose another {flag}")
     return res
 
 
-def preflight_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[str] | str = "--out",
+def preflight_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[str] | str = _OUT,
                     inputs: Iterable = ()) -> list[Path | None]:
     """Every check of :func:`output_files` that can be made before any work; returns the
     resolved targets (``None`` for ``None``)."""
@@ -361,7 +362,7 @@ def preflight_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence
 
 
 @contextlib.contextmanager
-def output_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[str] | str = "--out",
+def output_files(paths: Sequence, *, overwrite: bool = False, flags: Sequence[str] | str = _OUT,
                  inputs: Iterable = ()) -> Iterator[list[Path]]:
     """Write single output files atomically under the ownership rules (module doc).
 

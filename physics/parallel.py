@@ -36,7 +36,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-from .errors import InputError, ModelError
+from .errors import InputError, ModelError, arg
 from .progress import Progress
 
 #: Environment variable naming an existing Dask scheduler.
@@ -63,7 +63,7 @@ def check_address(address: str) -> str:
     ``tls://HOST:PORT`` or ``HOST:PORT``)."""
     m = _ADDRESS.match(str(address).strip())
     if not m or m["scheme"] not in (None, "tcp", "tls") or not 1 <= int(m["port"]) <= 65535:
-        raise InputError(f"--scheduler {address!r}: not a Dask scheduler address; expected tcp://HOST:PORT "
+        raise InputError(f"{arg('scheduler')} {address!r}: not a Dask scheduler address; expected tcp://HOST:PORT "
                          f"(e.g. tcp://10.0.0.5:8786; the variable {SCHEDULER_ENV} takes the same form)")
     return str(address).strip()
 
@@ -77,12 +77,12 @@ class ParallelSettings:
 
     def __post_init__(self):
         if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
-            raise InputError(f"--workers {self.workers!r}: must be a positive whole number")
+            raise InputError(f"{arg('workers')} {self.workers!r}: must be a positive whole number")
         if self.scheduler:
             check_address(self.scheduler)
         elif self.workers > cores():
-            raise InputError(f"--workers {self.workers}: this machine gives {cores()} core(s); more local workers "
-                             "than cores only queue behind each other — use at most that many, or --scheduler for "
+            raise InputError(f"{arg('workers')} {self.workers}: this machine gives {cores()} core(s); more local workers "
+                             f"than cores only queue behind each other — use at most that many, or {arg('scheduler')} for "
                              "a cluster")
 
     @classmethod
@@ -296,7 +296,7 @@ def _connect(address: str):
         socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
     except OSError as exc:
         why = "timed out" if isinstance(exc, TimeoutError) else exc.strerror or str(exc)
-        raise InputError(f"--scheduler {address}: cannot connect ({why}); {hint}") from None
+        raise InputError(f"{arg('scheduler')} {address}: cannot connect ({why}); {hint}") from None
     result: dict = {}
 
     def connect():
@@ -316,7 +316,7 @@ def _connect(address: str):
             why = f"cannot connect ({' '.join(str(err).split())[:160]})"
         else:   # a reply that is not Dask's protocol (e.g. a length of exabytes): not a scheduler
             why = "something answers there, but not as a Dask scheduler"
-        raise InputError(f"--scheduler {address}: {why}; {hint}")
+        raise InputError(f"{arg('scheduler')} {address}: {why}; {hint}")
     return result["client"]
 
 

@@ -17,7 +17,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, arg
 from .limits import FS_RANGE_HZ
 
 #: Largest accepted deviation of a time step from the median step, relative to it.
@@ -207,7 +207,7 @@ def check_record(arrays: dict[str, np.ndarray], where: str, locate: Locate,
     lo, hi = FS_RANGE_HZ
     if not lo <= 1.0 / step <= hi:
         raise InputError(f"{where}, {label['time']}: time step {step!r} s is a sampling rate of {1.0 / step:.3g} Hz, "
-                         f"outside {lo:g}–{hi:g} Hz; check the time column's unit (s or ms) or --fs-Hz")
+                         f"outside {lo:g}–{hi:g} Hz; check the time column's unit (s or ms) or {arg('fs_Hz', 'fs')}")
     dev = np.abs(dt - step) / step
     bad = np.flatnonzero(dev > UNIFORM_RTOL)
     if not bad.size:
@@ -216,7 +216,7 @@ def check_record(arrays: dict[str, np.ndarray], where: str, locate: Locate,
         i = bad[0] + 1
         raise InputError(f"{where}, {locate(i)}, {label['time']}: step {float(dt[i - 1])!r} s differs from the "
                          f"median step {step!r} s by {100 * dev[i - 1]:.3g} % (more than "
-                         f"{100 * UNIFORM_RTOL:g} %); sampling must be uniform, or pass --resample "
+                         f"{100 * UNIFORM_RTOL:g} %); sampling must be uniform, or pass {arg('resample')} "
                          "to interpolate onto the median step")
     new_t = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step * (1 + 1e-12))) + 1)
     out = {name: np.interp(new_t, t, arr) for name, arr in arrays.items()}

@@ -58,7 +58,7 @@ from typing import Mapping
 import numpy as np
 
 from .csvtable import check_input_path, read_table, write_table
-from .errors import InputError, InputNotice
+from .errors import InputError, InputNotice, arg
 from .limits import MAX_DRIVE_V
 from .record import (CHANNELS, DEFLECTION, OutputQuantity, TimeSeries, check_range,  # noqa: F401 (TimeSeries: public)
                      check_record)
@@ -85,6 +85,7 @@ PLAUSIBLE = {"voltage": (-MAX_DRIVE_V, MAX_DRIVE_V, "V (drive voltage)"),
              "temperature": (-273.15, 1e3, "°C (ambient temperature)")}
 #: Other spellings of units in column maps and headers.
 _UNIT_ALIASES = {"%": "pct", "%RH": "pct", "pct": "pct", "degC": "C", "°C": "C", "µm": "um", "μm": "um"}
+_COLUMNS, _OUTPUT = arg("columns"), arg("output")   # how messages name the column map and the output
 _HEADER_UNIT = re.compile(r"^(?P<name>.*?)\s*(?:\((?P<a>[^()]+)\)|\[(?P<b>[^\[\]]+)\])\s*$")
 
 
@@ -201,17 +202,17 @@ def _resolve_map(columns: Mapping[str, str], table, output, where: str) -> dict[
             how = "the column map"
         if col not in table.columns:
             raise InputError(f"{where}: column {col!r} (mapped to {quantity}) is missing; the file has "
-                             f"{', '.join(map(repr, table.columns))} — fix the map given with --columns")
+                             f"{', '.join(map(repr, table.columns))} — fix the map given with {_COLUMNS}")
         if col in used:
             raise InputError(f"{where}: column {col!r} is mapped to both {used[col]} and {quantity}; each column "
-                             "gives one quantity — fix --columns")
+                             f"gives one quantity — fix {_COLUMNS}")
         used[col] = quantity
         said = header_unit(col)
         if unit is None and said is not None:
             unit, how = said, "its header"
         elif unit is not None and said is not None and said != unit:
             raise InputError(f"{where}: column {col!r} is mapped with unit {unit} but its header says {said}; "
-                             "correct the unit in --columns")
+                             f"correct the unit in {_COLUMNS}")
         out[channel] = (col, unit, how)
     return out
 
@@ -229,7 +230,7 @@ def _convert(table, channel: str, col: str, unit: str | None, how: str, output: 
         if scale is None:
             raise InputError(f"{where}: {label} ({channel}) is in {unit!r} according to {how}, which is not a unit "
                              f"of {channel}; accepted: {', '.join(TIMESERIES_UNITS[channel])} and other "
-                             f"units of {STORED_UNITS[channel]} — correct --columns")
+                             f"units of {STORED_UNITS[channel]} — correct {_COLUMNS}")
         if how == "its header":
             warnings.warn(f"{where}: {label} read as {channel} in {unit} (the unit in its header)", InputNotice,
                           stacklevel=3)
@@ -240,7 +241,7 @@ def _convert(table, channel: str, col: str, unit: str | None, how: str, output: 
 def _convert_output(values, label, unit, how, output, gain, where):
     """Values of the output column and the output quantity they are (module doc)."""
     if unit is None and output is not None:
-        unit, how = output.unit, "--output"
+        unit, how = output.unit, _OUTPUT
     if gain is not None:
         metres_per, per_unit = parse_gain(gain)
         if unit is None:
@@ -265,7 +266,7 @@ def _convert_output(values, label, unit, how, output, gain, where):
         q = 1.0 if unit == output.unit else _dimension_scale(unit, output.unit)
         if q is None:
             raise InputError(f"{where}: {label} is in {unit} according to {how}, but the output is "
-                             f"{output.name} in {output.unit}; correct --columns or --output")
+                             f"{output.name} in {output.unit}; correct {_COLUMNS} or {_OUTPUT}")
         return (values * q if q != 1.0 else values), output
     try:
         quantity = OutputQuantity("deflection", unit)
@@ -302,10 +303,10 @@ def _standard_columns(table, p: Path, output: OutputQuantity | None):
             quantity, scale = "deflection", (q, 0.0)
         else:
             quantity, unit = parse_header(name, TIMESERIES_UNITS, p, (f" or the output {output.column}" if other else "")
-                                          + "; read other files with a column map, e.g. --columns time=t,voltage=u")
+                                          + f"; read other files with a column map, e.g. {_COLUMNS} time=t,voltage=u")
             if other and quantity == "deflection":
                 raise InputError(f"{p}: column {name!r}: the output here is {output.name} ({output.column}), not "
-                                 f"the deflection; name the column {output.column} or map it with --columns "
+                                 f"the deflection; name the column {output.column} or map it with {_COLUMNS} "
                                  f"{output.name}=COLUMN")
             scale = TIMESERIES_UNITS[quantity][unit]
         if quantity in found:
@@ -354,8 +355,8 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
     for quantity, arr in values.items():
         if quantity == "deflection":
             lo, hi, what = quantity_out.bounds()
-            hint = ("; if the output is another quantity or unit, say so with --output NAME:UNIT (e.g. "
-                    "--output level:V) or a unit in --columns (deflection=COLUMN:V)") if quantity_out.is_deflection \
+            hint = (f"; if the output is another quantity or unit, say so with {_OUTPUT} NAME:UNIT (e.g. "
+                    f"{_OUTPUT} level:V) or a unit in {_COLUMNS} (deflection=COLUMN:V)") if quantity_out.is_deflection \
                 else ""
             check_range(arr, lo, hi, where, table.locate, labels[quantity], what + hint)
         elif quantity in PLAUSIBLE:
@@ -373,11 +374,11 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
         if "time" in values:
             raise InputError(f"{where}: has a time column, so a sampling rate must not be given too")
         if not np.isfinite(fs) or fs <= 0:
-            raise InputError(f"{where}: sampling rate --fs-Hz {fs!r} must be a positive number")
+            raise InputError(f"{where}: sampling rate {arg('fs_Hz', 'fs')} {fs!r} must be a positive number")
         values["time"] = np.arange(n) / float(fs)
     elif "time" not in values:
         raise InputError(f"{where}: missing column time_s (time in s or ms); give the "
-                         "sampling rate with --fs-Hz for a file without a time column")
+                         f"sampling rate with {arg('fs_Hz', 'fs')} for a file without a time column")
     if n < 2:
         raise InputError(f"{where}: needs at least 2 samples, got {n}")
     meta = read_sidecar(p)
@@ -386,7 +387,7 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
         if abs(col_rh - float(meta["rh_pct"])) > 5.0:
             raise InputError(f"{where}: the sidecar {p.with_suffix('.yaml').name} says rh_pct={meta['rh_pct']!r} "
                              f"but the {labels['rh']} averages {col_rh:.3g} %; correct one of them (or give "
-                             "--rh to override both)")
+                             f"{arg('rh')} to override both)")
     if rh is not None:
         if not np.isfinite(rh) or not 0.0 <= rh <= 100.0:
             raise InputError(f"{where}: relative humidity rh={rh!r} must lie within 0–100 %")
@@ -395,7 +396,7 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
         side_rh = meta.get("rh_pct")
         if side_rh is None:
             raise InputError(f"{where}: no relative humidity: add an rh_pct column, the key "
-                             "rh_pct to the sidecar, or give the RH with --rh")
+                             f"rh_pct to the sidecar, or give the RH with {arg('rh')}")
         values["rh"] = np.full(n, float(side_rh))
     values, info = check_record(values, where, table.locate, labels, resample=resample)
     if info is not None:

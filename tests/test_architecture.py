@@ -19,13 +19,12 @@ from physics.errors import InputError, arg
 ROOT = Path(__file__).resolve().parent.parent
 
 #: physics modules whose raises still name flags, (module, count): physics/diagnose/**,
-#: physics/identify/**, physics/compare/** are converted by the `dx` track, the readers and
-#: writers (timeseries, outputs, fileio, parallel) by the `io` track.  Only ever shrinks.
+#: physics/identify/**, physics/compare/** are converted by the `dx` track (the readers and
+#: writers of the `io` track are converted).  Only ever shrinks.
 FLAG_ALLOWLIST = {
     "physics/compare/comparison.py": 2, "physics/compare/measurements.py": 1,
     "physics/diagnose/demo.py": 2, "physics/diagnose/diagnosis.py": 6, "physics/diagnose/records.py": 1,
     "physics/diagnose/report.py": 1, "physics/identify/parameters.py": 1, "physics/identify/problem.py": 4,
-    "physics/fileio.py": 1, "physics/outputs.py": 3, "physics/parallel.py": 2, "physics/timeseries.py": 6,
 }
 _FLAG = re.compile(r"(?<![\w-])--[A-Za-z][\w-]*")
 

@@ -99,7 +99,7 @@ def test_column_map_reads_mapped_time_and_ignores_other_columns(tmp_path):
     np.testing.assert_array_equal(ts.deflection, [5.0, 6.0])
     assert ts.output.to_dict() == {"name": "deflection", "unit": "V"}
     # without a unit a mapped output is a tip deflection in metres: 5 m is refused at once, with the way out
-    with pytest.raises(InputError, match=r"line 2, column 'd' \(output\): value 5.0 is outside -1–1 m .*--output"):
+    with pytest.raises(InputError, match=r"line 2, column 'd' \(output\): value 5.0 is outside -1–1 m .*output level:V"):
         read_timeseries(p, columns=parse_column_map("time=t, voltage=u, deflection=d"), rh=30)
 
 
@@ -264,7 +264,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
     "missing-voltage": ("time_s,deflection_m,rh_pct\n0,1,50\n1,1,50\n", {},
                         ["missing column voltage_V"]),
     "missing-time": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {},
-                     ["missing column time_s", "sampling rate with --fs-Hz"]),
+                     ["missing column time_s", "sampling rate with fs"]),
     "unknown-column": ("time_s,voltage_V,deflection_m,rh_pct,force_N\n0,1,0,50,1\n1,1,0,50,1\n", {},
                        ["unknown column 'force_N'", "deflection_mm"]),
     "unparseable-unit": ("time_s,voltage_V,deflection_cm,rh_pct\n0,1,0,50\n1,1,0,50\n", {},
@@ -309,7 +309,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
                                            "fs": 10.0, "rh": 50},
                       ["line 3", "column 'V1'", "'x' is not a number"]),
     "fs-and-time": (GOOD, {"fs": 100.0}, ["time column", "sampling rate"]),
-    "bad-fs": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {"fs": -5.0}, ["--fs-Hz -5.0"]),
+    "bad-fs": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {"fs": -5.0}, ["fs -5.0"]),
 }
 
 

@@ -7,7 +7,7 @@ from physics.errors import InputError, ModelError
 from physics.fileio import write_json
 from physics.frequency import frequency_response
 from physics.frfdata import FRFData, write_frf
-from physics.limits import FREQ_RANGE_HZ, MAX_FREQUENCIES, check_count, check_range
+from physics.limits import FREQ_RANGE_HZ, MAX_FREQUENCIES, MAX_GAIN_M_PER_V, check_count, check_range
 from physics.outputs import output_files
 from physics.plotting import plot_bode
 
@@ -43,9 +43,14 @@ def run(args) -> int:
     with output_files(targets, overwrite=args.overwrite, flags=flags) as (json_tmp, csv_tmp, plot_tmp):
         f = np.logspace(np.log10(args.f_min_Hz), np.log10(args.f_max_Hz), args.points)
         fr = frequency_response(args.device, args.effects, f, rh=args.rh, n_modes=args.n_modes)
+        where = f"the response of {fr.device} [{', '.join(fr.effects)}]"
         if not (np.all(np.isfinite(fr.deflection)) and np.all(np.isfinite(fr.impedance))):
-            raise ModelError(f"the response of {fr.device} [{', '.join(fr.effects)}] is not finite at some "
-                             "frequencies (an effect or a parameter out of its range); nothing was written")
+            raise ModelError(f"{where} is not finite at some frequencies (an effect or a parameter out of its "
+                             "range); nothing was written")
+        peak = float(np.max(np.abs(fr.deflection)))
+        if peak > MAX_GAIN_M_PER_V:
+            raise ModelError(f"{where} reaches {peak:.3g} m/V, beyond {MAX_GAIN_M_PER_V:g} m/V: not a strip's "
+                             "response (an effect or a parameter out of its range); nothing was written")
         out = fr.to_dict()
         out["provenance"] = provenance()
         write_json(json_tmp, out)
