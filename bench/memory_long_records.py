@@ -1,4 +1,5 @@
-"""Peak memory (RSS) and wall time of `eap predict` and `eap compare` on long records.
+"""Peak memory (RSS) and wall time of `eap predict` and `eap compare` (physics model and
+neural bundle) on long records.
 
 Each measurement runs the command in a fresh process and reads that process's own peak
 RSS; an address-space cap (``--cap-GB``) keeps a run that would exhaust the machine from
@@ -83,19 +84,21 @@ def main() -> None:
         bundle = _bundle(tmp, args.fs_Hz)
         base = _measure(args.cap_GB, ["effects"])
         print(f"baseline (imports, `eap effects`): {base.get('peak_MB', float('nan')):.0f} MB")
-        print(f"{'samples':>10s} {'command':8s} {'peak MB':>9s} {'time s':>8s}  note")
+        print(f"{'samples':>10s} {'command':10s} {'peak MB':>9s} {'time s':>8s}  note")
         for n in sizes:
             rec = tmp / f"r{n}.csv"
             _record(rec, n, args.fs_Hz)
             runs = {"predict": ["predict", "--model", str(bundle), "--input", str(rec), "--out",
                                 str(tmp / f"p{n}.csv"), "--overwrite"],
                     "compare": ["compare", str(rec), "--model", "ip2c_pedot_water", "--out", str(tmp / f"c{n}"),
-                                "--overwrite"]}
+                                "--overwrite"],
+                    "compare-nn": ["compare", str(rec), "--model", str(bundle), "--out", str(tmp / f"n{n}"),
+                                   "--overwrite"]}
             for name, argv in runs.items():
                 t0 = time.perf_counter()
                 r = _measure(args.cap_GB, argv)
                 note = "" if r.get("rc") == 0 else f"FAILED: {' '.join(r.get('error', []))[:120]}"
-                print(f"{n:10d} {name:8s} {r.get('peak_MB', float('nan')):9.0f} "
+                print(f"{n:10d} {name:10s} {r.get('peak_MB', float('nan')):9.0f} "
                       f"{r.get('s', time.perf_counter() - t0):8.1f}  {note}", flush=True)
             rec.unlink()
 

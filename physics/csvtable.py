@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import os
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -113,6 +114,19 @@ def csv_header(path: Path) -> list[str]:
     return [n.strip() for n in next(csv.reader([header_line], delimiter=delim), [])]
 
 
+def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str) -> None:
+    """Refuse a line of the first 64 kB whose number of fields differs from the header's,
+    naming the line (a later one is caught by the parser, without its number)."""
+    with path.open("rb") as fh:
+        head = fh.read(1 << 16).decode(encoding, errors="replace")
+    lines = head.splitlines()[1:-1]   # the last line of the head may be cut
+    rows = (ln.split() for ln in lines) if delim == r"\s+" else csv.reader(lines, delimiter=delim)
+    for k, fields in enumerate(rows):
+        if fields and len(fields) != n and any(f.strip() for f in fields):
+            raise InputError(f"{path}, line {k + 2}: {len(fields)} fields but the header has {n} "
+                             f"(separator {delim!r}){hint}")
+
+
 def _parse(path: Path, opts: dict) -> tuple[np.ndarray, np.ndarray | None]:
     """(float values, None) of a numeric file, or (None, text cells) when a cell is not a
     number (re-read as text to name it)."""
@@ -152,18 +166,21 @@ def read_table(path: Path) -> Table:
     if not any(names):
         raise InputError(f"{path}: empty file; expected a header line of column names "
                          "followed by data rows")
+    hint = ("; a decimal comma needs another field separator (';' or tab) — in a comma-separated file "
+            "write numbers with a decimal point") if delim == "," else ""
+    _check_field_counts(path, encoding, delim, len(names), hint)
     opts = dict(sep=delim, header=None, skiprows=1, names=list(range(len(names))), decimal=decimal,
-                encoding=encoding, skip_blank_lines=False, engine="c")
+                encoding=encoding, skip_blank_lines=False, engine="c", index_col=False)
     try:
-        try:
-            values, raw = _parse(path, opts)
-        except UnicodeDecodeError:   # a Latin-1 byte after the sniffed head: the file is Latin-1
-            values, raw = _parse(path, dict(opts, encoding="latin-1"))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", pd.errors.ParserWarning)   # a line with extra fields
+            try:
+                values, raw = _parse(path, opts)
+            except UnicodeDecodeError:   # a Latin-1 byte after the sniffed head: the file is Latin-1
+                values, raw = _parse(path, dict(opts, encoding="latin-1"))
     except pd.errors.EmptyDataError:
         raise InputError(f"{path}: empty file; the header is not followed by any data row") from None
-    except pd.errors.ParserError as exc:
-        hint = ("; a decimal comma needs another field separator (';' or tab) — in a comma-separated file "
-                "write numbers with a decimal point") if delim == "," else ""
+    except (pd.errors.ParserError, pd.errors.ParserWarning) as exc:
         raise InputError(f"{path}: cannot be parsed as CSV ({' '.join(str(exc).split())}); "
                          f"every line must have the {len(names)} fields of the header "
                          f"(separator {delim!r}){hint}") from None

@@ -347,8 +347,12 @@ def _local_cluster(workers: int) -> Future:
 
 def _start_cluster(workers: int, fut: Future) -> None:
     try:
+        import warnings
+
         import dask
         from distributed import Client, LocalCluster
+        # another cluster on this machine holds the dashboard port: not the user's concern
+        warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
         cores = os.cpu_count() or 1
         env = {v: str(max(1, cores // workers)) for v in _THREAD_VARS}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env, "distributed.worker.daemon": False,

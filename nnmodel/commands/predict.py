@@ -64,12 +64,11 @@ def run(args) -> int:
     from physics.record import OutputQuantity
     from physics.timeseries import TimeSeries, write_timeseries
 
-    from ..bundle import load
-
     log = stage_log(args, [args.input])
     if Path(args.out).suffix.lower() != ".csv":
         raise InputError(f"--out {args.out}: the prediction is written as CSV; give a path ending in .csv")
     preflight_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model])
+    from ..bundle import load
     bundle = load(args.model)
     output = OutputQuantity.from_dict(bundle.card.get("output"), f"{args.model}: card output")
     uses_rh = bundle.model.uses_rh
