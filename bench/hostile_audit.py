@@ -233,7 +233,7 @@ SIM = ["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "to
        "--fs-Hz", "100"]
 FRF = ["frf", "--device", "ip2c_pedot_water", "--rh", "60", "--points", "50"]
 CMP = ["compare", "rec.csv", "--model", "ip2c_pedot_water"]
-IDN = ["identify", "rec.csv", "--device", "ip2c_pedot_water", "--free", "kf"]
+IDN = ["identify", "rec.csv", "--device", "ipmc_pt_eg", "--free", "kf"]
 PRED = ["predict", "--model", "TC/models/ff", "--input", "rec.csv"]
 SWEEP = ["sweep", "--device", "ip2c_pedot_water", "--rh", "60", "--grid", "Y=1e8,2e8"]
 GEN = ["generate", "--config", "tiny.yaml", "--quiet"]

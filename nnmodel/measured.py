@@ -200,9 +200,12 @@ def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), 
 
 
 def check_dataset(path) -> list[str]:
-    """Re-verify a dataset: every file against its SHA-256 (raises naming a changed file)
-    and every source file still present; returns notes on sources that moved or changed."""
+    """Re-verify a dataset: every file against its SHA-256 (raises naming a changed file),
+    every record read as training reads it (sampling rate, output, plausibility), and every
+    source file still present; returns notes on sources that moved or changed."""
     ds = load_dataset(path, verify=True)
+    for e in ds.meta["files"]:
+        ds.record(e)
     notes = []
     for e in ds.meta["files"]:
         src = e.get("source")

@@ -121,27 +121,27 @@ def _owned_files(folder: Path) -> dict[str, str] | None:
 
 def foreign_entry(folder: Path) -> str | None:
     """The first entry of the eap output folder ``folder`` that eap did not write (or that
-    changed since), as a path relative to it; ``None`` when the folder holds only its files."""
+    changed since), as a path relative to it (a folder eap did not make is named by its
+    first file, or as ``NAME/`` when empty); ``None`` when the folder holds only its files."""
     owned = _owned_files(folder)
     if owned is None:
         return f"{MARKER} (missing, or from an older eap that did not list its files)"
-    dirs = {str(Path(rel).parent.as_posix()) for rel in owned}
-    dirs |= {p.as_posix() for rel in owned for p in Path(rel).parents}
+    dirs = {p.as_posix() for rel in owned for p in Path(rel).parents}
     for root, subdirs, files in os.walk(folder):
         subdirs.sort()
         base = Path(root).relative_to(folder)
-        for name in sorted(subdirs):
-            p = Path(root) / name
-            rel = (base / name).as_posix()
-            if p.is_symlink() or rel not in dirs:
-                return rel + "/"
         for name in sorted(files):
             p = Path(root) / name
             rel = (base / name).as_posix()
-            if rel in (MARKER,):
-                continue
-            if p.is_symlink() or owned.get(rel) != sha256_file(p):
+            if rel != MARKER and (p.is_symlink() or owned.get(rel) != sha256_file(p)):
                 return rel
+        for name in list(subdirs):
+            rel = (base / name).as_posix()
+            if (Path(root) / name).is_symlink():
+                return rel
+            if rel not in dirs:   # not made by eap: name what it holds
+                inside = sorted(q for q in (Path(root) / name).rglob("*") if not q.is_dir())
+                return inside[0].relative_to(folder).as_posix() if inside else rel + "/"
     return None
 
 
