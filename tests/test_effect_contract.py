@@ -211,6 +211,8 @@ def test_check_command(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "contract FAILED" in out and "FAIL  stable" in out and "pole at s = 0.333" in out
     assert "runaway" not in EFFECTS
+    assert main(["effects", "--check", str(tmp_path / "missing.py")]) == 2
+    assert "error: --check " in capsys.readouterr().err
 
 
 def test_effects_device_lists_what_param_takes(capsys):
