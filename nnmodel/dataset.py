@@ -38,7 +38,7 @@ from physics.timedomain import simulate
 from physics.record import OutputQuantity
 from physics.timeseries import read_timeseries, write_timeseries
 
-from .data import Record
+from .data import Experiment
 
 SCHEMA = "eap-dataset/1"
 SPLITS = ("train", "validation", "test")
@@ -268,7 +268,7 @@ class Dataset:
             out.append(e)
         return out
 
-    def records(self, split: str | None = None, **filters) -> list[Record]:
+    def records(self, split: str | None = None, **filters) -> list[Experiment]:
         return [self.record(e) for e in self.entries(split, **filters)]
 
     @property
@@ -276,12 +276,12 @@ class Dataset:
         """False for a dataset of measurements without relative humidity (``rh_levels`` null)."""
         return self.meta.get("rh_levels") is not None
 
-    def record(self, entry: dict) -> Record:
+    def record(self, entry: dict) -> Experiment:
         ts = read_timeseries(self.path / entry["path"], rh=None if self.has_rh else 0.0, output=self.output)
         if abs(ts.fs - self.fs) > 1e-6 * self.fs:
             raise InputError(f"{self.path / entry['path']}: sampled at {ts.fs:g} Hz but dataset.json says fs_Hz "
                              f"{self.fs:g}; the dataset was changed — rebuild it")
-        return Record(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
+        return Experiment(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
 
 
 # --------------------------------------------------------------------------- a closed world

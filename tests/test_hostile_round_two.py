@@ -446,13 +446,13 @@ def test_sidecar_spellings_are_read_into_stored_names(tmp_path):
 
 def test_predict_takes_a_column_map_and_names_its_output_column(tmp_path, capsys):
     from nnmodel.bundle import save
-    from nnmodel.data import Record
+    from nnmodel.data import Experiment
     from nnmodel.models import MODELS
     t = np.arange(600) / 100.0
     u = np.sin(2 * np.pi * 0.7 * t)
     y = 5.0 + 0.5 * np.sin(2 * np.pi * 0.7 * t - 0.4)
     m = MODELS["rbf"](n_centres=6, nb=4, na=1, progress_bar=False)
-    m.fit([Record(u=u, y=y, rh=None, fs=100.0)], None)
+    m.fit([Experiment(u=u, y=y, rh=None, fs=100.0)], None)
     bundle = save(m, tmp_path / "b", output=("level", "V"))
     lab = tmp_path / "lab.csv"
     lab.write_text("t,u\n" + "".join(f"{a},{b}\n" for a, b in zip(t, u)))
@@ -535,12 +535,12 @@ def test_any_edit_of_dataset_json_loads_or_is_refused(dataset, tmp_path, path, v
 @pytest.fixture(scope="module")
 def bundle(tmp_path_factory):
     from nnmodel.bundle import save
-    from nnmodel.data import Record
+    from nnmodel.data import Experiment
     from nnmodel.models import MODELS
     t = np.arange(300) / 100.0
     u = np.sin(2 * np.pi * 2 * t)
     m = MODELS["rbf"](n_centres=6, nb=4, na=1, progress_bar=False)
-    m.fit([Record(u=u, y=1e-4 * np.sin(2 * np.pi * 2 * t - 0.3), rh=np.full(300, 60.0), fs=100.0)], None)
+    m.fit([Experiment(u=u, y=1e-4 * np.sin(2 * np.pi * 2 * t - 0.3), rh=np.full(300, 60.0), fs=100.0)], None)
     return save(m, tmp_path_factory.mktemp("b") / "rbf")
 
 
