@@ -24,7 +24,7 @@ identify           identification on its own noise-free FRF recovers the free pa
                    within 2 % (linear, not fitted through a describing function)
 =================  ==========================================================================
 
-``fast=True`` runs the first six (tens of milliseconds; what loading a user effect file
+``fast=True`` runs the first six (about 0.1 s for the creep example; what loading a user effect file
 checks); the full contract takes seconds per effect.
 """
 from __future__ import annotations
