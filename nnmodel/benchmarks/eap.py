@@ -14,7 +14,7 @@ model lacks.  The physics simulator that generated the data is scored beside the
 networks (its error is the sensor noise).  There are no published figures for these
 synthetic data; the table states which model wins where.
 
-Outputs: ``eap.json``, ``eap.csv``, ``eap.html`` (self-contained) and ``eap.png``.
+Outputs: ``eap.json``, ``eap.csv``, ``index.html`` (self-contained; ``eap.html`` redirects to it) and ``eap.png``.
 """
 from __future__ import annotations
 
@@ -91,7 +91,7 @@ def run(models=None, out: str | os.PathLike = "eap-benchmark", *, quick: bool = 
     report = _report(summary, names, quick, ds_path, time.perf_counter() - t0, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["winners_text"],
-                  "report: eap.html (JSON eap.json; train-compare report compare/report.html) in the output folder")
+                  "report: index.html (JSON eap.json; train-compare report compare/index.html) in the output folder")
     return report
 
 
@@ -181,7 +181,7 @@ def _write_outputs(out: Path, report: dict) -> None:
                     hatch="//" if r["role"] == "reference" else None, edgecolor="k", linewidth=0.4)
     axes[0].set_yscale("log")
     axes[0].set_xticks(x, [GROUP_LABELS[g] for g in GROUPS])
-    axes[0].set_ylabel("free-run NRMSE (%)")
+    axes[0].set_ylabel("free-run NRMSE [%]")
     axes[0].axhline(5.0, color="r", lw=0.8, ls="--", label="5 % target (held-out RH)")
     axes[0].legend(fontsize=7, ncol=2)
     axes[0].grid(axis="y", which="both", alpha=0.3)
@@ -192,8 +192,8 @@ def _write_outputs(out: Path, report: dict) -> None:
             axes[1].plot([float(k) for k in by], list(by.values()), marker="o", label=r["model"],
                          ls="--" if r["role"] == "reference" else "-")
     axes[1].set_yscale("log")
-    axes[1].set_xlabel("RH (%)")
-    axes[1].set_ylabel("free-run NRMSE (%)")
+    axes[1].set_xlabel("RH [%] (nominal level)")
+    axes[1].set_ylabel("free-run NRMSE [%]")
     axes[1].set_title("error by RH level (held-out levels: 50, 70, 90 % by default)")
     axes[1].grid(alpha=0.3, which="both")
     axes[1].legend(fontsize=7)
@@ -214,8 +214,9 @@ def _write_outputs(out: Path, report: dict) -> None:
         ("h2", "Results"),
         ("table", (HEADER, hrows)),
         ("pre", "\n".join(report["winners_text"])),
-        ("img", out / "eap.png"),
-        ("p", f"Full train-compare report (overlays, Bode plots, bundles): {out / 'compare' / 'report.html'}"),
+        ("img", (out / "eap.png", "free-run NRMSE [%] by test group and by nominal RH level, per model "
+                                  "(hatched, dashed: the physics reference)")),
+        ("p", f"Full train-compare report (overlays, Bode plots, bundles): {out / 'compare' / 'index.html'}"),
         ("pre", json.dumps(report["environment"], indent=1)),
     ]
-    write_text(out / "eap.html", common.html_page("eap benchmark: humidity suite", blocks))
+    common.page("eap benchmark: humidity suite", blocks).write_index(out, old_name="eap.html")

@@ -13,7 +13,7 @@ from .compare import add_frf_arguments, add_measurement_arguments, frf_options, 
 NAME = "identify"
 HELP = "identify device parameters from measurements (least squares or the thesis Nelder-Mead); writes a device YAML"
 DESCRIPTION = (HELP + ". Writes NAME.yaml (a device file with the identified values, their units and sources), "
-               "report.json, parameters.csv, Bode/correlation PNGs and report.html into --out.")
+               "report.json, parameters.csv, Bode/correlation PNGs and the page index.html into --out.")
 
 
 def add_arguments(p):
@@ -79,5 +79,5 @@ def run(args) -> int:
         print(f"  warning: {w}")
     print(f"total {res.wall_s:.2f} s, {res.n_evaluations} model evaluations "
           f"(thesis loop for these data: {res.thesis_equivalent_s() / 86400:.3g} days)")
-    print(f"wrote {d / out['device_written']}, {d}/report.html, report.json, parameters.csv")
+    print(f"wrote {d / out['device_written']}, {d}/index.html, report.json, parameters.csv")
     return 0
