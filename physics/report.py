@@ -122,7 +122,12 @@ def _columns(rows: list[dict], columns: Sequence[str] | None) -> list[str]:
 
 
 def _missing(v: Any) -> bool:
-    return v is None or (isinstance(v, float) and not math.isfinite(v) and not math.isinf(v))
+    """None, NaN, or a cell a caller wrote as a hyphen or a dash for "no value"."""
+    return v is None or (isinstance(v, float) and math.isnan(v)) or (isinstance(v, str) and v.strip() in ("-", "–"))
+
+
+#: A number a caller already wrote as text ("51,415", "0.9"): right-aligned like a number.
+_NUMBER_TEXT = re.compile(r"^[-−+]?[\d,.\s]*\d(?:[eE][-+]?\d+)?$")
 
 
 def _cell(v: Any, col: Column, digits: int | None) -> str:
@@ -145,7 +150,9 @@ def _cell(v: Any, col: Column, digits: int | None) -> str:
 
 
 def _numeric(v: Any) -> bool:
-    return not isinstance(v, (str, bool, list, tuple, dict)) and v is not None
+    if isinstance(v, str):
+        return bool(_NUMBER_TEXT.match(v.strip()))
+    return not isinstance(v, (bool, list, tuple, dict)) and v is not None
 
 
 def _words(text: str) -> list[int]:

@@ -108,7 +108,7 @@ def text_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
 def page(title: str, blocks: Sequence[tuple[str, object]]):
     """A suite's page through the one report builder (a :class:`physics.report.Report`;
     write it with ``.write_index(out, old_name="SUITE.html")``).  ``blocks`` are (kind,
-    content): ``("h2", text)``, ``("p", text)``, ``("html", raw)``, ``("table", (header, rows))``
+    content): ``("h2", text)``, ``("p", text or (text, links))``, ``("html", raw)``, ``("table", (header, rows))``
     (headers read through :func:`physics.columns.column`), ``("img", (path, caption))``,
     ``("pre", text)``."""
     from physics.report import Report
@@ -116,8 +116,9 @@ def page(title: str, blocks: Sequence[tuple[str, object]]):
     for kind, content in blocks:
         if kind in ("h2", "h3"):
             rep.heading(str(content), level=int(kind[1]))
-        elif kind == "p":
-            rep.paragraph(str(content))
+        elif kind == "p":   # text, or (text, {words: address})
+            text, links = content if isinstance(content, tuple) else (content, None)
+            rep.paragraph(str(text), links=links)
         elif kind == "html":
             rep.raw(str(content))
         elif kind == "pre":

@@ -27,6 +27,7 @@ import numpy as np
 
 from physics.errors import InputError
 from physics.fileio import atomic_path, write_json, write_text
+from physics.plotting import legend_outside
 
 from . import common
 
@@ -183,7 +184,7 @@ def _write_outputs(out: Path, report: dict) -> None:
     axes[0].set_xticks(x, [GROUP_LABELS[g] for g in GROUPS])
     axes[0].set_ylabel("free-run NRMSE [%]")
     axes[0].axhline(5.0, color="r", lw=0.8, ls="--", label="5 % target (held-out RH)")
-    axes[0].legend(fontsize=7, ncol=2)
+    axes[0].legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12), frameon=False)
     axes[0].grid(axis="y", which="both", alpha=0.3)
     axes[0].set_title("eap suite: free-run error by test group")
     for r in rows:
@@ -196,10 +197,10 @@ def _write_outputs(out: Path, report: dict) -> None:
     axes[1].set_ylabel("free-run NRMSE [%]")
     axes[1].set_title("error by RH level (held-out levels: 50, 70, 90 % by default)")
     axes[1].grid(alpha=0.3, which="both")
-    axes[1].legend(fontsize=7)
+    legend_outside(axes[1], fontsize=7)
     fig.tight_layout()
     with atomic_path(out / "eap.png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=110, format="png", bbox_inches="tight")
     plt.close(fig)
 
     hrows = [{"class": "pub" if r["role"] == "reference" else "", "cells": c}
@@ -216,7 +217,8 @@ def _write_outputs(out: Path, report: dict) -> None:
         ("pre", "\n".join(report["winners_text"])),
         ("img", (out / "eap.png", "free-run NRMSE [%] by test group and by nominal RH level, per model "
                                   "(hatched, dashed: the physics reference)")),
-        ("p", f"Full train-compare report (overlays, Bode plots, bundles): {out / 'compare' / 'index.html'}"),
+        ("p", ("Full train-compare report (overlays, Bode plots, bundles): compare/index.html",
+               {"compare/index.html": "compare/index.html"})),
         ("pre", json.dumps(report["environment"], indent=1)),
     ]
     common.page("eap benchmark: humidity suite", blocks).write_index(out, old_name="eap.html")

@@ -69,7 +69,8 @@ def run(args) -> int:
           f"{sum(t.freq.size for t in prob.targets)} frequencies, RH levels {', '.join(f'{x:g}' for x in prob.levels)} %")
     for name, f in res.fits.items():
         mark = " (written)" if name == res.primary else ""
-        print(f"method {name}{mark}: J_err {res.j_err_initial:.4g} -> {f.j_err:.4g} m/V, {f.nfev} model evaluations"
+        print(f"method {name}{mark}: J_err {1e3 * res.j_err_initial:.4g} -> {1e3 * f.j_err:.4g} mm/V, {f.nfev} model "
+              "evaluations"
               + (f", {f.nit} iterations" if f.nit is not None else "") + f", {f.wall_s:.2f} s; {f.message}")
         for r in res.param_rows(f):
             print(f"  {r['parameter']:16s} = {r['value']:.6g} ± {r['std_error']:.3g} {r['unit']} "
