@@ -103,6 +103,9 @@ class Effect:
     #: how the reference solver treats the effect (:data:`REFERENCE`), and why when unsupported.
     reference: ClassVar[str] = "shared"
     reference_note: ClassVar[str] = ""
+    #: parameter values under which a large-signal effect is exactly the law the reference solver
+    #: computes (the validation report, :mod:`physics.reference.validate`, compares both there)
+    reference_limit: ClassVar[dict] = {}
 
     def __init__(self, device):
         self.device = device

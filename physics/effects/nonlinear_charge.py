@@ -79,6 +79,7 @@ class NonlinearCharge(LinearCharge):
     linear = False
     reference = "unsupported"
     reference_note = "the reference solver is the full nonlinear PNP itself"
+    reference_limit = {"C_max": np.inf}       # plain Poisson–Boltzmann layers, as in the reference
     summary = "large-signal double layer: voltage-dependent capacitance, asymmetric/saturating charge"
     explanation = __doc__
     params = (ParamSpec("C_max", "mol/m^3", 1.0, np.inf,
