@@ -19,7 +19,7 @@ from pathlib import Path
 from ..errors import InputError, arg
 from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
 from .declaration import declaration_problems
-from .catalog import BUILT_IN, BUILT_IN_EFFECTS, CHAIN, FACTOR_HOOKS, adds_factors, stage_of
+from .catalog import BUILT_IN, BUILT_IN_EFFECTS, CHAIN, CORE, FACTOR_HOOKS, adds_factors, stage_of
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
 from .fractional_coupling import ConstantCoupling, FractionalCoupling
@@ -134,6 +134,6 @@ def load_plugins() -> list[str]:
     return ids
 
 
-__all__ = ["Effect", "OutputEffect", "LoadEffect", "EFFECTS", "CHAIN", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
+__all__ = ["Effect", "OutputEffect", "LoadEffect", "EFFECTS", "CHAIN", "CORE", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
            "REFERENCE", "register", "unregister", "stage_of", "adds_factors", "load_effects_file", "load_plugins",
            "effect_classes_in_file", "user_effect_files", "ensure_registered", "check_effect", "declaration_problems"]

@@ -21,6 +21,8 @@ CHAIN: tuple[type[Effect], ...] = (DoubleLayer, LinearCharge, EquipotentialElect
 BUILT_IN_EFFECTS: tuple[type[Effect], ...] = (DoubleLayer, NonlinearCharge, ElectrodeResistance, SolventDiffusion,
                                               FractionalCoupling, Viscoelastic, LayeredBeam, Humidity, Thermal)
 
+#: The model's core: stage defaults with an id, always on (they cannot be removed).
+CORE = tuple(cls.id for cls in CHAIN if cls.id)
 #: Ids of the effects shipped with the package (the rest were registered by users).
 BUILT_IN = tuple(cls.id for cls in BUILT_IN_EFFECTS)
 #: Factor hooks an added effect may implement (see :mod:`physics.effects.base`).
