@@ -28,6 +28,7 @@ import contextlib
 import fcntl
 import json
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -73,6 +74,21 @@ def _inputs_with_sidecars(inputs: Iterable) -> list[Path]:
         if q.suffix.lower() in (".csv", ".mat"):
             out.add(q.with_suffix(".yaml"))
     return sorted(out)
+
+
+_TMP_NAME = re.compile(r"\.([^/\\\s'\"<>]+?)\.eap-tmp-\d+")
+
+
+def final_text(text: str) -> str:
+    """``text`` with every path through the temporary folder of an output being written
+    (``…/.NAME.eap-tmp-PID/…``) written as the path it will have (``…/NAME/…``): what a
+    page or a suggested command shows."""
+    return _TMP_NAME.sub(r"\1", str(text))
+
+
+def final_path(path) -> Path:
+    """The path ``path`` (inside the temporary folder of an output) will have once written."""
+    return Path(final_text(str(path)))
 
 
 def _pid_alive(pid: int) -> bool:

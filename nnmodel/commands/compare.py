@@ -18,7 +18,7 @@ NAME = "compare"
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series CSV/.mat files (DATA_FORMAT.md) or frequency-"
                "response CSVs (freq_Hz, mag_m_per_V, phase_deg). Writes report.json, metrics.csv, bands.csv, "
-               "by_rh.csv, PNGs and report.html into --out.")
+               "by_rh.csv, PNGs and the page index.html into --out.")
 
 
 # ------------------------------------------------------------------ shared with `eap identify`
@@ -196,6 +196,7 @@ def run(args) -> int:
     with writing(args, inputs=_inputs(args)) as tmp:
         write_comparison_report(res, tmp, provenance=provenance(inputs=args.measurements),
                                 title=f"eap compare: {predictor.name}", output=output)
+    from physics.columns import quantity
     d = Path(args.out)
     print(f"model: {predictor.name}")
     for r in res.records:
@@ -203,25 +204,23 @@ def run(args) -> int:
         parts = [f"{Path(r.source).name} (RH {r.rh:.3g} %):"]
         if tm:
             rt = tm["residual_tests"]
-            rmse = f"{1e6 * tm['rmse']:.3g} um" if output.is_deflection else f"{tm['rmse']:.3g} {output.unit}"
-            parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {tm['nrmse']:.3g}, corr {100 * tm['correlation']:.1f} %,"
-                         f" RMSE {rmse}; residual "
+            parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {100 * tm['nrmse']:.3g} %, corr "
+                         f"{100 * tm['correlation']:.1f} %, RMSE {quantity(tm['rmse'], output.unit)}; residual "
                          f"{'white' if rt['white'] else 'correlated'} ({rt['autocorrelation_outside']}/"
                          f"{rt['autocorrelation_lags']} lags outside 99 %), "
                          f"{'independent of' if rt['independent_of_input'] else 'correlated with'} the input "
                          f"({rt['cross_correlation_outside']}/{rt['cross_correlation_lags']});")
         if fe.get("j_err_m_per_V") is not None:
-            je = f"{1e3 * fe['j_err_m_per_V']:.3g} mm/V" if output.is_deflection else \
-                f"{fe['j_err_m_per_V']:.3g} {output.unit}/V"
-            parts.append(f"J_err {je}, |H| error {fe['log_mag_rms_dB']:.3g} dB rms, "
+            parts.append(f"J_err {quantity(fe['j_err_m_per_V'], output.unit + '/V')}, |H| error {fe['log_mag_rms_dB']:.3g} dB rms, "
                          f"phase {fe['phase_rms_deg']:.3g} deg rms ({fe['n_points']} freq.)")
         print("  " + " ".join(parts))
     if len(res.by_rh) >= 2:
         print("  by RH: " + "; ".join(
             f"{row['rh_pct']:g} %: " + (f"fit {row['fit_percent']:.1f} %, " if row["fit_percent"] is not None else "")
-            + (f"J_err {1e3 * row['j_err_m_per_V']:.3g} mm/V" if row["j_err_m_per_V"] is not None else "")
+            + (f"J_err {quantity(row['j_err_m_per_V'], output.unit + '/V')}" if row["j_err_m_per_V"] is not None
+               else "")
             for row in res.by_rh))
     for w in res.warnings:
         print(f"  warning: {w}")
-    print(f"wrote {d}/report.html, report.json, metrics.csv and plots in {time.perf_counter() - t0:.1f} s")
+    print(f"wrote {d}/index.html, report.json, metrics.csv and plots in {time.perf_counter() - t0:.1f} s")
     return 0

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physics.columns import quantity
 from physics.errors import InputError, ModelError
 
 from ._common import add_quiet_option, provenance, stage_log
@@ -112,7 +113,7 @@ def run(args) -> int:
                          "trained on")
     if ts.deflection is not None:
         fit = {"rmse": rmse(ts.deflection, pred)}
-        line += f"; against the measured {output.name}: RMSE {fit['rmse']:.4g} {out_unit}"
+        line += f"; against the measured {output.name}: RMSE {quantity(fit['rmse'], out_unit)}"
         try:
             fit["fit_percent"] = fit_percent(ts.deflection, pred)
             line += f", fit {fit['fit_percent']:.1f} %"
