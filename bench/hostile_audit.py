@@ -448,7 +448,7 @@ def cases() -> list[Case]:
                                            "--out", "D"], cp("long.csv"), expect="ok", may_change=("D/**",))
     add("dataset-same-column-twice", "dataset", ["dataset", "--train", "lab.csv", "--columns",
                                                  "time=t,voltage=y,deflection=y", "--out", "D"], cp("lab.csv"),
-        match="twice|same column")
+        match="twice|same column|both")
     add("dataset-quantity-twice", "dataset", ["dataset", "--train", "lab.csv", "--columns",
                                               "voltage=u,voltage=y", "--out", "D"], cp("lab.csv"), match="twice")
     add("dataset-unknown-column", "dataset", ["dataset", "--train", "lab.csv", "--columns",
@@ -723,6 +723,7 @@ class _Silent(threading.Thread):
 def _limit(cap_bytes: int):
     def pre():
         os.setsid()
+        signal.signal(signal.SIGINT, signal.SIG_DFL)   # as in a terminal (a background job ignores Ctrl-C)
         resource.setrlimit(resource.RLIMIT_AS, (cap_bytes, cap_bytes))
     return pre
 

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from physics.errors import InputError
-from physics.fileio import sha256_file
+from physics.fileio import load_json, sha256_file
 
 from .data import check_fs, check_voltage
 from .models import MODELS
@@ -141,10 +141,7 @@ def _read_card(folder: Path) -> dict:
     cp = folder / CARD
     if not cp.is_file():
         raise InputError(f"{folder} is not a model bundle (no {CARD})")
-    try:
-        card = json.loads(cp.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{cp}: not valid JSON ({exc})") from None
+    card = load_json(cp, "bundle card")
     if not isinstance(card, dict) or card.get("format") != FORMAT:
         raise InputError(f"{cp}: not an {FORMAT} card")
     if card.get("format_version") != FORMAT_VERSION:

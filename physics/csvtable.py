@@ -104,14 +104,24 @@ def sniff_dialect(path: Path) -> tuple[str, str, str]:
     return encoding, delim, decimal
 
 
+#: Longest header line read (characters): thousands of column names fit in it.
+MAX_HEADER = 1 << 20
+
+
 def csv_header(path: Path) -> list[str]:
     """Column names of a CSV's header line (dialect sniffed as by :func:`read_table`)."""
     encoding, delim, _ = sniff_dialect(path)
-    with open(path, encoding=encoding, newline="") as fh:
-        header_line = fh.readline()
+    with open(path, encoding=encoding, errors="replace", newline="") as fh:
+        header_line = fh.readline(MAX_HEADER + 1)
+    if len(header_line) > MAX_HEADER:
+        raise InputError(f"{path}: the first line is longer than {MAX_HEADER} characters; expected a header line "
+                         "of column names")
     if delim == r"\s+":
         return header_line.split()
-    return [n.strip() for n in next(csv.reader([header_line], delimiter=delim), [])]
+    try:
+        return [n.strip() for n in next(csv.reader([header_line], delimiter=delim), [])]
+    except csv.Error as exc:
+        raise InputError(f"{path}: the header line cannot be read as CSV ({exc})") from None
 
 
 def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str) -> None:
@@ -121,10 +131,14 @@ def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str
         head = fh.read(1 << 16).decode(encoding, errors="replace")
     lines = head.splitlines()[1:-1]   # the last line of the head may be cut
     rows = (ln.split() for ln in lines) if delim == r"\s+" else csv.reader(lines, delimiter=delim)
-    for k, fields in enumerate(rows):
-        if fields and len(fields) != n and any(f.strip() for f in fields):
-            raise InputError(f"{path}, line {k + 2}: {len(fields)} fields but the header has {n} "
-                             f"(separator {delim!r}){hint}")
+    k = -1
+    try:
+        for k, fields in enumerate(rows):
+            if fields and len(fields) != n and any(f.strip() for f in fields):
+                raise InputError(f"{path}, line {k + 2}: {len(fields)} fields but the header has {n} "
+                                 f"(separator {delim!r}){hint}")
+    except csv.Error as exc:
+        raise InputError(f"{path}, line {k + 3}: cannot be read as CSV ({exc})") from None
 
 
 def _parse(path: Path, opts: dict) -> tuple[np.ndarray, np.ndarray | None]:

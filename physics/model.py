@@ -146,7 +146,7 @@ class ActuatorModel:
     def modes(self) -> CantileverModes:
         return CantileverModes(self.free_length, self.n_modes)
 
-    def check_rh(self, rh, what: str = "rh"):
+    def check_rh(self, rh, what: str = arg("rh")):
         """Validate RH [%]; None is allowed only when the humidity effect is off."""
         if rh is None:
             if self.needs_rh:
@@ -154,7 +154,7 @@ class ActuatorModel:
             return self.device.reference_rh
         arr = np.asarray(rh, dtype=float)
         if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > 100):
-            raise InputError(f"{what} must be finite and within 0–100 %")
+            raise InputError(f"{what} {float(np.max(arr)) if arr.size else rh!r}: must be finite and within 0–100 %")
         return arr if arr.ndim else float(arr)
 
     def params_at(self, rh=None) -> dict:

@@ -108,9 +108,17 @@ def parse_header(name: str, units: Mapping[str, Mapping[str, object]],
 
 
 def header_unit(column: str) -> str | None:
-    """The unit written in a column's header, ``Tip (mm)`` / ``Tip [mm]`` → ``mm`` (or None)."""
+    """The unit written in a column's header, ``Tip (mm)`` / ``Tip [mm]`` → ``mm`` (None when
+    there is none, or when the brackets hold something that is not a unit: ``Sensor (raw)``)."""
     m = _HEADER_UNIT.match(column)
-    return (m["a"] or m["b"]).strip() if m else None
+    if not m:
+        return None
+    unit = (m["a"] or m["b"]).strip()
+    try:
+        parse_unit(_UNIT_ALIASES.get(unit, unit).replace("pct", "%"))
+    except UnitError:
+        return None
+    return unit
 
 
 def unit_scale(quantity: str, unit: str) -> tuple[float, float] | None:
@@ -269,9 +277,11 @@ def _convert_output(values, label, unit, how, output, gain, where):
                              f"{output.name} in {output.unit}; correct {_COLUMNS} or {_OUTPUT}")
         return (values * q if q != 1.0 else values), output
     try:
+        parse_unit(unit)
         quantity = OutputQuantity("deflection", unit)
-    except InputError:
-        raise InputError(f"{where}: {label}: {unit!r} (from {how}) is not a unit") from None
+    except (InputError, UnitError):
+        raise InputError(f"{where}: {label}: {unit!r} (from {how}) is not a unit this reader knows (m, mm, um, V, "
+                         f"mV, …); correct {_COLUMNS}, or declare the output with {_OUTPUT} NAME:UNIT") from None
     warnings.warn(f"{where}: {label} is in {unit} according to {how}, not a length: the output is the deflection "
                   f"read in {unit} (give a sensor gain to metres to compare with a physics model)", InputNotice,
                   stacklevel=4)
