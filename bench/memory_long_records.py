@@ -6,7 +6,7 @@ RSS; an address-space cap (``--cap-GB``) keeps a run that would exhaust the mach
 doing so (it then reports the package's out-of-memory error instead of a figure).
 
     python bench/memory_long_records.py                 # 1e5, 1e6, 1e7 samples
-    python bench/memory_long_records.py --sizes 1e5,1e6
+    python bench/memory_long_records.py --sizes 2e6,1e7 --commands predict,compare-nn
 """
 from __future__ import annotations
 
@@ -77,6 +77,7 @@ def main() -> None:
     ap.add_argument("--sizes", default="1e5,1e6,1e7", help="record lengths [samples]")
     ap.add_argument("--fs-Hz", type=float, default=1000.0)
     ap.add_argument("--cap-GB", type=float, default=12.0, help="address-space cap per run")
+    ap.add_argument("--commands", default="predict,compare,compare-nn", help="which runs to measure")
     args = ap.parse_args()
     sizes = [int(float(s)) for s in args.sizes.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
@@ -95,6 +96,8 @@ def main() -> None:
                     "compare-nn": ["compare", str(rec), "--model", str(bundle), "--out", str(tmp / f"n{n}"),
                                    "--overwrite"]}
             for name, argv in runs.items():
+                if name not in args.commands.split(","):
+                    continue
                 t0 = time.perf_counter()
                 r = _measure(args.cap_GB, argv)
                 note = "" if r.get("rc") == 0 else f"FAILED: {' '.join(r.get('error', []))[:120]}"

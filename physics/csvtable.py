@@ -14,6 +14,7 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import pandas as pd
@@ -141,37 +142,50 @@ def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str
         raise InputError(f"{path}, line {k + 3}: cannot be read as CSV ({exc})") from None
 
 
-def _parse(path: Path, opts: dict) -> tuple[np.ndarray, np.ndarray | None]:
-    """(float values, None) of a numeric file, or (None, text cells) when a cell is not a
-    number (re-read as text to name it)."""
-    try:  # in chunks: the parser's buffers stay small; peak ≈ 2 × the values
-        chunks = [c.to_numpy() for c in pd.read_csv(path, dtype=float, chunksize=1 << 18, **opts)]
-        values = np.concatenate(chunks) if chunks else np.empty((0, len(opts["names"])))
-        del chunks
+def _count_rows(path: Path) -> int:
+    """Data rows of a CSV (lines after the header, a last line without a newline included)."""
+    n, last = 0, b"\n"
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 22), b""):
+            n += block.count(b"\n")
+            last = block[-1:]
+    return n - 1 + (last != b"\n")
+
+
+def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """(float values, one row per column, or None; text cells or None): the numeric values
+    of a CSV (filled chunk by chunk into columns counted beforehand, 8 bytes per value), or
+    its cells as text when one is not a number (re-read to name it).  ``rows``: at most that
+    many rows after ``opts["skiprows"]``."""
+    try:
+        reader = pd.read_csv(path, dtype=float, chunksize=1 << 18, nrows=rows, **opts)
+        total = _count_rows(path) if rows is None else rows
+        values = np.empty((len(opts["names"]), max(total, 0)))
+        n = 0
+        for chunk in reader:
+            c = chunk.to_numpy()
+            if n + c.shape[0] > values.shape[1]:     # more rows than counted (odd line ends)
+                values = np.concatenate([values[:, :n], np.empty((values.shape[0], c.shape[0]))], 1)
+            values[:, n:n + c.shape[0]] = c.T
+            n += c.shape[0]
+        values = values[:, :n]
         if values.size and np.isnan(values).any():
-            nonblank = np.flatnonzero(~np.isnan(values).all(axis=1))
+            nonblank = np.flatnonzero(~np.isnan(values).all(axis=0))
             end = nonblank[-1] + 1 if nonblank.size else 0
-            if np.isnan(values[:end]).any() or end == 0:
+            if np.isnan(values[:, :end]).any() or end == 0:
                 raise ValueError("NaN or empty cell")
-            values = values[:end]
+            values = values[:, :end]
         return values, None
     except ValueError as exc:
         if isinstance(exc, UnicodeDecodeError):
             raise
-    df = pd.read_csv(path, dtype=str, keep_default_na=False, **opts)
+    df = pd.read_csv(path, dtype=str, keep_default_na=False, nrows=rows, **opts)
     return None, df.to_numpy(dtype=object).copy()
 
 
-def read_table(path: Path) -> Table:
-    """Read a CSV (header line of names) or .mat file into a :class:`Table`.
-
-    CSV dialects are sniffed (:func:`sniff_dialect`): comma, semicolon, tab or blank
-    separated, decimal point or comma, UTF-8 (BOM allowed) or Latin-1, LF or CRLF.  Numeric
-    files are parsed straight to floats (8 bytes per value); a file with a non-numeric,
-    empty or NaN cell is re-read as text to name the line and column.
-    """
-    if path.suffix.lower() == ".mat":
-        return _read_mat(path)
+def _setup(path: Path) -> tuple[list[str], dict, str, str]:
+    """(column names, pandas options, the hint on a field-count error, decimal mark) of a CSV,
+    its dialect sniffed and its first lines' field counts checked."""
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file; expected a header line of column names "
                          "followed by data rows")
@@ -185,33 +199,42 @@ def read_table(path: Path) -> Table:
     _check_field_counts(path, encoding, delim, len(names), hint)
     opts = dict(sep=delim, header=None, skiprows=1, names=list(range(len(names))), decimal=decimal,
                 encoding=encoding, skip_blank_lines=False, engine="c", index_col=False)
+    return names, opts, hint, decimal
+
+
+def _parsed(path: Path, names, opts, hint, rows: int | None = None):
+    """:func:`_parse` with the package's errors (and Latin-1 after a UTF-8 head)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", pd.errors.ParserWarning)   # a line with extra fields
             try:
-                values, raw = _parse(path, opts)
+                return _parse(path, opts, rows)
             except UnicodeDecodeError:   # a Latin-1 byte after the sniffed head: the file is Latin-1
-                values, raw = _parse(path, dict(opts, encoding="latin-1"))
+                return _parse(path, dict(opts, encoding="latin-1"), rows)
     except pd.errors.EmptyDataError:
         raise InputError(f"{path}: empty file; the header is not followed by any data row") from None
     except (pd.errors.ParserError, pd.errors.ParserWarning) as exc:
         raise InputError(f"{path}: cannot be parsed as CSV ({' '.join(str(exc).split())}); "
                          f"every line must have the {len(names)} fields of the header "
-                         f"(separator {delim!r}){hint}") from None
+                         f"(separator {opts['sep']!r}){hint}") from None
+
+
+def _table(path: Path, names, values, raw, decimal: str, first: int = 0) -> Table:
+    """The :class:`Table` of parsed values (or text cells) of rows ``first``… of a CSV."""
     if raw is not None:
         raw[pd.isna(raw)] = ""
         end = raw.shape[0]
         while end and not any(str(v).strip() for v in raw[end - 1]):
             end -= 1  # drop trailing blank lines
-        values = raw[:end]
+        raw = raw[:end]
         if decimal == ",":
-            values = np.vectorize(lambda v: str(v).replace(",", "."), otypes=[object])(values) \
-                if values.size else values
-    if values.shape[0] == 0:
+            raw = np.vectorize(lambda v: str(v).replace(",", "."), otypes=[object])(raw) if raw.size else raw
+    n = values.shape[1] if raw is None else raw.shape[0]
+    if n == 0:
         raise InputError(f"{path}: empty file; the header is not followed by any data row")
     columns: dict[str, np.ndarray] = {}
     for k, name in enumerate(names):
-        col = np.ascontiguousarray(values[:, k]) if raw is None else values[:, k].astype(str)
+        col = values[k] if raw is None else raw[:, k].astype(str)
         if not name:
             if (np.isnan(col).all() if raw is None else (np.char.strip(col) == "").all()):
                 continue  # trailing separator: nameless, empty column
@@ -219,7 +242,50 @@ def read_table(path: Path) -> Table:
         if name in columns:
             raise InputError(f"{path}: column {name!r} appears twice in the header")
         columns[name] = col
-    return Table(path, columns, lambda i: f"line {i + 2}")
+    return Table(path, columns, lambda i: f"line {first + i + 2}")
+
+
+def read_table(path: Path) -> Table:
+    """Read a CSV (header line of names) or .mat file into a :class:`Table`.
+
+    CSV dialects are sniffed (:func:`sniff_dialect`): comma, semicolon, tab or blank
+    separated, decimal point or comma, UTF-8 (BOM allowed) or Latin-1, LF or CRLF.  Numeric
+    files are parsed straight to floats (8 bytes per value, no second copy); a file with a
+    non-numeric, empty or NaN cell is re-read as text to name the line and column.
+    """
+    if path.suffix.lower() == ".mat":
+        return _read_mat(path)
+    names, opts, hint, decimal = _setup(path)
+    values, raw = _parsed(path, names, opts, hint)
+    return _table(path, names, values, raw, decimal)
+
+
+def iter_table(path: Path, rows: int = 1 << 20) -> Iterator[Table]:
+    """The rows of a CSV as consecutive :class:`Table` pieces of at most ``rows`` rows (the
+    same dialect, checks and messages as :func:`read_table`; ``locate`` names the file's
+    lines), so that a long file is never held whole."""
+    names, opts, hint, decimal = _setup(path)
+    total, first = _count_rows(path), 0
+    while total > rows and total % rows == 1:   # no last piece of one row (a record needs two)
+        rows += 1
+    reader = pd.read_csv(path, dtype=float, chunksize=rows, **opts)
+    while first < total:
+        n = min(rows, total - first)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", pd.errors.ParserWarning)
+                values = next(reader).to_numpy().T.copy()
+            if np.isnan(values).any():
+                raise ValueError("NaN or empty cell")
+            raw = None
+        except (ValueError, StopIteration, pd.errors.ParserError, pd.errors.ParserWarning):
+            values, raw = _parsed(path, names, dict(opts, skiprows=1 + first), hint, n)   # names the fault
+        table = _table(path, names, values, raw, decimal, first)
+        got = len(next(iter(table.columns.values()))) if table.columns else 0
+        if got < n and first + n < total:   # blank lines, then more data: as read_table says
+            raise InputError(f"{path}, line {first + got + 2}: empty line inside the data; remove it")
+        yield table
+        first += n
 
 
 def _read_mat(path: Path) -> Table:
@@ -260,15 +326,27 @@ def write_table(columns: dict[str, np.ndarray], meta: dict, path, *, overwrite: 
             raise InputError(f"refusing to overwrite the input file {p}; choose another output path")
         if p.exists() and not overwrite:
             raise InputError(f"{p} already exists; choose another output path or pass {arg('overwrite')}")
+    write_sidecar(meta, side)
+    with atomic_path(target, overwrite=True) as tmp, open(tmp, "w", encoding="utf-8", newline="") as fh:
+        append_rows(fh, columns, header=True)
+    return target
+
+
+def append_rows(fh, columns: dict[str, np.ndarray], *, header: bool) -> None:
+    """Write the rows of ``columns`` to the open text file ``fh`` as CSV (the header line
+    first when ``header``), floats in their shortest round-trip form: a long table can be
+    written piece by piece with the same text as in one go."""
+    pd.DataFrame(columns).to_csv(fh, index=False, header=header, lineterminator="\n")
+
+
+def write_sidecar(meta: dict, side: Path) -> None:
+    """Atomically write ``meta`` as the YAML sidecar ``side`` (remove it when ``meta`` is empty)."""
     if meta:
         text = yaml.safe_dump(plain(meta), sort_keys=False, allow_unicode=True)
         with atomic_path(side, overwrite=True) as tmp:
             tmp.write_text(text, encoding="utf-8")
     elif side.exists():
         side.unlink()
-    with atomic_path(target, overwrite=True) as tmp:
-        pd.DataFrame(columns).to_csv(tmp, index=False, lineterminator="\n")
-    return target
 
 
 def plain(obj, key: str = "meta"):

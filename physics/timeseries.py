@@ -57,11 +57,11 @@ from typing import Mapping
 
 import numpy as np
 
-from .csvtable import check_input_path, read_table, write_table
+from .csvtable import check_input_path, iter_table, read_table, write_table
 from .errors import InputError, InputNotice, arg
 from .limits import MAX_DRIVE_V
-from .record import (CHANNELS, DEFLECTION, OutputQuantity, TimeSeries, check_range,  # noqa: F401 (TimeSeries: public)
-                     check_record)
+from .record import (CHANNELS, DEFLECTION, UNIFORM_RTOL, OutputQuantity, TimeSeries,  # noqa: F401 (TimeSeries: public)
+                     check_range, check_record)
 from .sidecar import read_sidecar
 from .units import UnitError, parse_unit
 
@@ -329,31 +329,22 @@ def _standard_columns(table, p: Path, output: OutputQuantity | None):
     return values, labels, quantity_out
 
 
-def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | None = None,
-                    rh: float | None = None, require_deflection: bool = True, resample: bool = False,
-                    output: OutputQuantity | str | None = None, gain: str | None = None) -> TimeSeries:
-    """Read a time-series record (``.csv`` or ``.mat``) following ``DATA_FORMAT.md``.
-
-    ``columns`` maps quantities to the file's columns (with optional units, module doc);
-    ``fs`` (Hz) gives the time base of a file without a time column; ``rh`` (%) is the
-    relative humidity when the file has no ``rh_pct`` column (it wins over the column and
-    the sidecar); ``resample`` allows non-uniform time; ``output`` names the measured
-    output (default: the tip deflection in m; ``"level:V"``); ``gain`` converts an output
-    column in another unit to metres (``"2.5mm/V"``).
-    """
+def _output_arg(output, columns) -> OutputQuantity | None:
     if isinstance(output, str):
         output = OutputQuantity.parse(output)
     if output is not None and output.name == "deflection" and unit_scale("deflection", output.unit) is None \
             and columns is None:
         raise InputError(f"output {output.name}:{output.unit}: a deflection read in {output.unit} needs a column "
                          "map (deflection=COLUMN:UNIT)")
-    p = check_input_path(path, (".csv", ".mat"))
-    table = read_table(p)
+    return output
+
+
+def _channels_of(table, p: Path, meta: dict, *, columns, fs, rh, require_deflection, output, gain, first: int = 0):
+    """(values in stored units, labels, output quantity) of the rows of ``table`` (rows
+    ``first``… of the file), with time, RH and plausibility as the module doc says."""
     where = str(p)
-    values: dict[str, np.ndarray] = {}
-    labels: dict[str, str] = {}
     if columns is not None:
-        quantity_out = DEFLECTION
+        values, labels, quantity_out = {}, {}, DEFLECTION
         for channel, (col, unit, how) in _resolve_map(columns, table, output, where).items():
             labels[channel] = f"column {col!r} ({channel if channel != 'deflection' else 'output'})"
             values[channel], q = _convert(table, channel, col, unit, how, output, gain, where)
@@ -385,13 +376,10 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
             raise InputError(f"{where}: has a time column, so a sampling rate must not be given too")
         if not np.isfinite(fs) or fs <= 0:
             raise InputError(f"{where}: sampling rate {arg('fs_Hz', 'fs')} {fs!r} must be a positive number")
-        values["time"] = np.arange(n) / float(fs)
+        values["time"] = (first + np.arange(n)) / float(fs)
     elif "time" not in values:
         raise InputError(f"{where}: missing column time_s (time in s or ms); give the "
                          f"sampling rate with {arg('fs_Hz', 'fs')} for a file without a time column")
-    if n < 2:
-        raise InputError(f"{where}: needs at least 2 samples, got {n}")
-    meta = read_sidecar(p)
     if "rh" in values and meta.get("rh_pct") is not None and rh is None:
         col_rh = float(np.mean(values["rh"]))
         if abs(col_rh - float(meta["rh_pct"])) > 5.0:
@@ -408,24 +396,75 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
             raise InputError(f"{where}: no relative humidity: add an rh_pct column, the key "
                              f"rh_pct to the sidecar, or give the RH with {arg('rh')}")
         values["rh"] = np.full(n, float(side_rh))
-    values, info = check_record(values, where, table.locate, labels, resample=resample)
+    return values, labels, quantity_out
+
+
+def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | None = None,
+                    rh: float | None = None, require_deflection: bool = True, resample: bool = False,
+                    output: OutputQuantity | str | None = None, gain: str | None = None) -> TimeSeries:
+    """Read a time-series record (``.csv`` or ``.mat``) following ``DATA_FORMAT.md``.
+
+    ``columns`` maps quantities to the file's columns (with optional units, module doc);
+    ``fs`` (Hz) gives the time base of a file without a time column; ``rh`` (%) is the
+    relative humidity when the file has no ``rh_pct`` column (it wins over the column and
+    the sidecar); ``resample`` allows non-uniform time; ``output`` names the measured
+    output (default: the tip deflection in m; ``"level:V"``); ``gain`` converts an output
+    column in another unit to metres (``"2.5mm/V"``).
+    """
+    output = _output_arg(output, columns)
+    p = check_input_path(path, (".csv", ".mat"))
+    table = read_table(p)
+    meta = read_sidecar(p)
+    values, labels, quantity_out = _channels_of(table, p, meta, columns=columns, fs=fs, rh=rh, output=output,
+                                                require_deflection=require_deflection, gain=gain)
+    if values["voltage"].size < 2:
+        raise InputError(f"{p}: needs at least 2 samples, got {values['voltage'].size}")
+    values, info = check_record(values, str(p), table.locate, labels, resample=resample)
     if info is not None:
         meta["resampled"] = info
-    return TimeSeries(**values, meta=meta, source=where, output=quantity_out)
+    return TimeSeries(**values, meta=meta, source=str(p), output=quantity_out)
 
 
-def write_timeseries(ts: TimeSeries, path, *, units: dict[str, str] | None = None,
-                     overwrite: bool = False, protect=()) -> Path:
-    """Write ``ts`` atomically as CSV (``quantity_unit`` headers, full float precision; the
-    output column named after ``ts.output``) plus the sidecar ``NAME.yaml`` when ``ts.meta``
-    is non-empty.
+def read_timeseries_pieces(path, *, rows: int = 1 << 20, columns: dict[str, str] | None = None,
+                           fs: float | None = None, rh: float | None = None, require_deflection: bool = True,
+                           output: OutputQuantity | str | None = None, gain: str | None = None):
+    """A CSV record as consecutive :class:`TimeSeries` pieces of about ``rows`` samples,
+    each checked as :func:`read_timeseries` checks a record, the time uniform across pieces
+    too (every step within :data:`~physics.record.UNIFORM_RTOL` of the first piece's median
+    step); no resampling.  For records longer than memory; the pieces share ``meta``."""
+    output = _output_arg(output, columns)
+    p = check_input_path(path, (".csv",))
+    meta = read_sidecar(p)
+    kw = dict(columns=columns, fs=fs, rh=rh, require_deflection=require_deflection, output=output, gain=gain)
+    step = last = None
+    first = 0
+    for table in iter_table(p, rows):
+        values, labels, quantity_out = _channels_of(table, p, meta, first=first, **kw)
+        first += values["voltage"].size
+        if values["voltage"].size < 2:
+            raise InputError(f"{p}: needs at least 2 samples, got {values['voltage'].size}")
+        locate = table.locate
+        values, _ = check_record(values, str(p), locate, labels)
+        t = values["time"]
+        here = float(np.median(np.diff(t)))
+        if step is None:
+            step = here
+        elif abs(here - step) > UNIFORM_RTOL * step or abs(t[0] - last - step) > UNIFORM_RTOL * step:
+            bad = t[0] - last if abs(t[0] - last - step) > UNIFORM_RTOL * step else here
+            raise InputError(f"{p}, {locate(0)}, {labels['time']}: step {bad!r} s differs from the step "
+                             f"{step!r} s of the first lines by more than {100 * UNIFORM_RTOL:g} %; sampling must "
+                             "be uniform (resample the file first)")
+        last = float(t[-1])
+        yield TimeSeries(**values, meta=meta, source=str(p), output=quantity_out)
 
-    ``units`` chooses the unit per quantity (default: stored units; not for an output
-    other than the deflection); ``protect`` lists input files that must never be overwritten.
-    """
+
+def columns_of(ts: TimeSeries, units: dict[str, str] | None = None) -> dict[str, np.ndarray]:
+    """The CSV columns of ``ts`` (``quantity_unit`` headers, the output column named after
+    ``ts.output``); ``units`` chooses the unit per quantity (default: stored units; not for an
+    output other than the deflection)."""
     units = dict(units or {})
     for quantity, unit in units.items():
-        parse_header(f"{quantity}_{unit}", TIMESERIES_UNITS, Path(path))
+        parse_header(f"{quantity}_{unit}", TIMESERIES_UNITS, Path(ts.source or "record"))
     cols = {}
     for quantity in ("time",) + CHANNELS:
         arr = getattr(ts, quantity)
@@ -436,5 +475,13 @@ def write_timeseries(ts: TimeSeries, path, *, units: dict[str, str] | None = Non
             continue
         unit = units.get(quantity, STORED_UNITS[quantity])
         scale, offset = TIMESERIES_UNITS[quantity][unit]
-        cols[f"{quantity}_{unit}"] = (arr - offset) / scale
-    return write_table(cols, ts.meta, path, overwrite=overwrite, protect=protect)
+        cols[f"{quantity}_{unit}"] = (arr - offset) / scale if (scale, offset) != (1.0, 0.0) else arr
+    return cols
+
+
+def write_timeseries(ts: TimeSeries, path, *, units: dict[str, str] | None = None,
+                     overwrite: bool = False, protect=()) -> Path:
+    """Write ``ts`` atomically as CSV (:func:`columns_of`, full float precision) plus the
+    sidecar ``NAME.yaml`` when ``ts.meta`` is non-empty; ``protect`` lists input files that
+    must never be overwritten."""
+    return write_table(columns_of(ts, units), ts.meta, path, overwrite=overwrite, protect=protect)
