@@ -179,10 +179,13 @@ def load(path: str | os.PathLike) -> "Bundle":
     if not folder.is_dir():
         raise InputError(f"model bundle {folder} not found (expected a folder with {CARD} and {WEIGHTS})")
     card = _read_card(folder)
-    wfile = folder / card.get("weights", {}).get("file", WEIGHTS)
+    weights = card.get("weights") or {}
+    if not isinstance(weights.get("file", WEIGHTS), str):
+        raise InputError(f"{folder / CARD}: weights.file must be a file name, got {weights.get('file')!r}")
+    wfile = folder / weights.get("file", WEIGHTS)
     if wfile.parent.resolve() != folder.resolve() or not wfile.is_file():
         raise InputError(f"{folder}: weights file {wfile.name} missing or outside the bundle")
-    expected = card.get("weights", {}).get("sha256")
+    expected = weights.get("sha256")
     if expected and sha256_file(wfile) != expected:
         raise InputError(f"{wfile}: content does not match the SHA-256 in {CARD} (corrupt or altered)")
     try:

@@ -46,7 +46,7 @@ def add_arguments(p):
 
 
 #: Samples per piece of a record predicted in pieces.
-STREAM_SAMPLES = 1 << 20
+STREAM_SAMPLES = 1 << 18
 #: Input files larger than this (about 10⁶ rows) are predicted in pieces when the model can
 #: (a free run at the training rate): memory then grows with a piece, not with the record.
 STREAM_BYTES = 40 << 20
