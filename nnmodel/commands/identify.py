@@ -67,10 +67,17 @@ def run(args) -> int:
     prob = res.problem
     print(f"{prob.device.name} [{', '.join(prob.effects)}] from {len(res.sources)} measurement(s), "
           f"{sum(t.freq.size for t in prob.targets)} frequencies, RH levels {', '.join(f'{x:g}' for x in prob.levels)} %")
+    chk = res.check
     for name, f in res.fits.items():
-        mark = " (written)" if name == res.primary else ""
-        print(f"method {name}{mark}: J_err {res.j_err_initial:.4g} -> {f.j_err:.4g} m/V, {f.nfev} model evaluations"
-              + (f", {f.nit} iterations" if f.nit is not None else "") + f", {f.wall_s:.2f} s; {f.message}")
+        mark = (" (start values kept)" if res.kept_start else " (written)") if name == res.primary else ""
+        crit = (f"criterion ({f.residual_kind}) {chk['cost_start']:.4g} -> {f.cost:.4g}; "
+                if name == res.primary and chk.get("cost_start") is not None else "")
+        print(f"method {name}{mark}: {crit}J_err (eq. 13) {res.j_err_initial:.4g} -> {f.j_err:.4g} m/V, "
+              f"{f.nfev} model evaluations" + (f", {f.nit} iterations" if f.nit is not None else "")
+              + f", {f.wall_s:.2f} s; {f.message}")
+    if chk.get("time_rmse_start_m") is not None:
+        print(f"time records: RMS error {1e6 * chk['time_rmse_start_m']:.4g} µm at the start -> "
+              f"{1e6 * chk['time_rmse_fitted_m']:.4g} µm fitted (offset and linear drift of each record removed)")
         for r in res.param_rows(f):
             print(f"  {r['parameter']:16s} = {r['value']:.6g} ± {r['std_error']:.3g} {r['unit']} "
                   f"({100 * r['rel_std_error']:.3g} %), 95 % [{r['ci95_lo']:.4g}, {r['ci95_hi']:.4g}]"

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from . import stats
+from ..metrics import remove_nuisance
 
 #: The final model explains the data when its RMS error is within this × the noise floor.
 ADEQUATE_RATIO = 1.3
@@ -143,7 +144,7 @@ def describe_missing(fit, records: Sequence) -> list[dict]:
         regs = []
         for r, p in zip(records, preds):
             x = _lowpass(p, tau, r.fs_d)
-            regs.append(x - x.mean())
+            regs.append(remove_nuisance(x))
         g, rss1, d_bic = _fit_regressor(resid, regs, n_eff)
         if best is None or d_bic < best[3]:
             best = (tau, g, rss1, d_bic)
@@ -160,7 +161,7 @@ def describe_missing(fit, records: Sequence) -> list[dict]:
         regs = []
         for p in preds:
             x = play(p, w) - p
-            regs.append(x - x.mean())
+            regs.append(remove_nuisance(x))
         a, rss1, d_bic = _fit_regressor(resid, regs, n_eff)
         if best is None or d_bic < best[3]:
             best = (w, a, rss1, d_bic)

@@ -36,7 +36,8 @@ held at the device value and the report says so.
 :mod:`.records`; the sensor's low-pass applied; the model starts at rest at the record's
 first voltage).  The deflection is exactly proportional to the coupling gain, so that
 free parameter is then refined on the time records in closed form (:func:`_refine_gain`).
-The residual (measured minus model, best offset removed) gives the RMS error and fit %
+The residual (measured minus model, its nuisance terms — offset and linear drift of each
+record, :func:`.records.remove_nuisance` — removed) gives the RMS error and fit %
 at the full rate (the prediction interpolated back) and, on the decimated samples, the
 likelihood with the effective sample size of :mod:`.stats`.
 """
@@ -59,7 +60,7 @@ from ..model import ActuatorModel, resolve_effects
 from ..timedomain import simulate
 from . import stats
 from .describing import DescribingFunction
-from .records import Record, sensor_filter, upsample
+from .records import NUISANCE_TERMS, Record, nuisance_terms, remove_nuisance, sensor_filter, upsample
 from .specs import (declared_default, default_candidates, effect_params, is_nested, param_bounds, param_used,
                     role_family, role_param, spec_of, start_points)
 
@@ -281,6 +282,7 @@ class ModelFit:
     score_s: float = 0.0
     error: str | None = None
     df_info: dict | None = None
+    nuisance: list = field(default_factory=list)     # (offset [m], drift [m/s]) per record
 
     @property
     def ok(self) -> bool:
@@ -389,9 +391,9 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
     preds = _refine_gain(mf, records, preds)
     mf.pred_d, mf.resid_d, mf.rss, mf.n, mf.taus, mf.rmse_records = [], [], [], [], [], []
     num, den, sq, cnt = 0.0, 0.0, 0.0, 0
+    mf.nuisance = []
     for r, yh in zip(records, preds):
-        e = r.y_d - yh
-        e = e - e.mean()
+        e = remove_nuisance(r.y_d - yh)
         mf.pred_d.append(yh)
         mf.resid_d.append(e)
         mf.rss.append(float(e @ e))
@@ -399,8 +401,8 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
         mf.taus.append(stats.integrated_time(e))
         y = r.ts.deflection
         yf = upsample(yh, r.q, y.size)
-        ef = y - yf
-        ef = ef - ef.mean()
+        mf.nuisance.append(nuisance_terms(y - yf, r.ts.time))
+        ef = remove_nuisance(y - yf)
         mf.rmse_records.append(float(np.sqrt(np.mean(ef ** 2))))
         sq += float(ef @ ef)
         cnt += ef.size
@@ -408,7 +410,7 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
         den += float(np.sum((y - y.mean()) ** 2))
     mf.rmse = math.sqrt(sq / cnt)
     mf.fit_pct = 100.0 * (1.0 - math.sqrt(num / den)) if den > 0 else math.nan
-    k = mf.k + (len(records) if n_offsets is None else n_offsets)
+    k = mf.k + (NUISANCE_TERMS * len(records) if n_offsets is None else n_offsets)
     n_eff = [n / t for n, t in zip(mf.n, mf.taus)]
     mf.bic = stats.bic(mf.rss, mf.n, n_eff, k)
     mf.aic = stats.aic(mf.rss, mf.n, n_eff, k)
@@ -434,7 +436,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
                          n_modes=mf.model.n_modes)
     raw = [simulate(core, None, r.t_sim, r.v_sim, rh=r.rh_model, hold=r.hold).deflection for r in records]
     p0 = mf.model.params_at(records[0].rh if np.ndim(records[0].rh_model) == 0 else None)
-    ys = [r.y_d - r.y_d.mean() for r in records]
+    ys = [remove_nuisance(r.y_d) for r in records]
     scale = [1.0 / (np.std(y) * math.sqrt(y.size) or 1.0) for y in ys]
 
     def resid(theta):
@@ -444,7 +446,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
             for e in outs:
                 y = e.filter_output(y, r.fs_d, q)
             yh = sensor_filter(y, r.fs_d, r.sensor_bandwidth)[r.i0:]
-            preds.append(yh - yh.mean())
+            preds.append(remove_nuisance(yh))
         num = sum(float(ph @ y) for ph, y in zip(preds, ys))
         den = sum(float(ph @ ph) for ph in preds)
         a = num / den if den > 0 else 1.0
@@ -488,8 +490,8 @@ def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
         return preds
     num = den = 0.0
     for r, p in zip(records, preds):
-        pc = p - p.mean()
-        num += float(pc @ (r.y_d - r.y_d.mean()))
+        pc = remove_nuisance(p)
+        num += float(pc @ remove_nuisance(r.y_d))
         den += float(pc @ pc)
     if den <= 0 or not math.isfinite(num / den) or num / den <= 0:
         return preds
@@ -537,8 +539,8 @@ def compare_fits(base: ModelFit, cand: ModelFit, nested: bool, taus: Sequence[fl
     taus = list(cand.taus if taus is None else taus)
     n_eff = [n / t for n, t in zip(cand.n, taus)]
     dk = cand.k - base.k
-    kb = base.k + len(base.n)
-    kc = cand.k + len(cand.n)
+    kb = base.k + NUISANCE_TERMS * len(base.n)
+    kc = cand.k + NUISANCE_TERMS * len(cand.n)
     bb = stats.bic(base.rss, base.n, n_eff, kb)
     bc = stats.bic(cand.rss, cand.n, n_eff, kc)
     ab = stats.aic(base.rss, base.n, n_eff, kb)
@@ -567,7 +569,7 @@ def prediction_distance(a: ModelFit, b: ModelFit) -> float:
     """RMS difference [m] between two fitted models' predictions (decimated, offsets removed)."""
     sq, cnt = 0.0, 0
     for pa, pb in zip(a.pred_d, b.pred_d):
-        d = (pa - pa.mean()) - (pb - pb.mean())
+        d = remove_nuisance(pa - pb)
         sq += float(d @ d)
         cnt += d.size
     return math.sqrt(sq / max(cnt, 1))

@@ -52,7 +52,7 @@ from ..parallel import ParallelSettings, map_tasks, warm_up
 from ..threads import single_threaded
 from . import candidates as C
 from . import stats
-from .records import Record, frf_measurements, prepare_records
+from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records
 from .adequacy import ADEQUATE_RATIO, Adequacy, assess
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
@@ -368,8 +368,8 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     ref = min(fits, key=lambda f: sum(f.rss))
     taus_ref = list(ref.taus)
     n_eff_ref = [n / t for n, t in zip(base.n, taus_ref)]
-    base.bic = stats.bic(base.rss, base.n, n_eff_ref, base.k + len(records))
-    base.aic = stats.aic(base.rss, base.n, n_eff_ref, base.k + len(records))
+    base.bic = stats.bic(base.rss, base.n, n_eff_ref, base.k + NUISANCE_TERMS * len(records))
+    base.aic = stats.aic(base.rss, base.n, n_eff_ref, base.k + NUISANCE_TERMS * len(records))
     for c in results:
         if c.evaluated:
             # an effect fitted through per-RH parameters nests only when they were freed (≥ 2 RH levels)

@@ -54,6 +54,17 @@ class FractionalCoupling(ConstantCoupling):
         "signature": [("constant_slope_phase", 1.0), ("lf_excess_lag", 0.5), ("step_creep", 0.5)],
     }
 
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: frac_a U(0.25, 0.6), kf0 so that |kf(1 Hz)| is the
+        device's kf × U(0.7, 1.4)."""
+        p = device.params
+        a = float(rng.uniform(0.25, 0.6))
+        w_lo = 2 * np.pi * p.get("frac_f_lo", 1e-4)
+        kf0 = float(p["kf"] * rng.uniform(0.7, 1.4) * abs((2j * np.pi + w_lo) ** a))
+        vals = {"frac_a": a, "frac_b": 0.0, "kf0": kf0}
+        return device.with_params(**vals), vals
+
     def kf(self, s, p) -> np.ndarray:
         s = np.asarray(s, dtype=complex)
         w_lo = 2.0 * np.pi * p.get("frac_f_lo", 1e-4)

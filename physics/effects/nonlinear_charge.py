@@ -92,6 +92,12 @@ class NonlinearCharge(LinearCharge):
         "signature": [("amplitude_dependence", 1.0), ("harmonics", 0.5)],
     }
 
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: C_max log-uniform 1500–8000 mol/m³."""
+        c = float(np.exp(rng.uniform(np.log(1500.0), np.log(8000.0))))
+        return device.with_params(C_max=c), {"C_max": c}
+
     def nu(self, p) -> float:
         return float(p["C_anion"] / p.get("C_max", np.inf))
 

@@ -47,6 +47,14 @@ class SolventDiffusion(SolventDrag):
         "signature": [("lf_droop_lead", 1.0), ("step_back_relaxation", 1.0)],
     }
 
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: h²/Ds log-uniform 8–60 s (a water-like solvent; the
+        IPMC's ethylene glycol is ~1 h)."""
+        h = 0.5 * device.params["t_polymer"]
+        ds = float(h * h / np.exp(rng.uniform(np.log(8.0), np.log(60.0))))
+        return device.with_params(D_solvent=ds), {"D_solvent": ds}
+
     def solvent_factor(self, s, p) -> np.ndarray:
         g = 0.5 * p["t_polymer"] * np.sqrt(np.asarray(s, dtype=complex) / p["D_solvent"])
         out = np.empty_like(g)

@@ -81,6 +81,12 @@ class Viscoelastic(ElasticModulus):
         "reveal": {"spans_resonance": True},
         "signature": [("resonance_error", 1.0), ("lf_small_lag", 0.5)],
     }
+
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: dma_scale U(0.75, 1.35) on the device's DMA table."""
+        s = float(rng.uniform(0.75, 1.35))
+        return device.with_params(dma_scale=s), {"dma_scale": s}
     tables = (
         TableSpec("dma", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
                   "DMA storage and loss modulus of the whole strip vs frequency", optional=False),

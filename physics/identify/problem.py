@@ -179,6 +179,8 @@ class IdentificationProblem:
                 v0 = start[name]
             elif name in self.device.params:
                 v0 = self.device.params[name]
+            elif specs[name].default is not None:
+                v0 = float(specs[name].default)
             else:
                 raise InputError(f"device {self.device.name!r} has no value for {name!r}; give a start value "
                                  f"(start={{'{name}': ...}} / --start {name}=...)")
@@ -273,8 +275,10 @@ class IdentificationProblem:
         r = self.magnitude_residuals(theta)
         return float(np.sqrt(np.mean(r ** 2)))
 
-    def time_residuals(self, theta) -> np.ndarray:
-        """(ŷ − y − mean)/std(y) for each time record after ``skip_s``, stacked."""
+    def time_errors(self, theta) -> list[np.ndarray]:
+        """Simulated minus measured deflection [m] of each time record after ``skip_s``, its
+        offset and linear drift removed (:func:`physics.metrics.remove_nuisance`)."""
+        from ..metrics import remove_nuisance
         from ..timedomain import simulate
         model = self.model_for(theta)
         self.n_eval += 1
@@ -288,10 +292,21 @@ class IdentificationProblem:
             y_hat = simulate(model, None, tt, v, rh=t.rh_model, hold="cubic").deflection
             y_hat = sensor_lowpass(y_hat, ts.fs, t.sensor_bandwidth)
             i0 = int(math.ceil(self.skip_s * ts.fs))
-            e = (y_hat - ts.deflection)[i0:]
-            e = e - e.mean()
-            parts.append(e / np.std(ts.deflection[i0:]))
-        return np.concatenate(parts)
+            parts.append(remove_nuisance((y_hat - ts.deflection)[i0:]))
+        return parts
+
+    def time_rmse(self, theta) -> float:
+        """RMS of :meth:`time_errors` over all time records [m] (NaN without time records)."""
+        parts = self.time_errors(theta)
+        if not parts:
+            return math.nan
+        return float(np.sqrt(sum(float(e @ e) for e in parts) / sum(e.size for e in parts)))
+
+    def time_residuals(self, theta) -> np.ndarray:
+        """:meth:`time_errors` of each record divided by the std of its measurement, stacked."""
+        i0s = [int(math.ceil(self.skip_s * t.record.fs)) for t in self.targets if t.record is not None]
+        recs = [t.record for t in self.targets if t.record is not None]
+        return np.concatenate([e / np.std(ts.deflection[i0:]) for e, ts, i0 in zip(self.time_errors(theta), recs, i0s)])
 
     def residuals(self, theta) -> np.ndarray:
         if self.residual == "frf":
@@ -300,6 +315,14 @@ class IdentificationProblem:
             return self.time_residuals(theta)
         a, b = self.frf_residuals(theta), self.time_residuals(theta)
         return np.concatenate([a, b * math.sqrt(a.size / b.size)])
+
+    def criterion(self, theta, method: str = "lsq") -> float:
+        """The cost a method minimises at θ: 0.5‖r‖² of the least-squares residual, J_err
+        (eq. 13) for Nelder–Mead."""
+        if method == "nelder-mead":
+            return self.j_err(theta)
+        r = self.residuals(theta)
+        return float(0.5 * r @ r)
 
     def residuals_x(self, x) -> np.ndarray:
         return self.residuals(self.from_x(x))

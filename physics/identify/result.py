@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 
@@ -32,6 +32,14 @@ class IdentificationResult:
     sources: list[str]
     settings: dict
     wall_s: float
+    #: The check of the fit on the time records (:func:`_check_against_start`): the RMS error
+    #: [m] at the start and at the fit, and whether the start values were kept.
+    check: dict = field(default_factory=dict)
+
+    @property
+    def kept_start(self) -> bool:
+        """True when the fit made the time records worse and the device keeps the start values."""
+        return bool(self.check.get("kept_start"))
 
     @property
     def fit(self) -> Fit:
@@ -48,7 +56,7 @@ class IdentificationResult:
 
     @property
     def warnings(self) -> list[str]:
-        return list(self.fit.warnings)
+        return ([self.check["message"]] if self.kept_start else []) + list(self.fit.warnings)
 
     @property
     def n_evaluations(self) -> int:
@@ -87,6 +95,9 @@ class IdentificationResult:
             "effects": list(self.problem.effects), "free": self.problem.free, "per_rh": self.problem.per_rh,
             "rh_levels_pct": self.problem.levels, "primary": self.primary, "fits": fits,
             "j_err_initial_m_per_V": self.j_err_initial, "j_err_final_m_per_V": self.fit.j_err,
+            "criterion": {"name": self.fit.residual_kind, "start": self.check.get("cost_start"),
+                          "fitted": self.fit.cost},
+            "time_check": self.check,
             "model_evaluations": self.n_evaluations, "wall_s": self.wall_s,
             "thesis_loop_equivalent_s": self.thesis_equivalent_s(),
             "thesis_loop_assumption": "100 Nelder-Mead iterations x 1 model evaluation x 15 min per frequency "
@@ -141,7 +152,8 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
         fits["lsq"] = fit_lsq(problem, n_starts=int(n_starts), seed=seed, start_spread=start_spread,
                               max_nfev=max_nfev, settings=settings)
     primary = "lsq" if "lsq" in fits else "nelder-mead"
-    dev = problem.device_for(fits[primary].theta)
+    check = _check_against_start(problem, fits[primary])
+    dev = problem.device_for(problem.theta0 if check.get("kept_start") else fits[primary].theta)
     sources = [source_name(m, k) for k, m in enumerate(ms)]
     settings = {"method": method, "n_starts": n_starts, "seed": seed, "start_spread_decades": start_spread,
                 "residual": residual, "fit_phase": fit_phase, "weighting": weighting,
@@ -150,11 +162,35 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
                 "frf": vars(frf_options or FRFOptions()).copy(),
                 "thesis_nelder_mead": {"max_iter": THESIS_MAX_ITER, "xatol": THESIS_TOL, "fatol": THESIS_TOL,
                                        "tolerance_on": "parameters / start values and J_err / RMS |H_meas|"}}
-    res = IdentificationResult(problem, fits, primary, dev, j0, sources, settings, time.perf_counter() - t0)
+    res = IdentificationResult(problem, fits, primary, dev, j0, sources, settings, time.perf_counter() - t0, check)
     if warn:
         for w in res.warnings:
             warnings.warn(w, IdentifiabilityWarning, stacklevel=2)
     return res
+
+
+def _check_against_start(problem: IdentificationProblem, fit: Fit) -> dict:
+    """The fit is never written as the result when it is worse than its start: on its own
+    criterion (the method's cost) and, with time records, on the time-domain RMS error of
+    the records (what a user compares; an FRF fit can improve its FRF cost on biased
+    estimates while the records get worse).  Then the start values are kept and the
+    message says so plainly."""
+    start_cost = problem.criterion(problem.theta0, fit.method)
+    out: dict = {"cost_start": start_cost, "cost_fitted": fit.cost, "kept_start": False}
+    worse = []
+    if fit.cost > start_cost * (1 + 1e-9):
+        worse.append(f"its criterion ({fit.residual_kind}) rose from {start_cost:.4g} to {fit.cost:.4g}")
+    if any(t.record is not None for t in problem.targets):
+        e0, e1 = problem.time_rmse(problem.theta0), problem.time_rmse(fit.theta)
+        out.update(time_rmse_start_m=e0, time_rmse_fitted_m=e1)
+        if e1 > e0 * (1 + 1e-3):
+            worse.append(f"the RMS error of the time records rose from {1e6 * e0:.4g} to {1e6 * e1:.4g} µm")
+    if worse:
+        out["kept_start"] = True
+        out["message"] = ("the fit is worse than its start: " + "; ".join(worse) + ". The device file keeps the "
+                          "start values (the rejected fit is in report.json); check the free parameters, the FRF "
+                          "method (--frf-method) and the records")
+    return out
 
 
 # ============================================================================ device file
