@@ -8,7 +8,7 @@ from physics.errors import InputError
 from physics.identify import IdentifiabilityWarning, identify, write_identification
 
 from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
-from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
+from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "identify"
 HELP = "identify device parameters from measurements (least squares or the thesis Nelder-Mead); writes a device YAML"
@@ -54,13 +54,11 @@ def run(args) -> int:
     ms = read_measurements(args)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)  # printed below from the result
-        res = identify(ms, args.device, args.effects, args.free, per_rh=args.per_rh, method=args.method,
-                       n_starts=args.starts, seed=args.seed, start=args.start, bounds=args.bounds,
-                       residual=args.residual, fit_phase=not args.no_phase, frf_options=frf_options(args),
-                       min_coherence=args.min_coherence, weighting=args.weighting, rh_tolerance=args.rh_tolerance,
-                       sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), n_modes=args.n_modes,
-                       start_spread=args.start_spread, rh=args.rh, skip_s=args.skip_s,
-                       settings=parallel_settings(args))
+        opts = fit_options(args, free=args.free, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
+                           n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, weighting=args.weighting,
+                           settings=parallel_settings(args))
+        res = identify(ms, args.device, args.effects, options=opts, method=args.method, residual=args.residual,
+                       fit_phase=not args.no_phase, start_spread=args.start_spread, skip_s=args.skip_s)
     with writing(args, inputs=protect) as tmp:
         out = write_identification(res, tmp, name=args.name, provenance=provenance(inputs=protect), protect=protect)
     d = Path(args.out)

@@ -60,7 +60,7 @@ class ComparisonResult:
 
 def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOptions | None = None,
             offset: str = "mean", skip_s: float = 0.0, min_coherence: float = 0.0,
-            bands: Sequence[tuple[float, float]] | None = None, rh_tolerance: float = 2.5,
+            bands: Sequence[tuple[float, float]] | None = None, rh_tolerance: float = 1.0,
             sensor_bandwidth="auto", log=None) -> ComparisonResult:
     """Compare ``predictor`` with measurements (loaded :class:`TimeSeries` /
     :class:`FRFData`, see :func:`load_measurements`); see the module doc for the metrics.
@@ -131,7 +131,7 @@ def residual_tests(e: np.ndarray, u: np.ndarray, lags: int = RESIDUAL_LAGS) -> d
     autocorrelations ρ_ee(1..lags) and of input–residual cross-correlations ρ_ue(−lags..lags)
     outside the 99 % band ±2.576/√n of white noise; a model passes when at most 1 % + one
     lag falls outside (what chance alone gives)."""
-    from ..diagnose.stats import autocorrelation, cross_correlation
+    from ..stats import autocorrelation, cross_correlation
     n = e.size
     m = int(min(lags, max(1, n // 4)))
     band = 2.576 / math.sqrt(n)

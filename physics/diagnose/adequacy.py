@@ -31,7 +31,7 @@ from typing import Sequence
 import numpy as np
 from scipy.signal import lfilter
 
-from . import stats
+from .. import stats
 from ..metrics import remove_nuisance
 
 #: The final model explains the data when its RMS error is within this × the noise floor.
@@ -76,12 +76,13 @@ class Adequacy:
                 "ljung_box_p": self.ljung_box_p, "descriptors": self.descriptors, "summary": self.summary()}
 
 
-def assess(label: str, fit, records: Sequence, noise: float) -> Adequacy:
-    """Adequacy of ``fit`` (a scored :class:`.candidates.ModelFit`) on ``records``."""
+def assess(label: str, fit, records: Sequence, noise: float, describe: bool = True) -> Adequacy:
+    """Adequacy of ``fit`` (a scored :class:`.candidates.ModelFit`) on ``records``; with
+    ``describe`` the residual of an inadequate model is described (:func:`describe_missing`)."""
     adequate = None if not (math.isfinite(noise) and noise > 0) else bool(fit.rmse <= ADEQUATE_RATIO * noise)
     lb = stats.ljung_box(np.concatenate(list(fit.resid_d)), lags=20)
     out = Adequacy(label, float(fit.rmse), float(noise), adequate, float(lb.get("p_value", math.nan)))
-    if adequate is not True:
+    if adequate is not True and describe:
         out.descriptors = describe_missing(fit, records)
     return out
 

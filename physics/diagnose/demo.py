@@ -27,7 +27,6 @@ gives every case all of these records (every candidate can then be evaluated).
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -38,6 +37,7 @@ from .. import signals
 from ..device import Device, load_device
 from ..errors import InputError
 from ..frequency import frequency_response
+from ..identify.parameters import switchable
 from ..model import ActuatorModel
 from ..sensor import SensorModel
 from ..timedomain import simulate
@@ -113,7 +113,7 @@ def hidden_effect_case(effect: str | None = None, seed: int = 0, *, device: str 
     if effect in base_ids:
         raise InputError(f"{effect} is already in the base effects {list(base_ids)}")
     truth_dev, tp = draw_truth(effect, dev, rng)
-    truth_ids = tuple(e for e in base_ids if e != "double_layer") + ((effect,) if effect else ())
+    truth_ids = switchable(base_ids) + ((effect,) if effect else ())
     truth = ActuatorModel(truth_dev, truth_ids or "none")
     parts = RICH if design == "rich" else (design_for(effect) if design == "auto" else tuple(design))
     rh_list = [60.0] + ([40.0, 100.0] if "rh" in parts else [])
@@ -175,13 +175,13 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
     """Measurements of the bare ``device`` (effects none) with physics the catalog does not
     have, made here and nowhere else: ``creep`` (tip load × (1 + r/(1+sτ)), r U(0.25, 0.4), τ
     log-uniform 10–30 s), ``backlash`` (a play of width U(60, 100) µm on the output), ``twin``
-    (a viscoelastic polymer with another law than the DMA table: storage +U(8, 12) % per
-    decade, loss tangent U(0.10, 0.16)).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
+    (an effect's near twin, drawn by its ``draw_twin`` hook: a viscoelastic polymer with
+    another law than the DMA table).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
     sweep), ~2 mm peak, the default sensor.  Returns (records, truth parameters)."""
     from scipy.signal import lfilter
     from .adequacy import play
     if kind not in OUTSIDE:
-        raise InputError(f"--kind {kind!r}: choose one of {', '.join(OUTSIDE)}")
+        raise InputError(f"kind {kind!r}: choose one of {', '.join(OUTSIDE)}")
     rng = np.random.default_rng(seed)
     dev = load_device(device)
     truth, tp = ActuatorModel(dev, "none"), {}
@@ -190,13 +190,9 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
     elif kind == "backlash":
         tp = {"play_width_m": float(rng.uniform(60e-6, 100e-6))}
     else:
-        t = dev.tables["dma"]
-        f = np.geomspace(0.01, 100, 25)
-        tp = {"storage_rise_per_decade": float(rng.uniform(0.08, 0.12)), "tan_delta": float(rng.uniform(0.10, 0.16))}
-        E1 = float(np.interp(0.0, np.log10(t["freq"]), t["storage"]))
-        Es = E1 * (1 + tp["storage_rise_per_decade"]) ** np.log10(f)
-        table = {"freq": f, "storage": Es, "loss": tp["tan_delta"] * Es}
-        truth = ActuatorModel(dataclasses.replace(dev, tables={**dev.tables, "dma": table}), "viscoelastic")
+        twin = next(e for e, c in EFFECTS.items() if callable(getattr(c, "draw_twin", None)))
+        twin_dev, tp = EFFECTS[twin].draw_twin(dev, rng)
+        truth = ActuatorModel(twin_dev, twin)
     plan = [(signals.sweep(1.0, 0.1, 50.0, duration, fs), "cubic")]
     if kind != "twin":
         plan.append((signals.square(1.0, t_on=20.0, t_off=40.0, cycles=1, fs=fs), "linear"))

@@ -63,7 +63,7 @@ class Record:
     ts: TimeSeries                 # as read (full rate)
     kind: str                      # broadband | tone | steps | other
     amplitude: float               # V, robust peak of |v − median|
-    rh: float                      # RH level [%]
+    rh: float                      # nominal RH of the record's humidity level [%] (a label)
     rh_model: object               # RH given to the time solver (constant or series at fs_d)
     band: tuple[float, float]      # excited band [Hz]
     tone_hz: float | None
@@ -77,6 +77,7 @@ class Record:
     amplitude_level: float = 0.0   # V (set by prepare_records)
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))   # step indices at fs_d
     kind_how: str = ""             # how the excitation kind was decided
+    rh_measured: float = math.nan  # the record's own (median) RH [%], what a model is evaluated at
 
     @property
     def fs(self) -> float:
@@ -113,7 +114,7 @@ class Record:
     def describe(self) -> dict:
         return {"source": self.source, "kind": self.kind, "samples": self.ts.n, "fs_Hz": self.fs,
                 "duration_s": self.ts.duration, "amplitude_V": self.amplitude,
-                "amplitude_level_V": self.amplitude_level, "rh_pct": self.rh,
+                "amplitude_level_V": self.amplitude_level, "rh_pct": self.rh, "rh_measured_pct": self.rh_measured,
                 "band_Hz": list(self.band), "tone_Hz": self.tone_hz, "decimation": self.q,
                 "fs_analysis_Hz": self.fs_d, "sensor_bandwidth_Hz": self.sensor_bandwidth,
                 "noise_floor_m": self.noise_floor, "noise_floor_source": self.noise_source,
@@ -218,6 +219,46 @@ def deflection_spectrum(ts: TimeSeries) -> tuple[float, float, str]:
     return math.sqrt(level * ts.fs / 2), f_resp, how
 
 
+#: Mean square of a random walk left after its linear trend, per mean square of the fitted
+#: trend's rise over the record: 1/15 ÷ 6/5·(…) = 0.0566 (Brownian motion, computed).
+WANDER_PER_TREND = 0.0566
+
+
+def slow_wander(records: Sequence["Record"], resid_d: Sequence[np.ndarray], nuisance) -> float:
+    """RMS [m] of a slow wander (a sensor's drift beyond the linear trend the nuisance terms
+    remove) in a model's residuals, assuming a random-walk drift, from two independent
+    signs of it, pooled by their degrees of freedom:
+
+    * the fitted drift rates b of the records (``nuisance``: (offset, drift) per record): a
+      random walk leaves, after its trend, WANDER_PER_TREND × (b·T)² on average (T the
+      record's duration; one degree of freedom per record);
+    * the broadband records' residual below half their lowest excited frequency, where the
+      input has no power (the white noise's share removed; two degrees of freedom per line),
+      extrapolated with the share of a detrended random walk's variance those lines hold.
+
+    NaN when no record can show it."""
+    num = dof = 0.0
+    for r, e, (_, b) in zip(records, resid_d, nuisance):
+        T = r.ts.duration
+        num += WANDER_PER_TREND * (b * T) ** 2
+        dof += 1.0
+        n = e.size
+        k_max = int(math.floor(0.5 * r.band[0] * n / r.fs_d)) if r.kind == "broadband" else 0
+        if k_max < 1 or not math.isfinite(r.noise_floor_d):
+            continue
+        E = np.fft.rfft(e)[1:k_max + 1]
+        low = 2.0 * float(np.sum(np.abs(E) ** 2)) / n ** 2
+        white = r.noise_floor_d ** 2 * 2.0 * k_max / n
+        share = _WALK_SHARE[min(k_max, len(_WALK_SHARE)) - 1]
+        num += 2.0 * k_max * max(low - white, 0.0) / share
+        dof += 2.0 * k_max
+    return math.sqrt(num / dof) if dof else math.nan
+
+
+#: Share of a linearly detrended random walk's variance in its first k spectral lines (k = 1…10; computed).
+_WALK_SHARE = (0.46, 0.66, 0.75, 0.80, 0.84, 0.86, 0.88, 0.89, 0.90, 0.91)
+
+
 def estimate_noise_floor(ts: TimeSeries, f_hi: float | None = None) -> tuple[float, str]:
     """(noise floor [m], how it was obtained): the sensor metadata
     (:func:`sensor_noise_floor`), else the deflection spectrum (:func:`deflection_spectrum`)."""
@@ -230,7 +271,7 @@ def estimate_noise_floor(ts: TimeSeries, f_hi: float | None = None) -> tuple[flo
 
 def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_bandwidth="auto",
                     fs_max: float | None = None, noise_floor: float | None = None,
-                    rh_tolerance: float = 2.5) -> list[Record]:
+                    rh_tolerance: float = 1.0) -> list[Record]:
     """Prepare loaded time series (see the module doc).  FRF files are refused: the
     diagnosis needs time records (residuals in time, steps, amplitudes)."""
     ms = load_measurements(measurements, rh=rh)
@@ -267,6 +308,7 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         rec = Record(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
                      sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD, kind_how=how)
         rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
+        rec.rh_measured = float(np.median(rh_series))
         out.append(rec)
         rhs.append(float(np.median(rh_series)))
     if not out:
@@ -311,7 +353,7 @@ def frf_measurements(records: Sequence[Record]) -> tuple[list, list[Record]]:
             meta = {"sensor": r.ts.meta.get("sensor")} if isinstance(r.ts.meta.get("sensor"), dict) else {}
             eps = float(est.rel_error[0])
             coh = 1.0 / (1.0 + 2.0 * eps ** 2)          # γ² with ε = sqrt((1−γ²)/(2γ²))
-            ms.append(FRFData(est.freq, est.response, np.array([coh]), rh=r.rh, meta=meta,
+            ms.append(FRFData(est.freq, est.response, np.array([coh]), rh=r.rh_measured, meta=meta,
                               source=r.source))
             src.append(r)
     return ms, src

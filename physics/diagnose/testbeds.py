@@ -55,6 +55,7 @@ from .. import signals
 from ..device import Device, load_device
 from ..errors import InputError
 from ..frequency import response_per_volt
+from ..identify.parameters import switchable
 from ..model import ActuatorModel
 from ..sensor import SensorModel
 from ..timedomain import simulate
@@ -142,7 +143,7 @@ def lab_case(truth: str = "none", seed: int = 0, *, device: str = "ipmc_pt_eg", 
     base = load_device(device)
     geo = {"L_total": f"{int(rng.integers(30, 41))}mm", "width": f"{int(rng.integers(6, 11))}mm"}
     user = base.with_params(L_total=1e-3 * float(geo["L_total"][:-2]), width=1e-3 * float(geo["width"][:-2]))
-    defaults = tuple(e for e in ActuatorModel(user, "default").effect_ids if e != "double_layer")
+    defaults = switchable(ActuatorModel(user, "default").effect_ids)
     hidden = _check_truth(truth)
     if hidden is not None and hidden not in defaults:
         model_effects, truth_ids = "default", defaults + (hidden,)

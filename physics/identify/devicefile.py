@@ -12,7 +12,7 @@ import yaml
 from ..device import Device, HumidityMap, all_param_specs, parse_device
 from ..errors import InputError, ModelError
 from ..units import to_si
-from .parameters import _section_of
+from .parameters import _section_of, switchable
 from .result import IdentificationResult
 
 
@@ -103,7 +103,7 @@ def identified_device_raw(result: IdentificationResult, *, name: str | None = No
     new_name = name or f"{base.name}_identified"
     dev = dataclasses.replace(result.device, name=new_name,
                               title=(f"{base.title} — identified" if base.title else new_name),
-                              default_effects=tuple(e for e in prob.effects if e != "double_layer"))
+                              default_effects=switchable(prob.effects))
     # dataclass equality of HumidityMap with arrays is ambiguous: compare explicitly
     raw = device_to_raw(dataclasses.replace(dev, humidity_maps={}))
     raw.pop("humidity_maps", None)

@@ -18,7 +18,7 @@ from ..frequency import response_per_volt
 from ..frfdata import FRFData
 from ..model import ActuatorModel, resolve_effects
 from ..timeseries import TimeSeries
-from .parameters import FreeParameter, _HINTS, _make_param, _suggest
+from .parameters import FreeParameter, _make_param, _suggest, hint as _hint
 from .settings import EPS_FLOOR
 
 
@@ -27,7 +27,8 @@ from .settings import EPS_FLOOR
 @dataclass
 class FRFTarget:
     """One measured frequency response to fit: ``freq`` Hz, ``response`` complex m/V,
-    ``weight`` per frequency (relative), ``rh`` the RH level [%] the model is evaluated at."""
+    ``weight`` per frequency (relative), ``rh`` the record's RH [%] the model is evaluated
+    at, ``level`` the nominal RH of its humidity group [%] (the key of per-RH parameters)."""
 
     source: str
     freq: np.ndarray
@@ -39,6 +40,11 @@ class FRFTarget:
     estimator: dict
     record: TimeSeries | None = None
     rh_model: object = None          # RH given to the time solver (constant or smoothed series)
+    level: float | None = None       # nominal RH of the record's humidity group [%]
+
+    def __post_init__(self):
+        if self.level is None:
+            self.level = self.rh
 
     @property
     def s(self) -> np.ndarray:
@@ -57,7 +63,7 @@ def _weights(eps: np.ndarray | None, n: int, weighting: str) -> np.ndarray:
 
 
 def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = None,
-                  min_coherence: float = 0.0, weighting: str = "coherence", rh_tolerance: float = 2.5,
+                  min_coherence: float = 0.0, weighting: str = "coherence", rh_tolerance: float = 1.0,
                   sensor_bandwidth="auto", default_rh: float | None = None) -> list[FRFTarget]:
     """FRF targets from loaded measurements (see the module doc)."""
     if weighting not in ("coherence", "uniform"):
@@ -113,8 +119,8 @@ def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = No
     for r, lv in zip(raw, levels):
         rec = r["record"]
         out.append(FRFTarget(r["source"], r["freq"], r["response"], _weights(r["eps"], r["freq"].size, weighting),
-                             lv, r["coherence"], r["bw"], r["estimator"], rec,
-                             None if rec is None else model_rh(r["rh_series"], rec.fs, rh_tolerance)))
+                             r["rh"], r["coherence"], r["bw"], r["estimator"], rec,
+                             None if rec is None else model_rh(r["rh_series"], rec.fs, rh_tolerance), lv))
     return out
 
 
@@ -162,8 +168,9 @@ class IdentificationProblem:
         for name in free + per_rh:
             if name not in specs:
                 raise InputError(f"unknown parameter {name!r}{_suggest(name, specs)}")
-        # RH levels
-        self.levels = sorted({t.rh for t in self.targets})
+        # RH levels: nominal labels; each evaluated at the mean RH of its records
+        self.levels = sorted({t.level for t in self.targets})
+        self.level_rh = {lv: float(np.mean([t.rh for t in self.targets if t.level == lv])) for lv in self.levels}
         self.model0 = ActuatorModel(self.device, self.effects, n_modes=self.n_modes)
         hum_on = self.model0.needs_rh
         if per_rh:
@@ -220,6 +227,7 @@ class IdentificationProblem:
     def _effective_value(self, name: str, rh: float) -> float:
         if name not in self.device.params:
             raise InputError(f"device {self.device.name!r} has no value for {name!r}; give a start value")
+        rh = self.level_rh.get(rh, rh)
         if name == "Y":
             return float(self.device.params["Y"] * self.model0.hook("stiffness_factor")(rh))
         return float(self.model0.params_at(rh)[name])
@@ -233,8 +241,8 @@ class IdentificationProblem:
             maps = dict(dev.humidity_maps)
             for name in self.per_rh:
                 vals = np.array([v for p, v in zip(self.params, theta) if p.name == name and p.rh is not None])
-                maps[name] = HumidityMap(name, np.array(self.levels, dtype=float), vals, "absolute",
-                                         "identified per RH")
+                maps[name] = HumidityMap(name, np.array([self.level_rh[lv] for lv in self.levels], dtype=float), vals,
+                                         "absolute", "identified per RH (nodes at each level's mean RH)")
             dev = dataclasses.replace(dev, humidity_maps=maps)
         return dev
 
@@ -347,7 +355,7 @@ class IdentificationProblem:
             x[i] = x0[i] + step if x0[i] + step <= hi[i] else x0[i] - step
             H = np.concatenate(self.responses(self.from_x(x)))
             if np.max(np.abs(H - base)) <= 1e-10 * scale:
-                hint = _HINTS.get(p.name, "")
+                hint = _hint(p.name, self.effects)
                 raise InputError(f"parameter {p.label} has no effect on the frequency response of "
                                  f"{self.device.name!r} with effects [{', '.join(self.effects)}]"
                                  + (f": {hint}" if hint else "") + "; choose other free parameters or effects")

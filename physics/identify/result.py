@@ -4,15 +4,16 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Sequence
 
 
-from ..compare import (FRFOptions, load_measurements, source_name)
+from ..compare import load_measurements, source_name
 from ..device import Device
 from ..errors import InputError
-from ..parallel import ParallelSettings, warm_up
+from ..parallel import warm_up
 from ..threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
+from .options import FitOptions
 from .parameters import IdentifiabilityWarning, parse_assignments, parse_names
 from .problem import IdentificationProblem, build_targets
 from .settings import THESIS_MAX_ITER, THESIS_SECONDS_PER_FREQUENCY, THESIS_TOL
@@ -112,38 +113,39 @@ class IdentificationResult:
 
 @single_threaded
 def identify(measurements: Sequence, device, effects=None, free: Sequence[str] | str = (), *,
-             per_rh: Sequence[str] | str = (), method: str = "lsq", n_starts: int | None = None, seed: int = 0,
-             start: Mapping | str | None = None, bounds: Mapping | str | None = None, residual: str = "frf",
-             fit_phase: bool = True, frf_options: FRFOptions | None = None, min_coherence: float = 0.0,
-             weighting: str = "coherence", rh_tolerance: float = 2.5, sensor_bandwidth="auto",
-             n_modes: int = 4, start_spread: float = 1.0, rh: float | None = None, skip_s: float = 0.0,
-             max_nfev: int | None = None, warn: bool = True,
-             settings: ParallelSettings | None = None) -> IdentificationResult:
+             options: FitOptions | None = None, method: str = "lsq", residual: str = "frf", fit_phase: bool = True,
+             start_spread: float = 1.0, skip_s: float = 0.0, max_nfev: int | None = None, warn: bool = True,
+             **shared) -> IdentificationResult:
     """Identify ``free`` (shared) and ``per_rh`` parameters of ``device`` with ``effects``
     from ``measurements`` (paths, :class:`TimeSeries` or :class:`FRFData`).
 
-    ``method``: ``"lsq"`` (default), ``"nelder-mead"`` (thesis) or ``"both"`` (the device
-    uses the least-squares fit).  ``start``/``bounds``: {name: SI value} / {name: (lo, hi)}
-    or the text forms ``"kf=0.004,Y=0.2 GPa"`` / ``"kf=1e-4:1e-1"``.  ``n_starts`` defaults
-    to 5 for FRF residuals and 1 for time residuals.  Identifiability problems are
-    listed in the result and, with ``warn``, issued as :class:`IdentifiabilityWarning`.
-    ``settings``: where the least-squares starts run (:mod:`physics.parallel`; default here).
-    See the module doc for everything else."""
+    ``options``: the measurement and fit options shared with ``diagnose``
+    (:class:`~physics.identify.options.FitOptions`: ``per_rh``, ``start``/``bounds`` as
+    {name: SI value} / {name: (lo, hi)} or ``"kf=0.004,Y=0.2 GPa"`` / ``"kf=1e-4:1e-1"``,
+    ``n_starts`` (default 5 for FRF residuals, 1 for time residuals), ``seed``, ``frf``,
+    ``rh``, ``rh_tolerance``, ``sensor_bandwidth``, ``min_coherence``, ``weighting``,
+    ``n_modes``, ``settings``: where the least-squares starts run); its fields may also be
+    given as keywords.  ``method``: ``"lsq"`` (default), ``"nelder-mead"`` (thesis) or
+    ``"both"`` (the device uses the least-squares fit).  Identifiability problems are listed
+    in the result and, with ``warn``, issued as :class:`IdentifiabilityWarning`.  A fit worse
+    than its start is not written (:func:`_check_against_start`).  See the module doc."""
     t0 = time.perf_counter()
+    opts = FitOptions.merged(options, **({"free": free} if free not in (None, "", ()) else {}), **shared)
     if method not in ("lsq", "nelder-mead", "both"):
         raise InputError(f"method {method!r}: expected lsq, nelder-mead or both")
-    if n_starts is None:
-        n_starts = 5 if residual == "frf" else 1
+    n_starts = opts.n_starts if opts.n_starts is not None else (5 if residual == "frf" else 1)
     if int(n_starts) < 1:
         raise InputError(f"n_starts={n_starts!r} must be at least 1")
+    settings = opts.settings
     warm_up(settings)   # the workers start while the measurements are read and the FRFs estimated
-    ms = load_measurements(measurements, rh=rh)
-    targets = build_targets(ms, frf_options=frf_options, min_coherence=min_coherence, weighting=weighting,
-                            rh_tolerance=rh_tolerance, sensor_bandwidth=sensor_bandwidth, default_rh=rh)
-    problem = IdentificationProblem(device, effects, targets, parse_names(free), parse_names(per_rh, "--per-rh"),
-                                    start=parse_assignments(start), bounds=parse_assignments(bounds, ranges=True,
-                                                                                             what="--bounds"),
-                                    n_modes=n_modes, fit_phase=fit_phase, residual=residual, skip_s=skip_s)
+    ms = load_measurements(measurements, rh=opts.rh)
+    targets = build_targets(ms, frf_options=opts.frf, min_coherence=opts.min_coherence, weighting=opts.weighting,
+                            rh_tolerance=opts.rh_tolerance, sensor_bandwidth=opts.sensor_bandwidth, default_rh=opts.rh)
+    problem = IdentificationProblem(device, effects, targets, parse_names(opts.free or ()),
+                                    parse_names(opts.per_rh, "per_rh"), start=parse_assignments(opts.start),
+                                    bounds=parse_assignments(opts.bounds, ranges=True, what="bounds"),
+                                    n_modes=opts.n_modes, fit_phase=fit_phase, residual=residual, skip_s=skip_s)
+    seed = opts.seed
     j0 = problem.j_err(problem.theta0)
     fits: dict[str, Fit] = {}
     if method in ("nelder-mead", "both"):
@@ -156,10 +158,10 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
     dev = problem.device_for(problem.theta0 if check.get("kept_start") else fits[primary].theta)
     sources = [source_name(m, k) for k, m in enumerate(ms)]
     settings = {"method": method, "n_starts": n_starts, "seed": seed, "start_spread_decades": start_spread,
-                "residual": residual, "fit_phase": fit_phase, "weighting": weighting,
-                "min_coherence": min_coherence, "rh_tolerance_pct": rh_tolerance,
-                "sensor_bandwidth": sensor_bandwidth, "n_modes": n_modes, "skip_s": skip_s,
-                "frf": vars(frf_options or FRFOptions()).copy(),
+                "residual": residual, "fit_phase": fit_phase, "weighting": opts.weighting,
+                "min_coherence": opts.min_coherence, "rh_tolerance_pct": opts.rh_tolerance,
+                "sensor_bandwidth": opts.sensor_bandwidth, "n_modes": opts.n_modes, "skip_s": skip_s,
+                "frf": vars(opts.frf).copy(),
                 "thesis_nelder_mead": {"max_iter": THESIS_MAX_ITER, "xatol": THESIS_TOL, "fatol": THESIS_TOL,
                                        "tolerance_on": "parameters / start values and J_err / RMS |H_meas|"}}
     res = IdentificationResult(problem, fits, primary, dev, j0, sources, settings, time.perf_counter() - t0, check)
