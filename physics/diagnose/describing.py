@@ -55,7 +55,7 @@ def charge_effects(effects) -> tuple[str, ...]:
     for e in effects:
         cls = EFFECTS[e]
         stage = stage_of(cls)
-        if stage is cls or (stage is not None and stage.slot in CHARGE_STAGES) \
+        if stage is cls or (stage is not None and stage.stage in CHARGE_STAGES) \
                 or spec_of(e).get("describing_function"):
             out.append(e)
     return tuple(out)
@@ -64,7 +64,7 @@ def charge_effects(effects) -> tuple[str, ...]:
 def _replaces(cls, slot: str) -> bool:
     """True when the effect class replaces the stage ``slot`` (not the stage's own default)."""
     stage = stage_of(cls)
-    return stage is not None and stage is not cls and stage.slot == slot
+    return stage is not None and stage is not cls and stage.stage == slot
 
 
 class DescribingFunction:
