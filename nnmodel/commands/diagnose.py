@@ -12,6 +12,8 @@ from ._common import add_output_options, add_parallel_options, check_out, parall
 from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "diagnose"
+#: API argument → flag, where the flag's destination differs (InputError.render).
+FLAGS = {"n_starts": "--starts", "noise_floor": "--noise-floor-um", "fs_max": "--fs-max-Hz"}
 HELP = "diagnose a model against measurements: where it fails, which effect is missing (ranked, with statistics)"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series records (DATA_FORMAT.md): several records may differ "
                "in signal, amplitude and RH. Writes diagnosis.json, PNGs and report.html into --out; --apply also "

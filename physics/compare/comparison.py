@@ -9,7 +9,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import metrics
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..frfdata import FRFData
 from ..timeseries import TimeSeries
 from .frf import FRFOptions, default_bands, estimate_record_frf, frf_errors, residual_by_band, sensor_bandwidth_of, sensor_lowpass, sensor_response, thin_log, valid_points
@@ -151,7 +151,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
         raise InputError(f"{where}: has no deflection column; a measurement needs deflection_m")
     rh = ts.rh if ts.rh is not None else None
     if rh is None:
-        raise InputError(f"{where}: no relative humidity (rh_pct); give the RH with --rh")
+        raise InputError(f"{where}: no relative humidity (rh_pct); give the RH with {arg('rh')}")
     rh_arg = model_rh(rh, ts.fs, rh_tolerance)
     log(f"{Path(where).name}: {predictor.name} on {ts.n:,} samples")
     yhat = _check_output(predictor(ts.voltage, rh_arg, ts.fs), ts.n, predictor.name)
@@ -215,7 +215,7 @@ def _sensor_notes(rec: "RecordComparison", setting) -> list[str]:
 
 def _compare_frf(frf: FRFData, where, predictor, min_coh, sb_setting):
     if frf.rh is None:
-        raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with --rh")
+        raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with {arg('rh')}")
     rh = float(np.mean(frf.rh))
     bw = sensor_bandwidth_of(frf, sb_setting)
     Hc = predictor.frequency_response(frf.freq, rh) * sensor_response(frf.freq, bw)

@@ -7,7 +7,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..frfdata import FRFData, read_frf
 from ..timeseries import TimeSeries, csv_header, read_timeseries
 
@@ -55,7 +55,7 @@ def mean_rh(m, where: str) -> float:
     """Mean RH [%] of a record (an FRF without RH is an error naming it)."""
     rh = m.rh
     if rh is None:
-        raise InputError(f"{where}: no relative humidity; add an rh_pct column or give the RH with --rh")
+        raise InputError(f"{where}: no relative humidity; add an rh_pct column or give the RH with {arg('rh')}")
     return float(np.mean(rh))
 
 

@@ -38,7 +38,7 @@ import numpy as np
 from .. import stats
 from ..device import Device, all_param_specs, load_device
 from ..effects import EFFECTS, ensure_registered, user_effect_files
-from ..errors import InputError, ModelError
+from ..errors import InputError, ModelError, arg
 from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
 from ..identify.parameters import switchable
@@ -320,15 +320,16 @@ def _noise_source(records) -> str:
 def fit_base(data: Data, dev: Device, base_ids, options: FitOptions, free_l, per_rh_l, n_starts: int) -> C.ModelFit:
     """Phase 2: the user's model with its free parameters fitted and scored."""
     spec = C.ModelSpec("base", base_ids, list(free_l), list(per_rh_l), parse_assignments(options.start),
-                       parse_assignments(options.bounds, ranges=True, what="bounds"))
+                       parse_assignments(options.bounds, ranges=True, what=arg("bounds")))
     for name in spec.start:
         if name not in free_l + per_rh_l:
-            raise InputError(f"start: {name} is not a free parameter")
+            raise InputError(f"{arg('start')}: {name} is not a free parameter")
     for name in free_l:
         if name not in dev.params and name not in spec.start:
             default = declared_default(name)
             if default is None:
-                raise InputError(f"device {dev.name!r} has no value for free parameter {name}; give a start value")
+                raise InputError(f"device {dev.name!r} has no value for free parameter {name}; give a start value with "
+                                 f"{arg('start')}")
             spec.start[name] = default
     base = C.fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
                        n_modes=options.n_modes, df_cache=data.df_cache)
@@ -527,25 +528,25 @@ def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, options
 
 def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list, list, list]:
     free_l = parse_names(free) if free not in (None, "") else C.default_free(base_ids)
-    per_rh_l = parse_names(per_rh, "per_rh")
+    per_rh_l = parse_names(per_rh, arg("per_rh"))
     specs = all_param_specs()
     for name in free_l + per_rh_l:
         if name not in specs:
-            raise InputError(f"free: unknown parameter {name!r}")
+            raise InputError(f"{arg('free')}: unknown parameter {name!r}")
         if not C.param_used(name, base_ids):
-            raise InputError(f"free: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
+            raise InputError(f"{arg('free')}: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
                              f"free parameters of this model by default: {', '.join(C.default_free(base_ids))}")
     if candidates in (None, "", "default"):
         cand_ids = [e for e in C.default_candidates() if e not in base_ids]
     else:
-        cand_ids = parse_names(candidates, "candidates")
+        cand_ids = parse_names(candidates, arg("candidates"))
         bad = [e for e in cand_ids if not spec_of(e)]
         if bad:
-            raise InputError(f"candidates: unknown or fixed effect(s) {', '.join(bad)} (no diagnosis spec); "
+            raise InputError(f"{arg('candidates')}: unknown or fixed effect(s) {', '.join(bad)} (no diagnosis spec); "
                              f"catalog: {', '.join(e for e in EFFECTS if spec_of(e))}")
         already = [e for e in cand_ids if e in base_ids]
         if already:
-            raise InputError(f"candidates: {', '.join(already)} already in the model (effects)")
+            raise InputError(f"{arg('candidates')}: {', '.join(already)} already in the model ({arg('effects')})")
     return free_l, per_rh_l, cand_ids
 
 
@@ -571,9 +572,9 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     opts = FitOptions.merged(options, **({"free": free} if free not in (None, "") else {}), **shared)
     n_starts = 4 if opts.n_starts is None else int(opts.n_starts)
     if n_starts < 1:
-        raise InputError("n_starts must be at least 1")
+        raise InputError(f"{arg('n_starts')} must be at least 1")
     if int(max_effects) < 1:
-        raise InputError(f"max_effects={max_effects!r} must be at least 1")
+        raise InputError(f"{arg('max_effects')}={max_effects!r} must be at least 1")
     warm_up(opts.settings)   # the workers start beside the base fit and the residual analysis
     timings: dict = {}
     dev = load_device(device)

@@ -38,7 +38,7 @@ from scipy import signal as sps
 
 from ..compare import (FRFOptions, cluster_rh, load_measurements, model_rh, sensor_bandwidth_of,
                        sensor_response, source_name)
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..frf_estimation import detect_excitation, noise_level, stepped_sine
 from ..frfdata import FRFData
 from ..metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
@@ -285,7 +285,7 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         if m.deflection is None:
             raise InputError(f"{where}: no deflection; the diagnosis needs measured deflection_m")
         if m.rh is None and rh is None:
-            raise InputError(f"{where}: no relative humidity; add an rh_pct column or give --rh")
+            raise InputError(f"{where}: no relative humidity; add an rh_pct column or give {arg('rh')}")
         rh_series = m.rh if m.rh is not None else np.full(m.n, float(rh))
         if m.n < 64:
             raise InputError(f"{where}: only {m.n} samples; a diagnosis needs a record of at least 64")

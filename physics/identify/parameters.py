@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..device import all_param_specs
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..parameters import BASE_SECTIONS
 from ..units import to_si
 from .settings import DEFAULT_DECADES
@@ -99,7 +99,7 @@ class FreeParameter:
         return float(self.to_x(self.lower)), float(self.to_x(self.upper))
 
 
-def parse_names(text: str | Sequence[str] | None, what: str = "--free") -> list[str]:
+def parse_names(text: str | Sequence[str] | None, what: str = arg("free")) -> list[str]:
     """``"kf,beta_f"`` or a list → names (duplicates refused)."""
     if text is None:
         return []
@@ -127,7 +127,7 @@ def _value_with_unit(text: str, name: str, spec_unit: str, where: str) -> float:
     return float(v)
 
 
-def parse_assignments(text: str | Mapping | None, *, ranges: bool = False, what: str = "--start") -> dict:
+def parse_assignments(text: str | Mapping | None, *, ranges: bool = False, what: str = arg("start")) -> dict:
     """``"kf=0.004,Y=0.2 GPa"`` → {name: SI value}; with ``ranges`` ``"kf=1e-4:1e-1"`` →
     {name: (lo, hi)} (a unit after the range applies to both ends).  SI when no unit."""
     if text is None:
@@ -182,7 +182,7 @@ def _make_param(name, initial, spec, bounds, rh=None) -> FreeParameter:
     elif scale == "log":
         if initial <= 0:
             raise InputError(f"{where}: start value {initial:g} {spec.unit} is not positive; it is searched "
-                             f"in log space: give a positive start value (start={{'{name}': ...}} / --start)")
+                             f"in log space: give a positive start value ({arg('start')}: {name}=...)")
         lo = max(spec.lo, initial * 10 ** -DEFAULT_DECADES)
         hi = min(spec.hi, initial * 10 ** DEFAULT_DECADES)
     else:

@@ -13,7 +13,7 @@ from ..compare import (FRFOptions, cluster_rh, estimate_record_frf, model_rh,
                       sensor_bandwidth_of, sensor_lowpass, sensor_response, source_name, thin_log,
                       valid_points)
 from ..device import Device, HumidityMap, all_param_specs, load_device
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..frequency import response_per_volt
 from ..frfdata import FRFData
 from ..model import ActuatorModel, resolve_effects
@@ -93,7 +93,7 @@ def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = No
                             estimator=info, record=m, rh_series=rh))
         elif isinstance(m, FRFData):
             if m.rh is None and default_rh is None:
-                raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with --rh")
+                raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with {arg('rh')}")
             rh = float(np.mean(m.rh)) if m.rh is not None else float(default_rh)
             ok = np.ones(m.freq.size, bool)
             if m.coherence is not None and min_coherence > 0:
@@ -155,10 +155,10 @@ class IdentificationProblem:
                 raise InputError(f"residual='time' needs time-series records; {bad[0]} is a frequency-response file")
         free, per_rh = list(free), list(per_rh)
         if not free and not per_rh:
-            raise InputError("no free parameter: name at least one (e.g. --free kf,beta_f)")
+            raise InputError(f"no free parameter: name at least one (e.g. {arg('free')} kf,beta_f)")
         both = sorted(set(free) & set(per_rh))
         if both:
-            raise InputError(f"{', '.join(both)}: a parameter is either shared (--free) or per RH (--per-rh), not both")
+            raise InputError(f"{', '.join(both)}: a parameter is either shared ({arg('free')}) or per RH ({arg('per_rh')}), not both")
         specs = all_param_specs()
         start = dict(start or {})
         bounds = dict(bounds or {})
@@ -190,7 +190,7 @@ class IdentificationProblem:
                 v0 = float(specs[name].default)
             else:
                 raise InputError(f"device {self.device.name!r} has no value for {name!r}; give a start value "
-                                 f"(start={{'{name}': ...}} / --start {name}=...)")
+                                 f"({arg('start')}: {name}=...)")
             self.params.append(_make_param(name, v0, specs[name], bounds.get(name)))
         for name in per_rh:
             for lv in self.levels:

@@ -9,7 +9,7 @@ from typing import Sequence
 
 from ..compare import load_measurements, source_name
 from ..device import Device
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..parallel import warm_up
 from ..threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
@@ -135,15 +135,15 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
         raise InputError(f"method {method!r}: expected lsq, nelder-mead or both")
     n_starts = opts.n_starts if opts.n_starts is not None else (5 if residual == "frf" else 1)
     if int(n_starts) < 1:
-        raise InputError(f"n_starts={n_starts!r} must be at least 1")
+        raise InputError(f"{arg('n_starts')}={n_starts!r} must be at least 1")
     settings = opts.settings
     warm_up(settings)   # the workers start while the measurements are read and the FRFs estimated
     ms = load_measurements(measurements, rh=opts.rh)
     targets = build_targets(ms, frf_options=opts.frf, min_coherence=opts.min_coherence, weighting=opts.weighting,
                             rh_tolerance=opts.rh_tolerance, sensor_bandwidth=opts.sensor_bandwidth, default_rh=opts.rh)
     problem = IdentificationProblem(device, effects, targets, parse_names(opts.free or ()),
-                                    parse_names(opts.per_rh, "per_rh"), start=parse_assignments(opts.start),
-                                    bounds=parse_assignments(opts.bounds, ranges=True, what="bounds"),
+                                    parse_names(opts.per_rh, arg("per_rh")), start=parse_assignments(opts.start),
+                                    bounds=parse_assignments(opts.bounds, ranges=True, what=arg("bounds")),
                                     n_modes=opts.n_modes, fit_phase=fit_phase, residual=residual, skip_s=skip_s)
     seed = opts.seed
     j0 = problem.j_err(problem.theta0)
