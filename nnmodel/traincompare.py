@@ -36,7 +36,7 @@ from physics.parallel import ParallelSettings, map_tasks, warm_up
 
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
-from .training import load_recipe, make_model
+from .recipes import load_recipe, make_model
 
 GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
 SKIP = 50   # samples at the start of each test record used only for initialisation

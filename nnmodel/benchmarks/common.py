@@ -59,7 +59,7 @@ def finish(echo, table: str, findings: Sequence[str], report_line: str) -> None:
 
 def build_model(name: str, *layers: dict | None):
     """Model ``name`` from its recipe, updated by each override dict in turn."""
-    from ..training import load_recipe
+    from ..recipes import load_recipe
     from ..models import MODELS
 
     merged: dict = {}

@@ -116,7 +116,7 @@ def _curve_point(task: dict) -> dict:
     :func:`physics.parallel.map_tasks`; the dataset is read from its path)."""
     from ..dataset import load_dataset
     from ..traincompare import SKIP, _score
-    from ..training import make_model
+    from ..recipes import make_model
 
     ds = load_dataset(task["dataset"])
     chosen = task["records"]

@@ -30,7 +30,7 @@ from physics.errors import InputError
 from physics.parallel import ParallelSettings, map_tasks
 from physics.fileio import atomic_path, sha256_file, write_json, write_text
 
-from ..data import Record
+from ..data import Experiment
 from . import common
 
 FS = 610.35
@@ -129,7 +129,7 @@ def find_data(path: str | os.PathLike | None = None) -> Path:
 
 
 def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
-    """The standard split as records: ``{"train": Record, "tests": {name: Record},
+    """The standard split as records: ``{"train": Experiment, "tests": {name: Experiment},
     "path": Path, "sha256": str}``.  ``limit`` truncates every part to its first ``limit``
     samples (smoke tests only; the figures are then not comparable)."""
     import pandas as pd
@@ -149,10 +149,10 @@ def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
     um, ym = u[MULTISINE], y[MULTISINE]
     ua, ya = u[ARROW], y[ARROW]
     parts = {
-        "train": Record(um[:N_TRAIN], ym[:N_TRAIN], None, FS, "multisine train"),
-        "multisine": Record(um[N_TRAIN:], ym[N_TRAIN:], None, FS, "multisine test"),
-        "arrow_full": Record(ua, ya, None, FS, "arrow test (full)"),
-        "arrow_no_extrap": Record(ua[:N_ARROW_NO_EXTRAP], ya[:N_ARROW_NO_EXTRAP], None, FS,
+        "train": Experiment(um[:N_TRAIN], ym[:N_TRAIN], None, FS, "multisine train"),
+        "multisine": Experiment(um[N_TRAIN:], ym[N_TRAIN:], None, FS, "multisine test"),
+        "arrow_full": Experiment(ua, ya, None, FS, "arrow test (full)"),
+        "arrow_no_extrap": Experiment(ua[:N_ARROW_NO_EXTRAP], ya[:N_ARROW_NO_EXTRAP], None, FS,
                                   "arrow test (no extrapolation)"),
     }
     if limit is not None:
