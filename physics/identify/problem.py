@@ -15,6 +15,7 @@ from ..compare import (FRFOptions, cluster_rh, estimate_record_frf, model_rh,
 from ..device import Device, HumidityMap, all_param_specs, load_device
 from ..errors import InputError, arg
 from ..frequency import response_per_volt
+from ..frf_estimation import detect_excitation
 from ..frfdata import FRFData
 from ..model import ActuatorModel, resolve_effects
 from ..timeseries import TimeSeries
@@ -41,6 +42,7 @@ class FRFTarget:
     record: TimeSeries | None = None
     rh_model: object = None          # RH given to the time solver (constant or smoothed series)
     level: float | None = None       # nominal RH of the record's humidity group [%]
+    use_frf: bool = True             # False: a step record, used in the time domain only
 
     def __post_init__(self):
         if self.level is None:
@@ -90,7 +92,7 @@ def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = No
             eps = est.rel_error[idx]
             raw.append(dict(source=where, freq=est.freq[idx], response=est.response[idx],
                             eps=eps, rh=float(np.median(rh)), coherence=est.coherence[idx], bw=bw,
-                            estimator=info, record=m, rh_series=rh))
+                            estimator=info, record=m, rh_series=rh, steps=_is_steps(m)))
         elif isinstance(m, FRFData):
             if m.rh is None and default_rh is None:
                 raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with {arg('rh')}")
@@ -109,19 +111,37 @@ def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = No
                 eps = np.sqrt(1 - g) / np.sqrt(2 * g)
             raw.append(dict(source=where, freq=m.freq[idx], response=m.response[idx], eps=eps, rh=rh,
                             coherence=None if m.coherence is None else m.coherence[idx], bw=bw,
-                            estimator={"method": "file"}, record=None, rh_series=None))
+                            estimator={"method": "file"}, record=None, rh_series=None, steps=False))
         else:
             raise InputError(f"{where}: expected a TimeSeries or FRFData, got {type(m).__name__}")
     if not raw:
         raise InputError("no measurement given")
+    if any(r["steps"] for r in raw) and not all(r["steps"] for r in raw):
+        for r in raw:     # a step's response need not end at rest within the record: its FRF leaks
+            if r["steps"]:
+                r["estimator"] = {**r["estimator"], "use": "time only: a step record beside broadband ones (the "
+                                  "FRF of a transient that does not end at rest is biased)"}
     levels = cluster_rh([r["rh"] for r in raw], rh_tolerance)
     out = []
     for r, lv in zip(raw, levels):
         rec = r["record"]
         out.append(FRFTarget(r["source"], r["freq"], r["response"], _weights(r["eps"], r["freq"].size, weighting),
                              r["rh"], r["coherence"], r["bw"], r["estimator"], rec,
-                             None if rec is None else model_rh(r["rh_series"], rec.fs, rh_tolerance), lv))
+                             None if rec is None else model_rh(r["rh_series"], rec.fs, rh_tolerance), lv,
+                             not (r["steps"] and not all(x["steps"] for x in raw))))
     return out
+
+
+def _is_steps(ts: TimeSeries) -> bool:
+    """True when a record's excitation is steps or pulses (its metadata, else its voltage)."""
+    sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
+    kind = str(sig.get("kind", ""))
+    if kind:
+        return kind in ("square", "steps")
+    try:
+        return detect_excitation(ts.voltage, ts.fs).kind == "steps"
+    except InputError:
+        return False
 
 
 # ============================================================================ the problem
@@ -264,6 +284,8 @@ class IdentificationProblem:
         """Weighted complex-log residuals, real and imaginary parts stacked."""
         parts = []
         for t, H in zip(self.targets, self.responses(theta)):
+            if not t.use_frf:
+                continue
             with np.errstate(divide="ignore", invalid="ignore"):
                 ratio = H / t.response
             if not np.all(np.isfinite(ratio)) or np.any(ratio == 0):
@@ -276,7 +298,8 @@ class IdentificationProblem:
 
     def magnitude_residuals(self, theta) -> np.ndarray:
         """|H_model| − |H_meas| [m/V] over all targets (the residuals of eq. 13)."""
-        return np.concatenate([np.abs(H) - np.abs(t.response) for t, H in zip(self.targets, self.responses(theta))])
+        return np.concatenate([np.abs(H) - np.abs(t.response) for t, H in zip(self.targets, self.responses(theta))
+                               if t.use_frf])
 
     def j_err(self, theta) -> float:
         """Thesis cost eq. 13 over every fitted frequency [m/V]."""
@@ -340,7 +363,7 @@ class IdentificationProblem:
 
     @property
     def _mag_rms(self) -> float:
-        return float(np.sqrt(np.mean(np.concatenate([np.abs(t.response) ** 2 for t in self.targets]))))
+        return float(np.sqrt(np.mean(np.concatenate([np.abs(t.response) ** 2 for t in self.targets if t.use_frf]))))
 
     # --- checks ----------------------------------------------------------------------------
     def _check_params_used(self) -> None:
