@@ -50,7 +50,7 @@ def test_lab_records_on_the_command_line(tmp_path, capsys):
     # one verdict text: terminal = diagnosis.json = page
     for line in v["text"]:
         assert line in text
-    page = (out / "report.html").read_text()
+    page = (out / "index.html").read_text()
     for line in v["text"]:
         assert html.escape(line, quote=False) in page or html.escape(line) in page, line
     assert "\\u0394" not in page and ".eap-tmp-" not in page and ".eap-tmp-" not in text

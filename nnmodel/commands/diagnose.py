@@ -16,7 +16,7 @@ NAME = "diagnose"
 FLAGS = {"n_starts": "--starts", "noise_floor": "--noise-floor-um", "fs_max": "--fs-max-Hz"}
 HELP = "diagnose a model against measurements: where it fails, which effect is missing (ranked, with statistics)"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series records (DATA_FORMAT.md): several records may differ "
-               "in signal, amplitude and RH. Writes diagnosis.json, PNGs and report.html into --out; --apply also "
+               "in signal, amplitude and RH. Writes diagnosis.json, PNGs and the page index.html into --out; --apply also "
                "writes the extended device file (fitted values, the missing effect added to its effect list).")
 
 
@@ -106,12 +106,12 @@ def run(args) -> int:
                    fs_max=args.fs_max_Hz, progress=log)
     with writing(args, inputs=protect) as tmp:
         out = write_diagnosis(res, tmp, apply=args.apply, name=args.name, provenance=provenance(inputs=protect),
-                              protect=protect, final_dir=args.out)
+                              protect=protect)
     d = Path(args.out)
     print_summary(res)
     if args.apply:
         ap = out["applied"]
         print(f"applied: {ap['path']} (use it: {ap['usage']})" if ap.get("written") else f"applied: {ap['reason']}")
-    print(f"wrote {d}/diagnosis.json, {d}/report.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
+    print(f"wrote {d}/diagnosis.json, {d}/index.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
           f"in {res.timings['total']:.1f} s")
     return 0

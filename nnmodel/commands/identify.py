@@ -15,7 +15,7 @@ NAME = "identify"
 FLAGS = {"n_starts": "--starts"}
 HELP = "identify device parameters from measurements (least squares or the thesis Nelder-Mead); writes a device YAML"
 DESCRIPTION = (HELP + ". Writes NAME.yaml (a device file with the identified values, their units and sources), "
-               "report.json, parameters.csv, Bode/correlation PNGs and report.html into --out.")
+               "report.json, parameters.csv, Bode/correlation PNGs and the page index.html into --out.")
 
 
 def add_arguments(p):
@@ -72,7 +72,7 @@ def run(args) -> int:
         mark = (" (start values kept)" if res.kept_start else " (written)") if name == res.primary else ""
         crit = (f"criterion ({f.residual_kind}) {chk['cost_start']:.4g} -> {f.cost:.4g}; "
                 if name == res.primary and chk.get("cost_start") is not None else "")
-        print(f"method {name}{mark}: {crit}J_err (eq. 13) {res.j_err_initial:.4g} -> {f.j_err:.4g} m/V, "
+        print(f"method {name}{mark}: {crit}J_err (eq. 13) {1e3 * res.j_err_initial:.4g} -> {1e3 * f.j_err:.4g} mm/V, "
               f"{f.nfev} model evaluations" + (f", {f.nit} iterations" if f.nit is not None else "")
               + f", {f.wall_s:.2f} s; {f.message}")
     if chk.get("time_rmse_start_m") is not None:
@@ -86,5 +86,5 @@ def run(args) -> int:
         print(f"  warning: {w}")
     print(f"total {res.wall_s:.2f} s, {res.n_evaluations} model evaluations "
           f"(thesis loop for these data: {res.thesis_equivalent_s() / 86400:.3g} days)")
-    print(f"wrote {d / out['device_written']}, {d}/report.html, report.json, parameters.csv")
+    print(f"wrote {d / out['device_written']}, {d}/index.html, report.json, parameters.csv")
     return 0

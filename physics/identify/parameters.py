@@ -47,9 +47,8 @@ _BASE_ROLES = {"gain": ("kf",), "stiffness": ("Y",)}
 def switchable(ids) -> tuple[str, ...]:
     """The effects of ``ids`` that can be switched off: all but the model's core (a stage
     default that carries an id, always on)."""
-    from ..effects import CHAIN
-    core = {c.id for c in CHAIN if c.id}
-    return tuple(e for e in ids if e not in core)
+    from ..effects import CORE
+    return tuple(e for e in ids if e not in CORE)
 
 
 class IdentifiabilityWarning(UserWarning):
