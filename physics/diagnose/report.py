@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..columns import band
+from ..columns import ONE, Column, band
 from ..fileio import write_json, write_text
 from ..identify import write_device
 from ..identify.parameters import switchable
@@ -261,7 +261,8 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
                     "signature": (c.signature or {}).get("score"),
                     "cannot be told apart from": ", ".join(c.indistinguishable_from)} for c in s.ranking],
                   caption=f"step {s.index}: on top of [{', '.join(s.base.effects)}] (RMS {1e6 * s.base.rmse:.4g} µm; "
-                          f"weight of staying with it {w.get('base', 0):.3g})")
+                          f"weight of staying with it {w.get('base', 0):.3g})",
+                  headers={"weight": Column("weight", ONE), "quality flags": Column("quality flags", ONE)})
         for c in s.ranking:
             rep.paragraph(f"{c.effect}: {c.explanation}")
     ne = [c for c in res.candidates if not c.evaluated]
