@@ -24,6 +24,7 @@ import numpy as np
 
 from physics.outputs import output_folder, preflight
 from physics.compare import PhysicsPredictor, model_rh
+from physics.effects import CORE
 from physics.errors import InputError
 from physics.fileio import write_json
 from physics.frequency import frequency_response
@@ -434,7 +435,7 @@ def diagnose_command(summary: dict) -> str | None:
     if not grp or not gen.get("device"):
         return None
     effects = gen.get("effects") or "default"
-    effects = effects if isinstance(effects, str) else ",".join(e for e in effects if e != "double_layer")
+    effects = effects if isinstance(effects, str) else ",".join(e for e in effects if e not in CORE)
     paths = " ".join(str(Path(summary["dataset"]) / p) for p in grp["paths"])
     return f"eap diagnose {paths} --device {gen['device']} --effects {effects or 'none'} --out runs/diagnose"
 
