@@ -38,7 +38,7 @@ from physics.parallel import ParallelSettings, map_tasks, warm_up
 
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
-from .explain import notes, test_groups
+from .explain import group_facts, notes
 from .recipes import load_recipe, make_model
 
 GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
@@ -181,7 +181,7 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
                "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
                "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
-               "best_heldout": _best(results), "test_groups": test_groups(test_entries, group_of)}
+               "best_heldout": _best(results), "test_groups": group_facts(test_entries, group_of)}
     _plots(ds, test_entries, physics_rows, trained, results, out)
     write_json(out / "compare.json", summary)
     write_csv(table_rows(results), out / "metrics.csv")
