@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.outputs import output_folder, preflight
+from physics.outputs import final_path, output_folder, preflight
 from physics.compare import PhysicsPredictor, model_rh
 from physics.effects import CORE
 from physics.errors import InputError
@@ -176,7 +176,7 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         trained[name] = model
         if progress and not local:
             _echo_result(name, res)
-    summary = {"dataset": str(ds.path), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
+    summary = {"dataset": str(final_path(ds.path)), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
                "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
                "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
@@ -219,7 +219,7 @@ def _train_one(task: dict) -> dict:
            "training": _budget(model), "history": list(getattr(model, "history_", None) or [])}
     save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True, output=(ds.output.name, ds.output.unit),
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
-                notes=f"trained by eap train-compare on {ds.path}")
+                notes=f"trained by eap train-compare on {final_path(ds.path)}")
     if task["echo"]:
         _echo_result(name, res)
     return res
