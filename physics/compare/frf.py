@@ -58,7 +58,7 @@ class FRFOptions:
         period = sig.get("period_s")
         how = f"{self.method} (as asked)" if self.method != "auto" else f"auto: the metadata say {kind}"
         if self.method == "auto" and kind not in _KNOWN_KINDS:
-            ex = detect_excitation(ts.voltage, ts.fs)
+            ex = detect_excitation(ts.voltage, ts.fs, ts.source)
             kind = {"periodic": "multisine", "steps": "square"}.get(ex.kind, ex.kind)
             if ex.kind == "periodic":
                 period, periods = ex.period_s, int(round(n / ts.fs / ex.period_s))
