@@ -306,7 +306,7 @@ class Verdict:
                 head = "Which effect: " if k == 0 else "Then, on top of it: "
                 params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
                 out.append(f"{head}{p.effect} (confidence {p.label}, weight {_w(p.weight)}) — RMS error "
-                           f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {p.delta_bic:.4g}"
+                           f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {_signed(p.delta_bic)}"
                            + (f"; {params}" if params else "") + ".")
                 if p.quality:
                     out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
@@ -360,6 +360,10 @@ class Verdict:
                              "quality_penalty_bic": QUALITY_BIC, "rel_se_flag": REL_SE_FLAG, "corr_flag": CORR_FLAG}}
 
 
+def _signed(x: float) -> str:
+    return f"{x:.4g}".replace("-", "−")
+
+
 def _w(w: float) -> str:
     return f"{w:.3f}" if w >= 1e-3 else f"{w:.2g}"
 
@@ -368,9 +372,22 @@ def _cap(s: str) -> str:
     return s[:1].upper() + s[1:] if s else s
 
 
+#: Units as a reader writes them.
+_READABLE = (("^2", "²"), ("^3", "³"), ("ohm", "Ω"), ("degC", "°C"), ("um", "µm"))
+
+
+def readable_unit(unit: str) -> str:
+    """``m^2/s`` → ``m²/s``, ``ohm`` → ``Ω`` (a dimensionless ``1`` → empty)."""
+    if unit == "1":
+        return ""
+    for a, b in _READABLE:
+        unit = unit.replace(a, b)
+    return unit
+
+
 def _fmt_param(name: str, v: dict) -> str:
     spec = all_param_specs().get(name.split("@")[0])
-    unit = spec.unit if spec and spec.unit != "1" else ""
+    unit = readable_unit(spec.unit) if spec else ""
     se = v.get("std_error")
     se_txt = f" ± {se:.2g}" if se is not None and math.isfinite(se) else ""
     return f"{name} = {v['value']:.4g}{se_txt}{(' ' + unit) if unit else ''}"
