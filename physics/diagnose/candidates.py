@@ -298,10 +298,14 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     try:
         kw = dict(start={k: v for k, v in spec.start.items() if k in spec.free},
                   bounds={k: v for k, v in spec.bounds.items() if k in spec.free}, n_modes=n_modes)
+        time_only = time_only_params(spec, device)
         if any(spec_of(e).get("describing_function") for e in spec.effects):
             problem, df_info = _df_problem(spec, device, targets, target_records, kw, df_cache)
         else:
-            problem, df_info = IdentificationProblem(device, spec.effects, targets, spec.free, spec.per_rh, **kw), None
+            frf_free = [n for n in spec.free if n not in time_only]
+            kw = {**kw, "start": {k: v for k, v in kw["start"].items() if k in frf_free},
+                  "bounds": {k: v for k, v in kw["bounds"].items() if k in frf_free}}
+            problem, df_info = IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **kw), None
         extra = []
         for e in spec.extra_starts:
             th = problem.theta0.copy()
@@ -323,8 +327,29 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     mf = ModelFit(spec, res, res.device, ActuatorModel(res.device, spec.effects, n_modes=n_modes),
                   values=dict(zip(labels, fit.theta.tolist())), std_errors=dict(zip(labels, fit.std_error.tolist())),
                   rel_std_errors=dict(zip(labels, fit.rel_std_error.tolist())), warnings=list(fit.warnings),
-                  k=len(labels), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0, df_info=df_info)
+                  k=len(labels) + len(time_only), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0,
+                  df_info=df_info)
+    for n in time_only:     # set on the time records (_refine_output_effects)
+        mf.values[n] = float(res.device.params.get(n, declared_default(n)))
     return mf
+
+
+def time_only_params(spec: ModelSpec, device: Device) -> list[str]:
+    """Free parameters of output effects that do not change the frequency response (e.g. an
+    additive drift): fitted on the time records only, never on the FRF targets."""
+    model = ActuatorModel(device, spec.effects)
+    s = 2j * np.pi * np.array([0.1, 1.0, 10.0])
+    p = dict(device.params)
+    out = []
+    for e in model.outputs:
+        for n in effect_params(e.id):
+            if n not in spec.free:
+                continue
+            v = float(p.get(n, declared_default(n) or 0.0))
+            moved = {**p, n: v * 1.5 if v else 1e-3}
+            if np.allclose(e.output_response(s, p), e.output_response(s, moved), rtol=1e-12, atol=0):
+                out.append(n)
+    return out
 
 
 def _df_problem(spec, device, targets, target_records, kw, df_cache):
@@ -468,7 +493,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     for i, prm in enumerate(mf.result.problem.params):
         if prm.name in vals and prm.rh is None:
             mf.result.fit.theta[i] = vals[prm.name]
-            mf.values[prm.label] = vals[prm.name]
+    mf.values.update(vals)
     mf.spec.notes.append("parameters of " + ", ".join(e.id for e in outs) + " refined on the time records: "
                          + ", ".join(f"{k} = {v:.4g}" for k, v in vals.items()))
 

@@ -181,7 +181,7 @@ def run_hidden_effect(effect: str | None = None, seed: int = 0, *, out=None, dev
 
 
 #: Truths outside the catalog (:func:`outside_catalog_case`), each with its randomised parameters.
-OUTSIDE = ("creep", "backlash", "twin")
+OUTSIDE = ("creep", "backlash", "twin", "lowpass", "drift")
 
 
 def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg", fs: float = 500.0,
@@ -190,10 +190,13 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
     have, made here and nowhere else: ``creep`` (tip load × (1 + r/(1+sτ)), r U(0.25, 0.4), τ
     log-uniform 10–30 s), ``backlash`` (a play of width U(60, 100) µm on the output), ``twin``
     (a viscoelastic polymer with another law than the DMA table: storage +U(8, 12) % per
-    decade, loss tangent U(0.10, 0.16)).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
+    decade, loss tangent U(0.10, 0.16)), ``lowpass`` (a first-order low-pass on the output,
+    cut-off log-uniform 12–25 Hz, that the sensor metadata do not state), ``drift`` (an
+    additive A·(1 − e^(−t/τ)) from each record's start, |A| log-uniform 8–20 µm with a random
+    sign, τ log-uniform 5–60 s).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
     sweep), ~2 mm peak, the default sensor.  Returns (records, truth parameters)."""
     from scipy.signal import lfilter
-    from .adequacy import play
+    from .forms.play import play
     if kind not in OUTSIDE:
         raise InputError(f"--kind {kind!r}: choose one of {', '.join(OUTSIDE)}")
     rng = np.random.default_rng(seed)
@@ -203,6 +206,11 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
         tp = {"creep_r": float(rng.uniform(0.25, 0.4)), "creep_tau_s": float(np.exp(rng.uniform(np.log(10), np.log(30))))}
     elif kind == "backlash":
         tp = {"play_width_m": float(rng.uniform(60e-6, 100e-6))}
+    elif kind == "lowpass":
+        tp = {"cutoff_Hz": float(np.exp(rng.uniform(np.log(12.0), np.log(25.0))))}
+    elif kind == "drift":
+        tp = {"drift_m": float(rng.choice([-1.0, 1.0]) * np.exp(rng.uniform(np.log(8e-6), np.log(20e-6)))),
+              "drift_tau_s": float(np.exp(rng.uniform(np.log(5.0), np.log(60.0))))}
     else:
         t = dev.tables["dma"]
         f = np.geomspace(0.01, 100, 25)
@@ -226,6 +234,11 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
             y = y + tp["creep_r"] * lfilter([1 - a], [1, -a], y)
         elif kind == "backlash":
             y = play(y, tp["play_width_m"])
+        elif kind == "lowpass":
+            a = math.exp(-2 * math.pi * tp["cutoff_Hz"] / fs)
+            y = lfilter([1 - a], [1, -a], y)
+        elif kind == "drift":
+            y = y - tp["drift_m"] * np.expm1(-sig.t / tp["drift_tau_s"])
         ts = TimeSeries(sig.t, v, y, rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe()},
                         source=f"{kind}_{'sweep' if k == 0 else 'pulse'}")
         out.append(SensorModel().apply(ts, seed=int(rng.integers(2 ** 31))))

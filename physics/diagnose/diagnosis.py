@@ -53,6 +53,7 @@ from ..threads import single_threaded
 from . import candidates as C
 from . import stats
 from .records import Record, frf_measurements, prepare_records
+from . import forms
 from .adequacy import ADEQUATE_RATIO, Adequacy, assess
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
@@ -520,10 +521,11 @@ def _apply_adequacy(v: Verdict, ad: Adequacy, base: C.ModelFit, noise: float) ->
     :mod:`.adequacy`): a winner that leaves more than noise only partly explains the
     failure (confidence label "low"); no winner with a base above the noise is a failure
     the catalog does not explain, described by the residual's descriptors."""
-    found = [d["text"] for d in ad.descriptors if d.get("significant")]
+    found = ad.remaining()
     described = ("; what remains looks like " + "; and ".join(found)) if found else \
-        "; no simple descriptor (slow pole, hysteresis, amplitude or RH dependence) fits what remains"
-    template = " — to model it, write an effect like examples/effects/creep.py and pass it with --effects-path"
+        f"; no simple form ({forms.titles()}) fits what remains"
+    template = (" — to model it, `eap diagnose … --draft-effects DIR` drafts effect files for what remains (or write "
+                "one like examples/effects/creep.py); pass it back with --effects-path")
     if math.isfinite(noise) and base.rmse <= NOISE_MARGIN * noise:
         v.status = "nothing to explain"
     elif v.ambiguous:
