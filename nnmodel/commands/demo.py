@@ -1,12 +1,11 @@
 """``eap demo``: ``hidden-effect`` (a catalog effect hidden in synthetic measurements, then the
-diagnosis) and ``missing-physics`` (creep, outside the catalog: the diagnosis says so and
-describes it; the shipped example effect is added; the error falls)."""
+diagnosis) and ``missing-physics`` (physics outside the catalog: the diagnosis says so and
+describes what remains; it is drafted as an effect file; diagnosed again, the error falls)."""
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-from physics.diagnose.demo import HIDDEN, run_hidden_effect
+from physics.diagnose.demo import HIDDEN, OUTSIDE, run_hidden_effect
 from physics.errors import InputError
 
 from ._common import add_output_options, check_out, provenance, writing
@@ -16,14 +15,13 @@ NAME = "demo"
 HELP = ("demonstrations: `eap demo hidden-effect` hides a physical effect in synthetic measurements and diagnoses "
         "it; `eap demo missing-physics` shows the loop with an effect outside the catalog")
 SCENARIOS = ("hidden-effect", "missing-physics")
-#: The example effect file the missing-physics demo adds (the recipe for users).
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "effects" / "creep.py"
 
 
 def add_arguments(p):
     p.add_argument("scenario", choices=SCENARIOS, help="hidden-effect: measurements with an effect the model lacks; "
-                   "missing-physics: creep, outside the catalog, then the example effect added")
-    p.add_argument("--template", default=str(EXAMPLE), help="missing-physics: the effect file added in the second step")
+                   "missing-physics: physics outside the catalog, described, drafted as an effect, diagnosed again")
+    p.add_argument("--kind", default="creep", choices=OUTSIDE,
+                   help="missing-physics: the physics outside the catalog in the records")
     p.add_argument("--effect", default="random", help=f"the hidden effect: {', '.join(HIDDEN)}, none, or random")
     p.add_argument("--seed", type=int, default=0, help="seed of the random parameters, noise and choice")
     p.add_argument("--device", default="ipmc_pt_eg", help="device the measurements are simulated from")
@@ -63,34 +61,39 @@ def run(args) -> int:
 
 
 def _missing_physics(args) -> int:
-    """Creep records → diagnosis (not explained, described) → + the example effect → diagnosis."""
+    """Records with physics outside the catalog → diagnosis (not explained; what remains) →
+    drafted effect files → diagnosis with the drafts → the error before and after."""
     from physics.diagnose.demo import outside_catalog_case
     from physics.diagnose.diagnosis import diagnose
     from physics.diagnose.report import write_diagnosis
-    from physics.effects import effect_classes_in_file, register, unregister
+    from physics.effects import load_effects_file, unregister
+    from .diagnose import write_draft_effects
     check_out(args)
-    ms, tp = outside_catalog_case("creep", args.seed, device=args.device, fs=args.fs_Hz, duration=args.duration_s)
-    print(f"truth (outside the catalog): tip load × (1 + r/(1+sτ)), r = {tp['creep_r']:.3g}, "
-          f"τ = {tp['creep_tau_s']:.3g} s; user's model: {args.device} [double_layer]")
+    ms, tp = outside_catalog_case(args.kind, args.seed, device=args.device, fs=args.fs_Hz, duration=args.duration_s)
+    print(f"truth (outside the catalog): {args.kind}, " + ", ".join(f"{k} = {v:.4g}" for k, v in tp.items())
+          + f"; user's model: {args.device} [double_layer]")
     before = diagnose(ms, args.device, "none")
     print("\n1. the catalog alone:")
     print_summary(before)
-    classes = effect_classes_in_file(args.template)
-    ids = [register(c).id for c in classes]
-    try:
-        after = diagnose(ms, args.device, "none")
-    finally:
-        for i in ids:
-            unregister(i)
-    print(f"\n2. with {args.template} added (--effects-path):")
-    print_summary(after)
     with writing(args) as tmp:
+        print("\n2. what remains, drafted as effect files:")
+        outcome = write_draft_effects(before, tmp / "drafts", lambda dev, eff, free, cands: diagnose(
+            ms, dev, eff, free, candidates=cands, force=True, check_support=False), shown=f"{args.out}/drafts")
+        ids = [i for d in outcome.kept for i in load_effects_file(tmp / "drafts" / d.file_name)]
+        try:
+            after = diagnose(ms, args.device, "none")
+        finally:
+            for i in ids:
+                unregister(i)
+        print(f"\n3. the diagnosis again, with {', '.join(d.file_name for d in outcome.kept) or 'no draft'} "
+              "(--effects-path):")
+        print_summary(after)
         write_diagnosis(before, tmp / "before", provenance={**provenance(), "truth": tp})
         write_diagnosis(after, tmp / "after", provenance={**provenance(), "truth": tp})
     w = after.winner
+    final = w.fit.rmse if w else after.base.rmse
     print(f"\nloop: before {before.verdict.status} (RMS {1e6 * before.base.rmse:.3g} µm); after adding "
-          f"{', '.join(ids)}: {after.verdict.status}" + (f", RMS {1e6 * w.fit.rmse:.3g} µm "
-                                                          f"({w.fit.rmse / after.noise_floor:.2f}× the noise floor)"
-                                                          if w else ""))
-    print(f"reports: {args.out}/before/report.html, {args.out}/after/report.html")
+          f"{', '.join(ids) or 'nothing'}: {after.verdict.status}, RMS {1e6 * final:.3g} µm "
+          f"({final / after.noise_floor:.2f}× the noise floor {1e6 * after.noise_floor:.3g} µm)")
+    print(f"drafts: {args.out}/drafts/; reports: {args.out}/before/report.html, {args.out}/after/report.html")
     return 0

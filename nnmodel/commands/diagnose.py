@@ -128,9 +128,10 @@ def run(args) -> int:
     return 0
 
 
-def write_draft_effects(res, out, rediagnose, *, overwrite=False, inputs=()):
+def write_draft_effects(res, out, rediagnose, *, overwrite=False, inputs=(), shown=None):
     """Draft what remains after ``res`` (:func:`physics.diagnose.draft.draft_effects`), print
-    the outcome and write the kept drafts into ``out``; returns the outcome."""
+    the outcome and write the kept drafts into ``out`` (named ``shown``, the final folder, when
+    ``out`` is a temporary one); returns the outcome."""
     from physics.diagnose.draft import draft_effects, write_drafts
     outcome = draft_effects(res, rediagnose)
     for line in outcome.lines():
@@ -140,7 +141,8 @@ def write_draft_effects(res, out, rediagnose, *, overwrite=False, inputs=()):
                                                        else "no draft lowers the error") + ")")
         return outcome
     checks = write_drafts(outcome.kept, out, overwrite=overwrite, inputs=inputs)
+    shown = Path(shown or out)
     for name, problems in checks.items():
-        print(f"draft: {Path(out) / name}: contract check " + ("passed" if not problems else "FAILED: " + "; ".join(problems)))
-    print(f"draft: try it with --effects-path {Path(out) / outcome.kept[0].file_name}")
+        print(f"draft: {shown / name}: contract check " + ("passed" if not problems else "FAILED: " + "; ".join(problems)))
+    print(f"draft: try it with --effects-path {shown / outcome.kept[0].file_name}")
     return outcome

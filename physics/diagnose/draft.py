@@ -102,7 +102,7 @@ class EffectDraft:
 
     def source(self) -> str:
         """The effect file's text."""
-        doc = "\n\n".join(textwrap.fill(par, 96) for par in (
+        doc = "\n\n".join(textwrap.fill(par, 96, break_on_hyphens=False, break_long_words=False) for par in (
             f"{self.summary[0].upper()}{self.summary[1:]} — drafted by `eap diagnose --draft-effects` from what "
             "remained after the best model.",
             f"What was seen: {self.seen}",

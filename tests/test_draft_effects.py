@@ -1,0 +1,155 @@
+"""Residual forms and drafted effects (issue 24 part 6): each form recovers its own
+parameters from a residual made with known values and stays quiet on noise; a draft is a
+valid effect file (contract checks) written atomically; the loop on lab-like records of a
+drifting sensor: described, drafted, passed back, the verdict and the error."""
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physics.diagnose import forms as F
+from physics.diagnose.draft import check_draft, write_drafts
+from physics.effects import EFFECTS, load_effects_file, unregister
+from physics.errors import InputError
+
+
+@dataclass
+class _Rec:
+    y_d: np.ndarray
+    fs_d: float = 100.0
+    band: tuple = (0.1, 20.0)
+    kind: str = "broadband"
+    amplitude_level: float = 1.0
+    rh: float = 60.0
+    source: str = "r"
+    steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+
+def _residual(make_resid, seed=0, noise=1e-6):
+    """Two records (a sweep-like and a pulse-like prediction, 60 s at 100 Hz), the residual
+    ``make_resid(pred, t, fs)`` + white noise."""
+    rng = np.random.default_rng(seed)
+    fs, t = 100.0, np.arange(6000) / 100.0
+    sweep = 1e-3 * np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
+    pulse = 1e-3 * ((t > 5) & (t < 25)).astype(float)
+    recs, resid, preds = [], [], []
+    for p in (sweep, pulse):
+        e = make_resid(p, t, fs) + rng.normal(0, noise, t.size)
+        recs.append(_Rec(p + e))
+        resid.append(e - e.mean())
+        preds.append(p)
+    n_eff = [e.size / 1.0 for e in resid]
+    return F.Residual(recs, resid, preds, n_eff)
+
+
+def _fit(form_id, res):
+    return next(f for f in F.FORMS if f.id == form_id)().fit(res)
+
+
+def test_each_form_recovers_what_made_the_residual():
+    tau = 12.0
+    ff = _fit("slow_pole", _residual(lambda p, t, fs: 0.3 * F.lowpass(p, tau, fs)))
+    assert ff.significant and ff.params["tau_s"] == pytest.approx(tau, rel=0.25) \
+        and ff.params["gain"] == pytest.approx(0.3, rel=0.2)
+    fc = 8.0
+    ff = _fit("output_lowpass", _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * fc), fs) - p))
+    assert ff.significant and ff.params["cutoff_Hz"] == pytest.approx(fc, rel=0.2) \
+        and ff.params["gain"] == pytest.approx(1.0, rel=0.1)
+    ff = _fit("drift", _residual(lambda p, t, fs: -15e-6 * -np.expm1(-t / 6.0)))
+    assert ff.significant and ff.params["amplitude_m"] == pytest.approx(-15e-6, rel=0.2) \
+        and ff.params["tau_s"] == pytest.approx(6.0, rel=0.35)
+
+
+def test_forms_stay_quiet_on_white_noise_and_describe_selects_nothing():
+    res = _residual(lambda p, t, fs: np.zeros_like(p), noise=2e-6)
+    for f in F.FORMS:
+        ff = f().fit(res)
+        assert ff is None or not ff.significant, f.id
+
+
+def test_forward_selection_takes_the_form_that_made_it_first():
+    class _Fit:
+        pass
+    res = _residual(lambda p, t, fs: 0.3 * F.lowpass(p, 12.0, fs) + 8e-6 * -np.expm1(-t / 5.0))
+    fit = _Fit()
+    fit.resid_d, fit.pred_d = res.resid, res.preds
+    chain = F.selected(F.describe(fit, res.records))
+    assert [c.form for c in chain][:2] == ["slow_pole", "drift"]
+
+
+def test_a_draft_is_a_valid_effect_file_written_atomically(tmp_path):
+    res = _residual(lambda p, t, fs: 0.3 * F.lowpass(p, 12.0, fs))
+    items = []
+    for form_id in ("slow_pole", "output_lowpass", "drift"):
+        ff = _fit(form_id, res)
+        d = next(f for f in F.FORMS if f.id == form_id)().draft(ff, res)
+        d.seen = ff.full_text
+        items.append(d)
+    out = tmp_path / "drafts"
+    report = write_drafts(items, out)
+    assert all(not p for p in report.values()), report
+    assert sorted(p.name for p in out.glob("*.py")) == sorted(d.file_name for d in items)
+    text = " ".join((out / "drafted_slow_pole.py").read_text().split())
+    assert "What was seen: a slow pole" in text and "time constant τ ≈ " in text
+    ids = [i for f in sorted(out.glob("*.py")) for i in load_effects_file(f)]
+    try:
+        spec = EFFECTS["drafted_slow_pole"].diagnosis
+        assert spec["off"] == {"slow_pole_r": 0.0} and spec["nested"]
+        tau = next(p for p in EFFECTS["drafted_slow_pole"].params if p.name == "slow_pole_tau").default
+        assert tau == pytest.approx(_fit("slow_pole", res).params["tau_s"], rel=1e-3)
+    finally:
+        for i in ids:
+            unregister(i)
+    # never over a folder eap did not write
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match="--draft-effects"):
+        write_drafts(items, mine, overwrite=True)
+    assert (mine / "notes.txt").read_text() == "mine"
+
+
+def test_a_broken_draft_fails_the_contract_check(tmp_path):
+    bad = tmp_path / "bad.py"
+    bad.write_text(
+        "from physics.effects import OutputEffect\nfrom physics.parameters import ParamSpec\n\n"
+        "class Bad(OutputEffect):\n    id = 'bad_draft'\n"
+        "    params = (ParamSpec('bd_g', '1', 0.0, 2.0, 'g', optional=True, default=0.5),)\n"
+        "    diagnosis = {'free': ('bd_g',), 'bounds': {'bd_g': (0.0, 2.0)}, 'starts': [{'bd_g': 0.5}],\n"
+        "                 'nested': True, 'off': {'bd_g': 0.0}, 'excitation': 'x', 'reveal': {},\n"
+        "                 'signature': [('hf_phase_lag', 1.0)]}\n\n"
+        "    def output_tf(self, p):\n        return [1.0 + 0.1], [1.0]   # ignores its off value\n")
+    assert check_draft(bad)
+    assert "bad_draft" not in EFFECTS
+
+
+def test_lab_like_drift_loop_from_the_command_line(tmp_path, capsys):
+    """A drifting reading (outside the catalog) in mm columns without excitation metadata:
+    described, drafted, passed back; the draft becomes the verdict and the error falls by
+    at least half its distance to the noise floor."""
+    import json
+    from nnmodel.cli import main
+    from physics.diagnose.demo import outside_catalog_case
+    from physics.timeseries import write_timeseries
+    ms, tp = outside_catalog_case("drift", seed=1, fs=200.0, duration=40.0)
+    files = []
+    for m in ms:
+        m.meta.pop("signal", None)
+        files.append(str(write_timeseries(m, tmp_path / f"{m.source}.csv", units={"deflection": "mm"})))
+    drafts = tmp_path / "drafts"
+    assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx"), "--quiet",
+                 "--draft-effects", str(drafts)]) == 0
+    out = capsys.readouterr().out
+    assert "drafted_drift.py: contract check passed" in out
+    before = json.loads((tmp_path / "dx" / "diagnosis.json").read_text())
+    assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx2"), "--quiet",
+                 "--effects-path", str(drafts / "drafted_drift.py")]) == 0
+    after = json.loads((tmp_path / "dx2" / "diagnosis.json").read_text())
+    unregister("drafted_drift")
+    assert after["verdict"]["missing_effect"] == "drafted_drift"
+    e0, e1, nf = before["base"]["rmse"], after["ranking"][0]["rmse_after"], after["noise_floor_m"]
+    assert e1 <= e0 - 0.5 * (e0 - nf), (e0, e1, nf)
+    vals = after["ranking"][0]["effect_parameters"]
+    assert vals["drift_amplitude"] == pytest.approx(tp["drift_m"], rel=0.25)
