@@ -153,3 +153,22 @@ def test_lab_like_drift_loop_from_the_command_line(tmp_path, capsys):
     assert e1 <= e0 - 0.5 * (e0 - nf), (e0, e1, nf)
     vals = after["ranking"][0]["effect_parameters"]
     assert vals["drift_amplitude"] == pytest.approx(tp["drift_m"], rel=0.25)
+
+
+def test_the_contract_recovers_a_drift_on_a_time_record(tmp_path):
+    """A drafted drift acts on the time records only (its frequency response is 1): the
+    contract recovers its parameters on a time record and compares the solvers on the
+    response to the input; a drift parameter that does nothing fails the identify check."""
+    from physics.effects import check_effect, effect_classes_in_file
+    res = _residual(lambda p, t, fs: 12e-6 * -np.expm1(-t / 60.0))
+    ff = _fit("drift", res)
+    d = F.form_of("drift")().draft(ff, res)
+    good = tmp_path / d.file_name
+    good.write_text(d.source())
+    report = check_effect(effect_classes_in_file(good)[0])
+    assert report.ok and "on a time record" in report["identify"].detail, str(report)
+    dead = tmp_path / "dead.py"
+    dead.write_text(d.source().replace('"drift_tau")', '"drift_tau") * 0 + 5.0').replace(
+        "'drafted_drift'", "'dead_drift'"))
+    report = check_effect(effect_classes_in_file(dead)[0])
+    assert report["identify"].status == "fail" and "drift_tau" in report["identify"].detail, str(report)
