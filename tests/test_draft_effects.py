@@ -18,6 +18,7 @@ from physics.errors import InputError
 @dataclass
 class _Rec:
     y_d: np.ndarray
+    v_d: np.ndarray
     fs_d: float = 100.0
     band: tuple = (0.1, 20.0)
     kind: str = "broadband"
@@ -27,21 +28,29 @@ class _Rec:
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
 
+GAIN = 1e-3      # m/V of the stand-in linear model: prediction = GAIN × voltage
+
+
+def _respond(k, u):
+    return GAIN * u
+
+
 def _residual(make_resid, seed=0, noise=1e-6):
-    """Two records (a sweep-like and a pulse-like prediction, 60 s at 100 Hz), the residual
-    ``make_resid(pred, t, fs)`` + white noise."""
+    """Two records (a sweep and a pulse of 1 V, 60 s at 100 Hz, the prediction GAIN × the
+    voltage), the residual ``make_resid(pred, t, fs)`` + white noise."""
     rng = np.random.default_rng(seed)
     fs, t = 100.0, np.arange(6000) / 100.0
-    sweep = 1e-3 * np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
-    pulse = 1e-3 * ((t > 5) & (t < 25)).astype(float)
+    sweep = np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
+    pulse = ((t > 5) & (t < 25)).astype(float)
     recs, resid, preds = [], [], []
-    for p in (sweep, pulse):
+    for v in (sweep, pulse):
+        p = GAIN * v
         e = make_resid(p, t, fs) + rng.normal(0, noise, t.size)
-        recs.append(_Rec(p + e))
+        recs.append(_Rec(p + e, v))
         resid.append(e - e.mean())
         preds.append(p)
     n_eff = [e.size / 1.0 for e in resid]
-    return F.Residual(recs, resid, preds, n_eff)
+    return F.Residual(recs, resid, preds, n_eff, _respond)
 
 
 def _fit(form_id, res):
@@ -60,6 +69,16 @@ def test_each_form_recovers_what_made_the_residual():
     ff = _fit("drift", _residual(lambda p, t, fs: -15e-6 * -np.expm1(-t / 6.0)))
     assert ff.significant and ff.params["amplitude_m"] == pytest.approx(-15e-6, rel=0.2) \
         and ff.params["tau_s"] == pytest.approx(6.0, rel=0.35)
+
+
+def test_input_side_forms_recover_a_dead_zone_and_a_saturation():
+    """Through the model H (here a gain): a dead-zone of ±0.15 V and a clip at ±0.6 V of a 1 V drive."""
+    ff = _fit("input_deadzone", _residual(lambda p, t, fs: -GAIN * np.clip(p / GAIN, -0.15, 0.15)))
+    assert ff.significant and ff.params["level_V"] == pytest.approx(0.15, rel=0.15) \
+        and ff.params["gain"] == pytest.approx(1.0, rel=0.15)
+    ff = _fit("input_saturation", _residual(lambda p, t, fs: GAIN * (np.clip(p / GAIN, -0.6, 0.6) - p / GAIN)))
+    assert ff.significant and ff.params["level_V"] == pytest.approx(0.6, rel=0.1)
+    assert F.form_of("input_deadzone")().draft(ff, None) is None          # described, not drafted
 
 
 def test_forms_stay_quiet_on_white_noise_and_describe_selects_nothing():
@@ -125,6 +144,71 @@ def test_a_broken_draft_fails_the_contract_check(tmp_path):
     assert "bad_draft" not in EFFECTS
 
 
+class _Stub:
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def _fit_stub(rmse, values=None, resid=None, preds=None):
+    return _Stub(rmse=rmse, values=values or {}, device=f"device fitted to {rmse}", effects=["double_layer"],
+                 spec=_Stub(label="base", free=["kf", "Y", "beta_f"]), resid_d=resid, pred_d=preds)
+
+
+def _diagnosis_stub(winner, res, rmse_final):
+    """A diagnosis whose final model (base or base + ``winner``) leaves the residual ``res``."""
+    fit = _fit_stub(rmse_final, resid=res.resid, preds=res.preds)
+    if winner:
+        fit.spec = _Stub(label=f"+{winner}", free=["kf", "Y", "beta_f"])
+    forms = F.describe(fit, res.records)
+    return _Stub(winner=_Stub(effect=winner, fit=fit) if winner else None, base=_fit_stub(90e-6, resid=res.resid),
+                 adequacy=_Stub(adequate=False, forms=forms), records=res.records)
+
+
+def _rediagnose(table, calls):
+    """rediagnose(device, effects, free, candidates) answering from ``table``:
+    {effects on top (tuple): (base RMS, {candidate: (RMS, ΔBIC, values)})}."""
+    def run(device, effects, free, candidates):
+        calls.append((tuple(effects), tuple(sorted(candidates))))
+        base_rmse, rows = table[tuple(effects)]
+        cands = [_Stub(effect=c, evaluated=True, reason="", fit=_fit_stub(rows[c][0], rows[c][2]),
+                       comparison=_Stub(delta_bic=rows[c][1])) for c in candidates]
+        return _Stub(base=_Stub(rmse=base_rmse), candidates=cands)
+    return run
+
+
+def test_drafts_compete_with_the_catalog_pick_then_go_forward():
+    """The catalog's pick (here a mimic) competes with the drafts from the base: a draft that
+    fits better takes its place and keeps its jointly fitted values; what does not lower the
+    error is rejected with the reason; a catalog pick that wins stays first, the drafts on top."""
+    from physics.diagnose.draft import draft_effects
+    pick, lp, sp, dr = "electrode_resistance", "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift"
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+    on_base = ("double_layer",)
+    calls = []
+    table = {on_base: (90e-6, {pick: (5e-6, -515.0, {"Rs": 40.0}), lp: (4e-6, -520.0, {"lowpass_tau": 0.0265}),
+                               sp: (80e-6, -20.0, {}), dr: (95e-6, 3.0, {})}),
+             on_base + (lp,): (4e-6, {pick: (3.95e-6, -2.0, {}), sp: (3.9e-6, -1.0, {}), dr: (4.2e-6, 6.0, {})})}
+    out = draft_effects(_diagnosis_stub(pick, res, 5e-6), _rediagnose(table, calls))
+    assert calls[0] == (on_base, tuple(sorted([pick, lp, sp, dr])))           # the pick competes from the base
+    assert [d.effect_id for d in out.kept] == [lp] and out.chain == [(lp, 4e-6)]
+    assert out.kept[0].params[0].default == pytest.approx(0.0265)
+    assert pick in out.kept[0].evidence["text"] and "fits almost as well" in out.kept[0].evidence["text"]
+    why = dict((d.effect_id, w) for d, w in out.rejected)
+    assert set(why) == {sp, dr} and "raises the RMS error from 4 to 4.2 µm" in why[dr]
+    # the catalog's pick wins: it goes first and the drafts are tried on top of it
+    calls.clear()
+    table = {on_base: (90e-6, {pick: (4e-6, -520.0, {"Rs": 40.0}), lp: (6e-6, -400.0, {}), sp: (80e-6, -20.0, {}),
+                               dr: (95e-6, 3.0, {})}),
+             on_base + (pick,): (4e-6, {lp: (3.5e-6, -30.0, {"lowpass_tau": 0.02}), sp: (3.9e-6, -1.0, {}),
+                                        dr: (4.2e-6, 6.0, {})}),
+             on_base + (pick, lp): (3.5e-6, {sp: (3.45e-6, -1.0, {}), dr: (3.6e-6, 6.0, {})})}
+    out = draft_effects(_diagnosis_stub(pick, res, 4e-6), _rediagnose(table, calls))
+    assert [c[0] for c in calls] == [on_base, on_base + (pick,), on_base + (pick, lp)]
+    assert out.chain == [(pick, 4e-6), (lp, 3.5e-6)] and [d.effect_id for d in out.kept] == [lp]
+    assert "the diagnosis's pick" in out.notes[0] and out.rmse_after == 3.5e-6
+
+
+@pytest.mark.slow
 def test_lab_like_drift_loop_from_the_command_line(tmp_path, capsys):
     """A drifting reading (outside the catalog) in mm columns without excitation metadata:
     described, drafted, passed back; the draft becomes the verdict and the error falls by
@@ -172,3 +256,35 @@ def test_the_contract_recovers_a_drift_on_a_time_record(tmp_path):
         "'drafted_drift'", "'dead_drift'"))
     report = check_effect(effect_classes_in_file(dead)[0])
     assert report["identify"].status == "fail" and "drift_tau" in report["identify"].detail, str(report)
+
+
+@pytest.mark.slow
+def test_lab_like_sensor_lowpass_loop_beats_the_catalog_mimic(tmp_path, capsys):
+    """A sensor slower than stated (a low-pass outside the catalog) in lab-like records: the
+    catalog's electrode resistance mimics it; the drafted low-pass competes with it, is kept,
+    and passed back it becomes the verdict, with its cut-off within 5 % and the error down by at
+    least half its distance to the true model's."""
+    import json
+    from nnmodel.cli import main
+    from physics.diagnose.demo import outside_catalog_case
+    from physics.timeseries import write_timeseries
+    ms, tp, clean = outside_catalog_case("lowpass", seed=0, fs=200.0, duration=60.0, lab=True, clean=True)
+    files = [str(write_timeseries(m, tmp_path / f"{m.source}.csv", units={"deflection": "mm"})) for m in ms]
+    true = math.sqrt(sum(float(np.sum((m.deflection - y - np.mean(m.deflection - y)) ** 2)) for m, y in zip(ms, clean))
+                     / sum(m.deflection.size for m in ms))
+    drafts = tmp_path / "drafts"
+    assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx"), "--quiet",
+                 "--draft-effects", str(drafts)]) == 0
+    assert "drafted_output_lowpass.py: contract check passed" in capsys.readouterr().out
+    before = json.loads((tmp_path / "dx" / "diagnosis.json").read_text())
+    try:
+        assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx2"), "--quiet",
+                     "--effects-path", str(drafts / "drafted_output_lowpass.py")]) == 0
+    finally:
+        unregister("drafted_output_lowpass")
+    after = json.loads((tmp_path / "dx2" / "diagnosis.json").read_text())
+    assert after["verdict"]["missing_effect"] == "drafted_output_lowpass"
+    e0, e1 = before["base"]["rmse"], after["ranking"][0]["rmse_after"]
+    assert e1 <= e0 - 0.5 * (e0 - true), (e0, e1, true)
+    tau = after["ranking"][0]["effect_parameters"]["lowpass_tau"]
+    assert 1 / (2 * math.pi * tau) == pytest.approx(tp["cutoff_Hz"], rel=0.05)

@@ -28,8 +28,12 @@ def add_arguments(p):
     p.add_argument("--design", choices=["auto", "rich"], default="auto",
                    help="auto: the excitation that exposes the hidden effect; rich: sweeps at 3 RH levels and "
                         "2 amplitudes plus a square pulse, so every candidate is evaluated")
+    p.add_argument("--records", choices=["lab", "simulator"], default="lab",
+                   help="missing-physics: the records as a lab exports them (tip in mm with 3 µm noise, an offset "
+                        "and a drift, no excitation or sensor metadata) or as the simulator writes them")
     p.add_argument("--duration-s", type=float, default=60.0, help="length of each record [s]")
-    p.add_argument("--fs-Hz", type=float, default=500.0, help="sampling rate of the records [Hz]")
+    p.add_argument("--fs-Hz", type=float, default=None,
+                   help="sampling rate of the records [Hz] (default: 500; missing-physics 200)")
     add_output_options(p, "runs/demo_hidden_effect", "folder for the diagnosis report")
 
 
@@ -43,12 +47,12 @@ def run(args) -> int:
     check_out(args)
     with writing(args) as tmp:
         case, res = run_hidden_effect(eff, args.seed, out=tmp, device=args.device, design=args.design,
-                                      fs=args.fs_Hz, duration=args.duration_s, progress=log)
+                                      fs=args.fs_Hz or 500.0, duration=args.duration_s, progress=log)
     hidden = case.hidden
     tp = ", ".join(f"{k}={v:.4g}" for k, v in case.truth_params.items())
     print(f"hidden effect: {hidden or 'none'} (seed {args.seed}); truth parameters: {tp}")
     print(f"user's model: {case.device} [{', '.join(case.base_effects)}]; records: "
-          f"{', '.join(m.source for m in case.measurements)} ({args.duration_s:g} s at {args.fs_Hz:g} Hz, "
+          f"{', '.join(m.source for m in case.measurements)} ({args.duration_s:g} s at {args.fs_Hz or 500.0:g} Hz, "
           f"sensor noise floor {1e6 * case.noise_floor:.3g} µm)")
     print_summary(res)
     found = res.verdict.missing_effect
@@ -62,38 +66,38 @@ def run(args) -> int:
 
 def _missing_physics(args) -> int:
     """Records with physics outside the catalog → diagnosis (not explained; what remains) →
-    drafted effect files → diagnosis with the drafts → the error before and after."""
-    from physics.diagnose.demo import outside_catalog_case
-    from physics.diagnose.diagnosis import diagnose
+    drafted effect files → diagnosis with the drafts → the error before and after
+    (:func:`physics.diagnose.demo.outside_loop`)."""
+    from physics.diagnose.demo import outside_loop, outside_truth_text
     from physics.diagnose.report import write_diagnosis
-    from physics.effects import load_effects_file, unregister
-    from .diagnose import write_draft_effects
     check_out(args)
-    ms, tp = outside_catalog_case(args.kind, args.seed, device=args.device, fs=args.fs_Hz, duration=args.duration_s)
-    print(f"truth (outside the catalog): {args.kind}, " + ", ".join(f"{k} = {v:.4g}" for k, v in tp.items())
-          + f"; user's model: {args.device} [double_layer]")
-    before = diagnose(ms, args.device, "none")
-    print("\n1. the catalog alone:")
-    print_summary(before)
+    lab = args.records == "lab"
     with writing(args) as tmp:
+        lp = outside_loop(args.kind, args.seed, tmp, device=args.device, fs=args.fs_Hz or 200.0,
+                          duration=args.duration_s, lab=lab)
+        print(f"truth (outside the catalog): {outside_truth_text(args.kind, lp.truth)}; records: "
+              f"{', '.join(f'{args.out}/records/{f.name}' for f in lp.files)}"
+              + (" (as a lab exports them: tip in mm, no excitation or sensor metadata)" if lab else "")
+              + f"; user's model: {args.device} with effects 'none' (the bare double layer)")
+        print("\n1. the catalog alone:")
+        print_summary(lp.before)
         print("\n2. what remains, drafted as effect files:")
-        outcome = write_draft_effects(before, tmp / "drafts", lambda dev, eff, free, cands: diagnose(
-            ms, dev, eff, free, candidates=cands, force=True, check_support=False), shown=f"{args.out}/drafts")
-        ids = [i for d in outcome.kept for i in load_effects_file(tmp / "drafts" / d.file_name)]
-        try:
-            after = diagnose(ms, args.device, "none")
-        finally:
-            for i in ids:
-                unregister(i)
-        print(f"\n3. the diagnosis again, with {', '.join(d.file_name for d in outcome.kept) or 'no draft'} "
-              "(--effects-path):")
-        print_summary(after)
-        write_diagnosis(before, tmp / "before", provenance={**provenance(), "truth": tp})
-        write_diagnosis(after, tmp / "after", provenance={**provenance(), "truth": tp})
+        for line in lp.outcome.lines():
+            print(f"draft: {line}")
+        for name, problems in lp.checks.items():
+            print(f"draft: {args.out}/drafts/{name}: contract check " + ("; ".join(problems) or "passed"))
+        write_diagnosis(lp.before, tmp / "before", provenance={**provenance(), "truth": lp.truth})
+        if lp.after is not None:
+            print(f"\n3. the diagnosis again, with {', '.join(d.file_name for d in lp.outcome.kept)} (--effects-path):")
+            print_summary(lp.after)
+            write_diagnosis(lp.after, tmp / "after", provenance={**provenance(), "truth": lp.truth})
+    before, after = lp.before, lp.after or lp.before
     w = after.winner
     final = w.fit.rmse if w else after.base.rmse
-    print(f"\nloop: before {before.verdict.status} (RMS {1e6 * before.base.rmse:.3g} µm); after adding "
-          f"{', '.join(ids) or 'nothing'}: {after.verdict.status}, RMS {1e6 * final:.3g} µm "
-          f"({final / after.noise_floor:.2f}× the noise floor {1e6 * after.noise_floor:.3g} µm)")
-    print(f"drafts: {args.out}/drafts/; reports: {args.out}/before/report.html, {args.out}/after/report.html")
+    kept = ", ".join(d.effect_id for d in lp.outcome.kept)
+    print(f"\nloop: before {before.verdict.status} (RMS {1e6 * before.base.rmse:.3g} µm); "
+          + (f"after adding {kept}: {after.verdict.status}, " if kept else "no draft kept: ")
+          + f"RMS {1e6 * final:.3g} µm (the true model: {1e6 * lp.true_error:.3g} µm)")
+    print(f"records: {args.out}/records/; drafts: {args.out}/drafts/; reports: {args.out}/before/report.html"
+          + (f", {args.out}/after/report.html" if lp.after is not None else ""))
     return 0

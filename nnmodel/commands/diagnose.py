@@ -120,7 +120,7 @@ def run(args) -> int:
     print(f"wrote {d}/diagnosis.json, {d}/report.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
           f"in {res.timings['total']:.1f} s")
     if args.draft_effects is not None:
-        write_draft_effects(res, args.draft_effects, lambda dev, eff, free, cands: diagnose(
+        _write_draft_effects(res, args.draft_effects, lambda dev, eff, free, cands: diagnose(
             ms, dev, eff, free, per_rh=args.per_rh, candidates=cands, force=True, check_support=False, rh=args.rh,
             frf_options=frf_options(args), sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
             rh_tolerance=args.rh_tolerance, noise_floor=res.noise_floor, fs_max=args.fs_max_Hz, n_starts=args.starts,
@@ -128,10 +128,9 @@ def run(args) -> int:
     return 0
 
 
-def write_draft_effects(res, out, rediagnose, *, overwrite=False, inputs=(), shown=None):
+def _write_draft_effects(res, out, rediagnose, *, overwrite=False, inputs=()):
     """Draft what remains after ``res`` (:func:`physics.diagnose.draft.draft_effects`), print
-    the outcome and write the kept drafts into ``out`` (named ``shown``, the final folder, when
-    ``out`` is a temporary one); returns the outcome."""
+    the outcome and write the kept drafts into the new folder ``out``; returns the outcome."""
     from physics.diagnose.draft import draft_effects, write_drafts
     outcome = draft_effects(res, rediagnose)
     for line in outcome.lines():
@@ -141,8 +140,7 @@ def write_draft_effects(res, out, rediagnose, *, overwrite=False, inputs=(), sho
                                                        else "no draft lowers the error") + ")")
         return outcome
     checks = write_drafts(outcome.kept, out, overwrite=overwrite, inputs=inputs)
-    shown = Path(shown or out)
     for name, problems in checks.items():
-        print(f"draft: {shown / name}: contract check " + ("passed" if not problems else "FAILED: " + "; ".join(problems)))
-    print(f"draft: try it with --effects-path {shown / outcome.kept[0].file_name}")
+        print(f"draft: {Path(out) / name}: contract check " + ("passed" if not problems else "FAILED: " + "; ".join(problems)))
+    print(f"draft: try it with --effects-path {Path(out) / outcome.kept[0].file_name}")
     return outcome

@@ -93,7 +93,7 @@ def run(args) -> int:
 
 
 def _write_report(d: Path, args, t0: float) -> dict:
-    from nnmodel.story import dataset_facts, loop_stage, write_page
+    from nnmodel.story import dataset_facts, loop_stage, outside_stage, write_page
     from nnmodel.traincompare import table_rows
     report = {"physics": _physics_stage(d)}
     if not args.physics_only:
@@ -102,6 +102,7 @@ def _write_report(d: Path, args, t0: float) -> dict:
         report["neural"].update({"table": table_rows(summary["models"]), "report": "compare/report.html",
                                  "dataset": dataset_facts(d / "dataset")})
     report["loop"] = loop_stage(d)
+    report["outside"] = outside_stage(d)
     report["runtime_s"] = time.perf_counter() - t0
     report["provenance"] = provenance()
     write_json(d / "report.json", report)

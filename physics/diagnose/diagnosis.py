@@ -541,8 +541,8 @@ def _apply_adequacy(v: Verdict, ad: Adequacy, base: C.ModelFit, noise: float) ->
             v.status = "explained"
     else:
         v.status = "not explained by the catalog"
-        v.remaining = (f"no catalog effect explains the failure (RMS error {ad.ratio:.2f}× the noise floor)"
-                       + described + template)
+        level = f"{ad.ratio:.2f}× the noise floor" if math.isfinite(ad.ratio) else f"{1e6 * ad.rmse:.3g} µm"
+        v.remaining = f"no catalog effect explains the failure (RMS error {level})" + described + template
 
 
 def _label(w: float) -> str:

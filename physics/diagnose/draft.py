@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
+from ..threads import single_threaded
 from . import forms as F
 
 
@@ -96,7 +97,7 @@ class EffectDraft:
         p = next(q for q in self.params if q.name == self.scan)
         lo, hi = p.bounds
         if isinstance(p.range, tuple) and lo > 0:
-            return [p.default] + [float(x) for x in np.geomspace(lo, hi, 6)[1:-1]]
+            return [p.default] + [float(x) for x in np.geomspace(lo, hi, 6)[:-1]]
         return [min(max(p.default * k, lo), hi) for k in (1.0, 1 / 3.0, 3.0)]
 
     def source(self) -> str:
@@ -149,33 +150,39 @@ def drafts(forms: Sequence[F.FormFit], fit, records) -> list[EffectDraft]:
 
 @dataclass
 class DraftOutcome:
-    """The drafts fitted with the final model, forward-selected: kept (in order) and rejected."""
+    """The drafts fitted with the model, forward-selected: kept (in order), rejected, and the
+    chain of effects added to the base (kept drafts and any catalog pick, in order)."""
 
     kept: list
     rejected: list                   # (draft, reason)
-    rmse_before: float
-    final_model: list
+    rmse_before: float               # the diagnosis's final model (base, or base + its pick)
+    chain: list = field(default_factory=list)     # (effect id, RMS after [m]) per step from the base
+    notes: list = field(default_factory=list)
     steps: list = field(default_factory=list)     # (effects fitted on, DiagnosisResult) per round
 
     @property
     def rmse_after(self) -> float:
-        return self.kept[-1].evidence["rmse_after_m"] if self.kept else self.rmse_before
+        return self.chain[-1][1] if self.chain and self.kept else self.rmse_before
 
     def lines(self) -> list[str]:
         out = [f"{d.file_name}: {d.evidence['text']}" for d in self.kept]
         out += [f"{d.effect_id} not kept: {why}" for d, why in self.rejected]
-        return out
+        return out + self.notes
 
 
+@single_threaded
 def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     """Draft what remains after the final model of the diagnosis ``res`` and select the drafts
     by fitting them with the model: ``rediagnose(device, effects, free, candidates)`` runs the
     diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
-    the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.  Forward: the
-    draft that lowers the error most is kept when it passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC`
-    and ≥ :data:`.forms.MIN_GAIN` lower RMS error; the others are tried again on top of it
-    (at most ``max_effects`` kept).  A kept draft takes the values fitted with the model as
-    its defaults (bounds and starts follow)."""
+    the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.
+
+    Forward from the base, the drafts competing with the catalog effect the diagnosis picked
+    (a catalog effect can mimic physics it does not model, e.g. the electrode resistance a
+    sensor's low-pass): the candidate that lowers the error most (lowest ΔBIC) is taken when it
+    passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
+    and the others are tried again on top of it (at most ``max_effects`` drafts kept).  A kept
+    draft takes the values fitted with the model as its defaults (bounds and starts follow)."""
     import tempfile
 
     from .. import effects as E
@@ -184,10 +191,12 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     fit = win.fit if win is not None else res.base
     ad = res.adequacy
     items = drafts(ad.forms, fit, res.records) if ad is not None and ad.adequate is not True else []
-    outcome = DraftOutcome([], [], fit.rmse, list(fit.effects))
+    outcome = DraftOutcome([], [], fit.rmse)
     if not items:
         return outcome
-    on_top, free, device = list(fit.effects), [n for n in fit.spec.free], fit.device
+    base = res.base
+    on_top, free, device = list(base.effects), list(base.spec.free), base.device
+    catalog = [win.effect] if win is not None else []
     with tempfile.TemporaryDirectory(prefix="eap-drafts-") as tmp:
         ids = []
         for d in items:
@@ -197,36 +206,49 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
         try:
             pool = list(items)
             while pool and len(outcome.kept) < max_effects:
-                again = rediagnose(device, on_top, free, [d.effect_id for d in pool])
+                again = rediagnose(device, on_top, free, [d.effect_id for d in pool] + catalog)
                 outcome.steps.append((list(on_top), again))
                 by_id = {c.effect: c for c in again.candidates}
                 scored, why = [], {}
-                for d in pool:
-                    c = by_id.get(d.effect_id)
+                for key in pool + catalog:
+                    eid = key if isinstance(key, str) else key.effect_id
+                    c = by_id.get(eid)
                     if c is None or not c.evaluated:
-                        why[d.effect_id] = c.reason if c is not None else "not evaluated"
+                        why[eid] = c.reason if c is not None else "not evaluated"
                         continue
                     gain = 1.0 - c.fit.rmse / again.base.rmse if again.base.rmse > 0 else 0.0
                     dbic = c.comparison.delta_bic
                     if dbic <= -F.SIGNIFICANT_BIC and gain >= F.MIN_GAIN:
-                        scored.append((dbic, d, c))
+                        scored.append((dbic, key, c))
                     else:
-                        why[d.effect_id] = (f"fitted with [{', '.join(on_top)}] it lowers the RMS error only from "
-                                            f"{1e6 * again.base.rmse:.4g} to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.3g})")
+                        how = "lowers the RMS error only" if c.fit.rmse <= again.base.rmse else "raises the RMS error"
+                        why[eid] = (f"fitted with [{', '.join(on_top)}] it {how} from {1e6 * again.base.rmse:.4g} "
+                                    f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.3g})")
                 if not scored:
                     outcome.rejected += [(d, why.get(d.effect_id, "")) for d in pool]
                     break
-                dbic, d, c = min(scored, key=lambda x: x[0])
-                values = effect_values(c.fit, d.effect_id)
-                d.refit(values)
+                scored.sort(key=lambda x: x[0])
+                dbic, key, c = scored[0]
+                eid = key if isinstance(key, str) else key.effect_id
+                values = effect_values(c.fit, eid)
                 text = (f"fitted with [{', '.join(on_top)}] it lowers the RMS error from {1e6 * again.base.rmse:.4g} "
                         f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.4g})")
-                d.evidence.update({"rmse_before_m": again.base.rmse, "rmse_after_m": c.fit.rmse, "delta_bic": dbic,
-                                   "on_top_of": list(on_top), "text": text, "values": values})
-                d.seen += " Fitted jointly, " + text[len("fitted "):] + "."
-                outcome.kept.append(d)
-                pool.remove(d)
-                on_top.append(d.effect_id)
+                rivals = [(b, k) for b, k, _ in scored[1:] if b - dbic < F.SIGNIFICANT_BIC]
+                if rivals:
+                    text += "; " + ", ".join(f"{k if isinstance(k, str) else k.effect_id} (ΔBIC {b:.4g})"
+                                             for b, k in rivals) + " fits almost as well: these records hardly tell them apart"
+                if isinstance(key, str):            # the catalog's pick: on the chain, then the drafts on top
+                    outcome.notes.append(f"{eid} (the diagnosis's pick) {text}; the drafts are tried on top of it")
+                    catalog.remove(key)
+                else:
+                    key.refit(values)
+                    key.evidence.update({"rmse_before_m": again.base.rmse, "rmse_after_m": c.fit.rmse,
+                                         "delta_bic": dbic, "on_top_of": list(on_top), "text": text, "values": values})
+                    key.seen += " Fitted jointly, " + text[len("fitted "):] + "."
+                    outcome.kept.append(key)
+                    pool.remove(key)
+                outcome.chain.append((eid, c.fit.rmse))
+                on_top.append(eid)
                 free += [n for n in values if n not in free]
                 device = c.fit.device
             else:
@@ -237,6 +259,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     return outcome
 
 
+@single_threaded
 def check_draft(path: Path) -> list[str]:
     """The contract (:func:`physics.effects.check_effect`) run on a written draft; [] when it passes."""
     from .. import effects as E

@@ -1,7 +1,8 @@
 """Slow pole on the output: the tip keeps moving after the drive settles (creep).
 
-Form: e ≈ g · LP_τ(ŷ) with τ ≥ :func:`slowest` (below the excited band), a first-order lag 1/(1 + sτ) of the model's own output; g > 0 the
-tip creeps forward by a fraction g of the deflection, g < 0 it relaxes back.  The effect
+Form: e ≈ g · LP_τ(ŷ) with τ ≥ :func:`slowest` (below the excited band), a first-order lag
+1/(1 + sτ) of the model's own output; g > 0 the tip creeps forward by a fraction g of the
+deflection, g < 0 it relaxes back.  The effect
 it drafts multiplies the deflection by 1 + r/(1 + sτ) (a standard linear solid in series
 with the beam; Findley, Lai & Onaran, *Creep and relaxation of nonlinear viscoelastic
 materials*, 1976, ch. 5), r = g, off at r = 0.
@@ -39,6 +40,8 @@ class SlowPole(Form):
         tau, g = ff.params["tau_s"], ff.params["gain"]
         r = float(np.clip(g, -0.85, 4.5))
         f_lo = 1.0 / (2 * np.pi * tau)
+        # what reveals it, relaxed to what the records it was found in offer
+        f_max, hold = max(2.0 * f_lo, 1.1 * res.band[0]), min(0.5 * tau, 0.5 * res.span_s)
         creeps = r > 0
         return EffectDraft(
             form=self.id, effect_id="drafted_slow_pole", class_name="DraftedSlowPole",
@@ -50,8 +53,8 @@ class SlowPole(Form):
                     Param("slow_pole_tau", "s", float(f"{slowest(res):.3g}"), 1e5, "time constant τ", tau)],
             scan="slow_pole_tau",
             off={"slow_pole_r": 0.0},
-            excitation=f"a step or pulse held ≥ {0.5 * tau:.2g} s, or a sweep down to {2 * f_lo:.2g} Hz",
-            reveal={"f_lo_max": 2.0 * f_lo, "hold_s": 0.5 * tau},
+            excitation=f"a step or pulse held ≥ {hold:.2g} s, or a sweep down to {f_max:.2g} Hz",
+            reveal={"f_lo_max": f_max, "hold_s": hold},
             signature=[("step_creep", 1.0), ("lf_excess_lag", 0.5)] if creeps else
                       [("step_back_relaxation", 1.0), ("lf_droop_lead", 0.5)],
             body=('    def output_tf(self, p):\n'
