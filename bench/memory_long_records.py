@@ -49,12 +49,12 @@ def _bundle(folder: Path, fs: float) -> Path:
     from scipy.signal import lfilter
 
     from nnmodel.bundle import save
-    from nnmodel.data import Record
+    from nnmodel.data import Experiment
     from nnmodel.models import MODELS
     rng = np.random.default_rng(0)
     u = np.convolve(rng.normal(size=20000), np.ones(20) / 20, "same")
     y = lfilter([0.01], [1, -0.99], u) * 1e-3
-    rec = Record(u=u, y=y, rh=np.full(u.size, 60.0), fs=fs)
+    rec = Experiment(u=u, y=y, rh=np.full(u.size, 60.0), fs=fs)
     m = MODELS["ff"](max_epochs=2, progress_bar=False)
     m.fit([rec], [rec])
     return save(m, folder / "ff")

@@ -55,8 +55,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", default="ff,rbf,narx,lstm")
     args = ap.parse_args()
-    from nnmodel.data import Record
-    from nnmodel.training import make_model
+    from nnmodel.data import Experiment
+    from nnmodel.recipes import make_model
     (ut, yt), (uv, yv), (us, ys) = plant(1500, 1), plant(500, 2), plant(1024, 3)
     skip = 20
     best = None
@@ -72,7 +72,7 @@ def main() -> None:
     for name in [m.strip() for m in args.models.split(",") if m.strip()]:
         m = make_model(name, {"progress_bar": False})
         t0 = time.perf_counter()
-        m.fit([Record(ut, yt, None, FS)], [Record(uv, yv, None, FS)])
+        m.fit([Experiment(ut, yt, None, FS)], [Experiment(uv, yv, None, FS)])
         wall = time.perf_counter() - t0
         yh = m.simulate(us, y_init=ys[:m.n_init_])
         e = rmse(ys[skip:], yh[skip:])

@@ -10,4 +10,12 @@ def load(path):
     return _load(path)
 
 
-__all__ = ["load"]
+def check_model(cls, params=None):
+    """Check a network class against the model contract (:mod:`nnmodel.models.check`):
+    returns the checks passed, raises ``ContractError`` naming the first that fails."""
+    from .models.check import check_model as _check
+
+    return _check(cls, params)
+
+
+__all__ = ["load", "check_model"]

@@ -205,7 +205,7 @@ def load(path: str | os.PathLike) -> "Bundle":
     learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
                "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
                "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
-               "card_extra": {k: card[k] for k in getattr(cls, "CARD_EXTRA", ()) if k in card}}
+               "card_extra": {k: card[k] for k in cls.card_keys() if k in card}}
     try:
         with torch.device("meta"), warnings.catch_warnings():  # shapes only: nothing is allocated
             warnings.simplefilter("ignore", UserWarning)  # "copying ... to a meta parameter is a no-op"

@@ -1,6 +1,6 @@
-"""Records (one experiment: input voltage, humidity, output) and training windows.
+"""Experiments (input voltage, humidity, output) and training windows.
 
-A :class:`Record` holds one uniformly sampled experiment in physical units: input voltage
+An :class:`Experiment` holds one uniformly sampled experiment in physical units: input voltage
 ``u`` (V), measured output ``y`` (tip deflection, m; ``None`` for an input-only record),
 relative humidity ``rh`` (% per sample, or ``None`` when the model does not use humidity)
 and the sampling rate ``fs`` (Hz).  Records slice like arrays (``rec[100:200]``) as in
@@ -17,11 +17,12 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from physics.errors import InputError
+from physics.timeseries import check_finite, check_range
 # One definition of the fit metrics for the whole package (NRMSE = RMSE / std(y), fit % =
 # 100 (1 - NRMSE)): physics.metrics, re-exported here for the neural-model code.
 from physics.metrics import fit_percent, nrmse, rmse
 
-__all__ = ["Record", "check_records", "split_index", "split_records", "window_starts", "cut_windows",
+__all__ = ["Experiment", "check_prediction_inputs", "check_records", "split_index", "split_records", "window_starts", "cut_windows",
            "rh_range", "rmse", "nrmse", "fit_percent"]
 
 
@@ -37,14 +38,20 @@ def check_fs(fs, where: str = "") -> float:
     return fs
 
 
-def check_voltage(u) -> np.ndarray:
+def _where(name: str) -> str:
+    return f"record {name!r}"
+
+
+def _sample(i: int) -> str:
+    return f"sample {i}"
+
+
+def check_voltage(u, where: str = "voltage") -> np.ndarray:
     """A voltage record (V) as a non-empty, finite 1-D float array, or an InputError."""
     u = np.asarray(u, dtype=float)
     if u.ndim != 1 or u.size == 0:
-        raise InputError(f"voltage must be a non-empty 1-D array, got shape {u.shape}")
-    if not np.all(np.isfinite(u)):
-        raise InputError(f"voltage contains NaN or infinite values (first at sample "
-                         f"{int(np.flatnonzero(~np.isfinite(u))[0])})")
+        raise InputError(f"{where} must be a non-empty 1-D array, got shape {u.shape}")
+    check_finite(u, where, _sample, "voltage")
     return u
 
 
@@ -54,15 +61,25 @@ def _as_1d(x, what: str, name: str, n: int | None = None) -> np.ndarray:
         raise InputError(f"record {name!r}: {what} must be a 1-D array, got shape {a.shape}")
     if n is not None and a.shape[0] != n:
         raise InputError(f"record {name!r}: {what} has {a.shape[0]} samples but the voltage has {n}")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise InputError(f"record {name!r}: {what} contains NaN or infinite values "
-                         f"(first at sample {i}, {int(bad.sum())} in total)")
+    check_finite(a, _where(name), _sample, what)
     return a
 
 
-class Record:
+def check_rh(rh, n: int, where: str) -> np.ndarray:
+    """Relative humidity (%) as one finite value in 0-100 per sample (a constant is
+    broadcast to ``n`` samples), or an InputError naming ``where``."""
+    rh = np.asarray(rh, dtype=float)
+    if rh.ndim == 0:
+        rh = np.full(n, float(rh))
+    if rh.shape != (n,):
+        raise InputError(f"{where}: rh must be a constant or have one value per voltage sample "
+                         f"({n}), got shape {rh.shape}")
+    check_finite(rh, where, _sample, "relative humidity rh")
+    check_range(rh, 0.0, 100.0, where, _sample, "relative humidity rh", "% (relative humidity)")
+    return rh
+
+
+class Experiment:
     """One uniformly sampled experiment in physical units.
 
     Parameters
@@ -70,7 +87,8 @@ class Record:
     u : array (n,)
         Input voltage in V.
     y : array (n,) or None
-        Measured output (tip deflection in m); ``None`` for an input-only record.
+        Measured output (tip deflection in m, or the dataset's output quantity); ``None``
+        for an input-only record.
     rh : float, array (n,) or None
         Relative humidity in %: a constant is broadcast to every sample.  ``None`` means the
         record carries no humidity (a model trained on such records ignores humidity).
@@ -78,6 +96,9 @@ class Record:
         Sampling rate in Hz (required).
     name : str
         Free label used in messages and reports.
+
+    Values are checked with the rules of the file readers (:mod:`physics.timeseries`:
+    finite numbers, RH within 0-100 %).
     """
 
     __slots__ = ("u", "y", "rh", "fs", "name")
@@ -92,21 +113,11 @@ class Record:
         if n == 0:
             raise InputError(f"record {self.name!r}: empty record (no samples)")
         self.y = None if y is None else _as_1d(y, "output y", self.name, n)
-        if rh is None:
-            self.rh = None
-        else:
-            rh_arr = np.asarray(rh, dtype=float)
-            if rh_arr.ndim == 0:
-                rh_arr = np.full(n, float(rh_arr))
-            rh_arr = _as_1d(rh_arr, "relative humidity rh", self.name, n)
-            if rh_arr.min() < 0 or rh_arr.max() > 100:
-                raise InputError(f"record {self.name!r}: relative humidity must lie in 0-100 %, "
-                                 f"got {rh_arr.min():g}-{rh_arr.max():g} %")
-            self.rh = rh_arr
+        self.rh = None if rh is None else check_rh(rh, n, _where(self.name))
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_timeseries(cls, ts, name: str | None = None) -> "Record":
+    def from_timeseries(cls, ts, name: str | None = None) -> "Experiment":
         """Build a record from a time-series object with attributes ``time``, ``voltage``,
         ``deflection`` (may be ``None``), ``rh`` (scalar, array or ``None``) and ``fs``
         (for example :class:`physics.timeseries.TimeSeries`; duck-typed)."""
@@ -123,18 +134,18 @@ class Record:
     def __len__(self) -> int:
         return int(self.u.shape[0])
 
-    def __getitem__(self, item) -> "Record":
+    def __getitem__(self, item) -> "Experiment":
         if not isinstance(item, slice):
             raise TypeError("records slice only with a slice, e.g. rec[100:200]")
         if item.step not in (None, 1):
             raise InputError("slicing a record with a step would change its sampling rate; "
                              "resample explicitly instead")
-        return Record(self.u[item], None if self.y is None else self.y[item],
+        return Experiment(self.u[item], None if self.y is None else self.y[item],
                       None if self.rh is None else self.rh[item], self.fs, self.name)
 
     def __repr__(self) -> str:
         rh = "no RH" if self.rh is None else f"RH {self.rh.min():g}-{self.rh.max():g} %"
-        return (f"Record({self.name!r}, {len(self)} samples at {self.fs:g} Hz, "
+        return (f"Experiment({self.name!r}, {len(self)} samples at {self.fs:g} Hz, "
                 f"{'with' if self.y is not None else 'no'} output, {rh})")
 
     @property
@@ -146,25 +157,58 @@ class Record:
     def duration(self) -> float:
         return len(self) / self.fs
 
-    def split(self, fraction: float) -> tuple["Record", "Record"]:
+    def split(self, fraction: float) -> tuple["Experiment", "Experiment"]:
         """Split at ``fraction`` of the length: ``(first part, last part)``."""
         k = int(round(len(self) * float(fraction)))
         return self[:k], self[k:]
 
 
+
+def check_prediction_inputs(u, rh, y, y_name: str, rh_trained: tuple | None):
+    """Inputs of a prediction in physical units as arrays ``(u, rh or None, y or None)``.
+
+    ``rh_trained``: the RH range (%) seen in training by a model that takes humidity (it
+    then needs ``rh``, and warns outside that range), None for a model without humidity
+    (``rh`` is then ignored with a warning)."""
+    import warnings
+
+    u = check_voltage(u)
+    n = u.size
+    if rh_trained is not None:
+        lo, hi = rh_trained
+        if rh is None:
+            raise InputError(f"this model takes relative humidity as an input (trained on "
+                             f"{lo:g}-{hi:g} %RH); pass rh= (a constant or one value per sample)")
+        rh = check_rh(rh, n, "prediction input")
+        tol = 1e-9 * max(1.0, hi)
+        if rh.min() < lo - tol or rh.max() > hi + tol:
+            warnings.warn(f"relative humidity {rh.min():g}-{rh.max():g} % is outside the range "
+                          f"seen in training ({lo:g}-{hi:g} %RH): the model extrapolates and "
+                          "its predictions are not validated there", RuntimeWarning, stacklevel=4)
+    elif rh is not None:
+        warnings.warn("this model was trained without humidity; the rh argument is ignored",
+                      RuntimeWarning, stacklevel=4)
+        rh = None
+    if y is not None:
+        y = np.asarray(y, dtype=float)
+        if y.ndim != 1:
+            raise InputError(f"{y_name} must be a 1-D array, got shape {y.shape}")
+        check_finite(y, "prediction input", _sample, y_name)
+    return u, rh, y
+
 # ---------------------------------------------------------------------- record lists
-def check_records(records: Sequence[Record] | Record, what: str = "training",
-                  need_y: bool = True) -> list[Record]:
+def check_records(records: Sequence[Experiment] | Experiment, what: str = "training",
+                  need_y: bool = True) -> list[Experiment]:
     """Validate a list of records for fitting: same sampling rate, outputs present and
     humidity either on every record or on none.  Returns the list."""
-    if isinstance(records, Record):
+    if isinstance(records, Experiment):
         records = [records]
     records = list(records or [])
     if not records:
         raise InputError(f"no {what} records given")
     for r in records:
-        if not isinstance(r, Record):
-            raise InputError(f"{what} data must be nnmodel.data.Record objects, got {type(r).__name__}")
+        if not isinstance(r, Experiment):
+            raise InputError(f"{what} data must be nnmodel.data.Experiment objects, got {type(r).__name__}")
         if need_y and r.y is None:
             raise InputError(f"{what} record {r.name!r} has no measured output y")
     fs = records[0].fs
@@ -179,7 +223,7 @@ def check_records(records: Sequence[Record] | Record, what: str = "training",
     return records
 
 
-def rh_range(records: Iterable[Record]) -> tuple[float, float] | None:
+def rh_range(records: Iterable[Experiment]) -> tuple[float, float] | None:
     """(min, max) RH over records, or None if they carry no humidity."""
     vals = [(r.rh.min(), r.rh.max()) for r in records if r.rh is not None]
     if not vals:
@@ -198,8 +242,8 @@ def split_index(n: int, val_fraction: float, min_len: int = 1) -> int | None:
     return None
 
 
-def split_records(records: Sequence[Record], val_fraction: float,
-                  min_len: int = 1) -> tuple[list[Record], list[Record]]:
+def split_records(records: Sequence[Experiment], val_fraction: float,
+                  min_len: int = 1) -> tuple[list[Experiment], list[Experiment]]:
     """Hold out the last ``val_fraction`` of every record (at least ``min_len`` samples on
     each side) for validation.  Records too short to split stay in training."""
     train, val = [], []
@@ -226,7 +270,7 @@ def window_starts(n: int, length: int, stride: int) -> np.ndarray:
     return starts
 
 
-def cut_windows(records: Sequence[Record], n_init: int, horizon: int, stride: int) -> dict:
+def cut_windows(records: Sequence[Experiment], n_init: int, horizon: int, stride: int) -> dict:
     """Cut records into windows of ``n_init`` history + ``horizon`` simulated samples.
 
     Returns a dict of arrays of shape (n_windows, n_init + horizon): ``u``, ``y`` and, if

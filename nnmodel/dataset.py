@@ -35,7 +35,7 @@ from physics.sensor import SensorModel
 from physics.timedomain import simulate
 from physics.timeseries import read_timeseries, write_timeseries
 
-from .data import Record
+from .data import Experiment
 
 SCHEMA = "eap-dataset/1"
 SPLITS = ("train", "validation", "test")
@@ -259,7 +259,7 @@ class Dataset:
             out.append(e)
         return out
 
-    def records(self, split: str | None = None, **filters) -> list[Record]:
+    def records(self, split: str | None = None, **filters) -> list[Experiment]:
         return [self.record(e) for e in self.entries(split, **filters)]
 
     @property
@@ -267,9 +267,9 @@ class Dataset:
         """False for a dataset of measurements without relative humidity (``rh_levels`` null)."""
         return self.meta.get("rh_levels") is not None
 
-    def record(self, entry: dict) -> Record:
+    def record(self, entry: dict) -> Experiment:
         ts = read_timeseries(self.path / entry["path"], rh=None if self.has_rh else 0.0)
-        return Record(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
+        return Experiment(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
 
 
 def load_dataset(path: str | Path, verify: bool = True) -> Dataset:

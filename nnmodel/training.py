@@ -1,4 +1,4 @@
-"""Lightning pieces shared by every neural model, and the training recipes.
+"""The Lightning training loop shared by every network (recipes: :mod:`nnmodel.recipes`).
 
 * :class:`WindowDataModule` cuts normalised records into training windows (``n_init``
   samples of measured history + ``horizon`` simulated samples; ``horizon = 1`` is
@@ -9,8 +9,10 @@
   error over each window; the validation metric ``val_loss`` is the free-run NRMSE.
 * :func:`fit_core` runs the Trainer: CPU by default, early stopping and best-checkpoint on
   the validation free-run error, learning-rate reduction on plateaus, optional wall-clock
-  budget, deterministic seeds.
-* :func:`load_recipe` reads ``configs/train/NAME.yaml`` and validates its keys.
+  budget, deterministic seeds; its settings are one :class:`~nnmodel.models.config.TrainingConfig`.
+
+This module knows cores (:class:`~nnmodel.models.core.SequenceCore`) and their normalised
+records, never the model classes.
 """
 from __future__ import annotations
 
@@ -27,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 import lightning.pytorch as pl
 from lightning.pytorch.callbacks import Callback, EarlyStopping, ModelCheckpoint
 from torch.utils.data import BatchSampler, DataLoader, Dataset, DistributedSampler, RandomSampler
@@ -36,8 +37,7 @@ from physics.errors import InputError
 
 from .data import window_starts
 
-__all__ = ["WindowDataModule", "SimulationTask", "fit_core", "load_recipe", "make_model",
-           "recipe_dir"]
+__all__ = ["WindowDataModule", "SimulationTask", "fit_core", "free_run_error", "execution"]
 
 
 # ====================================================================== data
@@ -162,7 +162,7 @@ def _split(batch, k):
 
 
 class SimulationTask(pl.LightningModule):
-    """Simulation-error training of a :class:`nnmodel.models.base.SequenceCore`."""
+    """Simulation-error training of a :class:`nnmodel.models.core.SequenceCore`."""
 
     def __init__(self, core, lr: float = 1e-3, weight_decay: float = 0.0, lr_patience: int = 10,
                  lr_factor: float = 0.3, monitor: str = "val_loss", min_lr: float = 1e-6):
@@ -238,7 +238,9 @@ class _LineProgress(Callback):
             return
         self._last = now
         m = trainer.callback_metrics
-        losses = ", ".join(f"{k} {float(m[k]):.4g}" for k in ("train_loss", "val_loss") if k in m)
+        losses = ", ".join(f"{k} {float(m[k]):.4g} ({what(float(m[k]))})" for k, what in (
+            ("train_loss", lambda x: f"mean square on windows, √ = {math.sqrt(x):.3g}"),
+            ("val_loss", lambda x: "free-run RMS")) if k in m)
         print(f"  epoch {trainer.current_epoch + 1}/{trainer.max_epochs}: {losses}", file=sys.stderr, flush=True)
 
 
@@ -266,25 +268,24 @@ def _quiet_lightning():
                 logging.getLogger(n).setLevel(lvl)
 
 
-def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_size: int,
-             lr: float, max_epochs: int, seed: int = 0, weight_decay: float = 0.0,
-             max_time: float | None = None, patience: int = 20, lr_patience: int | None = None,
-             grad_clip: float | None = None, accelerator: str = "cpu", progress_bar: bool = True,
-             checkpoint_dir: str | None = None) -> list[dict]:
-    """Train ``core`` in place with Lightning; restores the best (validation free-run)
-    weights at the end and returns (the per-epoch history, the budget used: epochs run and
-    whether the wall-clock guard ``max_time`` ended the training)."""
+def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
+    """Train ``core`` in place with Lightning as ``config`` (a
+    :class:`~nnmodel.models.config.TrainingConfig`) says; restores the best (validation
+    free-run) weights at the end and returns (the per-epoch history, the budget used: epochs
+    run and whether the wall-clock guard ``max_time`` ended the training)."""
+    c = config
+    seed, batch_size, max_epochs, max_time, patience = c.seed, c.batch_size, c.max_epochs, c.max_time, c.patience
     pl.seed_everything(seed, workers=True, verbose=False)
     monitor = "val_loss" if val_seqs else "train_loss"
-    dm = WindowDataModule(train_seqs, val_seqs, core.n_init, horizon, stride, batch_size, seed)
+    dm = WindowDataModule(train_seqs, val_seqs, core.n_init, c.horizon, c.stride, batch_size, seed)
     dm.setup()
     n_windows = len(dm.train_set)
     if n_windows < MIN_STEPS_PER_EPOCH * batch_size:   # short records: keep several optimizer steps per epoch
         dm.batch_size = max(1, n_windows // MIN_STEPS_PER_EPOCH)
         warnings.warn(f"{n_windows} training windows: batch size {batch_size} lowered to {dm.batch_size} so that an "
                       f"epoch has at least {MIN_STEPS_PER_EPOCH} optimizer steps", UserWarning, stacklevel=3)
-    task = SimulationTask(core, lr=lr, weight_decay=weight_decay, monitor=monitor,
-                          lr_patience=lr_patience if lr_patience is not None else max(2, patience // 3))
+    task = SimulationTask(core, lr=c.lr, weight_decay=c.weight_decay, monitor=monitor,
+                          lr_patience=max(2, patience // 3))
     hist = _History()
     # the starting point (least-squares initialisation) competes with the trained epochs
     init_state = {k: v.detach().clone() for k, v in core.state_dict().items()}
@@ -292,22 +293,23 @@ def fit_core(core, train_seqs, val_seqs, *, horizon: int, stride: int, batch_siz
     if init_val is not None:
         hist.rows.append({"epoch": -1, "val_loss": init_val})
     with contextlib.ExitStack() as stack:
-        ckdir = checkpoint_dir or stack.enter_context(tempfile.TemporaryDirectory(prefix="eap-ckpt-"))
+        ckdir = c.checkpoint_dir or stack.enter_context(tempfile.TemporaryDirectory(prefix="eap-ckpt-"))
         Path(ckdir).mkdir(parents=True, exist_ok=True)
         ckpt = ModelCheckpoint(dirpath=ckdir, filename="best", monitor=monitor, mode="min",
                                save_top_k=1, save_weights_only=True, enable_version_counter=False)
         stop = EarlyStopping(monitor=monitor, mode="min", patience=patience, check_finite=False)
         tty = sys.stderr.isatty()
+        progress_bar = c.progress_bar
         with _quiet_lightning():
             devices, strategy = EXECUTION["devices"], EXECUTION["strategy"]
             trainer = pl.Trainer(
-                accelerator=accelerator, devices=devices, strategy=strategy, max_epochs=max_epochs,
+                accelerator=c.accelerator, devices=devices, strategy=strategy, max_epochs=max_epochs,
                 use_distributed_sampler=False, reload_dataloaders_every_n_epochs=1 if devices > 1 else 0,
                 max_time=None if max_time is None else datetime.timedelta(seconds=float(max_time)),
                 callbacks=[ckpt, stop, hist] + ([_LineProgress()] if progress_bar and not tty else []),
                 enable_progress_bar=progress_bar and tty, logger=False,
                 enable_model_summary=False, num_sanity_val_steps=0, log_every_n_steps=1,
-                gradient_clip_val=grad_clip, default_root_dir=ckdir)
+                gradient_clip_val=c.grad_clip, default_root_dir=ckdir)
             t_fit = time.monotonic()
             trainer.fit(task, datamodule=dm)
             elapsed = time.monotonic() - t_fit
@@ -351,68 +353,3 @@ def free_run_error(core, seqs) -> float:
     core.train(was_training)
     err = torch.nan_to_num((y_hat - y) ** 2, nan=1e12, posinf=1e12) * mask
     return min(math.sqrt(float(err.sum()) / max(float(mask.sum()), 1.0)), 1e6)
-
-
-# ====================================================================== recipes
-def recipe_dir() -> Path:
-    """Folder of the training recipes: ``$EAP_TRAIN_RECIPES`` or ``configs/train`` of the
-    source tree."""
-    env = os.environ.get("EAP_TRAIN_RECIPES")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[1] / "configs" / "train"
-
-
-_RECIPE_KEYS = {"model", "description", "hyper_parameters"}
-
-
-def load_recipe(name: str, overrides: dict | None = None, directory: str | os.PathLike | None = None) -> dict:
-    """Read the recipe ``NAME.yaml`` and apply ``overrides`` (hyper-parameter -> value).
-
-    Returns ``{"model": kind, "description": str, "hyper_parameters": {...}}`` where the
-    hyper-parameters are the model's defaults updated by the file and then the overrides.
-    Unknown keys (in the file or in the overrides) raise :class:`InputError`.
-    """
-    from .models import MODELS
-
-    folder = Path(directory) if directory else recipe_dir()
-    path = folder / f"{name}.yaml"
-    if not path.is_file():
-        avail = sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
-        raise InputError(f"no training recipe {name!r} ({path} not found); available: "
-                         f"{', '.join(avail) or 'none'}")
-    try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except yaml.YAMLError as exc:
-        raise InputError(f"{path}: not valid YAML ({exc})") from None
-    if not isinstance(doc, dict):
-        raise InputError(f"{path}: a recipe must be a mapping with keys {sorted(_RECIPE_KEYS)}")
-    bad = sorted(set(doc) - _RECIPE_KEYS)
-    if bad:
-        raise InputError(f"{path}: unknown key(s) {bad}; a recipe has {sorted(_RECIPE_KEYS)}")
-    kind = doc.get("model", name)
-    if kind not in MODELS:
-        raise InputError(f"{path}: unknown model {kind!r}; known models: {', '.join(sorted(MODELS))}")
-    cls = MODELS[kind]
-    hp = doc.get("hyper_parameters") or {}
-    if not isinstance(hp, dict):
-        raise InputError(f"{path}: hyper_parameters must be a mapping")
-    known = set(cls.param_names())
-    for where, d in ((str(path), hp), ("overrides", overrides or {})):
-        bad = sorted(set(d) - known)
-        if bad:
-            raise InputError(f"{where}: unknown hyper-parameter(s) {bad} for model {kind!r}; "
-                             f"known: {', '.join(sorted(known))}")
-    params = cls.default_params()
-    params.update(hp)
-    params.update(overrides or {})
-    cls(**params)  # validates values (raises InputError)
-    return {"model": kind, "description": str(doc.get("description", "")), "hyper_parameters": params}
-
-
-def make_model(name: str, overrides: dict | None = None, directory=None):
-    """A model built from its recipe (see :func:`load_recipe`)."""
-    from .models import MODELS
-
-    rec = load_recipe(name, overrides, directory)
-    return MODELS[rec["model"]](**rec["hyper_parameters"])

@@ -19,7 +19,7 @@ import numpy as np
 
 from .beam import CantileverModes
 from .device import Device, load_device
-from .effects import CHAIN, EFFECTS, Effect, stage_of
+from .effects import CHAIN, CORE, EFFECTS, Effect, stage_of
 from .effects.double_layer import DoubleLayerProps
 from .errors import InputError, arg
 
@@ -40,7 +40,7 @@ def _group(key: str, device: Device) -> list[str]:
 def resolve_effects(effects, device: Device) -> tuple[str, ...]:
     """Effect ids from a list or a comma-separated string: ids, the groups ``default`` (the
     device's ``default_effects``), ``all``, ``linear``, ``none``, and ``+id`` / ``-id`` to add or
-    remove (e.g. ``default,+creep,-thermal``); ``double_layer`` is always included."""
+    remove (e.g. ``default,+creep,-thermal``); the core (the double layer) is always included."""
     if effects is None:
         effects = "default"
     if isinstance(effects, str):
@@ -62,12 +62,12 @@ def resolve_effects(effects, device: Device) -> tuple[str, ...]:
             raise InputError(f"unknown effect(s) {', '.join(unknown)}; known effects: {', '.join(EFFECTS)} "
                              f"(a user effect is registered from its file: {load} FILE.py)")
         if sign == "-":
-            if name == "double_layer":
-                raise InputError("effects: double_layer cannot be removed (it is the model's core)")
+            if name in CORE:
+                raise InputError(f"effects: {name} cannot be removed (it is the model's core)")
             ids = [e for e in ids if e != name]
         else:
             ids += [e for e in names if e not in ids]
-    ids_set = set(ids) | {"double_layer"}
+    ids_set = set(ids) | set(CORE)
     return tuple(k for k in EFFECTS if k in ids_set)
 
 

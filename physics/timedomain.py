@@ -103,8 +103,10 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     w_hi = np.pi / dt
     stepper_needed = (not model.is_linear) or (model.hook("electrochemistry_varies")() and np.ptp(rh_t) > 0)
     if periodic and (stepper_needed or (model.needs_rh and np.ptp(rh_t) > 0)):
+        large = [e.label for e in model.effects if not type(e).linear]
         raise InputError("periodic steady state needs a linear model at constant RH "
-                         "(nonlinear_charge/thermal or a varying RH make the response aperiodic)")
+                         f"({'/'.join(large) or 'a varying RH'} make{'s' if len(large) < 2 else ''} the response "
+                         "aperiodic)")
     p_mid = model.params_at(float(np.median(rh_t)))
     distributed = _distributed(model, p_mid)
     edges = _line_grid(model, p_mid, w_hi, n_segments, distributed) if (distributed or fields) \

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from physics.effects import (BUILT_IN, CHAIN, CHECKS, EFFECTS, FAST_CHECKS, LoadEffect, OutputEffect, check_effect,
-                             effect_classes_in_file, register, stage_of, unregister)
+from physics.contract import CHECKS, FAST_CHECKS
+from physics.effects import (BUILT_IN, CHAIN, EFFECTS, LoadEffect, OutputEffect, check_effect, effect_classes_in_file,
+                             register, stage_of, unregister)
 from physics.effects.stages import STAGE_PROTOCOLS
 from physics.errors import InputError
 from physics.model import ActuatorModel
@@ -211,3 +212,18 @@ def test_check_command(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "contract FAILED" in out and "FAIL  stable" in out and "pole at s = 0.333" in out
     assert "runaway" not in EFFECTS
+    assert main(["effects", "--check", str(tmp_path / "missing.py")]) == 2
+    assert "error: --check " in capsys.readouterr().err
+
+
+def test_effects_device_lists_what_param_takes(capsys):
+    from nnmodel.cli import build_parser, main
+    assert main(["effects", "--device", "ipmc_pt_eg"]) == 0
+    out = capsys.readouterr().out
+    for name, unit in (("L_total", "m"), ("width", "m"), ("Y", "Pa"), ("kf", "N m/mol"), ("beta_f", "s")):
+        line = next(ln for ln in out.splitlines() if ln.strip().startswith(f"{name} "))
+        assert f" {unit} " in line and "=" in line, line
+    assert "clamp included" in out and "L_total − L_clamp = 0.021 m" in out
+    frf = next(a for a in build_parser()._actions if hasattr(a, "choices") and a.choices and "frf" in a.choices)
+    helps = {a.dest: a.help for a in frf.choices["frf"]._actions}
+    assert "eap effects --device D" in helps["param"]

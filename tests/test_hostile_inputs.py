@@ -112,9 +112,9 @@ def test_sidecar_geometry_is_refused_not_ignored(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def bundle(tmp_path_factory):
     from nnmodel.bundle import save
-    from nnmodel.data import Record
+    from nnmodel.data import Experiment
     from nnmodel.models import MODELS
-    rec = Record(u=V, y=D, rh=np.full(V.size, 60.0), fs=100.0)
+    rec = Experiment(u=V, y=D, rh=np.full(V.size, 60.0), fs=100.0)
     m = MODELS["rbf"](n_centres=8, nb=4, na=1, progress_bar=False)
     m.fit([rec], [rec])
     return save(m, tmp_path_factory.mktemp("b") / "rbf")

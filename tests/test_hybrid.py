@@ -12,7 +12,7 @@ import physics
 from physics import signals
 from physics.errors import InputError
 from nnmodel.bundle import CARD, save
-from nnmodel.data import Record, nrmse
+from nnmodel.data import Experiment, nrmse
 from nnmodel.models import MODELS
 
 FS = 100.0
@@ -30,7 +30,7 @@ def _records(seeds, rhs, duration=8.0):
         v *= np.minimum(1.0, sig.t / 0.5)   # from rest at 0 V, as a free run without history assumes
         for rh in rhs:
             y = physics.simulate(DEVICE, "default", sig.t, v, rh=rh).deflection
-            out.append(Record(v, GAIN * y, rh, FS, f"s{s}-rh{rh:g}"))
+            out.append(Experiment(v, GAIN * y, rh, FS, f"s{s}-rh{rh:g}"))
     return out
 
 
@@ -88,7 +88,7 @@ def test_the_hybrid_needs_humidity_for_its_physics(hybrid, data):
     with pytest.raises(InputError, match="relative humidity"):
         hybrid.simulate(r.u)
     with pytest.raises(InputError, match="relative humidity"):
-        MODELS["hybrid"](max_epochs=0, **QUIET).fit([Record(r.u, r.y, None, FS)])
+        MODELS["hybrid"](max_epochs=0, **QUIET).fit([Experiment(r.u, r.y, None, FS)])
     with pytest.raises(InputError, match="inputs"):
         MODELS["hybrid"](inputs="voltage", max_epochs=0, **QUIET).fit(data["train"])
     with pytest.raises(InputError, match="physics_states"):
@@ -106,7 +106,7 @@ def test_physics_inputs_identify_a_static_input_nonlinearity(data):
         for r in recs:
             t = np.arange(len(r)) / FS
             y = physics.simulate(DEVICE, "default", t, r.u - 0.4 * r.u * np.abs(r.u), rh=r.rh).deflection
-            out.append(Record(r.u, y, r.rh, FS, r.name))
+            out.append(Experiment(r.u, y, r.rh, FS, r.name))
         return out
     train, val, test = bent(data["train"]), bent(data["val"]), bent(data["test"])[0]
     plain = MODELS["hybrid"](nb=3, layers=0, max_epochs=0, **QUIET).fit(train, val)

@@ -1,67 +1,78 @@
-"""A contract over every entry of the model registry: a model is tested the moment it is
-registered (fit, free run, one-step, save/load round trip, NaN refused, seeded)."""
+"""The network contract over every entry of the model registry: a model is tested the moment
+it is registered (nnmodel.check_model: hyper-parameter conventions, fit, free run, one-step
+and k-step, NaN refused, bundle round trip, chunked free run, seeded), and the check
+itself catches a model that breaks the contract."""
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
-from nnmodel.bundle import load, save
-from nnmodel.data import Record
-from nnmodel.models import MODELS
+import nnmodel
+from nnmodel.models import MODELS, register
+from nnmodel.models.check import CHECKS, ContractError
+from nnmodel.models.ff import FFModel
 from physics.errors import InputError
 
-FS = 50.0
-BRIEF = {"ff": dict(max_epochs=1), "rbf": dict(n_centres=6), "narx": dict(max_epochs=1, horizon=20, stride=20),
-         "lstm": dict(max_epochs=1, horizon=20, stride=20, n_init=5), "gru": dict(max_epochs=1, horizon=20,
-                                                                                 stride=20, n_init=5),
-         "hybrid": dict(max_epochs=1, device="ipmc_pt_eg", effects="none")}
-
-
-def _records():
-    rng = np.random.default_rng(0)
-    out = []
-    for rh in (40.0, 80.0):
-        u = np.convolve(rng.normal(size=600), np.ones(4) / 4, "same")
-        y = lfilter([0.05], [1, -0.95], np.tanh(u)) * 1e-3 * (1 + rh / 100)
-        out.append(Record(u=u, y=y, rh=np.full(u.size, rh), fs=FS))
-    return out
-
 
 @pytest.mark.parametrize("kind", sorted(MODELS))
-def test_registered_model_honours_the_contract(kind, tmp_path):
-    kw = dict(progress_bar=False, seed=3, **BRIEF.get(kind, dict(max_epochs=1)))
-    recs = _records()
-    m = MODELS[kind](**kw).fit(recs[:1], recs[1:])
-    u, rh, y = recs[0].u, 40.0, recs[0].y
-    free = m.simulate(u, rh)
-    assert free.shape == u.shape and np.all(np.isfinite(free))
-    one = m.predict(u, rh, y=y, steps_ahead=1)
-    assert one.shape == u.shape and np.all(np.isfinite(one))
-    b = load(save(m, tmp_path / kind))
-    np.testing.assert_allclose(b.predict(u, rh=rh, fs=FS), free, rtol=1e-6, atol=1e-12)
-    bad = u.copy()
-    bad[10] = np.nan
-    with pytest.raises(InputError):
-        m.simulate(bad, rh)
-    again = MODELS[kind](**kw).fit(recs[:1], recs[1:])
-    np.testing.assert_array_equal(again.simulate(u, rh), free)
+def test_registered_model_honours_the_contract(kind):
+    assert nnmodel.check_model(MODELS[kind]) == [c.__name__ for c in CHECKS]
 
 
-@pytest.mark.parametrize("kind", sorted(MODELS))
-def test_training_settings_live_in_one_config(kind):
-    """No constructor repeats the training settings: they are one TrainingConfig
-    (model.training), still read, written and validated as flat hyper-parameters."""
+def test_training_settings_live_in_one_config():
+    """No constructor repeats the shared settings (training, features, structures)."""
     import inspect
 
-    from nnmodel.models.config import TRAINING_FIELDS, TrainingConfig
-    cls = MODELS[kind]
-    own = set(inspect.signature(cls.__init__).parameters) - {"self", "training"}
-    assert not own & set(TRAINING_FIELDS), sorted(own & set(TRAINING_FIELDS))
-    m = cls(max_epochs=3, lr=5e-4)
-    assert isinstance(m.training, TrainingConfig) and m.training.max_epochs == 3 and m.lr == 5e-4
-    m.set_params(patience=4)
-    assert m.training.patience == 4 and m.get_params()["patience"] == 4
-    assert set(TRAINING_FIELDS) <= set(cls.param_names()) and set(cls.default_params()) == set(cls.param_names())
+    from nnmodel.models.base import PARTS
+    shared = {n for part in PARTS for n in part.names()}
+    for kind, cls in MODELS.items():
+        own = set(inspect.signature(cls.__init__).parameters) - {"self", "settings"}
+        assert not own & shared, (kind, sorted(own & shared))
+
+
+class _Repeats(FFModel):
+    """Repeats a training setting in its constructor."""
+
+    kind = "repeats"
+
+    def __init__(self, na: int = 2, nb: int = 20, hidden: int = 32, layers: int = 2, activation: str = "tanh",
+                 poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True, max_epochs: int = 3,
+                 **settings):
+        self._set_params_from(locals())
+
+
+class _Unseeded(FFModel):
+    """Initialises its bypass from an unseeded generator: two fits differ."""
+
+    kind = "unseeded"
+
+    def _initialise(self, core, train):
+        import torch
+        super()._initialise(core, train)
+        with torch.no_grad():
+            core.fmap.lin_x.bias.add_(float(np.random.default_rng().normal()))
+
+
+class _Forgetful(FFModel):
+    """Forgets the memory-filter range in its card: the loaded bundle predicts differently."""
+
+    kind = "forgetful"
+
+    def _card_extra(self):
+        return {"memory_range_s": [1.0, 2.0]}
+
+
+@pytest.mark.parametrize("cls, check", [(_Repeats, "class"), (_Unseeded, "seeded"), (_Forgetful, "bundle")])
+def test_the_check_catches_a_model_that_breaks_the_contract(cls, check):
+    params = {"memory_filters": 2} if cls is _Forgetful else None
+    with pytest.raises(ContractError, match=f"^{check}:"):
+        nnmodel.check_model(cls, params)
+    assert cls.kind not in MODELS      # checking does not register
+
+
+def test_register_refuses_a_repeated_setting_or_a_taken_kind():
     with pytest.raises(InputError, match="max_epochs"):
-        cls(max_epochs=-1)
-    with pytest.raises(InputError, match="unknown hyper-parameter"):
-        cls(epochs=3)
+        register(_Repeats)
+
+    class Twin(FFModel):
+        kind = "narx"
+    with pytest.raises(InputError, match="already registered"):
+        register(Twin)

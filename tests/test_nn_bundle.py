@@ -130,7 +130,7 @@ def test_predict_refuses_other_rates_unless_resampling(saved, rh_model):
 def test_predict_checks_values_shapes_and_humidity(saved):
     b = load(saved)
     u = toy.excitation(200, seed=3)
-    with pytest.raises(InputError, match="NaN"):
+    with pytest.raises(InputError, match="not finite"):
         b.predict(np.r_[u, np.nan], rh=50.0, fs=toy.FS)
     with pytest.raises(InputError, match="1-D"):
         b.predict(u.reshape(2, -1), rh=50.0, fs=toy.FS)

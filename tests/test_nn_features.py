@@ -10,7 +10,7 @@ import nnmodel
 from physics.errors import InputError
 from nnmodel.benchmarks import toy
 from nnmodel.bundle import save
-from nnmodel.data import Record, nrmse
+from nnmodel.data import Experiment, nrmse
 from nnmodel.models import MODELS
 from nnmodel.models.features import auto_knots, memory_filters, memory_taus, rh_hats
 
@@ -57,7 +57,7 @@ def test_auto_knots_are_the_constant_rh_levels_widened_to_the_drift_range():
 
 def test_memory_filters_give_an_nfir_model_the_slow_dynamics_a_delay_line_misses():
     u = toy.excitation(6000, seed=1, pole=0.95)
-    train = [Record(u, slow_system(u), None, FS)]
+    train = [Experiment(u, slow_system(u), None, FS)]
     u2 = toy.excitation(3000, seed=2, pole=0.95)
     y2 = slow_system(u2, from_rest=True)
     kw = dict(na=0, nb=5, layers=0, max_epochs=0, val_fraction=0.0, **QUIET)
@@ -138,14 +138,14 @@ def test_memory_filters_adapt_to_the_sampling_rate_and_record_length(tmp_path):
     import json
     from scipy.signal import lfilter
     from nnmodel.bundle import load, save
-    from nnmodel.data import Record
+    from nnmodel.data import Experiment
     from nnmodel.models import MODELS
     fs, n = 0.25, 1200
     rng = np.random.default_rng(0)
     u = np.repeat(rng.uniform(-1, 1, n // 12 + 1), 12)[:n]
     a = np.exp(-1 / (120 * fs))
     y = np.tanh(2 * lfilter([1 - a], [1, -a], u))
-    rec = Record(u=u, y=y, rh=None, fs=fs)
+    rec = Experiment(u=u, y=y, rh=None, fs=fs)
     m = MODELS["ff"](nb=4, memory_filters=6, memory_min_s=0.01, memory_max_s=1e5, max_epochs=1, progress_bar=False)
     with pytest.warns(UserWarning, match="memory filters 0.01–100000 s do not fit these data"):
         m.fit([rec])

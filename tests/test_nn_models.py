@@ -12,7 +12,7 @@ from scipy import signal
 
 from physics.errors import InputError
 from nnmodel.benchmarks import toy
-from nnmodel.data import Record, nrmse
+from nnmodel.data import Experiment, nrmse
 from nnmodel.models import MODELS, NotFittedError
 
 QUIET = dict(progress_bar=False, num_threads=1)
@@ -97,7 +97,7 @@ def test_one_step_prediction_not_worse_than_free_run_for_equation_error_data():
     e = 0.2 * rng.standard_normal(u.size)
     # ARX-type noise: y = B/A u + 1/A e, where the one-step predictor with true outputs is optimal
     y = toy.SCALE * (signal.lfilter(toy.LIN2_B, toy.LIN2_A, u) + signal.lfilter([1.0], toy.LIN2_A, e))
-    m = fit("ff", [Record(u, y, None, toy.FS)], na=2, nb=3, layers=0, max_epochs=0)
+    m = fit("ff", [Experiment(u, y, None, toy.FS)], na=2, nb=3, layers=0, max_epochs=0)
     u2 = toy.excitation(1500, seed=4)
     e2 = 0.2 * rng.standard_normal(u2.size)
     y2 = toy.SCALE * (signal.lfilter(toy.LIN2_B, toy.LIN2_A, u2) + signal.lfilter([1.0], toy.LIN2_A, e2))
@@ -157,7 +157,7 @@ def test_same_seed_gives_identical_weights(name):
 def test_inputs_are_checked(linear_models):
     m = linear_models["ff"]
     u = toy.excitation(100, seed=1)
-    with pytest.raises(InputError, match="NaN"):
+    with pytest.raises(InputError, match="not finite"):
         m.simulate(np.r_[u, np.nan])
     with pytest.raises(InputError, match="1-D"):
         m.simulate(np.zeros((3, 3)))
@@ -174,7 +174,7 @@ def test_humidity_model_needs_rh_and_warns_outside_the_trained_range():
     u = toy.excitation(100, seed=1)
     with pytest.raises(InputError, match="relative humidity"):
         m.simulate(u)
-    with pytest.raises(InputError, match="0-100"):
+    with pytest.raises(InputError, match="0–100"):
         m.simulate(u, rh=150.0)
     with pytest.warns(RuntimeWarning, match=r"outside the range seen in training \(40-60 %RH\)"):
         m.simulate(u, rh=90.0)
@@ -258,13 +258,13 @@ def test_fast_numpy_free_run_matches_the_torch_loop_for_rbf():
 def test_free_run_in_chunks_equals_one_piece(kind, monkeypatch):
     """Long records are simulated in pieces (bounded memory); the pieces must continue exactly."""
     import nnmodel.models.base as base
-    from nnmodel.data import Record
+    from nnmodel.data import Experiment
     from nnmodel.models import MODELS
     from scipy.signal import lfilter
     rng = np.random.default_rng(1)
     u = np.convolve(rng.normal(size=2000), np.ones(5) / 5, "same")
     y = lfilter([0.05], [1, -0.95], np.tanh(u)) * 1e-3
-    rec = Record(u=u, y=y, rh=np.full(u.size, 50.0), fs=100.0)
+    rec = Experiment(u=u, y=y, rh=np.full(u.size, 50.0), fs=100.0)
     kw = {"ff": dict(max_epochs=2), "narx": dict(max_epochs=1, horizon=20, stride=20),
           "lstm": dict(max_epochs=1, horizon=50, stride=50), "rbf": dict(n_centres=8)}[kind]
     m = MODELS[kind](progress_bar=False, **kw)
@@ -279,14 +279,14 @@ def test_without_output_feedback_one_step_equals_free_run_from_any_start():
     """FF has no output feedback (na = 0): k-step prediction and free run are the same model
     evaluation, also on a record that does not start at rest (filters start in the steady
     state of the first input sample on both paths)."""
-    from nnmodel.data import Record
+    from nnmodel.data import Experiment
     from nnmodel.models import MODELS
     from scipy.signal import lfilter
     rng = np.random.default_rng(2)
     u = 0.8 + np.convolve(rng.normal(size=1500), np.ones(5) / 5, "same")   # far from 0 V at the start
     y = lfilter([0.05], [1, -0.95], np.tanh(u)) * 1e-3
     m = MODELS["ff"](na=0, nb=6, memory_filters=4, max_epochs=1, progress_bar=False)
-    m.fit([Record(u=u, y=y, rh=None, fs=100.0)])
+    m.fit([Experiment(u=u, y=y, rh=None, fs=100.0)])
     k = m.n_init_
     free = m.simulate(u, y_init=y[:k])
     one = m.predict(u, y=y, steps_ahead=1)
@@ -303,7 +303,7 @@ def _resonant_records(n=3000, fs=100.0):
     for seed in (1, 2):
         u = signal.lfilter(b, a, np.random.default_rng(seed).normal(size=n))
         y = signal.lfilter(np.ravel(bd), ad, u)
-        out.append(Record(u=u, y=y + 1e-3 * np.std(y) * np.random.default_rng(seed + 10).normal(size=n),
+        out.append(Experiment(u=u, y=y + 1e-3 * np.std(y) * np.random.default_rng(seed + 10).normal(size=n),
                           rh=None, fs=fs))
     return out
 

@@ -8,7 +8,7 @@ import torch
 from physics.errors import InputError
 from nnmodel.benchmarks import toy
 from nnmodel.models import MODELS
-from nnmodel.training import load_recipe, make_model
+from nnmodel.recipes import load_recipe, make_model
 
 QUIET = dict(progress_bar=False, num_threads=1)
 

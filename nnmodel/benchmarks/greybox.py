@@ -15,7 +15,7 @@ physics part has the default effects only, so the data contain physics it lacks.
    training capped at ``curve_budget_s`` seconds; the validation records (early
    stopping) and the test records are the same for every point.
 
-Outputs: ``greybox.json``, ``greybox.csv``, ``greybox.html``, ``greybox_efficiency.png``.
+Outputs: ``greybox.json``, ``greybox.csv``, ``index.html`` (``greybox.html`` redirects to it), ``greybox_efficiency.png``.
 """
 from __future__ import annotations
 
@@ -107,7 +107,7 @@ def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = 
     report = _report(full, curve, names, quick, budget, ds_path, time.perf_counter() - t_start, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["findings"],
-                  "report: greybox.html (JSON greybox.json) in the output folder")
+                  "report: index.html (JSON greybox.json) in the output folder")
     return report
 
 
@@ -116,7 +116,7 @@ def _curve_point(task: dict) -> dict:
     :func:`physics.parallel.map_tasks`; the dataset is read from its path)."""
     from ..dataset import load_dataset
     from ..traincompare import SKIP, _score
-    from ..training import make_model
+    from ..recipes import make_model
 
     ds = load_dataset(task["dataset"])
     chosen = task["records"]
@@ -208,6 +208,14 @@ def format_table(report: dict) -> str:
             f"training capped at {report['curve_budget_s']:.0f} s):\n" + common.text_table(h, r))
 
 
+def _missing_physics(report: dict) -> str:
+    """The generator's effects that the hybrid's physics (the device's default effects) lacks."""
+    from physics.device import load_device
+    gen = report["dataset"]["generator"]
+    own = load_device(gen["device"]).default_effects
+    return ", ".join(e for e in gen["effects"] if e not in own) or "nothing"
+
+
 def _write_outputs(out: Path, report: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -232,9 +240,9 @@ def _write_outputs(out: Path, report: dict) -> None:
                        lw=0.9, label=lab)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("training data (s of records; 1, 2, 4, 8, all records)")
-    ax.set_ylabel("free-run NRMSE on held-out RH (%)")
-    ax.set_title("grey-box study: data efficiency (nonlinear_charge missing from the hybrid's physics)")
+    ax.set_xlabel("training data [s] (1, 2, 4, 8, all records)")
+    ax.set_ylabel("free-run NRMSE on held-out RH [%]")
+    ax.set_title(f"grey-box study: data efficiency ({_missing_physics(report)} missing from the hybrid's physics)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -246,13 +254,15 @@ def _write_outputs(out: Path, report: dict) -> None:
         ("p", f"Dataset: {report['dataset']['path']} (hash {report['dataset']['hash'][:12]}), generator "
               f"{report['dataset']['generator']['device']} with {', '.join(report['dataset']['generator']['effects'])}."),
         ("p", "Score: " + report["score"] + ". physics_base is the hybrid's physics part alone (default effects, "
-              "no nonlinear_charge); physics is the generator itself (a reference no model can beat except by noise)."),
+              f"no {_missing_physics(report)}); physics is the generator itself (a reference no model can beat "
+              "except by noise)."),
         ("h2", "Full training data (recipes)"),
         ("table", (HEADER, _table_rows(report))),
         ("pre", "\n".join(report["findings"])),
         ("h2", "Data efficiency"),
         ("table", _curve_rows(report)),
-        ("img", out / "greybox_efficiency.png"),
+        ("img", (out / "greybox_efficiency.png", "free-run NRMSE on held-out RH [%] against the seconds of training "
+                                                 "data, per model; dashed: the physics alone")),
         ("pre", json.dumps(report["environment"], indent=1)),
     ]
-    write_text(out / "greybox.html", common.html_page("eap benchmark: grey-box study", blocks))
+    common.page("eap benchmark: grey-box study", blocks).write_index(out, old_name="greybox.html")

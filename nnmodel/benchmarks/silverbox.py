@@ -30,7 +30,7 @@ from physics.errors import InputError
 from physics.parallel import ParallelSettings, map_tasks
 from physics.fileio import atomic_path, sha256_file, write_json, write_text
 
-from ..data import Record
+from ..data import Experiment
 from . import common
 
 FS = 610.35
@@ -129,7 +129,7 @@ def find_data(path: str | os.PathLike | None = None) -> Path:
 
 
 def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
-    """The standard split as records: ``{"train": Record, "tests": {name: Record},
+    """The standard split as records: ``{"train": Experiment, "tests": {name: Experiment},
     "path": Path, "sha256": str}``.  ``limit`` truncates every part to its first ``limit``
     samples (smoke tests only; the figures are then not comparable)."""
     import pandas as pd
@@ -149,10 +149,10 @@ def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
     um, ym = u[MULTISINE], y[MULTISINE]
     ua, ya = u[ARROW], y[ARROW]
     parts = {
-        "train": Record(um[:N_TRAIN], ym[:N_TRAIN], None, FS, "multisine train"),
-        "multisine": Record(um[N_TRAIN:], ym[N_TRAIN:], None, FS, "multisine test"),
-        "arrow_full": Record(ua, ya, None, FS, "arrow test (full)"),
-        "arrow_no_extrap": Record(ua[:N_ARROW_NO_EXTRAP], ya[:N_ARROW_NO_EXTRAP], None, FS,
+        "train": Experiment(um[:N_TRAIN], ym[:N_TRAIN], None, FS, "multisine train"),
+        "multisine": Experiment(um[N_TRAIN:], ym[N_TRAIN:], None, FS, "multisine test"),
+        "arrow_full": Experiment(ua, ya, None, FS, "arrow test (full)"),
+        "arrow_no_extrap": Experiment(ua[:N_ARROW_NO_EXTRAP], ya[:N_ARROW_NO_EXTRAP], None, FS,
                                   "arrow test (no extrapolation)"),
     }
     if limit is not None:
@@ -211,8 +211,9 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
         save_models: bool = True, references: bool = True, settings: ParallelSettings | None = None,
         echo=print) -> dict:
     """Train ``models`` (default: all) on the Silverbox training data and write the report
-    to ``out``: ``silverbox.json``, ``silverbox.csv``, ``silverbox.html``, two PNGs and (with
-    ``save_models``) one bundle per model in ``out/models/``.  Returns the JSON content.
+    to ``out``: ``silverbox.json``, ``silverbox.csv``, ``index.html`` (``silverbox.html``
+    redirects to it), two PNGs and (with ``save_models``) one bundle per model in
+    ``out/models/``.  Returns the JSON content.
     ``settings``: where the models train (:mod:`physics.parallel`, one task per model)."""
 
     names, overrides, out = common.start(models, ("ff", "rbf", "narx", "lstm", "gru"), overrides, out)
@@ -274,7 +275,7 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
     }
     _write_outputs(out, report, rows, preds, tests)
     common.finish(echo, format_table(report), [target["summary"]],
-                  "report: silverbox.html (JSON silverbox.json) in the output folder")
+                  "report: index.html (JSON silverbox.json) in the output folder")
     return report
 
 
@@ -352,7 +353,7 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
     ax.axhspan(lo, hi, color="green", alpha=0.15, label=f"best published {lo}-{hi} mV")
     ax.set_yscale("log")
     ax.set_xticks(x, [TEST_LABELS[t] for t in TESTS])
-    ax.set_ylabel("free-run RMSE (mV)")
+    ax.set_ylabel("free-run RMSE [mV]")
     ax.set_title("Silverbox: simulation RMSE, ours vs published")
     ax.grid(axis="y", which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))
@@ -369,7 +370,7 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
         tt = np.arange(len(rec)) / FS
         ax2 = ax.twinx()
         ax2.plot(tt, rec.y * 1e3, color="0.85", lw=0.4)
-        ax2.set_ylabel("measured output (mV)", color="0.6", fontsize=8)
+        ax2.set_ylabel("measured output [mV]", color="0.6", fontsize=8)
         ax2.tick_params(axis="y", colors="0.6", labelsize=7)
         ax.set_zorder(ax2.get_zorder() + 1)
         ax.patch.set_visible(False)
@@ -382,9 +383,9 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
             ax.axvspan(N_ARROW_NO_EXTRAP / FS, tt[-1], color="orange", alpha=0.1,
                        label="extrapolation region")
         ax.set_title(f"{TEST_LABELS[t]}: simulation error", fontsize=9)
-        ax.set_ylabel("error (mV)")
+        ax.set_ylabel("error [mV]")
         ax.legend(fontsize=6, ncol=3, loc="upper left")
-    axes[-1].set_xlabel("time (s)")
+    axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     with atomic_path(out / "silverbox_errors.png") as tmp:
         fig.savefig(tmp, dpi=100, format="png")
@@ -405,9 +406,11 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
         ("h2", "Results"),
         ("table", (HEADER, hrows)),
         ("p", report["target"]["summary"]),
-        ("img", out / "silverbox_rmse.png"),
+        ("img", (out / "silverbox_rmse.png", "free-run RMSE [mV] on each test signal: our models, our linear and "
+                                             "polynomial references and the published results (hatched)")),
         ("h2", "Errors over time"),
-        ("img", out / "silverbox_errors.png"),
+        ("img", (out / "silverbox_errors.png", "simulation error [mV] over time on each test signal (the measured "
+                                               "output faintly behind, right axis [mV])")),
         ("h2", "Settings"),
         ("pre", json.dumps(settings, indent=1)),
         ("pre", json.dumps(report["environment"], indent=1)),
@@ -415,4 +418,4 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
     if report["data"]["limited_smoke_run"]:
         blocks.insert(0, ("p", "SMOKE RUN on a truncated data set: figures are not comparable "
                                "with the published ones."))
-    write_text(out / "silverbox.html", common.html_page("Silverbox benchmark", blocks))
+    common.page("Silverbox benchmark", blocks).write_index(out, old_name="silverbox.html")

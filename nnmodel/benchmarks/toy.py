@@ -1,6 +1,6 @@
 """Small known systems with exact answers, for tests and quick examples.
 
-Each function returns a list of :class:`nnmodel.data.Record` in physical-looking units
+Each function returns a list of :class:`nnmodel.data.Experiment` in physical-looking units
 (volts in, metres out) generated from a closed-form system, so a model's error against the
 truth can be bounded without trusting any model's own output.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from ..data import Record
+from ..data import Experiment
 
 FS = 100.0
 #: 2nd-order resonant discrete system (poles 0.75 +/- 0.37j, |p| = 0.84), DC gain 1
@@ -57,9 +57,9 @@ def records(kind: str, n: int = 2000, seeds=(1,), rh_levels=(40.0, 60.0, 80.0), 
             for rh in rh_levels:
                 y = rh_system(u, rh)
                 y = y + noise * SCALE * rng.standard_normal(n)
-                out.append(Record(u, y, rh, FS, f"rh{rh:g}-s{s}"))
+                out.append(Experiment(u, y, rh, FS, f"rh{rh:g}-s{s}"))
             continue
         y = linear2(u) if kind == "linear2" else static_cubic(u)
         y = y + noise * SCALE * rng.standard_normal(n)
-        out.append(Record(u, y, None, FS, f"{kind}-s{s}"))
+        out.append(Experiment(u, y, None, FS, f"{kind}-s{s}"))
     return out

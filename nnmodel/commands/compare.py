@@ -15,7 +15,7 @@ NAME = "compare"
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series CSV/.mat files (DATA_FORMAT.md) or frequency-"
                "response CSVs (freq_Hz, mag_m_per_V, phase_deg). Writes report.json, metrics.csv, bands.csv, "
-               "by_rh.csv, PNGs and report.html into --out.")
+               "by_rh.csv, PNGs and the page index.html into --out.")
 
 
 # ------------------------------------------------------------------ shared with `eap identify`
@@ -44,8 +44,9 @@ def add_frf_arguments(p) -> None:
     g.add_argument("--sensor-bandwidth-Hz", default="auto",
                    help="first-order sensor low-pass applied to the model: auto (from record metadata), none, "
                         "or a cut-off in Hz")
-    g.add_argument("--rh-tolerance", type=float, default=2.5,
-                   help="records whose RH differ by less than this [%%] form one RH level")
+    g.add_argument("--rh-tolerance", type=float, default=1.0,
+                   help="the hygrometer's tolerance [%%]: records whose RH differ by less than this form one RH "
+                        "level, labelled by its nominal value (default 1)")
 
 
 def frf_options(args) -> FRFOptions:
@@ -69,6 +70,17 @@ def frf_options(args) -> FRFOptions:
                              "blackman, boxcar, flattop") from None
     return FRFOptions(method=args.frf_method, nperseg=args.nperseg, window=args.window, band=band,
                       max_points=args.points)
+
+
+def fit_options(args, **fit):
+    """The measurement options of ``args`` (and the fit options ``fit``) as the one options
+    object of identify and diagnose."""
+    from physics.identify.options import FitOptions
+    if not (args.rh_tolerance >= 0):
+        raise InputError(f"--rh-tolerance {args.rh_tolerance!r}: must be a non-negative number of % RH")
+    return FitOptions(rh=args.rh, rh_tolerance=args.rh_tolerance, frf=frf_options(args),
+                      sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
+                      min_coherence=args.min_coherence, **fit)
 
 
 def sensor_setting(text: str):
@@ -176,6 +188,7 @@ def run(args) -> int:
     with writing(args, inputs=_inputs(args)) as tmp:
         write_comparison_report(res, tmp, provenance=provenance(inputs=args.measurements),
                                 title=f"eap compare: {predictor.name}")
+    from physics.columns import quantity
     d = Path(args.out)
     print(f"model: {predictor.name}")
     for r in res.records:
@@ -183,8 +196,8 @@ def run(args) -> int:
         parts = [f"{Path(r.source).name} (RH {r.rh:.3g} %):"]
         if tm:
             rt = tm["residual_tests"]
-            parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {tm['nrmse']:.3g}, corr {100 * tm['correlation']:.1f} %,"
-                         f" RMSE {1e6 * tm['rmse']:.3g} um; residual "
+            parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {100 * tm['nrmse']:.3g} %, corr "
+                         f"{100 * tm['correlation']:.1f} %, RMSE {quantity(tm['rmse'], 'm')}; residual "
                          f"{'white' if rt['white'] else 'correlated'} ({rt['autocorrelation_outside']}/"
                          f"{rt['autocorrelation_lags']} lags outside 99 %), "
                          f"{'independent of' if rt['independent_of_input'] else 'correlated with'} the input "
@@ -200,5 +213,5 @@ def run(args) -> int:
             for row in res.by_rh))
     for w in res.warnings:
         print(f"  warning: {w}")
-    print(f"wrote {d}/report.html, report.json, metrics.csv and plots in {time.perf_counter() - t0:.1f} s")
+    print(f"wrote {d}/index.html, report.json, metrics.csv and plots in {time.perf_counter() - t0:.1f} s")
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from physics.diagnose.demo import HIDDEN, OUTSIDE, run_hidden_effect
+from physics.diagnose.demo import OUTSIDE, hidden_effects, run_hidden_effect
 from physics.errors import InputError
 
 from ._common import add_output_options, check_out, provenance, writing
@@ -22,7 +22,7 @@ def add_arguments(p):
                    "missing-physics: physics outside the catalog, described, drafted as an effect, diagnosed again")
     p.add_argument("--kind", default="creep", choices=OUTSIDE,
                    help="missing-physics: the physics outside the catalog in the records")
-    p.add_argument("--effect", default="random", help=f"the hidden effect: {', '.join(HIDDEN)}, none, or random")
+    p.add_argument("--effect", default="random", help=f"the hidden effect: {', '.join(hidden_effects())}, none, or random")
     p.add_argument("--seed", type=int, default=0, help="seed of the random parameters, noise and choice")
     p.add_argument("--device", default="ipmc_pt_eg", help="device the measurements are simulated from")
     p.add_argument("--design", choices=["auto", "rich"], default="auto",
@@ -41,8 +41,8 @@ def run(args) -> int:
     if args.scenario == "missing-physics":
         return _missing_physics(args)
     eff = None if args.effect == "none" else args.effect
-    if eff not in (None, "random") and eff not in HIDDEN:
-        raise InputError(f"--effect {args.effect!r}: choose one of {', '.join(HIDDEN)}, none or random")
+    if eff not in (None, "random") and eff not in hidden_effects():
+        raise InputError(f"--effect {args.effect!r}: choose one of {', '.join(hidden_effects())}, none or random")
     log = lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True)  # noqa: E731
     check_out(args)
     with writing(args) as tmp:
@@ -60,7 +60,7 @@ def run(args) -> int:
     ok = (found == hidden) if hidden else (found is None)
     print(f"result: hidden {hidden or 'none'}, ranked first {top}, verdict {found} -> "
           f"{'correct' if ok else 'NOT correct'}")
-    print(f"report: {args.out}/report.html")
+    print(f"report: {args.out}/index.html")
     return 0
 
 
@@ -98,6 +98,6 @@ def _missing_physics(args) -> int:
     print(f"\nloop: before {before.verdict.status} (RMS {1e6 * before.base.rmse:.3g} µm); "
           + (f"after adding {kept}: {after.verdict.status}, " if kept else "no draft kept: ")
           + f"RMS {1e6 * final:.3g} µm (the true model: {1e6 * lp.true_error:.3g} µm)")
-    print(f"records: {args.out}/records/; drafts: {args.out}/drafts/; reports: {args.out}/before/report.html"
-          + (f", {args.out}/after/report.html" if lp.after is not None else ""))
+    print(f"records: {args.out}/records/; drafts: {args.out}/drafts/; reports: {args.out}/before/index.html"
+          + (f", {args.out}/after/index.html" if lp.after is not None else ""))
     return 0

@@ -87,8 +87,13 @@ def _device_parameters(dev) -> None:
 
 def _check(path, device, fast: bool) -> int:
     """Run :func:`physics.effects.check_effect` on every effect of ``path``; 1 if one fails."""
+    from physics.errors import InputError
+    try:
+        classes = effect_classes_in_file(path)
+    except InputError as exc:            # the file was named with --check, not --effects-path
+        raise InputError(exc.render(lambda name: "--check" if name == "effects_path" else None)) from None
     failed = 0
-    for cls in effect_classes_in_file(path):
+    for cls in classes:
         report = check_effect(cls, device or "ipmc_pt_eg", fast=fast)
         print(report)
         failed += not report.ok

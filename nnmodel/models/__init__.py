@@ -1,25 +1,43 @@
-"""Neural and grey-box models of the actuator (one module per model family).
+"""Neural and grey-box models of the actuator (one module per network).
 
-``MODELS`` maps the registry name used in recipes and on the command line to the class;
-every class follows the contract of :class:`nnmodel.models.base.NeuralModel`.
+``MODELS`` maps the registry name used in recipes and on the command line to the class:
+the built-ins of :data:`BUILT_IN_MODELS`, then any added with :func:`register`.  Every
+class follows the contract of :class:`nnmodel.models.base.NeuralModel`, which
+:func:`nnmodel.check_model` checks.
 """
 from __future__ import annotations
 
-from .base import NeuralModel, NotFittedError
+from physics.errors import InputError
+
+from .base import PARTS, NeuralModel, NotFittedError
 from .ff import FFModel
 from .hybrid import HybridModel
 from .narx import NARXModel
 from .rbf import RBFModel
 from .rnn import GRUModel, LSTMModel
 
-MODELS: dict[str, type[NeuralModel]] = {
-    "ff": FFModel,
-    "rbf": RBFModel,
-    "narx": NARXModel,
-    "lstm": LSTMModel,
-    "gru": GRUModel,
-    "hybrid": HybridModel,
-}
+#: The networks shipped with the package.
+BUILT_IN_MODELS: tuple[type[NeuralModel], ...] = (FFModel, RBFModel, NARXModel, LSTMModel, GRUModel, HybridModel)
+MODELS: dict[str, type[NeuralModel]] = {cls.kind: cls for cls in BUILT_IN_MODELS}
 
-__all__ = ["MODELS", "NeuralModel", "NotFittedError", "FFModel", "RBFModel", "NARXModel",
-           "LSTMModel", "GRUModel", "HybridModel"]
+
+def register(cls: type[NeuralModel]) -> type[NeuralModel]:
+    """Add a network class to :data:`MODELS` under its ``kind`` (its recipe is
+    ``KIND.yaml`` in the recipe folder); the class is checked for the static part of the
+    contract (run :func:`nnmodel.check_model` for the whole of it).  Returns the class."""
+    if not (isinstance(cls, type) and issubclass(cls, NeuralModel)):
+        raise InputError(f"{cls!r} is not a NeuralModel subclass")
+    if not isinstance(cls.kind, str) or not cls.kind.isidentifier() or cls.kind == NeuralModel.kind:
+        raise InputError(f"{cls.__name__}: kind must be a name such as 'tcn', got {cls.kind!r}")
+    if MODELS.get(cls.kind, cls) is not cls:
+        raise InputError(f"{cls.__name__}: kind {cls.kind!r} is already registered by {MODELS[cls.kind].__name__}")
+    shared = set(cls._model_params()) & {n for part in PARTS for n in part.names()}
+    if shared:
+        raise InputError(f"{cls.__name__}: constructor parameters {sorted(shared)} are settings of the shared "
+                         "parts (training, features, structure search); take them through **settings")
+    MODELS[cls.kind] = cls
+    return cls
+
+
+__all__ = ["MODELS", "BUILT_IN_MODELS", "register", "NeuralModel", "NotFittedError", "FFModel", "RBFModel",
+           "NARXModel", "LSTMModel", "GRUModel", "HybridModel"]

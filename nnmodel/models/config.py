@@ -1,28 +1,51 @@
-"""Training settings shared by every network, in one object.
+"""How a network is trained, in one settings part (:class:`TrainingConfig`, ``model.training``).
 
-Each model's constructor takes only what describes the model (lags, layers, filters ...);
-the settings of *how* it is trained — budget, optimiser, early stopping, threads, progress —
-are one :class:`TrainingConfig` (``model.training``).  Recipes, ``--set`` and bundle cards
-keep them as flat hyper-parameters (``max_epochs: 200``): a model accepts them as keyword
-arguments and reads and writes them as attributes, which go to ``model.training``.  A model
-class states only where its defaults differ (:attr:`NeuralModel.TRAINING_DEFAULTS`).
+Each model's constructor takes only what describes the model (lags, layers, centres ...);
+the settings of *how* it is trained — budget, optimiser, training windows, early
+stopping, threads, progress — are one :class:`TrainingConfig`.  Recipes, ``--set`` and
+bundle cards keep them as flat hyper-parameters (``max_epochs: 200``); a model class states
+only where its defaults differ (:attr:`NeuralModel.DEFAULTS`).
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 
-from physics.errors import InputError
+from .params import Part, flag, pos_float, pos_int
+
+__all__ = ["TrainingConfig", "TRAINING_FIELDS"]
 
 
 @dataclass
-class TrainingConfig:
+class TrainingConfig(Part):
     """How a network is trained.
 
     ``max_epochs``: the budget (epochs; 0 = no gradient training); ``max_time`` [s]: a
-    wall-clock guard only (the card says if it fired); ``patience``: epochs without a better
-    validation free-run error before stopping; ``val_fraction``: tail of each training
-    record held out when no validation records are given; ``num_threads``: torch threads
-    (None: torch's default); ``checkpoint_dir``: where Lightning may write checkpoints."""
+    wall-clock guard only (the card says if it fired); ``horizon``: simulated samples per
+    training window after the measured history (1 = one-step / series-parallel training,
+    longer = closed loop, truncated back-propagation through time), ``stride``: samples
+    between window starts; ``patience``: epochs without a better validation free-run error
+    before stopping; ``val_fraction``: tail of each training record held out when no
+    validation records are given; ``num_threads``: torch threads (None: torch's default);
+    ``checkpoint_dir``: where Lightning may write checkpoints."""
+
+    ATTR = "training"
+    CHECKS = {
+        "seed": lambda v: pos_int(v, zero=True),
+        "lr": pos_float,
+        "weight_decay": lambda v: pos_float(v, zero=True),
+        "batch_size": pos_int,
+        "max_epochs": lambda v: pos_int(v, zero=True),
+        "max_time": lambda v: None if v is None else pos_float(v),
+        "horizon": pos_int,
+        "stride": pos_int,
+        "patience": pos_int,
+        "val_fraction": lambda v: None if (pos_float(v, zero=True) is None and v < 1) else "a number in [0, 1)",
+        "grad_clip": lambda v: None if v is None else pos_float(v),
+        "progress_bar": flag,
+        "num_threads": lambda v: None if v is None else pos_int(v),
+        "accelerator": lambda v: None if isinstance(v, str) else "a Lightning accelerator name such as 'cpu'",
+        "checkpoint_dir": lambda v: None if v is None or isinstance(v, str) else "a folder path or null",
+    }
 
     seed: int = 0
     lr: float = 1e-3
@@ -30,6 +53,8 @@ class TrainingConfig:
     batch_size: int = 256
     max_epochs: int = 100
     max_time: float | None = None
+    horizon: int = 1
+    stride: int = 1
     patience: int = 10
     val_fraction: float = 0.2
     grad_clip: float | None = None
@@ -38,23 +63,6 @@ class TrainingConfig:
     num_threads: int | None = 1
     checkpoint_dir: str | None = None
 
-    def fit_settings(self) -> dict:
-        """Keyword arguments of :func:`nnmodel.training.fit_core` (without the window
-        settings, which depend on the model)."""
-        out = asdict(self)
-        for k in ("val_fraction", "num_threads"):
-            out.pop(k)
-        return out
-
 
 #: Names of the training settings (flat hyper-parameters of every model).
-TRAINING_FIELDS = tuple(f.name for f in fields(TrainingConfig))
-
-
-def training_config(kind: str, defaults: dict, given: dict) -> TrainingConfig:
-    """The config of a model of ``kind``: TrainingConfig's defaults, then the class's
-    ``defaults``, then the ``given`` keyword arguments (unknown names are refused)."""
-    unknown = sorted(set(given) - set(TRAINING_FIELDS))
-    if unknown:
-        raise InputError(f"unknown hyper-parameter(s) {unknown} for model {kind!r}")
-    return TrainingConfig(**{**defaults, **given})
+TRAINING_FIELDS = TrainingConfig.names()

@@ -22,15 +22,33 @@
 
 Everything here is numpy, deterministic and computed from whole records, so training
 windows cut from the middle of a record see exactly the filter states of the record.
+
+:class:`InputFeatures` is the settings part every model composes (the hyper-parameters
+``memory_filters``, ``memory_min_s``, ``memory_max_s``, ``memory_abs``, ``rh_knots``,
+``inputs``, declared once here); fitting it to the training records gives a
+:class:`FeatureMap` (``model.features_``): the time constants and RH knots actually used,
+and the map from a record in physical units to the normalised channels of a core.
 """
 from __future__ import annotations
 
 import math
+import warnings
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal
 
-__all__ = ["memory_taus", "memory_filters", "rh_hats", "check_knots", "auto_knots"]
+from physics.errors import InputError
+
+from .params import Part, flag, pos_float, pos_int
+
+__all__ = ["memory_taus", "memory_filters", "rh_hats", "check_knots", "auto_knots", "InputFeatures",
+           "FeatureMap", "MEMORY_MIN_SAMPLES", "MEMORY_MAX_FRACTION"]
+
+#: The fastest memory filter spans at least this many sample periods ...
+MEMORY_MIN_SAMPLES = 2.0
+#: ... and the slowest at most this fraction of the (median) training record.
+MEMORY_MAX_FRACTION = 0.5
 
 
 def memory_taus(n: int, min_s: float, max_s: float) -> np.ndarray:
@@ -113,3 +131,164 @@ def auto_knots(rh_series, tol: float = 2.5) -> list[float]:
         levels.append(float(np.ceil(hi)))
     return levels
 
+
+
+# ---------------------------------------------------------------------- the settings part
+@dataclass
+class InputFeatures(Part):
+    """Which input features a model sees: ``memory_filters`` low-pass filters of the voltage
+    with time constants ``memory_min_s``..``memory_max_s`` (s; adapted to the data, see
+    :meth:`fit`), with ``memory_abs`` the same filters of |V|; ``rh_knots`` (%, ``"auto"``:
+    the training RH levels, None/[]: none) schedule the linear paths on RH; ``inputs``:
+    ``auto`` (voltage, + RH when the records carry it), ``voltage`` or ``voltage+rh``."""
+
+    ATTR = "features"
+    CHECKS = {
+        "memory_filters": lambda v: pos_int(v, zero=True),
+        "memory_min_s": pos_float,
+        "memory_max_s": pos_float,
+        "memory_abs": flag,
+        "rh_knots": lambda v: None if v is None else check_knots(v),
+        "inputs": lambda v: None if v in ("auto", "voltage", "voltage+rh") else "'auto', 'voltage' or 'voltage+rh'",
+    }
+
+    memory_filters: int = 0
+    memory_min_s: float = 0.02
+    memory_max_s: float = 100.0
+    memory_abs: bool = False
+    rh_knots: list | str | None = None
+    inputs: str = "auto"
+
+    def uses_rh(self, kind: str, has_rh: bool) -> bool:
+        """Whether a model fitted on records with (``has_rh``) or without RH takes RH."""
+        if self.inputs == "voltage+rh" and not has_rh:
+            raise InputError(f"model {kind!r} was asked for inputs voltage+rh but the training "
+                             "records carry no relative humidity")
+        return has_rh and self.inputs != "voltage"
+
+    def fit(self, kind: str, fs: float, records, use_rh: bool) -> "FeatureMap":
+        """The features for these training records: the RH knots (``"auto"``: the records'
+        levels, :func:`auto_knots`) and the memory time constants fitted to the data — none
+        faster than :data:`MEMORY_MIN_SAMPLES` sample periods, none slower than
+        :data:`MEMORY_MAX_FRACTION` of the median record; the recipe's range is kept where
+        the data support it (a warning says when it is not)."""
+        if self.rh_knots == "auto":
+            knots = auto_knots([r.rh for r in records]) if use_rh else []
+        else:
+            knots = [float(k) for k in (self.rh_knots or [])]
+        rng = None
+        if self.memory_filters:
+            want = (float(self.memory_min_s), float(self.memory_max_s))
+            ceiling = MEMORY_MAX_FRACTION * float(np.median([len(r) for r in records])) / fs
+            lo = max(want[0], MEMORY_MIN_SAMPLES / fs)
+            hi = min(want[1], ceiling)
+            if hi <= lo * 1.01:   # records too short for the range: one decade above the fastest
+                hi = lo * 10.0
+            if (lo, hi) != want:
+                warnings.warn(f"model {kind!r}: memory filters {want[0]:g}–{want[1]:g} s do not fit these data "
+                              f"(sample period {1 / fs:.3g} s, records of ~{ceiling / MEMORY_MAX_FRACTION:.3g} s); "
+                              f"using {lo:.3g}–{hi:.3g} s", UserWarning, stacklevel=4)
+            rng = (lo, hi)
+        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs))
+
+    def card(self, fm: "FeatureMap") -> dict:
+        """Bundle-card entries of fitted features (what :meth:`restore` needs)."""
+        out = {}
+        if self.rh_knots == "auto":
+            out["rh_knots_pct"] = list(fm.knots)
+        if fm.memory_range:
+            out["memory_range_s"] = [float(x) for x in fm.memory_range]
+        return out
+
+    def restore(self, kind: str, fs: float, use_rh: bool, card: dict) -> "FeatureMap":
+        """The fitted features from a bundle card's entries (see :meth:`card`)."""
+        if self.rh_knots == "auto":
+            if card.get("rh_knots_pct") is None:
+                raise InputError(f"model {kind!r} with rh_knots 'auto' needs the knots found in "
+                                 "training (card entry rh_knots_pct); the bundle lacks them")
+            knots = [float(k) for k in card["rh_knots_pct"]]
+        else:
+            knots = [float(k) for k in (self.rh_knots or [])]
+        rng = card.get("memory_range_s")
+        if rng is None and self.memory_filters:   # cards written before the range adapted to the data
+            rng = (self.memory_min_s, self.memory_max_s)
+        rng = None if rng is None else (float(rng[0]), float(rng[1]))
+        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs))
+
+
+@dataclass
+class FeatureMap:
+    """Fitted input features: records in physical units -> normalised core channels.
+
+    ``u`` channels: normalised voltage, then the memory filters (each divided by its
+    standard deviation over the training records, held by the :class:`~.normalise.Normalized`
+    module as ``mem_std``); ``rh`` channels: normalised RH, then one hat per RH knot."""
+
+    fs: float
+    use_rh: bool
+    knots: list
+    memory_range: tuple | None
+    n_filters: int
+    memory_abs: bool
+
+    @property
+    def taus(self) -> np.ndarray:
+        """Memory time constants (s)."""
+        if not self.n_filters:
+            return np.zeros(0)
+        return memory_taus(self.n_filters, *self.memory_range)
+
+    @property
+    def n_mem(self) -> int:
+        """Memory channels: the filters of the voltage (and of |V| with ``memory_abs``)."""
+        return 2 * self.n_filters if self.memory_abs else self.n_filters
+
+    @property
+    def n_rh(self) -> int:
+        """RH channels given to the core: normalised RH, then one hat per knot."""
+        return (1 + len(self.knots)) if self.use_rh else 0
+
+    @property
+    def n_sched(self) -> int:
+        """Hat channels that schedule a linear path on RH."""
+        return len(self.knots) if self.use_rh else 0
+
+    def memory_raw(self, u: np.ndarray, net) -> np.ndarray:
+        """Memory filters of the normalised voltage (and of |V| / std(V) with
+        ``memory_abs``) for a voltage record ``u`` in V, unscaled."""
+        m = memory_filters(net.norm("u", u), self.taus, self.fs)
+        if self.memory_abs:
+            _, sd = net.stat("u")
+            m = np.concatenate([m, memory_filters(np.abs(u) / sd, self.taus, self.fs)], 1)
+        return m
+
+    def memory(self, u: np.ndarray, net) -> np.ndarray:
+        """Memory channels of a voltage record ``u`` (V), each at unit scale over training."""
+        m = self.memory_raw(u, net)
+        return m / net.mem_std.numpy() if hasattr(net, "mem_std") else m
+
+    def set_scale(self, records, net) -> None:
+        """Store the standard deviation of every memory channel over ``records`` in ``net``."""
+        if self.n_mem:
+            import torch
+            M = np.concatenate([self.memory_raw(r.u, net) for r in records])
+            sd = M.std(0)
+            sd[~np.isfinite(sd) | (sd <= 1e-12)] = 1.0
+            net.mem_std.copy_(torch.as_tensor(sd))
+
+    def rh_channels(self, rh: np.ndarray | None, net) -> np.ndarray | None:
+        """Normalised RH and its hat weights (None when the model ignores humidity)."""
+        if rh is None or not self.use_rh:
+            return None
+        parts = [net.norm("rh", rh)[:, None]]
+        if self.knots:
+            parts.append(rh_hats(rh, self.knots))
+        return np.concatenate(parts, 1) if len(parts) > 1 else parts[0]
+
+    def channels(self, u: np.ndarray, rh: np.ndarray | None, net) -> tuple[np.ndarray, np.ndarray | None]:
+        """(``u`` channels (n, 1 + n_mem), ``rh`` channels (n, n_rh) or None) of a record."""
+        cols = [net.norm("u", u)[:, None]]
+        if self.n_mem:
+            cols.append(self.memory(u, net))
+        U = np.concatenate(cols, 1) if len(cols) > 1 else cols[0]
+        return U, self.rh_channels(rh, net)

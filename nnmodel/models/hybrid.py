@@ -34,10 +34,11 @@ from torch import nn
 
 from physics.errors import InputError
 
-from .base import NeuralModel, _pos_int
+from .base import NeuralModel
 from .features import memory_filters
-from .ff import _LAG_CHECKS
-from .lag import LagSimulator, MLPMap, arx_init
+from .ff import LAG_CHECKS, lag_core
+from .lag import LagSimulator, arx_init
+from .params import pos_int
 
 #: internal physics signals the correction may see: name -> (SimulationResult attribute, unit)
 PHYSICS_STATES = {"cs_up": ("cs_up", "mol/m^3"), "current": ("current", "A")}
@@ -63,7 +64,7 @@ def _distinct_names(allowed):
 def _check_effects(v):
     if isinstance(v, str) or (isinstance(v, (list, tuple)) and all(isinstance(e, str) for e in v)):
         return None
-    return "an effect list (e.g. 'default' or [electrode_resistance, humidity])"
+    return "an effect list (e.g. 'default', or a list of effect ids as `eap effects` shows them)"
 
 
 class HybridCore(LagSimulator):
@@ -96,28 +97,24 @@ class HybridModel(NeuralModel):
     """Physics simulator + neural correction of its output (grey box)."""
 
     kind = "hybrid"
-    TRAINING_DEFAULTS = {"max_time": 600.0, "grad_clip": 1.0}
-    _checks = {**_LAG_CHECKS,
-               "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
-               "effects": _check_effects,
-               "physics_states": _distinct_names(PHYSICS_STATES),
-               "physics_inputs": _distinct_names(PHYSICS_INPUTS),
-               "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'",
-               "gain_hidden": lambda v: _pos_int(v, zero=True)}
+    DEFAULTS = {"max_time": 600.0, "grad_clip": 1.0}
+    CHECKS = {**LAG_CHECKS,
+              "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
+              "effects": _check_effects,
+              "physics_states": _distinct_names(PHYSICS_STATES),
+              "physics_inputs": _distinct_names(PHYSICS_INPUTS),
+              "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'",
+              "gain_hidden": lambda v: pos_int(v, zero=True)}
+    CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "device": "ipmc_pt_eg", "effects": "none"}
+    CARD_KEYS = ("physics",)
+    _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")
 
     def __init__(self, device: str = "ip2c_pedot_water", effects="default", physics_states: list | None = None,
                  physics_inputs: list | None = None, hold: str = "cubic",
                  na: int = 0, nb: int = 20, hidden: int = 32, layers: int = 2, activation: str = "tanh",
-                 poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
-                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
-                 memory_abs: bool = False,
-                 rh_knots: list | None = None, gain_hidden: int = 0, horizon: int = 1, stride: int = 1,
-                 inputs: str = "auto", **training):
+                 poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True, gain_hidden: int = 0,
+                 **settings):
         self._set_params_from(locals())
-
-    _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")
-    #: card entries (besides the standard ones) written by learned_state and read back on load
-    CARD_EXTRA = ("physics", "rh_knots_pct", "memory_range_s")
 
     # ------------------------------------------------------------------ physics
     def _states(self) -> list[str]:
@@ -171,8 +168,9 @@ class HybridModel(NeuralModel):
         core = self.net_.core
         m, sd = self.net_.stat("y")
         core.y_offset.fill_(m / sd)
-        if self._n_mem():
-            M = np.concatenate([memory_filters(self.net_.norm("y", v[2][0]), self._memory_taus(), self.fs_)
+        fm = self.features_
+        if fm.n_mem:
+            M = np.concatenate([memory_filters(self.net_.norm("y", v[2][0]), fm.taus, fm.fs)
                                 for v in self._cache.values()])
             sd = M.std(0)
             sd[~np.isfinite(sd) | (sd <= 1e-12)] = 1.0
@@ -188,8 +186,10 @@ class HybridModel(NeuralModel):
         self._cache = {}
 
     def _channels(self, u, rh):
-        from .features import rh_hats
-        n = self.net_
+        """Channels of the correction: voltage and physics output (both delayed), the physics
+        states and extra runs (normalised), the memory filters of the voltage and of the
+        physics output, and the RH channels."""
+        n, fm = self.net_, self.features_
         hit = getattr(self, "_cache", {}).get((id(u), id(rh)))
         yp, S = hit[2] if hit is not None and hit[0] is u and hit[1] is rh else self.physics_output(u, rh)
         un, ypn = n.norm("u", u), n.norm("y", yp)
@@ -197,35 +197,20 @@ class HybridModel(NeuralModel):
         core = n.core
         if S.shape[1]:
             cols.append((S - core.state_mean.numpy()) / core.state_std.numpy())
-        if self._n_mem():   # memory of the voltage (and |V|) and of the physics output
-            cols.append(self._memory(u))
-            cols.append(memory_filters(ypn, self._memory_taus(), self.fs_) / core.phys_mem_std.numpy())
-        U = np.concatenate(cols, 1)
-        R = None
-        if rh is not None and "rh" in self.inputs_:
-            parts = [n.norm("rh", rh)[:, None]]
-            if self._rh_knots():
-                parts.append(rh_hats(rh, self._rh_knots()))
-            R = np.concatenate(parts, 1)
-        return U, R
+        if fm.n_mem:   # memory of the voltage (and |V|) and of the physics output
+            cols.append(fm.memory(u, n))
+            cols.append(memory_filters(ypn, fm.taus, fm.fs) / core.phys_mem_std.numpy())
+        return np.concatenate(cols, 1), fm.rh_channels(rh, n)
 
     # ------------------------------------------------------------------ network
-    def _build_core(self, n_rh):
-        n_states = self._n_extra()
-        n_mem = n_states + self._n_mem() + len(self._memory_taus())
-        n_sched = len(self._rh_knots()) if n_rh else 0
-        fmap = MLPMap(self.na, 2 * self.nb + n_mem + n_rh, self.hidden, self.layers, self.activation,
-                      linear=True, poly_degree=self.poly_degree, n_sched=n_sched)
-        return HybridCore(self.na, self.nb, n_rh, fmap, self.feedthrough, n_mem=n_mem, n_tap=2,
-                          residual=True, n_states=n_states, n_phys_mem=len(self._memory_taus()),
-                          gain_hidden=self.gain_hidden)
+    def _build_core(self, features):
+        n_states, n_phys_mem = self._n_extra(), len(features.taus)
+        return lag_core(self, features, n_tap=2, n_extra=n_states + n_phys_mem, core_cls=HybridCore, residual=True,
+                        n_states=n_states, n_phys_mem=n_phys_mem, gain_hidden=self.gain_hidden)
 
     def _initialise(self, core, train):
         if self.arx_init:
             self.init_report_ = arx_init(core, train)
-
-    def _training_settings(self):
-        return dict(horizon=self.horizon, stride=self.stride)
 
     def fit(self, train, val=None):
         if self.inputs == "voltage":
@@ -234,17 +219,14 @@ class HybridModel(NeuralModel):
         return super().fit(train, val)
 
     # ------------------------------------------------------------------ persistence
-    def learned_state(self):
-        out = super().learned_state()
+    def _card_extra(self):
         self._physics_model()
-        out["card_extra"] = {**out.get("card_extra", {}), "physics": self.physics_card_}
-        return out
+        return {"physics": self.physics_card_}
 
-    def restore(self, learned, state_dict):
-        card = (learned.get("card_extra") or {}).get("physics")
+    def _restore_extra(self, card_extra):
+        card = card_extra.get("physics")
         if card is not None:
             self.physics_, self.physics_card_ = _physics_from_card(card)
-        return super().restore(learned, state_dict)
 
 
 # ---------------------------------------------------------------------- physics in the card

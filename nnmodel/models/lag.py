@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .base import SequenceCore
+from .core import SequenceCore
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "gelu": nn.GELU, "silu": nn.SiLU,
                "elu": nn.ELU, "sigmoid": nn.Sigmoid}

@@ -16,17 +16,11 @@ class NARXModel(LagModel):
     """Closed-loop-trained NARX network (simulation-error / multiple-shooting training)."""
 
     kind = "narx"
-    TRAINING_DEFAULTS = {"lr": 2e-3, "batch_size": 64, "max_epochs": 200, "max_time": 600.0, "patience": 20,
-                         "grad_clip": 1.0}
+    DEFAULTS = {"lr": 2e-3, "batch_size": 64, "max_epochs": 200, "max_time": 600.0, "patience": 20,
+                "grad_clip": 1.0, "horizon": 100, "stride": 20}
+    CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "horizon": 20, "stride": 20}
 
     def __init__(self, na: int = 4, nb: int = 8, hidden: int = 32, layers: int = 2,
                  activation: str = "tanh", poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True,
-                 horizon: int = 100, stride: int = 20,
-                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
-                 memory_abs: bool = False,
-                 rh_knots: list | None = None,
-                 inputs: str = "auto", **training):
+                 **settings):
         self._set_params_from(locals())
-
-    def _training_settings(self):
-        return dict(horizon=self.horizon, stride=self.stride)

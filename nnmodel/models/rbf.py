@@ -7,7 +7,7 @@ normalised one-step regressors, widths s_j = ``width_factor`` x the mean distanc
 to its ``width_neighbours`` nearest centres, then the output layer (w, a, c) by ridge
 regression on one-step targets.  Optional gradient fine-tuning of everything (centres,
 widths, weights) with the shared Lightning loop: ``max_epochs > 0``, one step ahead
-(``horizon = 1``) or in closed loop (``horizon > 1``).  With ``na = 0`` it is an NFIR
+(``horizon = 1``) or in closed loop (``horizon > 1``, training settings).  With ``na = 0`` it is an NFIR
 network; ``memory_filters`` add long input memory (see :mod:`nnmodel.models.features`).
 """
 from __future__ import annotations
@@ -15,37 +15,33 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .base import NeuralModel, _pos_float, _pos_int
-from .ff import _LAG_CHECKS
+from .base import NeuralModel
+from .ff import LAG_CHECKS
 from .lag import LagSimulator, RBFMap, _normal_equations, ridge
+from .params import flag, pos_float, pos_int
 
 
 class RBFModel(NeuralModel):
     """Gaussian RBF network: k-means centres, spacing-based widths, ridge output layer."""
 
     kind = "rbf"
-    TRAINING_DEFAULTS = {"max_epochs": 0, "grad_clip": 1.0}
-    _checks = {**_LAG_CHECKS,
-               "n_centres": _pos_int,
-               "width_factor": _pos_float,
-               "width_neighbours": _pos_int,
-               "alpha": lambda v: _pos_float(v, zero=True),
-               "kmeans_samples": _pos_int}
+    DEFAULTS = {"max_epochs": 0, "grad_clip": 1.0}
+    CHECKS = {"na": LAG_CHECKS["na"], "nb": LAG_CHECKS["nb"], "feedthrough": flag,
+              "n_centres": pos_int,
+              "width_factor": pos_float,
+              "width_neighbours": pos_int,
+              "alpha": lambda v: pos_float(v, zero=True),
+              "kmeans_samples": pos_int}
+    CHECK_PARAMS = {"n_centres": 6}
 
     def __init__(self, na: int = 2, nb: int = 20, n_centres: int = 100, width_factor: float = 1.0,
                  width_neighbours: int = 2, alpha: float = 1e-6, kmeans_samples: int = 20000,
-                 feedthrough: bool = True, horizon: int = 1, stride: int = 1,
-                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
-                 memory_abs: bool = False,
-                 rh_knots: list | None = None,
-                 inputs: str = "auto", structures: list | None = None, **training):
+                 feedthrough: bool = True, **settings):
         self._set_params_from(locals())
 
-    def _build_core(self, n_rh):
-        n_mem = self._n_mem()
-        n_sched = len(self._rh_knots()) if n_rh else 0
-        fmap = RBFMap(self.na, self.nb + n_mem + n_rh, self.n_centres, n_sched=n_sched)
-        return LagSimulator(self.na, self.nb, n_rh, fmap, self.feedthrough, n_mem=n_mem)
+    def _build_core(self, features):
+        fmap = RBFMap(self.na, self.nb + features.n_mem + features.n_rh, self.n_centres, n_sched=features.n_sched)
+        return LagSimulator(self.na, self.nb, features.n_rh, fmap, self.feedthrough, n_mem=features.n_mem)
 
     def _initialise(self, core, train):
         from sklearn.cluster import KMeans
@@ -102,6 +98,3 @@ class RBFModel(NeuralModel):
             resid = t - np.einsum("nm,nk,km->n", Zl, S, W) - S @ w[m * K:m * K + K] - Phi @ w[m * K + K:]
         self.init_report_ = {"one_step_rmse": float(np.sqrt(np.mean(resid ** 2))),
                              "mean_width": float(width.mean())}
-
-    def _training_settings(self):
-        return dict(horizon=self.horizon, stride=self.stride)

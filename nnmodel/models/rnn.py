@@ -20,8 +20,10 @@ from torch import nn
 
 import numpy as np
 
-from .base import NeuralModel, SequenceCore, _pos_int
-from .features import check_knots
+from .base import NeuralModel
+from .core import SequenceCore
+from .lag import _normal_equations
+from .params import flag, pos_int
 
 
 def _channels(x):
@@ -85,34 +87,24 @@ class RNNSimulator(SequenceCore):
 
 class _RNNModel(NeuralModel):
     cell = "lstm"
-    TRAINING_DEFAULTS = {"lr": 3e-3, "batch_size": 32, "max_epochs": 300, "max_time": 600.0, "patience": 20,
-                         "grad_clip": 1.0}
-    _checks = {"hidden": _pos_int, "layers": _pos_int, "n_init": _pos_int,
-               "encoder_hidden": _pos_int, "horizon": _pos_int, "stride": _pos_int,
-               "rh_knots": lambda v: None if v is None else check_knots(v),
-               "skip_init": lambda v: None if isinstance(v, bool) else "true or false"}
+    DEFAULTS = {"lr": 3e-3, "batch_size": 32, "max_epochs": 300, "max_time": 600.0, "patience": 20,
+                "grad_clip": 1.0, "horizon": 200, "stride": 50}
+    CHECKS = {"hidden": pos_int, "layers": pos_int, "n_init": pos_int, "encoder_hidden": pos_int, "skip_init": flag}
+    CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "horizon": 20, "stride": 20, "n_init": 5}
 
     def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
-                 horizon: int = 200, stride: int = 50,
-                 memory_filters: int = 0, memory_min_s: float = 0.02, memory_max_s: float = 100.0,
-                 memory_abs: bool = False,
-                 rh_knots: list | None = None, skip_init: bool = False,
-                 inputs: str = "auto", **training):
+                 skip_init: bool = False, **settings):
         self._set_params_from(locals())
 
-    def _build_core(self, n_rh):
-        n_sched = len(self._rh_knots()) if n_rh else 0
-        return RNNSimulator(self.cell, n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden,
-                            n_mem=self._n_mem(), n_sched=n_sched)
+    def _build_core(self, features):
+        return RNNSimulator(self.cell, features.n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden,
+                            n_mem=features.n_mem, n_sched=features.n_sched)
 
     def _initialise(self, core, train):
         """``skip_init``: least-squares fit of the direct path on the training records
         (normalised), recurrent read-out set to zero."""
         if not self.skip_init:
             return
-        import torch
-        from .lag import _normal_equations
-
         xs = [np.concatenate([s.u if s.u.ndim == 2 else s.u[:, None]]
                              + ([s.rh if s.rh.ndim == 2 else s.rh[:, None]] if core.n_rh else []), 1)
               for s in train]
@@ -144,9 +136,6 @@ class _RNNModel(NeuralModel):
             core.readout.bias.zero_()
         resid = t - np.concatenate([blocks(slice(a, a + 20000)) for a in range(0, len(t), 20000)]) @ w
         self.init_report_ = {"skip_one_step_rmse": float(np.sqrt(np.mean(resid ** 2)))}
-
-    def _training_settings(self):
-        return dict(horizon=self.horizon, stride=self.stride)
 
 
 class LSTMModel(_RNNModel):

@@ -23,7 +23,8 @@ from typing import Sequence
 
 import numpy as np
 
-from . import forms, stats
+from .. import stats
+from . import forms
 
 #: The final model explains the data when its RMS error is within this × the noise floor.
 ADEQUATE_RATIO = 1.3
@@ -54,14 +55,15 @@ class Adequacy:
                f"({'within' if self.adequate else 'above'} {ADEQUATE_RATIO}×)")
         found = self.remaining()
         if found:
-            txt += "; remaining: " + "; ".join(found)
+            txt += "; remaining: " + "; ".join(d["text"] for d in found)
         return txt
 
-    def remaining(self) -> list[str]:
-        """Sentences for what remains: the forward-selected forms, then any level dependence."""
+    def remaining(self) -> list[dict]:
+        """What remains, described: the forward-selected forms in order, then any significant
+        level dependence (:mod:`.forms`)."""
         chosen = sorted((d for d in self.descriptors if d.get("selected_step")), key=lambda d: d["selected_step"])
         levels = [d for d in self.descriptors if d.get("significant") and "delta_bic" not in d]
-        return [d["text"] for d in chosen + levels]
+        return chosen + levels
 
     def to_dict(self) -> dict:
         return {"model": self.model, "rmse_m": self.rmse, "noise_floor_m": self.noise_floor,
@@ -69,17 +71,13 @@ class Adequacy:
                 "ljung_box_p": self.ljung_box_p, "descriptors": self.descriptors, "summary": self.summary()}
 
 
-def assess(label: str, fit, records: Sequence, noise: float) -> Adequacy:
-    """Adequacy of ``fit`` (a scored :class:`.candidates.ModelFit`) on ``records``."""
+def assess(label: str, fit, records: Sequence, noise: float, describe: bool = True) -> Adequacy:
+    """Adequacy of ``fit`` (a scored :class:`.candidates.ModelFit`) on ``records``; with
+    ``describe`` the residual of an inadequate model is described (:func:`.forms.describe`)."""
     adequate = None if not (math.isfinite(noise) and noise > 0) else bool(fit.rmse <= ADEQUATE_RATIO * noise)
     lb = stats.ljung_box(np.concatenate(list(fit.resid_d)), lags=20)
     out = Adequacy(label, float(fit.rmse), float(noise), adequate, float(lb.get("p_value", math.nan)))
-    if adequate is not True:
+    if adequate is not True and describe:
         out.forms = forms.describe(fit, records)
         out.descriptors = [ff.to_dict() for ff in out.forms]
     return out
-
-
-def describe_missing(fit, records: Sequence) -> list[dict]:
-    """The residual forms of ``fit`` (:func:`.forms.describe`) as plain dicts, selected first."""
-    return [ff.to_dict() for ff in forms.describe(fit, records)]

@@ -34,7 +34,8 @@ from typing import Callable, ClassVar, Sequence
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
 
-from .. import stats
+from ... import stats
+from ...metrics import remove_nuisance
 
 #: A form is significant at ΔBIC ≤ −this (very strong evidence, Kass & Raftery) ...
 SIGNIFICANT_BIC = 10.0
@@ -56,14 +57,14 @@ class Residual:
     the voltage ``u`` [V] at its ``fs_d`` instead of its own (:func:`linear_response`)."""
 
     records: list
-    resid: list                  # per record, decimated [m], mean removed
+    resid: list                  # per record, decimated [m], nuisance terms removed
     preds: list                  # model prediction per record, decimated [m]
     n_eff: list                  # effective sample size per record
     respond: Callable | None = None
 
     @classmethod
     def of(cls, fit, records: Sequence) -> "Residual":
-        resid = [np.asarray(e, float) - float(np.mean(e)) for e in fit.resid_d]
+        resid = [remove_nuisance(e) for e in fit.resid_d]
         preds = [np.asarray(p, float) for p in fit.pred_d]
         n_eff = [e.size / max(stats.integrated_time(e), 1.0) for e in resid]
         model = getattr(fit, "model", None)
@@ -100,9 +101,10 @@ class Residual:
 
     def regress(self, columns: list[list[np.ndarray]], k_grid: int = 1) -> "Regression":
         """Least squares e_r ≈ Σ_j c_j x_rj with gains shared by the records; ``columns[r]`` the
-        regressors of record r (means removed here, as the fit removes each record's offset);
+        regressors of record r (their nuisance terms removed here, as the fit removes each
+        record's offset and linear drift, :func:`physics.metrics.remove_nuisance`);
         ``k_grid`` nonlinear parameters scanned outside (counted in ΔBIC with the gains)."""
-        X = [np.column_stack([x - x.mean() for x in cols]) for cols in columns]
+        X = [np.column_stack([remove_nuisance(x) for x in cols]) for cols in columns]
         A = sum(x.T @ x for x in X)
         b = sum(x.T @ e for x, e in zip(X, self.resid))
         scale = np.sqrt(np.maximum(np.diag(A), 1e-300))

@@ -1,0 +1,81 @@
+"""Training recipes: ``configs/train/NAME.yaml``, one per network (the model's hyper-parameters).
+
+A recipe is ``{model, description, hyper_parameters}``; :func:`load_recipe` layers the
+model's defaults, the file, then the caller's overrides (``--set MODEL.KEY=VALUE``), and
+refuses unknown keys and invalid values before any training; :func:`make_model` builds the
+model.  This module sits above both the model registry and the training loop (it imports
+the models, the training loop imports neither).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import yaml
+
+from physics.errors import InputError
+
+__all__ = ["recipe_dir", "load_recipe", "make_model"]
+
+_RECIPE_KEYS = {"model", "description", "hyper_parameters"}
+
+
+def recipe_dir() -> Path:
+    """Folder of the training recipes: ``$EAP_TRAIN_RECIPES`` or ``configs/train`` of the
+    source tree."""
+    env = os.environ.get("EAP_TRAIN_RECIPES")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[1] / "configs" / "train"
+
+
+def load_recipe(name: str, overrides: dict | None = None, directory: str | os.PathLike | None = None) -> dict:
+    """Read the recipe ``NAME.yaml`` and apply ``overrides`` (hyper-parameter -> value).
+
+    Returns ``{"model": kind, "description": str, "hyper_parameters": {...}}`` where the
+    hyper-parameters are the model's defaults updated by the file and then the overrides.
+    Unknown keys (in the file or in the overrides) raise :class:`InputError`.
+    """
+    from .models import MODELS
+
+    folder = Path(directory) if directory else recipe_dir()
+    path = folder / f"{name}.yaml"
+    if not path.is_file():
+        avail = sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
+        raise InputError(f"no training recipe {name!r} ({path} not found); available: "
+                         f"{', '.join(avail) or 'none'}")
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: a recipe must be a mapping with keys {sorted(_RECIPE_KEYS)}")
+    bad = sorted(set(doc) - _RECIPE_KEYS)
+    if bad:
+        raise InputError(f"{path}: unknown key(s) {bad}; a recipe has {sorted(_RECIPE_KEYS)}")
+    kind = doc.get("model", name)
+    if kind not in MODELS:
+        raise InputError(f"{path}: unknown model {kind!r}; known models: {', '.join(sorted(MODELS))}")
+    cls = MODELS[kind]
+    hp = doc.get("hyper_parameters") or {}
+    if not isinstance(hp, dict):
+        raise InputError(f"{path}: hyper_parameters must be a mapping")
+    known = set(cls.param_names())
+    for where, d in ((str(path), hp), ("overrides", overrides or {})):
+        bad = sorted(set(d) - known)
+        if bad:
+            raise InputError(f"{where}: unknown hyper-parameter(s) {bad} for model {kind!r}; "
+                             f"known: {', '.join(sorted(known))}")
+    params = cls.default_params()
+    params.update(hp)
+    params.update(overrides or {})
+    cls(**params)  # validates values (raises InputError)
+    return {"model": kind, "description": str(doc.get("description", "")), "hyper_parameters": params}
+
+
+def make_model(name: str, overrides: dict | None = None, directory=None):
+    """A model built from its recipe (see :func:`load_recipe`)."""
+    from .models import MODELS
+
+    rec = load_recipe(name, overrides, directory)
+    return MODELS[rec["model"]](**rec["hyper_parameters"])
