@@ -2,18 +2,21 @@
 effects → diagnosis again with the drafts → the error before and after, against the true
 model's error.
 
-    python bench/draft_loop.py [--kinds lowpass,drift,creep] [--seeds 0,1,2] [--suite lab|sim]
+    python bench/draft_loop.py [--suites outside,lab,perturbed] [--truths creep,lowpass,drift]
+        [--seeds 0,1,2]
 
-Records: :func:`physics.diagnose.demo.outside_catalog_case` (a sweep 0.1–50 Hz and a 20 s
-pulse, 60 s at 200 Hz; the user's model is the bare device), written as CSV files and read
-back by ``eap diagnose`` as a user would: ``lab`` exports them as an instrument does (tip in
-mm, 3 µm noise, an offset, a random-walk drift, hygrometer jitter, no excitation or sensor
-metadata), ``sim`` as the simulator writes them (metadata kept).  For each case it prints the
-truth, the first diagnosis (status, pick, RMS error of its final model), the kept drafts with
-their fitted parameters, whether each passed the contract check, the second diagnosis with
-the drafts passed back (``--effects-path``), and the true model's error (measurement minus
-the true deflection, each record's mean removed, full rate).  The machine may be shared:
-the wall times are indicative.
+Suites: ``outside`` — :func:`physics.diagnose.demo.outside_catalog_case` exported as a lab does
+(the bare device, a sweep and a pulse, 60 s at 200 Hz, tip in mm, no metadata; its ``drift`` is
+a deterministic A·(1 − e^(−t/τ)) shared by the records); ``lab`` and ``perturbed`` — the test
+beds of :mod:`physics.diagnose.testbeds` (lab-like exports of our simulator with the device's
+default effects; a simulator whose base differs a little; their ``drift`` is a random wander,
+different in every record).  The records are written as files and ``eap diagnose`` reads them
+as a user would, with ``--draft-effects``, then again with the kept drafts (``--effects-path``).
+Printed per case: the truth, the first verdict (pick or none, status, RMS error of its final
+model), the noise floor the diagnosis used, the true model's error (scored like the diagnosis:
+each record's offset and linear drift removed), the kept drafts (contract check), the second
+verdict with the drafts' fitted values, and the wall time.  The machine may be shared: the wall
+times are indicative.
 """
 from __future__ import annotations
 
@@ -39,38 +42,52 @@ def _run(argv: list[str]) -> tuple[str, float]:
     return out.getvalue(), time.perf_counter() - t0
 
 
+def _um(x) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{1e6 * x:.3g}"
+
+
 def _verdict(d: dict) -> str:
-    """Status, pick (or the ambiguous ones) with their RMS error [µm] and confidence label."""
+    """Pick (or the ambiguous ones) with the RMS error [µm] of the final model, status and label."""
     v = d["verdict"]
     rmse = {r["effect"]: r.get("rmse_after") for r in d["ranking"]}
-    picks = [v["missing_effect"]] if v.get("missing_effect") else list(v.get("ambiguous") or [])
+    picks = [p["effect"] for p in v.get("chain", [])] or list(v.get("ambiguous") or [])
     named = " / ".join(f"{p} {_um(rmse.get(p))}" for p in picks) or f"no pick, base {_um(d['base']['rmse'])}"
     return f"{named} ({v['status']}" + (f", {v.get('confidence_label')})" if v.get("missing_effect") else ")")
 
 
-def case(kind: str, seed: int, suite: str, tmp: Path) -> dict:
-    from physics.diagnose.demo import outside_catalog_case
+def _records(suite: str, truth: str, seed: int, folder: Path) -> tuple[list[str], list[str], dict, float]:
+    """(files, device/effects arguments, truth parameters, true model's error [m])."""
+    if suite == "outside":
+        from physics.diagnose.demo import outside_catalog_case
+        from physics.metrics import remove_nuisance
+        from physics.timeseries import write_timeseries
+        ms, tp, clean = outside_catalog_case(truth, seed, fs=200.0, duration=60.0, lab=True, clean=True)
+        err = [remove_nuisance(m.deflection - y, m.time) for m, y in zip(ms, clean)]
+        files = [str(write_timeseries(m, folder / f"{m.source}.csv", units={"deflection": "mm"})) for m in ms]
+        return files, ["--device", "ipmc_pt_eg", "--effects", "none"], tp, \
+            math.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err))
+    from physics.diagnose.testbeds import make_case
+    case = make_case(suite, truth, seed)
+    files = [str(f) for f in case.write(folder)]
+    return files, ["--device", case.device_name, *case.param_args(), "--effects", case.effects], \
+        case.truth_params, case.true_error()
+
+
+def case(suite: str, truth: str, seed: int, tmp: Path) -> dict:
     from physics.effects import EFFECTS, unregister
-    from physics.timeseries import write_timeseries
-    ms, tp, clean = outside_catalog_case(kind, seed, fs=200.0, duration=60.0, lab=suite == "lab", clean=True)
-    files, sq, n = [], 0.0, 0
-    for m, y in zip(ms, clean):
-        files.append(str(write_timeseries(m, tmp / f"{m.source}.csv",
-                                          units={"deflection": "mm"} if suite == "lab" else {})))
-        e = m.deflection - y
-        e = e - e.mean()
-        sq, n = sq + float(e @ e), n + e.size
-    out, t1 = _run(["diagnose", *files, "--effects", "none", "--out", str(tmp / "dx"), "--quiet",
-                    "--draft-effects", str(tmp / "drafts")])
+    files, model, tp, true_error = _records(suite, truth, seed, tmp / "records")
+    out, t1 = _run(["diagnose", *files, *model, "--out", str(tmp / "dx"), "--quiet", "--draft-effects",
+                    str(tmp / "drafts")])
     first = json.loads((tmp / "dx" / "diagnosis.json").read_text())
     drafts = sorted((tmp / "drafts").glob("*.py")) if (tmp / "drafts").is_dir() else []
     checks = dict(re.findall(r"draft: \S*?(\w+\.py): contract check (passed|FAILED)", out))
-    row = {"kind": kind, "seed": seed, "truth": tp, "true_error_m": math.sqrt(sq / n),
-           "noise_floor_m": first.get("noise_floor_m"), "base_m": first["base"]["rmse"],
-           "first": _verdict(first),
-           "drafts": {p.name: checks.get(p.name, "?") for p in drafts}, "seconds": [t1]}
+    row = {"truth": tp, "true_error_m": true_error, "noise_floor_m": first.get("noise_floor_m"),
+           "base_m": first["base"]["rmse"], "first": _verdict(first), "seconds": [t1],
+           "drafts": {p.name: checks.get(p.name, "?") for p in drafts},
+           "not_kept": re.findall(r"draft: (\w+) not kept: .*?(lowers the RMS error only|raises the RMS error) "
+                                  r"from ([\d.]+) to ([\d.]+) µm", out)}
     if drafts:
-        argv = ["diagnose", *files, "--effects", "none", "--out", str(tmp / "dx2"), "--quiet"]
+        argv = ["diagnose", *files, *model, "--out", str(tmp / "dx2"), "--quiet"]
         for p in drafts:
             argv += ["--effects-path", str(p)]
         try:
@@ -79,37 +96,36 @@ def case(kind: str, seed: int, suite: str, tmp: Path) -> dict:
             for i in [i for i in EFFECTS if i.startswith("drafted_")]:
                 unregister(i)
         second = json.loads((tmp / "dx2" / "diagnosis.json").read_text())
-        fitted = {k: x for r in second["ranking"] if r["effect"].startswith("drafted_")
-                  for k, x in r.get("effect_parameters", {}).items()}
-        row.update({"second": _verdict(second), "fitted": fitted})
+        row["second"] = _verdict(second)
+        row["fitted"] = {k: x for r in second["ranking"] if r["effect"].startswith("drafted_")
+                         for k, x in r.get("effect_parameters", {}).items()}
         row["seconds"].append(t2)
     return row
 
 
-def _um(x) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{1e6 * x:.3g}"
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--kinds", default="lowpass,drift,creep")
+    ap.add_argument("--suites", default="outside,lab,perturbed")
+    ap.add_argument("--truths", default="creep,lowpass,drift")
     ap.add_argument("--seeds", default="0,1,2")
-    ap.add_argument("--suite", default="lab", choices=("lab", "sim"))
     args = ap.parse_args()
-    print(f"suite {args.suite}: error [µm] = RMS of the final model; true = the true model's error\n")
-    for kind in args.kinds.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            with tempfile.TemporaryDirectory(prefix="eap-draft-loop-") as tmp:
-                r = case(kind, seed, args.suite, Path(tmp))
-            truth = ", ".join(f"{k} {v:.4g}" for k, v in r["truth"].items())
-            print(f"{kind} seed {seed} (truth: {truth})")
-            print(f"  1. eap diagnose: base {_um(r['base_m'])} → {r['first']}; noise floor {_um(r['noise_floor_m'])}; "
-                  f"true model {_um(r['true_error_m'])}")
-            print("  2. drafts: " + (", ".join(f"{k} (contract {v})" for k, v in r["drafts"].items()) or "none"))
-            if "second" in r:
-                fitted = ", ".join(f"{k} {v:.4g}" for k, v in r["fitted"].items())
-                print(f"  3. with the drafts (--effects-path): {r['second']}; drafts fitted: {fitted or '-'}")
-            print(f"  wall {' + '.join(f'{t:.0f}' for t in r['seconds'])} s", flush=True)
+    print("errors [µm]: RMS of the final model; true = the true model's error, scored the same way\n")
+    for suite in args.suites.split(","):
+        for truth in args.truths.split(","):
+            for seed in (int(s) for s in args.seeds.split(",")):
+                with tempfile.TemporaryDirectory(prefix="eap-draft-loop-") as tmp:
+                    r = case(suite, truth, seed, Path(tmp))
+                tp = ", ".join(f"{k} {v:.4g}" for k, v in r["truth"].items())
+                print(f"{suite} {truth} seed {seed} (truth: {tp})")
+                print(f"  1. base {_um(r['base_m'])} → {r['first']}; noise floor {_um(r['noise_floor_m'])}; "
+                      f"true model {_um(r['true_error_m'])}")
+                print("  2. drafts kept: " + (", ".join(f"{k} (contract {v})" for k, v in r["drafts"].items())
+                                              or "none") + "".join(f"; {d} not kept ({a} → {b})"
+                                                                   for d, _, a, b in r["not_kept"]))
+                if "second" in r:
+                    fitted = ", ".join(f"{k} {v:.4g}" for k, v in r["fitted"].items())
+                    print(f"  3. with the drafts: {r['second']}; drafts fitted: {fitted or '-'}")
+                print(f"  wall {' + '.join(f'{t:.0f}' for t in r['seconds'])} s", flush=True)
 
 
 if __name__ == "__main__":

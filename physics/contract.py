@@ -329,12 +329,15 @@ class _Context:
         from .identify import IdentificationProblem, fit_lsq
         from .identify.problem import FRFTarget
         off = {k: _scaled(v, self.dev) for k, v in spec.get("off", {}).items()}
+        starts = start_points(self.cls.id, self.dev)
         truth = {}
-        for name in spec["free"]:                     # a point inside the bounds, away from the off value
+        for name in spec["free"]:           # a point inside the bounds, away from the off value and the starts
             lo, hi = self._bounds(name)
             truth[name] = float(np.sqrt(lo * hi)) if lo > 0 else 0.5 * (lo + hi)
-            if name in off and truth[name] == off[name]:
-                truth[name] = 0.5 * (truth[name] + hi)
+            avoid = [off[name]] if name in off else []
+            avoid += [st[name] for st in starts if name in st]
+            if any(np.isclose(truth[name], a, rtol=1e-6, atol=0) for a in avoid):
+                truth[name] = float(np.sqrt(truth[name] * hi)) if lo > 0 else 0.5 * (truth[name] + hi)
         dev = self.dev.with_params(**truth)
         ids = f"none,+{self.cls.id}"
         model = ActuatorModel(dev, ids)
@@ -342,7 +345,7 @@ class _Context:
         for n in truth:
             lo, hi = self._bounds(n)
             start[n] = float(np.clip(truth[n] * 1.6 if truth[n] else 0.2 * (hi - lo), lo, hi))
-        extra = [{**start, **st} for st in start_points(self.cls.id, self.dev)]
+        extra = [{**start, **st} for st in starts]
         blind = time_only_params(model, list(truth), model.params_at(self.rh))
         names = [n for n in truth if n not in blind]
         got = self._identify_in_time(dev, blind, start, extra) if blind else {}

@@ -264,7 +264,7 @@ class OutsideLoop:
     kind: str
     truth: dict
     files: list                       # the records as written (CSV)
-    true_error: float                 # m: measurement − true deflection, each record's mean removed
+    true_error: float                 # m: measurement − true deflection, nuisance terms removed (as scored)
     before: object                    # diagnosis of the bare model
     outcome: object                   # the drafts (kept, rejected) with their evidence
     checks: dict                      # kept draft file → contract problems ([] = passed)
@@ -281,6 +281,7 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     ``--effects-path`` does).  ``folder`` is created; its parent must exist."""
     from pathlib import Path
     from ..effects import load_effects_file, unregister
+    from ..metrics import remove_nuisance
     from ..timeseries import write_timeseries
     from .diagnosis import diagnose
     from .draft import draft_effects, write_drafts
@@ -289,7 +290,7 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     (folder / "records").mkdir(parents=True)
     files = [write_timeseries(m, folder / "records" / f"{m.source}.csv", units={"deflection": "mm"} if lab else None)
              for m in ms]
-    err = [m.deflection - y - np.mean(m.deflection - y) for m, y in zip(ms, clean)]
+    err = [remove_nuisance(m.deflection - y, m.time) for m, y in zip(ms, clean)]
     true_error = float(np.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err)))
     before = diagnose(files, device, "none")
     outcome = draft_effects(before, lambda dev, eff, free, cands: diagnose(
