@@ -85,8 +85,7 @@ def outside_stage(d: Path) -> dict:
                 "parameters": {p.name: {"value": p.default, "unit": p.unit} for p in x.params}} for x in lp.outcome.kept]
     again = None
     if after is not None:
-        w = after.winner
-        again = {"verdict": after.verdict.to_dict(), "rmse_m": w.fit.rmse if w else after.base.rmse,
+        again = {"verdict": after.verdict.to_dict(), "rmse_m": after.final.rmse,
                  "ranking": [{"effect": c.effect, "rmse_um": 1e6 * c.fit.rmse, "delta_bic": c.comparison.delta_bic}
                              for c in after.ranking[:4]]}
     return jsonable({"kind": OUTSIDE_KIND, "truth": lp.truth, "truth_text": outside_truth_text(OUTSIDE_KIND, lp.truth),
@@ -101,15 +100,15 @@ def outside_stage(d: Path) -> dict:
 
 def _outside_figure(before, after, path: Path) -> None:
     """The pulse record (the last): measured vs the bare model and vs the model with the
-    diagnosis's pick once the drafts are passed back, and the residuals."""
+    diagnosis's picks once the drafts are passed back, and the residuals."""
     r = before.records[-1]
     t = np.arange(r.y_d.size) / r.fs_d
     fig, ax = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
     ax[0].plot(t, 1e6 * (r.y_d - r.y_d.mean()), color=colour("measurement"), lw=1.0, label="measurement")
     curves = [("model (base)", before.base, colour("base"))]
-    w = after.winner if after is not None else None
-    if w is not None:
-        curves.append((f"+ {w.effect}", w.fit, colour(f"+{w.effect}")))
+    picks = [c.effect for c in after.picks] if after is not None else []
+    if picks:
+        curves.append(("+ " + " + ".join(picks), after.final, colour(f"+{picks[0]}")))
     for label, fit, c in curves:
         p = fit.pred_d[-1]
         ax[0].plot(t, 1e6 * (p - p.mean()), color=c, lw=0.9, label=label)

@@ -155,12 +155,12 @@ def _fit_stub(rmse, values=None, resid=None, preds=None):
 
 
 def _diagnosis_stub(winner, res, rmse_final):
-    """A diagnosis whose final model (base or base + ``winner``) leaves the residual ``res``."""
+    """A diagnosis whose final model (base or base + its pick ``winner``) leaves the residual ``res``."""
     fit = _fit_stub(rmse_final, resid=res.resid, preds=res.preds)
     if winner:
         fit.spec = _Stub(label=f"+{winner}", free=["kf", "Y", "beta_f"])
     forms = F.describe(fit, res.records)
-    return _Stub(winner=_Stub(effect=winner, fit=fit) if winner else None, base=_fit_stub(90e-6, resid=res.resid),
+    return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
                  adequacy=_Stub(adequate=False, forms=forms), records=res.records)
 
 

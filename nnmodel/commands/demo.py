@@ -92,8 +92,7 @@ def _missing_physics(args) -> int:
             print_summary(lp.after)
             write_diagnosis(lp.after, tmp / "after", provenance={**provenance(), "truth": lp.truth})
     before, after = lp.before, lp.after or lp.before
-    w = after.winner
-    final = w.fit.rmse if w else after.base.rmse
+    final = after.final.rmse
     kept = ", ".join(d.effect_id for d in lp.outcome.kept)
     print(f"\nloop: before {before.verdict.status} (RMS {1e6 * before.base.rmse:.3g} µm); "
           + (f"after adding {kept}: {after.verdict.status}, " if kept else "no draft kept: ")

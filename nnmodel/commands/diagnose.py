@@ -122,10 +122,8 @@ def run(args) -> int:
           f"in {res.timings['total']:.1f} s")
     if args.draft_effects is not None:
         _write_draft_effects(res, args.draft_effects, lambda dev, eff, free, cands: diagnose(
-            ms, dev, eff, free, per_rh=args.per_rh, candidates=cands, force=True, check_support=False, rh=args.rh,
-            frf_options=frf_options(args), sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
-            rh_tolerance=args.rh_tolerance, noise_floor=res.noise_floor, fs_max=args.fs_max_Hz, n_starts=args.starts,
-            seed=args.seed, n_modes=args.n_modes), overwrite=args.overwrite, inputs=protect)
+            ms, dev, eff, free, options=opts, candidates=cands, force=True, check_support=False, max_effects=1,
+            noise_floor=res.noise_floor, fs_max=args.fs_max_Hz), overwrite=args.overwrite, inputs=protect)
     return 0
 
 

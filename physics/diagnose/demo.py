@@ -294,7 +294,8 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     true_error = float(np.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err)))
     before = diagnose(files, device, "none")
     outcome = draft_effects(before, lambda dev, eff, free, cands: diagnose(
-        files, dev, eff, free, candidates=cands, force=True, check_support=False))
+        files, dev, eff, free, candidates=cands, force=True, check_support=False, max_effects=1,
+        noise_floor=before.noise_floor))
     checks = write_drafts(outcome.kept, folder / "drafts") if outcome.kept else {}
     ids = [i for d in outcome.kept for i in load_effects_file(folder / "drafts" / d.file_name)]
     try:

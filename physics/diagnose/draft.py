@@ -155,7 +155,7 @@ class DraftOutcome:
 
     kept: list
     rejected: list                   # (draft, reason)
-    rmse_before: float               # the diagnosis's final model (base, or base + its pick)
+    rmse_before: float               # the diagnosis's final model (base, or base + its picks)
     chain: list = field(default_factory=list)     # (effect id, RMS after [m]) per step from the base
     notes: list = field(default_factory=list)
     steps: list = field(default_factory=list)     # (effects fitted on, DiagnosisResult) per round
@@ -177,7 +177,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
     the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.
 
-    Forward from the base, the drafts competing with the catalog effect the diagnosis picked
+    Forward from the base, the drafts competing with the catalog effects the diagnosis picked
     (a catalog effect can mimic physics it does not model, e.g. the electrode resistance a
     sensor's low-pass): the candidate that lowers the error most (lowest ΔBIC) is taken when it
     passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
@@ -187,8 +187,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
 
     from .. import effects as E
     from .candidates import effect_values
-    win = res.winner
-    fit = win.fit if win is not None else res.base
+    fit = res.final
     ad = res.adequacy
     items = drafts(ad.forms, fit, res.records) if ad is not None and ad.adequate is not True else []
     outcome = DraftOutcome([], [], fit.rmse)
@@ -196,7 +195,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
         return outcome
     base = res.base
     on_top, free, device = list(base.effects), list(base.spec.free), base.device
-    catalog = [win.effect] if win is not None else []
+    catalog = [p.effect for p in res.picks]
     with tempfile.TemporaryDirectory(prefix="eap-drafts-") as tmp:
         ids = []
         for d in items:

@@ -48,8 +48,10 @@ class OutputLowPass(Form):
             summary="a first-order low-pass on the tip deflection: × 1/(1 + sτ)",
             model=("The measured deflection is the tip's through a first-order low-pass ``1 / (1 + s τ)`` "
                    "(a sensor or a mount slower than the excitation); τ = 0 is the model without it."),
+            # searched from a cut-off 20× the sampling rate (practically off: the base model, nested) down to the
+            # lowest excited frequency
             params=[Param("lowpass_tau", "s", 0.0, 10.0, "time constant τ = 1/(2π f_c) of the low-pass", tau,
-                          (1.0 / (2 * math.pi * 0.45 * res.fs_min), 1.0 / (2 * math.pi * res.band[0])))],
+                          (1.0 / (2 * math.pi * 20.0 * res.fs_min), 1.0 / (2 * math.pi * res.band[0])))],
             scan="lowpass_tau",
             off={"lowpass_tau": 0.0},
             excitation=f"a broadband record reaching ≥ {reach:.2g} Hz",
