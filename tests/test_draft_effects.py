@@ -161,7 +161,8 @@ def _diagnosis_stub(winner, res, rmse_final):
         fit.spec = _Stub(label=f"+{winner}", free=["kf", "Y", "beta_f"])
     forms = F.describe(fit, res.records)
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
-                 adequacy=_Stub(adequate=False, forms=forms), records=res.records)
+                 adequacy=_Stub(adequate=False, forms=forms), records=res.records,
+                 verdict=_Stub(status="partly explained" if winner else "not explained by the catalog"))
 
 
 def _rediagnose(table, calls):
@@ -206,6 +207,16 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     assert [c[0] for c in calls] == [on_base, on_base + (pick,), on_base + (pick, lp)]
     assert out.chain == [(pick, 4e-6), (lp, 3.5e-6)] and [d.effect_id for d in out.kept] == [lp]
     assert "the diagnosis's pick" in out.notes[0] and out.rmse_after == 3.5e-6
+    # an adequate catalog pick still meets the drafts (it may be a mimic within the noise) ...
+    adequate = _diagnosis_stub(pick, res, 4e-6)
+    adequate.adequacy = _Stub(adequate=True, forms=[])
+    calls.clear()
+    draft_effects(adequate, _rediagnose(table, calls))
+    assert calls and calls[0][0] == on_base
+    # ... but nothing is drafted when there is nothing to explain
+    adequate.verdict.status = "nothing to explain"
+    calls.clear()
+    assert not draft_effects(adequate, _rediagnose(table, calls)).kept and not calls
 
 
 @pytest.mark.slow

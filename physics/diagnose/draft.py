@@ -177,9 +177,10 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
     the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.
 
-    Forward from the base, the drafts competing with the catalog effects the diagnosis picked
-    (a catalog effect can mimic physics it does not model, e.g. the electrode resistance a
-    sensor's low-pass): the candidate that lowers the error most (lowest ΔBIC) is taken when it
+    Nothing is drafted when there is nothing to explain.  Otherwise, forward from the base, the
+    drafts compete with the catalog effects the diagnosis picked, even when the model with them
+    is adequate (a catalog effect can mimic physics it does not model within the noise, e.g. the
+    electrode resistance a sensor's low-pass): the candidate that lowers the error most (lowest ΔBIC) is taken when it
     passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
     and the others are tried again on top of it (at most ``max_effects`` drafts kept).  A kept
     draft takes the values fitted with the model as its defaults (bounds and starts follow)."""
@@ -189,7 +190,10 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     from .candidates import effect_values
     fit = res.final
     ad = res.adequacy
-    items = drafts(ad.forms, fit, res.records) if ad is not None and ad.adequate is not True else []
+    if res.verdict.status == "nothing to explain" or (ad is not None and ad.adequate and not res.picks):
+        items = []
+    else:       # an adequate catalog pick may still be a mimic: the drafts compete with it
+        items = drafts(ad.forms if ad is not None and ad.forms else F.describe(fit, res.records), fit, res.records)
     outcome = DraftOutcome([], [], fit.rmse)
     if not items:
         return outcome
