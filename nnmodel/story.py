@@ -127,7 +127,8 @@ def _outside_section(rep: Report, d: Path, out: dict) -> None:
     b, a = out["before"], out["after"]
     vb = b["verdict"]
     nf = b["noise_floor_m"]
-    floor = f"the noise floor {1e6 * nf:.3g} µm" if nf is not None else "the records state no noise floor"
+    floor = f"the noise floor eap diagnose estimates from them: {1e6 * nf:.3g} µm" if nf is not None else \
+        "no noise floor could be estimated"
     rep.heading("Beyond the catalog: physics no effect models")
     rep.lead(f"Lab-like records of {out['device']} (tip in mm with 3 µm noise, an offset and a drift, no excitation "
              f"or sensor metadata: {', '.join(Path(f).name for f in out['records'])}) with physics no catalog effect "

@@ -270,33 +270,31 @@ def test_the_contract_recovers_a_drift_on_a_time_record(tmp_path):
 
 
 @pytest.mark.slow
-def test_lab_like_sensor_lowpass_loop_beats_the_catalog_mimic(tmp_path, capsys):
-    """A sensor slower than stated (a low-pass outside the catalog) in lab-like records: the
-    catalog's electrode resistance mimics it; the drafted low-pass competes with it, is kept,
-    and passed back it becomes the verdict, with its cut-off within 5 % and the error down by at
+def test_lab_test_bed_sensor_lowpass_is_drafted_and_becomes_the_verdict(tmp_path, capsys):
+    """A sensor slower than stated (a low-pass outside the catalog) in the lab test bed's
+    records (mm, no metadata, the device's default effects): described, drafted, passed back it
+    becomes the verdict with "high" confidence, its cut-off within 5 % and the error down by at
     least half its distance to the true model's."""
     import json
     from nnmodel.cli import main
-    from physics.diagnose.demo import outside_catalog_case
-    from physics.timeseries import write_timeseries
-    ms, tp, clean = outside_catalog_case("lowpass", seed=0, fs=200.0, duration=60.0, lab=True, clean=True)
-    files = [str(write_timeseries(m, tmp_path / f"{m.source}.csv", units={"deflection": "mm"})) for m in ms]
-    from physics.metrics import remove_nuisance
-    true = math.sqrt(sum(float(np.sum(remove_nuisance(m.deflection - y, m.time) ** 2)) for m, y in zip(ms, clean))
-                     / sum(m.deflection.size for m in ms))
+    from physics.diagnose.testbeds import make_case
+    case = make_case("lab", "lowpass", 0)
+    files = [str(f) for f in case.write(tmp_path / "records")]
+    model = ["--device", case.device_name, *case.param_args(), "--effects", case.effects]
     drafts = tmp_path / "drafts"
-    assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx"), "--quiet",
+    assert main(["diagnose", *files, *model, "--out", str(tmp_path / "dx"), "--quiet",
                  "--draft-effects", str(drafts)]) == 0
     assert "drafted_output_lowpass.py: contract check passed" in capsys.readouterr().out
     before = json.loads((tmp_path / "dx" / "diagnosis.json").read_text())
     try:
-        assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx2"), "--quiet",
+        assert main(["diagnose", *files, *model, "--out", str(tmp_path / "dx2"), "--quiet",
                      "--effects-path", str(drafts / "drafted_output_lowpass.py")]) == 0
     finally:
         unregister("drafted_output_lowpass")
     after = json.loads((tmp_path / "dx2" / "diagnosis.json").read_text())
-    assert after["verdict"]["missing_effect"] == "drafted_output_lowpass"
-    e0, e1 = before["base"]["rmse"], after["ranking"][0]["rmse_after"]
+    v = after["verdict"]
+    assert v["missing_effect"] == "drafted_output_lowpass" and v["confidence_label"] == "high", v["text"]
+    e0, e1, true = before["base"]["rmse"], after["ranking"][0]["rmse_after"], case.true_error()
     assert e1 <= e0 - 0.5 * (e0 - true), (e0, e1, true)
     tau = after["ranking"][0]["effect_parameters"]["lowpass_tau"]
-    assert 1 / (2 * math.pi * tau) == pytest.approx(tp["cutoff_Hz"], rel=0.05)
+    assert 1 / (2 * math.pi * tau) == pytest.approx(case.truth_params["lowpass_Hz"], rel=0.05)
