@@ -71,12 +71,12 @@ class Humidity(HumidityInvariant):
         """A hidden truth for test beds and demos: every humidity map of the device raised to a power
         U(0.7, 1.3) about the reference RH (the RH dependence 30 % weaker to 30 % stronger)."""
         import dataclasses
-        from ..device import HumidityMap
         g = float(rng.uniform(0.7, 1.3))
         maps = {}
-        for name, m in device.humidity_maps.items():
+        for name, m in device.humidity_maps.items():     # replace() on the maps: no import of physics.device
             ref = float(np.interp(device.reference_rh, m.rh, m.values))
-            maps[name] = HumidityMap(name, m.rh, ref * (m.values / ref) ** g, m.mode, f"{m.source} (power {g:.3g})")
+            maps[name] = dataclasses.replace(m, values=ref * (m.values / ref) ** g,
+                                             source=f"{m.source} (power {g:.3g})")
         return dataclasses.replace(device, humidity_maps=maps), {"humidity_power": g}
     summary = "RH-dependent parameters: Y(RH), kf(RH) of Table V, user maps for others"
     explanation = __doc__
