@@ -143,8 +143,9 @@ def _outside_section(rep: Report, d: Path, out: dict) -> None:
     for x in out["drafts"]:
         rep.lead(f"eap diagnose … --draft-effects wrote {x['file']}: {x['summary']}; {x['text']}. "
                  f"Contract check: {x['contract']}.")
-        rep.table([{"parameter": k, "value": v["value"], "unit": v["unit"]} for k, v in x["parameters"].items()],
-                  caption=f"{Path(x['file']).name}: its parameters, fitted with the model (the file's defaults)")
+        rep.table([{"parameter": f"{k} [{v['unit']}]", "value": v["value"]} for k, v in x["parameters"].items()],
+                  caption=f"{Path(x['file']).name}: its parameters, fitted with the model (the file's defaults), "
+                          "each in its row's unit")
         rep.paragraph("What was seen: " + x["seen"], note=True)
     if out["not_kept"]:
         rep.bullets([f"not kept: {t}" for t in out["not_kept"]])
