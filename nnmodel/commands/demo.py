@@ -80,7 +80,7 @@ def _missing_physics(args) -> int:
               + (" (as a lab exports them: tip in mm, no excitation or sensor metadata)" if lab else "")
               + f"; user's model: {args.device} with effects 'none' (the bare double layer)")
         print("\n1. the catalog alone:")
-        print_summary(lp.before)
+        _final_summary(lp.before)
         print("\n2. what remains, drafted as effect files:")
         for line in lp.outcome.lines():
             print(f"draft: {line}")
@@ -89,7 +89,7 @@ def _missing_physics(args) -> int:
         write_diagnosis(lp.before, tmp / "before", provenance={**provenance(), "truth": lp.truth})
         if lp.after is not None:
             print(f"\n3. the diagnosis again, with {', '.join(d.file_name for d in lp.outcome.kept)} (--effects-path):")
-            print_summary(lp.after)
+            _final_summary(lp.after)
             write_diagnosis(lp.after, tmp / "after", provenance={**provenance(), "truth": lp.truth})
     before, after = lp.before, lp.after or lp.before
     final = after.final.rmse
@@ -100,3 +100,13 @@ def _missing_physics(args) -> int:
     print(f"records: {args.out}/records/; drafts: {args.out}/drafts/; reports: {args.out}/before/index.html"
           + (f", {args.out}/after/index.html" if lp.after is not None else ""))
     return 0
+
+
+def _final_summary(res) -> None:
+    """:func:`print_summary` with the paths of records inside the output being written shown
+    as their final paths."""
+    import io
+    from physics.outputs import final_text
+    buf = io.StringIO()
+    print_summary(res, file=buf)
+    print(final_text(buf.getvalue()), end="")
