@@ -217,7 +217,7 @@ def _train_one(task: dict) -> dict:
            "inference_samples_per_s": _speed(free, ds, entries),
            "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None,
            "training": _budget(model), "history": list(getattr(model, "history_", None) or [])}
-    save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True,
+    save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True, output=(ds.output.name, ds.output.unit),
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
                 notes=f"trained by eap train-compare on {final_path(ds.path)}")
     if task["echo"]:

@@ -52,6 +52,8 @@ __all__ = ["NeuralModel", "NotFittedError", "PARTS", "SequenceCore"]
 PARTS = (TrainingConfig, InputFeatures, StructureSearch)
 #: Samples per piece of a free run (bounds the activations held at once on long records).
 SIM_CHUNK = 1 << 16
+#: Samples per piece whose input channels (memory filters) are computed at once in a free run.
+PIECE = 1 << 20
 
 
 class NotFittedError(InputError):
@@ -265,14 +267,18 @@ class NeuralModel:
         measured output ``y``, held at the first samples (the steady state of the first input
         and output, so the memory filters start there whatever the record's start); without
         one, at rest (0 V, output 0, the first RH), the documented assumption of a free run."""
-        n = self.net_
+        up, rhp, yn = self._pad(u, rh, y, pad)
+        un, rhn = self._channels(up, rhp)
+        return un, rhn, yn
+
+    def _pad(self, u, rh, y, pad: int):
+        """(u, rh, normalised y) with ``pad`` samples in front, as :meth:`_padded` says."""
         known = y is not None and y.size > 0
         up = np.concatenate([np.full(pad, u[0] if known else 0.0), u])
         rhp = None if rh is None else np.concatenate([np.full(pad, rh[0]), rh])
-        un, rhn = self._channels(up, rhp)
-        yn = None if y is None else np.concatenate([np.full(pad, n.norm("y", float(y[0]) if known else 0.0)),
-                                                    n.norm("y", y)])
-        return un, rhn, yn
+        yn = None if y is None else np.concatenate([np.full(pad, self.net_.norm("y", float(y[0]) if known else 0.0)),
+                                                    self.net_.norm("y", y)])
+        return up, rhp, yn
 
     @staticmethod
     def _t(x):
@@ -291,6 +297,10 @@ class NeuralModel:
         if m >= u.size:
             raise InputError(f"y_init has {m} samples but the input only {u.size}; y_init must be "
                              "shorter than the record it initialises")
+        if self.streams and u.size > PIECE:   # a long record: its channels one piece at a time
+            cuts = range(0, u.size, PIECE)
+            return np.concatenate(list(self.simulate_pieces(
+                ((u[a:a + PIECE], None if rh is None else rh[a:a + PIECE]) for a in cuts), y_init)))
         k = self.n_init_
         pad = max(0, k - m)
         un, rhn, yn = self._padded(u, rh, y_init if y_init is not None else np.zeros(0), pad)
@@ -311,6 +321,45 @@ class NeuralModel:
         if m:
             y_hat = np.concatenate([y_init, y_hat])
         return y_hat
+
+    @property
+    def streams(self) -> bool:
+        """True when :meth:`simulate_pieces` applies: the core continues from a state and the
+        channels are causal filters of the input (the hybrid's physics channel is not)."""
+        return type(self.net_.core).advance is not SequenceCore.advance and \
+            type(self)._channels is NeuralModel._channels
+
+    def simulate_pieces(self, pieces, y_init=None):
+        """Free run over a record given as consecutive pieces ``(u, rh)`` in physical units,
+        yielding the output of each piece: the values :meth:`simulate` gives on the whole
+        record (the memory filters and the core's state carry over), with one piece in
+        memory at a time.  ``y_init`` as in :meth:`simulate`, shorter than the first piece."""
+        if not self.streams:
+            raise InputError(f"{type(self).__name__} cannot simulate a record in pieces; use simulate()")
+        core, fm, k = self.net_.core, self.features_, self.n_init_
+        state = last = None
+        with torch.no_grad(), torch_threads(self.num_threads):
+            for u, rh in pieces:
+                u, rh, y0 = self._prepare(u, rh, y_init if state is None else None, "y_init")
+                head, s = np.zeros(0), 0
+                if state is None:
+                    m = 0 if y0 is None else y0.size
+                    if m >= u.size:
+                        raise InputError(f"y_init has {m} samples but the first piece only {u.size}; y_init must be "
+                                         "shorter than the piece it initialises")
+                    pad = max(0, k - m)
+                    u, rh, yn = self._pad(u, rh, y0 if y0 is not None else np.zeros(0), pad)
+                    head, s = (y0 if m else head), pad + m
+                un, rhn, last = fm.channels_continued(u, rh, self.net_, last)
+                if state is None:
+                    state = core.init_state(self._t(un[None, s - k:s]), self._t(yn[None, s - k:s]),
+                                            None if rhn is None else self._t(rhn[None, s - k:s]))
+                out = np.empty(un.shape[0] - s)
+                for a in range(s, un.shape[0], SIM_CHUNK):
+                    b = min(un.shape[0], a + SIM_CHUNK)
+                    o, state = core.advance(state, self._t(un[None, a:b]), None if rhn is None else self._t(rhn[None, a:b]))
+                    out[a - s:b - s] = o[0].double().numpy()
+                yield np.concatenate([head, self.net_.denorm("y", out)])
 
     def predict(self, u, rh=None, y=None, steps_ahead: int | None = None,
                 chunk: int = 4096) -> np.ndarray:
