@@ -202,6 +202,9 @@ def load(path: str | os.PathLike) -> "Bundle":
         raise InputError(f"{wfile}: weights {bad[:3]} contain NaN or infinite values; the bundle is corrupt")
     cls = MODELS[card["model"]]
     hp = _card_hyper_parameters(card, cls, folder / CARD)
+    if isinstance(hp.get("layers"), int) and hp["layers"] > len(state):   # each layer holds a tensor; checked
+        raise InputError(f"{folder / CARD}: layers={hp['layers']} but {wfile.name} holds {len(state)} tensors "
+                         "(each layer has its own); the card does not belong to these weights")  # before building
     learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
                "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
                "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
