@@ -217,8 +217,10 @@ def load(path: str | os.PathLike) -> "Bundle":
     except InputError as exc:
         raise InputError(f"{folder}: {exc}") from None
     except (RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
-        raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's "
-                         f"hyper-parameters ({' '.join(str(exc).split())[:300]})") from None
+        sizes = ", ".join(f"{k}={v}" for k, v in hp.items() if (k in cls._model_params() or k == "memory_filters")
+                          and isinstance(v, int) and not isinstance(v, bool))
+        raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's sizes "
+                         f"{sizes} ({' '.join(str(exc).split())[:300]})") from None
     return Bundle(model, card, folder)
 
 

@@ -610,7 +610,7 @@ def test_any_edit_of_a_bundle_card_loads_or_is_refused(bundle, tmp_path, path, v
         pass
 
 
-def test_card_asking_for_1e8_layers_is_refused_before_building(tmp_path, monkeypatch, capsys):
+def test_card_asking_for_1e8_layers_or_width_is_refused_naming_it(tmp_path, monkeypatch, capsys):
     """Issue 27: `layers: 100000000` in a card ran past 240 s at 4 GB; the weights hold a few tensors."""
     from nnmodel.bundle import save
     from nnmodel.data import Experiment
@@ -627,6 +627,10 @@ def test_card_asking_for_1e8_layers_is_refused_before_building(tmp_path, monkeyp
     monkeypatch.chdir(tmp_path)
     assert main(["predict", "--model", "ff", "--input", "r.csv", "--out", "p.csv"]) == 2
     assert "layers=100000000" in _err(capsys) and not (tmp_path / "p.csv").exists()
+    card["hyper_parameters"].update(layers=2, nb=10 ** 8)     # a width the weights contradict: the sizes named
+    (b / "card.json").write_text(json.dumps(card))
+    assert main(["predict", "--model", "ff", "--input", "r.csv", "--out", "p.csv"]) == 2
+    assert "nb=100000000" in _err(capsys) and not (tmp_path / "p.csv").exists()
 
 
 def test_nothing_is_left_behind_by_refused_outputs(tmp_path, monkeypatch, capsys):
