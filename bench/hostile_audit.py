@@ -4,7 +4,7 @@
 
 A case *holds* when the command ends as it should — a refusal is exit 2 with one line
 ``eap CMD: error: …`` (matching the case's expected words where given), an accepted input is
-exit 0, an interrupt is 130/143 with one line — with no traceback, within the time limit, and
+exit 0, an interrupt is 130/143 with one line (after any warnings) — with no traceback, within the time limit, and
 every file that existed before is byte-identical afterwards (outputs the case may write
 excepted); a refusal creates nothing.
 
@@ -649,6 +649,12 @@ def cases() -> list[Case]:
     add("sigint-sweep-workers", "signals", ["sweep", "--device", "ip2c_pedot_water", "--rh", "60", "--grid",
                                             "Y=log:1e7:1e9:20000", "--workers", "2", "--quiet", "--out", "t.csv"],
         expect=130, send=(signal.SIGINT, 10.0), timeout=60)
+    train_long = ["train-compare", "DS", "--models", "lstm", "--set", "lstm.max_epochs=100000", "--set",
+                  "lstm.patience=100000", "--quiet", "--out", "R"]
+    add("sigint-train-compare", "signals", train_long, cp("DS"), expect=130, send=(signal.SIGINT, 15.0), timeout=90)
+    for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
+        add(f"{sig.name.lower()}-train-compare-workers", "signals", train_long + ["--workers", "2"], cp("DS"),
+            expect=code, send=(sig, 20.0), timeout=90)
     return C
 
 
@@ -794,8 +800,10 @@ def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
     else:
         if rc != case.expect:
             notes.append(f"exit {rc} (expected {case.expect}): {(lines[-1] if lines else '')[:160]}")
-        elif len(lines) != 1:
-            notes.append(f"{len(lines)} lines on stderr (expected one)")
+        elif not lines or not re.match(r"eap [\w-]+: interrupted", lines[-1]) or len(lines) != 1 + sum(
+                bool(re.match(r"eap [\w-]+: (warning|note): ", ln)) for ln in lines[:-1]):
+            notes.append(f"{len(lines)} lines on stderr (expected the warnings said before and one "
+                         f"'interrupted' line): {(lines[-1] if lines else '')[:120]}")
     changed = [k for k in before if after.get(k) != before[k] and not _allowed(k, case.may_change)]
     new = [k for k in after if k not in before and not _allowed(k, case.may_change)]
     if changed:

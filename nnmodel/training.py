@@ -21,8 +21,10 @@ import datetime
 import logging
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -244,6 +246,24 @@ class _LineProgress(Callback):
         print(f"  epoch {trainer.current_epoch + 1}/{trainer.max_epochs}: {losses}", file=sys.stderr, flush=True)
 
 
+@contextlib.contextmanager
+def _ctrl_c_stays_ctrl_c():
+    """Lightning answers Ctrl-C inside ``fit`` by ignoring SIGINT from then on and calling
+    ``sys.exit(1)``: give the caller its KeyboardInterrupt back (exit 130, one line) and the
+    SIGINT handler it had."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if main else None
+    try:
+        yield
+    except SystemExit as exc:
+        if isinstance(exc.__context__, KeyboardInterrupt):
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        if main and previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
 #: Seconds between progress lines when stderr is not a terminal.
 LOG_EVERY_S = 10.0
 
@@ -311,7 +331,8 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
                 enable_model_summary=False, num_sanity_val_steps=0, log_every_n_steps=1,
                 gradient_clip_val=c.grad_clip, default_root_dir=ckdir)
             t_fit = time.monotonic()
-            trainer.fit(task, datamodule=dm)
+            with _ctrl_c_stays_ctrl_c():
+                trainer.fit(task, datamodule=dm)
             elapsed = time.monotonic() - t_fit
         # with spawned processes (DDP) the callback's state stays in them: the file is the record
         best = ckpt.best_model_path or str(Path(ckdir) / "best.ckpt")

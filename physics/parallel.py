@@ -361,10 +361,12 @@ def _start_cluster(workers: int, fut: Future) -> None:
         warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
         cores = os.cpu_count() or 1
         env = {v: str(max(1, cores // workers)) for v in _THREAD_VARS}
+        # task errors come back through the futures; the cluster's own log (a worker's heartbeat
+        # traceback when Ctrl-C or SIGTERM closes the scheduler under it) is not the user's concern
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env, "distributed.worker.daemon": False,
-                              "distributed.logging.distributed": "error"}):
+                              "distributed.logging.distributed": "critical"}):
             cluster = LocalCluster(n_workers=workers - 1, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40, env=env)
+                                   dashboard_address=None, silence_logs=50, env=env)
         client = Client(cluster)
         client.eap_cluster = cluster
         fut.set_result(client)

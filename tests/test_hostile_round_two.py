@@ -639,3 +639,22 @@ def test_nothing_is_left_behind_by_refused_outputs(tmp_path, monkeypatch, capsys
     assert main(FRF + ["--json", "/proc/self/x.json"]) == 2
     capsys.readouterr()
     assert not [p for p in tmp_path.iterdir()], os.listdir(tmp_path)
+
+
+def test_ctrl_c_during_network_training_exits_130_and_restores_the_sigint_handler(dataset, tmp_path, monkeypatch,
+                                                                                    capsys):
+    """Issue 27: Lightning turns Ctrl-C inside fit into sys.exit(1) (reported as an effect file
+    that exits) and ignores SIGINT from then on."""
+    import signal
+
+    from nnmodel import training
+
+    def interrupted(self, batch, batch_idx):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(training.SimulationTask, "training_step", interrupted)
+    monkeypatch.chdir(tmp_path)
+    handler = signal.getsignal(signal.SIGINT)
+    assert main(["train-compare", str(dataset), "--models", "ff", "--set", "ff.structures=null", "--out", "R",
+                 "--quiet"]) == 130
+    assert _err(capsys) == "eap train-compare: interrupted; nothing written to R"
+    assert signal.getsignal(signal.SIGINT) is handler and not (tmp_path / "R").exists()
