@@ -70,24 +70,29 @@ def test_nothing_hidden_gives_nothing_to_explain_without_a_confidence():
     assert "none is needed" in " ".join(v.lines())
 
 
+class Fit:
+    """Stand-ins for a fitted candidate in :func:`decide` (its quality flags given)."""
+
+    def __init__(self, rmse):
+        self.rmse = rmse
+
+
+class Cmp:
+    def __init__(self, d):
+        self.delta_bic, self.p_value = d, 1e-30
+
+
+class Cand:
+    def __init__(self, effect, d, rmse, flags):
+        self.effect, self.comparison, self.fit, self._flags = effect, Cmp(d), Fit(rmse), flags
+        self.indistinguishable_from, self.quality, self.passes = [], [], {}
+        self.signature = None
+
+
 def test_quality_flags_decide_between_close_candidates(monkeypatch):
     """Two candidates lower the error alike; the one whose parameters are on bounds and
     correlated loses, and the pick's confidence reflects that it dominates."""
     from physics.diagnose import verdict as V
-
-    class Fit:
-        def __init__(self, rmse):
-            self.rmse = rmse
-
-    class Cmp:
-        def __init__(self, d):
-            self.delta_bic, self.p_value = d, 1e-30
-
-    class Cand:
-        def __init__(self, effect, d, rmse, flags):
-            self.effect, self.comparison, self.fit, self._flags = effect, Cmp(d), Fit(rmse), flags
-            self.indistinguishable_from, self.quality, self.passes = [], [], {}
-            self.signature = None
 
     base = Fit(50e-6)
     flexible = Cand("flexible", -5020.0, 2.00e-6, ["a on a bound", "a and b correlated", "signature absent"])
@@ -110,20 +115,6 @@ def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
     that lowers it a lot (huge ΔBIC) but with its signature absent is picked on the first step,
     never on a later one; a clean one is."""
     from physics.diagnose import verdict as V
-
-    class Fit:
-        def __init__(self, rmse):
-            self.rmse = rmse
-
-    class Cmp:
-        def __init__(self, d):
-            self.delta_bic, self.p_value = d, 1e-30
-
-    class Cand:
-        def __init__(self, effect, d, rmse, flags):
-            self.effect, self.comparison, self.fit, self._flags = effect, Cmp(d), Fit(rmse), flags
-            self.indistinguishable_from, self.quality, self.passes = [], [], {}
-            self.signature = None
 
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
     base, floor = Fit(1.7e-6), 1.04e-6
