@@ -202,6 +202,9 @@ def load(path: str | os.PathLike) -> "Bundle":
         raise InputError(f"{wfile}: weights {bad[:3]} contain NaN or infinite values; the bundle is corrupt")
     cls = MODELS[card["model"]]
     hp = _card_hyper_parameters(card, cls, folder / CARD)
+    if isinstance(hp.get("layers"), int) and hp["layers"] > len(state):   # each layer holds a tensor; checked
+        raise InputError(f"{folder / CARD}: layers={hp['layers']} but {wfile.name} holds {len(state)} tensors "
+                         "(each layer has its own); the card does not belong to these weights")  # before building
     learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
                "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
                "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
@@ -214,8 +217,10 @@ def load(path: str | os.PathLike) -> "Bundle":
     except InputError as exc:
         raise InputError(f"{folder}: {exc}") from None
     except (RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
-        raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's "
-                         f"hyper-parameters ({' '.join(str(exc).split())[:300]})") from None
+        sizes = ", ".join(f"{k}={v}" for k, v in hp.items() if (k in cls._model_params() or k == "memory_filters")
+                          and isinstance(v, int) and not isinstance(v, bool))
+        raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's sizes "
+                         f"{sizes} ({' '.join(str(exc).split())[:300]})") from None
     return Bundle(model, card, folder)
 
 
