@@ -18,7 +18,7 @@ from pathlib import Path
 import yaml
 
 from physics.errors import InputError, InputNotice, ModelError
-from physics.outputs import protecting
+from physics.outputs import INTERRUPTS, protecting, raise_if_interrupted
 
 from . import commands
 
@@ -69,16 +69,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    previous = signal.signal(signal.SIGTERM, _terminated)   # first: a signal during start-up is clean too
+    INTERRUPTS.clear()
+    previous = _handle_signals()    # first: a signal during start-up is clean too
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
     except (KeyboardInterrupt, Terminated) as exc:
-        signal.signal(signal.SIGTERM, previous)
+        _restore_signals(previous)
         print("eap: interrupted", file=sys.stderr)
         return 143 if isinstance(exc, Terminated) else 130
     if not getattr(args, "_run", None):
-        signal.signal(signal.SIGTERM, previous)
+        _restore_signals(previous)
         parser.print_help()
         return 2
     shown = warnings.showwarning
@@ -87,7 +88,9 @@ def main(argv: list[str] | None = None) -> int:
         _load_effects(getattr(args, "effects_path", []))
         with protecting(_inputs_of(args)), tempfile.TemporaryDirectory(prefix="eap-param-") as tmp:
             _apply_params(args, Path(tmp))
-            return int(args._run(args) or 0)
+            rc = int(args._run(args) or 0)
+            raise_if_interrupted()      # a SIGTERM that Python dropped (raised in a gc callback) still counts
+            return rc
     except InputError as exc:
         print(f"eap {args.command}: error: {exc.render(flag_speller(parser, args.command))}", file=sys.stderr)
         return 2
@@ -111,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
               "written (an effect file must not exit)", file=sys.stderr)
         return 2
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        _restore_signals(previous)
         warnings.showwarning = shown
 
 
@@ -225,8 +228,23 @@ class Terminated(BaseException):
     """SIGTERM as an exception, so that output folders are cleaned up like on Ctrl-C."""
 
 
-def _terminated(signum, frame):
-    raise Terminated()
+def _on_signal(signum, frame):
+    INTERRUPTS.append(Terminated() if signum == signal.SIGTERM else KeyboardInterrupt())
+    raise INTERRUPTS[-1]   # kept: raised where Python drops exceptions (a gc callback), it still stops the run
+
+
+def _handle_signals() -> dict:
+    """Install :func:`_on_signal` for SIGTERM, and for SIGINT unless it is ignored (a
+    background job); returns the previous handlers for :func:`_restore_signals`."""
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _on_signal)}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, _on_signal)
+    return previous
+
+
+def _restore_signals(previous: dict) -> None:
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

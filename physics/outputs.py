@@ -50,6 +50,16 @@ _OLD = ".eap-old-"
 _PARTIAL = ".eap-partial"
 _OUT = arg("out")   # how messages name an output path by default (the CLI: --out)
 _PROTECTED: set[Path] = set()
+#: Interrupts raised by the command line's signal handlers (SIGTERM). Python drops an exception
+#: raised inside a gc callback or a finaliser (it prints it and carries on): no output is put in
+#: place after one.
+INTERRUPTS: list[BaseException] = []
+
+
+def raise_if_interrupted() -> None:
+    """Raise the first interrupt of :data:`INTERRUPTS`, if any (even one Python dropped)."""
+    if INTERRUPTS:
+        raise INTERRUPTS[0]
 
 
 @contextlib.contextmanager
@@ -304,6 +314,7 @@ def output_folder(out, *, inputs: Iterable = (), overwrite: bool = False,
 
 
 def _promote(tmp: Path, res: Path, overwrite: bool, flag: str, out) -> None:
+    raise_if_interrupted()
     if res.exists() and res.is_dir() and not any(res.iterdir()):
         res.rmdir()
     if res.exists():
@@ -417,6 +428,7 @@ def _clean_stale_files(parent: Path) -> None:
 
 
 def _promote_files(parent: Path, tmp: Path, targets: list[Path], overwrite: bool, flag: str, inputs) -> None:
+    raise_if_interrupted()
     written = sorted(p.name for p in tmp.iterdir())
     stale = [t.with_suffix(".yaml") for t in targets if t.suffix.lower() == ".csv"
              and t.with_suffix(".yaml").name not in written and t.with_suffix(".yaml").exists()]

@@ -658,3 +658,31 @@ def test_ctrl_c_during_network_training_exits_130_and_restores_the_sigint_handle
                  "--quiet"]) == 130
     assert _err(capsys) == "eap train-compare: interrupted; nothing written to R"
     assert signal.getsignal(signal.SIGINT) is handler and not (tmp_path / "R").exists()
+
+
+@pytest.mark.parametrize("signame, code", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_signal_python_drops_in_a_gc_callback_still_stops_the_run(tmp_path, monkeypatch, capsys, signame, code):
+    """Issue 27 audit: SIGTERM during `generate --workers 2` arrived inside Dask's gc callback,
+    where Python prints an exception and carries on: the run finished with exit 0."""
+    import gc
+    import signal
+    import sys
+
+    from nnmodel import cli
+    from physics import outputs
+    real = outputs.preflight
+
+    def dropped(phase, info):
+        gc.callbacks.remove(dropped)
+        cli._on_signal(getattr(signal, signame), None)
+
+    def preflight(*a, **k):            # the signal lands in a gc callback once the run has begun
+        gc.callbacks.append(dropped)
+        gc.collect()
+        return real(*a, **k)
+    monkeypatch.setattr(outputs, "preflight", preflight)
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: None)
+    monkeypatch.chdir(tmp_path)
+    assert main(SIM + ["--out", "S"]) == code
+    assert _err(capsys) == "eap simulate: interrupted; nothing written to S"
+    assert not [p for p in tmp_path.iterdir()], os.listdir(tmp_path)
