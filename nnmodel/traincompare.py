@@ -12,7 +12,10 @@ prediction on the test records, grouped as
 
 The physics simulator that generated the data is scored on the same records: it is the
 reference the networks learned from (its error is the sensor noise, except on the
-measurement-like records).  Scores are pooled over records: NRMSE = sqrt(Σe²/Σ(y−ȳ)²)
+measurement-like records).  The best linear model of the same training data
+(:func:`nnmodel.linear.fit_linear`: ARX orders chosen on the validation data, refined for
+the output error where that helps) is the row ``linear``, the yardstick every network is
+measured against (``vs_linear_pct``: how far its test error lies below or above it).  Scores are pooled over records: NRMSE = sqrt(Σe²/Σ(y−ȳ)²)
 (ȳ per record), fit % = 100 (1 − NRMSE) as MATLAB ``compare``.
 """
 from __future__ import annotations
@@ -36,9 +39,12 @@ from physics.parallel import ParallelSettings, map_tasks, warm_up
 
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
+from .linear import LinearModel, fit_linear
 from .recipes import load_recipe, make_model
 
 GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
+#: name of the linear yardstick's row
+LINEAR = "linear"
 SKIP = 50   # samples at the start of each test record used only for initialisation
 
 
@@ -143,9 +149,12 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         results["physics"]["eval_time_s"] = time.perf_counter() - t0
         physics_rows["physics"] = physics_predict
     local = settings is None or settings.serial
-    tasks = []
+    val_fraction = _val_fraction(ds)
+    tasks = [{"name": LINEAR, "dataset": str(ds.path), "val_fraction": val_fraction, "echo": progress and local}]
     for name in models:
         ov = dict((overrides or {}).get(name, {}))
+        if val_fraction is not None:        # the dataset's own split when it has no validation records
+            ov.setdefault("val_fraction", val_fraction)
         if not progress or not local:
             ov.setdefault("progress_bar", False)
         if max_time_s is not None:
@@ -161,9 +170,17 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         print(f"training {', '.join(models)} on {settings.workers if not settings.scheduler else 'the cluster'} "
               f"worker(s) ...", flush=True)
     runs = map_tasks(_train_one, tasks, settings, desc="models", progress=False, cost=_training_cost)
-    trained = {}
+    trained, linear_rows = {}, {}
     for task, res in zip(tasks, runs):
         name = task["name"]
+        if name == LINEAR:
+            results[name] = res
+            lin = LinearModel.from_card(res["linear"])
+            linear_rows[name] = lambda rec, lin=lin: lin.simulate(rec.u, rec.rh if lin.uses_rh else None,
+                                                                  y_init=rec.y[:lin.n_init])
+            if progress and not local:
+                _echo_result(name, res)
+            continue
         model = load_bundle(task["bundle"]).model
         if name == "hybrid":
             base = _physics_base_row(model, gen, ds, test_entries)
@@ -173,22 +190,71 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         trained[name] = model
         if progress and not local:
             _echo_result(name, res)
+    _compare_with_linear(results)
     summary = {"dataset": str(ds.path), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
                "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
                "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
                "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
                "best_heldout": _best(results)}
-    _plots(ds, test_entries, physics_rows, trained, results, out)
+    _plots(ds, test_entries, physics_rows, linear_rows, trained, results, out)
     write_json(out / "compare.json", summary)
     write_csv(table_rows(results), out / "metrics.csv")
     _report(summary, out)
     return summary
 
 
+def _val_fraction(ds: Dataset) -> float | None:
+    """The dataset's validation fraction when it has no validation records (else None)."""
+    if ds.entries("validation"):
+        return None
+    vf = ds.meta.get("val_fraction")
+    return None if vf is None else float(vf)
+
+
+def _train_linear(task: dict) -> dict:
+    """Fit and score the linear yardstick (a task like :func:`_train_one`)."""
+    ds = load_dataset(task["dataset"])
+    train, val = ds.records("train"), ds.records("validation") or None
+    entries = ds.entries("test")
+    if task["echo"]:
+        print("fitting the linear yardstick ...", flush=True)
+    t1 = time.perf_counter()
+    lin = fit_linear(train, val, 0.2 if task["val_fraction"] is None else task["val_fraction"])
+    fit_time = time.perf_counter() - t1
+    skip = max(SKIP, lin.n_init)
+
+    def free(rec):
+        return lin.simulate(rec.u, rec.rh if lin.uses_rh else None, y_init=rec.y[:lin.n_init])
+
+    def one_step(rec):
+        return lin.one_step(rec.u, rec.rh if lin.uses_rh else None, rec.y)
+
+    res = {"kind": lin.label(), "n_parameters": lin.na + lin.nb + 1 + int(lin.uses_rh), "train_time_s": fit_time,
+           "free_run": _score(free, ds, entries, skip), "one_step": _score(one_step, ds, entries, skip),
+           "inference_samples_per_s": _speed(free, ds, entries), "linear": lin.card()}
+    if task["echo"]:
+        _echo_result(LINEAR, res)
+    return res
+
+
+def _compare_with_linear(results: dict) -> None:
+    """Every row but the yardstick says how far its test error lies from the linear row's
+    (``vs_linear_pct``: negative below, positive above)."""
+    lin = results.get(LINEAR)
+    if lin is None:
+        return
+    ref = lin["free_run"]["test"]["nrmse"]
+    for name, row in results.items():
+        if name != LINEAR and np.isfinite(ref) and ref > 0:
+            row["vs_linear_pct"] = 100.0 * (row["free_run"]["test"]["nrmse"] / ref - 1.0)
+
+
 def _train_one(task: dict) -> dict:
     """Train, score and save one model (a task of :func:`physics.parallel.map_tasks`: in this
     process or on a worker, which reads the dataset from its path); returns its result row."""
+    if task["name"] == LINEAR:
+        return _train_linear(task)
     ensure_registered(task["effect_files"])
     ds = load_dataset(task["dataset"])
     train, val = ds.records("train"), ds.records("validation") or None
@@ -223,7 +289,10 @@ def _train_one(task: dict) -> dict:
 
 def _training_cost(task: dict) -> float:
     """Relative training cost, to start the dearest models first: recurrent and hybrid
-    models train by back-propagation through time, FF/RBF mostly by least squares."""
+    models train by back-propagation through time, FF/RBF mostly by least squares, the
+    linear yardstick in seconds."""
+    if task["name"] == LINEAR:
+        return 0.1
     return 1.0 if load_recipe(task["name"], task["overrides"])["model"] in ("ff", "rbf") else 4.0
 
 
@@ -254,6 +323,11 @@ def _is_physics(name: str, row: dict) -> bool:
     return row.get("n_parameters") is None and str(row.get("kind", "")).startswith("physics")
 
 
+def _is_reference(name: str, row: dict) -> bool:
+    """Rows that are not networks: the physics rows and the linear yardstick."""
+    return name == LINEAR or _is_physics(name, row)
+
+
 def _speed(predict, ds: Dataset, entries) -> float:
     rec = ds.record(max(entries, key=lambda e: e["samples"]))
     t0 = time.perf_counter()
@@ -263,7 +337,7 @@ def _speed(predict, ds: Dataset, entries) -> float:
 
 def _best(results: dict) -> dict:
     """The best network on held-out RH (or on the whole test set when nothing is held out)."""
-    nets = {k: v for k, v in results.items() if not _is_physics(k, v)}
+    nets = {k: v for k, v in results.items() if not _is_reference(k, v)}
     group = "heldout_rh" if any("heldout_rh" in v["free_run"] for v in nets.values()) else "test"
     nets = {k: v for k, v in nets.items() if group in v["free_run"]}
     if not nets:
@@ -285,7 +359,8 @@ def table_rows(results: dict) -> list[dict]:
                      "nrmse_measurement_like_pct": 100 * fr.get("measurement_like", {}).get("nrmse", float("nan")),
                      "fit_heldout_pct": fr.get("heldout_rh", {}).get("fit_pct", float("nan")),
                      "corr_heldout": fr.get("heldout_rh", {}).get("correlation", float("nan")),
-                     "one_step_nrmse_test_pct": 100 * r["one_step"]["test"]["nrmse"] if "one_step" in r else None})
+                     "one_step_nrmse_test_pct": 100 * r["one_step"]["test"]["nrmse"] if "one_step" in r else None,
+                     "vs_linear_pct": r.get("vs_linear_pct")})
     return rows
 
 
@@ -295,21 +370,25 @@ def format_table(summary: dict) -> str:
             ("varying %", "nrmse_varying_rh_pct", 9), ("meas-like %", "nrmse_measurement_like_pct", 11)]
     cols = [c for c in cols if c[1] == "nrmse_test_pct" or any(np.isfinite(r[c[1]]) for r in rows)]
     head = f"{'model':8s} {'params':>8s} {'train s':>8s} {'samples/s':>10s} " + \
-        " ".join(f"{h:>{w}s}" for h, _, w in cols) + f" {'1-step %':>8s}"
+        " ".join(f"{h:>{w}s}" for h, _, w in cols) + f" {'1-step %':>8s} {'vs linear':>9s}"
     lines = [head, "-" * len(head)]
     for r in rows:
         p = "-" if r["parameters"] is None else str(r["parameters"])
         one = "-" if r["one_step_nrmse_test_pct"] is None else f"{r['one_step_nrmse_test_pct']:.2f}"
+        vs = "-" if r["vs_linear_pct"] is None else f"{r['vs_linear_pct']:+.0f} %"
         lines.append(f"{r['model']:8s} {p:>8s} {r['train_time_s']:8.1f} {r['samples_per_s']:10.3g} "
-                     + " ".join(f"{r[k]:{w}.2f}" for _, k, w in cols) + f" {one:>8s}")
+                     + " ".join(f"{r[k]:{w}.2f}" for _, k, w in cols) + f" {one:>8s} {vs:>9s}")
     phys = summary.get("physics")
     note = "" if phys is None else ("; the physics row is the simulator that generated the data" if phys["is_generator"]
                                     else f"; the physics row is the device {phys['device']} named with --physics")
+    lin = summary["models"].get(LINEAR)
+    if lin is not None:
+        note += f"; the linear row is {lin['kind']}, 'vs linear' the test error relative to it"
     lines.append("free-run NRMSE (RMSE/std of the measurement, pooled over records)" + note)
     return "\n".join(lines)
 
 
-def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
+def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) -> None:
     output = ds.meta.get("output") or {"name": "deflection", "unit": "m"}
     qty, unit, k = output["name"], output["unit"], 1.0
     if unit == "m":
@@ -323,7 +402,7 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
         t = np.arange(rec.u.size) / rec.fs
         fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
         ax[0].plot(t, k * rec.y, color=colour("measurement"), lw=1.0, label="measurement")
-        for label, predict in physics_rows.items():
+        for label, predict in {**physics_rows, **linear_rows}.items():
             ax[0].plot(t, k * predict(rec), color=colour(label), lw=0.8, label=label)
         for name, m in trained.items():
             yh = m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])

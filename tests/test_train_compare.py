@@ -30,7 +30,7 @@ def test_outputs_and_groups(run):
     for f in ("compare.json", "metrics.csv", "report.html", "bode.png", "error_by_rh.png", "overlay_heldout_rh.png"):
         assert (out / f).is_file(), f
     data = json.loads((out / "compare.json").read_text())
-    assert set(data["models"]) == {"physics", "rbf", "ff"}
+    assert set(data["models"]) == {"physics", "linear", "rbf", "ff"}
     for name in ("rbf", "ff"):
         m = data["models"][name]
         assert {"train_rh", "heldout_rh", "varying_rh", "measurement_like", "test"} <= set(m["free_run"])
@@ -38,6 +38,24 @@ def test_outputs_and_groups(run):
         assert m["rh_range_trained_pct"] == [pytest.approx(40, abs=1), pytest.approx(100, abs=1)]
     assert "model" in data["best_heldout"]
     assert "physics" in format_table(summary)
+
+
+def test_every_row_is_measured_against_the_linear_yardstick(run):
+    """The linear row is the best ARX on the same split (orders chosen on validation data),
+    scored like the networks; every other row says how far below or above it it lies."""
+    from nnmodel.linear import NA_GRID, NB_GRID
+    _, summary = run
+    models = summary["models"]
+    lin = models["linear"]
+    card = lin["linear"]
+    assert card["na"] in NA_GRID and card["nb"] in NB_GRID and lin["n_parameters"] == card["na"] + card["nb"] + 2
+    scores = card["report"]["scores"]
+    chosen = scores[f"{card['na']},{card['nb']}"]
+    assert len(scores) == len(NA_GRID) * len(NB_GRID) and chosen <= 1.01 * min(scores.values())
+    ref = lin["free_run"]["test"]["nrmse"]
+    for name in ("physics", "rbf", "ff"):
+        assert models[name]["vs_linear_pct"] == pytest.approx(100 * (models[name]["free_run"]["test"]["nrmse"] / ref - 1))
+    assert "vs linear" in format_table(summary) and summary["best_heldout"]["model"] in ("rbf", "ff")
 
 
 def test_physics_reference_scores_at_the_noise_floor_except_measurement_like(run):

@@ -76,7 +76,7 @@ class NeuralModel:
     CARD_KEYS: tuple[str, ...] = ()
 
     _LEARNED = ("net_", "features_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
-                "training_summary_", "structure_search_", "init_report_")
+                "training_summary_", "structure_search_", "init_report_", "linear_start_")
 
     # ------------------------------------------------------------------ hyper-parameters
     @classmethod
@@ -101,7 +101,7 @@ class NeuralModel:
     @classmethod
     def card_keys(cls) -> tuple[str, ...]:
         """Bundle-card entries besides the standard ones that :meth:`restore` reads."""
-        return ("rh_knots_pct", "memory_range_s", "structure_search") + tuple(cls.CARD_KEYS)
+        return ("rh_knots_pct", "memory_range_s", "linear_start", "structure_search") + tuple(cls.CARD_KEYS)
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in self.param_names()}
@@ -158,9 +158,11 @@ class NeuralModel:
     def _release_channels(self) -> None:
         """Hook after the training records are normalised (drop caches)."""
 
-    def _channels(self, u: np.ndarray, rh: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-        """Normalised core channels of a record in physical units (:meth:`FeatureMap.channels`)."""
-        return self.features_.channels(u, rh, self.net_)
+    def _channels(self, u: np.ndarray, rh: np.ndarray | None,
+                  y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Normalised core channels of a record in physical units (:meth:`FeatureMap.channels`;
+        ``y``: measured outputs from the record's start, when known)."""
+        return self.features_.channels(u, rh, self.net_, y)
 
     def _card_extra(self) -> dict:
         """Model-specific bundle-card entries (named in :attr:`CARD_KEYS`)."""
@@ -194,7 +196,7 @@ class NeuralModel:
         from ..training import fit_core  # Lightning is imported only when training
 
         with torch_threads(self.num_threads):
-            self.features_ = self.features.fit(self.kind, fs, train, use_rh)
+            self.features_ = self.features.fit(self.kind, fs, train, use_rh, val, self.val_fraction)
             core = self._build_core(self.features_)
             min_len = core.n_init + 2
             # channels (memory filters, physics) are computed on whole records and then cut,
@@ -227,12 +229,14 @@ class NeuralModel:
             history: list[dict] = []
             if self.max_epochs > 0:
                 history, self.training_summary_ = fit_core(core, tr, va, self.training)
+            if self.features_.linear is not None:
+                self.linear_start_ = keep_if_better(core, va)
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history
             core.eval()
 
     def _norm_record(self, r) -> Seq:
-        U, R = self._channels(r.u, r.rh if "rh" in self.inputs_ else None)
+        U, R = self._channels(r.u, r.rh if "rh" in self.inputs_ else None, r.y)
         return Seq(U, self.net_.norm("y", r.y), R)
 
     @property
@@ -269,7 +273,7 @@ class NeuralModel:
         known = y is not None and y.size > 0
         up = np.concatenate([np.full(pad, u[0] if known else 0.0), u])
         rhp = None if rh is None else np.concatenate([np.full(pad, rh[0]), rh])
-        un, rhn = self._channels(up, rhp)
+        un, rhn = self._channels(up, rhp, np.concatenate([np.full(pad, y[0]), y]) if known else None)
         yn = None if y is None else np.concatenate([np.full(pad, n.norm("y", float(y[0]) if known else 0.0)),
                                                     n.norm("y", y)])
         return un, rhn, yn
@@ -367,6 +371,8 @@ class NeuralModel:
         extra = {**self.features.card(self.features_), **self._card_extra()}
         if self.__dict__.get("structure_search_"):
             extra["structure_search"] = self.structure_search_
+        if self.__dict__.get("linear_start_") and "linear_start" in extra:
+            extra["linear_start"] = {**extra["linear_start"], "outcome": self.linear_start_}
         out = {"inputs": list(self.inputs_), "fs": self.fs_,
                "rh_range": None if self.rh_range_ is None else list(self.rh_range_),
                "n_init": self.n_init_, "fit_time_s": self.__dict__.get("fit_time_")}
@@ -401,6 +407,25 @@ class NeuralModel:
         if extra.get("structure_search"):
             self.structure_search_ = extra["structure_search"]
         return self
+
+
+def keep_if_better(core, val) -> dict:
+    """A network that starts from a linear model ends no worse than it on validation: when
+    the trained correction does not lower the free-run error of ``val`` (normalised
+    records), it is set to zero (``core.zero_correction()``), leaving the linear model."""
+    import copy
+
+    from ..batches import free_run_error
+    if not val:
+        return {"kept": "network", "reason": "no validation data"}
+    e_net = free_run_error(core, val)
+    lin = copy.deepcopy(core)
+    lin.zero_correction()
+    e_lin = free_run_error(lin, val)
+    kept = "network" if e_net < e_lin else "linear"
+    if kept == "linear":
+        core.load_state_dict(lin.state_dict())
+    return {"kept": kept, "validation_nrmse_network": e_net, "validation_nrmse_linear": e_lin}
 
 
 def _missing(name: str):

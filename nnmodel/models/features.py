@@ -140,7 +140,10 @@ class InputFeatures(Part):
     with time constants ``memory_min_s``..``memory_max_s`` (s; adapted to the data, see
     :meth:`fit`), with ``memory_abs`` the same filters of |V|; ``rh_knots`` (%, ``"auto"``:
     the training RH levels, None/[]: none) schedule the linear paths on RH; ``inputs``:
-    ``auto`` (voltage, + RH when the records carry it), ``voltage`` or ``voltage+rh``."""
+    ``auto`` (voltage, + RH when the records carry it), ``voltage`` or ``voltage+rh``;
+    ``linear_start``: the network starts from the best linear model of the training data
+    (:func:`nnmodel.linear.fit_linear`): its free-run output is a reference channel and the
+    network's output is that reference plus a correction that starts at zero."""
 
     ATTR = "features"
     CHECKS = {
@@ -150,6 +153,7 @@ class InputFeatures(Part):
         "memory_abs": flag,
         "rh_knots": lambda v: None if v is None else check_knots(v),
         "inputs": lambda v: None if v in ("auto", "voltage", "voltage+rh") else "'auto', 'voltage' or 'voltage+rh'",
+        "linear_start": flag,
     }
 
     memory_filters: int = 0
@@ -158,6 +162,7 @@ class InputFeatures(Part):
     memory_abs: bool = False
     rh_knots: list | str | None = None
     inputs: str = "auto"
+    linear_start: bool = False
 
     def uses_rh(self, kind: str, has_rh: bool) -> bool:
         """Whether a model fitted on records with (``has_rh``) or without RH takes RH."""
@@ -166,12 +171,14 @@ class InputFeatures(Part):
                              "records carry no relative humidity")
         return has_rh and self.inputs != "voltage"
 
-    def fit(self, kind: str, fs: float, records, use_rh: bool) -> "FeatureMap":
+    def fit(self, kind: str, fs: float, records, use_rh: bool, val=None, val_fraction: float = 0.2) -> "FeatureMap":
         """The features for these training records: the RH knots (``"auto"``: the records'
         levels, :func:`auto_knots`) and the memory time constants fitted to the data — none
         faster than :data:`MEMORY_MIN_SAMPLES` sample periods, none slower than
         :data:`MEMORY_MAX_FRACTION` of the median record; the recipe's range is kept where
-        the data support it (a warning says when it is not)."""
+        the data support it (a warning says when it is not); with ``linear_start`` the
+        linear model fitted on ``records`` and validated on ``val`` (or the last
+        ``val_fraction`` of each record)."""
         if self.rh_knots == "auto":
             knots = auto_knots([r.rh for r in records]) if use_rh else []
         else:
@@ -189,7 +196,12 @@ class InputFeatures(Part):
                               f"(sample period {1 / fs:.3g} s, records of ~{ceiling / MEMORY_MAX_FRACTION:.3g} s); "
                               f"using {lo:.3g}–{hi:.3g} s", UserWarning, stacklevel=4)
             rng = (lo, hi)
-        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs))
+        linear = None
+        if self.linear_start:
+            from ..linear import fit_linear
+            linear = fit_linear(records, val, val_fraction, use_rh=use_rh)
+        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs),
+                          linear)
 
     def card(self, fm: "FeatureMap") -> dict:
         """Bundle-card entries of fitted features (what :meth:`restore` needs)."""
@@ -198,6 +210,8 @@ class InputFeatures(Part):
             out["rh_knots_pct"] = list(fm.knots)
         if fm.memory_range:
             out["memory_range_s"] = [float(x) for x in fm.memory_range]
+        if fm.linear is not None:
+            out["linear_start"] = fm.linear.card()
         return out
 
     def restore(self, kind: str, fs: float, use_rh: bool, card: dict) -> "FeatureMap":
@@ -213,16 +227,25 @@ class InputFeatures(Part):
         if rng is None and self.memory_filters:   # cards written before the range adapted to the data
             rng = (self.memory_min_s, self.memory_max_s)
         rng = None if rng is None else (float(rng[0]), float(rng[1]))
-        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs))
+        linear = None
+        if self.linear_start:
+            from ..linear import LinearModel
+            if card.get("linear_start") is None:
+                raise InputError(f"model {kind!r} with linear_start needs its linear model (card entry "
+                                 "linear_start); the bundle lacks it")
+            linear = LinearModel.from_card(card["linear_start"], "card entry linear_start")
+        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs),
+                          linear)
 
 
 @dataclass
 class FeatureMap:
     """Fitted input features: records in physical units -> normalised core channels.
 
-    ``u`` channels: normalised voltage, then the memory filters (each divided by its
-    standard deviation over the training records, held by the :class:`~.normalise.Normalized`
-    module as ``mem_std``); ``rh`` channels: normalised RH, then one hat per RH knot."""
+    ``u`` channels: normalised voltage, then (``linear``) the free run of the linear start in
+    the output's normalisation, then the memory filters (each divided by its standard
+    deviation over the training records, held by the :class:`~.normalise.Normalized` module
+    as ``mem_std``); ``rh`` channels: normalised RH, then one hat per RH knot."""
 
     fs: float
     use_rh: bool
@@ -230,6 +253,12 @@ class FeatureMap:
     memory_range: tuple | None
     n_filters: int
     memory_abs: bool
+    linear: object = None
+
+    @property
+    def n_ref(self) -> int:
+        """Reference channels (the linear start's output) after the voltage."""
+        return 0 if self.linear is None else 1
 
     @property
     def taus(self) -> np.ndarray:
@@ -285,9 +314,22 @@ class FeatureMap:
             parts.append(rh_hats(rh, self.knots))
         return np.concatenate(parts, 1) if len(parts) > 1 else parts[0]
 
-    def channels(self, u: np.ndarray, rh: np.ndarray | None, net) -> tuple[np.ndarray, np.ndarray | None]:
-        """(``u`` channels (n, 1 + n_mem), ``rh`` channels (n, n_rh) or None) of a record."""
+    def reference(self, u: np.ndarray, rh: np.ndarray | None, y: np.ndarray | None, net) -> np.ndarray:
+        """Free run of the linear start (normalised like the output), started from the
+        measured outputs ``y`` at the record's start when known, else from the steady state
+        of the first input."""
+        lin = self.linear
+        y0 = None if y is None or len(y) == 0 else np.asarray(y, float)[:lin.n_init]
+        return net.norm("y", lin.simulate(u, rh if lin.uses_rh else None, y_init=y0))
+
+    def channels(self, u: np.ndarray, rh: np.ndarray | None, net,
+                 y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(``u`` channels (n, 1 + n_ref + n_mem), ``rh`` channels (n, n_rh) or None) of a
+        record; ``y``: measured outputs from the record's start (only the linear start uses
+        them, to start its free run)."""
         cols = [net.norm("u", u)[:, None]]
+        if self.linear is not None:
+            cols.append(self.reference(u, rh, y, net)[:, None])
         if self.n_mem:
             cols.append(self.memory(u, net))
         U = np.concatenate(cols, 1) if len(cols) > 1 else cols[0]

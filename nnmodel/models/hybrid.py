@@ -185,7 +185,7 @@ class HybridModel(NeuralModel):
     def _release_channels(self):
         self._cache = {}
 
-    def _channels(self, u, rh):
+    def _channels(self, u, rh, y=None):
         """Channels of the correction: voltage and physics output (both delayed), the physics
         states and extra runs (normalised), the memory filters of the voltage and of the
         physics output, and the RH channels."""
@@ -213,6 +213,8 @@ class HybridModel(NeuralModel):
             self.init_report_ = arx_init(core, train)
 
     def fit(self, train, val=None):
+        if self.linear_start:
+            raise InputError("model 'hybrid': linear_start must be false (the hybrid starts from its physics)")
         if self.inputs == "voltage":
             raise InputError("model 'hybrid': inputs must be 'auto' or 'voltage+rh' (its physics part "
                              "needs the relative humidity of every record)")

@@ -40,8 +40,11 @@ class RBFModel(NeuralModel):
         self._set_params_from(locals())
 
     def _build_core(self, features):
-        fmap = RBFMap(self.na, self.nb + features.n_mem + features.n_rh, self.n_centres, n_sched=features.n_sched)
-        return LagSimulator(self.na, self.nb, features.n_rh, fmap, self.feedthrough, n_mem=features.n_mem)
+        n_tap = 1 + features.n_ref      # the voltage, and the linear start's output (a residual core)
+        fmap = RBFMap(self.na, n_tap * self.nb + features.n_mem + features.n_rh, self.n_centres,
+                      n_sched=features.n_sched)
+        return LagSimulator(self.na, self.nb, features.n_rh, fmap, self.feedthrough, n_mem=features.n_mem,
+                            n_tap=n_tap, residual=features.n_ref > 0)
 
     def _initialise(self, core, train):
         from sklearn.cluster import KMeans

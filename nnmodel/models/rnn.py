@@ -31,20 +31,22 @@ def _channels(x):
 
 
 class RNNSimulator(SequenceCore):
-    """Recurrent core; inputs: voltage (+ ``n_mem`` memory-filter channels) and ``n_rh`` RH
-    channels, tensors (batch, time) or (batch, time, channels)."""
+    """Recurrent core; inputs: voltage (+ ``n_ref`` reference channel: the linear start's
+    output, which is then added to the output; + ``n_mem`` memory-filter channels) and
+    ``n_rh`` RH channels, tensors (batch, time) or (batch, time, channels)."""
 
     def __init__(self, cell: str, n_rh: int, hidden: int, layers: int, n_init: int,
-                 encoder_hidden: int, n_mem: int = 0, n_sched: int = 0):
+                 encoder_hidden: int, n_mem: int = 0, n_sched: int = 0, n_ref: int = 0):
         super().__init__()
-        self.cell, self.n_rh, self.n_mem = cell, int(n_rh), int(n_mem)
+        self.cell, self.n_rh, self.n_mem, self.n_ref = cell, int(n_rh), int(n_mem), int(n_ref)
         self.n_sched = int(n_sched)
         self.hidden_size, self.layers, self.n_init = int(hidden), int(layers), int(n_init)
-        n_in = 1 + self.n_mem + self.n_rh
+        n_in = 1 + self.n_ref + self.n_mem + self.n_rh
         rnn_cls = nn.LSTM if cell == "lstm" else nn.GRU
         self.rnn = rnn_cls(n_in, hidden, layers, batch_first=True)
         self.n_parts = 2 if cell == "lstm" else 1
-        self.encoder = nn.Sequential(nn.Linear(2 * n_init + self.n_rh + self.n_mem, encoder_hidden), nn.Tanh(),
+        self.encoder = nn.Sequential(nn.Linear((2 + self.n_ref) * n_init + self.n_rh + self.n_mem, encoder_hidden),
+                                     nn.Tanh(),
                                      nn.Linear(encoder_hidden, self.n_parts * layers * hidden))
         self.readout = nn.Linear(hidden, 1)
         # direct linear path; scheduled: one set of weights per RH knot (last n_sched inputs)
@@ -58,17 +60,19 @@ class RNNSimulator(SequenceCore):
         return (self.skip(x[..., :-K]) * x[..., -K:]).sum(-1)
 
     def _inputs(self, u, rh):
-        u = _channels(u)[..., :1 + self.n_mem]
+        u = _channels(u)[..., :1 + self.n_ref + self.n_mem]
         return u if not self.n_rh else torch.cat([u, _channels(rh)[..., :self.n_rh]], -1)
 
     def init_state(self, u_hist, y_hist, rh_hist):
         k = self.n_init
         u_hist = _channels(u_hist)
         parts = [u_hist[:, -k:, 0], y_hist[:, -k:]]
+        if self.n_ref:
+            parts.append(u_hist[:, -k:, 1])
         if self.n_rh:
             parts.append(_channels(rh_hist)[:, -1, :self.n_rh])
         if self.n_mem:
-            parts.append(u_hist[:, -1, 1:1 + self.n_mem])
+            parts.append(u_hist[:, -1, 1 + self.n_ref:1 + self.n_ref + self.n_mem])
         s = self.encoder(torch.cat(parts, 1))
         B = s.shape[0]
         s = s.view(B, self.n_parts, self.layers, self.hidden_size).permute(1, 2, 0, 3)
@@ -82,7 +86,14 @@ class RNNSimulator(SequenceCore):
     def advance(self, state, u, rh):
         x = self._inputs(u, rh)
         out, state = self.rnn(x, state)
-        return self.readout(out)[..., 0] + self.direct(x), state
+        y = self.readout(out)[..., 0] + self.direct(x)
+        return (y + x[..., 1] if self.n_ref else y), state
+
+    def zero_correction(self) -> None:
+        """Reduce the core to its reference (read-out and direct path at zero)."""
+        with torch.no_grad():
+            for p in (self.readout.weight, self.readout.bias, self.skip.weight, self.skip.bias):
+                p.zero_()
 
 
 class _RNNModel(NeuralModel):
@@ -98,12 +109,15 @@ class _RNNModel(NeuralModel):
 
     def _build_core(self, features):
         return RNNSimulator(self.cell, features.n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden,
-                            n_mem=features.n_mem, n_sched=features.n_sched)
+                            n_mem=features.n_mem, n_sched=features.n_sched, n_ref=features.n_ref)
 
     def _initialise(self, core, train):
         """``skip_init``: least-squares fit of the direct path on the training records
-        (normalised), recurrent read-out set to zero."""
-        if not self.skip_init:
+        (normalised), recurrent read-out set to zero.  With a linear start the core starts
+        as that linear model instead (read-out and direct path at zero)."""
+        if core.n_ref or not self.skip_init:   # with a linear start: start as that linear model
+            if core.n_ref:
+                core.zero_correction()
             return
         xs = [np.concatenate([s.u if s.u.ndim == 2 else s.u[:, None]]
                              + ([s.rh if s.rh.ndim == 2 else s.rh[:, None]] if core.n_rh else []), 1)
