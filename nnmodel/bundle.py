@@ -75,12 +75,13 @@ def _jsonable(obj):
 
 def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | None = None,
          metrics: dict | None = None, output: tuple[str, str] = ("deflection", "m"),
-         notes: str = "", overwrite: bool = False) -> Path:
+         notes: str = "", overwrite: bool = False, extra: dict | None = None) -> Path:
     """Save a trained model as the folder ``path`` (atomically).
 
     ``output`` names the output quantity and its unit (default tip deflection in m; the
     Silverbox benchmark saves ``("V2", "V")``).  An existing folder is replaced only with
-    ``overwrite=True``.
+    ``overwrite=True``.  ``extra``: further card entries (e.g. ``tuning``, the trials of
+    ``train-compare --tune``), which may not replace a standard one.
     """
     model._check_fitted()
     target = Path(path)
@@ -118,7 +119,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "weights": {"file": WEIGHTS, "sha256": sha256_file(tmp / WEIGHTS), "format": "torch state_dict"},
         }
-        for key, value in (learned.get("card_extra") or {}).items():  # e.g. the hybrid's physics
+        for key, value in {**(learned.get("card_extra") or {}), **(extra or {})}.items():  # e.g. the hybrid's physics
             if key in card:
                 raise InputError(f"model {model.kind!r}: card entry {key!r} would overwrite a standard field")
             card[key] = value

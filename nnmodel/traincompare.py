@@ -41,6 +41,8 @@ from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
 from .linear import LinearModel, fit_linear
 from .recipes import load_recipe, make_model
+from .shortfalls import data_facts, explain
+from .tuning import tune as run_tuning
 
 GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
 #: name of the linear yardstick's row
@@ -62,8 +64,9 @@ def _pooled(ys, yhats) -> dict:
     n = sum(y.size for y in ys)
     nr = float(np.sqrt(e2 / v2)) if v2 > 0 else float("nan")
     corr = float(np.mean([np.corrcoef(y, yh)[0, 1] for y, yh in zip(ys, yhats)]))
+    bias = sum(float(np.sum(y - yh)) for y, yh in zip(ys, yhats)) / n
     return {"rmse_m": float(np.sqrt(e2 / n)), "nrmse": nr, "fit_pct": 100.0 * (1.0 - nr), "correlation": corr,
-            "records": len(ys)}
+            "mean_error": bias, "records": len(ys)}
 
 
 def _score(predict, ds: Dataset, entries: list[dict], skip: int) -> dict:
@@ -105,21 +108,24 @@ def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: f
 def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/train-compare",
                   *, overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
                   progress: bool = True, overwrite: bool = False, physics: str | None = None,
-                  settings: ParallelSettings | None = None) -> dict:
+                  settings: ParallelSettings | None = None, tune: int | None = None) -> dict:
     """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
     ``compare.json``, ``metrics.csv``, plots and ``report.html`` in ``out`` (a folder written
     atomically under the policy of :mod:`physics.outputs`).  ``physics``: a device (name or
     YAML) whose simulator is scored beside the networks — by default the dataset's generator,
     none for measured data.  ``settings``: where the models train (:mod:`physics.parallel`:
-    one task per model, each reading the dataset from its path; default here)."""
+    one task per model, each reading the dataset from its path; default here).  ``tune``:
+    trials per model of the search on validation data (:mod:`nnmodel.tuning`), the best
+    trial's settings are trained and saved."""
     preflight(out, inputs=[dataset], overwrite=overwrite)
     warm_up(settings)   # the workers start while the dataset is read and the physics scored
     ds = load_dataset(dataset)
     with output_folder(out, inputs=[dataset], overwrite=overwrite) as tmp:
-        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress, physics, settings)
+        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress, physics, settings, tune)
 
 
-def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress, physics, settings) -> dict:
+def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress, physics, settings,
+                   tune=None) -> dict:
     if not ds.entries("train"):
         raise InputError(f"{dataset}: no training records")
     test_entries = ds.entries("test")
@@ -166,6 +172,15 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         make_model(name, ov)                  # a bad recipe or --set fails here, before any training
         tasks.append({"name": name, "overrides": ov, "dataset": str(ds.path), "bundle": str(out / "models" / name),
                       "echo": progress and local, "effect_files": user_effect_files()})
+    tuning = {}
+    for task in tasks[1:] if tune else ():
+        name = task["name"]
+        if progress:
+            print(f"tuning {name}: {tune} trials on the validation data ...", flush=True)
+        tuning[name] = run_tuning(name, load_recipe(name, task["overrides"]), task["overrides"], tune,
+                                  str(ds.path), settings, task["effect_files"], print if progress else None)
+        task["overrides"] = {**tuning[name]["best"]["overrides"], **task["overrides"]}
+        task["tuning"] = tuning[name]
     if progress and not local:
         print(f"training {', '.join(models)} on {settings.workers if not settings.scheduler else 'the cluster'} "
               f"worker(s) ...", flush=True)
@@ -187,10 +202,15 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
             if base is not None:   # the physics the hybrid starts from, alone
                 results["physics_base"], physics_rows["physics_base"] = base
         results[name] = res
+        if name in tuning:
+            res["tuning"] = tuning[name]
         trained[name] = model
         if progress and not local:
             _echo_result(name, res)
     _compare_with_linear(results)
+    facts = data_facts(ds)
+    for name, model in trained.items():
+        results[name]["shortfalls"] = explain(name, results[name], results, model, facts, LINEAR)
     summary = {"dataset": str(ds.path), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
                "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
@@ -198,6 +218,8 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
                "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
                "best_heldout": _best(results)}
     _plots(ds, test_entries, physics_rows, linear_rows, trained, results, out)
+    if tuning:
+        _tuning_plot(tuning, out)
     write_json(out / "compare.json", summary)
     write_csv(table_rows(results), out / "metrics.csv")
     _report(summary, out)
@@ -281,7 +303,8 @@ def _train_one(task: dict) -> dict:
            "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None}
     save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True,
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
-                notes=f"trained by eap train-compare on {ds.path}")
+                notes=f"trained by eap train-compare on {ds.path}",
+                extra={"tuning": task["tuning"]} if task.get("tuning") else None)
     if task["echo"]:
         _echo_result(name, res)
     return res
@@ -388,6 +411,37 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def tuning_rows(tuned: dict) -> list[dict]:
+    """One row per trial of every tuned model (the page's trial table)."""
+    rows = []
+    for name, t in tuned.items():
+        for r in t["trials"]:
+            v = r["validation_nrmse"]
+            rows.append({"model": name, "trial": r["trial"], "best": "yes" if r["trial"] == t["best"]["trial"] else "",
+                         "validation_nrmse_pct": None if v is None else 100 * v, "fit_s": r["fit_time_s"],
+                         "settings": ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
+                                               for k, v in r["params"].items()) + (f" (failed: {r['error']})"
+                                                                                   if r["error"] else "")})
+    return rows
+
+
+def _tuning_plot(tuned: dict, out: Path) -> None:
+    """Validation score of every trial, and the best so far, per tuned model."""
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for name, t in tuned.items():
+        x = [r["trial"] for r in t["trials"]]
+        y = [np.nan if r["validation_nrmse"] is None else 100 * r["validation_nrmse"] for r in t["trials"]]
+        ax.plot(x, y, "o", ms=4, color=colour(name), alpha=0.6, label=f"{name} trials")
+        ax.plot(x, np.fmin.accumulate(np.where(np.isnan(y), np.inf, y)), "-", color=colour(name),
+                label=f"{name} best so far")
+    ax.set_xlabel("trial")
+    ax.set_ylabel("free-run NRMSE on validation [%]")
+    ax.set_yscale("log")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    save(fig, out / "tuning.png")
+
+
 def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) -> None:
     output = ds.meta.get("output") or {"name": "deflection", "unit": "m"}
     qty, unit, k = output["name"], output["unit"], 1.0
@@ -469,6 +523,25 @@ def _report(summary: dict, out: Path) -> None:
     if best:
         rep.paragraph(f"Best free-run NRMSE on {best.get('group', 'held-out RH')}: {best['model']} "
                       f"{100 * best['nrmse']:.2f} %.")
+    lin = summary["models"].get(LINEAR)
+    if lin is not None:
+        rep.paragraph(f"Linear yardstick: {lin['kind']}, orders chosen on the validation data, free-run test "
+                      f"NRMSE {100 * lin['free_run']['test']['nrmse']:.2f} %. " + "; ".join(
+                          f"{k} {abs(r['vs_linear_pct']):.0f} % {'below' if r['vs_linear_pct'] < 0 else 'above'} it"
+                          for k, r in summary["models"].items() if r.get("vs_linear_pct") is not None) + ".")
+    findings = [f for r in summary["models"].values() for f in r.get("shortfalls", [])]
+    if findings:
+        rep.heading("Where a network falls short, and why")
+        rep.bullets([f"{f['finding']}. Likely cause: {f['cause']}. What to do: {f['action']}." for f in findings])
+    tuned = {k: r["tuning"] for k, r in summary["models"].items() if r.get("tuning")}
+    if tuned:
+        rep.heading("Tuning on the validation data")
+        first = next(iter(tuned.values()))
+        rep.paragraph(f"{first['n_trials']} trials per model, {first['sampler']}, asked and told in batches of "
+                      f"{first['batch']} (the same trials for any worker count); score: {first['score']}. "
+                      "The best trial's settings were trained again and saved.")
+        rep.image(out / "tuning.png", "validation score of every trial")
+        rep.table(tuning_rows(tuned))
     for img, cap in (("error_by_rh.png", "free-run error by RH"), ("bode.png", "small-signal Bode"),
                      *[(f"overlay_{g}.png", g) for g in GROUPS]):
         if (out / img).is_file():

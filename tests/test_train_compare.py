@@ -104,3 +104,28 @@ def test_devices_and_workers_are_exclusive(run, capsys):
     data = json.loads((out / "compare.json").read_text())["dataset"]
     assert main(["train-compare", data, "--devices", "2", "--workers", "2", "--out", str(out.parent / "x")]) == 2
     assert "use one of them" in capsys.readouterr().err
+
+
+def test_tuning_gives_the_same_trials_and_bundle_on_one_and_two_workers(run, tmp_path):
+    """--tune: seeded TPE asked and told in fixed batches, trials on the execution layer; the
+    trials, scores and the saved bundle are the same for one and two workers, every trial is
+    in the card and on the page, and the bundle holds the best trial's settings."""
+    from physics.parallel import ParallelSettings
+    out, _ = run
+    data = json.loads((out / "compare.json").read_text())["dataset"]
+    kw = dict(progress=False, tune=6, overrides={"rbf": {"n_centres": 20}})
+    one = train_compare(data, ["rbf"], tmp_path / "one", **kw)
+    two = train_compare(data, ["rbf"], tmp_path / "two", settings=ParallelSettings(2), **kw)
+    t1, t2 = one["models"]["rbf"]["tuning"], two["models"]["rbf"]["tuning"]
+    assert len(t1["trials"]) == 6 and "n_centres" not in t1["trials"][0]["params"]   # a --set value stays fixed
+    assert [(r["params"], r["validation_nrmse"]) for r in t1["trials"]] == \
+        [(r["params"], r["validation_nrmse"]) for r in t2["trials"]]
+    cards = [json.loads((d / "models" / "rbf" / "card.json").read_text()) for d in (tmp_path / "one", tmp_path / "two")]
+    assert cards[0]["weights"]["sha256"] == cards[1]["weights"]["sha256"]
+    best = t1["best"]
+    assert best["validation_nrmse"] == min(r["validation_nrmse"] for r in t1["trials"] if r["validation_nrmse"])
+    hp = cards[0]["hyper_parameters"]
+    assert all(hp[k] == v for k, v in best["overrides"].items()) and hp["n_centres"] == 20
+    assert len(cards[0]["tuning"]["trials"]) == 6
+    assert (tmp_path / "one" / "tuning.png").is_file() and "Tuning on the validation data" in \
+        (tmp_path / "one" / "report.html").read_text()
