@@ -57,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
         if "--device" in p._option_string_actions or mod.NAME == "compare":
             p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                            help="override a device parameter, with its unit, e.g. --param L_total=40mm "
-                                "--param width=10mm (repeatable; see `eap effects` for names)")
+                                "--param width=10mm (repeatable; `eap effects --device D` lists the names, units and values)")
         if "--effects" in p._option_string_actions or mod.NAME == "effects":
             p.add_argument("--effects-path", action="append", default=[], metavar="FILE.py",
                            help="a Python file defining user effects (physics.effects.OutputEffect subclasses, "
@@ -78,7 +78,10 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory(prefix="eap-param-") as tmp:
             _apply_params(args, Path(tmp))
             return int(args._run(args) or 0)
-    except (InputError, ModelError) as exc:
+    except InputError as exc:
+        print(f"eap {args.command}: error: {exc.render(flag_speller(parser, args.command))}", file=sys.stderr)
+        return 2
+    except ModelError as exc:
         print(f"eap {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, Terminated) as exc:
@@ -97,6 +100,46 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, previous)
 
 
+def flag_speller(parser: argparse.ArgumentParser, command: str):
+    """``spell(name)`` for :meth:`physics.errors.InputError.render`: the flag of ``command``
+    whose destination is the argument ``name`` (``fs_Hz`` → ``--fs-Hz``), else the flag a
+    command module maps it to in its ``FLAGS`` dict (API argument → flag), else None (the
+    Python spelling is kept)."""
+    sub = next((a.choices[command] for a in parser._actions if isinstance(a, argparse._SubParsersAction)
+                and command in a.choices), None)
+    flags = {} if sub is None else {a.dest: max(a.option_strings, key=len) for a in sub._actions if a.option_strings}
+    mod = next((m for m in _command_modules() if m.NAME == command), None)
+    flags.update(getattr(mod, "FLAGS", {}))
+    return flags.get
+
+
+def parse_quantity(text: str) -> tuple[str, float]:
+    """``--param`` ``"NAME=VALUE[UNIT]"`` (e.g. ``L_total=40mm``, ``Y=0.2 GPa``, ``kf=0.004``) →
+    (name, value in SI), the unit checked against the parameter's; no unit means SI."""
+    import difflib
+    import re
+    from physics.device import all_param_specs
+    from physics.units import UnitError, to_si
+    name, sep, rest = (s.strip() for s in text.partition("="))
+    specs = all_param_specs()
+    if not sep or not name:
+        raise InputError(f"--param {text!r}: expected NAME=VALUE with a unit, e.g. L_total=40mm")
+    if name not in specs:
+        close = difflib.get_close_matches(name, list(specs), n=3)
+        raise InputError(f"--param {name}: unknown parameter" + (f" (did you mean {', '.join(close)}?)" if close
+                                                                  else "; see `eap effects --device D` for names"))
+    m = re.match(r"^([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*)$", rest)
+    if not m:
+        raise InputError(f"--param {text!r}: {rest!r} is not a number with an optional unit")
+    value, unit = float(m.group(1)), m.group(2).strip()
+    if not unit:
+        return name, value
+    try:
+        return name, float(to_si(value, unit, specs[name].unit))
+    except UnitError as exc:
+        raise InputError(f"--param {text!r}: {exc} (the unit of {name} is {specs[name].unit})") from None
+
+
 def _apply_params(args, tmp: Path) -> None:
     """``--param NAME=VALUE``: the device with these values, as a temporary device file that
     replaces ``--device`` (or a device ``--model``) for this run; a notice names the changes."""
@@ -105,7 +148,6 @@ def _apply_params(args, tmp: Path) -> None:
         return
     from physics.device import load_device
     from physics.identify.devicefile import device_to_raw
-    from physics.units import parse_quantity
     attr = "device" if hasattr(args, "device") else "model"
     ref = getattr(args, attr)
     if attr == "model" and Path(ref).is_dir():

@@ -21,10 +21,12 @@ from .beam import CantileverModes
 from .device import Device, load_device
 from .effects import CHAIN, EFFECTS, Effect, stage_of
 from .effects.double_layer import DoubleLayerProps
-from .errors import InputError
+from .errors import InputError, arg
 
 
 _GROUPS = ("default", "all", "linear", "none")
+#: effects that are the model's core: a stage default with an id (always on, cannot be removed)
+_CORE = tuple(c.id for c in CHAIN if c.id)
 
 
 def _group(key: str, device: Device) -> list[str]:
@@ -40,7 +42,7 @@ def _group(key: str, device: Device) -> list[str]:
 def resolve_effects(effects, device: Device) -> tuple[str, ...]:
     """Effect ids from a list or a comma-separated string: ids, the groups ``default`` (the
     device's ``default_effects``), ``all``, ``linear``, ``none``, and ``+id`` / ``-id`` to add or
-    remove (e.g. ``default,+creep,-thermal``); ``double_layer`` is always included."""
+    remove (e.g. ``default,+creep,-thermal``); the core (the double layer) is always included."""
     if effects is None:
         effects = "default"
     if isinstance(effects, str):
@@ -58,15 +60,16 @@ def resolve_effects(effects, device: Device) -> tuple[str, ...]:
             raise InputError(f"effects: cannot remove the group {name!r}; remove single effects, e.g. -thermal")
         unknown = [e for e in names if e not in EFFECTS]
         if unknown:
+            load = arg("effects_path", "physics.effects.load_effects_file")
             raise InputError(f"unknown effect(s) {', '.join(unknown)}; known effects: {', '.join(EFFECTS)} "
-                             "(a user effect needs --effects-path FILE.py)")
+                             f"(a user effect is registered from its file: {load} FILE.py)")
         if sign == "-":
-            if name == "double_layer":
-                raise InputError("effects: double_layer cannot be removed (it is the model's core)")
+            if name in _CORE:
+                raise InputError(f"effects: {name} cannot be removed (it is the model's core)")
             ids = [e for e in ids if e != name]
         else:
             ids += [e for e in names if e not in ids]
-    ids_set = set(ids) | {"double_layer"}
+    ids_set = set(ids) | set(_CORE)
     return tuple(k for k in EFFECTS if k in ids_set)
 
 
@@ -81,24 +84,23 @@ class ActuatorModel:
         if self.n_modes < 1:
             raise InputError("n_modes must be at least 1")
         on = [EFFECTS[e] for e in self.effect_ids]
-        self.components: dict[str, Effect] = {}
+        #: the chain: each stage's name → the effect filling it (its default or the one replacing it)
+        self.stages: dict[str, Effect] = {}
         for default in CHAIN:
             chosen = [c for c in on if issubclass(c, default)]
             if len(chosen) > 1:
-                raise InputError(f"effects {' and '.join(c.id for c in chosen)} both replace the {default.slot!r} "
+                raise InputError(f"effects {' and '.join(c.id for c in chosen)} both replace the {default.stage!r} "
                                  "stage; switch one of them off")
-            self.components[default.slot] = (chosen[0] if chosen else default)(self.device)
-        self.stages: list[Effect] = list(self.components.values())
+            self.stages[default.stage] = (chosen[0] if chosen else default)(self.device)
         #: effects that add factors (load or output), in the order given
         self.added: list[Effect] = [cls(self.device) for cls in on if stage_of(cls) is None]
-        for e in self.added:
-            self.components[e.id] = e
         self._hooks: dict = {}
 
     # --- the effect list, as the user reads it back --------------------------------------
     @property
     def effects(self) -> list[Effect]:
-        return list(self.components.values())
+        """Every effect object of the model: the stages in chain order, then the added ones."""
+        return list(self.stages.values()) + self.added
 
     @property
     def outputs(self) -> list[Effect]:
@@ -114,12 +116,6 @@ class ActuatorModel:
         """True when an effect makes the response depend on the relative humidity."""
         return any(type(e).needs_rh for e in self.effects)
 
-    def __getattr__(self, slot: str) -> Effect:
-        comps = self.__dict__.get("components", {})
-        if slot in comps:
-            return comps[slot]
-        raise AttributeError(slot)
-
     def __repr__(self) -> str:
         return f"ActuatorModel({self.device.name!r}, effects={list(self.effect_ids)})"
 
@@ -128,7 +124,7 @@ class ActuatorModel:
         """The stage hook ``name`` (a bound method of the stage that provides it)."""
         fn = self._hooks.get(name)
         if fn is None:
-            comp = next((c for c in self.stages if callable(getattr(c, name, None))), None)
+            comp = next((c for c in self.stages.values() if callable(getattr(c, name, None))), None)
             if comp is None:
                 raise AttributeError(f"no stage of the chain provides the hook {name!r}")
             fn = self._hooks[name] = getattr(comp, name)
@@ -184,8 +180,10 @@ class ActuatorModel:
 
     def describe(self) -> str:
         lines = [repr(self)]
-        for slot, e in self.components.items():
-            lines.append(f"  {slot:12s} {e.label:24s} {e.summary}")
+        for stage, e in self.stages.items():
+            lines.append(f"  {stage:12s} {e.label:24s} {e.summary}")
+        for e in self.added:
+            lines.append(f"  {'added':12s} {e.label:24s} {e.summary}")
         return "\n".join(lines)
 
     def output_response(self, s: np.ndarray, p: dict) -> np.ndarray | float:

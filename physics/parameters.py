@@ -56,7 +56,7 @@ BASE_SECTIONS: dict[str, dict[str, ParamSpec]] = {
         ParamSpec("sigma_polymer", "S/m", 0.0, 1e3,
                   "electronic (leakage) conductivity of the polymer, the sigma of eq. 1"),
         ParamSpec("Rs", "ohm", 0.0, 1e7,
-                  "electrode sheet resistance (ohm per square) of each face; used by electrode_resistance"),
+                  "electrode sheet resistance (ohm per square) of each face (the electrode line)"),
     ]),
     "chemical": _specs([
         ParamSpec("D_cation", "m^2/s", 1e-16, 1e-6, "cation diffusion coefficient D+ (eq. 5)"),

@@ -64,7 +64,7 @@ class BranchNetwork:
             areas = np.array([areas.sum()])
         self.area = np.concatenate([[p["width"] * p["L_clamp"]], areas])
         self.g = None if lumped else model.hook("series_conductances")(p, edges)
-        self.half_g = None if lumped else 0.5 * self.g
+        self.half_g = None if self.g is None else 0.5 * self.g   # None: every branch at Vin (no line)
         self.n = self.area.size
         self.set_temperature(np.full(self.n, p["T_ext"]))
 

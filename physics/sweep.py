@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, arg
 from .parallel import ParallelSettings, map_tasks
 
 #: Largest grid accepted (rows); a bigger sweep should be split.
@@ -29,7 +29,7 @@ SPECIAL = {"rh": "%", "amplitude": "V"}
 
 def parse_values(name: str, text: str) -> list[float]:
     """``a,b,c``, ``lin:a:b:n`` or ``log:a:b:n`` → values (errors name the grid entry)."""
-    where = f"--grid {name}={text}"
+    where = f"{arg('grid')} {name}={text}"
     try:
         if text.startswith(("lin:", "log:")):
             kind, a, b, n = text.split(":")
@@ -59,23 +59,23 @@ def parse_grid(items, device) -> dict[str, list[float]]:
     for item in items:
         name, sep, text = (s.strip() for s in item.partition("="))
         if not sep or not name:
-            raise InputError(f"--grid {item!r}: expected NAME=VALUES, e.g. Y=lin:1e8:3e8:5 or rh=40,60,80")
+            raise InputError(f"{arg('grid')} {item!r}: expected NAME=VALUES, e.g. Y=lin:1e8:3e8:5 or rh=40,60,80")
         if name in grid:
-            raise InputError(f"--grid: {name} is given twice")
+            raise InputError(f"{arg('grid')}: {name} is given twice")
         if name not in SPECIAL and name not in specs:
             import difflib
             close = difflib.get_close_matches(name, list(specs) + list(SPECIAL), n=3)
-            raise InputError(f"--grid {name}: unknown parameter" + (f" (did you mean {', '.join(close)}?)" if close
+            raise InputError(f"{arg('grid')} {name}: unknown parameter" + (f" (did you mean {', '.join(close)}?)" if close
                                                                      else "; see `eap effects` for names"))
         vals = parse_values(name, text)
         if name in specs:
             for v in vals:
-                specs[name].check(v, f"--grid {name}")
+                specs[name].check(v, f"{arg('grid')} {name}")
         if name == "rh" and not all(0 <= v <= 100 for v in vals):
-            raise InputError(f"--grid rh={text}: RH must lie within 0–100 %")
+            raise InputError(f"{arg('grid')} rh={text}: RH must lie within 0–100 %")
         grid[name] = vals
     if not grid:
-        raise InputError("give at least one --grid NAME=VALUES")
+        raise InputError(f"give at least one {arg('grid')} entry NAME=VALUES")
     n = math.prod(len(v) for v in grid.values())
     if n > MAX_POINTS:
         raise InputError(f"the grid has {n} points; at most {MAX_POINTS} per sweep — split it")
@@ -122,7 +122,7 @@ def run_sweep(device, effects, grid: dict[str, list[float]], *, kind: str = "frf
     """The sweep as a pandas DataFrame (grid columns first, in grid order)."""
     import pandas as pd
     if kind not in ("frf", "simulate"):
-        raise InputError(f"--kind {kind!r}: expected frf or simulate")
+        raise InputError(f"{arg('kind')} {kind!r}: expected frf or simulate")
     if not (0 < f_range[0] < f_range[1]):
         raise InputError(f"frequency range {f_range}: must be positive and increasing")
     dev_ref = str(device) if isinstance(device, (str, Path)) else device

@@ -103,8 +103,10 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     w_hi = np.pi / dt
     stepper_needed = (not model.is_linear) or (model.hook("electrochemistry_varies")() and np.ptp(rh_t) > 0)
     if periodic and (stepper_needed or (model.needs_rh and np.ptp(rh_t) > 0)):
+        large = [e.label for e in model.effects if not type(e).linear]
         raise InputError("periodic steady state needs a linear model at constant RH "
-                         "(nonlinear_charge/thermal or a varying RH make the response aperiodic)")
+                         f"({'/'.join(large) or 'a varying RH'} make{'s' if len(large) < 2 else ''} the response "
+                         "aperiodic)")
     p_mid = model.params_at(float(np.median(rh_t)))
     distributed = _distributed(model, p_mid)
     edges = _line_grid(model, p_mid, w_hi, n_segments, distributed) if (distributed or fields) \
@@ -153,8 +155,7 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     del reduced                                      # the electrochemistry rows are no longer needed
     tip = _mechanics(model, base, loads, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
     del loads
-    if model.outputs:
-        tip = model.filter_output(tip, 1.0 / dt, model.params_at(float(np.mean(rh_t))))
+    tip = _output_effects(model, tip, rh_t, dt)
     return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs,
                             cs_low=-cs, device=model.device.name, effects=model.effect_ids,
                             z=0.5 * (edges[1:] + edges[:-1]), fields=flds)
@@ -163,7 +164,8 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
 @single_threaded
 def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_factor: bool = True,
                               hold: str = "cubic", periodic: bool = False) -> np.ndarray:
-    """Tip deflection [m] for a given load history, through the same beam as :func:`simulate`.
+    """Tip deflection [m] for a given load history, through the same load factors, beam and
+    output effects as :func:`simulate`.
 
     ``ell`` (n_seg, N) is the first-moment-equivalent interface cation excess [mol/m³] (the
     face excess (C⁺(h) − C⁺(−h))/2 in the linear regime) on the free segments with ``edges`` [m] (from the clamp), sampled at ``t`` [s];
@@ -186,9 +188,17 @@ def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_fa
 
 def _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic):
     """Stages 2–4 for per-segment loads ``ell`` (n_seg, N): projection onto the modes,
-    load filter and humidity (:func:`_modal_loads`), mechanics."""
+    load filter and humidity (:func:`_modal_loads`), mechanics, then the output effects."""
     loads = _modal_loads(model, _beam_projection(model, base, edges) @ ell, rh_t, load_filter, dt, hold, periodic)
-    return _mechanics(model, base, loads, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
+    tip = _mechanics(model, base, loads, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
+    return _output_effects(model, tip, rh_t, dt)
+
+
+def _output_effects(model, tip, rh_t, dt) -> np.ndarray:
+    """The tip deflection through the model's added output effects (at the mean RH)."""
+    if not model.outputs:
+        return tip
+    return model.filter_output(tip, 1.0 / dt, model.params_at(float(np.mean(rh_t))))
 
 
 def _beam_projection(model, base, edges) -> np.ndarray:

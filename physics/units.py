@@ -162,30 +162,3 @@ def to_si(value, unit: str, expected: str | None = None):
     if np.ndim(value):
         return np.asarray(value, dtype=float) * q.factor
     return float(value) * q.factor
-
-
-def parse_quantity(text: str) -> tuple[str, float]:
-    """``"NAME=VALUE[UNIT]"`` (e.g. ``L_total=40mm``, ``Y=0.2 GPa``, ``kf=0.004``) → (name,
-    value in SI), the unit checked against the parameter's; no unit means SI."""
-    import re
-    from .device import all_param_specs
-    from .errors import InputError
-    name, sep, rest = (s.strip() for s in text.partition("="))
-    specs = all_param_specs()
-    if not sep or not name:
-        raise InputError(f"--param {text!r}: expected NAME=VALUE with a unit, e.g. L_total=40mm")
-    if name not in specs:
-        import difflib
-        close = difflib.get_close_matches(name, list(specs), n=3)
-        raise InputError(f"--param {name}: unknown parameter" + (f" (did you mean {', '.join(close)}?)" if close
-                                                                  else "; see `eap effects` for names"))
-    m = re.match(r"^([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*)$", rest)
-    if not m:
-        raise InputError(f"--param {text!r}: {rest!r} is not a number with an optional unit")
-    value, unit = float(m.group(1)), m.group(2).strip()
-    if not unit:
-        return name, value
-    try:
-        return name, float(to_si(value, unit, specs[name].unit))
-    except UnitError as exc:
-        raise InputError(f"--param {text!r}: {exc} (the unit of {name} is {specs[name].unit})") from None

@@ -142,7 +142,7 @@ def rh_records(ipmc):
 
 
 def test_joint_fit_per_rh_recovers_table_v(ipmc, rh_records, tmp_path):
-    hum = ipmc.components["humidity"]
+    hum = ipmc.stages["humidity"]
     truth_Y = {rh: ipmc.device["Y"] * float(hum.stiffness_factor(rh)) for rh in (40, 60, 80)}
     truth_kf = {rh: ipmc.params_at(rh)["kf"] for rh in (40, 60, 80)}
     res = identify(rh_records, "ipmc_pt_eg", "default", "beta_f", per_rh="Y,kf",

@@ -43,7 +43,7 @@ def test_transmission_line_matches_a_boundary_value_solve():
     z = np.linspace(0, L, 200)
     sol = solve_bvp(rhs, bc, z, np.zeros((4, z.size)), tol=1e-8, max_nodes=100000)
     assert sol.success
-    U = m.components["line"].distribution(np.array([s]), np.array([Yp]), p, z)[0]
+    U = m.stages["line"].distribution(np.array([s]), np.array([Yp]), p, z)[0]
     ref = sol.sol(z)
     np.testing.assert_allclose(U, ref[0] + 1j * ref[1], atol=1e-5)
     assert np.all(np.diff(np.abs(U)) < 0)     # the voltage falls along the strip
@@ -88,7 +88,7 @@ def test_fractional_coupling_has_the_thesis_constant_phase():
     m = ActuatorModel("ipmc_pt_eg", "fractional_coupling")
     p = dict(m.device.params)
     f = np.logspace(-1, np.log10(50), 20)
-    kf = m.components["coupling"].kf(2j * np.pi * f, p)
+    kf = m.stages["coupling"].kf(2j * np.pi * f, p)
     np.testing.assert_allclose(np.degrees(np.angle(kf)), -54.0, atol=0.05)
     slope = np.diff(np.log(np.abs(kf))) / np.diff(np.log(f))
     np.testing.assert_allclose(slope, -0.6, atol=1e-3)

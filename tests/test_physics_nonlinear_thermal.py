@@ -107,7 +107,7 @@ def test_thermal_steady_state_energy_balance():
     t = np.arange(0, 400.0, 0.5)
     v0 = 1.5
     out = stepper.run(m, m.params_at, t, np.full(t.size, v0), np.full(t.size, 100.0), edges, {"T"})
-    net = m.components["temperature"].network(p, edges)
+    net = m.stages["temperature"].network(p, edges)
     T = out["T"][:, -1]
     assert np.max(np.abs(out["T"][:, -1] - out["T"][:, -11])) < 1e-4     # steady state reached
     loss = np.sum(net.convection * (T - p["T_ext"]))

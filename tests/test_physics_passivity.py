@@ -22,11 +22,11 @@ def test_every_combination_absorbs_electrical_power_and_has_stable_mechanics(dev
     for combo in COMBOS:
         m = ActuatorModel(device, list(combo))
         for rh in (40.0, 70.0, 100.0):
-            rh_arg = rh if m.components["humidity"].enabled else None
+            rh_arg = rh if m.stages["humidity"].needs_rh else None
             fr = frequency_response(m, None, np.abs(S) / (2 * np.pi), rh=rh_arg)
             assert np.all(fr.current.real >= 0), (combo, rh)          # Re Y_in ≥ 0: passive load
             p = m.params_at(rh_arg)
-            EI, _ = m.section(p, float(m.components["humidity"].stiffness_factor(rh)))
+            EI, _ = m.section(p, float(m.stages["humidity"].stiffness_factor(rh)))
             Ew = EI(S)
             assert np.all(Ew.imag >= 0) and np.all(Ew.real > 0), (combo, rh)   # no negative loss
 

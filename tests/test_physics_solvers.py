@@ -36,8 +36,8 @@ def test_load_filter_realisations_are_accurate(device):
     p = dict(m.device.params)
     KB, B = _load_filters(m, p, np.pi * 1000)
     s = 2j * np.pi * np.logspace(-3, np.log10(500), 80)
-    exact_B = m.components["solvent"].solvent_factor(s, p)
-    exact_KB = m.components["coupling"].kf(s, p) * exact_B
+    exact_B = m.stages["solvent"].solvent_factor(s, p)
+    exact_KB = m.stages["coupling"].kf(s, p) * exact_B
     np.testing.assert_allclose(B.freqresp(s)[0, 0], exact_B, rtol=1e-3)
     np.testing.assert_allclose(KB.freqresp(s)[0, 0], exact_KB, rtol=1e-3)
 
@@ -129,5 +129,5 @@ def test_long_records_do_not_hold_a_row_per_segment():
         tracemalloc.stop()
         assert r.deflection.size == n
     per_sample = (peaks[1] - peaks[0]) / 200_000 / 8
-    assert model.components["line"].enabled
+    assert model.stages["line"].id == "electrode_resistance"
     assert per_sample < 30, f"{per_sample:.1f} float64 per sample"

@@ -5,6 +5,7 @@ import pytest
 from scipy.optimize import brentq
 
 from physics.constants import GAS_CONSTANT
+from physics.errors import InputError
 from physics.frequency import frequency_response
 from physics.reference.strip import ReferenceStrip
 from physics.timedomain import simulate, tip_from_interface_excess
@@ -110,3 +111,66 @@ def test_eap_validate_writes_the_report(tmp_path):
     if CHROMIUM:
         check, _ = render(tmp_path / "report.html")
         assert_clean(check, tmp_path / "report.html")
+
+
+def _added_effects():
+    """The shipped output effect (creep) and a throwaway load effect (a lag on the load)."""
+    from pathlib import Path
+    from physics.effects import LoadEffect, effect_classes_in_file
+    from physics.parameters import ParamSpec
+    (creep,) = effect_classes_in_file(Path(__file__).resolve().parents[1] / "examples" / "effects" / "creep.py")
+
+    class LoadLag(LoadEffect):
+        id = "load_lag_ref"
+        params = (ParamSpec("lag_tau", "s", 1e-4, 10.0, "lag time constant", default=0.05),)
+
+        def load_tf(self, p):
+            return [1.0], [self.value(p, "lag_tau"), 1.0]
+    return [creep, LoadLag]
+
+
+@pytest.mark.parametrize("cls", _added_effects(), ids=lambda c: c.id)
+def test_reference_path_keeps_added_output_and_load_effects(cls):
+    """Regression (issue 26): tip_from_interface_excess (the reference solver's path to the tip)
+    skipped the output effects that simulate applies; the reference FRF skipped both kinds."""
+    from physics.effects import register, unregister
+    from physics.model import ActuatorModel
+    from physics.timedomain import _line_grid
+    register(cls)
+    try:
+        t = np.arange(0, 2.0 + 1e-9, 1e-3)
+        v = 0.5 * np.sin(2 * np.pi * 3 * t) + 0.3
+        m = ActuatorModel("ipmc_pt_eg", f"default,+{cls.id}")
+        res = simulate(m, None, t, v, rh=100, fields=("cation",))
+        edges = _line_grid(m, m.params_at(100), np.pi / 1e-3, None)
+        ell = 0.5 * (res.fields["cation_upper"] - res.fields["cation_lower"])
+        tip = tip_from_interface_excess(m, t, ell, edges, 100)
+        assert np.max(np.abs(tip - res.deflection)) < 1e-9 * np.max(np.abs(res.deflection))
+        # the reference FRF carries the factor exactly: with / without = the effect's own factor
+        f = np.array([0.01, 0.1, 1.0, 5.0])
+        with_it = ReferenceStrip(m, rh=100).frequency_response(f)["deflection"]
+        without = ReferenceStrip("ipmc_pt_eg", "default", rh=100).frequency_response(f)["deflection"]
+        p, s = m.params_at(100), 2j * np.pi * f
+        factor = m.output_response(s, p) * m.product("load_factor", s, p)
+        assert np.max(np.abs(factor - 1)) > 0.05            # the effect matters at these frequencies
+        np.testing.assert_allclose(with_it / without, factor, rtol=1e-9)
+    finally:
+        unregister(cls.id)
+
+
+def test_reference_refuses_what_an_effect_says_it_cannot_reproduce():
+    from physics.effects import CHAIN, register, unregister
+    charge_law = next(c for c in CHAIN if c.stage == "charge_law")
+
+    class OtherCharge(charge_law):          # another electrochemistry, silent about the reference
+        id = "other_charge"
+    register(OtherCharge)
+    try:
+        with pytest.raises(InputError, match="other_charge .it does not declare reference support"):
+            ReferenceStrip("ipmc_pt_eg", "default,+other_charge", rh=100)
+        OtherCharge.reference = "reproduced"    # a claim made on the class itself counts
+        assert ReferenceStrip("ipmc_pt_eg", "default,+other_charge", rh=100).model is not None
+    finally:
+        unregister("other_charge")
+    with pytest.raises(InputError, match="isothermal"):
+        ReferenceStrip("ipmc_pt_eg", "default,+thermal", rh=100)

@@ -208,6 +208,14 @@ def format_table(report: dict) -> str:
             f"training capped at {report['curve_budget_s']:.0f} s):\n" + common.text_table(h, r))
 
 
+def _missing_physics(report: dict) -> str:
+    """The generator's effects that the hybrid's physics (the device's default effects) lacks."""
+    from physics.device import load_device
+    gen = report["dataset"]["generator"]
+    own = load_device(gen["device"]).default_effects
+    return ", ".join(e for e in gen["effects"] if e not in own) or "nothing"
+
+
 def _write_outputs(out: Path, report: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -234,7 +242,7 @@ def _write_outputs(out: Path, report: dict) -> None:
     ax.set_yscale("log")
     ax.set_xlabel("training data (s of records; 1, 2, 4, 8, all records)")
     ax.set_ylabel("free-run NRMSE on held-out RH (%)")
-    ax.set_title("grey-box study: data efficiency (nonlinear_charge missing from the hybrid's physics)")
+    ax.set_title(f"grey-box study: data efficiency ({_missing_physics(report)} missing from the hybrid's physics)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -246,7 +254,8 @@ def _write_outputs(out: Path, report: dict) -> None:
         ("p", f"Dataset: {report['dataset']['path']} (hash {report['dataset']['hash'][:12]}), generator "
               f"{report['dataset']['generator']['device']} with {', '.join(report['dataset']['generator']['effects'])}."),
         ("p", "Score: " + report["score"] + ". physics_base is the hybrid's physics part alone (default effects, "
-              "no nonlinear_charge); physics is the generator itself (a reference no model can beat except by noise)."),
+              f"no {_missing_physics(report)}); physics is the generator itself (a reference no model can beat "
+              "except by noise)."),
         ("h2", "Full training data (recipes)"),
         ("table", (HEADER, _table_rows(report))),
         ("pre", "\n".join(report["findings"])),

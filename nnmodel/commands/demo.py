@@ -71,7 +71,7 @@ def _missing_physics(args) -> int:
     check_out(args)
     ms, tp = outside_catalog_case("creep", args.seed, device=args.device, fs=args.fs_Hz, duration=args.duration_s)
     print(f"truth (outside the catalog): tip load × (1 + r/(1+sτ)), r = {tp['creep_r']:.3g}, "
-          f"τ = {tp['creep_tau_s']:.3g} s; user's model: {args.device} [double_layer]")
+          f"τ = {tp['creep_tau_s']:.3g} s; user's model: {args.device} with effects 'none' (the bare double layer)")
     before = diagnose(ms, args.device, "none")
     print("\n1. the catalog alone:")
     print_summary(before)

@@ -24,7 +24,8 @@ def add_arguments(p):
     p.add_argument("--effects", default="default",
                    help="the model's effects: comma-separated ids, or default / linear / all / none (see `eap effects`)")
     p.add_argument("--free", default="",
-                   help="the model's free parameters (default: coupling gain kf/kf0, stiffness Y/dma_scale/Y_polymer, beta_f)")
+                   help="the model's free parameters (default: the coupling gain and the stiffness, each as the model's "
+                        "effects name it, and beta_f)")
     p.add_argument("--per-rh", default="", help="model parameters fitted once per RH level (with humidity)")
     p.add_argument("--candidates", default="default",
                    help="effects to try: comma-separated ids (default: every catalog effect the model lacks but thermal)")

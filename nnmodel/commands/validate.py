@@ -11,7 +11,8 @@ from ._common import add_output_options, check_out, provenance, writing
 NAME = "validate"
 HELP = "validation report: reduced model vs the full nonlinear PNP + solvent reference (plots, JSON, HTML)"
 DESCRIPTION = (HELP + ". Small-signal FRF (criterion 1 % / 1° over 0.1–50 Hz), amplitude sweep 0.05–2 V with "
-               "the amplitudes where the linear model's error passes 5 % and 20 % and the effect of nonlinear_charge, "
+               "the amplitudes where the linear model's error passes 5 % and 20 % and the effect of the large-signal "
+               "charge law, "
                "harmonic distortion, cation/solvent profiles at the thesis's snapshots (Fig. 13/15/17/30). "
                "A full run takes a few minutes.")
 

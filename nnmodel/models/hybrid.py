@@ -64,7 +64,7 @@ def _distinct_names(allowed):
 def _check_effects(v):
     if isinstance(v, str) or (isinstance(v, (list, tuple)) and all(isinstance(e, str) for e in v)):
         return None
-    return "an effect list (e.g. 'default' or [electrode_resistance, humidity])"
+    return "an effect list (e.g. 'default', or a list of effect ids as `eap effects` shows them)"
 
 
 class HybridCore(LagSimulator):

@@ -1,8 +1,10 @@
 """Physical effects (stable ids), the model chain's "no effect" defaults, and user effects.
 
 ``CHAIN`` lists, in chain order, the default variant of every stage of the model (the
-contract is in :mod:`physics.effects.base`); an effect replaces the stage whose default it
-subclasses, or adds factors (``load_factor``, ``output_response``).  ``EFFECTS`` maps each id
+contract is in :mod:`physics.effects.base`, each stage's typed protocol in
+:mod:`physics.effects.stages`); an effect replaces the stage whose default it subclasses, or
+adds factors (:class:`LoadEffect`: ``load_factor``; :class:`OutputEffect`: ``output_response``).
+:func:`check_effect` runs the contract on any effect.  ``EFFECTS`` maps each id
 to its class: the built-ins of ``BUILT_IN_EFFECTS``, then those added by users with
 :func:`register`, from a file with :func:`load_effects_file` (``--effects-path FILE.py``) or
 from installed packages with :func:`load_plugins` (entry-point group ``eap.effects``).
@@ -14,8 +16,9 @@ import inspect
 import sys
 from pathlib import Path
 
-from ..errors import InputError
-from .base import DIAGNOSIS_KEYS, REVEAL_RULES, Effect, OutputEffect
+from ..errors import InputError, arg
+from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
+from .contract import CHECKS, FAST_CHECKS, ContractReport, check_effect, declaration_problems
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
 from .fractional_coupling import ConstantCoupling, FractionalCoupling
@@ -49,46 +52,26 @@ def stage_of(cls: type[Effect]) -> type[Effect] | None:
 def adds_factors(cls: type[Effect]) -> bool:
     """True when ``cls`` implements a factor hook."""
     return any(callable(getattr(cls, h, None)) for h in FACTOR_HOOKS)
-LINEAR_EFFECTS = tuple(k for k, v in EFFECTS.items() if v.linear)
+
+
+def __getattr__(name):
+    if name == "LINEAR_EFFECTS":     # computed on access, so that it includes registered user effects
+        return tuple(k for k, v in EFFECTS.items() if v.linear)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 ENTRY_POINT_GROUP = "eap.effects"
+_PATH = arg("effects_path", "path")    # how a caller names an effect file
 
 
 def register(cls: type[Effect]) -> type[Effect]:
-    """Register a user effect class (checked against the contract of :mod:`.base`); returns it.
-
-    It either replaces a stage (subclasses one of :data:`CHAIN`) or adds factors
-    (:class:`OutputEffect`, or any effect with ``load_factor``)."""
+    """Register a user effect class (its declaration checked: :func:`declaration_problems`);
+    returns it.  It either replaces a stage (subclasses one of :data:`CHAIN`) or adds factors
+    (:class:`OutputEffect`, :class:`LoadEffect`, or any effect with ``load_factor``)."""
     where = f"effect class {getattr(cls, '__name__', cls)!r}"
-    if not (inspect.isclass(cls) and issubclass(cls, Effect)):
-        raise InputError(f"{where}: a user effect must subclass physics.effects.OutputEffect (or Effect)")
-    if not isinstance(cls.id, str) or not cls.id.isidentifier():
-        raise InputError(f"{where}: needs an id that is a Python identifier, got {cls.id!r}")
-    if cls.id in BUILT_IN:
-        raise InputError(f"{where}: id {cls.id!r} is a built-in effect; choose another id")
-    if issubclass(cls, OutputEffect):
-        if cls.output_tf is OutputEffect.output_tf and cls.filter_output is OutputEffect.filter_output:
-            raise InputError(f"{where}: define output_tf(self, p) (or filter_output and output_response)")
-    elif stage_of(cls) is None and not adds_factors(cls):
-        raise InputError(f"{where}: an effect must replace a stage (subclass one of "
-                         f"{', '.join(c.__name__ for c in CHAIN)}) or define load_factor(self, s, p); "
-                         "the simplest is a subclass of OutputEffect")
-    for spec in cls.params:
-        if spec.default is None:
-            raise InputError(f"{where}: parameter {spec.name!r} needs a default (ParamSpec(..., default=...))")
-    known = {s.name for s in cls.params}
-    spec = cls.diagnosis
-    if spec is not None:
-        if not isinstance(spec, dict) or not spec.get("free"):
-            raise InputError(f"{where}: diagnosis must be a dict with at least 'free' (parameters to fit)")
-        unknown = sorted(set(spec) - set(DIAGNOSIS_KEYS))
-        if unknown:
-            raise InputError(f"{where}: unknown diagnosis key(s) {unknown}; known: {', '.join(DIAGNOSIS_KEYS)}")
-        bad = [n for n in list(spec["free"]) + list(spec.get("bounds", {})) if n not in known]
-        if bad:
-            raise InputError(f"{where}: diagnosis names parameters {bad} that the effect does not declare")
-        bad_rules = sorted(set(spec.get("reveal", {})) - set(REVEAL_RULES))
-        if bad_rules:
-            raise InputError(f"{where}: unknown reveal rule(s) {bad_rules}; known: {', '.join(REVEAL_RULES)}")
+    problems = declaration_problems(cls, user=True)
+    if problems:
+        raise InputError(f"{where}: {problems[0]}")
     old = EFFECTS.get(cls.id)
     if old is not None and old is not cls and (old.__module__, old.__qualname__) != (cls.__module__, cls.__qualname__):
         raise InputError(f"{where}: id {cls.id!r} is already registered by {old.__module__}.{old.__qualname__}")
@@ -107,7 +90,7 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
     """Import the Python file ``path`` and return the user effect classes it defines."""
     p = Path(path)
     if p.suffix != ".py" or not p.is_file():
-        raise InputError(f"--effects-path {p}: expected an existing Python file (.py) defining an effect")
+        raise InputError(f"{_PATH} {p}: expected an existing Python file (.py) defining an effect")
     name = f"eap_user_effects_{p.stem}"
     spec = importlib.util.spec_from_file_location(name, p)
     module = importlib.util.module_from_spec(spec)
@@ -117,13 +100,13 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
     except InputError:
         raise
     except Exception as exc:  # a user's file: report what went wrong in it, one line
-        raise InputError(f"--effects-path {p}: importing it failed: {type(exc).__name__}: {exc}") from None
+        raise InputError(f"{_PATH} {p}: importing it failed: {type(exc).__name__}: {exc}") from None
     classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, Effect)
                and c.__module__ == name and isinstance(getattr(c, "id", None), str)]
     for c in classes:
         c.source_file = str(p.resolve())   # so that worker processes can load it too
     if not classes:
-        raise InputError(f"--effects-path {p}: defines no subclass of physics.effects.OutputEffect "
+        raise InputError(f"{_PATH} {p}: defines no subclass of physics.effects.OutputEffect, LoadEffect "
                          "(or Effect) with an id")
     return classes
 
@@ -160,6 +143,7 @@ def load_plugins() -> list[str]:
     return ids
 
 
-__all__ = ["Effect", "OutputEffect", "EFFECTS", "CHAIN", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS", "register",
-           "unregister", "stage_of", "adds_factors", "load_effects_file", "load_plugins", "effect_classes_in_file",
-           "user_effect_files", "ensure_registered"]
+__all__ = ["Effect", "OutputEffect", "LoadEffect", "EFFECTS", "CHAIN", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
+           "REFERENCE", "register", "unregister", "stage_of", "adds_factors", "load_effects_file", "load_plugins",
+           "effect_classes_in_file", "user_effect_files", "ensure_registered", "check_effect", "ContractReport",
+           "CHECKS", "FAST_CHECKS", "declaration_problems"]

@@ -8,20 +8,24 @@ module, everything the rest of the package needs:
   (:mod:`physics.frequency`, :mod:`physics.timedomain`) call the hooks through the model
   (:meth:`physics.model.ActuatorModel.hook`, :meth:`~physics.model.ActuatorModel.product`)
   and never name an effect;
-* a plain-data ``diagnosis`` spec (:data:`DIAGNOSIS_KEYS`), read by ``identify``/``diagnose``.
+* a plain-data ``diagnosis`` spec (:data:`DIAGNOSIS_KEYS`), read by ``identify``/``diagnose``;
+* ``reference``: how the reference solver (:mod:`physics.reference`) treats it (:data:`REFERENCE`).
 
-**Stage hooks** (one provider each).  The model chain is a fixed list of stages, each with a
+:func:`physics.effects.check_effect` runs this contract on any effect class.
+
+**Stages** (one provider each).  The model chain is a fixed list of stages, each with a
 "no effect" default variant living in the module of the effect that replaces it
-(:data:`physics.effects.CHAIN`).  An effect *replaces* a stage by subclassing its default
-and overriding the stage's hooks:
+(:data:`physics.effects.CHAIN`; the default's ``stage`` names the stage).  An effect
+*replaces* a stage by subclassing its default and overriding the stage's hooks (typed in
+:mod:`physics.effects.stages`):
 
 =================  ==========================================================================
 stage (default)    hooks
 =================  ==========================================================================
 double_layer       ``props(p, T)``, ``realize(d, w_hi)`` (linearised PNP, always present)
-charge_law         ``small_signal(s, d, p)``, ``compiled(d, p)``
+charge_law         ``small_signal(s, d, p)``, ``compiled(d, p)`` → ``evaluate(Q)``, ``excess(Q)``
 line               ``distribution(s, Yp, p, z)``, ``series_conductances(p, edges)``
-solvent            ``factor(s, p)``
+solvent            ``solvent_factor(s, p)``, ``solvent_diffusivity(p)``
 coupling           ``kf(s, p)``
 modulus            ``polymer_modulus(p, layered)``
 section            ``section(p, polymer, y_factor)``, attribute ``layered``
@@ -33,7 +37,8 @@ temperature        ``network(p, edges)`` (None: isothermal)
 **Factor hooks** (any number of effects, multiplied in chain order; absent = no effect):
 
 * ``load_factor(s, p)``: a factor on the bending load (after kf and the solvent factor);
-  the time solver realises the product with real poles over the band;
+  the time solver realises the product with real poles over the band
+  (:class:`LoadEffect`: give ``load_tf``);
 * ``output_response(s, p)`` with ``filter_output(y, fs, p)``: a factor on the tip
   deflection (:class:`OutputEffect`: give ``output_tf`` and both follow).  ``filter_output``
   may be nonlinear (hysteresis, saturation); the frequency solver then uses
@@ -71,14 +76,20 @@ DIAGNOSIS_KEYS = ("free", "bounds", "starts", "nested", "off", "excitation", "re
 #: ``reveal`` rules: {"f_hi_min": Hz}, {"decades_min": n}, {"f_lo_max": Hz, "hold_s": s} (either),
 #: {"spans_resonance": True}, {"rh_levels": n}, {"amplitude_levels": n}; absent: always revealable.
 REVEAL_RULES = ("f_hi_min", "decades_min", "f_lo_max", "hold_s", "spans_resonance", "rh_levels", "amplitude_levels")
+#: ``reference`` values: "reproduced" (the reference solver solves it itself, through the stage's
+#: hooks), "shared" (it acts downstream of the electrochemistry, on the load or the beam, which the
+#: reference shares with the reduced model), "unsupported" (the reference refuses a model with it;
+#: ``reference_note`` says why).  A "reproduced" claim is never inherited: an effect replacing a stage
+#: the reference solves must say so itself (:meth:`Effect.reference_support`).
+REFERENCE = ("reproduced", "shared", "unsupported")
 
 
 class Effect:
     """Base class of all effect variants (the "on" variants carry an ``id``)."""
 
     id: ClassVar[str | None] = None
-    slot: ClassVar[str]
-    enabled: ClassVar[bool] = True
+    #: the stage of the chain this variant fills (set on the defaults of ``CHAIN``)
+    stage: ClassVar[str]
     summary: ClassVar[str] = ""
     explanation: ClassVar[str] = ""
     params: ClassVar[tuple[ParamSpec, ...]] = ()     # parameters owned by this effect (own section)
@@ -89,6 +100,12 @@ class Effect:
     needs_rh: ClassVar[bool] = False
     #: Plain-data diagnosis spec (keys in :data:`DIAGNOSIS_KEYS`); None: not a diagnosis candidate.
     diagnosis: ClassVar[dict | None] = None
+    #: how the reference solver treats the effect (:data:`REFERENCE`), and why when unsupported.
+    reference: ClassVar[str] = "shared"
+    reference_note: ClassVar[str] = ""
+    #: parameter values under which a large-signal effect is exactly the law the reference solver
+    #: computes (the validation report, :mod:`physics.reference.validate`, compares both there)
+    reference_limit: ClassVar[dict] = {}
 
     def __init__(self, device):
         self.device = device
@@ -100,8 +117,21 @@ class Effect:
 
     @classmethod
     def needed(cls) -> list[str]:
-        return [p.name for p in cls.params if not p.optional] + [t.name for t in cls.tables if not t.optional] \
-            + list(cls.requires)
+        """Parameters and tables the device must give: those declared without a default and
+        not optional, the required tables, and ``requires``."""
+        return [p.name for p in cls.params if not p.optional and p.default is None] \
+            + [t.name for t in cls.tables if not t.optional] + list(cls.requires)
+
+    @classmethod
+    def reference_support(cls) -> str:
+        """"reproduced", "shared" or "unsupported" (:data:`REFERENCE`).  An inherited
+        "reproduced" does not count: the reference reproduces what the class it was declared
+        on computes, not a subclass's other physics."""
+        own = cls.__dict__.get("reference")
+        value = own if own is not None else cls.reference
+        if value not in REFERENCE:
+            raise InputError(f"effect {cls.id!r}: reference must be one of {', '.join(REFERENCE)}, got {value!r}")
+        return "unsupported" if own is None and value == "reproduced" else value
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
@@ -122,8 +152,9 @@ class Effect:
 
 
 class OutputEffect(Effect):
-    """An effect acting on the tip deflection after the rest of the chain: the contract
-    for effects added by users (``--effects-path FILE.py``, entry points ``eap.effects``).
+    """An effect acting on the tip deflection after the rest of the chain: the simplest
+    contract for effects added by users (``--effects-path FILE.py``, entry points
+    ``eap.effects``).
 
     Subclass it in one file with an ``id``, a ``summary``, the ``params`` (each with a
     ``default``) and :meth:`output_tf`, the transfer function (numerator, denominator
@@ -134,11 +165,11 @@ class OutputEffect(Effect):
 
     ``free``: its parameters to fit; ``bounds``: {name: (lo, hi)}; ``starts``: a list of
     {name: value} start points; ``nested``: True when some parameter value switches it off;
-    ``excitation``: the excitation that reveals it (text).
+    ``excitation``: the excitation that reveals it (text); all keys in :data:`DIAGNOSIS_KEYS`.
     See ``examples/effects/creep.py``.
     """
 
-    slot = "output"
+    stage = "output"
     summary = "user-defined output effect"
 
     @classmethod
@@ -163,3 +194,28 @@ class OutputEffect(Effect):
         if len(a) == 1:
             return b[0] / a[0] * np.asarray(y, float)
         return lfilter(b, a, y, zi=lfilter_zi(b, a) * y[0])[0]
+
+
+class LoadEffect(Effect):
+    """An effect acting on the bending load (after kf(s) and the solvent factor), before the
+    beam: e.g. a coupling that saturates slowly, a polymer relaxation of the traction.
+
+    Subclass it in one file with an ``id``, a ``summary``, the ``params`` (each with a
+    ``default``) and :meth:`load_tf`, the transfer function (numerator, denominator in s,
+    highest power first) multiplying the load, or override :meth:`load_factor` for any causal
+    factor.  The frequency solver multiplies the load by it exactly; the time solver realises
+    kf(s)·B(s)·factor with real poles over the band (so a factor must be stable and smooth over
+    the band: :func:`physics.effects.check_effect` checks both solvers agree).  ``diagnosis``
+    as for :class:`OutputEffect`.
+    """
+
+    summary = "user-defined load effect"
+
+    def load_tf(self, p: dict) -> tuple[list[float], list[float]]:
+        """(numerator, denominator) in s of the factor on the load; parameters ``p`` in SI."""
+        raise NotImplementedError
+
+    def load_factor(self, s: np.ndarray, p: dict) -> np.ndarray:
+        """The factor at complex frequencies ``s`` [rad/s]."""
+        num, den = self.load_tf(p)
+        return np.polyval(num, s) / np.polyval(den, s)

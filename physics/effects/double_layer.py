@@ -65,7 +65,8 @@ def _charge(s, kappa, K, D, h):
 
 class DoubleLayer(Effect):
     id = "double_layer"
-    slot = "double_layer"
+    stage = "double_layer"
+    reference = "reproduced"
     summary = "linearised PNP charge dynamics through the thickness (always on)"
     explanation = __doc__
     requires = ("eps_r", "sigma_polymer", "D_cation", "C_anion", "z_cation", "T_ext", "t_polymer")

@@ -20,8 +20,8 @@ from .base import Effect
 
 
 class EquipotentialElectrodes(Effect):
-    slot = "line"
-    enabled = False
+    stage = "line"
+    reference = "reproduced"          # the reference hangs its slices on series_conductances
     summary = "ideal electrodes: the full voltage across the polymer everywhere"
 
     def distribution(self, s, Yp, p, z) -> np.ndarray:
@@ -35,7 +35,7 @@ class EquipotentialElectrodes(Effect):
 
 class ElectrodeResistance(EquipotentialElectrodes):
     id = "electrode_resistance"
-    enabled = True
+    reference = "reproduced"
     summary = "electrode sheet resistance: RC transmission line from the clamp, voltage falls along the strip"
     explanation = __doc__
     requires = ("Rs",)

@@ -19,8 +19,7 @@ from .base import Effect
 
 
 class ConstantCoupling(Effect):
-    slot = "coupling"
-    enabled = False
+    stage = "coupling"
     summary = "constant load constant kf (eq. 9)"
     requires = ("kf",)
 
@@ -31,7 +30,6 @@ class ConstantCoupling(Effect):
 
 class FractionalCoupling(ConstantCoupling):
     id = "fractional_coupling"
-    enabled = True
     summary = "rough electrodes: kf(f) = kf0/((j2πf)^a (j2πf+p)^b), constant-phase fractional load"
     explanation = __doc__
     requires = ()

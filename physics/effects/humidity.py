@@ -25,8 +25,7 @@ MECHANICAL_MAPS = ("Y", "Y_polymer", "kf", "kf0")
 
 
 class HumidityInvariant(Effect):
-    slot = "humidity"
-    enabled = False
+    stage = "humidity"
     summary = "parameters independent of RH (those at the device's reference RH)"
 
     def factors(self, rh) -> dict[str, np.ndarray]:
@@ -58,7 +57,6 @@ class HumidityInvariant(Effect):
 
 class Humidity(HumidityInvariant):
     id = "humidity"
-    enabled = True
     needs_rh = True
     diagnosis = {
         "free": (), "per_rh": ("kf", "Y"),                    # Table V style: kf, Y once per RH level

@@ -19,8 +19,7 @@ from .viscoelastic import Prony
 
 
 class HomogeneousSection(Effect):
-    slot = "section"
-    enabled = False
+    stage = "section"
     layered = False
     summary = "homogeneous strip (whole-strip modulus Y, polymer density)"
 
@@ -32,7 +31,6 @@ class HomogeneousSection(Effect):
 
 class LayeredBeam(HomogeneousSection):
     id = "layered_beam"
-    enabled = True
     layered = True
     summary = "electrode layers' stiffness and mass (Y_electrode, t_electrode, rho_electrode)"
     explanation = __doc__

@@ -37,8 +37,8 @@ from .double_layer import DoubleLayer, DoubleLayerProps
 
 
 class LinearCharge(Effect):
-    slot = "charge_law"
-    enabled = False
+    stage = "charge_law"
+    reference = "reproduced"          # the reference solves the charge of its PNP slabs itself
     summary = "linear double layer at any amplitude"
 
     def small_signal(self, s, d: DoubleLayerProps, p):
@@ -76,8 +76,10 @@ class LinearCharge(Effect):
 
 class NonlinearCharge(LinearCharge):
     id = "nonlinear_charge"
-    enabled = True
     linear = False
+    reference = "unsupported"
+    reference_note = "the reference solver is the full nonlinear PNP itself"
+    reference_limit = {"C_max": np.inf}       # plain Poisson–Boltzmann layers, as in the reference
     summary = "large-signal double layer: voltage-dependent capacitance, asymmetric/saturating charge"
     explanation = __doc__
     params = (ParamSpec("C_max", "mol/m^3", 1.0, np.inf,

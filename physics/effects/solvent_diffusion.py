@@ -21,18 +21,22 @@ from .base import Effect
 
 
 class SolventDrag(Effect):
-    slot = "solvent"
-    enabled = False
+    stage = "solvent"
+    reference = "reproduced"          # the reference transports the solvent with solvent_diffusivity
     summary = "solvent moves with the cations only (no back-diffusion)"
 
     def solvent_factor(self, s, p) -> np.ndarray:
         """B(s): first moment of the solvent excess relative to no back-diffusion."""
         return np.ones(np.shape(s), dtype=complex)
 
+    def solvent_diffusivity(self, p) -> float:
+        """Ds [m²/s] of the solvent's back-diffusion (0: none), for the reference solver."""
+        return 0.0
+
 
 class SolventDiffusion(SolventDrag):
     id = "solvent_diffusion"
-    enabled = True
+    reference = "reproduced"
     summary = "solvent dragged by cations (n+) and diffusing back (Ds): back-relaxation, time scale h²/Ds"
     explanation = __doc__
     requires = ("D_solvent", "n_solvation")
@@ -46,6 +50,9 @@ class SolventDiffusion(SolventDrag):
         "reveal": {"f_lo_max": 0.5, "hold_s": 5.0},
         "signature": [("lf_droop_lead", 1.0), ("step_back_relaxation", 1.0)],
     }
+
+    def solvent_diffusivity(self, p) -> float:
+        return float(p["D_solvent"])
 
     def solvent_factor(self, s, p) -> np.ndarray:
         g = 0.5 * p["t_polymer"] * np.sqrt(np.asarray(s, dtype=complex) / p["D_solvent"])

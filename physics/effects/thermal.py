@@ -34,8 +34,8 @@ class ThermalNetwork:
 
 
 class Isothermal(Effect):
-    slot = "temperature"
-    enabled = False
+    stage = "temperature"
+    reference = "reproduced"          # the reference solver is isothermal too
     summary = "isothermal at T_ext"
 
     def network(self, p, edges) -> "ThermalNetwork | None":
@@ -45,8 +45,9 @@ class Isothermal(Effect):
 
 class Thermal(Isothermal):
     id = "thermal"
-    enabled = True
     linear = False
+    reference = "unsupported"
+    reference_note = "the reference solver is isothermal"
     summary = "Joule heating along the strip -> temperature -> ion mobility (eq. 6, 12)"
     explanation = __doc__
     params = (

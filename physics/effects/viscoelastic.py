@@ -53,8 +53,7 @@ class Prony:
 
 
 class ElasticModulus(Effect):
-    slot = "modulus"
-    enabled = False
+    stage = "modulus"
     summary = "elastic polymer modulus (Y, or Y_polymer with layered_beam)"
 
     def polymer_modulus(self, p, layered: bool) -> Prony:
@@ -63,7 +62,6 @@ class ElasticModulus(Effect):
 
 class Viscoelastic(ElasticModulus):
     id = "viscoelastic"
-    enabled = True
     summary = "frequency-dependent storage/loss modulus fitted (Prony) to DMA tables"
     explanation = __doc__
     params = (ParamSpec("dma_scale", "1", 1e-3, 1e3, "factor on the tabulated DMA modulus", optional=True,

@@ -39,7 +39,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 from scipy.linalg.lapack import dgbtrf, dgbtrs, zgbtrf, zgbtrs
 
-from ..constants import EPS0, FARADAY, GAS_CONSTANT
+from ..constants import FARADAY, GAS_CONSTANT
 from ..errors import InputError, ModelError
 
 KL, KU = 5, 3                    # band widths of the interleaved (ψ, ĉ, ŝ) Jacobian
@@ -65,16 +65,19 @@ class SlabParams:
     sigma_leak: float   # electronic conductivity of the polymer σ (eq. 1) [S/m]
 
     @classmethod
-    def from_params(cls, p: dict, T: float | None = None, solvent_diffusion: bool = True) -> "SlabParams":
-        """From a device parameter dict (SI).  ``T`` [K] defaults to ``T_ext``; D follows an
-        optional Arrhenius energy ``E_a`` as in :class:`physics.effects.double_layer.DoubleLayer`
-        and the mobility follows eq. 6 through V_T = RT/(zF)."""
+    def from_params(cls, p: dict, T: float | None = None, D_solvent: float | None = None,
+                    props=None) -> "SlabParams":
+        """From a device parameter dict (SI).  ``T`` [K] defaults to ``T_ext``; the permittivity,
+        thickness and D at T come from the double layer's ``props(p, T)`` (default
+        :meth:`physics.effects.double_layer.DoubleLayer.props`; a model's own stage:
+        :meth:`physics.model.ActuatorModel.double_layer_props`), so the mobility follows eq. 6
+        through V_T = RT/(zF) as there.  ``D_solvent`` [m²/s]: the solvent's back-diffusion
+        (default the device's value; 0: none)."""
+        from ..effects.double_layer import DoubleLayer
         T = float(p["T_ext"] if T is None else T)
-        Ea = p.get("E_a", 0.0)
-        D = p["D_cation"] * np.exp(-Ea / GAS_CONSTANT * (1.0 / T - 1.0 / p["T_ext"]))
-        return cls(h=0.5 * p["t_polymer"], kappa=EPS0 * p["eps_r"], C_anion=p["C_anion"], z=p["z_cation"],
-                   D=float(D), T=T, n_solv=p["n_solvation"],
-                   D_solvent=p["D_solvent"] if solvent_diffusion else 0.0,
+        d = (props or DoubleLayer.props)(p, T)
+        return cls(h=d.h, kappa=d.kappa, C_anion=d.C_anion, z=d.z, D=float(d.D), T=T, n_solv=p["n_solvation"],
+                   D_solvent=float(p["D_solvent"] if D_solvent is None else D_solvent),
                    C_solvent0=p["C_solvent0"], sigma_leak=p["sigma_polymer"])
 
     @property

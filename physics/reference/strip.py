@@ -2,11 +2,13 @@
 
 Along the strip (z from the clamp, free length L) the polymer is cut into slices, each a full
 through-thickness solve of :mod:`physics.reference.pnp`: slice 0 is the clamped part (area
-w·L_clamp, at Vin, it does not bend), slices 1..n the free segments.  With
-``electrode_resistance`` on, the slices hang on the resistive ladder of the two electrodes
-(link conductance w/(2 Rs Δz) between consecutive slice centres, Rs the sheet resistance of
-each face), so the voltage across the polymer falls along the strip; otherwise every slice
-sees Vin and one free slice stands for all.
+w·L_clamp, at Vin, it does not bend), slices 1..n the free segments.  When the model's line
+stage has series conductances (electrode sheet resistance: link conductance w/(2 Rs Δz)
+between consecutive slice centres), the slices hang on that resistive ladder of the two
+electrodes, so the voltage across the polymer falls along the strip; otherwise every slice
+sees Vin and one free slice stands for all.  The solvent diffuses back with the solvent
+stage's ``solvent_diffusivity``.  Which effects the reference supports each effect says itself
+(``reference``: :data:`physics.effects.REFERENCE`); the reference refuses the others.
 
 Load (how the reference is compared with the reduced model).  The reference solves the
 solvent (eq. 7) explicitly.  The strip bends with the first moment of the solvent excess
@@ -38,10 +40,6 @@ from ..strip import projection, segment_edges
 from ..timedomain import _check_record, beam_statespace, tip_from_interface_excess
 from .pnp import Integrator, Ladder, Slab, SlabParams, Tolerances, graded_mesh
 
-#: effects the reference reproduces itself; the others act downstream on its load (kf(s),
-#: modulus, layers, humidity factors of the mechanics) through the shared beam.
-ELECTROCHEMICAL = ("double_layer", "electrode_resistance", "solvent_diffusion")
-UNSUPPORTED = ("nonlinear_charge", "thermal")   # the reference is nonlinear and isothermal by itself
 
 
 @dataclass
@@ -82,17 +80,19 @@ class ReferenceStrip:
     def __init__(self, device, effects=None, rh=None, *, n_modes: int = 4, n_segments: int | None = None,
                  mesh: dict | None = None, T: float | None = None, tol: Tolerances | None = None):
         self.model: ActuatorModel = as_model(device, effects, n_modes)
-        bad = [e for e in UNSUPPORTED if e in self.model.effect_ids]
+        bad = [e for e in self.model.effects if type(e).reference_support() == "unsupported"]
         if bad:
-            raise InputError(f"the reference solver is the full nonlinear PNP itself and is isothermal: "
-                             f"drop {', '.join(bad)} from its effects")
+            raise InputError("the reference solver cannot run " + "; ".join(
+                f"{e.label} ({type(e).reference_note or 'it does not declare reference support'})" for e in bad)
+                + f": drop {'it' if len(bad) == 1 else 'them'} from its effects")
         self.rh = float(self.model.check_rh(rh))
         p = self.model.params_at(self.rh)
         self.p = p
-        self.prm = SlabParams.from_params(p, T, solvent_diffusion="solvent_diffusion" in self.model.effect_ids)
+        self.prm = SlabParams.from_params(p, T, D_solvent=self.model.hook("solvent_diffusivity")(p),
+                                          props=self.model.double_layer_props)
         self.slab = Slab(self.prm, graded_mesh(self.prm.h, self.prm.lam, **(mesh or {})))
-        self.line = "electrode_resistance" in self.model.effect_ids and p["Rs"] > 0
         L = self.model.free_length
+        self.line = self.model.hook("series_conductances")(p, segment_edges(L, 2)) is not None
         n = (8 if n_segments is None else int(n_segments)) if self.line else 1
         self.edges = segment_edges(L, n, 1.5 if self.line else 1.0)
         self.area = p["width"] * np.concatenate([[p["L_clamp"]], np.diff(self.edges)])
@@ -111,8 +111,9 @@ class ReferenceStrip:
     def frequency_response(self, freqs, n_segments: int = 256) -> dict:
         """Small-signal reference FRF at ``freqs`` [Hz]: the linearised slab (same discretisation
         as the time stepper) on a ladder of ``n_segments`` free slices (when the electrode
-        resistance is on), through kf(s) and the reduced model's beam.  Returns deflection [m/V],
-        current [A/V] and cs_up [mol/m³/V] (complex arrays) and the slab response."""
+        resistance is on), through kf(s) × the load factors, the reduced model's beam and its
+        output effects.  Returns deflection [m/V], current [A/V] and cs_up [mol/m³/V] (complex
+        arrays) and the slab response."""
         f = np.atleast_1d(np.asarray(freqs, dtype=float))
         s = 2j * np.pi * f
         slab = self.slab_response(s)
@@ -120,18 +121,22 @@ class ReferenceStrip:
         L = m.free_length
         edges = segment_edges(L, n_segments, 1.5) if self.line else self.edges
         area = p["width"] * np.diff(edges)
-        U = _ladder(self.p, edges, area, slab["Y"]) if self.line else np.ones((s.size, 1), dtype=complex)
-        kf = m.hook("kf")(s, p) * float(m.hook("coupling_factor")(self.rh))
+        U = _ladder(self._conductances(edges), area, slab["Y"]) if self.line else np.ones((s.size, 1), dtype=complex)
+        kf = m.load_response(s, p, solvent=False) * float(m.hook("coupling_factor")(self.rh))   # kf(s) × load factors
         coef = 2.0 * 0.5 * p["t_polymer"] * p["width"] * p["n_solvation"]
         proj = projection(m.modes(), edges, coef)
         ell = slab["ell"][:, None] * U                                   # (n_s, n_seg)
         pre = np.hstack([ell @ proj.modal.T, (ell @ proj.residual)[:, None]])
         beam = beam_statespace(m, p, float(m.hook("stiffness_factor")(self.rh))).freqresp(s)[0]   # (inputs, n_s)
-        tip = kf * np.einsum("ki,ik->k", pre, beam)
+        tip = kf * np.einsum("ki,ik->k", pre, beam) * m.output_response(s, self.p)
         Lc, Lt = p["L_clamp"], p["L_total"]
         current = slab["Y"] * (p["width"] * Lc + U @ area)
         cs = p["n_solvation"] * slab["ell"] * (Lc + U @ np.diff(edges)) / Lt
         return {"freq": f, "deflection": tip, "current": current, "cs_up": cs, "slab": slab}
+
+    def _conductances(self, edges) -> np.ndarray:
+        """Links of the electrode ladder [S]: clamp → first slice centre, then centre to centre."""
+        return self.model.hook("series_conductances")(self.p, edges)
 
     # --- time domain --------------------------------------------------------------------------
     def simulate(self, t, voltage, *, snapshots=(), progress=None) -> ReferenceResult:
@@ -142,9 +147,7 @@ class ReferenceStrip:
         S = self.edges.size                       # clamp + free slices
         ladder = None
         if self.line:
-            centres = 0.5 * (self.edges[1:] + self.edges[:-1])
-            gaps = np.diff(np.concatenate([[0.0], centres]))
-            ladder = Ladder(g=self.p["width"] / (2.0 * self.p["Rs"] * gaps), area=self.area)
+            ladder = Ladder(g=self._conductances(self.edges), area=self.area)
         else:
             S = 1                                 # clamp and free part are identical, both at Vin
         integ = Integrator(self.slab, S, ladder, self.tol)
@@ -182,12 +185,10 @@ class ReferenceStrip:
                                profiles=profiles, conservation=cons, stats=stats)
 
 
-def _ladder(p: dict, edges, area, Y) -> np.ndarray:
-    """Per-volt slice voltages of the electrode ladder for polymer admittances Y(s) per area,
-    shape (len(Y), n_seg)."""
+def _ladder(g, area, Y) -> np.ndarray:
+    """Per-volt slice voltages of the electrode ladder with link conductances ``g`` [S] for
+    polymer admittances Y(s) per area, shape (len(Y), n_seg)."""
     from scipy.linalg import solve_banded
-    centres = 0.5 * (edges[1:] + edges[:-1])
-    g = p["width"] / (2.0 * p["Rs"] * np.diff(np.concatenate([[0.0], centres])))
     n = area.size
     gr = np.append(g[1:], 0.0)
     out = np.empty((Y.size, n), dtype=complex)

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..device import load_device
+from ..effects import EFFECTS, stage_of
 from ..effects.double_layer import DoubleLayer
 from ..fileio import write_json, write_text
 from ..frequency import frequency_response
@@ -38,8 +39,21 @@ DEVICES = ("ipmc_pt_eg", "ip2c_pedot_water")
 AMPLITUDES = (0.05, 0.1, 0.2, 0.5, 1.0, 1.5, 2.0)
 
 
-def _without(effects, drop):
-    return [e for e in effects if e not in drop]
+def _lumped(effects) -> list[str]:
+    """``effects`` without the one replacing the electrode line (every slice then sees Vin)."""
+    return [e for e in effects if getattr(stage_of(EFFECTS[e]), "stage", None) != "line"]
+
+
+def large_signal_law() -> tuple[str, dict]:
+    """(id, limit) of the large-signal charge law the report validates: the effect replacing the
+    charge-law stage with large-signal behaviour, and its ``reference_limit`` (the parameters
+    under which it is the plain Poisson–Boltzmann law the reference solver computes)."""
+    cls = next(c for c in EFFECTS.values() if getattr(stage_of(c), "stage", None) == "charge_law" and not c.linear)
+    return cls.id, dict(cls.reference_limit)
+
+
+def _label(law: str, params: dict) -> str:
+    return f"{law} ({', '.join(f'{k}={v:g}' for k, v in params.items())})"
 
 
 def _nrmse(a, b):
@@ -122,25 +136,27 @@ def small_signal(device: str, rh: float = 100.0, n_freq: int = 60) -> dict:
 
 def amplitude_sweep(device: str, amps=AMPLITUDES, f0: float = 1.0, periods: int = 3, fs: float = 1000.0,
                     rh: float = 100.0) -> dict:
-    """Sine of ``f0`` [Hz] at each amplitude [V]: reference vs reduced (linear, nonlinear_charge
-    with C_max = ∞ and with the device's C_max, and the charge-based load variant)."""
+    """Sine of ``f0`` [Hz] at each amplitude [V]: reference vs reduced (linear, the large-signal
+    charge law at its reference limit and with the device's values, and the charge-based load
+    variant)."""
     dev = load_device(device)
-    base_fx = _without(dev.default_effects, ("electrode_resistance",))
+    base_fx = _lumped(dev.default_effects)
     n_per = int(round(fs / f0))
     t = np.arange(periods * n_per + 1) / fs
     last = t >= t[-1] - 1.0 / f0 - 1e-9
-    dev_inf = dev.with_params(C_max=np.inf)
+    law, limit = large_signal_law()
+    plain = _label(law, limit)
     variants = {
         "linear": ActuatorModel(dev, base_fx),
-        "nonlinear_charge (C_max=inf)": ActuatorModel(dev_inf, base_fx + ["nonlinear_charge"]),
-        f"nonlinear_charge (C_max={dev['C_max']:g})": ActuatorModel(dev, base_fx + ["nonlinear_charge"]),
+        plain: ActuatorModel(dev.with_params(**limit), base_fx + [law]),
+        _label(law, {k: dev[k] for k in limit}): ActuatorModel(dev, base_fx + [law]),
     }
     out = {"device": device, "effects": base_fx, "f0_Hz": f0, "fs_Hz": fs, "periods": periods,
            "amplitudes_V": list(map(float, amps)), "models": {}, "reference": {"thd_current": [], "thd_deflection": [],
                                                                               "wall_s": [], "steps": [],
                                                                               "H1_deflection_m_per_V": [],
                                                                               "H1_current_A_per_V": []}}
-    names = list(variants) + ["nonlinear_charge (C_max=inf), charge-based load"]
+    names = list(variants) + [f"{plain}, charge-based load"]
     for k in names:
         out["models"][k] = {"err_deflection": [], "err_current": [], "thd_current": [], "thd_deflection": []}
     for A in amps:
@@ -155,12 +171,12 @@ def amplitude_sweep(device: str, amps=AMPLITUDES, f0: float = 1.0, periods: int 
         R["H1_deflection_m_per_V"].append(float(abs(_harmonics(rr.deflection, n_per)[0]) / A))
         R["H1_current_A_per_V"].append(float(abs(_harmonics(rr.current, n_per)[0]) / A))
         for name, m in variants.items():
-            fields = ("charge",) if "inf" in name else ()
+            fields = ("charge",) if name == plain else ()
             res = simulate(m, None, t, v, rh=rh, hold="linear", n_segments=1, fields=fields)
             _score(out["models"][name], res.deflection, res.current, rr, last, n_per)
             if fields:
                 p = m.params_at(rh)
-                d = DoubleLayer.props(p)
+                d = m.double_layer_props(p)
                 ell_q = res.fields["charge"] * d.c0 / d.C0
                 tip_q = tip_from_interface_excess(m, t, ell_q, np.array([0.0, m.free_length]), rh, hold="linear")
                 _score(out["models"][names[-1]], tip_q, res.current, rr, last, n_per)
@@ -182,7 +198,9 @@ def line_large_signal(device: str, amps=(0.05, 2.0), f0: float = 1.0, periods: i
     t = np.arange(periods * n_per + 1) / fs
     last = t >= t[-1] - 1.0 / f0 - 1e-9
     lin = ActuatorModel(dev, fx)
-    nl = ActuatorModel(dev.with_params(C_max=np.inf), fx + ["nonlinear_charge"])
+    law, limit = large_signal_law()
+    plain = _label(law, limit)
+    nl = ActuatorModel(dev.with_params(**limit), fx + [law])
     n_seg = 16
     edges = np.asarray(lin.free_length * np.linspace(0.0, 1.0, n_seg + 1) ** 1.5)
     out = {"device": device, "effects": fx, "f0_Hz": f0, "amplitudes_V": list(map(float, amps)), "rows": []}
@@ -192,7 +210,7 @@ def line_large_signal(device: str, amps=(0.05, 2.0), f0: float = 1.0, periods: i
         rr = ref.simulate(t, v)
         r_lin = simulate(lin, None, t, v, rh=rh, hold="linear", n_segments=n_seg)
         r_nl = simulate(nl, None, t, v, rh=rh, hold="linear", n_segments=n_seg, fields=("charge", "voltage"))
-        d = DoubleLayer.props(nl.params_at(rh))
+        d = nl.double_layer_props(nl.params_at(rh))
         tip_q = tip_from_interface_excess(nl, t, r_nl.fields["charge"] * d.c0 / d.C0, edges, rh, hold="linear")
         z_ref = rr.z[1:]
         amp_ref = np.max(np.abs(rr.U[1:, last]), axis=1) / A
@@ -200,10 +218,10 @@ def line_large_signal(device: str, amps=(0.05, 2.0), f0: float = 1.0, periods: i
         out["rows"].append({
             "amplitude_V": float(A), "reference_wall_s": rr.stats["wall_s"], "slices": int(rr.U.shape[0]),
             "err_deflection": {"linear": _nrmse(r_lin.deflection[last], rr.deflection[last]),
-                               "nonlinear_charge (C_max=inf)": _nrmse(r_nl.deflection[last], rr.deflection[last]),
+                               plain: _nrmse(r_nl.deflection[last], rr.deflection[last]),
                                "charge-based load": _nrmse(tip_q[last], rr.deflection[last])},
             "err_current": {"linear": _nrmse(r_lin.current[last], rr.current[last]),
-                            "nonlinear_charge (C_max=inf)": _nrmse(r_nl.current[last], rr.current[last])},
+                            plain: _nrmse(r_nl.current[last], rr.current[last])},
             "z_m": z_ref.tolist(), "U_amp_reference": amp_ref.tolist(), "U_amp_reduced_nonlinear": amp_red.tolist(),
         })
     return out
@@ -252,7 +270,7 @@ def _solvent_zones(x, Cs, Cs0, h):
 def profiles_sine(device: str, A: float = 2.0, f0: float = 1.0, rh: float = 100.0) -> dict:
     """4 Vpp at 1 Hz (thesis Fig. 13–15, 30): profiles at Vin max/min of the first period and at 3 s."""
     dev = load_device(device)
-    fx = _without(dev.default_effects, ("electrode_resistance",))
+    fx = _lumped(dev.default_effects)
     t = np.arange(0, 3.0 + 1e-9, 1e-3)
     snaps = [0.25, 0.75, 2.25, 3.0]
     ref = ReferenceStrip(dev, fx, rh=rh)
@@ -275,7 +293,7 @@ def square_pulse(device: str, A: float = 2.0, t_on: float = 20.0, t_off: float =
                  rh: float = 100.0) -> dict:
     """Square pulse (thesis Fig. 17): solvent accumulation during Ton and what is left during Toff."""
     dev = load_device(device)
-    fx = _without(dev.default_effects, ("electrode_resistance",))
+    fx = _lumped(dev.default_effects)
     t = np.arange(0, t_on + t_off + 1e-9, 1.0 / fs)
     v = np.where(t < t_on, A, 0.0)
     v[0] = 0.0
@@ -436,10 +454,11 @@ def _plots(figs, out: Path) -> list[Path]:
         R = sw["reference"]
         ax[2].loglog(a, 100 * np.maximum(R["thd_current"], 1e-9), "o-", label="reference current")
         ax[2].loglog(a, 100 * np.maximum(R["thd_deflection"], 1e-9), "s-", label="reference deflection")
-        nl = sw["models"]["nonlinear_charge (C_max=inf)"]
-        ax[2].loglog(a, 100 * np.maximum(nl["thd_current"], 1e-9), "o--", label="nonlinear_charge current")
-        ax[2].loglog(a, 100 * np.maximum(nl["thd_deflection"], 1e-9), "s--", label="nonlinear_charge deflection")
-        cb = sw["models"]["nonlinear_charge (C_max=inf), charge-based load"]
+        law, limit = large_signal_law()
+        nl = sw["models"][_label(law, limit)]
+        ax[2].loglog(a, 100 * np.maximum(nl["thd_current"], 1e-9), "o--", label=f"{law} current")
+        ax[2].loglog(a, 100 * np.maximum(nl["thd_deflection"], 1e-9), "s--", label=f"{law} deflection")
+        cb = sw["models"][f"{_label(law, limit)}, charge-based load"]
         ax[2].loglog(a, 100 * np.maximum(cb["thd_deflection"], 1e-9), "^:", label="charge-based load deflection")
         ax[2].set_ylabel("THD (harmonics 2–5) [%]")
         ax[2].set_xlabel("amplitude [V]")
@@ -497,10 +516,10 @@ _NOTES = """<h2>How to read it</h2><ul>
 finite-volume mesh, so agreement checks the reduced model's closed forms and its strip and beam chain.</li>
 <li>Plain Poisson–Boltzmann layers obey e^{−x_c} − e^{−x_a} = x_a − x_c (equal charges on both faces): the
 antisymmetric interface cation excess (C⁺(h) − C⁺(−h))/2 equals C⁻U/(2V_T) at every amplitude.  The
-reduced model's load is that interface excess, so with C_max = ∞ <code>nonlinear_charge</code> leaves the
+reduced model's load is that interface excess, so at {limit} <code>{law}</code> leaves the
 deflection exactly linear: it fixes the current (the charge saturates as sqrt(U)) but not the deflection.
 The solvent the cations carry follows the moved charge, not the peak concentration; the variant
-'charge-based load' (ℓ = Q·c0/C0 from the same <code>nonlinear_charge</code> run) shows what that closes.</li>
+'charge-based load' (ℓ = Q·c0/C0 from the same <code>{law}</code> run) shows what that closes.</li>
 <li>Cations pile up within nanometres of the faces (Debye length with bulk εr is sub-nm); averaged over
 a micrometre-sized cell they differ from C⁻ by a few mol/m³ only.</li></ul>"""
 
@@ -564,7 +583,9 @@ def _html(figs, pngs, out: Path) -> str:
     rep.paragraph(f"{__doc__.strip().splitlines()[0]} See physics/reference/strip.py for how the load is "
                   "compared: ℓ_ref = ∫x(Cs − Cs0)dx / (n⁺Λ), which equals the reduced model's ℓ·B(s) in the "
                   "small-signal limit.")
-    rep.raw(_NOTES + "".join(rows))
+    law, limit = large_signal_law()
+    notes = _NOTES.replace("{law}", law).replace("{limit}", ", ".join(f"{k} = {v:g}" for k, v in limit.items()))
+    rep.raw(notes + "".join(rows))
     for p in pngs:
         rep.image(p, p.stem.replace("_", " "))
     return rep.to_html()

@@ -1,0 +1,171 @@
+"""Architecture rules read from the sources with :mod:`ast` (issue 26).
+
+1. Physics raises errors that name API arguments, never command-line flags: a flag in a
+   ``raise`` of ``physics/`` is allowed only in the modules of :data:`FLAG_ALLOWLIST`, which
+   other tracks are converting (the list only ever shrinks).
+2. Nothing outside ``physics/effects/`` names an effect id or an effect-owned parameter
+   (docstrings and comments aside): see :func:`effect_literals`.
+"""
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+from physics.errors import InputError, arg
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: physics modules whose raises still name flags, (module, count): physics/diagnose/**,
+#: physics/identify/**, physics/compare/** are converted by the `dx` track, the readers and
+#: writers (timeseries, outputs, fileio, parallel) by the `io` track.  Only ever shrinks.
+FLAG_ALLOWLIST = {
+    "physics/compare/comparison.py": 2, "physics/compare/measurements.py": 1,
+    "physics/diagnose/demo.py": 2, "physics/diagnose/diagnosis.py": 6, "physics/diagnose/records.py": 1,
+    "physics/diagnose/report.py": 1, "physics/identify/parameters.py": 1, "physics/identify/problem.py": 4,
+    "physics/fileio.py": 1, "physics/outputs.py": 3, "physics/parallel.py": 2, "physics/timeseries.py": 6,
+}
+_FLAG = re.compile(r"(?<![\w-])--[A-Za-z][\w-]*")
+
+
+def flag_raises(root: Path = ROOT) -> dict[str, int]:
+    """{module: number of ``raise`` statements whose string constants name a ``--flag``}."""
+    out = {}
+    for f in sorted((root / "physics").rglob("*.py")):
+        tree = ast.parse(f.read_text(encoding="utf-8"))
+        n = 0
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                text = " ".join(c.value for c in ast.walk(node.exc)
+                                if isinstance(c, ast.Constant) and isinstance(c.value, str))
+                n += bool(_FLAG.search(text))
+        if n:
+            out[f.relative_to(root).as_posix()] = n
+    return out
+
+
+def test_physics_raises_name_arguments_not_flags():
+    found = flag_raises()
+    new = {m: n for m, n in found.items() if n > FLAG_ALLOWLIST.get(m, 0)}
+    assert not new, f"physics raises naming a CLI flag (use physics.errors.arg): {new}"
+    stale = {m: (FLAG_ALLOWLIST[m], found.get(m, 0)) for m in FLAG_ALLOWLIST if found.get(m, 0) < FLAG_ALLOWLIST[m]}
+    assert not stale, f"converted modules: shrink FLAG_ALLOWLIST (allowed, found) {stale}"
+
+
+def test_the_flag_rule_can_fail(tmp_path):
+    (tmp_path / "physics").mkdir()
+    (tmp_path / "physics" / "bad.py").write_text(
+        "def f(x):\n    raise ValueError(f'{x}: pass --overwrite')\n\ndef g():\n    raise ValueError('x: ' + 'use --rh')\n")
+    assert flag_raises(tmp_path) == {"physics/bad.py": 2}
+
+
+def test_errors_name_the_argument_in_python_and_the_flag_on_the_command_line(tmp_path, capsys):
+    from nnmodel.cli import main
+    from physics.sweep import parse_grid
+    with pytest.raises(InputError) as info:
+        parse_grid(["Yy=1,2"], None)
+    assert str(info.value).startswith("grid Yy: unknown parameter") and "--" not in str(info.value)
+    assert info.value.params == ("grid",)
+    assert info.value.render({"grid": "--grid"}.get).startswith("--grid Yy: unknown parameter")
+    assert main(["sweep", "--grid", "Yy=1,2", "--out", str(tmp_path / "s.csv")]) == 2
+    assert "error: --grid Yy: unknown parameter" in capsys.readouterr().err
+    # an argument whose flag differs from its Python name
+    assert main(["frf", "--effects-path", str(tmp_path / "nope.py"), "--json", str(tmp_path / "f.json")]) == 2
+    assert "error: --effects-path " in capsys.readouterr().err
+    from physics.effects import load_effects_file
+    with pytest.raises(InputError, match=r"^path .*nope\.py: expected an existing Python file"):
+        load_effects_file(tmp_path / "nope.py")
+
+
+def test_argument_references_survive_pickling():
+    import pickle
+    err = pickle.loads(pickle.dumps(InputError(f"give the RH with {arg('rh')} (a number)")))
+    assert str(err) == "give the RH with rh (a number)" and err.params == ("rh",)
+    assert err.render(lambda name: "--" + name) == "give the RH with --rh (a number)"
+
+
+# ------------------------------------------------------------------ effects are named only in physics/effects
+
+#: Offenders in physics/diagnose/** and physics/identify/**, (file → literals), which the `dx`
+#: track is replacing with hooks on the effects: it empties this list.  It only ever shrinks
+#: (an entry that no longer occurs fails the test until it is removed here).
+DX_ALLOWLIST = {
+    "physics/diagnose/candidates.py": {"C_max", "Y_polymer", "dma", "dma_membrane", "dma_scale", "frac_a", "frac_b",
+                                       "frac_f_lo", "frac_p", "kf0"},
+    "physics/diagnose/demo.py": {"C_max", "dma", "dma_scale", "double_layer", "electrode_resistance", "frac_a",
+                                 "frac_b", "frac_f_lo", "fractional_coupling", "humidity", "kf0", "nonlinear_charge",
+                                 "solvent_diffusion", "viscoelastic"},
+    "physics/diagnose/describing.py": {"electrode_resistance", "nonlinear_charge"},
+    "physics/diagnose/diagnosis.py": {"double_layer"},
+    "physics/diagnose/report.py": {"double_layer"},
+    "physics/identify/devicefile.py": {"double_layer"},
+    "physics/identify/parameters.py": {"C_max", "Y_polymer", "electrode_resistance", "frac_a", "frac_b", "frac_p",
+                                       "fractional_coupling", "kf0", "layered_beam", "nonlinear_charge",
+                                       "solvent_diffusion"},
+}
+#: Legitimate data, not code that branches on an effect: a scenario's choice of effect, as a
+#: device file's default effect list is (file → literals, with the reason).
+DATA = {
+    "nnmodel/dataset.py": ({"nonlinear_charge"}, "the default configuration's measurement-like records "
+                                                 "(the same as configs/datasets/default.yaml)"),
+    "nnmodel/story.py": ({"solvent_diffusion"}, "the effect the one-page story's loop hides"),
+}
+
+
+def _effect_words() -> tuple[set[str], re.Pattern]:
+    """Effect ids and effect-owned parameter/table names of the built-ins, and a pattern for the
+    identifier-like ones (with '_' or a digit), which are matched inside any string; plain words
+    (``humidity``, ``thermal``, ``dma``) only as a whole literal, since they are also English."""
+    from physics.effects import BUILT_IN_EFFECTS, CHAIN
+    classes = list(BUILT_IN_EFFECTS) + list(CHAIN)
+    words = {c.id for c in classes if c.id} | {p.name for c in classes for p in c.params} \
+        | {t.name for c in classes for t in c.tables}
+    ident = sorted((w for w in words if re.search(r"[_0-9]", w)), key=len, reverse=True)
+    return words, re.compile(r"(?<![A-Za-z0-9_])(" + "|".join(map(re.escape, ident)) + r")(?![A-Za-z0-9_])")
+
+
+def effect_literals(root: Path = ROOT, packages=("physics", "nnmodel")) -> dict[str, set[str]]:
+    """{file: effect ids and effect-owned parameter names in its string literals}, for every
+    module of ``packages`` outside ``physics/effects/``; docstrings (and comments) do not count."""
+    words, pattern = _effect_words()
+    out: dict[str, set[str]] = {}
+    for pkg in packages:
+        for f in sorted((root / pkg).rglob("*.py")):
+            rel = f.relative_to(root).as_posix()
+            if rel.startswith("physics/effects/"):
+                continue
+            tree = ast.parse(f.read_text(encoding="utf-8"))
+            doc = {id(n.value) for n in ast.walk(tree) if isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant)}
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in doc:
+                    found = set(pattern.findall(node.value)) | ({node.value} & words)
+                    if found:
+                        out.setdefault(rel, set()).update(found)
+    return out
+
+
+def test_no_effect_is_named_outside_physics_effects():
+    found = effect_literals()
+    allowed = {f: DX_ALLOWLIST.get(f, set()) | DATA.get(f, (set(),))[0] for f in set(DX_ALLOWLIST) | set(DATA)}
+    new = {f: sorted(lits - allowed.get(f, set())) for f, lits in found.items() if lits - allowed.get(f, set())}
+    assert not new, ("effect ids / effect-owned parameters named outside physics/effects/ (give the effect a hook, "
+                     f"or make it data): {new}")
+    stale = {f: sorted(lits - found.get(f, set())) for f, lits in DX_ALLOWLIST.items() if lits - found.get(f, set())}
+    assert not stale, f"no longer named: remove them from DX_ALLOWLIST (it only shrinks): {stale}"
+
+
+def test_the_effect_rule_can_fail(tmp_path):
+    pkg = tmp_path / "physics"
+    (pkg / "effects").mkdir(parents=True)
+    (pkg / "effects" / "mine.py").write_text("ID = 'nonlinear_charge'\n")            # inside: allowed
+    (pkg / "solver.py").write_text(
+        '"""Docstrings may say nonlinear_charge."""\n'
+        "# and comments: electrode_resistance\n"
+        "def f(model, p):\n"
+        "    if 'thermal' in model.effect_ids:\n"                                      # a plain word, whole literal
+        "        return p['C_max']\n"                                                   # an effect's parameter
+        "    raise ValueError(f'{p} needs solvent_diffusion')\n"                       # inside a message
+        "NOTE = 'relative humidity and thermal drift'\n")                              # English: not flagged
+    assert effect_literals(tmp_path, ("physics",)) == {"physics/solver.py": {"thermal", "C_max", "solvent_diffusion"}}
