@@ -226,11 +226,12 @@ class NeuralModel:
             self._release_channels()
             t0 = time.perf_counter()
             self._initialise(core, tr)
+            start = keep_if_better(core, va) if self.features_.linear is not None else None
             history: list[dict] = []
             if self.max_epochs > 0:
                 history, self.training_summary_ = fit_core(core, tr, va, self.training)
-            if self.features_.linear is not None:
-                self.linear_start_ = keep_if_better(core, va)
+            if start is not None:
+                self.linear_start_ = {"start": start, "end": keep_if_better(core, va)}
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history
             core.eval()
@@ -410,9 +411,10 @@ class NeuralModel:
 
 
 def keep_if_better(core, val) -> dict:
-    """A network that starts from a linear model ends no worse than it on validation: when
-    the trained correction does not lower the free-run error of ``val`` (normalised
-    records), it is set to zero (``core.zero_correction()``), leaving the linear model."""
+    """A network with a linear start starts and ends no worse than that linear model on
+    validation: when its correction (initialised by least squares, or trained) does not
+    lower the free-run error of ``val`` (normalised records), it is set to zero
+    (``core.zero_correction()``), leaving the linear model."""
     import copy
 
     from ..batches import free_run_error

@@ -65,7 +65,7 @@ class LagModel(NeuralModel):
         return lag_core(self, features)
 
     def _initialise(self, core, train):
-        if self.arx_init and not core.residual:   # with a linear start the bypass starts at zero
+        if self.arx_init:   # with a linear start: fitted to its residual (kept if it validates better)
             self.init_report_ = arx_init(core, train)
 
 

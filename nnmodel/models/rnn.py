@@ -113,17 +113,18 @@ class _RNNModel(NeuralModel):
 
     def _initialise(self, core, train):
         """``skip_init``: least-squares fit of the direct path on the training records
-        (normalised), recurrent read-out set to zero.  With a linear start the core starts
-        as that linear model instead (read-out and direct path at zero)."""
-        if core.n_ref or not self.skip_init:   # with a linear start: start as that linear model
-            if core.n_ref:
-                core.zero_correction()
+        (normalised; with a linear start on its residual, kept if it validates better),
+        recurrent read-out set to zero.  A linear start without ``skip_init`` starts as that
+        linear model (read-out and direct path at zero)."""
+        if core.n_ref:
+            core.zero_correction()
+        if not self.skip_init:
             return
         xs = [np.concatenate([s.u if s.u.ndim == 2 else s.u[:, None]]
                              + ([s.rh if s.rh.ndim == 2 else s.rh[:, None]] if core.n_rh else []), 1)
               for s in train]
         X = np.concatenate(xs)
-        t = np.concatenate([s.y for s in train])
+        t = np.concatenate([s.y - (s.u[:, 1] if core.n_ref else 0.0) for s in train])
         K = core.n_sched
         if K:
             S, Xl = X[:, -K:], X[:, :-K]
