@@ -21,8 +21,10 @@ import datetime
 import logging
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -241,6 +243,23 @@ def _quiet_lightning():
                 logging.getLogger(n).setLevel(lvl)
 
 
+def _fit_interruptible(trainer, task, dm) -> None:
+    """``trainer.fit`` that lets Ctrl-C through: Lightning answers a KeyboardInterrupt with a
+    graceful shutdown, ``sys.exit(1)`` and SIGINT ignored from then on; here the handler is
+    restored and the KeyboardInterrupt raised again, so the command ends as on any other
+    Ctrl-C (exit 130, nothing that looks complete)."""
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        trainer.fit(task, datamodule=dm)
+    except SystemExit as exc:
+        if isinstance(exc.__context__, KeyboardInterrupt):
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, handler)
+
+
 def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
     """Train ``core`` in place with Lightning as ``config`` (a
     :class:`~nnmodel.models.config.TrainingConfig`) says; restores the best (validation
@@ -284,7 +303,7 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
                 enable_model_summary=False, num_sanity_val_steps=0, log_every_n_steps=1,
                 gradient_clip_val=c.grad_clip, default_root_dir=ckdir)
             t_fit = time.monotonic()
-            trainer.fit(task, datamodule=dm)
+            _fit_interruptible(trainer, task, dm)
             elapsed = time.monotonic() - t_fit
         # with spawned processes (DDP) the callback's state stays in them: the file is the record
         best = ckpt.best_model_path or str(Path(ckdir) / "best.ckpt")

@@ -129,3 +129,25 @@ def test_tuning_gives_the_same_trials_and_bundle_on_one_and_two_workers(run, tmp
     assert len(cards[0]["tuning"]["trials"]) == 6
     assert (tmp_path / "one" / "tuning.png").is_file() and "Tuning on the validation data" in \
         (tmp_path / "one" / "report.html").read_text()
+
+
+def test_ctrl_c_during_network_training_exits_130_and_leaves_nothing(run, tmp_path, monkeypatch, capsys):
+    """Lightning turns Ctrl-C into a 'graceful shutdown' and sys.exit(1) with SIGINT ignored;
+    the command must instead end as on any Ctrl-C: 130, one line, no output folder, and the
+    SIGINT handler restored."""
+    import signal
+
+    from nnmodel import training
+    from nnmodel.cli import main
+
+    def interrupted(self, batch, batch_idx):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(training.SimulationTask, "training_step", interrupted)
+    out, _ = run
+    data = json.loads((out / "compare.json").read_text())["dataset"]
+    handler = signal.getsignal(signal.SIGINT)
+    code = main(["train-compare", data, "--models", "narx", "--set", "narx.max_epochs=3", "--quiet",
+                 "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 130 and err[-1] == f"eap train-compare: interrupted; nothing written to {tmp_path / 'x'}"
+    assert not (tmp_path / "x").exists() and signal.getsignal(signal.SIGINT) is handler

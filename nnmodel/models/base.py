@@ -381,8 +381,9 @@ class NeuralModel:
             out["card_extra"] = extra
         return out
 
-    def restore(self, learned: dict, state_dict: dict) -> "NeuralModel":
-        """Rebuild the network from ``learned_state()`` and load its weights."""
+    def restore(self, learned: dict, state_dict: dict | None) -> "NeuralModel":
+        """Rebuild the network from ``learned_state()`` and load its weights (``None``: the
+        shapes only, e.g. on torch's meta device to size a network before loading it)."""
         self._validate()
         inputs = list(learned["inputs"])
         if inputs not in (["voltage"], ["voltage", "rh"]):
@@ -392,7 +393,7 @@ class NeuralModel:
         features = self.features.restore(self.kind, learned["fs"], "rh" in inputs, extra)
         core = self._build_core(features)
         net = Normalized(core, features.n_mem)
-        missing, unexpected = net.load_state_dict(state_dict, strict=False)
+        missing, unexpected = net.load_state_dict(state_dict, strict=False) if state_dict is not None else ((), ())
         if missing or unexpected:
             raise InputError(f"saved weights do not match a {self.kind!r} model with these "
                              f"hyper-parameters (missing {missing}, unexpected {unexpected})")

@@ -40,7 +40,7 @@ from scipy import signal
 
 from physics.errors import InputError
 
-from .params import Part, flag, pos_float, pos_int
+from .params import MAX_FILTERS, Part, flag, pos_float, size
 
 __all__ = ["memory_taus", "memory_filters", "rh_hats", "check_knots", "auto_knots", "InputFeatures",
            "FeatureMap", "MEMORY_MIN_SAMPLES", "MEMORY_MAX_FRACTION"]
@@ -147,7 +147,7 @@ class InputFeatures(Part):
 
     ATTR = "features"
     CHECKS = {
-        "memory_filters": lambda v: pos_int(v, zero=True),
+        "memory_filters": size(MAX_FILTERS, zero=True),
         "memory_min_s": pos_float,
         "memory_max_s": pos_float,
         "memory_abs": flag,

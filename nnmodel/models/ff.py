@@ -18,18 +18,18 @@ from __future__ import annotations
 
 from .base import NeuralModel
 from .lag import ACTIVATIONS, LagSimulator, MLPMap, arx_init
-from .params import flag, pos_int
+from .params import MAX_LAGS, MAX_LAYERS, MAX_WIDTH, flag, pos_int, size
 
 #: value checks of the tapped-delay parameters (shared by ff, narx, rbf, hybrid)
 LAG_CHECKS = {
-    "na": lambda v: pos_int(v, zero=True),
-    "nb": pos_int,
-    "hidden": pos_int,
-    "layers": lambda v: pos_int(v, zero=True),
+    "na": size(MAX_LAGS, zero=True),
+    "nb": size(MAX_LAGS),
+    "hidden": size(MAX_WIDTH),
+    "layers": size(MAX_LAYERS, zero=True),
     "activation": lambda v: None if v in ACTIVATIONS else f"one of {sorted(ACTIVATIONS)}",
     "feedthrough": flag,
     "arx_init": flag,
-    "poly_degree": pos_int,
+    "poly_degree": size(9),
 }
 
 

@@ -38,7 +38,7 @@ from .base import NeuralModel
 from .features import memory_filters
 from .ff import LAG_CHECKS, lag_core
 from .lag import LagSimulator, arx_init
-from .params import pos_int
+from .params import MAX_WIDTH, size
 
 #: internal physics signals the correction may see: name -> (SimulationResult attribute, unit)
 PHYSICS_STATES = {"cs_up": ("cs_up", "mol/m^3"), "current": ("current", "A")}
@@ -104,7 +104,7 @@ class HybridModel(NeuralModel):
               "physics_states": _distinct_names(PHYSICS_STATES),
               "physics_inputs": _distinct_names(PHYSICS_INPUTS),
               "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'",
-              "gain_hidden": lambda v: pos_int(v, zero=True)}
+              "gain_hidden": size(MAX_WIDTH, zero=True)}
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "device": "ipmc_pt_eg", "effects": "none"}
     CARD_KEYS = ("physics",)
     _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")

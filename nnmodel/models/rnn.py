@@ -23,7 +23,7 @@ import numpy as np
 from .base import NeuralModel
 from .core import SequenceCore
 from .lag import _normal_equations
-from .params import flag, pos_int
+from .params import MAX_LAGS, MAX_LAYERS, MAX_WIDTH, flag, size
 
 
 def _channels(x):
@@ -100,7 +100,8 @@ class _RNNModel(NeuralModel):
     cell = "lstm"
     DEFAULTS = {"lr": 3e-3, "batch_size": 32, "max_epochs": 300, "max_time": 600.0, "patience": 20,
                 "grad_clip": 1.0, "horizon": 200, "stride": 50}
-    CHECKS = {"hidden": pos_int, "layers": pos_int, "n_init": pos_int, "encoder_hidden": pos_int, "skip_init": flag}
+    CHECKS = {"hidden": size(MAX_WIDTH), "layers": size(MAX_LAYERS), "n_init": size(MAX_LAGS),
+              "encoder_hidden": size(MAX_WIDTH), "skip_init": flag}
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "horizon": 20, "stride": 20, "n_init": 5}
 
     def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
