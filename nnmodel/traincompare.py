@@ -15,7 +15,8 @@ reference the networks learned from (its error is the sensor noise, except on th
 measurement-like records).  The best linear model of the same training data
 (:func:`nnmodel.linear.fit_linear`: ARX orders chosen on the validation data, refined for
 the output error where that helps) is the row ``linear``, the yardstick every network is
-measured against (``vs_linear_pct``: how far its test error lies below or above it).  Scores are pooled over records: NRMSE = sqrt(Σe²/Σ(y−ȳ)²)
+measured against (``vs_linear_pct``: how far its test error lies below or above it).
+Scores are pooled over records: NRMSE = sqrt(Σe²/Σ(y−ȳ)²)
 (ȳ per record), fit % = 100 (1 − NRMSE) as MATLAB ``compare``.
 """
 from __future__ import annotations
