@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["data_facts", "explain", "BIAS_RATIO", "MIN_SAMPLES_PER_PARAMETER", "MIN_RH_LEVELS"]
+__all__ = ["data_facts", "explain", "sentences", "BIAS_RATIO", "MIN_SAMPLES_PER_PARAMETER", "MIN_RH_LEVELS"]
 
 #: a one-step residual whose mean exceeds this fraction of its RMS is biased
 BIAS_RATIO = 0.5
@@ -46,6 +46,13 @@ def _value(v: float, unit: str) -> str:
     return f"{v:.3g} {unit}"
 
 
+def _smaller(name: str, model) -> str:
+    """How to ask for a smaller network of this kind on the command line."""
+    params = model.get_params() if hasattr(model, "get_params") else {}
+    sizes = [f"--set {name}.{k}={max(2, int(params[k]) // 4)}" for k in ("hidden", "n_centres") if k in params]
+    return ", ".join(sizes + ([f"fewer lags (--set {name}.nb=...)"] if "nb" in params else [])) or "fewer parameters"
+
+
 def _causes(name: str, model, facts: dict, biased: bool) -> list[tuple[str, str]]:
     """(cause, what to do) pairs the data support."""
     out = []
@@ -68,7 +75,7 @@ def _causes(name: str, model, facts: dict, biased: bool) -> list[tuple[str, str]
             out.append((f"too short records: {facts['train_samples']:,} training samples for "
                         f"{model.n_parameters:,} parameters ({per:.1f} per parameter), so it can fit noise",
                         f"record longer (about {MIN_SAMPLES_PER_PARAMETER * model.n_parameters:,} samples) or train a "
-                        f"smaller network (--set {name}.hidden=8, fewer lags)"))
+                        f"smaller network ({_smaller(name, model)})"))
         rng = model.memory_range_
         if rng is not None and rng[1] < 0.99 * float(model.memory_max_s):
             out.append((f"records may be too short for slow dynamics: at {facts['record_s']:.3g} s they cover "
@@ -79,7 +86,8 @@ def _causes(name: str, model, facts: dict, biased: bool) -> list[tuple[str, str]
 
 def explain(name: str, row: dict, results: dict, model, facts: dict, linear: str = "linear") -> list[dict]:
     """Findings for the network ``name`` (its result ``row``; ``model`` the trained model):
-    each ``{"finding", "cause", "action"}`` in plain words; empty when it falls short nowhere."""
+    ``[{"finding", "causes": [{"cause", "action"}, ...]}]`` in plain words; empty when it
+    falls short nowhere."""
     test = row["free_run"]["test"]["nrmse"]
     gaps = []
     lin = results.get(linear)
@@ -100,4 +108,10 @@ def explain(name: str, row: dict, results: dict, model, facts: dict, linear: str
     causes = _causes(name, model, facts, biased) or [(
         "no cause found in the data: the recipe's structure or budget does not suit this plant",
         f"search its settings on the validation data with `eap train-compare ... --models {name} --tune 20`")]
-    return [{"finding": f"{name}: {'; '.join(gaps)}", "cause": c, "action": a} for c, a in causes]
+    return [{"finding": f"{name}: {'; '.join(gaps)}", "causes": [{"cause": c, "action": a} for c, a in causes]}]
+
+
+def sentences(finding: dict) -> list[str]:
+    """A finding as plain sentences: what falls short, then each likely cause and what to do."""
+    return [f"{finding['finding']}."] + [f"Likely cause: {c['cause']}. What to do: {c['action']}."
+                                         for c in finding["causes"]]

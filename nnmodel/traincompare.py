@@ -42,7 +42,7 @@ from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
 from .linear import LinearModel, fit_linear
 from .recipes import load_recipe, make_model
-from .shortfalls import data_facts, explain
+from .shortfalls import data_facts, explain, sentences
 from .tuning import tune as run_tuning
 
 GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
@@ -533,7 +533,10 @@ def _report(summary: dict, out: Path) -> None:
     findings = [f for r in summary["models"].values() for f in r.get("shortfalls", [])]
     if findings:
         rep.heading("Where a network falls short, and why")
-        rep.bullets([f"{f['finding']}. Likely cause: {f['cause']}. What to do: {f['action']}." for f in findings])
+        for f in findings:
+            first, *causes = sentences(f)
+            rep.paragraph(first)
+            rep.bullets(causes)
     tuned = {k: r["tuning"] for k, r in summary["models"].items() if r.get("tuning")}
     if tuned:
         rep.heading("Tuning on the validation data")

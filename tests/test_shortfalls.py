@@ -26,29 +26,31 @@ def test_no_finding_when_the_network_beats_linear_and_physics_without_bias():
 def test_worse_than_linear_with_few_samples_per_parameter_says_so_and_what_to_do():
     f = explain("narx", _row(0.2), RESULTS, _model(n_parameters=50_000), FACTS)
     assert len(f) == 1 and "above the linear model's (10.00 %)" in f[0]["finding"]
-    assert f[0]["cause"].startswith("too short records: 100,000 training samples for 50,000 parameters")
-    assert "--set narx.hidden=8" in f[0]["action"]
+    assert f[0]["causes"][0]["cause"].startswith("too short records: 100,000 training samples for 50,000 parameters")
+    assert "fewer parameters" in f[0]["causes"][0]["action"]
 
 
 def test_a_biased_residual_with_shifted_output_means_is_an_offset_not_removed():
     facts = {**FACTS, "test_mean": 2e-3}
     f = explain("ff", _row(0.04, one_rmse=2e-3, one_bias=(BIAS_RATIO + 0.4) * 2e-3), RESULTS, _model(), facts)
     assert "one-step residual is biased: it sits 1.8 mm off zero (90 % of its RMS)" in f[0]["finding"]
-    assert f[0]["cause"].startswith("offset not removed") and "by 2 mm (2.0 standard deviations)" in f[0]["cause"]
-    assert "subtract its rest value" in f[0]["action"]
+    cause = f[0]["causes"][0]
+    assert cause["cause"].startswith("offset not removed") and "by 2 mm (2.0 standard deviations)" in cause["cause"]
+    assert "subtract its rest value" in cause["action"]
 
 
 def test_too_few_rh_levels_and_short_records_for_slow_dynamics():
     facts = {**FACTS, "rh_levels": [40.0, 80.0], "record_s": 30.0}
     f = explain("lstm", _row(0.08), RESULTS, _model(memory=(0.01, 15.0)), facts)
-    causes = [x["cause"] for x in f]
+    causes = [c["cause"] for c in f[0]["causes"]]
     assert any(c.startswith("too few RH levels: trained at 2 (40, 80 %)") for c in causes)
     assert any(c.startswith("records may be too short for slow dynamics") for c in causes)
     assert all("physics model's (5.00 %)" in x["finding"] for x in f)
-    assert not explain("lstm", _row(0.08), RESULTS, _model(uses_rh=False), {**facts, "record_s": 1e4})[0]["cause"] \
-        .startswith("too few RH levels")
+    other = explain("lstm", _row(0.08), RESULTS, _model(uses_rh=False), {**facts, "record_s": 1e4})
+    assert not any(c["cause"].startswith("too few RH levels") for c in other[0]["causes"])
 
 
 def test_a_shortfall_without_a_cause_in_the_data_points_to_tuning():
     f = explain("gru", _row(0.2), RESULTS, _model(), FACTS)
-    assert f[0]["cause"].startswith("no cause found in the data") and "--models gru --tune 20" in f[0]["action"]
+    (cause,) = f[0]["causes"]
+    assert cause["cause"].startswith("no cause found in the data") and "--models gru --tune 20" in cause["action"]

@@ -76,5 +76,9 @@ def run(args) -> int:
     best = summary["best_heldout"]
     if best:
         print(f"best free-run NRMSE on {best['group']}: {best['model']} {100 * best['nrmse']:.2f} %")
+    from nnmodel.shortfalls import sentences
+    for f in (f for r in summary["models"].values() for f in r.get("shortfalls", [])):
+        first, *causes = sentences(f)
+        print(first + "".join(f"\n  - {c}" for c in causes))
     print(f"report: {args.out}/report.html")
     return 0
