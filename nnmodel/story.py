@@ -96,27 +96,33 @@ def write_page(d: Path, report: dict, provenance: dict) -> Path:
     for dev, r in report["physics"].items():
         rep.paragraph(f"{dev}: effects {', '.join(r['effects'])}; a 4 Vpp sweep of 100 s at 1 kHz simulates in "
                       f"{r['sweep_simulation_runtime_s']:.2f} s.")
-        rep.image(d / f"{dev}_bode.png", f"{dev}: tip deflection per volt [m/V] and phase [deg] vs frequency [Hz] "
-                                         "at RH 40–100 %")
+        rep.image(d / f"{dev}_bode.png", f"{dev}: tip deflection per volt |H| [mm/V] and phase [°] against "
+                                         f"frequency [Hz], one curve per RH level ({_levels(r)} %)")
     nn = report.get("neural")
     if nn:
         ds = nn.get("dataset", {})
         rep.heading("The dataset")
-        rep.lead(f"{ds.get('records', '?')} records at {ds.get('fs_Hz', float('nan')):g} Hz from the physics "
-                 f"simulator with a realistic sensor: training RH {ds.get('train_rh')} %, held-out RH "
-                 f"{ds.get('heldout_rh')} % (never trained on).")
+        rep.lead(f"{ds.get('records', '?')} records at {ds.get('fs_Hz', 0):g} Hz from the physics simulator with a "
+                 f"realistic sensor: training RH {_join(ds.get('train_rh'))} %, held-out RH "
+                 f"{_join(ds.get('heldout_rh'))} % (never trained on).")
         rows = nn["table"]
         rep.heading("The networks")
         best = nn.get("best_heldout") or {}
         if best:
             rep.lead(f"Best on held-out RH: {best['model']} at {100 * best['nrmse']:.2f} % free-run NRMSE; the "
                      f"physics simulator itself scores {rows[0]['nrmse_heldout_rh_pct']:.2f} % on the same records.")
-        rep.table(rows, caption="free-run NRMSE [%] by group (RMSE / std of the measurement); train time [s]")
-        for img, cap in (("error_by_rh.png", "free-run NRMSE [%] by RH [%] (grey: held out)"),
-                         ("overlay_heldout_rh.png", "a held-out-RH record: measured and predicted deflection [mm]")):
+        rep.table(rows, caption="free-run NRMSE by test group (RMSE / std of the measurement)",
+                  missing="the dataset has no record of this group, or the row has nothing to count (physics rows)")
+        for n in nn.get("notes", []):
+            rep.why(n["text"], n["links"])
+        for img, cap in (("error_by_rh.png", "free-run NRMSE [%] by nominal RH level, per model (grey: held-out "
+                                             "levels)"),
+                         ("overlay_heldout_rh.png", "a held-out-RH test record: measured and predicted deflection "
+                                                    "[µm], and the residual of each network")):
             if (d / "compare" / img).is_file():
                 rep.image(d / "compare" / img, cap)
-        rep.paragraph("Full comparison: compare/report.html.", note=True)
+        rep.paragraph("Full comparison (every test group, Bode plots, training curves): compare/index.html.",
+                      note=True, links={"compare/index.html": "compare/index.html"})
     loop = report.get("loop")
     if loop:
         v = loop["verdict"]
@@ -141,6 +147,18 @@ def write_page(d: Path, report: dict, provenance: dict) -> Path:
         rep.image(d / "loop.png", "measured vs model deflection [µm] before and after, and the residuals [µm]")
     rep.json_block(report, "report.json")
     return rep.write(d / "index.html")
+
+
+def _join(levels) -> str:
+    return ", ".join(f"{float(x):g}" for x in levels) if isinstance(levels, (list, tuple)) else str(levels)
+
+
+def _levels(physics_row: dict) -> str:
+    return _join(sorted(physics_row["resonance_Hz_by_rh"], key=float))
+
+
+#: Where the run page's diagnosis is (the notes of the networks link to it).
+DIAGNOSIS_ANCHOR = "#" + Report.anchor("The diagnosis")
 
 
 def dataset_facts(ds_path: Path) -> dict:

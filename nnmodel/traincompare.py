@@ -28,10 +28,12 @@ import numpy as np
 
 from physics.outputs import output_folder, preflight
 from physics.compare import PhysicsPredictor, model_rh
+from physics.effects import CORE
 from physics.errors import InputError
 from physics.fileio import write_json
 from physics.frequency import frequency_response
-from physics.plotting import plt, save
+from physics.columns import reading_unit
+from physics.plotting import legend_outside, plain_log_axis, plt, rh_axis, save
 from physics.report import Report, colour, write_csv
 from physics import signals
 
@@ -41,6 +43,7 @@ from physics.parallel import ParallelSettings, map_tasks, warm_up
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
 from .linear import LinearModel, fit_linear
+from .explain import notes, test_groups
 from .recipes import load_recipe, make_model
 from .shortfalls import data_facts, explain, sentences
 from .tuning import tune as run_tuning
@@ -111,7 +114,7 @@ def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out
                   progress: bool = True, overwrite: bool = False, physics: str | None = None,
                   settings: ParallelSettings | None = None, tune: int | None = None) -> dict:
     """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
-    ``compare.json``, ``metrics.csv``, plots and ``report.html`` in ``out`` (a folder written
+    ``compare.json``, ``metrics.csv``, plots and the page ``index.html`` in ``out`` (a folder written
     atomically under the policy of :mod:`physics.outputs`).  ``physics``: a device (name or
     YAML) whose simulator is scored beside the networks — by default the dataset's generator,
     none for measured data.  ``settings``: where the models train (:mod:`physics.parallel`:
@@ -217,7 +220,7 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
                "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
                "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
-               "best_heldout": _best(results)}
+               "best_heldout": _best(results), "test_groups": test_groups(test_entries, group_of)}
     _plots(ds, test_entries, physics_rows, linear_rows, trained, results, out)
     if tuning:
         _tuning_plot(tuning, out)
@@ -301,7 +304,8 @@ def _train_one(task: dict) -> dict:
            "free_run": _score(free, ds, entries, skip),
            "one_step": _score(one_step, ds, entries, skip),
            "inference_samples_per_s": _speed(free, ds, entries),
-           "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None}
+           "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None,
+           "training": _budget(model), "history": list(getattr(model, "history_", None) or [])}
     save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True,
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
                 notes=f"trained by eap train-compare on {ds.path}",
@@ -309,6 +313,13 @@ def _train_one(task: dict) -> dict:
     if task["echo"]:
         _echo_result(name, res)
     return res
+
+
+def _budget(model) -> dict:
+    """The training budget a model used: epochs run and the epoch budget (None for a
+    least-squares fit)."""
+    s = getattr(model, "training_summary_", None) or {}
+    return {"epochs": s.get("epochs_run"), "max_epochs": s.get("max_epochs")}
 
 
 def _training_cost(task: dict) -> float:
@@ -438,16 +449,21 @@ def _tuning_plot(tuned: dict, out: Path) -> None:
     ax.set_xlabel("trial")
     ax.set_ylabel("free-run NRMSE on validation [%]")
     ax.set_yscale("log")
+    plain_log_axis(ax)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    legend_outside(ax)
     save(fig, out / "tuning.png")
+
+
+#: How each test group reads in a caption.
+GROUP_LABELS = {"train_rh": "trained-RH", "heldout_rh": "held-out-RH", "varying_rh": "drifting-RH",
+                "measurement_like": "measurement-like"}
 
 
 def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) -> None:
     output = ds.meta.get("output") or {"name": "deflection", "unit": "m"}
-    qty, unit, k = output["name"], output["unit"], 1.0
-    if unit == "m":
-        unit, k = "mm", 1e3
+    qty = output["name"]
+    unit, k = reading_unit(output["unit"])
     # time overlays: one record of each group
     for g in GROUPS:
         es = [e for e in entries if group_of(e) == g]
@@ -466,25 +482,30 @@ def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) 
         ax[0].set_ylabel(f"{qty} [{unit}]")
         ax[1].set_ylabel(f"residual [{unit}]")
         ax[1].set_xlabel("time [s]")
-        ax[0].legend(fontsize=7, ncol=3)
-        ax[0].set_title(f"{g}: {es[0]['path']}")
+        legend_outside(ax[0])
+        ax[0].set_title(f"{GROUP_LABELS[g]} record {es[0]['path']}", fontsize=10)
         save(fig, out / f"overlay_{g}.png")
+    _plot_losses(results, out / "losses.png")
     if not ds.has_rh or not physics_rows:
         return  # no RH levels to plot against, no closed form to compare with
     # error by RH
     fig, ax = plt.subplots(figsize=(7, 3.5))
+    levels = []
     for name, r in results.items():
         rh = r["free_run"]["by_rh"]
         if rh:
             xs = [float(k) for k in rh]
+            levels += xs
             ax.plot(xs, [100 * v for v in rh.values()], "o-", color=colour(name), label=name)
     held = ds.meta["rh_levels"]["held_out"]
     for h in held:
         ax.axvline(h, color="0.85", zorder=0)
-    ax.set_xlabel("RH [%] (grey: held out)")
+    rh_axis(ax, levels + list(held))
+    ax.set_xlabel("RH [%] (nominal level; grey: held out)")
     ax.set_ylabel("free-run NRMSE [%]")
     ax.set_yscale("log")
-    ax.legend(fontsize=8)
+    plain_log_axis(ax)
+    legend_outside(ax)
     ax.grid(alpha=0.3)
     save(fig, out / "error_by_rh.png")
     # small-signal Bode: networks vs the physics closed form
@@ -500,36 +521,78 @@ def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) 
     f_ref, _ = _small_signal_frf(lambda v, r: v, ds.fs, rh, f_max=fmax)
     resp_phys = frequency_response(gen["device"], gen["effects"], f_ref, rh=rh).deflection
     fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
-    ax[0].loglog(f_ref, np.abs(resp_phys), "k", lw=1.5, label="physics (closed form)")
+    ax[0].loglog(f_ref, 1e3 * np.abs(resp_phys), "k", lw=1.5, label="physics (closed form)")
     ax[1].semilogx(f_ref, np.degrees(np.unwrap(np.angle(resp_phys))), "k", lw=1.5)
     for name, H in resp.items():
-        ax[0].loglog(f_ref, np.abs(H), color=colour(name), lw=0.9, label=name)
+        ax[0].loglog(f_ref, 1e3 * np.abs(H), color=colour(name), lw=0.9, label=name)
         ax[1].semilogx(f_ref, np.degrees(np.unwrap(np.angle(H))), color=colour(name), lw=0.9)
-    ax[0].set_ylabel("|H| [m/V]")
-    ax[1].set_ylabel("phase [deg]")
+    ax[0].set_ylabel("|H| [mm/V]")
+    ax[1].set_ylabel("phase [°]")
     ax[1].set_xlabel("frequency [Hz]")
-    ax[0].legend(fontsize=7)
-    ax[0].set_title(f"small-signal response at RH {rh:g} % (multisine 0.3 V rms)")
+    legend_outside(ax[0])
+    ax[0].set_title(f"small-signal response at RH {rh:.0f} % (multisine 0.3 V rms)", fontsize=10)
     for a in ax:
         a.grid(alpha=0.3, which="both")
     save(fig, out / "bode.png")
 
 
+def _plot_losses(results: dict, path: Path) -> bool:
+    """Training curves of the networks trained by gradient descent, on one scale: √train_loss
+    (RMS of the normalised output on training windows) and val_loss (RMS free-run error of
+    the normalised output on whole validation records)."""
+    curves = {n: [h for h in r.get("history") or [] if h.get("epoch", -1) >= 0] for n, r in results.items()}
+    curves = {n: h for n, h in curves.items() if any("train_loss" in x for x in h)}
+    if not curves:
+        return False
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for n, h in curves.items():
+        ep = [x["epoch"] + 1 for x in h if "train_loss" in x]
+        ax.plot(ep, [np.sqrt(x["train_loss"]) for x in h if "train_loss" in x], color=colour(n), lw=1.0, ls=":",
+                label=f"{n}: √train_loss")
+        ev = [x["epoch"] + 1 for x in h if "val_loss" in x]
+        if ev:
+            ax.plot(ev, [x["val_loss"] for x in h if "val_loss" in x], color=colour(n), lw=1.3,
+                    label=f"{n}: val_loss")
+    ax.set_yscale("log")
+    plain_log_axis(ax)
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("RMS error of the normalised output")
+    legend_outside(ax)
+    ax.grid(alpha=0.3, which="both")
+    save(fig, path)
+    return True
+
+
+def diagnose_command(summary: dict) -> str | None:
+    """The command that diagnoses the measurement-like records of a synthetic dataset."""
+    grp = (summary.get("test_groups") or {}).get("measurement_like")
+    gen = summary.get("generator") or {}
+    if not grp or not gen.get("device"):
+        return None
+    effects = gen.get("effects") or "default"
+    effects = effects if isinstance(effects, str) else ",".join(e for e in effects if e not in CORE)
+    paths = " ".join(str(Path(summary["dataset"]) / p) for p in grp["paths"])
+    return f"eap diagnose {paths} --device {gen['device']} --effects {effects or 'none'} --out runs/diagnose"
+
+
 def _report(summary: dict, out: Path) -> None:
-    rep = Report("eap train-compare", f"dataset {summary['dataset']}",
+    rep = Report("eap train-compare", f"dataset {summary['dataset']}", output=summary.get("output"),
                  provenance={"dataset hash": summary["dataset_hash"][:16], "fs": f"{summary['fs_Hz']:g} Hz"})
     rep.paragraph(__doc__.strip().split("\n\n")[0])
-    rep.table(table_rows(summary["models"]))
+    rep.table(table_rows(summary["models"]), caption="free-run NRMSE by test group (RMSE / std of the measurement)",
+              missing="the dataset has no record of this group, or the row has nothing to count (physics rows)")
     best = summary["best_heldout"]
     if best:
-        rep.paragraph(f"Best free-run NRMSE on {best.get('group', 'held-out RH')}: {best['model']} "
-                      f"{100 * best['nrmse']:.2f} %.")
+        rep.lead(f"Best free-run NRMSE on {best.get('group', 'held-out RH')}: {best['model']} "
+                 f"{100 * best['nrmse']:.2f} %.")
     lin = summary["models"].get(LINEAR)
     if lin is not None:
         rep.paragraph(f"Linear yardstick: {lin['kind']}, orders chosen on the validation data, free-run test "
                       f"NRMSE {100 * lin['free_run']['test']['nrmse']:.2f} %. " + "; ".join(
                           f"{k} {abs(r['vs_linear_pct']):.0f} % {'below' if r['vs_linear_pct'] < 0 else 'above'} it"
                           for k, r in summary["models"].items() if r.get("vs_linear_pct") is not None) + ".")
+    for n in notes(summary, diagnosis=diagnose_command(summary)):
+        rep.why(n["text"], n["links"])
     findings = [f for r in summary["models"].values() for f in r.get("shortfalls", [])]
     if findings:
         rep.heading("Where a network falls short, and why")
@@ -544,11 +607,16 @@ def _report(summary: dict, out: Path) -> None:
         rep.paragraph(f"{first['n_trials']} trials per model, {first['sampler']}, asked and told in batches of "
                       f"{first['batch']} (the same trials for any worker count); score: {first['score']}. "
                       "The best trial's settings were trained again and saved.")
-        rep.image(out / "tuning.png", "validation score of every trial")
-        rep.table(tuning_rows(tuned))
-    for img, cap in (("error_by_rh.png", "free-run error by RH"), ("bode.png", "small-signal Bode"),
-                     *[(f"overlay_{g}.png", g) for g in GROUPS]):
+        rep.image(out / "tuning.png", "free-run NRMSE [%] on the validation data of every trial, and the best so far")
+        rep.table(tuning_rows(tuned), caption="every trial: its validation score and settings")
+    for img, cap in (("error_by_rh.png", "free-run NRMSE [%] by nominal RH level, per model (grey: held-out levels)"),
+                     ("bode.png", "small-signal response |H| [mm/V] and phase [°] of each network beside the "
+                                  "physics closed form"),
+                     ("losses.png", "training curves: √train_loss (dotted) and val_loss (solid), both RMS errors of "
+                                    "the normalised output"),
+                     *[(f"overlay_{g}.png", f"a {GROUP_LABELS[g]} test record: measured and predicted, and the "
+                                            "residual of each network") for g in GROUPS]):
         if (out / img).is_file():
             rep.image(out / img, cap)
     rep.json_block(summary, "compare.json")
-    rep.write(out / "report.html")
+    rep.write_index(out)

@@ -215,7 +215,9 @@ class _LineProgress(Callback):
             return
         self._last = now
         m = trainer.callback_metrics
-        losses = ", ".join(f"{k} {float(m[k]):.4g}" for k in ("train_loss", "val_loss") if k in m)
+        losses = ", ".join(f"{k} {float(m[k]):.4g} ({what(float(m[k]))})" for k, what in (
+            ("train_loss", lambda x: f"mean square on windows, √ = {math.sqrt(x):.3g}"),
+            ("val_loss", lambda x: "free-run RMS")) if k in m)
         print(f"  epoch {trainer.current_epoch + 1}/{trainer.max_epochs}: {losses}", file=sys.stderr, flush=True)
 
 

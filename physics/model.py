@@ -19,14 +19,12 @@ import numpy as np
 
 from .beam import CantileverModes
 from .device import Device, load_device
-from .effects import CHAIN, EFFECTS, Effect, stage_of
+from .effects import CHAIN, CORE, EFFECTS, Effect, stage_of
 from .effects.double_layer import DoubleLayerProps
 from .errors import InputError, arg
 
 
 _GROUPS = ("default", "all", "linear", "none")
-#: effects that are the model's core: a stage default with an id (always on, cannot be removed)
-_CORE = tuple(c.id for c in CHAIN if c.id)
 
 
 def _group(key: str, device: Device) -> list[str]:
@@ -64,12 +62,12 @@ def resolve_effects(effects, device: Device) -> tuple[str, ...]:
             raise InputError(f"unknown effect(s) {', '.join(unknown)}; known effects: {', '.join(EFFECTS)} "
                              f"(a user effect is registered from its file: {load} FILE.py)")
         if sign == "-":
-            if name in _CORE:
+            if name in CORE:
                 raise InputError(f"effects: {name} cannot be removed (it is the model's core)")
             ids = [e for e in ids if e != name]
         else:
             ids += [e for e in names if e not in ids]
-    ids_set = set(ids) | set(_CORE)
+    ids_set = set(ids) | set(CORE)
     return tuple(k for k in EFFECTS if k in ids_set)
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import sys
 import time
@@ -35,6 +36,21 @@ MARKER = ".eap-output.json"
 LOCK_SUFFIX = ".eap-lock"
 _TMP = ".eap-tmp-"
 _OLD = ".eap-old-"
+
+
+_TMP_NAME = re.compile(r"\.([^/\\\s'\"<>]+?)\.eap-tmp-\d+")
+
+
+def final_text(text: str) -> str:
+    """``text`` with every path through the temporary folder of an output being written
+    (``…/.NAME.eap-tmp-PID/…``) written as the path it will have (``…/NAME/…``): what a
+    page or a suggested command shows."""
+    return _TMP_NAME.sub(r"\1", str(text))
+
+
+def final_path(path) -> Path:
+    """The path ``path`` (inside the temporary folder of an output) will have once written."""
+    return Path(final_text(str(path)))
 
 
 def _pid_alive(pid: int) -> bool:

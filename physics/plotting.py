@@ -16,6 +16,53 @@ def save(fig, path) -> None:
     plt.close(fig)
 
 
+def legend_outside(ax, **kw) -> None:
+    """The legend beside the axes (right of them), never over the data."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=kw.pop("fontsize", 8), loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+                  frameon=False, **kw)
+
+
+def rh_axis(ax, levels, axis: str = "x") -> None:
+    """An RH axis labelled by nominal level: ticks at the levels rounded to 1 % (a
+    hygrometer's jitter never becomes a tick or an offset such as "+7e1"), at least 10 %
+    of range shown."""
+    nominal = sorted({float(round(v)) for v in levels if v is not None and np.isfinite(v)})
+    if not nominal:
+        return
+    lo, hi = nominal[0], nominal[-1]
+    pad = max(5.0, 0.05 * (hi - lo))
+    ticks = nominal if len(nominal) <= 12 else None   # many levels: matplotlib's own ticks
+    if axis == "x":
+        if ticks:
+            ax.set_xticks(ticks)
+        ax.set_xlim(lo - pad, hi + pad)
+        ax.set_xlabel("RH [%] (nominal level)")
+    else:
+        if ticks:
+            ax.set_yticks(ticks)
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.set_ylabel("RH [%] (nominal level)")
+    ax.ticklabel_format(axis=axis, style="plain", useOffset=False)
+
+
+def plain_log_axis(ax, axis: str = "y") -> None:
+    """Tick labels of a log axis as plain numbers (0.5, 2, 10, 200; never 6×10⁰ or
+    6e−01); over fewer than 2.5 decades the 2s and 5s are labelled too.  Call after plotting."""
+    import math
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    lo, hi = ax.get_ylim() if axis == "y" else ax.get_xlim()
+    a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    if lo > 0 and math.log10(hi / lo) < 2.5:
+        def minor(v, _):
+            m = v / 10 ** math.floor(math.log10(v)) if v > 0 else 0
+            return f"{v:g}" if round(m, 6) in (2.0, 5.0) else ""
+        a.set_minor_formatter(FuncFormatter(minor))
+    else:
+        a.set_minor_formatter(NullFormatter())
+
+
 #: Points per line beyond which a time plot draws the min–max envelope instead.
 MAX_LINE_POINTS = 20_000
 
@@ -79,7 +126,7 @@ def plot_bode_curves(curves: dict, path, *, unit: str = "mm/V", coherence=None, 
         ax[0].fill_between(fb[ok], scale * np.maximum(lo[ok], 1e-30), scale * hi[ok], color="C0", alpha=0.15,
                            lw=0, label="95 % bounds")
     ax[0].set_ylabel(f"|H| [{unit}]")
-    ax[1].set_ylabel("phase [deg]")
+    ax[1].set_ylabel("phase [°]")
     if coherence is not None:
         fc, coh = coherence
         ax[2].semilogx(fc[fc > 0], coh[fc > 0], color="k", lw=0.7)
@@ -87,7 +134,7 @@ def plot_bode_curves(curves: dict, path, *, unit: str = "mm/V", coherence=None, 
         ax[2].set_ylim(0, 1.05)
     for a in ax:
         a.grid(alpha=0.3, which="both")
-    ax[0].legend(fontsize=8)
+    legend_outside(ax[0])
     ax[-1].set_xlabel("frequency [Hz]")
     if title:
         ax[0].set_title(title, fontsize=10)

@@ -8,13 +8,18 @@ evaluates something can use it::
 
     from physics.report import Report
     rep = Report("eap compare", subtitle="ipmc_pt_eg vs 3 records")
-    rep.table([{"record": "a.csv", "fit_percent": 93.1}], caption="time-domain metrics")
-    rep.image("bode.png", caption="Bode magnitude and phase")   # a PNG file, or PNG bytes
-    rep.figure(fig)                                              # a matplotlib figure
-    rep.write("out/report.html")                                 # atomic (physics.fileio)
+    rep.table([{"record": "a.csv", "fit_percent": 93.1, "rmse_m": 3.1e-5}])  # fit [%], RMSE [µm]
+    rep.why("The measurement-like records carry physics absent from training ...")
+    rep.image("bode.png", caption="|H| [mm/V] and phase [°] of ...")   # a PNG file, or PNG bytes
+    rep.figure(fig, caption="...")                                     # a matplotlib figure
+    rep.write_index("out")     # out/index.html, atomic (physics.fileio); out/report.html redirects
 
-Every text is HTML-escaped; numbers are formatted with :func:`format_value` (4
-significant digits by default).  :func:`write_csv` writes the same rows as a CSV table.
+Tables read like a paper's: every stored key is shown by :mod:`physics.columns` as a name
+with its unit, values in the unit that reads best (µm for tips, mV for volt outputs, %),
+missing values as an en dash with a footnote, and a table too wide for a 1280 px window is
+split into parts.  Pages name final paths, never the temporary folder of an atomic write.
+Text is HTML-escaped.  :func:`write_csv` writes the same rows as a CSV table (SI, full
+precision).
 """
 from __future__ import annotations
 
@@ -26,11 +31,14 @@ import io
 import json
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
+from .columns import Column, band, column, number
 from .errors import InputError
 from .fileio import atomic_path, write_text
+from .outputs import final_text
 
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;
@@ -38,36 +46,33 @@ max-width:1100px;color:#222;line-height:1.4;padding:0 1em}
 h1{font-size:1.6em;border-bottom:2px solid #446;padding-bottom:.2em}
 h2{font-size:1.3em;margin-top:1.6em;border-bottom:1px solid #ccd}
 h3{font-size:1.1em}
-table{border-collapse:collapse;margin:.6em 0 1.2em 0;font-size:.9em}
-th,td{border:1px solid #bbc;padding:.25em .6em;text-align:right}
-th{background:#eef}
-td.t,th.t{text-align:left}
-caption{caption-side:top;text-align:left;font-weight:600;padding:.3em 0}
+table{border-collapse:collapse;margin:.6em 0 .3em 0;font-size:.9em;max-width:100%}
+th,td{border:1px solid #bbc;padding:.25em .5em;text-align:right;vertical-align:top}
+th{background:#eef;font-weight:600;vertical-align:bottom}
+th[scope=row]{vertical-align:top}
+td{white-space:nowrap}
+td.t,th.t{text-align:left;white-space:normal;overflow-wrap:break-word}
+td.b{overflow-wrap:anywhere}
+p.cap{font-weight:600;margin:.8em 0 0 0}
 figure{margin:1em 0}
-figure img{max-width:100%;border:1px solid #ddd}
-figcaption{font-size:.9em;color:#555}
+figure img{max-width:100%;height:auto;border:1px solid #ddd}
+figcaption{font-size:.9em;color:#444;max-width:100%}
 .warn{background:#fff4e0;border-left:4px solid #e90;padding:.4em .8em;margin:.5em 0}
 .note{color:#555;font-size:.9em}
+.foot{color:#555;font-size:.85em;margin:.1em 0 1.2em 0}
+.why{background:#f3f7ff;border-left:4px solid #68a;padding:.4em .8em;margin:.5em 0}
 pre{background:#f6f6fa;padding:.6em;overflow-x:auto;font-size:.85em;white-space:pre-wrap;word-break:break-word}
 .tw{max-width:100%;overflow-x:auto}
 nav{background:#f4f4fa;border:1px solid #dde;padding:.4em .8em;font-size:.9em}
 nav a{margin-right:1em}
-.prov{font-size:.85em;color:#555;word-break:break-all}
+.prov{font-size:.85em;color:#555;overflow-wrap:anywhere}
 .lead{font-size:1.05em;font-weight:500}
+p,li{overflow-wrap:anywhere}
 """
 
-#: Runs in the browser: collects script errors, broken images and elements wider than the
-#: viewport into ``<body data-eap-check="{json}">`` (read by the headless-browser tests).
-_CHECK_JS = """
-(function(){var errs=[];window.addEventListener('error',function(e){errs.push(String(e.message||e));});
-window.addEventListener('load',function(){var imgs=[].slice.call(document.images);
-var broken=imgs.filter(function(i){return !(i.complete&&i.naturalWidth>0);}).map(function(i){return i.alt;});
-var vw=document.documentElement.clientWidth,wide=[];
-[].slice.call(document.body.querySelectorAll('*')).forEach(function(el){var r=el.getBoundingClientRect();
-if(r.right>vw+1&&!el.closest('.tw')&&!el.closest('pre')){wide.push(el.tagName+(el.id?'#'+el.id:''));}});
-document.body.setAttribute('data-eap-check',JSON.stringify({images:imgs.length,broken:broken,errors:errs,
-too_wide:wide.slice(0,20),sections:[].slice.call(document.querySelectorAll('h2')).map(function(h){return h.textContent;})}));});})();
-"""
+#: The width a table may take before it is split into parts [px] (the page is 1100 px wide
+#: with 1 em padding; :func:`_min_width` estimates a column's narrowest layout).
+TABLE_BUDGET_PX = 1040
 
 #: The same colour for the same name in every figure of every report (matplotlib "tab10").
 COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
@@ -83,22 +88,15 @@ def colour(name: str) -> str:
     return COLOURS[zlib.crc32(name.encode()) % len(COLOURS)]
 
 
-def format_value(v: Any, digits: int = 4) -> str:
-    """Text for a table cell: floats to ``digits`` significant digits (``inf``/``nan``
-    spelled out), ``None`` as an empty cell, lists joined by commas, the rest ``str``."""
+def format_value(v: Any, digits: int = 3) -> str:
+    """Text for a value in running text or a cell: numbers by :func:`physics.columns.number`
+    (a missing number is an en dash), ``None`` empty, lists joined by commas, the rest ``str``."""
     if v is None:
         return ""
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, float) or (hasattr(v, "dtype") and getattr(v, "ndim", 1) == 0):
-        x = float(v)
-        if math.isnan(x):
-            return "nan"
-        if math.isinf(x):
-            return "inf" if x > 0 else "-inf"
-        return f"{x:.{digits}g}"
     if isinstance(v, (list, tuple)):
         return ", ".join(format_value(x, digits) for x in v)
+    if isinstance(v, (bool, int, float)) or hasattr(v, "dtype"):
+        return number(v, digits)
     return str(v)
 
 
@@ -121,6 +119,67 @@ def _columns(rows: list[dict], columns: Sequence[str] | None) -> list[str]:
     for r in rows:
         cols += [c for c in r if c not in cols]
     return cols
+
+
+def _missing(v: Any) -> bool:
+    """None, NaN, or a cell a caller wrote as a hyphen or a dash for "no value"."""
+    return v is None or (isinstance(v, float) and math.isnan(v)) or (isinstance(v, str) and v.strip() in ("-", "–"))
+
+
+#: A number a caller already wrote as text ("51,415", "0.9"): right-aligned like a number.
+_NUMBER_TEXT = re.compile(r"^[-−+]?[\d,.\s]*\d(?:[eE][-+]?\d+)?$")
+
+
+def _cell(v: Any, col: Column, digits: int | None) -> str:
+    """The text of a cell: numbers scaled to the column's unit; a pair of numbers in a
+    column of frequencies is a band (``0.13–1``)."""
+    d = digits or col.digits
+    if _missing(v):
+        return "–"
+    if isinstance(v, str):
+        return v
+    if isinstance(v, (list, tuple)):
+        if len(v) == 2 and col.unit == "Hz" and all(isinstance(x, (int, float)) for x in v):
+            return band(float(v[0]), float(v[1]))[:-3]
+        return ", ".join(_cell(x, col, digits) for x in v)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) and not hasattr(v, "dtype"):
+        return format_value(v, d)
+    if isinstance(v, int) or (hasattr(v, "dtype") and v.dtype.kind in "iu"):
+        return number(int(v) if col.scale == 1 else int(v) * col.scale, d)
+    return number(float(v) * col.scale, d)
+
+
+def _numeric(v: Any) -> bool:
+    if isinstance(v, str):
+        return bool(_NUMBER_TEXT.match(v.strip()))
+    return not isinstance(v, (bool, list, tuple, dict)) and v is not None
+
+
+def _words(text: str) -> list[int]:
+    """Lengths of the pieces a browser may not break (split at spaces and after hyphens)."""
+    return [len(w) for w in re.split(r"\s+|(?<=-)", text) if w] or [1]
+
+
+def _min_width(label: str, cells: Sequence[str], numeric: Sequence[bool]) -> int:
+    """Estimated narrowest width of a column [px]: its longest header word, its longest
+    number (numbers never wrap) and its longest text word (text wraps, long words break);
+    about 7.5 px per character at the table's font size, 16 px of padding and border."""
+    widths = [len(c) if n else min(max(_words(c)), LONG_WORD) for c, n in zip(cells, numeric)]
+    return int(7.5 * max(max(_words(label)), max(widths, default=1))) + 16
+
+
+_T, _ROW = " class='t'", " scope='row'"
+#: Words longer than this in a text cell may break anywhere (paths, hashes); shorter ones never do.
+LONG_WORD = 24
+
+
+def _text_class(text: str) -> str:
+    return " class='t b'" if any(len(w) > LONG_WORD for w in text.split()) else _T
+
+
+def _th(col: Column, cls: str = "", scope: str = "") -> str:
+    unit = "" if col.unit is None else f" data-unit='{html.escape(col.unit or '1')}'"
+    return (f"<th{cls}{scope}{unit}>{html.escape(col.header)}</th>")
 
 
 def header(provenance: Mapping[str, Any] | None) -> dict:
@@ -151,32 +210,60 @@ def png_data_uri(image: str | os.PathLike | bytes) -> str:
 class Report:
     """An HTML page built block by block (see the module doc)."""
 
-    def __init__(self, title: str, subtitle: str | None = None, provenance: Mapping[str, Any] | None = None):
+    def __init__(self, title: str, subtitle: str | None = None, provenance: Mapping[str, Any] | None = None,
+                 output: Mapping[str, Any] | None = None):
         self.title = str(title)
         self.subtitle = subtitle
         self.provenance = dict(provenance or {})
+        #: The plant's output (``{"name", "unit"}``; default a deflection in metres): tables
+        #: show output quantities (errors, noise floors) in its reading unit.
+        self.output = dict(output or {})
         self._blocks: list[str] = []
         self._sections: list[tuple[str, str]] = []
 
     # --- blocks --------------------------------------------------------------------------
+    @staticmethod
+    def anchor(title: str) -> str:
+        """The id of the section headed ``title`` (to link to it before it is written)."""
+        return "s-" + (re.sub(r"[^a-z0-9]+", "-", str(title).lower()).strip("-") or "section")
+
     def heading(self, text: str, level: int = 2) -> "Report":
         level = min(max(int(level), 2), 4)
         anchor = ""
         if level == 2:
-            sid = f"s{len(self._sections) + 1}"
+            sid = self.anchor(text)
+            if any(sid == s for s, _ in self._sections):
+                sid += f"-{len(self._sections) + 1}"
             self._sections.append((sid, str(text)))
             anchor = f" id='{sid}'"
         self._blocks.append(f"<h{level}{anchor}>{html.escape(str(text))}</h{level}>")
         return self
 
-    def lead(self, text: str) -> "Report":
+    @staticmethod
+    def _text(text: str, links: Mapping[str, str] | None) -> str:
+        """Escaped text; ````literal```` becomes code; each key of ``links`` found in it becomes
+        a link to its value."""
+        out = re.sub(r"``([^`]+)``", r"<code>\1</code>", html.escape(str(text)))
+        for words, href in (links or {}).items():
+            w = html.escape(words)
+            out = out.replace(w, f"<a href='{html.escape(href)}'>{w}</a>", 1)
+        return out
+
+    def lead(self, text: str, links: Mapping[str, str] | None = None) -> "Report":
         """The one sentence that opens a section (computed from the results)."""
-        self._blocks.append(f"<p class='lead'>{html.escape(str(text))}</p>")
+        self._blocks.append(f"<p class='lead'>{self._text(text, links)}</p>")
         return self
 
-    def paragraph(self, text: str, note: bool = False) -> "Report":
+    def paragraph(self, text: str, note: bool = False, links: Mapping[str, str] | None = None) -> "Report":
+        """A paragraph; ``links`` maps words of ``text`` to the address they link to
+        (``{"the diagnosis": "#" + Report.anchor("The diagnosis")}``)."""
         cls = " class='note'" if note else ""
-        self._blocks.append(f"<p{cls}>{html.escape(str(text))}</p>")
+        self._blocks.append(f"<p{cls}>{self._text(text, links)}</p>")
+        return self
+
+    def why(self, text: str, links: Mapping[str, str] | None = None) -> "Report":
+        """The sentence beside a number a reader would stop at: why it is what it is."""
+        self._blocks.append(f"<p class='why'>{self._text(text, links)}</p>")
         return self
 
     def warning(self, text: str) -> "Report":
@@ -190,41 +277,77 @@ class Report:
 
     def table(self, data: Sequence[Mapping[str, Any]] | Mapping[str, Any], *,
               columns: Sequence[str] | None = None, caption: str | None = None,
-              digits: int = 4, headers: Mapping[str, str] | None = None) -> "Report":
+              digits: int | None = None, headers: Mapping[str, str | Column] | None = None,
+              missing: str | None = None, notes: Sequence[str] = ()) -> "Report":
         """A table from a list of row dicts (columns: union of keys, first-seen order, or
-        ``columns``) or from one dict (two columns, quantity and value).  ``headers``
-        renames columns for display."""
-        rows = _rows(data)
-        cols = _columns(rows, columns)
+        ``columns``) or from one dict (one row per key: its name and unit, its value).
+
+        Every key is shown through :func:`physics.columns.column` (a name, a unit, the
+        display scale; ``headers`` gives another name or :class:`Column` for a key); a
+        missing value (None, NaN) is an en dash explained under the table by ``missing``;
+        ``notes`` are further footnotes.  A table too wide for the page is split into parts
+        that repeat its first column."""
         headers = dict(headers or {})
-        out = ["<table>"]
-        if caption:
-            out.append(f"<caption>{html.escape(caption)}</caption>")
-        out.append("<tr>" + "".join(
-            f"<th class='{'t' if i == 0 else ''}'>{html.escape(str(headers.get(c, c)))}</th>"
-            for i, c in enumerate(cols)) + "</tr>")
-        for r in rows:
-            cells = []
-            for i, c in enumerate(cols):
-                v = r.get(c)
-                cls = " class='t'" if (i == 0 or isinstance(v, str)) else ""
-                cells.append(f"<td{cls}>{html.escape(format_value(v, digits))}</td>")
-            out.append("<tr>" + "".join(cells) + "</tr>")
-        out.append("</table>")
-        self._blocks.append("<div class='tw'>" + "\n".join(out) + "</div>")
+
+        def col(key):
+            h = headers.get(key, key)
+            return h if isinstance(h, Column) else column(h, self.output)
+        foot = list(notes)
+        if isinstance(data, Mapping):
+            body, gap = [], False
+            for key, v in data.items():
+                c = col(key)
+                text = _cell(v, c, digits)
+                gap |= text == "–"
+                cls = _text_class(text) if not _numeric(v) else ""
+                body.append(f"<tr>{_th(c, _T, _ROW)}<td{cls}>{html.escape(text)}</td></tr>")
+            if gap:
+                foot.insert(0, f"– {missing or 'no value (not applicable, or not measured)'}")
+            self._table_block(caption, "", body, foot)
+            return self
+        rows = _rows(data)
+        keys = _columns(rows, columns)
+        gone = [k for k in keys[1:] if all(_missing(r.get(k)) for r in rows)]
+        if gone and rows:   # a column with no value at all is left out, and said
+            foot.append("Not shown (no value in any row): " + ", ".join(col(k).header for k in gone) + ".")
+            keys = [k for k in keys if k not in gone]
+        cols = [col(k) for k in keys]
+        cells = [[_cell(r.get(k), c, digits) for k, c in zip(keys, cols)] for r in rows]
+        numeric = [[_numeric(r.get(k)) and not _missing(r.get(k)) for k in keys] for r in rows]
+        right = [any(n[j] for n in numeric) for j in range(len(keys))]   # a column of numbers: right-aligned
+        if any(t == "–" for row in cells for t in row):
+            foot.insert(0, f"– {missing or 'no value (not applicable, or not measured)'}")
+        widths = [_min_width(c.header, [row[j] for row in cells], [n[j] for n in numeric]) for j, c in enumerate(cols)]
+        parts, cur = [], [0]
+        for j in range(1, len(keys)):
+            if sum(widths[i] for i in cur) + widths[j] > TABLE_BUDGET_PX and len(cur) > 1:
+                parts.append(cur)
+                cur = [0]
+            cur.append(j)
+        parts.append(cur)
+        for n, part in enumerate(parts):
+            head = "<tr>" + "".join(_th(cols[j], _T if j == 0 else "") for j in part) + "</tr>"
+            body = ["<tr>" + "".join(f"<td{'' if right[j] else _text_class(row[j])}>{html.escape(row[j])}</td>"
+                                     for j in part) + "</tr>" for row in cells]
+            cap = caption if n == 0 else f"{caption or 'table'} (continued, {n + 1}/{len(parts)})"
+            self._table_block(cap, head, body, foot if n == len(parts) - 1 else [])
         return self
 
-    def image(self, image: str | os.PathLike | bytes, caption: str | None = None,
-              width: int | None = None) -> "Report":
-        """Embed a PNG (file path or bytes) as a base64 data URI."""
+    def _table_block(self, caption, head, body, foot) -> None:
+        cap = f"<p class='cap'>{html.escape(caption)}</p>" if caption else ""
+        notes = "".join(f"<p class='foot'>{html.escape(f)}</p>" for f in foot)
+        self._blocks.append(f"{cap}<div class='tw'><table>{head}\n" + "\n".join(body) + f"</table></div>{notes}")
+
+    def image(self, image: str | os.PathLike | bytes, caption: str, width: int | None = None) -> "Report":
+        """Embed a PNG (file path or bytes) as a base64 data URI, with a caption that says
+        what is shown (also the image's alternative text)."""
         uri = png_data_uri(image)
-        alt = html.escape(caption or (Path(image).name if not isinstance(image, (bytes, bytearray)) else "figure"))
         w = f" width='{int(width)}'" if width else ""
-        cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
-        self._blocks.append(f"<figure><img src='{uri}' alt='{alt}'{w}>{cap}</figure>")
+        cap = html.escape(str(caption))
+        self._blocks.append(f"<figure><img src='{uri}' alt='{cap}'{w}><figcaption>{cap}</figcaption></figure>")
         return self
 
-    def figure(self, fig, caption: str | None = None, dpi: int = 110) -> "Report":
+    def figure(self, fig, caption: str, dpi: int = 110) -> "Report":
         """Embed a matplotlib figure (rendered to PNG in memory; the figure is closed)."""
         import matplotlib.pyplot as plt
         buf = io.BytesIO()
@@ -234,7 +357,7 @@ class Report:
 
     def json_block(self, obj: Any, summary: str = "JSON") -> "Report":
         """A collapsible block with ``obj`` as indented JSON."""
-        text = json.dumps(obj, indent=2, default=str)
+        text = json.dumps(obj, indent=2, default=str, ensure_ascii=False)
         self._blocks.append(f"<details><summary>{html.escape(summary)}</summary>"
                             f"<pre>{html.escape(text)}</pre></details>")
         return self
@@ -262,14 +385,32 @@ class Report:
         body = "\n".join(self._blocks)
         return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
                 f"<meta name='viewport' content='width=device-width, initial-scale=1'>"
-                f"<title>{html.escape(self.title)}</title><style>{_CSS}</style>"
-                f"<script>{_CHECK_JS}</script></head><body>\n"
+                f"<title>{html.escape(self.title)}</title><style>{_CSS}</style></head><body>\n"
                 f"<h1>{html.escape(self.title)}</h1>{sub}{prov}{nav}\n{body}\n"
                 f"<p class='note'>Generated {stamp} by eap-model.</p>\n</body></html>\n")
 
     def write(self, path: str | os.PathLike) -> Path:
-        """Write the page atomically (temporary file, then rename)."""
-        return write_text(path, self.to_html())
+        """Write the page atomically (temporary file, then rename).  Paths through the
+        temporary folder of an output being written are shown as their final paths
+        (:func:`physics.outputs.final_text`)."""
+        return write_text(path, final_text(self.to_html()))
+
+    def write_index(self, folder: str | os.PathLike, old_name: str = "report.html") -> Path:
+        """Write the page as ``folder/index.html`` (every command's page has this name) and
+        ``folder/OLD_NAME``, a redirect to it under the name the page had before (kept for
+        one release); returns the page's path."""
+        d = Path(folder)
+        page = self.write(d / PAGE)
+        write_text(d / old_name, _REDIRECT.replace("OLD", html.escape(old_name)))
+        return page
+
+
+#: The name of every command's page (the name it had before is a redirect, :meth:`Report.write_index`).
+PAGE = "index.html"
+_REDIRECT = ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+             "<meta http-equiv='refresh' content='0; url=index.html'><title>moved to index.html</title></head>"
+             "<body><p>This page is now <a href='index.html'>index.html</a> (OLD is kept as this "
+             "redirect for one release).</p></body></html>\n")
 
 
 def write_csv(rows: Sequence[Mapping[str, Any]] | Mapping[str, Any], path: str | os.PathLike, *,

@@ -32,13 +32,14 @@ def test_eap_suite_writes_one_table_with_every_model_and_the_physics_reference(t
     out = tmp_path / "eap"
     rep = eap.run(["ff", "rbf", "hybrid"], out, data=tiny, progress=False,
                   overrides={k: SMALL[k] for k in ("ff", "rbf", "hybrid")}, echo=lambda *a: None)
-    for f in ("eap.json", "eap.csv", "eap.html", "eap.png", "compare/report.html", "compare/models/hybrid/card.json"):
+    for f in ("eap.json", "eap.csv", "index.html", "eap.html", "eap.png", "compare/index.html",
+              "compare/models/hybrid/card.json"):
         assert (out / f).is_file(), f
     data = json.loads((out / "eap.json").read_text())
     from browser_check import CHROMIUM, assert_clean, render
     if CHROMIUM:   # the benchmark page through the one report builder, in a real browser
-        check, text = render(out / "eap.html")
-        assert_clean(check, out / "eap.html")
+        check, text = render(out / "index.html")
+        assert_clean(check, out / "index.html")
     names = [r["model"] for r in data["results"]]
     assert names[0] == "physics" and {"ff", "rbf", "hybrid"} <= set(names)
     for r in data["results"]:
@@ -52,7 +53,7 @@ def test_eap_suite_writes_one_table_with_every_model_and_the_physics_reference(t
     assert "physics" not in data["ranking_heldout"]
     table = eap.format_table(rep)
     assert "held-out RH %" in table and "physics (reference)" in table
-    html = (out / "eap.html").read_text()
+    html = (out / "index.html").read_text()
     assert "data:image/png;base64" in html and "no published figures" in html
 
 
@@ -77,8 +78,12 @@ def test_greybox_study_reports_the_verdicts_and_a_data_efficiency_curve(tmp_path
     out = tmp_path / "study"
     rep = greybox.run(["hybrid", "ff"], out, data=ds, progress=False, sizes=(1, None), curve_budget_s=5.0,
                       overrides={"hybrid": SMALL["hybrid"], "ff": SMALL["ff"]}, echo=lambda *a: None)
-    for f in ("greybox.json", "greybox.csv", "greybox.html", "greybox_efficiency.png"):
+    for f in ("greybox.json", "greybox.csv", "index.html", "greybox.html", "greybox_efficiency.png"):
         assert (out / f).is_file(), f
+    from browser_check import CHROMIUM, assert_clean, render
+    if CHROMIUM:
+        check, _ = render(out / "index.html")
+        assert_clean(check, out / "index.html")
     rows = {r["model"]: r for r in rep["full_data"]}
     # the hybrid's physics lacks nonlinear_charge: its physics part alone is scored separately
     assert "physics_base" in rows and rows["physics_base"]["heldout_rh_pct"] > rows["physics"]["heldout_rh_pct"]

@@ -172,7 +172,7 @@ def test_report_files(result, tmp_path):
     for rec in data["records"]:
         for png in rec["plots"]:
             assert (tmp_path / png).read_bytes().startswith(b"\x89PNG")
-    html = (tmp_path / "report.html").read_text()
+    html = (tmp_path / "index.html").read_text()
     srcs = re.findall(r"src='([^']*)'", html)
     assert srcs and all(s.startswith("data:image/png;base64,") for s in srcs)   # self-contained
     assert "rh.png" in out["plots"] and (tmp_path / "metrics.csv").is_file()
@@ -185,7 +185,7 @@ def test_cli_compare_device_and_bundle(model, records, tmp_path, capsys, monkeyp
                  "--out", str(tmp_path / "dev")])
     text = capsys.readouterr().out
     assert code == 0 and "fit" in text and "J_err" in text
-    assert (tmp_path / "dev" / "report.html").is_file()
+    assert (tmp_path / "dev" / "index.html").is_file()
     # a folder that is not a bundle: a clear error, no traceback
     empty = tmp_path / "notabundle"
     empty.mkdir()

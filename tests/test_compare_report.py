@@ -31,7 +31,7 @@ def test_report_embeds_images_and_escapes_text(tmp_path):
     rep = Report("Title <&>", subtitle="sub")
     rep.heading("Section").paragraph("a < b <script>alert(1)</script>").warning("careful & quick")
     rep.table([{"name": "x<y", "value": 1.234567}, {"name": "z", "extra": None}], caption="cap")
-    rep.table({"fit": 97.5})
+    rep.table({"fit_percent": 97.5})
     rep.image(png, caption="file png")
     fig, ax = plt.subplots()
     rep.figure(fig, caption="in memory")
@@ -39,16 +39,50 @@ def test_report_embeds_images_and_escapes_text(tmp_path):
     path = rep.write(tmp_path / "r.html")
     html = path.read_text()
     assert "Title &lt;&amp;&gt;" in html and "a &lt; b" in html and "x&lt;y" in html
-    # one script only: the page's own self-check (user text is escaped, nothing is fetched)
-    assert html.count("<script") == 1 and "&lt;script&gt;alert(1)" in html and "http" not in html.split("<style>")[0]
+    # no script at all (user text is escaped, nothing is fetched)
+    assert "<script" not in html and "&lt;script&gt;alert(1)" in html and "http" not in html.split("<style>")[0]
     uris = [s.split("'")[0] for s in html.split("src='")[1:]]
     assert len(uris) == 2
     for u in uris:
         assert u.startswith("data:image/png;base64,")
         assert base64.b64decode(u.split(",", 1)[1]).startswith(b"\x89PNG")
     assert base64.b64decode(uris[0].split(",", 1)[1]) == png.read_bytes()
-    assert "1.235" in html                               # 4 significant digits
-    assert "<th class='t'>name</th><th class=''>value</th><th class=''>extra</th>" in html
+    assert "1.235" in html                               # identified values ('value'): 4 significant digits
+    assert "<th class='t'>name</th><th data-unit='per row'>identified</th></tr>" in html
+    assert "Not shown (no value in any row): extra." in html   # an empty column is left out, and said
+    assert "<th class='t' scope='row' data-unit='%'>fit [%]</th><td>97.5</td>" in html   # a dict: one row per key
+
+
+def test_tables_name_their_columns_with_units_and_explain_gaps(tmp_path):
+    rep = Report("t")
+    rep.table([{"model": "ff", "nrmse_heldout_rh_pct": 3.14159, "rmse_m": 3.11e-5, "nrmse_measurement_like_pct":
+                float("nan"), "band_Hz": [0.1333333, 1.0]}, {"model": "rbf", "nrmse_measurement_like_pct": 104.2}],
+              missing="no measurement-like records")
+    html = rep.to_html()
+    assert "held-out RH NRMSE [%]" in html and ">3.14<" in html
+    assert "RMSE [µm]" in html and ">31.1<" in html            # tips in µm
+    assert ">0.13–1<" in html and "band [Hz]" in html             # rounded band edges
+    assert "nan" not in html.lower().replace("nanum", "") and "– no measurement-like records" in html
+    wide = {f"nrmse_group{k}_pct": 12.3456 for k in range(30)}
+    rep2 = Report("t")
+    rep2.table([{"model": "a_long_model_name", **wide}], caption="wide")
+    parts = rep2.to_html().count("<table>")
+    assert parts >= 2 and "(continued, 2/" in rep2.to_html()   # split, never a sideways scroll
+    assert rep2.to_html().count("a_long_model_name") == parts   # the first column repeated in each part
+    volts = Report("t", output={"name": "level", "unit": "V"})
+    volts.table({"rmse_m": 1.2e-3})
+    assert "RMSE [mV]" in volts.to_html() and ">1.20<" in volts.to_html()
+
+
+def test_pages_are_index_html_name_final_paths_and_keep_a_redirect(tmp_path):
+    d = tmp_path / ".out.eap-tmp-123"
+    rep = Report("t")
+    rep.paragraph(f"dataset {d}/dataset")
+    page = rep.write_index(d)
+    assert page.name == "index.html"
+    assert f"{tmp_path}/out/dataset" in page.read_text() and ".eap-tmp-" not in page.read_text()
+    redirect = (d / "report.html").read_text()
+    assert "url=index.html" in redirect and len(redirect) < 2000
 
 
 def test_image_errors(tmp_path):
@@ -56,12 +90,13 @@ def test_image_errors(tmp_path):
         png_data_uri(tmp_path / "missing.png")
     (tmp_path / "x.png").write_text("not a png")
     with pytest.raises(InputError, match="not a PNG"):
-        Report("t").image(tmp_path / "x.png")
+        Report("t").image(tmp_path / "x.png", "a figure")
 
 
 def test_format_and_json():
-    assert format_value(float("nan")) == "nan" and format_value(math.inf) == "inf"
-    assert format_value(None) == "" and format_value(True) == "yes" and format_value([1.0, 2.5]) == "1, 2.5"
+    assert format_value(float("nan")) == "–" and format_value(math.inf) == "∞"
+    assert format_value(None) == "" and format_value(True) == "yes" and format_value([1.0, 2.5]) == "1.00, 2.50"
+    assert format_value(3.11e-5) == "3.11×10⁻⁵" and format_value(194.3) == "194" and format_value(12345.6) == "12346"
     obj = jsonable({"a": np.float64(np.nan), "b": np.arange(2), "c": (1, math.inf), "d": 1 + 2j})
     assert obj == {"a": None, "b": [0, 1], "c": [1, None], "d": {"re": 1.0, "im": 2.0}}
     json.dumps(obj, allow_nan=False)

@@ -284,7 +284,7 @@ def test_report_and_apply(tmp_path):
         assert set(row) >= {"effect", "rmse_after", "fit_pct_after", "delta_bic", "p_value", "evidence", "explanation"}
     assert [r["delta_bic"] for r in d["ranking"]] == sorted(r["delta_bic"] for r in d["ranking"])
     assert d["verdict"]["missing_effect"] == "electrode_resistance" and 0 <= d["verdict"]["confidence"] <= 1
-    html = (tmp_path / "d" / "report.html").read_text()
+    html = (tmp_path / "d" / "index.html").read_text()
     assert "data:image/png;base64" in html and "src='http" not in html
     for f in ("where_it_fails.png", "ranking.png", "overlay.png", "error_breakdown.png"):
         assert (tmp_path / "d" / f).stat().st_size > 1000
@@ -320,7 +320,7 @@ def test_cli_demo(tmp_path, capsys):
     assert "ranking (most to least supported)" in text
     assert "error before/after adding viscoelastic" in text
     assert "-> correct" in text
-    assert (tmp_path / "demo" / "report.html").exists()
+    assert (tmp_path / "demo" / "index.html").exists()
 
 
 def test_identify_extra_starts_backwards_compatible():

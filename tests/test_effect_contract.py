@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from physics.effects import (BUILT_IN, CHAIN, CHECKS, EFFECTS, FAST_CHECKS, LoadEffect, OutputEffect, check_effect,
-                             effect_classes_in_file, register, stage_of, unregister)
+from physics.contract import CHECKS, FAST_CHECKS
+from physics.effects import (BUILT_IN, CHAIN, EFFECTS, LoadEffect, OutputEffect, check_effect, effect_classes_in_file,
+                             register, stage_of, unregister)
 from physics.effects.stages import STAGE_PROTOCOLS
 from physics.errors import InputError
 from physics.model import ActuatorModel

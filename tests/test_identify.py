@@ -296,7 +296,7 @@ def test_cli_identify(tmp_path, ipmc_record, capsys):
     text = capsys.readouterr().out
     assert code == 0, text
     assert "kf" in text and "model evaluations" in text
-    for name in ("ipmc_pt_eg_identified.yaml", "report.json", "report.html", "parameters.csv"):
+    for name in ("ipmc_pt_eg_identified.yaml", "report.json", "index.html", "parameters.csv"):
         assert (out / name).is_file()
     dev = load_device(out / "ipmc_pt_eg_identified.yaml")
     assert dev["kf"] == pytest.approx(0.0041, rel=0.05)

@@ -105,12 +105,12 @@ def test_eap_validate_writes_the_report(tmp_path):
     figs = json.loads((tmp_path / "figures.json").read_text())
     ss = figs["ip2c_pedot_water"]["small_signal"]
     assert ss["max_mag_err_pct"] < 1 and ss["max_phase_err_deg"] < 1
-    assert (tmp_path / "report.html").stat().st_size > 10000
+    assert (tmp_path / "index.html").stat().st_size > 10000
     assert len(list(tmp_path.glob("*.png"))) == 3
     from browser_check import CHROMIUM, assert_clean, render
     if CHROMIUM:
-        check, _ = render(tmp_path / "report.html")
-        assert_clean(check, tmp_path / "report.html")
+        check, _ = render(tmp_path / "index.html")
+        assert_clean(check, tmp_path / "index.html")
 
 
 def _added_effects():

@@ -27,7 +27,7 @@ def run(tmp_path_factory):
 
 def test_outputs_and_groups(run):
     out, summary = run
-    for f in ("compare.json", "metrics.csv", "report.html", "bode.png", "error_by_rh.png", "overlay_heldout_rh.png"):
+    for f in ("compare.json", "metrics.csv", "index.html", "bode.png", "error_by_rh.png", "overlay_heldout_rh.png"):
         assert (out / f).is_file(), f
     data = json.loads((out / "compare.json").read_text())
     assert set(data["models"]) == {"physics", "linear", "rbf", "ff"}

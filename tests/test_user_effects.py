@@ -172,7 +172,7 @@ def test_demo_missing_physics_runs_the_loop(tmp_path, capsys):
     assert main(["demo", "missing-physics", "--out", str(tmp_path / "mp"), "--duration-s", "60"]) == 0
     out = capsys.readouterr().out
     assert "loop: before not explained by the catalog" in out and "after adding creep: explained" in out
-    assert (tmp_path / "mp" / "before" / "report.html").is_file() and (tmp_path / "mp" / "after" / "report.html").is_file()
+    assert (tmp_path / "mp" / "before" / "index.html").is_file() and (tmp_path / "mp" / "after" / "index.html").is_file()
     assert "creep" not in EFFECTS  # the demo leaves the registry as it found it
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from physics.errors import InputError
 
-__all__ = ["build_model", "parse_models", "start", "time_free_run", "text_table", "html_page",
+__all__ = ["build_model", "parse_models", "start", "time_free_run", "text_table", "page",
            "environment", "fmt"]
 
 
@@ -105,30 +105,34 @@ def text_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
     return "\n".join([line(cells[0]), sep] + [line(r) for r in cells[1:]])
 
 
-def html_page(title: str, blocks: Sequence[tuple[str, object]]) -> str:
-    """A self-contained page through the one report builder (:class:`physics.report.Report`).
-    ``blocks`` are (kind, content): ``("h2", text)``, ``("p", text)``, ``("html", raw)``,
-    ``("table", (header, rows))``, ``("img", path)``, ``("pre", text)``."""
+def page(title: str, blocks: Sequence[tuple[str, object]]):
+    """A suite's page through the one report builder (a :class:`physics.report.Report`;
+    write it with ``.write_index(out, old_name="SUITE.html")``).  ``blocks`` are (kind,
+    content): ``("h2", text)``, ``("p", text or (text, links))``, ``("html", raw)``, ``("table", (header, rows))``
+    (headers read through :func:`physics.columns.column`), ``("img", (path, caption))``,
+    ``("pre", text)``."""
     from physics.report import Report
     rep = Report(title)
     for kind, content in blocks:
         if kind in ("h2", "h3"):
             rep.heading(str(content), level=int(kind[1]))
-        elif kind == "p":
-            rep.paragraph(str(content))
+        elif kind == "p":   # text, or (text, {words: address})
+            text, links = content if isinstance(content, tuple) else (content, None)
+            rep.paragraph(str(text), links=links)
         elif kind == "html":
             rep.raw(str(content))
         elif kind == "pre":
             rep.preformatted(str(content))
         elif kind == "img":
-            rep.image(content, Path(content).stem.replace("_", " "))
+            path, caption = content
+            rep.image(path, caption)
         elif kind == "table":
             header, rows = content
             rep.table([dict(zip(header, r["cells"] if isinstance(r, dict) else r)) for r in rows],
-                      columns=[str(h) for h in header])
+                      columns=[str(h) for h in header], missing="not applicable to this row")
         else:  # pragma: no cover - programming error
             raise ValueError(kind)
-    return rep.to_html()
+    return rep
 
 
 def environment() -> dict:

@@ -14,7 +14,7 @@ model lacks.  The physics simulator that generated the data is scored beside the
 networks (its error is the sensor noise).  There are no published figures for these
 synthetic data; the table states which model wins where.
 
-Outputs: ``eap.json``, ``eap.csv``, ``eap.html`` (self-contained) and ``eap.png``.
+Outputs: ``eap.json``, ``eap.csv``, ``index.html`` (self-contained; ``eap.html`` redirects to it) and ``eap.png``.
 """
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ import numpy as np
 
 from physics.errors import InputError
 from physics.fileio import atomic_path, write_json, write_text
+from physics.plotting import legend_outside
 
 from . import common
 
@@ -91,7 +92,7 @@ def run(models=None, out: str | os.PathLike = "eap-benchmark", *, quick: bool = 
     report = _report(summary, names, quick, ds_path, time.perf_counter() - t0, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["winners_text"],
-                  "report: eap.html (JSON eap.json; train-compare report compare/report.html) in the output folder")
+                  "report: index.html (JSON eap.json; train-compare report compare/index.html) in the output folder")
     return report
 
 
@@ -181,9 +182,9 @@ def _write_outputs(out: Path, report: dict) -> None:
                     hatch="//" if r["role"] == "reference" else None, edgecolor="k", linewidth=0.4)
     axes[0].set_yscale("log")
     axes[0].set_xticks(x, [GROUP_LABELS[g] for g in GROUPS])
-    axes[0].set_ylabel("free-run NRMSE (%)")
+    axes[0].set_ylabel("free-run NRMSE [%]")
     axes[0].axhline(5.0, color="r", lw=0.8, ls="--", label="5 % target (held-out RH)")
-    axes[0].legend(fontsize=7, ncol=2)
+    axes[0].legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12), frameon=False)
     axes[0].grid(axis="y", which="both", alpha=0.3)
     axes[0].set_title("eap suite: free-run error by test group")
     for r in rows:
@@ -192,14 +193,14 @@ def _write_outputs(out: Path, report: dict) -> None:
             axes[1].plot([float(k) for k in by], list(by.values()), marker="o", label=r["model"],
                          ls="--" if r["role"] == "reference" else "-")
     axes[1].set_yscale("log")
-    axes[1].set_xlabel("RH (%)")
-    axes[1].set_ylabel("free-run NRMSE (%)")
+    axes[1].set_xlabel("RH [%] (nominal level)")
+    axes[1].set_ylabel("free-run NRMSE [%]")
     axes[1].set_title("error by RH level (held-out levels: 50, 70, 90 % by default)")
     axes[1].grid(alpha=0.3, which="both")
-    axes[1].legend(fontsize=7)
+    legend_outside(axes[1], fontsize=7)
     fig.tight_layout()
     with atomic_path(out / "eap.png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=110, format="png", bbox_inches="tight")
     plt.close(fig)
 
     hrows = [{"class": "pub" if r["role"] == "reference" else "", "cells": c}
@@ -214,8 +215,10 @@ def _write_outputs(out: Path, report: dict) -> None:
         ("h2", "Results"),
         ("table", (HEADER, hrows)),
         ("pre", "\n".join(report["winners_text"])),
-        ("img", out / "eap.png"),
-        ("p", f"Full train-compare report (overlays, Bode plots, bundles): {out / 'compare' / 'report.html'}"),
+        ("img", (out / "eap.png", "free-run NRMSE [%] by test group and by nominal RH level, per model "
+                                  "(hatched, dashed: the physics reference)")),
+        ("p", ("Full train-compare report (overlays, Bode plots, bundles): compare/index.html",
+               {"compare/index.html": "compare/index.html"})),
         ("pre", json.dumps(report["environment"], indent=1)),
     ]
-    write_text(out / "eap.html", common.html_page("eap benchmark: humidity suite", blocks))
+    common.page("eap benchmark: humidity suite", blocks).write_index(out, old_name="eap.html")

@@ -15,7 +15,7 @@ physics part has the default effects only, so the data contain physics it lacks.
    training capped at ``curve_budget_s`` seconds; the validation records (early
    stopping) and the test records are the same for every point.
 
-Outputs: ``greybox.json``, ``greybox.csv``, ``greybox.html``, ``greybox_efficiency.png``.
+Outputs: ``greybox.json``, ``greybox.csv``, ``index.html`` (``greybox.html`` redirects to it), ``greybox_efficiency.png``.
 """
 from __future__ import annotations
 
@@ -107,7 +107,7 @@ def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = 
     report = _report(full, curve, names, quick, budget, ds_path, time.perf_counter() - t_start, out)
     _write_outputs(out, report)
     common.finish(echo, format_table(report), report["findings"],
-                  "report: greybox.html (JSON greybox.json) in the output folder")
+                  "report: index.html (JSON greybox.json) in the output folder")
     return report
 
 
@@ -240,8 +240,8 @@ def _write_outputs(out: Path, report: dict) -> None:
                        lw=0.9, label=lab)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("training data (s of records; 1, 2, 4, 8, all records)")
-    ax.set_ylabel("free-run NRMSE on held-out RH (%)")
+    ax.set_xlabel("training data [s] (1, 2, 4, 8, all records)")
+    ax.set_ylabel("free-run NRMSE on held-out RH [%]")
     ax.set_title(f"grey-box study: data efficiency ({_missing_physics(report)} missing from the hybrid's physics)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
@@ -261,7 +261,8 @@ def _write_outputs(out: Path, report: dict) -> None:
         ("pre", "\n".join(report["findings"])),
         ("h2", "Data efficiency"),
         ("table", _curve_rows(report)),
-        ("img", out / "greybox_efficiency.png"),
+        ("img", (out / "greybox_efficiency.png", "free-run NRMSE on held-out RH [%] against the seconds of training "
+                                                 "data, per model; dashed: the physics alone")),
         ("pre", json.dumps(report["environment"], indent=1)),
     ]
-    write_text(out / "greybox.html", common.html_page("eap benchmark: grey-box study", blocks))
+    common.page("eap benchmark: grey-box study", blocks).write_index(out, old_name="greybox.html")

@@ -214,8 +214,9 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
         save_models: bool = True, references: bool = True, settings: ParallelSettings | None = None,
         echo=print) -> dict:
     """Train ``models`` (default: all) on the Silverbox training data and write the report
-    to ``out``: ``silverbox.json``, ``silverbox.csv``, ``silverbox.html``, two PNGs and (with
-    ``save_models``) one bundle per model in ``out/models/``.  Returns the JSON content.
+    to ``out``: ``silverbox.json``, ``silverbox.csv``, ``index.html`` (``silverbox.html``
+    redirects to it), two PNGs and (with ``save_models``) one bundle per model in
+    ``out/models/``.  Returns the JSON content.
     ``settings``: where the models train (:mod:`physics.parallel`, one task per model)."""
 
     names, overrides, out = common.start(models, ("ff", "rbf", "narx", "lstm", "gru"), overrides, out)
@@ -277,7 +278,7 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
     }
     _write_outputs(out, report, rows, preds, tests)
     common.finish(echo, format_table(report), [target["summary"]],
-                  "report: silverbox.html (JSON silverbox.json) in the output folder")
+                  "report: index.html (JSON silverbox.json) in the output folder")
     return report
 
 
@@ -355,7 +356,7 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
     ax.axhspan(lo, hi, color="green", alpha=0.15, label=f"best published {lo}-{hi} mV")
     ax.set_yscale("log")
     ax.set_xticks(x, [TEST_LABELS[t] for t in TESTS])
-    ax.set_ylabel("free-run RMSE (mV)")
+    ax.set_ylabel("free-run RMSE [mV]")
     ax.set_title("Silverbox: simulation RMSE, ours vs published")
     ax.grid(axis="y", which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))
@@ -372,7 +373,7 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
         tt = np.arange(len(rec)) / FS
         ax2 = ax.twinx()
         ax2.plot(tt, rec.y * 1e3, color="0.85", lw=0.4)
-        ax2.set_ylabel("measured output (mV)", color="0.6", fontsize=8)
+        ax2.set_ylabel("measured output [mV]", color="0.6", fontsize=8)
         ax2.tick_params(axis="y", colors="0.6", labelsize=7)
         ax.set_zorder(ax2.get_zorder() + 1)
         ax.patch.set_visible(False)
@@ -385,9 +386,9 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
             ax.axvspan(N_ARROW_NO_EXTRAP / FS, tt[-1], color="orange", alpha=0.1,
                        label="extrapolation region")
         ax.set_title(f"{TEST_LABELS[t]}: simulation error", fontsize=9)
-        ax.set_ylabel("error (mV)")
+        ax.set_ylabel("error [mV]")
         ax.legend(fontsize=6, ncol=3, loc="upper left")
-    axes[-1].set_xlabel("time (s)")
+    axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     with atomic_path(out / "silverbox_errors.png") as tmp:
         fig.savefig(tmp, dpi=100, format="png")
@@ -408,9 +409,11 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
         ("h2", "Results"),
         ("table", (HEADER, hrows)),
         ("p", report["target"]["summary"]),
-        ("img", out / "silverbox_rmse.png"),
+        ("img", (out / "silverbox_rmse.png", "free-run RMSE [mV] on each test signal: our models, our linear and "
+                                             "polynomial references and the published results (hatched)")),
         ("h2", "Errors over time"),
-        ("img", out / "silverbox_errors.png"),
+        ("img", (out / "silverbox_errors.png", "simulation error [mV] over time on each test signal (the measured "
+                                               "output faintly behind, right axis [mV])")),
         ("h2", "Settings"),
         ("pre", json.dumps(settings, indent=1)),
         ("pre", json.dumps(report["environment"], indent=1)),
@@ -418,4 +421,4 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
     if report["data"]["limited_smoke_run"]:
         blocks.insert(0, ("p", "SMOKE RUN on a truncated data set: figures are not comparable "
                                "with the published ones."))
-    write_text(out / "silverbox.html", common.html_page("Silverbox benchmark", blocks))
+    common.page("Silverbox benchmark", blocks).write_index(out, old_name="silverbox.html")

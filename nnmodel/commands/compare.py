@@ -15,7 +15,7 @@ NAME = "compare"
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series CSV/.mat files (DATA_FORMAT.md) or frequency-"
                "response CSVs (freq_Hz, mag_m_per_V, phase_deg). Writes report.json, metrics.csv, bands.csv, "
-               "by_rh.csv, PNGs and report.html into --out.")
+               "by_rh.csv, PNGs and the page index.html into --out.")
 
 
 # ------------------------------------------------------------------ shared with `eap identify`
@@ -176,6 +176,7 @@ def run(args) -> int:
     with writing(args, inputs=_inputs(args)) as tmp:
         write_comparison_report(res, tmp, provenance=provenance(inputs=args.measurements),
                                 title=f"eap compare: {predictor.name}")
+    from physics.columns import quantity
     d = Path(args.out)
     print(f"model: {predictor.name}")
     for r in res.records:
@@ -183,8 +184,8 @@ def run(args) -> int:
         parts = [f"{Path(r.source).name} (RH {r.rh:.3g} %):"]
         if tm:
             rt = tm["residual_tests"]
-            parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {tm['nrmse']:.3g}, corr {100 * tm['correlation']:.1f} %,"
-                         f" RMSE {1e6 * tm['rmse']:.3g} um; residual "
+            parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {100 * tm['nrmse']:.3g} %, corr "
+                         f"{100 * tm['correlation']:.1f} %, RMSE {quantity(tm['rmse'], 'm')}; residual "
                          f"{'white' if rt['white'] else 'correlated'} ({rt['autocorrelation_outside']}/"
                          f"{rt['autocorrelation_lags']} lags outside 99 %), "
                          f"{'independent of' if rt['independent_of_input'] else 'correlated with'} the input "
@@ -200,5 +201,5 @@ def run(args) -> int:
             for row in res.by_rh))
     for w in res.warnings:
         print(f"  warning: {w}")
-    print(f"wrote {d}/report.html, report.json, metrics.csv and plots in {time.perf_counter() - t0:.1f} s")
+    print(f"wrote {d}/index.html, report.json, metrics.csv and plots in {time.perf_counter() - t0:.1f} s")
     return 0

@@ -58,7 +58,7 @@ def run(args) -> int:
     ok = (found == hidden) if hidden else (found is None)
     print(f"result: hidden {hidden or 'none'}, ranked first {top}, verdict {found} -> "
           f"{'correct' if ok else 'NOT correct'}")
-    print(f"report: {args.out}/report.html")
+    print(f"report: {args.out}/index.html")
     return 0
 
 
@@ -92,5 +92,5 @@ def _missing_physics(args) -> int:
           f"{', '.join(ids)}: {after.verdict.status}" + (f", RMS {1e6 * w.fit.rmse:.3g} µm "
                                                           f"({w.fit.rmse / after.noise_floor:.2f}× the noise floor)"
                                                           if w else ""))
-    print(f"reports: {args.out}/before/report.html, {args.out}/after/report.html")
+    print(f"reports: {args.out}/before/index.html, {args.out}/after/index.html")
     return 0

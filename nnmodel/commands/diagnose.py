@@ -14,7 +14,7 @@ from .compare import add_frf_arguments, add_measurement_arguments, frf_options, 
 NAME = "diagnose"
 HELP = "diagnose a model against measurements: where it fails, which effect is missing (ranked, with statistics)"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series records (DATA_FORMAT.md): several records may differ "
-               "in signal, amplitude and RH. Writes diagnosis.json, PNGs and report.html into --out; --apply also "
+               "in signal, amplitude and RH. Writes diagnosis.json, PNGs and the page index.html into --out; --apply also "
                "writes the extended device file (fitted values, the missing effect added to its effect list).")
 
 
@@ -112,6 +112,6 @@ def run(args) -> int:
     if args.apply:
         ap = out["applied"]
         print(f"applied: {d / ap['written']} ({ap['usage']})" if ap.get("written") else f"applied: {ap['reason']}")
-    print(f"wrote {d}/diagnosis.json, {d}/report.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
+    print(f"wrote {d}/diagnosis.json, {d}/index.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
           f"in {res.timings['total']:.1f} s")
     return 0

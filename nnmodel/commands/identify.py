@@ -13,7 +13,7 @@ from .compare import add_frf_arguments, add_measurement_arguments, frf_options, 
 NAME = "identify"
 HELP = "identify device parameters from measurements (least squares or the thesis Nelder-Mead); writes a device YAML"
 DESCRIPTION = (HELP + ". Writes NAME.yaml (a device file with the identified values, their units and sources), "
-               "report.json, parameters.csv, Bode/correlation PNGs and report.html into --out.")
+               "report.json, parameters.csv, Bode/correlation PNGs and the page index.html into --out.")
 
 
 def add_arguments(p):
@@ -69,7 +69,8 @@ def run(args) -> int:
           f"{sum(t.freq.size for t in prob.targets)} frequencies, RH levels {', '.join(f'{x:g}' for x in prob.levels)} %")
     for name, f in res.fits.items():
         mark = " (written)" if name == res.primary else ""
-        print(f"method {name}{mark}: J_err {res.j_err_initial:.4g} -> {f.j_err:.4g} m/V, {f.nfev} model evaluations"
+        print(f"method {name}{mark}: J_err {1e3 * res.j_err_initial:.4g} -> {1e3 * f.j_err:.4g} mm/V, {f.nfev} model "
+              "evaluations"
               + (f", {f.nit} iterations" if f.nit is not None else "") + f", {f.wall_s:.2f} s; {f.message}")
         for r in res.param_rows(f):
             print(f"  {r['parameter']:16s} = {r['value']:.6g} ± {r['std_error']:.3g} {r['unit']} "
@@ -79,5 +80,5 @@ def run(args) -> int:
         print(f"  warning: {w}")
     print(f"total {res.wall_s:.2f} s, {res.n_evaluations} model evaluations "
           f"(thesis loop for these data: {res.thesis_equivalent_s() / 86400:.3g} days)")
-    print(f"wrote {d / out['device_written']}, {d}/report.html, report.json, parameters.csv")
+    print(f"wrote {d / out['device_written']}, {d}/index.html, report.json, parameters.csv")
     return 0

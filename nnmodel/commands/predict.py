@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physics.columns import quantity
 from physics.errors import InputError
 
 from ._common import add_quiet_option, provenance, stage_log
@@ -109,7 +110,7 @@ def run(args) -> int:
         raise InputError("the model produced non-finite values for this input (diverged)")
     if ts.deflection is not None:
         fit = {"rmse": rmse(ts.deflection, pred)}
-        line += f"; against the measured deflection: RMSE {fit['rmse']:.4g} {out_unit}"
+        line += f"; against the measured deflection: RMSE {quantity(fit['rmse'], out_unit)}"
         try:
             fit["fit_percent"] = fit_percent(ts.deflection, pred)
             line += f", fit {fit['fit_percent']:.1f} %"

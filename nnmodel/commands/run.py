@@ -93,14 +93,16 @@ def run(args) -> int:
 
 
 def _write_report(d: Path, args, t0: float) -> dict:
-    from nnmodel.story import dataset_facts, loop_stage, write_page
+    from nnmodel.explain import notes
+    from nnmodel.story import DIAGNOSIS_ANCHOR, dataset_facts, loop_stage, write_page
     from nnmodel.traincompare import table_rows
     report = {"physics": _physics_stage(d)}
     if not args.physics_only:
         summary = _neural_stage(d, args)
         report["neural"] = {k: v for k, v in summary.items() if k != "models"}
-        report["neural"].update({"table": table_rows(summary["models"]), "report": "compare/report.html",
-                                 "dataset": dataset_facts(d / "dataset")})
+        report["neural"].update({"table": table_rows(summary["models"]), "report": "compare/index.html",
+                                 "dataset": dataset_facts(d / "dataset"),
+                                 "notes": notes(summary, diagnosis=DIAGNOSIS_ANCHOR)})
     report["loop"] = loop_stage(d)
     report["runtime_s"] = time.perf_counter() - t0
     report["provenance"] = provenance()

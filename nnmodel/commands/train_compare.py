@@ -14,7 +14,7 @@ HELP = "train neural models on a dataset and compare them (free run, held-out RH
 def add_arguments(p):
     p.add_argument("dataset", help="dataset folder (from `eap generate`)")
     p.add_argument("--models", default="ff,rbf,narx,lstm", help="comma-separated: ff, rbf, narx, lstm, gru")
-    add_output_options(p, "runs/train-compare", "run folder (models/, compare.json, report.html)")
+    add_output_options(p, "runs/train-compare", "run folder (models/, compare.json, the page index.html)")
     p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
     p.add_argument("--max-time-s", type=float, default=None,
@@ -80,5 +80,5 @@ def run(args) -> int:
     for f in (f for r in summary["models"].values() for f in r.get("shortfalls", [])):
         first, *causes = sentences(f)
         print(first + "".join(f"\n  - {c}" for c in causes))
-    print(f"report: {args.out}/report.html")
+    print(f"report: {args.out}/index.html")
     return 0

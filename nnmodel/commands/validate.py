@@ -23,7 +23,7 @@ def add_arguments(p):
     p.add_argument("--amplitudes-V", type=float, nargs="+", default=list(AMPLITUDES),
                    help="sine amplitudes of the sweep [V]")
     p.add_argument("--quick", action="store_true", help="three amplitudes and no square pulse (smoke run)")
-    add_output_options(p, "runs/validate", "report folder (PNG plots, figures.json, report.html)")
+    add_output_options(p, "runs/validate", "report folder (PNG plots, figures.json, index.html)")
 
 
 def run(args) -> int:
@@ -36,5 +36,5 @@ def run(args) -> int:
     ok = all(figs[dev]["small_signal"]["max_mag_err_pct"] <= 1.0 and figs[dev]["small_signal"]["max_phase_err_deg"] <= 1.0
              for dev in figs["devices"])
     print(f"small-signal criterion (1 % / 1° over 0.1–50 Hz): {'met' if ok else 'NOT met'}; "
-          f"wrote {d / 'report.html'}, {d / 'figures.json'} and the PNG plots")
+          f"wrote {d / 'index.html'}, {d / 'figures.json'} and the PNG plots")
     return 0 if ok else 1

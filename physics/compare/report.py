@@ -15,24 +15,25 @@ def _slug(text: str) -> str:
 
 
 def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float | None = None) -> None:
-    """Measured and model deflection [mm], the residual below, and a zoom on the last
+    """Measured and model deflection [µm], the residual below, and a zoom on the last
     ``zoom_s`` seconds (default: 2 s or a tenth of the record, the shorter)."""
     import matplotlib.pyplot as plt
-    from ..plotting import envelope, save
+    from ..plotting import envelope, legend_outside, save
+    k = 1e6
     fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
-    ax[0].plot(*envelope(r.time, 1e3 * r.measured), lw=0.7, label="measured")
-    ax[0].plot(*envelope(r.time, 1e3 * r.predicted), lw=0.7, label="model")
-    ax[0].set_ylabel("deflection [mm]")
-    ax[0].legend(fontsize=8, loc="upper right")
-    ax[1].plot(*envelope(r.time, 1e3 * (r.measured - r.predicted)), lw=0.6, color="k")
-    ax[1].set_ylabel("residual [mm]")
+    ax[0].plot(*envelope(r.time, k * r.measured), lw=0.7, label="measured")
+    ax[0].plot(*envelope(r.time, k * r.predicted), lw=0.7, label="model")
+    ax[0].set_ylabel("deflection [µm]")
+    legend_outside(ax[0])
+    ax[1].plot(*envelope(r.time, k * (r.measured - r.predicted)), lw=0.6, color="k")
+    ax[1].set_ylabel("residual [µm]")
     ax[1].sharex(ax[0])
     span = float(r.time[-1] - r.time[0])
     zoom = min(2.0, 0.1 * span) if zoom_s is None else float(zoom_s)
     z = r.time >= r.time[-1] - zoom
-    ax[2].plot(*envelope(r.time[z], 1e3 * r.measured[z]), lw=0.9, label="measured")
-    ax[2].plot(*envelope(r.time[z], 1e3 * r.predicted[z]), lw=0.9, ls="--", label="model")
-    ax[2].set_ylabel("zoom [mm]")
+    ax[2].plot(*envelope(r.time[z], k * r.measured[z]), lw=0.9, label="measured")
+    ax[2].plot(*envelope(r.time[z], k * r.predicted[z]), lw=0.9, ls="--", label="model")
+    ax[2].set_ylabel(f"last {zoom:.3g} s [µm]")
     ax[2].set_xlabel("time [s]")
     for a in ax:
         a.grid(alpha=0.3)
@@ -62,29 +63,30 @@ def _plot_bode_record(r: RecordComparison, path):
 
 def _plot_bands(res: ComparisonResult, path):
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..columns import band
+    from ..plotting import legend_outside, save
     bands = res.settings["bands_Hz"]
     if not bands:
         return False
-    labels = [f"{a:g}–{b:g} Hz" for a, b in bands]
+    labels = [band(a, b) for a, b in bands]
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.4))
     width = 0.8 / max(len(res.records), 1)
     x = np.arange(len(bands))
     for i, r in enumerate(res.records):
         rows = r.summary["bands"]
-        nr = [row.get("nrmse_in_band") or 0.0 for row in rows]
+        nr = [100 * (row.get("nrmse_in_band") or 0.0) for row in rows]
         lm = [row.get("log_mag_rms_dB") or 0.0 for row in rows]
         name = Path(r.source).name[:25]
         if r.kind == "timeseries":
             ax[0].bar(x + i * width, nr, width, label=name)
         ax[1].bar(x + i * width, lm, width, label=name)
-    ax[0].set_ylabel("residual NRMSE in band")
-    ax[1].set_ylabel("FRF log-magnitude RMS error [dB]")
+    ax[0].set_ylabel("residual NRMSE in band [%]")
+    ax[1].set_ylabel("|H| error RMS [dB]")
     for a in ax:
         a.set_xticks(x + 0.4 - width / 2)
         a.set_xticklabels(labels, fontsize=8)
         a.grid(alpha=0.3, axis="y")
-    ax[1].legend(fontsize=7)
+    legend_outside(ax[1])
     fig.tight_layout()
     save(fig, path)
     return True
@@ -92,7 +94,7 @@ def _plot_bands(res: ComparisonResult, path):
 
 def _plot_rh(res: ComparisonResult, path):
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..plotting import rh_axis, save
     rows = res.by_rh
     rh = [r["rh_pct"] for r in rows]
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
@@ -104,7 +106,7 @@ def _plot_rh(res: ComparisonResult, path):
     ax[1].plot(rh, [np.nan if v is None else 1e3 * v for v in je], "s-", color="C1")
     ax[1].set_ylabel("J_err (eq. 13) [mm/V]")
     for a in ax:
-        a.set_xlabel("RH [%]")
+        rh_axis(a, rh)
         a.grid(alpha=0.3)
     fig.tight_layout()
     save(fig, path)
@@ -112,10 +114,10 @@ def _plot_rh(res: ComparisonResult, path):
 
 def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict | None = None,
                             title: str = "Model vs measurement") -> dict:
-    """Write ``report.json``, ``metrics.csv``, ``bands.csv``, PNGs and ``report.html`` into
-    ``out_dir`` (all atomically); returns the JSON dict."""
+    """Write ``report.json``, ``metrics.csv``, ``bands.csv``, PNGs and the page ``index.html``
+    into ``out_dir`` (all atomically); returns the JSON dict."""
     from ..fileio import write_json
-    from ..report import Report, header, jsonable, write_csv
+    from ..report import Report, format_value, header, jsonable, write_csv
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     plots: dict[str, list[str]] = {}
@@ -167,34 +169,44 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     for w in res.warnings:
         rep.warning(w)
     rep.heading("Summary")
-    rep.table(jsonable(res.overall), caption="overall (fit %, NRMSE, correlation: time records; "
-                                             "J_err: eq. 13 over all compared frequencies, m/V)")
+    rep.table(jsonable(res.overall), caption="all records (fit, NRMSE, correlation: time records; J_err: eq. 13 "
+                                             "over every compared frequency)")
     rep.table([{k: v for k, v in row.items() if k != "source"} | {"record": Path(row["source"]).name}
                for row in rows], columns=["record", "kind", "rh_pct", "fit_percent", "nrmse", "rmse_m",
                                           "correlation", "j_err_m_per_V", "log_mag_rms_dB", "phase_rms_deg",
-                                          "frf_points"], caption="metrics per measurement")
+                                          "frf_points"], caption="metrics per measurement",
+              missing="not defined for this kind of record (a frequency-response file has no time metrics)")
     if len(res.by_rh) >= 2:
         rep.heading("Error by relative humidity")
-        rep.table(res.by_rh)
-        rep.image(d / "rh.png", caption="fit and J_err by RH")
+        rep.table(res.by_rh, missing="no record of that kind at this RH")
+        rep.image(d / "rh.png", caption="fit [%] and J_err [mm/V] by nominal RH level")
     if brows:
         rep.heading("Error by frequency band")
-        rep.table([{k: v for k, v in b.items() if k != "source"} | {"record": Path(b["source"]).name}
-                   for b in brows], columns=["record", "f_lo_Hz", "f_hi_Hz", "residual_rms_m", "nrmse_in_band",
-                                             "j_err_m_per_V", "log_mag_rms_dB", "phase_rms_deg", "frf_points"])
+        rep.table([{"record": Path(b["source"]).name, "band_Hz": [b["f_lo_Hz"], b["f_hi_Hz"]]}
+                   | {k: v for k, v in b.items() if k not in ("source", "rh_pct", "f_lo_Hz", "f_hi_Hz")}
+                   for b in brows], missing="no compared frequency, or no time record, in this band")
         if "bands.png" in extra:
-            rep.image(d / "bands.png", caption="errors by frequency band")
+            rep.image(d / "bands.png", caption="residual NRMSE [%] and |H| error [dB] by frequency band, per record")
     for r in res.records:
-        rep.heading(f"{Path(r.source).name} (RH {r.rh:.3g} %)", level=3)
+        name = Path(r.source).name
+        rep.heading(f"{name} (RH {r.rh:.3g} %)", level=3)
         est = r.summary["frf_metrics"].get("estimator")
         if est:
-            rep.paragraph(f"FRF estimate: {est}", note=True)
+            rep.paragraph("FRF estimate: " + (", ".join(f"{k} {format_value(v)}" for k, v in est.items())
+                                              if isinstance(est, dict) else str(est)), note=True)
         for f in r.summary["plots"]:
-            rep.image(d / f, caption=f)
+            rep.image(d / f, caption=_caption(f, name))
     rep.heading("Model and settings")
     rep.json_block(jsonable(res.predictor), "model")
     rep.json_block(jsonable(res.settings), "settings")
     if provenance:
         rep.json_block(provenance, "provenance")
-    rep.write(d / "report.html")
+    rep.write_index(d)
     return out
+
+
+def _caption(png: str, record: str) -> str:
+    """What a per-record figure shows."""
+    if png.startswith("time_"):
+        return f"{record}: measured and model deflection [µm], the residual [µm] and a zoom on the record's end"
+    return f"{record}: measured and model frequency response |H| [mm/V], phase [°] and coherence"

@@ -18,8 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..columns import band
 from ..fileio import write_json, write_text
 from ..identify import write_device
+from ..outputs import final_path
 from ..report import Report, header, jsonable
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
@@ -144,7 +146,7 @@ def _plot_breakdown(res: DiagnosisResult, path) -> None:
         x = np.arange(len(ra.by_band))
         ax[0].bar(x + (j - 0.5) * width, [1e6 * b["residual_rms_m"] for b in ra.by_band], width, color=col, label=lab)
         ax[0].set_xticks(x)
-        ax[0].set_xticklabels([f"{b['band_Hz'][0]:.3g}–{b['band_Hz'][1]:.3g}" for b in ra.by_band], fontsize=7)
+        ax[0].set_xticklabels([band(*b["band_Hz"]) for b in ra.by_band], fontsize=7)
         xa = np.arange(len(ra.by_amplitude))
         ax[1].bar(xa + (j - 0.5) * width, [1e6 * b["residual_rms_m"] for b in ra.by_amplitude], width, color=col,
                   label=lab)
@@ -153,10 +155,10 @@ def _plot_breakdown(res: DiagnosisResult, path) -> None:
         xr = np.arange(len(ra.by_rh))
         ax[2].bar(xr + (j - 0.5) * width, [1e6 * b["residual_rms_m"] for b in ra.by_rh], width, color=col, label=lab)
         ax[2].set_xticks(xr)
-        ax[2].set_xticklabels([f"RH {b['rh_pct']:g} %" for b in ra.by_rh], fontsize=7)
-    for a, t in zip(ax, ("by frequency band [Hz]", "by amplitude", "by RH")):
+        ax[2].set_xticklabels([f"RH {round(b['rh_pct']):.0f} %" for b in ra.by_rh], fontsize=7)
+    for a, t in zip(ax, ("by frequency band", "by amplitude", "by nominal RH level")):
         a.set_title(f"RMS error {t}", fontsize=9)
-        a.set_ylabel("µm")
+        a.set_ylabel("RMS error [µm]")
         a.set_yscale("log")
         a.grid(alpha=0.3, axis="y")
         a.legend(fontsize=7)
@@ -166,7 +168,7 @@ def _plot_breakdown(res: DiagnosisResult, path) -> None:
 
 def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name: str | None = None,
                     provenance: dict | None = None, protect=()) -> dict:
-    """Write ``diagnosis.json``, the PNGs and ``report.html`` into ``out_dir``; with
+    """Write ``diagnosis.json``, the PNGs and the page ``index.html`` into ``out_dir``; with
     ``apply`` also the extended device file ``NAME.yaml`` (the fitted device with the
     missing effect added to its ``default_effects``; nothing when the verdict is null).
     Returns the JSON dict."""
@@ -196,10 +198,10 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
                 "written by eap identify on", f"written by eap diagnose --apply ({w.effect} added) on", 1)
             write_text(path, text, protect=tuple(protect))
             applied = {"written": path.name, "effects": [e for e in w.fit.effects if e != "double_layer"],
-                       "usage": f"eap compare MEASUREMENT --model {path} --effects default"}
+                       "usage": f"eap compare MEASUREMENT --model {final_path(path)} --effects default"}
             written.append(path.name)
     out["applied"] = applied
-    out["files"] = ["diagnosis.json", "report.html"] + written
+    out["files"] = ["diagnosis.json", "index.html", "report.html"] + written
     if provenance:
         out["provenance"] = provenance
     write_json(d / "diagnosis.json", jsonable(out))
@@ -272,16 +274,18 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
         for w_ in b.warnings:
             rep.warning(w_)
     rep.heading("Records")
-    rep.table([{k: r.describe()[k] for k in ("source", "kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct",
+    rep.table([{k: r.describe()[k] for k in ("kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct",
                                                "band_Hz", "fs_analysis_Hz", "noise_floor_m", "noise_floor_source")}
-               for r in res.records])
+               | {"record": Path(r.source).name} for r in res.records],
+              columns=["record", "kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct", "band_Hz",
+                       "fs_analysis_Hz", "noise_floor_m", "noise_floor_source"])
     rep.heading("How the statistics work")
     rep.bullets([f"{k}: {t}" for k, t in out["statistics"].items()])
     rep.json_block(out["verdict"], "verdict (JSON)")
     rep.json_block(out["settings"], "settings")
     if provenance:
         rep.json_block(jsonable(provenance), "provenance")
-    rep.write(d / "report.html")
+    rep.write_index(d)
 
 
 def _correlation_panel(a, curves, xlabel: str, ylabel: str, title: str) -> None:

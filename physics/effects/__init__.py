@@ -4,7 +4,7 @@
 contract is in :mod:`physics.effects.base`, each stage's typed protocol in
 :mod:`physics.effects.stages`); an effect replaces the stage whose default it subclasses, or
 adds factors (:class:`LoadEffect`: ``load_factor``; :class:`OutputEffect`: ``output_response``).
-:func:`check_effect` runs the contract on any effect.  ``EFFECTS`` maps each id
+:func:`check_effect` runs the contract on any effect (:mod:`physics.contract`).  ``EFFECTS`` maps each id
 to its class: the built-ins of ``BUILT_IN_EFFECTS``, then those added by users with
 :func:`register`, from a file with :func:`load_effects_file` (``--effects-path FILE.py``) or
 from installed packages with :func:`load_plugins` (entry-point group ``eap.effects``).
@@ -18,7 +18,8 @@ from pathlib import Path
 
 from ..errors import InputError, arg
 from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
-from .contract import CHECKS, FAST_CHECKS, ContractReport, check_effect, declaration_problems
+from .declaration import declaration_problems
+from .catalog import BUILT_IN, BUILT_IN_EFFECTS, CHAIN, CORE, FACTOR_HOOKS, adds_factors, stage_of
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
 from .fractional_coupling import ConstantCoupling, FractionalCoupling
@@ -29,29 +30,7 @@ from .solvent_diffusion import SolventDiffusion, SolventDrag
 from .thermal import Isothermal, Thermal
 from .viscoelastic import ElasticModulus, Viscoelastic
 
-#: The stages of the model chain, in order, each as its "no effect" variant (the double layer
-#: is the model's core and always on).
-CHAIN: tuple[type[Effect], ...] = (DoubleLayer, LinearCharge, EquipotentialElectrodes, SolventDrag, ConstantCoupling,
-                                   ElasticModulus, HomogeneousSection, HumidityInvariant, Isothermal)
-#: The effects shipped with the package.
-BUILT_IN_EFFECTS: tuple[type[Effect], ...] = (DoubleLayer, NonlinearCharge, ElectrodeResistance, SolventDiffusion,
-                                              FractionalCoupling, Viscoelastic, LayeredBeam, Humidity, Thermal)
-
 EFFECTS: dict[str, type[Effect]] = {cls.id: cls for cls in BUILT_IN_EFFECTS}
-#: Ids of the effects shipped with the package (the rest were registered by users).
-BUILT_IN = tuple(EFFECTS)
-#: Factor hooks an added effect may implement (see :mod:`physics.effects.base`).
-FACTOR_HOOKS = ("load_factor", "output_response", "filter_output")
-
-
-def stage_of(cls: type[Effect]) -> type[Effect] | None:
-    """The default variant of the stage that ``cls`` fills (None: an added effect)."""
-    return next((d for d in CHAIN if issubclass(cls, d)), None)
-
-
-def adds_factors(cls: type[Effect]) -> bool:
-    """True when ``cls`` implements a factor hook."""
-    return any(callable(getattr(cls, h, None)) for h in FACTOR_HOOKS)
 
 
 def __getattr__(name):
@@ -62,6 +41,18 @@ def __getattr__(name):
 
 ENTRY_POINT_GROUP = "eap.effects"
 _PATH = arg("effects_path", "path")    # how a caller names an effect file
+
+
+#: The contract's runner, installed by :mod:`physics.contract` when ``physics`` is imported: its
+#: checks run the model and the solvers, layers above this package, which must not import them.
+_CONTRACT: list = []
+
+
+def check_effect(cls, device="ipmc_pt_eg", *, fast: bool = False, rh: float = 60.0):
+    """Run the effect contract on effect class ``cls`` (or a registered id) with ``device`` at
+    ``rh`` [%]: a :class:`physics.contract.ContractReport`, one line per check; ``fast``: the
+    quick checks only (for checks at load time).  See :mod:`physics.contract`."""
+    return _CONTRACT[-1](cls, device, fast=fast, rh=rh)
 
 
 def register(cls: type[Effect]) -> type[Effect]:
@@ -143,7 +134,6 @@ def load_plugins() -> list[str]:
     return ids
 
 
-__all__ = ["Effect", "OutputEffect", "LoadEffect", "EFFECTS", "CHAIN", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
+__all__ = ["Effect", "OutputEffect", "LoadEffect", "EFFECTS", "CHAIN", "CORE", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
            "REFERENCE", "register", "unregister", "stage_of", "adds_factors", "load_effects_file", "load_plugins",
-           "effect_classes_in_file", "user_effect_files", "ensure_registered", "check_effect", "ContractReport",
-           "CHECKS", "FAST_CHECKS", "declaration_problems"]
+           "effect_classes_in_file", "user_effect_files", "ensure_registered", "check_effect", "declaration_problems"]

@@ -23,7 +23,7 @@ def _plot_target(result: IdentificationResult, k: int, path) -> None:
         curves[f"fitted ({name})"] = (t.freq, prob.responses(f.theta)[k], {"lw": 1.1})
     coh = (t.freq, t.coherence) if t.coherence is not None else None
     plot_bode_curves(curves, path, coherence=coh,
-                         title=f"{Path(t.source).name}, RH {t.rh:g} %")
+                         title=f"{Path(t.source).name}, RH {t.rh:.3g} %")
 
 
 def _plot_corr(labels, corr, path) -> None:
@@ -48,7 +48,7 @@ def _plot_corr(labels, corr, path) -> None:
 
 def _plot_rh_maps(result: IdentificationResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..plotting import rh_axis, save
     prob, fit = result.problem, result.fit
     names = prob.per_rh
     fig, axes = plt.subplots(1, len(names), figsize=(4 * len(names), 3.2), squeeze=False)
@@ -57,17 +57,18 @@ def _plot_rh_maps(result: IdentificationResult, path) -> None:
         rh = [prob.params[i].rh for i in idx]
         ax.errorbar(rh, fit.theta[idx], yerr=1.96 * fit.std_error[idx], fmt="o-", capsize=3, label="identified")
         ax.plot(rh, [prob.params[i].initial for i in idx], "x:", color="gray", label="start")
-        ax.set_xlabel("RH [%]")
+        rh_axis(ax, rh)
         ax.set_ylabel(f"{name} [{prob.params[idx[0]].unit}]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
+    fig.tight_layout()
     save(fig, path)
 
 
 def write_identification(result: IdentificationResult, out_dir, *, name: str | None = None,
                          provenance: dict | None = None, protect=()) -> dict:
     """Write the fitted device ``NAME.yaml``, ``report.json``, ``parameters.csv``, PNGs and
-    ``report.html`` into ``out_dir``; returns the JSON dict (with the file names)."""
+    the page ``index.html`` into ``out_dir``; returns the JSON dict (with the file names)."""
     from ..fileio import write_json
     from ..report import Report, header, jsonable, write_csv
     d = Path(out_dir)
@@ -89,7 +90,7 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
         pngs.append("rh_maps.png")
     rows = result.param_rows()
     write_csv(rows, d / "parameters.csv")
-    files += ["parameters.csv", "report.json", "report.html"] + pngs
+    files += ["parameters.csv", "report.json", "index.html", "report.html"] + pngs
     out = result.to_dict()
     out["files"] = files
     out["device_written"] = dev_path.name
@@ -105,49 +106,60 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
     for w in result.warnings:
         rep.warning(w)
     rep.heading("Result")
-    rep.table({"method": fit.method, "residual": fit.residual_kind, "J_err start (eq. 13) [m/V]": result.j_err_initial,
-               "J_err fitted [m/V]": fit.j_err, "model evaluations": result.n_evaluations,
-               "wall time [s]": result.wall_s, "residual variance s²": fit.s2, "degrees of freedom": fit.dof,
+    rep.table({"method": fit.method, "residual": fit.residual_kind, "J_err at the start (eq. 13) [mm/V]":
+               1e3 * result.j_err_initial, "J_err fitted [mm/V]": 1e3 * fit.j_err,
+               "model evaluations": result.n_evaluations, "wall time [s]": result.wall_s,
+               "residual variance s²": fit.s2, "degrees of freedom": fit.dof,
                "condition number of J": fit.condition, "converged": fit.success, "message": fit.message,
-               "thesis loop, same data [days]": result.thesis_equivalent_s() / 86400})
-    rep.table([{k: r[k] for k in ("parameter", "unit", "initial", "value", "std_error", "rel_std_error",
-                                  "ci95_lo", "ci95_hi", "scale", "lower_bound", "upper_bound")} for r in rows],
-              caption="identified parameters (SI; std_error 1σ, Bates & Watts linear approximation scaled by s²; "
-                      "95 % interval)")
+               "thesis loop, same data [days]": result.thesis_equivalent_s() / 86400},
+              notes=[f"s²: variance of the normalised ({fit.residual_kind}) residual at the fit, dimensionless; "
+                     "J_err: eq. 13 of the thesis."])
+    rep.table([_shown(r) for r in rows], columns=["parameter", "initial", "value", "std_error", "rel_std_error",
+                                                  "ci95_lo", "ci95_hi", "lower_bound", "upper_bound"],
+              caption="identified parameters, each in its row's unit (SI); 1σ: Bates & Watts linear "
+                      "approximation scaled by s²; 95 % interval")
     if result.problem.per_rh:
         table_v = []
         for lv in result.problem.levels:
-            row = {"RH [%]": lv}
+            row = {"rh_pct": lv}
             for i, p in enumerate(result.problem.params):
                 if p.rh == lv:
                     row[f"{p.name} [{p.unit}]"] = float(fit.theta[i])
-                    row[f"± {p.name}"] = float(fit.std_error[i])
+                    row[f"{p.name} 1σ [{p.unit}]"] = float(fit.std_error[i])
             table_v.append(row)
         rep.heading("Per-RH values (Table V style)")
-        rep.table(table_v)
-        rep.image(d / "rh_maps.png", caption="per-RH values with 95 % intervals")
+        rep.table(table_v, digits=4)
+        rep.image(d / "rh_maps.png", caption="identified per-RH values with 95 % intervals, and their starts, "
+                                             "by nominal RH level")
     if "correlation.png" in pngs:
-        rep.image(d / "correlation.png", caption="correlation matrix of the estimates")
+        rep.image(d / "correlation.png", caption="correlation matrix of the estimates (−1 … 1)")
     for name_, f in result.fits.items():
         if name_ != result.primary:
             rep.heading(f"Also fitted: {name_}")
-            rep.table([{k: r[k] for k in ("parameter", "value", "std_error", "rel_std_error")}
-                       for r in result.param_rows(f)],
-                      caption=f"{f.method}: J_err {f.j_err:.4g} m/V, {f.nfev} evaluations, {f.nit} iterations, "
-                              f"{f.message}")
+            rep.table([_shown(r) for r in result.param_rows(f)],
+                      columns=["parameter", "value", "std_error", "rel_std_error"],
+                      caption=f"{f.method}: J_err {1e3 * f.j_err:.3g} mm/V, {f.nfev} evaluations, {f.nit} "
+                              f"iterations, {f.message}")
             for w in f.warnings:
                 rep.warning(f"{name_}: {w}")
     if fit.starts:
         rep.heading("Multi-start")
+        units = [p.unit for p in result.problem.params]
         rep.table([{"start": s["start"], "cost": s.get("cost"), "evaluations": s.get("nfev"),
-                    **{lab: v for lab, v in zip(result.problem.labels, s.get("theta", []))}} for s in fit.starts])
+                    **{f"{lab} [{u}]": v for lab, u, v in zip(result.problem.labels, units, s.get("theta", []))}}
+                   for s in fit.starts], digits=4)
     rep.heading("Measured and fitted frequency responses")
-    for fn in pngs:
-        if fn.startswith("bode_"):
-            rep.image(d / fn, caption=fn)
+    for fn, t in zip([f for f in pngs if f.startswith("bode_")], result.problem.targets):
+        rep.image(d / fn, caption=f"{Path(t.source).name} (RH {t.rh:.3g} %): measured, start and fitted |H| "
+                                  "[mm/V], phase [°] and coherence")
     rep.heading("Settings")
     rep.json_block(jsonable(result.settings), "settings")
     if provenance:
         rep.json_block(provenance, "provenance")
-    rep.write(d / "report.html")
+    rep.write_index(d)
     return out
+
+
+def _shown(row: dict) -> dict:
+    """A parameter row for the page: its name with its unit, values in that unit."""
+    return {**row, "parameter": f"{row['parameter']} [{row['unit']}]"}

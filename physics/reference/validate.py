@@ -1,7 +1,7 @@
 """Validation report: the reduced model against the reference PNP + solvent solver.
 
 :func:`run_validation` writes a folder with PNG plots, ``figures.json`` (every number and
-curve plotted) and a self-contained ``report.html``, and returns the summary.  Sections:
+curve plotted) and a self-contained page ``index.html``, and returns the summary.  Sections:
 
 1. small signal: reduced FRF (closed form) vs the reference linearised on its own
    discretisation, for the device's default effects at the reference RH; slab-level checks
@@ -29,7 +29,7 @@ import numpy as np
 from ..device import load_device
 from ..effects import EFFECTS, stage_of
 from ..effects.double_layer import DoubleLayer
-from ..fileio import write_json, write_text
+from ..fileio import write_json
 from ..frequency import frequency_response
 from ..model import ActuatorModel
 from ..timedomain import simulate, tip_from_interface_excess
@@ -389,7 +389,7 @@ def run_validation(out_dir, devices=DEVICES, amps=AMPLITUDES, quick: bool = Fals
         log(f"[{dev}] done in {time.perf_counter() - t0:.0f} s")
     pngs = _plots(figs, out)
     write_json(out / "figures.json", _clean(figs))
-    write_text(out / "report.html", _html(figs, pngs, out))
+    _page(figs, pngs).write_index(out)
     return figs
 
 
@@ -422,9 +422,9 @@ def _plots(figs, out: Path) -> list[Path]:
         ss = F["small_signal"]
         fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
         f = ss["freq_Hz"]
-        ax[0].loglog(f, ss["reduced_mag_m_per_V"], label="reduced (closed form)")
-        ax[0].loglog(f, ss["reference_mag_m_per_V"], "--", label="reference (linearised PNP)")
-        ax[0].set_ylabel("|δ/V| [m/V]")
+        ax[0].loglog(f, 1e3 * np.asarray(ss["reduced_mag_m_per_V"]), label="reduced (closed form)")
+        ax[0].loglog(f, 1e3 * np.asarray(ss["reference_mag_m_per_V"]), "--", label="reference (linearised PNP)")
+        ax[0].set_ylabel("|δ/V| [mm/V]")
         ax[0].legend()
         ax[1].semilogx(f, ss["reduced_phase_deg"])
         ax[1].semilogx(f, ss["reference_phase_deg"], "--")
@@ -492,9 +492,9 @@ def _plots(figs, out: Path) -> list[Path]:
             ax[0].plot(sq["t_s"], sq["reference_cs_up"])
             ax[0].set_ylabel("reference Cs_up (first-moment equivalent) [mol/m³]")
             ax[0].set_xlabel("time [s]")
-            ax[1].plot(sq["t_s"], 1e3 * np.array(sq["reference_deflection_m"]), label="reference")
-            ax[1].plot(sq["t_s"], 1e3 * np.array(sq["reduced_linear_deflection_m"]), "--", label="reduced, linear")
-            ax[1].set_ylabel("tip deflection [mm]")
+            ax[1].plot(sq["t_s"], 1e6 * np.array(sq["reference_deflection_m"]), label="reference")
+            ax[1].plot(sq["t_s"], 1e6 * np.array(sq["reduced_linear_deflection_m"]), "--", label="reduced, linear")
+            ax[1].set_ylabel("tip deflection [µm]")
             ax[1].set_xlabel("time [s]")
             ax[1].legend(fontsize=7)
             for ts, P in sq["profiles"].items():
@@ -524,7 +524,21 @@ The solvent the cations carry follows the moved charge, not the peak concentrati
 a micrometre-sized cell they differ from C⁻ by a few mol/m³ only.</li></ul>"""
 
 
-def _html(figs, pngs, out: Path) -> str:
+#: What each figure of the page shows (by the first word of its file name).
+_CAPTIONS = {"frf": "small-signal frequency response, reduced vs reference: |δ/V| [mm/V], phase [°] and their "
+                    "differences",
+             "amplitude": "amplitude sweep: deflection and current errors vs the reference [%] and harmonic "
+                          "distortion [%] against the amplitude [V]",
+             "profiles": "cation and solvent concentration profiles [mol/m³] near both faces, 4 Vpp at 1 Hz",
+             "square": "square pulse 2 V: reference Cs_up [mol/m³], tip deflection [µm] and solvent profiles"}
+
+
+def _device(stem: str) -> str:
+    return stem.split("_", 1)[1] if "_" in stem else stem
+
+
+def _page(figs, pngs):
+    """The page of ``eap validate`` (a :class:`physics.report.Report`)."""
     rows = []
     for dev in figs["devices"]:
         F = figs[dev]
@@ -587,5 +601,5 @@ def _html(figs, pngs, out: Path) -> str:
     notes = _NOTES.replace("{law}", law).replace("{limit}", ", ".join(f"{k} = {v:g}" for k, v in limit.items()))
     rep.raw(notes + "".join(rows))
     for p in pngs:
-        rep.image(p, p.stem.replace("_", " "))
-    return rep.to_html()
+        rep.image(p, _CAPTIONS.get(p.stem.split("_")[0], p.stem.replace("_", " ")) + f" ({_device(p.stem)})")
+    return rep

@@ -1,4 +1,7 @@
-"""The effect contract as a function: :func:`check_effect` runs it on any effect class.
+"""The effect contract as a function: :func:`check_effect` runs it on any effect class
+(also :func:`physics.effects.check_effect`, which calls it: the checks run the model, the solvers,
+``diagnose`` and ``identify``, layers above :mod:`physics.effects`, so they live here and this
+module installs itself there when ``physics`` is imported).
 
 Checks (each passes, fails with a one-line reason, or is skipped with the reason):
 
@@ -21,21 +24,26 @@ identify           identification on its own noise-free FRF recovers the free pa
                    within 2 % (linear, not fitted through a describing function)
 =================  ==========================================================================
 
-``fast=True`` runs the first six (tens of milliseconds; what loading a user effect file
+``fast=True`` runs the first six (about 0.1 s for the creep example; what loading a user effect file
 checks); the full contract takes seconds per effect.
 """
 from __future__ import annotations
 
 import contextlib
-import inspect
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
-from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
-from .stages import STAGE_PROTOCOLS, CompiledChargeLaw, LoadFactor, OutputFactor
+from . import effects, signals
+from .device import all_param_specs, load_device
+from .effects import BUILT_IN, EFFECTS, Effect, LoadEffect, OutputEffect, register, stage_of, unregister
+from .effects.declaration import declaration_problems
+from .effects.stages import STAGE_PROTOCOLS, CompiledChargeLaw, LoadFactor, OutputFactor
+from .errors import InputError
+from .frequency import frequency_response
+from .model import ActuatorModel
+from .timedomain import simulate
 
 #: Checks run by :func:`check_effect`, in order; ``FAST_CHECKS`` with ``fast=True``.
 CHECKS = ("declaration", "builds", "protocol", "finite", "stable", "passive", "spec", "solvers", "off", "identify")
@@ -87,54 +95,9 @@ class ContractReport:
                              f"{c.name!r}: {c.detail}")
 
 
-def declaration_problems(cls, *, user: bool = True) -> list[str]:
-    """What is wrong with the declaration of effect class ``cls`` (empty: nothing).  ``user``:
-    checked as a user effect (its id is not a built-in one, every parameter has a default)."""
-    from . import BUILT_IN, CHAIN, adds_factors, stage_of
-    if not (inspect.isclass(cls) and issubclass(cls, Effect)):
-        return ["a user effect must subclass physics.effects.OutputEffect, LoadEffect (or Effect)"]
-    out = []
-    if not isinstance(cls.id, str) or not cls.id.isidentifier():
-        out.append(f"needs an id that is a Python identifier, got {cls.id!r}")
-    elif user and cls.id in BUILT_IN:
-        out.append(f"id {cls.id!r} is a built-in effect; choose another id")
-    if issubclass(cls, OutputEffect):
-        if cls.output_tf is OutputEffect.output_tf and cls.filter_output is OutputEffect.filter_output:
-            out.append("define output_tf(self, p) (or filter_output and output_response)")
-    elif issubclass(cls, LoadEffect):
-        if cls.load_tf is LoadEffect.load_tf and cls.load_factor is LoadEffect.load_factor:
-            out.append("define load_tf(self, p) (or load_factor(self, s, p))")
-    elif stage_of(cls) is None and not adds_factors(cls):
-        out.append(f"an effect must replace a stage (subclass one of {', '.join(c.__name__ for c in CHAIN)}) or "
-                   "define load_factor(self, s, p); the simplest is a subclass of OutputEffect or LoadEffect")
-    if user:
-        out += [f"parameter {s.name!r} needs a default (ParamSpec(..., default=...))"
-                for s in cls.params if s.default is None]
-    ref = cls.__dict__.get("reference", cls.reference)
-    if ref not in REFERENCE:
-        out.append(f"reference must be one of {', '.join(REFERENCE)}, got {ref!r}")
-    known = {s.name for s in cls.params}
-    spec = cls.diagnosis
-    if spec is not None:
-        if not isinstance(spec, dict) or "free" not in spec or (user and not spec["free"]):
-            return out + ["diagnosis must be a dict with at least 'free' (parameters to fit)"]
-        unknown = sorted(set(spec) - set(DIAGNOSIS_KEYS))
-        if unknown:
-            out.append(f"unknown diagnosis key(s) {unknown}; known: {', '.join(DIAGNOSIS_KEYS)}")
-        names = list(spec["free"]) + list(spec.get("bounds", {}))
-        bad = [n for n in names if n not in known | set(cls.requires)]
-        if user and bad:
-            out.append(f"diagnosis names parameters {bad} that the effect does not declare")
-        bad_rules = sorted(set(spec.get("reveal", {})) - set(REVEAL_RULES))
-        if bad_rules:
-            out.append(f"unknown reveal rule(s) {bad_rules}; known: {', '.join(REVEAL_RULES)}")
-    return out
-
-
 @contextlib.contextmanager
 def _registered(cls):
     """``cls`` registered for the duration (unless it already is)."""
-    from . import EFFECTS, register, unregister
     if EFFECTS.get(cls.id) is cls:
         yield
         return
@@ -149,8 +112,6 @@ def check_effect(cls, device=DEVICE, *, fast: bool = False, rh: float = 60.0) ->
     """Run the effect contract on effect class ``cls`` (or a registered id) with ``device``
     (name, path or Device) at ``rh`` [%]; ``fast``: the quick checks only (:data:`FAST_CHECKS`).
     Returns a :class:`ContractReport`; a check that raises fails with the exception's message."""
-    from . import BUILT_IN, EFFECTS
-    from ..device import load_device
     if isinstance(cls, str):
         if cls not in EFFECTS:
             raise InputError(f"check_effect: unknown effect {cls!r}; known: {', '.join(EFFECTS)}")
@@ -202,14 +163,12 @@ class _Context:
         self.model = None
 
     def builds(self):
-        from ..model import ActuatorModel
         self.model = ActuatorModel(self.dev, f"none,+{self.cls.id}")
         return "pass", f"ActuatorModel({self.dev.name!r}, 'none,+{self.cls.id}')"
 
     def _bounds(self, name) -> tuple[float, float]:
         """The search range of ``name``: the spec's bounds, else the parameter's admissible range."""
-        from ..device import all_param_specs
-        from ..diagnose.specs import param_bounds
+        from .diagnose.specs import param_bounds
         b = param_bounds(name, self.dev)
         if b is None:
             spec = all_param_specs()[name]
@@ -220,7 +179,6 @@ class _Context:
         return next(e for e in self.model.effects if type(e) is self.cls)
 
     def protocol(self):
-        from . import stage_of
         e = self._instance()
         default = stage_of(self.cls)
         if default is None:
@@ -244,9 +202,6 @@ class _Context:
         return "pass", f"stage {default.stage!r} ({proto.__name__})"
 
     def finite(self):
-        from .. import signals
-        from ..frequency import frequency_response
-        from ..timedomain import simulate
         f = np.geomspace(1e-3, 1e3, 61)
         fr = frequency_response(self.model, None, f, rh=self.rh)
         bad = f[~(np.isfinite(fr.deflection) & np.isfinite(fr.current))]
@@ -267,7 +222,6 @@ class _Context:
         return "skip", "no rational factor (output_tf/load_tf) to check; 'finite' and 'solvers' cover the rest"
 
     def passive(self):
-        from ..frequency import frequency_response
         m = self.model
         f = np.logspace(-4, 3, 50)
         for rh in ((40.0, 100.0) if m.needs_rh else (self.rh,)):
@@ -285,8 +239,8 @@ class _Context:
         spec = self.cls.diagnosis
         if spec is None:
             return "skip", "no diagnosis spec: not a diagnosis candidate"
-        from ..diagnose.signatures import FEATURE_TEXT
-        from ..diagnose.specs import start_points
+        from .diagnose.signatures import FEATURE_TEXT
+        from .diagnose.specs import start_points
         problems = []
         if "nested" not in spec or not spec.get("excitation"):
             problems.append("needs 'nested' and 'excitation'")
@@ -311,8 +265,6 @@ class _Context:
             ("pass", f"free {', '.join(spec['free']) or '(per RH)'}; bounds and starts consistent")
 
     def _periodic_frf(self, model):
-        from .. import signals
-        from ..timedomain import simulate
         fs, period = 200.0, 20.0
         sig = signals.multisine(rms=0.02, f_start=0.1, f_stop=20.0, period=period, fs=fs, seed=3)
         n = sig.t.size
@@ -325,7 +277,6 @@ class _Context:
         return k / period, np.fft.rfft(y)[k] / np.fft.rfft(sig.v)[k]
 
     def solvers(self):
-        from ..frequency import frequency_response
         if not self.cls.linear:
             return "skip", "large-signal effect: the frequency solver gives its small-signal form only"
         f, H = self._periodic_frf(self.model)
@@ -336,17 +287,12 @@ class _Context:
 
     def _base_ids(self) -> list[str]:
         """The linear built-in effects, without the one filling the same stage."""
-        from . import BUILT_IN, EFFECTS, stage_of
         own = stage_of(self.cls)
         return [e for e in BUILT_IN if EFFECTS[e].linear and e != self.cls.id
                 and (own is None or not issubclass(EFFECTS[e], own))]
 
     def off(self):
-        from .. import signals
-        from ..diagnose.specs import _scaled
-        from ..frequency import frequency_response
-        from ..model import ActuatorModel
-        from ..timedomain import simulate
+        from .diagnose.specs import _scaled
         spec = self.cls.diagnosis or {}
         if not spec.get("off"):
             return "skip", "the spec gives no 'off' values"
@@ -374,11 +320,9 @@ class _Context:
         spec = self.cls.diagnosis or {}
         if not (self.cls.linear and spec.get("free") and not spec.get("describing_function")):
             return "skip", "only linear effects with free parameters fitted on the FRF"
-        from ..diagnose.specs import start_points
-        from ..frequency import frequency_response
-        from ..identify import IdentificationProblem, fit_lsq
-        from ..identify.problem import FRFTarget
-        from ..model import ActuatorModel
+        from .diagnose.specs import start_points
+        from .identify import IdentificationProblem, fit_lsq
+        from .identify.problem import FRFTarget
         truth = {}
         for name in spec["free"]:                     # a point inside the bounds
             lo, hi = self._bounds(name)
@@ -402,3 +346,6 @@ class _Context:
         ok = all(abs(got[n] - truth[n]) <= max(0.02 * abs(truth[n]), 1e-12) for n in names)
         return ("pass" if ok else "fail"), ", ".join(f"{n} {got[n]:.4g} for {truth[n]:.4g} ({100 * errs[n]:.2g} %)"
                                                      for n in names) + " (limit 2 %)"
+
+
+effects._CONTRACT.append(check_effect)      # physics.effects.check_effect runs this
