@@ -129,7 +129,7 @@ def test_tuning_gives_the_same_trials_and_bundle_on_one_and_two_workers(run, tmp
     assert all(hp[k] == v for k, v in best["overrides"].items()) and hp["n_centres"] == 20
     assert len(cards[0]["tuning"]["trials"]) == 6
     assert (tmp_path / "one" / "tuning.png").is_file() and "Tuning on the validation data" in \
-        (tmp_path / "one" / "report.html").read_text()
+        (tmp_path / "one" / "index.html").read_text()
 
 
 def test_ctrl_c_during_network_training_exits_130_and_leaves_nothing(run, tmp_path, monkeypatch, capsys):
