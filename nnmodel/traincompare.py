@@ -358,7 +358,7 @@ def _is_physics(name: str, row: dict) -> bool:
     return row.get("n_parameters") is None and str(row.get("kind", "")).startswith("physics")
 
 
-def _is_reference(name: str, row: dict) -> bool:
+def is_reference(name: str, row: dict) -> bool:
     """Rows that are not networks: the physics rows and the linear yardstick."""
     return name == LINEAR or _is_physics(name, row)
 
@@ -372,7 +372,7 @@ def _speed(predict, ds: Dataset, entries) -> float:
 
 def _best(results: dict) -> dict:
     """The best network on held-out RH (or on the whole test set when nothing is held out)."""
-    nets = {k: v for k, v in results.items() if not _is_reference(k, v)}
+    nets = {k: v for k, v in results.items() if not is_reference(k, v)}
     group = "heldout_rh" if any("heldout_rh" in v["free_run"] for v in nets.values()) else "test"
     nets = {k: v for k, v in nets.items() if group in v["free_run"]}
     if not nets:
