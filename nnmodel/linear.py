@@ -72,11 +72,11 @@ class LinearModel:
     def _norm(self, name, x):
         return (np.asarray(x, float) - self.scale[f"{name}_mean"]) / self.scale[f"{name}_std"]
 
-    def _forcing(self, un, rhn):
-        """w[k] = sum_j b_j u[k-d-j] + c + e rh[k] (normalised), for every k (inputs
-        before the record held at the first sample)."""
+    def _forcing(self, un, rhn, before=None):
+        """w[k] = sum_j b_j u[k-d-j] + c + e rh[k] (normalised), for every k; inputs before
+        the record are ``before`` (default: held at the first sample)."""
         pad = self.nb - 1 + self.delay
-        up = np.concatenate([np.full(pad, un[0]), un])
+        up = np.concatenate([np.full(pad, un[0] if before is None else before), un])
         w = np.convolve(up, np.r_[np.zeros(self.delay), self.b])[pad:pad + un.size] + self.c
         if self.e is not None:
             w = w + self.e * rhn
@@ -84,17 +84,21 @@ class LinearModel:
 
     def simulate_norm(self, un, rhn, yn_init=None) -> np.ndarray:
         """Free run in normalised units; ``yn_init``: measured outputs that start it (the
-        first ``len(yn_init)`` outputs are returned as given), else from the steady state
-        of the first input."""
-        w = self._forcing(un, rhn)
+        first ``len(yn_init)`` outputs are returned as given; inputs before the record held
+        at the first sample), else from rest: 0 V before the record and the output at its
+        0 V steady state (the convention of the networks' free run)."""
         den = np.r_[1.0, -self.a]
         m = 0 if yn_init is None else len(yn_init)
         if m:
+            w = self._forcing(un, rhn)
             past = np.asarray(yn_init, float)[::-1][:self.na]
             past = np.r_[past, np.full(self.na - past.size, past[-1])] if past.size else past
             zi = signal.lfiltic([1.0], den, past) if self.na else np.zeros(0)
-        else:   # at rest in equilibrium with the first input
-            y0 = w[0] / max(1e-12, 1.0 - float(np.sum(self.a))) if self.na else w[0]
+        else:
+            rest = -self.scale["u_mean"] / self.scale["u_std"]           # 0 V, normalised
+            w = self._forcing(un, rhn, before=rest)
+            w0 = rest * float(np.sum(self.b)) + self.c + (0.0 if self.e is None else self.e * rhn[0])
+            y0 = w0 / max(1e-12, 1.0 - float(np.sum(self.a)))
             zi = signal.lfiltic([1.0], den, np.full(self.na, y0)) if self.na else np.zeros(0)
         with np.errstate(all="ignore"):
             if self.na:
@@ -273,10 +277,15 @@ def _output_error(model: LinearModel, seqs, iterations: int = 40) -> LinearModel
     return cur
 
 
+def _finite(x: float) -> float | None:
+    """A score for the card (None for a candidate whose free run diverged)."""
+    return float(x) if math.isfinite(x) else None
+
+
 _CACHE: dict[str, LinearModel] = {}
 
 
-def _key(train, val, val_fraction, feedthrough, use_rh) -> str:
+def _key(train, val, *options) -> str:
     h = hashlib.sha1()
     for part in (train, val or []):
         h.update(b"|")
@@ -284,31 +293,34 @@ def _key(train, val, val_fraction, feedthrough, use_rh) -> str:
             for a in (r.u, r.y, r.rh):
                 h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
             h.update(repr(float(r.fs)).encode())
-    h.update(repr((val_fraction, feedthrough, use_rh)).encode())
+    h.update(repr(options).encode())
     return h.hexdigest()
 
 
 def fit_linear(train, val=None, val_fraction: float = 0.2, feedthrough: bool = True,
-               use_rh: bool | None = None) -> LinearModel:
+               use_rh: bool | None = None, na_grid=NA_GRID, nb_grid=NB_GRID,
+               output_error: bool = True) -> LinearModel:
     """The best linear ARX model for these records (see the module docstring).  Without
     validation records the last ``val_fraction`` of every training record validates (as the
-    networks do); ``use_rh``: RH as a linear input (None: when the records carry it).
+    networks do); ``use_rh``: RH as a linear input (None: when the records carry it);
+    ``na_grid``, ``nb_grid``: the orders tried; ``output_error``: try the refinement.
     Results are cached per process (the same data give the same model)."""
-    key = _key(train, val, val_fraction, feedthrough, use_rh)
+    options = (val_fraction, feedthrough, use_rh, tuple(na_grid), tuple(nb_grid), output_error)
+    key = _key(train, val, *options)
     if key not in _CACHE:
         from threadpoolctl import threadpool_limits
         with threadpool_limits(limits=1, user_api="blas"):   # small matrices: one thread is fastest
-            _CACHE[key] = _fit(train, val, val_fraction, feedthrough, use_rh)
+            _CACHE[key] = _fit(train, val, *options)
     return _CACHE[key]
 
 
-def _fit(train, val, val_fraction, feedthrough, use_rh) -> LinearModel:
+def _fit(train, val, val_fraction, feedthrough, use_rh, na_grid, nb_grid, output_error) -> LinearModel:
     from .data import check_records, split_records
     train = check_records(train, "training")
     if val:
         val = check_records(val, "validation")
     else:
-        k = max(max(NA_GRID), max(NB_GRID))
+        k = max(max(na_grid), max(nb_grid))
         train, val = split_records(train, val_fraction, min_len=k + 2)
         if not val:
             val = train
@@ -316,29 +328,33 @@ def _fit(train, val, val_fraction, feedthrough, use_rh) -> LinearModel:
     sc = _scale(train, use_rh)
     tr, va = _normed(train, sc, use_rh), _normed(val, sc, use_rh)
     delay = 0 if feedthrough else 1
-    na_max, nb_max = max(NA_GRID), max(NB_GRID)
+    # orders whose history fits in half the shortest training record
+    room = max(1, min(len(r) for r in train) // 2 - 1)
+    grid_na = [n for n in na_grid if n <= room] or [0]
+    grid_nb = [n for n in nb_grid if n <= room] or [1]
+    na_max, nb_max = max(grid_na), max(grid_nb)
     G, g = _regressors(tr, na_max, nb_max, delay, use_rh)
     scores, fits = {}, []
-    for na in NA_GRID:
-        for nb in NB_GRID:
+    for na in grid_na:
+        for nb in grid_nb:
             a, b, c, e = _solve(G, g, na, nb, na_max, nb_max, use_rh)
             m = LinearModel(na, nb, delay, a, b, c, e, sc)
             scores[f"{na},{nb}"] = s = _free_run_nrmse(m, va)
             fits.append((s, na + nb, m))
     # parsimony: the fewest coefficients among the orders within PARSIMONY of the best score
     top = min(f[0] for f in fits)
-    score, _, model = min((f for f in fits if f[0] <= top * (1 + PARSIMONY)), key=lambda f: (f[1], f[0]))
-    report = {"orders_scored_on": "validation free-run NRMSE", "grid_na": list(NA_GRID), "grid_nb": list(NB_GRID),
-              "validation_nrmse_arx": score, "output_error_kept": False}
+    score, _, model = min((f for f in fits if f[0] <= top * (1 + PARSIMONY) + 1e-6), key=lambda f: (f[1], f[0]))
+    report = {"orders_scored_on": "validation free-run NRMSE", "grid_na": grid_na, "grid_nb": grid_nb,
+              "validation_nrmse_arx": _finite(score), "output_error_kept": False}
     n_train = sum(u.size for u, _, _ in tr)
-    if np.isfinite(score) and n_train * (model.na + model.nb + 2) <= OE_BUDGET:
+    if output_error and np.isfinite(score) and n_train * (model.na + model.nb + 2) <= OE_BUDGET:
         oe = _output_error(model, tr)
         s_oe = _free_run_nrmse(oe, va)
-        report["validation_nrmse_output_error"] = s_oe
+        report["validation_nrmse_output_error"] = _finite(s_oe)
         if s_oe < score:
             model, score = oe, s_oe
             report["output_error_kept"] = True
-    report["validation_nrmse"] = score
-    report["scores"] = scores
+    report["validation_nrmse"] = _finite(score)
+    report["scores"] = {k: _finite(v) for k, v in scores.items()}
     model.report = report
     return model
