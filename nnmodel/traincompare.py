@@ -142,22 +142,7 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     results: dict[str, dict] = {}
     physics_rows = {}
     if device is not None:
-        if not ds.has_rh:
-            raise InputError(f"--physics {device}: the dataset has no relative humidity, which the physics "
-                             "model needs; build it with --rh")
-        physics_model = PhysicsPredictor.from_device(device, effects)
-
-        def physics_predict(rec):   # measured RH is noisy: the physics gets the slow RH (compare.model_rh)
-            return physics_model(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
-
-        t0 = time.perf_counter()
-        kind = "physics simulator (generator)" if physics is None else f"physics model {device} (--physics)"
-        results["physics"] = {"kind": kind, "effects": list(physics_model.model.effect_ids),
-                              "free_run": _score(physics_predict, ds, test_entries, SKIP),
-                              "n_parameters": None, "train_time_s": 0.0}
-        results["physics"]["inference_samples_per_s"] = _speed(lambda r: physics_predict(r), ds, test_entries)
-        results["physics"]["eval_time_s"] = time.perf_counter() - t0
-        physics_rows["physics"] = physics_predict
+        results["physics"], physics_rows["physics"] = _physics_row(ds, device, effects, physics is None, test_entries)
     local = settings is None or settings.serial
     val_fraction = _val_fraction(ds)
     tasks = [{"name": LINEAR, "dataset": str(ds.path), "val_fraction": val_fraction, "echo": progress and local}]
@@ -176,15 +161,7 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         make_model(name, ov)                  # a bad recipe or --set fails here, before any training
         tasks.append({"name": name, "overrides": ov, "dataset": str(ds.path), "bundle": str(out / "models" / name),
                       "echo": progress and local, "effect_files": user_effect_files()})
-    tuning = {}
-    for task in tasks[1:] if tune else ():
-        name = task["name"]
-        if progress:
-            print(f"tuning {name}: {tune} trials on the validation data ...", flush=True)
-        tuning[name] = run_tuning(name, load_recipe(name, task["overrides"]), task["overrides"], tune,
-                                  str(ds.path), settings, task["effect_files"], print if progress else None)
-        task["overrides"] = {**tuning[name]["best"]["overrides"], **task["overrides"]}
-        task["tuning"] = tuning[name]
+    tuning = _tune(tasks[1:], tune, str(ds.path), settings, progress) if tune else {}
     if progress and not local:
         print(f"training {', '.join(models)} on {settings.workers if not settings.scheduler else 'the cluster'} "
               f"worker(s) ...", flush=True)
@@ -228,6 +205,40 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     write_csv(table_rows(results), out / "metrics.csv")
     _report(summary, out)
     return summary
+
+
+def _physics_row(ds, device, effects, is_generator: bool, entries) -> tuple[dict, object]:
+    """(result row, predict) of the physics simulator of ``device`` on the test records."""
+    if not ds.has_rh:
+        raise InputError(f"--physics {device}: the dataset has no relative humidity, which the physics "
+                         "model needs; build it with --rh")
+    physics_model = PhysicsPredictor.from_device(device, effects)
+
+    def predict(rec):   # measured RH is noisy: the physics gets the slow RH (compare.model_rh)
+        return physics_model(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
+
+    t0 = time.perf_counter()
+    kind = "physics simulator (generator)" if is_generator else f"physics model {device} (--physics)"
+    row = {"kind": kind, "effects": list(physics_model.model.effect_ids),
+           "free_run": _score(predict, ds, entries, SKIP), "n_parameters": None, "train_time_s": 0.0,
+           "inference_samples_per_s": _speed(predict, ds, entries)}
+    row["eval_time_s"] = time.perf_counter() - t0
+    return row, predict
+
+
+def _tune(tasks: list[dict], n_trials: int, dataset: str, settings, progress: bool) -> dict:
+    """Tune each model task (:mod:`nnmodel.tuning`) and set its overrides to the best trial's
+    (the caller's ``--set`` values win); returns the tuning record of each model."""
+    tuning = {}
+    for task in tasks:
+        name = task["name"]
+        if progress:
+            print(f"tuning {name}: {n_trials} trials on the validation data ...", flush=True)
+        tuning[name] = run_tuning(name, load_recipe(name, task["overrides"]), task["overrides"], n_trials,
+                                  dataset, settings, task["effect_files"], print if progress else None)
+        task["overrides"] = {**tuning[name]["best"]["overrides"], **task["overrides"]}
+        task["tuning"] = tuning[name]
+    return tuning
 
 
 def _val_fraction(ds: Dataset) -> float | None:
