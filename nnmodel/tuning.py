@@ -3,7 +3,9 @@
 Each model's search space is the ``tune:`` section of its recipe (``configs/train/NAME.yaml``):
 hyper-parameter -> ``{low, high}`` (whole numbers when both bounds are; ``log: true`` for a
 log scale) or ``{choices: [...]}``; the pseudo-parameter ``structure`` picks one entry of
-the recipe's ``structures``.  N trials are drawn by Optuna's TPE sampler (Bergstra et al.,
+the recipe's ``structures`` or ``search`` (the recipe's own search over them).  The first
+trial is the recipe itself (its values, clipped into the ranges), so tuning never ends
+worse than the defaults on validation.  N trials are drawn by Optuna's TPE sampler (Bergstra et al.,
 NeurIPS 2011) seeded with the model's seed, asked and told in fixed batches of
 :data:`BATCH` — the trials of a batch are tasks on the execution layer
 (:mod:`physics.parallel`, ``--workers``/``--scheduler``) and are told back in trial order —
@@ -26,8 +28,10 @@ __all__ = ["BATCH", "search_space", "tune"]
 
 #: trials asked (and run side by side) before the sampler is told their scores
 BATCH = 4
-#: the pseudo-parameter that picks an entry of the recipe's ``structures``
+#: the pseudo-parameter that picks an entry of the recipe's ``structures`` (or SEARCH)
 STRUCTURE = "structure"
+#: the ``structure`` choice that keeps the recipe's own search over its structures
+SEARCH = "search"
 
 
 def search_space(name: str, spec: dict, params: dict) -> dict:
@@ -42,7 +46,7 @@ def search_space(name: str, spec: dict, params: dict) -> dict:
             n = len(params.get("structures") or [])
             if n < 2:
                 raise InputError(f"{where}: the recipe has no structures to choose from")
-            out[key] = CategoricalDistribution(list(range(n)))
+            out[key] = CategoricalDistribution([SEARCH] + list(range(n)))
             continue
         if key not in params:
             raise InputError(f"{where}: not a hyper-parameter of {name!r}")
@@ -67,8 +71,25 @@ def search_space(name: str, spec: dict, params: dict) -> dict:
 def overrides_of(params: dict, recipe_params: dict) -> dict:
     """Hyper-parameter overrides of a trial (``structure`` expanded to its entry)."""
     out = {k: v for k, v in params.items() if k != STRUCTURE}
-    if STRUCTURE in params:
+    if params.get(STRUCTURE, SEARCH) != SEARCH:
         out = {**recipe_params["structures"][params[STRUCTURE]], **out, "structures": None}
+    return out
+
+
+def recipe_trial(space: dict, params: dict) -> dict:
+    """The recipe's own values as a trial of ``space`` (numbers clipped into their range,
+    the structure search as the recipe has it)."""
+    from optuna.distributions import CategoricalDistribution
+    out = {}
+    for key, dist in space.items():
+        if key == STRUCTURE:
+            out[key] = SEARCH
+        elif isinstance(dist, CategoricalDistribution):
+            if params[key] in dist.choices:
+                out[key] = params[key]
+        else:
+            v = min(max(params[key], dist.low), dist.high)
+            out[key] = int(round(v)) if isinstance(dist.low, int) and not isinstance(dist.low, bool) else float(v)
     return out
 
 
@@ -114,6 +135,7 @@ def tune(name: str, recipe: dict, base: dict, n_trials: int, dataset: str, setti
     seed = int(params.get("seed", 0))
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(direction="minimize", sampler=optuna.samplers.TPESampler(seed=seed))
+    study.enqueue_trial(recipe_trial(space, params))
     rows = []
     while len(rows) < n_trials:
         asked = [study.ask(space) for _ in range(min(BATCH, n_trials - len(rows)))]

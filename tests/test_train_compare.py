@@ -120,6 +120,7 @@ def test_tuning_gives_the_same_trials_and_bundle_on_one_and_two_workers(run, tmp
     two = train_compare(data, ["rbf"], tmp_path / "two", settings=ParallelSettings(2), **kw)
     t1, t2 = one["models"]["rbf"]["tuning"], two["models"]["rbf"]["tuning"]
     assert len(t1["trials"]) == 6 and "n_centres" not in t1["trials"][0]["params"]   # a --set value stays fixed
+    assert t1["trials"][0]["params"]["structure"] == "search"      # the first trial is the recipe itself
     assert [(r["params"], r["validation_nrmse"]) for r in t1["trials"]] == \
         [(r["params"], r["validation_nrmse"]) for r in t2["trials"]]
     cards = [json.loads((d / "models" / "rbf" / "card.json").read_text()) for d in (tmp_path / "one", tmp_path / "two")]
