@@ -39,7 +39,7 @@ import numpy as np
 
 from physics import signals
 from physics.diagnose import diagnose
-from physics.diagnose.demo import HIDDEN, _truth, hidden_effect_case
+from physics.diagnose.demo import draw_truth, hidden_effect_case, hidden_effects
 from physics.device import load_device
 from physics.model import ActuatorModel
 from physics.sensor import SensorModel
@@ -47,13 +47,11 @@ from physics.timedomain import simulate
 from physics.timeseries import TimeSeries
 
 TARGET_S = 60.0
-SIX = ("electrode_resistance", "fractional_coupling", "solvent_diffusion", "viscoelastic", "humidity",
-       "nonlinear_charge")
 
 
 def bench_record(hidden: str, seed: int = 0) -> TimeSeries:
     dev = load_device("ipmc_pt_eg")
-    truth_dev, tp = _truth(hidden, dev, np.random.default_rng(seed))
+    truth_dev, tp = draw_truth(hidden, dev, np.random.default_rng(seed))
     truth = ActuatorModel(truth_dev, (hidden,))
     sig = signals.sweep(0.2, 0.1, 50.0, 200.0, 1000.0)
     y = simulate(truth, None, sig.t, sig.v, rh=60.0).deflection
@@ -64,7 +62,7 @@ def bench_record(hidden: str, seed: int = 0) -> TimeSeries:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--hidden", default="electrode_resistance", choices=HIDDEN)
+    ap.add_argument("--hidden", default="electrode_resistance", choices=hidden_effects())
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rate-seeds", type=int, default=0, help="also measure the identification rate over seeds")
     ap.add_argument("--design", default="auto", choices=["auto", "rich"])
@@ -76,7 +74,7 @@ def main(argv=None) -> int:
     print(f"record: 200 s at 1 kHz ({rec.n} samples), hidden {args.hidden} "
           f"({', '.join(f'{k}={v:.3g}' for k, v in tp.items())}); generated in {time.perf_counter() - t0:.1f} s")
     status = 0
-    for label, kw in (("forced, all 6 candidates", dict(candidates=",".join(SIX), force=True)),
+    for label, kw in ((f"forced, all {len(hidden_effects())} candidates", dict(candidates=",".join(hidden_effects()), force=True)),
                       ("default (candidates the data can reveal)", {})):
         t0 = time.perf_counter()
         res = diagnose([rec], "ipmc_pt_eg", "none", **kw)
@@ -96,7 +94,7 @@ def main(argv=None) -> int:
     if args.rate_seeds > 0:
         print(f"\nidentification rate, seeds 0..{args.rate_seeds - 1}, design {args.design}:")
         total = 0
-        for eff in list(HIDDEN) + [None]:
+        for eff in list(hidden_effects()) + [None]:
             hits, t0 = 0, time.perf_counter()
             fails = []
             for s in range(args.rate_seeds):
@@ -114,7 +112,7 @@ def main(argv=None) -> int:
             total += hits
             print(f"  {str(eff or 'none (no hidden effect)'):26s} {hits}/{args.rate_seeds}"
                   + (f"  (missed seeds {fails})" if fails else "") + f"  {time.perf_counter() - t0:.0f} s")
-        print(f"  overall {total}/{args.rate_seeds * (len(HIDDEN) + 1)}")
+        print(f"  overall {total}/{args.rate_seeds * (len(hidden_effects()) + 1)}")
     return status
 
 

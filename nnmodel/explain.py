@@ -171,8 +171,9 @@ def _budget_sentence(name: str, row: dict) -> str:
                 "a larger epoch budget would not change its place.")
     if ran is not None and budget and ran >= budget:
         if len(vals) > 1 and vals[-1] <= min(vals[:-1]):
-            return (f"Training ended on its budget of {budget} epochs with the validation error still falling: "
-                    f"a larger budget (--set {name}.max_epochs={2 * budget}) may change its place.")
+            return (f"Training ended on its budget of {budget} epochs with its best validation error at the last "
+                    f"epoch: only a longer run (--set {name}.max_epochs={2 * budget}; early stopping ends it when "
+                    "the validation error stops falling) can tell whether more epochs change its place.")
         return (f"Training ended on its budget of {budget} epochs, the validation error no longer falling: a "
                 "larger epoch budget is unlikely to change its place.")
     return ""
@@ -204,7 +205,7 @@ def notes(summary: dict, *, diagnosis: str | None = None) -> list[dict]:
     return measurement_like(summary, diagnosis) + reference_rows(summary) + hybrid(summary) + losses(summary)
 
 
-def test_groups(entries: list[dict], group_of) -> dict[str, Any]:
+def group_facts(entries: list[dict], group_of) -> dict[str, Any]:
     """Per test group: records, nominal RH levels and the effects added to the generator
     (read from the dataset's entries; ``group_of(entry)`` names the group)."""
     out: dict[str, dict] = {}
@@ -218,4 +219,4 @@ def test_groups(entries: list[dict], group_of) -> dict[str, Any]:
     return out
 
 
-__all__ = ["notes", "note", "test_groups", "measurement_like", "reference_rows", "hybrid", "losses"]
+__all__ = ["notes", "note", "group_facts", "measurement_like", "reference_rows", "hybrid", "losses"]

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.outputs import output_folder, preflight
+from physics.outputs import final_path, output_folder, preflight
 from physics.compare import PhysicsPredictor, model_rh
 from physics.effects import CORE
 from physics.errors import InputError
@@ -43,7 +43,7 @@ from physics.parallel import ParallelSettings, map_tasks, warm_up
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
 from .linear import LinearModel, fit_linear
-from .explain import notes, test_groups
+from .explain import group_facts, notes
 from .recipes import load_recipe, make_model
 from .shortfalls import data_facts, explain, sentences
 from .tuning import tune as run_tuning
@@ -192,12 +192,12 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     facts = data_facts(ds)
     for name, model in trained.items():
         results[name]["shortfalls"] = explain(name, results[name], results, model, facts, LINEAR)
-    summary = {"dataset": str(ds.path), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
+    summary = {"dataset": str(final_path(ds.path)), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
                "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
                "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
                "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
-               "best_heldout": _best(results), "test_groups": test_groups(test_entries, group_of)}
+               "best_heldout": _best(results), "test_groups": group_facts(test_entries, group_of)}
     _plots(ds, test_entries, physics_rows, linear_rows, trained, results, out)
     if tuning:
         _tuning_plot(tuning, out)
@@ -319,7 +319,7 @@ def _train_one(task: dict) -> dict:
            "training": _budget(model), "history": list(getattr(model, "history_", None) or [])}
     save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True,
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
-                notes=f"trained by eap train-compare on {ds.path}",
+                notes=f"trained by eap train-compare on {final_path(ds.path)}",
                 extra={"tuning": task["tuning"]} if task.get("tuning") else None)
     if task["echo"]:
         _echo_result(name, res)

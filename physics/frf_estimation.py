@@ -4,6 +4,9 @@
   swept-sine, multisine and noise excitation, with the ordinary coherence γ² and
   random-error confidence bounds.
 * :func:`stepped_sine` — one least-squares sine fit per record at its known tone.
+* :func:`detect_excitation` — what kind of excitation a voltage record is (steps, tone,
+  periodic multisine, sweep, noise), from the samples alone, for records whose metadata
+  do not say (a lab's exports): it decides how the frequency response is estimated.
 
 Random errors follow Bendat & Piersol, *Random Data* (4th ed., Wiley 2010), §9.2.4,
 Table 9.6: with n_d independent averages, the normalized random error of |Ĥ| and the
@@ -126,7 +129,7 @@ def welch_averages(window: np.ndarray, step: int, n_segments: int) -> float:
 def estimate_frf(u, y, fs: float, *, nperseg: int | None = None, window="hann",
                  overlap: float = 0.5, detrend="constant",
                  band: tuple[float, float] | None = None, confidence: float = 0.95,
-                 min_input_power: float = 1e-3) -> FRFEstimate:
+                 min_input_power: float = 1e-3, noise_psd: float | None = None) -> FRFEstimate:
     """H1 estimate of the frequency response from input ``u`` to output ``y`` (fs in Hz).
 
     Spectra are Welch averages (:func:`scipy.signal.csd`, :func:`scipy.signal.welch`) over
@@ -138,6 +141,12 @@ def estimate_frf(u, y, fs: float, *, nperseg: int | None = None, window="hann",
     those frequencies.  A frequency counts as excited when S_uu exceeds
     ``min_input_power`` times its largest value in the band; elsewhere ``response`` and
     ``rel_error`` are NaN.
+
+    With one average (the whole record, one period) the ordinary coherence is 1 by
+    construction and says nothing about the noise; given the output's noise level
+    ``noise_psd`` [units²/Hz, one-sided] (:func:`noise_level`), the coherence is then
+    γ² = 1 − S_nn/S_yy (the output power not explained by noise), so that the random
+    error ε of each line — and the weights of a fit — follow its signal-to-noise ratio.
     """
     u, y = _check_pair(u, y, fs, confidence)
     n = u.size
@@ -165,19 +174,55 @@ def estimate_frf(u, y, fs: float, *, nperseg: int | None = None, window="hann",
                              f"(resolution {fs / nperseg:g} Hz, Nyquist {fs / 2:g} Hz)")
         freq, s_uy, s_uu, s_yy = freq[keep], s_uy[keep], s_uu[keep], s_yy[keep]
     excited = s_uu > min_input_power * s_uu.max() if s_uu.max() > 0 else np.zeros(freq.shape, bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        coherence = np.clip(np.abs(s_uy) ** 2 / (s_uu * s_yy), 0.0, 1.0)
-        h = np.where(excited, s_uy / s_uu, np.nan)
     step = nperseg - noverlap
     n_seg = 1 + (n - nperseg) // step
     n_d = welch_averages(signal.get_window(window, nperseg), step, n_seg)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if n_seg == 1 and noise_psd is not None:
+            coherence = np.clip(1.0 - noise_psd / s_yy, 1e-12, 1.0)
+        else:
+            coherence = np.clip(np.abs(s_uy) ** 2 / (s_uu * s_yy), 0.0, 1.0)
+        h = np.where(excited, s_uy / s_uu, np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         eps = np.sqrt(1 - coherence) / np.sqrt(coherence * 2 * n_d)
     eps = np.where(excited, eps, np.nan)
     return FRFEstimate(freq, h, coherence, eps, np.full(freq.shape, n_d), excited, confidence,
                        "H1 (Welch)", meta={"nperseg": nperseg, "window": str(window),
                                            "overlap": noverlap / nperseg, "segments": n_seg,
-                                           "detrend": str(detrend)})
+                                           "detrend": str(detrend),
+                                           "coherence": "from the output noise level" if n_seg == 1
+                                           and noise_psd is not None else "ordinary"})
+
+
+def noise_level(y, fs: float) -> tuple[float, float, tuple[float, float]]:
+    """(white noise level of the output [units²/Hz, one-sided], highest frequency where the
+    response stands ≥ :data:`RESPONSE_SNR` × above it [Hz], the band the level came from [Hz]).
+
+    Welch spectrum of the linearly detrended record (segments of ~4 s); the level is the
+    lowest median power of eight log-spaced bands above 1 Hz: where the response has fallen
+    away (beyond the excitation or the resonance) only the sensor's white noise and
+    quantisation remain, while a drift lives below 1 Hz.  When the response fills the whole
+    spectrum the level is an upper bound.  NaN when the record is too short."""
+    y = signal.detrend(_as_signal(y, "output y"))
+    nper = int(min(y.size, max(256, 4.0 * fs)))
+    f, P = signal.welch(y, fs=fs, nperseg=nper)
+    lo = max(1.0, 8.0 * fs / nper)
+    edges = np.geomspace(lo, 0.98 * fs / 2, 9) if 0.98 * fs / 2 > 2 * lo else np.array([lo, fs / 2])
+    meds = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = (f >= a) & (f < b)
+        if m.sum() >= 3:
+            meds.append((float(np.median(P[m])), float(a), float(b)))
+    if not meds:
+        return float("nan"), fs / 2, (float("nan"), float("nan"))
+    level, a, b = min(meds)
+    smooth = np.convolve(P, np.ones(5) / 5, mode="same")
+    above = np.flatnonzero(smooth > RESPONSE_SNR * level)
+    return level, float(f[above[-1]]) if above.size else float(f[1]), (a, b)
+
+
+#: The response band ends where the output spectrum falls below this × its noise level.
+RESPONSE_SNR = 30.0
 
 
 def _tone(x: np.ndarray, fs: float, f0: float, i0: int, n: int) -> tuple[complex, float]:
@@ -234,3 +279,122 @@ def stepped_sine(records, *, settle: float = 0.0, confidence: float = 0.95,
                        np.array([r[2] for r in rows]), np.array([r[3] for r in rows], float),
                        np.array([r[4] for r in rows]), confidence, "stepped sine",
                        meta={"settle_s": settle})
+
+
+# ============================================================================ excitation from the data
+
+
+@dataclass
+class Excitation:
+    """What a voltage record excites, read from its samples (:func:`detect_excitation`).
+
+    ``kind``: ``steps`` (piecewise constant), ``tone`` (one line), ``periodic`` (a signal
+    repeating with ``period_s``, e.g. a multisine of several periods), ``sweep`` (a single
+    transient chirp: its dominant frequency moves monotonically), ``noise`` (stationary
+    broadband), ``other``; ``band`` [Hz] holds 99 % of the input power; ``how`` says why."""
+
+    kind: str
+    band: tuple[float, float]
+    tone_hz: float | None = None
+    period_s: float | None = None
+    how: str = ""
+
+
+#: Steps: at least this fraction of the samples lies in the 8 most populated bins of 2 % of the span.
+STEP_LEVEL_FRACTION = 0.9
+#: Periodic: normalised autocorrelation at the period at least this.
+PERIODIC_CORRELATION = 0.98
+#: Sweep: the dominant log-frequency of successive segments rises (or falls) with a rank
+#: correlation of at least this over at least SWEEP_DECADES decades.
+SWEEP_RANK = 0.9
+SWEEP_DECADES = 0.6
+
+
+def detect_excitation(v, fs: float) -> Excitation:
+    """Classify the voltage record ``v`` sampled at ``fs`` [Hz] (see :class:`Excitation`).
+
+    Steps: the samples sit on a few levels (histogram of 2 %-of-span bins) and jump between
+    them.  Tone: one spectral line holds 90 % of the power.  Periodic: the autocorrelation
+    reaches :data:`PERIODIC_CORRELATION` at a lag L ≤ n/2 (two periods or more).  Sweep: the
+    power-weighted mean log-frequency of 24 successive segments is monotone in time (Spearman
+    rank correlation ≥ :data:`SWEEP_RANK`) over ≥ :data:`SWEEP_DECADES` decades.  Noise: the rest
+    of the broadband records."""
+    v = _as_signal(v, "voltage")
+    x = v - np.median(v)
+    n = x.size
+    lo, hi = np.percentile(x, [0.5, 99.5])
+    span = float(hi - lo)
+    if span <= 0 or not np.any(x - x.mean()):
+        raise InputError("the voltage is constant; nothing is excited")
+    X = np.abs(np.fft.rfft(x - x.mean())) ** 2
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    cum = np.cumsum(X[1:]) / X[1:].sum()
+    band = (float(max(f[1:][np.searchsorted(cum, 0.005)], f[1])),
+            float(min(f[1:][min(np.searchsorted(cum, 0.995), cum.size - 1)], fs / 2)))
+    # steps: a few levels and jumps between them
+    counts, _ = np.histogram(x, bins=np.arange(lo - 0.01 * span, hi + 0.03 * span, 0.02 * span))
+    top = np.sort(counts)[::-1][:8].sum() / n
+    k = max(1, int(round(0.02 * fs)))
+    jumps = bool(np.any(np.abs(x[k:] - x[:-k]) > 0.3 * span))
+    if top >= STEP_LEVEL_FRACTION and jumps:
+        return Excitation("steps", (1.0 / (n / fs), min(fs / 2, 50.0)),
+                          how=f"piecewise constant: {100 * top:.0f} % of the samples on a few levels")
+    kmax = int(np.argmax(X[1:])) + 1
+    near = np.abs(f - f[kmax]) <= 2.5 * fs / n
+    if X[near].sum() > 0.9 * X[1:].sum():
+        return Excitation("tone", (float(f[kmax]), float(f[kmax])), tone_hz=float(f[kmax]),
+                          how=f"one line at {f[kmax]:.4g} Hz holds {100 * X[near].sum() / X[1:].sum():.0f} % of the power")
+    period = _period(x - x.mean(), fs)
+    if period is not None:
+        return Excitation("periodic", band, period_s=period,
+                          how=f"repeats every {period:.6g} s ({n / fs / period:.3g} periods)")
+    rank, decades = _sweep_trend(x, fs)
+    if abs(rank) >= SWEEP_RANK and decades >= SWEEP_DECADES:
+        return Excitation("sweep", band, how=f"a single sweep: the dominant frequency moves monotonically over "
+                                             f"{decades:.2g} decades (rank correlation {rank:+.2f})")
+    if band[1] > 2 * band[0]:
+        return Excitation("noise", band, how="stationary broadband (no period, no monotone sweep)")
+    return Excitation("other", band, how="narrow band, neither a tone nor a sweep")
+
+
+def _period(x: np.ndarray, fs: float) -> float | None:
+    """The shortest lag (≤ n/2, ≥ 8 samples) at which x repeats (normalised correlation
+    over the overlap ≥ :data:`PERIODIC_CORRELATION`), in s; None when it does not."""
+    n = x.size
+    F = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(F * np.conj(F))[: n // 2 + 1]
+    e = np.cumsum(x[::-1] ** 2)[::-1]             # energy of x[L:]
+    head = np.cumsum(x ** 2)                      # energy of x[:n-L]
+    lags = np.arange(8, n // 2 + 1)
+    if lags.size == 0:
+        return None
+    rho = ac[lags] / np.sqrt(np.maximum(e[lags] * head[n - 1 - lags], 1e-300))
+    ok = np.flatnonzero(rho >= PERIODIC_CORRELATION)
+    if ok.size == 0:
+        return None
+    i = ok[0]
+    while i + 1 < lags.size and rho[i + 1] > rho[i]:        # the top of that peak
+        i += 1
+    return float(lags[i] / fs)
+
+
+def _sweep_trend(x: np.ndarray, fs: float, segments: int = 24) -> tuple[float, float]:
+    """(Spearman rank correlation of the segments' dominant log-frequency with time, decades spanned)."""
+    n = x.size
+    m = n // segments
+    if m < 16:
+        return 0.0, 0.0
+    w = np.hanning(m)
+    f = np.fft.rfftfreq(m, 1.0 / fs)[1:]
+    cents = []
+    for k in range(segments):
+        seg = x[k * m:(k + 1) * m]
+        P = np.abs(np.fft.rfft((seg - seg.mean()) * w))[1:] ** 2
+        if P.sum() <= 0:
+            continue
+        cents.append(float(np.sum(P * np.log10(f)) / P.sum()))
+    if len(cents) < 6:
+        return 0.0, 0.0
+    c = np.asarray(cents)
+    r = stats.spearmanr(np.arange(c.size), c)[0]
+    return (float(r) if np.isfinite(r) else 0.0), float(np.ptp(c))

@@ -76,3 +76,30 @@ def summary(y, yhat) -> dict:
     signals, and is left out.)"""
     return {"n": int(np.size(y)), "rmse": rmse(y, yhat), "nrmse": nrmse(y, yhat),
             "fit_percent": fit_percent(y, yhat), "correlation": correlation(y, yhat)}
+
+
+#: Nuisance terms per record (offset and linear drift), counted as parameters in the BIC.
+NUISANCE_TERMS = 2
+
+
+def nuisance_terms(e: np.ndarray, t: np.ndarray | None = None) -> tuple[float, float]:
+    """(offset [units of e] at the record's start, drift [units per s]) of the least-squares
+    line through ``e`` (``t`` [s], default the sample index)."""
+    e = np.asarray(e, dtype=float)
+    t = np.arange(e.size, dtype=float) if t is None else np.asarray(t, dtype=float)
+    tc = t - t.mean()
+    den = float(tc @ tc)
+    slope = float(tc @ e) / den if den > 0 else 0.0
+    return float(e.mean() - slope * (t.mean() - t[0])), slope
+
+
+def remove_nuisance(e: np.ndarray, t: np.ndarray | None = None) -> np.ndarray:
+    """``e`` minus its least-squares offset and linear drift a + b·t (``t`` [s], default the
+    sample index): the nuisance terms of every record (a laser's zero is arbitrary and
+    drifts slowly; neither is physics)."""
+    e = np.asarray(e, dtype=float)
+    t = np.arange(e.size, dtype=float) if t is None else np.asarray(t, dtype=float)
+    tc = t - t.mean()
+    den = float(tc @ tc)
+    slope = float(tc @ e) / den if den > 0 else 0.0
+    return e - e.mean() - slope * tc

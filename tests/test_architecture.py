@@ -22,9 +22,6 @@ ROOT = Path(__file__).resolve().parent.parent
 #: physics/identify/**, physics/compare/** are converted by the `dx` track, the readers and
 #: writers (timeseries, outputs, fileio, parallel) by the `io` track.  Only ever shrinks.
 FLAG_ALLOWLIST = {
-    "physics/compare/comparison.py": 2, "physics/compare/measurements.py": 1,
-    "physics/diagnose/demo.py": 2, "physics/diagnose/diagnosis.py": 6, "physics/diagnose/records.py": 1,
-    "physics/diagnose/report.py": 1, "physics/identify/parameters.py": 1, "physics/identify/problem.py": 4,
     "physics/fileio.py": 1, "physics/outputs.py": 3, "physics/parallel.py": 2, "physics/timeseries.py": 6,
 }
 _FLAG = re.compile(r"(?<![\w-])--[A-Za-z][\w-]*")
@@ -88,23 +85,10 @@ def test_argument_references_survive_pickling():
 
 # ------------------------------------------------------------------ effects are named only in physics/effects
 
-#: Offenders in physics/diagnose/** and physics/identify/**, (file → literals), which the `dx`
-#: track is replacing with hooks on the effects: it empties this list.  It only ever shrinks
+#: Offenders in physics/diagnose/** and physics/identify/** (file → literals): emptied by the `dx`
+#: track (hooks on the effects replaced them); it stays empty.  It only ever shrinks
 #: (an entry that no longer occurs fails the test until it is removed here).
-DX_ALLOWLIST = {
-    "physics/diagnose/candidates.py": {"C_max", "Y_polymer", "dma", "dma_membrane", "dma_scale", "frac_a", "frac_b",
-                                       "frac_f_lo", "frac_p", "kf0"},
-    "physics/diagnose/demo.py": {"C_max", "dma", "dma_scale", "double_layer", "electrode_resistance", "frac_a",
-                                 "frac_b", "frac_f_lo", "fractional_coupling", "humidity", "kf0", "nonlinear_charge",
-                                 "solvent_diffusion", "viscoelastic"},
-    "physics/diagnose/describing.py": {"electrode_resistance", "nonlinear_charge"},
-    "physics/diagnose/diagnosis.py": {"double_layer"},
-    "physics/diagnose/report.py": {"double_layer"},
-    "physics/identify/devicefile.py": {"double_layer"},
-    "physics/identify/parameters.py": {"C_max", "Y_polymer", "electrode_resistance", "frac_a", "frac_b", "frac_p",
-                                       "fractional_coupling", "kf0", "layered_beam", "nonlinear_charge",
-                                       "solvent_diffusion"},
-}
+DX_ALLOWLIST: dict = {}
 #: Legitimate data, not code that branches on an effect: a scenario's choice of effect, as a
 #: device file's default effect list is (file → literals, with the reason).
 DATA = {

@@ -152,7 +152,12 @@ def test_bad_inputs(model, records):
 
 
 def test_helpers():
-    assert cluster_rh([40.2, 59.8, 40.0, 60.6, 80.0], 2.5) == [40.1, 60.2, 40.1, 60.2, 80.0]
+    # grouped within the tolerance, labelled by the nominal value (whole percent), never 60.0003
+    assert cluster_rh([40.2, 59.8, 40.0, 60.6, 80.0], 2.5) == [40.0, 60.0, 40.0, 60.0, 80.0]
+    assert cluster_rh([70.0003, 70.0019, 69.6, 70.4], 1.0) == [70.0] * 4
+    assert cluster_rh([60.0, 60.4], 0.2) == [60.0, 60.4]                 # a fine tolerance keeps 0.1 %
+    jitter = 60.0 + np.random.default_rng(0).normal(0.0, 0.15, 2000)
+    assert model_rh(jitter, 100.0, 1.0) == pytest.approx(60.0, abs=0.02)   # hygrometer jitter: one value
     assert default_bands(0.1, 50) == [(0.1, 1.0), (1.0, 10.0), (10.0, 50)]
     f = np.linspace(0.1, 50, 500)
     idx = thin_log(f, 100)

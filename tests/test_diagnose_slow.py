@@ -8,7 +8,7 @@ import warnings
 import pytest
 
 from physics.diagnose import diagnose
-from physics.diagnose.demo import HIDDEN, hidden_effect_case
+from physics.diagnose.demo import hidden_effect_case, hidden_effects
 
 pytestmark = pytest.mark.slow
 
@@ -28,7 +28,7 @@ def _run(effect, seed, design):
     return ok, res
 
 
-@pytest.mark.parametrize("effect", list(HIDDEN) + [None])
+@pytest.mark.parametrize("effect", list(hidden_effects()) + [None])
 def test_identification_rate_over_seeds(effect):
     results = [_run(effect, s, "auto") for s in SEEDS]
     rate = sum(ok for ok, _ in results) / len(SEEDS)
@@ -38,7 +38,7 @@ def test_identification_rate_over_seeds(effect):
     assert rate == 1.0, missed
 
 
-@pytest.mark.parametrize("effect", list(HIDDEN) + [None])
+@pytest.mark.parametrize("effect", list(hidden_effects()) + [None])
 def test_rich_design_every_candidate_competes(effect):
     """Sweeps at RH 40/70/100 %, two amplitudes and a square pulse: all seven candidates are
     evaluated, and the hidden one must still win (no hidden one: no verdict)."""

@@ -87,6 +87,7 @@ def test_run_page_tells_the_story(tmp_path):
     assert "measurement-like" in text and "not in the training data" in text   # the odd number has its sentence
     assert page.with_name("index.screenshot.png").is_file()
     assert (out / "compare" / "index.html").is_file()
+    assert ".eap-tmp-" not in (out / "compare" / "compare.json").read_text()   # final paths in the JSON too
 
 
 def test_train_compare_report(tmp_path):

@@ -44,8 +44,9 @@ def add_frf_arguments(p) -> None:
     g.add_argument("--sensor-bandwidth-Hz", default="auto",
                    help="first-order sensor low-pass applied to the model: auto (from record metadata), none, "
                         "or a cut-off in Hz")
-    g.add_argument("--rh-tolerance", type=float, default=2.5,
-                   help="records whose RH differ by less than this [%%] form one RH level")
+    g.add_argument("--rh-tolerance", type=float, default=1.0,
+                   help="the hygrometer's tolerance [%%]: records whose RH differ by less than this form one RH "
+                        "level, labelled by its nominal value (default 1)")
 
 
 def frf_options(args) -> FRFOptions:
@@ -69,6 +70,17 @@ def frf_options(args) -> FRFOptions:
                              "blackman, boxcar, flattop") from None
     return FRFOptions(method=args.frf_method, nperseg=args.nperseg, window=args.window, band=band,
                       max_points=args.points)
+
+
+def fit_options(args, **fit):
+    """The measurement options of ``args`` (and the fit options ``fit``) as the one options
+    object of identify and diagnose."""
+    from physics.identify.options import FitOptions
+    if not (args.rh_tolerance >= 0):
+        raise InputError(f"--rh-tolerance {args.rh_tolerance!r}: must be a non-negative number of % RH")
+    return FitOptions(rh=args.rh, rh_tolerance=args.rh_tolerance, frf=frf_options(args),
+                      sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
+                      min_coherence=args.min_coherence, **fit)
 
 
 def sensor_setting(text: str):

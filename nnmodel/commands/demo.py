@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from physics.diagnose.demo import HIDDEN, run_hidden_effect
+from physics.diagnose.demo import hidden_effects, run_hidden_effect
 from physics.errors import InputError
 
 from ._common import add_output_options, check_out, provenance, writing
@@ -24,7 +24,7 @@ def add_arguments(p):
     p.add_argument("scenario", choices=SCENARIOS, help="hidden-effect: measurements with an effect the model lacks; "
                    "missing-physics: creep, outside the catalog, then the example effect added")
     p.add_argument("--template", default=str(EXAMPLE), help="missing-physics: the effect file added in the second step")
-    p.add_argument("--effect", default="random", help=f"the hidden effect: {', '.join(HIDDEN)}, none, or random")
+    p.add_argument("--effect", default="random", help=f"the hidden effect: {', '.join(hidden_effects())}, none, or random")
     p.add_argument("--seed", type=int, default=0, help="seed of the random parameters, noise and choice")
     p.add_argument("--device", default="ipmc_pt_eg", help="device the measurements are simulated from")
     p.add_argument("--design", choices=["auto", "rich"], default="auto",
@@ -39,8 +39,8 @@ def run(args) -> int:
     if args.scenario == "missing-physics":
         return _missing_physics(args)
     eff = None if args.effect == "none" else args.effect
-    if eff not in (None, "random") and eff not in HIDDEN:
-        raise InputError(f"--effect {args.effect!r}: choose one of {', '.join(HIDDEN)}, none or random")
+    if eff not in (None, "random") and eff not in hidden_effects():
+        raise InputError(f"--effect {args.effect!r}: choose one of {', '.join(hidden_effects())}, none or random")
     log = lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True)  # noqa: E731
     check_out(args)
     with writing(args) as tmp:

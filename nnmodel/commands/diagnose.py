@@ -9,9 +9,11 @@ from physics.diagnose import diagnose, write_diagnosis
 from physics.errors import InputError
 
 from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
-from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
+from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "diagnose"
+#: API argument → flag, where the flag's destination differs (InputError.render).
+FLAGS = {"n_starts": "--starts", "noise_floor": "--noise-floor-um", "fs_max": "--fs-max-Hz"}
 HELP = "diagnose a model against measurements: where it fails, which effect is missing (ranked, with statistics)"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series records (DATA_FORMAT.md): several records may differ "
                "in signal, amplitude and RH. Writes diagnosis.json, PNGs and the page index.html into --out; --apply also "
@@ -28,8 +30,12 @@ def add_arguments(p):
                         "effects name it, and beta_f)")
     p.add_argument("--per-rh", default="", help="model parameters fitted once per RH level (with humidity)")
     p.add_argument("--candidates", default="default",
-                   help="effects to try: comma-separated ids (default: every catalog effect the model lacks but thermal)")
+                   help="effects to try: comma-separated ids (default: every effect with a diagnosis spec that the "
+                        "model lacks, catalog and --effects-path, except those tried only on request)")
     p.add_argument("--force", action="store_true", help="also try effects the data cannot reveal (flagged as such)")
+    p.add_argument("--max-effects", type=int, default=2,
+                   help="longest chain of missing effects: after a pick the remaining candidates are tried again on "
+                        "top of it while one passes (default 2)")
     p.add_argument("--no-support", action="store_true", help="skip checking that the data support the model's own effects")
     p.add_argument("--start", default=None, help="start values of the free parameters, e.g. kf=0.004,Y=0.2 GPa")
     p.add_argument("--bounds", default=None, help="search ranges, e.g. kf=1e-4:1e-1")
@@ -49,6 +55,8 @@ def add_arguments(p):
 
 
 def print_summary(res, file=None) -> None:
+    """The diagnosis on the terminal: the base, where it fails, the ranking of each step and
+    the verdict (the same text as the page and diagnosis.json)."""
     file = file or sys.stdout
     b = res.base
     nf = f"{1e6 * res.noise_floor:.3g} µm" if math.isfinite(res.noise_floor) else "unknown"
@@ -57,35 +65,26 @@ def print_summary(res, file=None) -> None:
     print("where it fails:", file=file)
     for f in res.analysis_base.findings:
         print(f"  - {f}", file=file)
-    print("ranking (most to least supported):", file=file)
-    print(f"  {'effect':22s} {'RMS after [µm]':>15s} {'fit after %':>11s} {'ΔBIC':>11s} {'p-value':>9s}  evidence",
-          file=file)
-    for c in res.ranking:
-        cmp = c.comparison
-        tag = "  <- missing" if c.effect == res.verdict.missing_effect else ""
-        apart = f"  (cannot be told apart from {', '.join(c.indistinguishable_from)})" if c.indistinguishable_from else ""
-        print(f"  {c.effect:22s} {1e6 * c.fit.rmse:15.4g} {c.fit.fit_pct:11.2f} {cmp.delta_bic:11.4g} "
-              f"{cmp.p_value:9.2g}  {c.evidence(b)}{tag}{apart}", file=file)
-    for c in res.candidates:
-        if not c.evaluated:
-            print(f"  {c.effect:22s} not evaluated: {c.reason}", file=file)
-    for s in res.support:
-        print(f"  model effect {s.effect}: {s.explanation}", file=file)
-    v = res.verdict
-    if v.missing_effect is not None:
-        print(f"verdict ({v.status}): missing effect = {v.missing_effect}, confidence {v.confidence:.3g} ({v.label}); "
-              f"{v.reason}", file=file)
-    else:
-        print(f"verdict ({v.status}): no catalog effect named" + (f" (ambiguous: {' or '.join(v.ambiguous)})"
-                                                                  if v.ambiguous else "") + f"; {v.reason}", file=file)
-    if res.adequacy is not None:
-        print(f"adequacy: {res.adequacy.summary()}", file=file)
-    if v.remaining:
-        print(f"what remains: {v.remaining}", file=file)
-    w = res.winner
-    if w is not None:
-        print(f"error before/after adding {w.effect}: RMS {1e6 * b.rmse:.4g} -> {1e6 * w.fit.rmse:.4g} µm "
-              f"({100 * (1 - w.fit.rmse / b.rmse):.1f} % lower), fit {b.fit_pct:.2f} -> {w.fit.fit_pct:.2f} %", file=file)
+    for s in res.steps:
+        on = "" if s.index == 1 else f" on top of {s.base.effects[-1]}"
+        print(f"step {s.index}: candidates{on}, most to least supported:", file=file)
+        print(f"  {'effect':22s} {'weight':>7s} {'RMS after [µm]':>15s} {'ΔBIC':>11s} {'p-value':>9s} {'flags':>5s}  "
+              "evidence", file=file)
+        for c in s.ranking:
+            cmp = c.comparison
+            tag = "  <- picked" if c is s.decision.pick else ""
+            apart = f"  (cannot be told apart from {', '.join(c.indistinguishable_from)})" if c.indistinguishable_from \
+                else ""
+            print(f"  {c.effect:22s} {s.decision.weights.get(c.effect, 0):7.3g} {1e6 * c.fit.rmse:15.4g} "
+                  f"{cmp.delta_bic:11.4g} {cmp.p_value:9.2g} {len(c.quality):5d}  {c.evidence(s.base)}{tag}{apart}",
+                  file=file)
+        for c in s.candidates:
+            if not c.evaluated and s.index == 1:
+                print(f"  {c.effect:22s} not evaluated: {c.reason}", file=file)
+    for sp in res.support:
+        print(f"  model effect {sp.effect}: {sp.explanation}", file=file)
+    for line in res.verdict.lines():
+        print(line, file=file)
 
 
 def run(args) -> int:
@@ -93,17 +92,18 @@ def run(args) -> int:
         raise InputError(f"--noise-floor-um {args.noise_floor_um!r}: must be a positive number of µm")
     if args.fs_max_Hz is not None and not (args.fs_max_Hz > 0):
         raise InputError(f"--fs-max-Hz {args.fs_max_Hz!r}: must be a positive frequency")
+    if args.max_effects < 1:
+        raise InputError(f"--max-effects {args.max_effects}: must be at least 1")
     protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
     check_out(args, protect)
     ms = read_measurements(args)
     log = None if args.quiet else (lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True))
-    res = diagnose(ms, args.device, args.effects, args.free or None, per_rh=args.per_rh,
-                   candidates=args.candidates, force=args.force, check_support=not args.no_support,
-                   rh=args.rh, start=args.start, bounds=args.bounds, frf_options=frf_options(args),
-                   sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), rh_tolerance=args.rh_tolerance,
+    opts = fit_options(args, free=args.free or None, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
+                       n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, settings=parallel_settings(args))
+    res = diagnose(ms, args.device, args.effects, options=opts, candidates=args.candidates, force=args.force,
+                   check_support=not args.no_support, max_effects=args.max_effects,
                    noise_floor=None if args.noise_floor_um is None else 1e-6 * args.noise_floor_um,
-                   fs_max=args.fs_max_Hz, n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, progress=log,
-                   settings=parallel_settings(args))
+                   fs_max=args.fs_max_Hz, progress=log)
     with writing(args, inputs=protect) as tmp:
         out = write_diagnosis(res, tmp, apply=args.apply, name=args.name, provenance=provenance(inputs=protect),
                               protect=protect)
@@ -111,7 +111,7 @@ def run(args) -> int:
     print_summary(res)
     if args.apply:
         ap = out["applied"]
-        print(f"applied: {d / ap['written']} ({ap['usage']})" if ap.get("written") else f"applied: {ap['reason']}")
+        print(f"applied: {ap['path']} (use it: {ap['usage']})" if ap.get("written") else f"applied: {ap['reason']}")
     print(f"wrote {d}/diagnosis.json, {d}/index.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
           f"in {res.timings['total']:.1f} s")
     return 0

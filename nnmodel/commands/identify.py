@@ -8,9 +8,11 @@ from physics.errors import InputError
 from physics.identify import IdentifiabilityWarning, identify, write_identification
 
 from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
-from .compare import add_frf_arguments, add_measurement_arguments, frf_options, read_measurements, sensor_setting
+from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "identify"
+#: API argument → flag, where the flag's destination differs (InputError.render).
+FLAGS = {"n_starts": "--starts"}
 HELP = "identify device parameters from measurements (least squares or the thesis Nelder-Mead); writes a device YAML"
 DESCRIPTION = (HELP + ". Writes NAME.yaml (a device file with the identified values, their units and sources), "
                "report.json, parameters.csv, Bode/correlation PNGs and the page index.html into --out.")
@@ -54,24 +56,28 @@ def run(args) -> int:
     ms = read_measurements(args)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)  # printed below from the result
-        res = identify(ms, args.device, args.effects, args.free, per_rh=args.per_rh, method=args.method,
-                       n_starts=args.starts, seed=args.seed, start=args.start, bounds=args.bounds,
-                       residual=args.residual, fit_phase=not args.no_phase, frf_options=frf_options(args),
-                       min_coherence=args.min_coherence, weighting=args.weighting, rh_tolerance=args.rh_tolerance,
-                       sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz), n_modes=args.n_modes,
-                       start_spread=args.start_spread, rh=args.rh, skip_s=args.skip_s,
-                       settings=parallel_settings(args))
+        opts = fit_options(args, free=args.free, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
+                           n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, weighting=args.weighting,
+                           settings=parallel_settings(args))
+        res = identify(ms, args.device, args.effects, options=opts, method=args.method, residual=args.residual,
+                       fit_phase=not args.no_phase, start_spread=args.start_spread, skip_s=args.skip_s)
     with writing(args, inputs=protect) as tmp:
         out = write_identification(res, tmp, name=args.name, provenance=provenance(inputs=protect), protect=protect)
     d = Path(args.out)
     prob = res.problem
     print(f"{prob.device.name} [{', '.join(prob.effects)}] from {len(res.sources)} measurement(s), "
           f"{sum(t.freq.size for t in prob.targets)} frequencies, RH levels {', '.join(f'{x:g}' for x in prob.levels)} %")
+    chk = res.check
     for name, f in res.fits.items():
-        mark = " (written)" if name == res.primary else ""
-        print(f"method {name}{mark}: J_err {1e3 * res.j_err_initial:.4g} -> {1e3 * f.j_err:.4g} mm/V, {f.nfev} model "
-              "evaluations"
-              + (f", {f.nit} iterations" if f.nit is not None else "") + f", {f.wall_s:.2f} s; {f.message}")
+        mark = (" (start values kept)" if res.kept_start else " (written)") if name == res.primary else ""
+        crit = (f"criterion ({f.residual_kind}) {chk['cost_start']:.4g} -> {f.cost:.4g}; "
+                if name == res.primary and chk.get("cost_start") is not None else "")
+        print(f"method {name}{mark}: {crit}J_err (eq. 13) {1e3 * res.j_err_initial:.4g} -> {1e3 * f.j_err:.4g} mm/V, "
+              f"{f.nfev} model evaluations" + (f", {f.nit} iterations" if f.nit is not None else "")
+              + f", {f.wall_s:.2f} s; {f.message}")
+    if chk.get("time_rmse_start_m") is not None:
+        print(f"time records: RMS error {1e6 * chk['time_rmse_start_m']:.4g} µm at the start -> "
+              f"{1e6 * chk['time_rmse_fitted_m']:.4g} µm fitted (offset and linear drift of each record removed)")
         for r in res.param_rows(f):
             print(f"  {r['parameter']:16s} = {r['value']:.6g} ± {r['std_error']:.3g} {r['unit']} "
                   f"({100 * r['rel_std_error']:.3g} %), 95 % [{r['ci95_lo']:.4g}, {r['ci95_hi']:.4g}]"

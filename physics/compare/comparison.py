@@ -9,7 +9,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import metrics
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..frfdata import FRFData
 from ..timeseries import TimeSeries
 from .frf import FRFOptions, default_bands, estimate_record_frf, frf_errors, residual_by_band, sensor_bandwidth_of, sensor_lowpass, sensor_response, thin_log, valid_points
@@ -60,7 +60,7 @@ class ComparisonResult:
 
 def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOptions | None = None,
             offset: str = "mean", skip_s: float = 0.0, min_coherence: float = 0.0,
-            bands: Sequence[tuple[float, float]] | None = None, rh_tolerance: float = 2.5,
+            bands: Sequence[tuple[float, float]] | None = None, rh_tolerance: float = 1.0,
             sensor_bandwidth="auto", log=None) -> ComparisonResult:
     """Compare ``predictor`` with measurements (loaded :class:`TimeSeries` /
     :class:`FRFData`, see :func:`load_measurements`); see the module doc for the metrics.
@@ -131,7 +131,7 @@ def residual_tests(e: np.ndarray, u: np.ndarray, lags: int = RESIDUAL_LAGS) -> d
     autocorrelations ρ_ee(1..lags) and of input–residual cross-correlations ρ_ue(−lags..lags)
     outside the 99 % band ±2.576/√n of white noise; a model passes when at most 1 % + one
     lag falls outside (what chance alone gives)."""
-    from ..diagnose.stats import autocorrelation, cross_correlation
+    from ..stats import autocorrelation, cross_correlation
     n = e.size
     m = int(min(lags, max(1, n // 4)))
     band = 2.576 / math.sqrt(n)
@@ -151,7 +151,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
         raise InputError(f"{where}: has no deflection column; a measurement needs deflection_m")
     rh = ts.rh if ts.rh is not None else None
     if rh is None:
-        raise InputError(f"{where}: no relative humidity (rh_pct); give the RH with --rh")
+        raise InputError(f"{where}: no relative humidity (rh_pct); give the RH with {arg('rh')}")
     rh_arg = model_rh(rh, ts.fs, rh_tolerance)
     log(f"{Path(where).name}: {predictor.name} on {ts.n:,} samples")
     yhat = _check_output(predictor(ts.voltage, rh_arg, ts.fs), ts.n, predictor.name)
@@ -215,7 +215,7 @@ def _sensor_notes(rec: "RecordComparison", setting) -> list[str]:
 
 def _compare_frf(frf: FRFData, where, predictor, min_coh, sb_setting):
     if frf.rh is None:
-        raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with --rh")
+        raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with {arg('rh')}")
     rh = float(np.mean(frf.rh))
     bw = sensor_bandwidth_of(frf, sb_setting)
     Hc = predictor.frequency_response(frf.freq, rh) * sensor_response(frf.freq, bw)

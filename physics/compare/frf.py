@@ -9,8 +9,14 @@ from scipy import signal as sps
 
 from .. import metrics
 from ..errors import InputError
-from ..frf_estimation import FRFEstimate, estimate_frf
+from ..frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level
 from ..timeseries import TimeSeries
+
+
+#: Excitation kinds of a record's metadata that :meth:`FRFOptions.settings_for` understands.
+_KNOWN_KINDS = ("sweep", "multisine", "noise", "tone", "square", "steps")
+#: Transient excitations (one event from rest): the whole record is one average.
+_TRANSIENT_KINDS = ("sweep", "multisine", "square", "steps")
 
 
 @dataclass
@@ -21,8 +27,10 @@ class FRFOptions:
     ``eap simulate``): a multisine of ≥ 2 periods → one period per segment, boxcar window,
     no overlap (leakage-free H1 over the periods); a single sweep or a single multisine
     period → the whole record, boxcar (one average: the coherence is then 1 by
-    construction and carries no information); anything else (noise, lab records) → Welch
-    with Hann windows of ``nperseg`` samples (default n/8), 50 % overlap.  ``nperseg``,
+    construction and carries no information); square pulses and steps → the whole record
+    too (a transient from rest); noise and tones → Welch with Hann windows of ``nperseg``
+    samples (default n/8), 50 % overlap.  Without metadata (a lab's export) the excitation
+    is read from the voltage (:func:`physics.frf_estimation.detect_excitation`).  ``nperseg``,
     ``window``, ``overlap`` override the choice.  ``band`` [Hz] keeps (f_lo, f_hi); by
     default the excitation's band from the metadata, if any.  ``max_points`` thins the
     estimate to about that many log-spaced frequencies (nearest lines; 0 keeps all): a
@@ -37,23 +45,34 @@ class FRFOptions:
     min_input_power: float = 1e-3
 
     def settings_for(self, ts: TimeSeries) -> dict:
-        """Keyword arguments for :func:`estimate_frf` for record ``ts``."""
+        """Keyword arguments for :func:`estimate_frf` for record ``ts``.  With ``method="auto"``
+        and no excitation in the record's metadata (a lab's export) the excitation is read
+        from the voltage itself (:func:`physics.frf_estimation.detect_excitation`) and the
+        choice says so (key ``_how``)."""
         n = ts.n
         sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
-        kind = str(sig.get("kind", "")) if self.method == "auto" else ""
         if self.method not in ("auto", "welch", "periodic", "whole"):
             raise InputError(f"FRF method {self.method!r}: expected auto, welch, periodic or whole")
+        kind = str(sig.get("kind", "")) if self.method == "auto" else ""
+        periods = int(sig.get("periods", 1)) if kind == "multisine" else 1
+        period = sig.get("period_s")
+        how = f"{self.method} (as asked)" if self.method != "auto" else f"auto: the metadata say {kind}"
+        if self.method == "auto" and kind not in _KNOWN_KINDS:
+            ex = detect_excitation(ts.voltage, ts.fs)
+            kind = {"periodic": "multisine", "steps": "square"}.get(ex.kind, ex.kind)
+            if ex.kind == "periodic":
+                period, periods = ex.period_s, int(round(n / ts.fs / ex.period_s))
+            how = f"auto: no excitation in the metadata; from the voltage: {ex.how}"
         kw: dict = {}
         chosen = self.method
-        if self.method == "periodic" or (kind == "multisine" and int(sig.get("periods", 1)) >= 2):
-            period = sig.get("period_s")
+        if self.method == "periodic" or (kind == "multisine" and periods >= 2):
             if period is None and self.nperseg is None:
                 raise InputError(f"{ts.source or 'record'}: periodic FRF estimation needs the period "
                                  "(meta signal.period_s) or an explicit nperseg")
             nper = self.nperseg or int(round(float(period) * ts.fs))
             kw = dict(nperseg=nper, window="boxcar", overlap=0.0)
             chosen = "periodic"
-        elif self.method == "whole" or kind in ("sweep", "multisine"):
+        elif self.method == "whole" or kind in _TRANSIENT_KINDS:
             kw = dict(nperseg=n, window="boxcar", overlap=0.0)
             chosen = "whole"
         else:
@@ -73,6 +92,7 @@ class FRFOptions:
             kw["band"] = (float(band[0]), float(band[1]))
         kw["min_input_power"] = self.min_input_power
         kw["_method"] = chosen
+        kw["_how"] = how
         return kw
 
 
@@ -81,11 +101,17 @@ def estimate_record_frf(ts: TimeSeries, y: np.ndarray, options: FRFOptions, *,
     """H1 estimate from the record's voltage to ``y`` (its deflection or a model output)."""
     kw = dict(settings or options.settings_for(ts))
     method = kw.pop("_method", "custom")
+    how = kw.pop("_how", "")
+    if kw["nperseg"] >= ts.n:       # one average: the coherence from the output's noise level
+        level = noise_level(y, ts.fs)[0]
+        if np.isfinite(level):
+            kw["noise_psd"] = level
     try:
         est = estimate_frf(ts.voltage, y, ts.fs, **kw)
     except InputError as exc:
         raise InputError(f"{ts.source or 'record'}: FRF estimation failed: {exc}") from None
-    return est, {"method": method, **{k: v for k, v in kw.items() if k != "min_input_power"}}
+    return est, {"method": method, "chosen": how, "coherence": est.meta.get("coherence"),
+                 **{k: v for k, v in kw.items() if k not in ("min_input_power", "noise_psd")}}
 
 
 def thin_log(freq: np.ndarray, max_points: int) -> np.ndarray:

@@ -7,7 +7,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..frfdata import FRFData, read_frf
 from ..timeseries import TimeSeries, csv_header, read_timeseries
 
@@ -55,14 +55,18 @@ def mean_rh(m, where: str) -> float:
     """Mean RH [%] of a record (an FRF without RH is an error naming it)."""
     rh = m.rh
     if rh is None:
-        raise InputError(f"{where}: no relative humidity; add an rh_pct column or give the RH with --rh")
+        raise InputError(f"{where}: no relative humidity; add an rh_pct column or give the RH with {arg('rh')}")
     return float(np.mean(rh))
 
 
-def cluster_rh(values: Sequence[float], tolerance: float = 2.5) -> list[float]:
-    """Group RH values [%] into levels: sorted values closer than ``tolerance`` [%] to the
-    previous one join its group; each level is its group's mean (rounded to 0.1 %).
-    Returns the level of each input value."""
+def cluster_rh(values: Sequence[float], tolerance: float = 1.0) -> list[float]:
+    """Group RH values [%] into humidity levels and label each by its nominal value.
+
+    Sorted values closer than ``tolerance`` [%] (a hygrometer's tolerance) to the previous
+    one join its group; a group is labelled by its mean rounded to whole percent (to 0.1 %
+    when ``tolerance`` is below 0.5 %, or when whole percents would merge two groups), so
+    that 59.7 % and 60.2 % are "60 %", never 59.95 or 60.0003.  Returns the label of each
+    input value; the value a model is evaluated at stays each record's own RH."""
     vals = np.asarray(values, dtype=float)
     order = np.argsort(vals)
     groups: list[list[int]] = []
@@ -71,24 +75,31 @@ def cluster_rh(values: Sequence[float], tolerance: float = 2.5) -> list[float]:
             groups[-1].append(int(i))
         else:
             groups.append([int(i)])
+    means = [float(np.mean(vals[g])) for g in groups]
+    step = 1.0 if tolerance >= 0.5 else 0.1
+    labels = [round(m / step) * step for m in means]
+    if len(set(labels)) < len(labels):
+        labels = [round(m, 1) for m in means]
     level = np.empty(vals.size)
-    for g in groups:
-        level[g] = round(float(np.mean(vals[g])), 1)
+    for g, lab in zip(groups, labels):
+        level[g] = round(lab, 1)
     return level.tolist()
+
 
 def model_rh(rh: np.ndarray, fs: float, tolerance: float = 2.5, window_s: float = 10.0,
              step: float = 0.5):
     """The RH [%] given to a model for a record's RH channel.
 
-    A humidity sensor's noise is not a humidity change, and a time solver would restart
-    its mechanics at every new RH value: when the record's RH spans no more than
-    ``tolerance`` [%] its median is used (robust to a sensor clipped at 100 %); otherwise a moving mean over ``window_s`` [s],
+    A hygrometer's jitter is not a humidity change, and a time solver would restart its
+    mechanics at every new RH value: the channel is smoothed by a moving mean over
+    ``window_s`` [s]; when the smoothed RH spans no more than ``tolerance`` [%] the record's
+    median is used (robust to a sensor clipped at 100 %), otherwise the smoothed series
     rounded to ``step`` [%] (RH changes slowly compared with the mechanics)."""
     rh = np.asarray(rh, dtype=float)
-    if np.ptp(rh) <= tolerance:
-        return float(np.median(rh))
     k = max(1, int(round(window_s * fs)))
     kernel = np.ones(min(k, rh.size)) / min(k, rh.size)
     pad = kernel.size // 2
     smooth = np.convolve(np.pad(rh, (pad, kernel.size - 1 - pad), mode="edge"), kernel, mode="valid")
+    if np.ptp(smooth) <= tolerance:
+        return float(np.median(rh))
     return np.clip(np.round(smooth / step) * step, 0.0, 100.0)

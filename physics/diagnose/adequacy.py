@@ -31,7 +31,8 @@ from typing import Sequence
 import numpy as np
 from scipy.signal import lfilter
 
-from . import stats
+from .. import stats
+from ..metrics import remove_nuisance
 
 #: The final model explains the data when its RMS error is within this × the noise floor.
 ADEQUATE_RATIO = 1.3
@@ -75,12 +76,13 @@ class Adequacy:
                 "ljung_box_p": self.ljung_box_p, "descriptors": self.descriptors, "summary": self.summary()}
 
 
-def assess(label: str, fit, records: Sequence, noise: float) -> Adequacy:
-    """Adequacy of ``fit`` (a scored :class:`.candidates.ModelFit`) on ``records``."""
+def assess(label: str, fit, records: Sequence, noise: float, describe: bool = True) -> Adequacy:
+    """Adequacy of ``fit`` (a scored :class:`.candidates.ModelFit`) on ``records``; with
+    ``describe`` the residual of an inadequate model is described (:func:`describe_missing`)."""
     adequate = None if not (math.isfinite(noise) and noise > 0) else bool(fit.rmse <= ADEQUATE_RATIO * noise)
     lb = stats.ljung_box(np.concatenate(list(fit.resid_d)), lags=20)
     out = Adequacy(label, float(fit.rmse), float(noise), adequate, float(lb.get("p_value", math.nan)))
-    if adequate is not True:
+    if adequate is not True and describe:
         out.descriptors = describe_missing(fit, records)
     return out
 
@@ -143,7 +145,7 @@ def describe_missing(fit, records: Sequence) -> list[dict]:
         regs = []
         for r, p in zip(records, preds):
             x = _lowpass(p, tau, r.fs_d)
-            regs.append(x - x.mean())
+            regs.append(remove_nuisance(x))
         g, rss1, d_bic = _fit_regressor(resid, regs, n_eff)
         if best is None or d_bic < best[3]:
             best = (tau, g, rss1, d_bic)
@@ -160,7 +162,7 @@ def describe_missing(fit, records: Sequence) -> list[dict]:
         regs = []
         for p in preds:
             x = play(p, w) - p
-            regs.append(x - x.mean())
+            regs.append(remove_nuisance(x))
         a, rss1, d_bic = _fit_regressor(resid, regs, n_eff)
         if best is None or d_bic < best[3]:
             best = (w, a, rss1, d_bic)

@@ -36,7 +36,8 @@ held at the device value and the report says so.
 :mod:`.records`; the sensor's low-pass applied; the model starts at rest at the record's
 first voltage).  The deflection is exactly proportional to the coupling gain, so that
 free parameter is then refined on the time records in closed form (:func:`_refine_gain`).
-The residual (measured minus model, best offset removed) gives the RMS error and fit %
+The residual (measured minus model, its nuisance terms — offset and linear drift of each
+record, :func:`.records.remove_nuisance` — removed) gives the RMS error and fit %
 at the full rate (the prediction interpolated back) and, on the decimated samples, the
 likelihood with the effective sample size of :mod:`.stats`.
 """
@@ -57,15 +58,15 @@ from ..identify import (IdentifiabilityWarning, IdentificationProblem, Identific
 from ..effects import EFFECTS
 from ..model import ActuatorModel, resolve_effects
 from ..timedomain import simulate
-from . import stats
-from .describing import DescribingFunction
-from .records import Record, sensor_filter, upsample
+from .. import stats
+from .describing import DescribingFunction, charge_effects
+from .records import NUISANCE_TERMS, Record, nuisance_terms, remove_nuisance, sensor_filter, upsample
 from .specs import (declared_default, default_candidates, effect_params, is_nested, param_bounds, param_used,
                     role_family, role_param, spec_of, start_points)
 
 ROLE_GAIN, ROLE_STIFF = "gain", "stiffness"
-#: C_max is fitted when it changes the large-signal gain by more than this (relative).
-C_MAX_MIN_SENSITIVITY = 0.10
+#: The large-signal parameter is fitted when it changes the large-signal gain by more than this (relative).
+DF_MIN_SENSITIVITY = 0.10
 
 
 def gain_param(ids) -> str:
@@ -113,59 +114,25 @@ def _ref_omega(band) -> float:
     return 2 * math.pi * math.sqrt(band[0] * band[1])
 
 
-def _frac_gain(p: dict, w: float, a: float) -> float:
-    w_lo = 2 * math.pi * p.get("frac_f_lo", 1e-4)
-    s = 1j * w
-    return abs((s + w_lo) ** a * (s + max(p.get("frac_p", 0.0), w_lo)) ** p.get("frac_b", 0.0))
-
-
-def _storage(device: Device, table: str, f: float) -> float | None:
-    t = device.tables.get(table)
-    if t is None:
-        return None
-    return float(np.exp(np.interp(math.log(f), np.log(t["freq"]), np.log(t["storage"]))))
-
-
-def _layer_modulus(p: dict) -> float:
-    """Electrode layers' bending stiffness as an added modulus of the polymer section [Pa]."""
-    if not all(k in p for k in ("t_electrode", "Y_electrode")):
-        return 0.0
-    h, te = 0.5 * p["t_polymer"], p["t_electrode"]
-    return p["Y_electrode"] * 8.0 * ((h + te) ** 3 - h ** 3) / p["t_polymer"] ** 3
-
-
 def translate_start(device: Device, from_ids, to_ids, band) -> dict:
     """Start values for the gain and stiffness roles of ``to_ids`` from the fitted values
-    of ``from_ids`` in ``device`` (see the module doc)."""
-    p = device.params
+    of ``from_ids`` in ``device`` (see the module doc), through the stages' role hooks
+    (``gain_equivalent``/``gain_start`` of the coupling stage, ``modulus_equivalent``/
+    ``modulus_start`` of the modulus stage, ``layer_modulus`` of the section stage)."""
+    p = dict(device.params)
     out: dict = {}
     w = _ref_omega(band)
-    g0, g1 = gain_param(from_ids), gain_param(to_ids)
-    if g0 != g1:
-        if g1 == "kf0":
-            a = 0.3
-            out["frac_a"] = a
-            out["kf0"] = p["kf"] * _frac_gain(p, w, a)
-        else:
-            out["kf"] = p["kf0"] / _frac_gain(p, w, p.get("frac_a", 0.0))
-    s0, s1 = stiffness_param(from_ids), stiffness_param(to_ids)
-    f_ref = math.sqrt(band[0] * band[1])
-    if s0 != s1:
-        # the modulus of an equivalent homogeneous strip the base found [Pa]
-        layers0 = _layer_modulus(p) if _layered(from_ids) else 0.0
-        layers1 = _layer_modulus(p) if _layered(to_ids) else 0.0
-        if s0 == "dma_scale":
-            table0 = "dma_membrane" if _layered(from_ids) else "dma"
-            E = p.get("dma_scale", 1.0) * (_storage(device, table0, f_ref) or p["Y"]) + layers0
-        else:
-            E = p[s0] + layers0
-        polymer = max(E - layers1, 0.2 * E)
-        if s1 in ("Y", "Y_polymer"):
-            out[s1] = polymer
-        else:
-            table = "dma_membrane" if _layered(to_ids) else "dma"
-            st = _storage(device, table, f_ref)
-            out["dma_scale"] = float(np.clip(polymer / st, 0.06, 15.0)) if st else 1.0
+    f_ref = w / (2 * math.pi)
+    m0 = ActuatorModel(device, from_ids)
+    m1 = ActuatorModel(device, to_ids)
+    if gain_param(from_ids) != gain_param(to_ids):
+        out.update(m1.hook("gain_start")(m0.hook("gain_equivalent")(p, w), p, w))
+    if stiffness_param(from_ids) != stiffness_param(to_ids):
+        lay0, lay1 = _layered(from_ids), _layered(to_ids)
+        # the modulus of an equivalent homogeneous strip the fitted model has [Pa]
+        E = m0.hook("modulus_equivalent")(p, f_ref, lay0) + m0.hook("layer_modulus")(p)
+        polymer = max(E - m1.hook("layer_modulus")(p), 0.2 * E)
+        out.update(m1.hook("modulus_start")(polymer, p, f_ref, lay1))
     return out
 
 
@@ -249,8 +216,10 @@ class DescribingFunctionProblem(IdentificationProblem):
     def responses(self, theta):
         out = super().responses(theta)
         names = [p.name for p in self.params]
-        c_max = float(theta[names.index("C_max")]) if "C_max" in names else float(self.device.params.get("C_max", np.inf))
-        return [H * self.df(a, t.freq, c_max) for H, a, t in zip(out, self.amplitudes, self.targets)]
+        name = self.df.param
+        value = float(theta[names.index(name)]) if name in names else \
+            float(self.device.params.get(name, declared_default(name)))
+        return [H * self.df(a, t.freq, value) for H, a, t in zip(out, self.amplitudes, self.targets)]
 
 
 @dataclass
@@ -281,6 +250,8 @@ class ModelFit:
     score_s: float = 0.0
     error: str | None = None
     df_info: dict | None = None
+    nuisance: list = field(default_factory=list)     # (offset [m], drift [m/s]) per record
+    correlation: np.ndarray | None = None            # of the free parameters, in ``values`` order
 
     @property
     def ok(self) -> bool:
@@ -323,7 +294,8 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     mf = ModelFit(spec, res, res.device, ActuatorModel(res.device, spec.effects, n_modes=n_modes),
                   values=dict(zip(labels, fit.theta.tolist())), std_errors=dict(zip(labels, fit.std_error.tolist())),
                   rel_std_errors=dict(zip(labels, fit.rel_std_error.tolist())), warnings=list(fit.warnings),
-                  k=len(labels), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0, df_info=df_info)
+                  k=len(labels), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0, df_info=df_info,
+                  correlation=np.array(fit.correlation, dtype=float))
     return mf
 
 
@@ -331,36 +303,40 @@ def _df_problem(spec, device, targets, target_records, kw, df_cache):
     amps = [r.amplitude for r in target_records]
     lo = min(float(t.freq.min()) for t in targets)
     hi = max(float(t.freq.max()) for t in targets)
-    rh = target_records[0].rh
-    key = (tuple(spec.effects), round(device.params.get("Rs", 0.0), 9), tuple(sorted(set(round(a, 9) for a in amps))),
-           round(lo, 6), round(hi, 6))
+    rh = target_records[0].rh_measured
+    shaping = charge_effects(spec.effects)
+    owned = sorted({n for e in shaping for n in [q.name for q in EFFECTS[e].params] + list(EFFECTS[e].requires)})
+    key = (tuple(spec.effects), tuple(round(float(device.params.get(n, math.nan)), 12) for n in owned),
+           tuple(sorted(set(round(a, 9) for a in amps))), round(lo, 6), round(hi, 6))
     cache = df_cache if df_cache is not None else {}
     if key not in cache:
         probe = DescribingFunction(device, spec.effects, [max(amps)], (lo, hi), rh=rh, n_freqs=1)
-        sens = probe.c_max_sensitivity
-        if sens > C_MAX_MIN_SENSITIVITY:
+        sens = probe.sensitivity
+        if sens > DF_MIN_SENSITIVITY:
             df = DescribingFunction(device, spec.effects, amps, (lo, hi), rh=rh)
         else:
-            nu = device.params["C_anion"] / device.params.get("C_max", np.inf)
-            df = DescribingFunction(device, spec.effects, amps, (lo, hi), rh=rh, nu_grid=[nu])
+            now = device.params.get(probe.param, declared_default(probe.param))
+            df = DescribingFunction(device, spec.effects, amps, (lo, hi), rh=rh,
+                                    coordinates=[probe.coordinate(float(now))])
         cache[key] = (df, sens)
     df, sens = cache[key]
+    name = df.param
     free = list(spec.free)
     note = None
-    if sens > C_MAX_MIN_SENSITIVITY and "C_max" not in free and len({round(a, 9) for a in amps}) >= 2:
-        free.append("C_max")
-        kw["bounds"] = {**kw.get("bounds", {}), "C_max": param_bounds("C_max", device)}
-    elif "C_max" in free and sens <= C_MAX_MIN_SENSITIVITY:
-        free.remove("C_max")
-    if "C_max" not in free:
-        note = (f"C_max held at {device.params.get('C_max', np.inf):.4g} mol/m³: across its range it changes the "
-                f"large-signal gain by only {100 * sens:.2g} % and otherwise scales the gain like kf, so these data "
-                "cannot determine it")
+    if sens > DF_MIN_SENSITIVITY and name not in free and len({round(a, 9) for a in amps}) >= 2:
+        free.append(name)
+        kw["bounds"] = {**kw.get("bounds", {}), name: param_bounds(name, device)}
+    elif name in free and sens <= DF_MIN_SENSITIVITY:
+        free.remove(name)
+    if name not in free:
+        now = device.params.get(name, declared_default(name))
+        note = (f"{name} held at {now:.4g}: across its range it changes the large-signal gain by only "
+                f"{100 * sens:.2g} % and otherwise scales the gain, so these data cannot determine it")
         if note not in spec.notes:
             spec.notes.append(note)
     spec.free = free
     problem = DescribingFunctionProblem(device, spec.effects, targets, free, spec.per_rh, amplitudes=amps, df=df, **kw)
-    info = {"c_max_sensitivity": sens, "c_max_fitted": "C_max" in free, **df.gain_table()}
+    info = {"sensitivity": sens, "parameter": name, "fitted": name in free, **df.gain_table()}
     return problem, info
 
 
@@ -389,9 +365,9 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
     preds = _refine_gain(mf, records, preds)
     mf.pred_d, mf.resid_d, mf.rss, mf.n, mf.taus, mf.rmse_records = [], [], [], [], [], []
     num, den, sq, cnt = 0.0, 0.0, 0.0, 0
+    mf.nuisance = []
     for r, yh in zip(records, preds):
-        e = r.y_d - yh
-        e = e - e.mean()
+        e = remove_nuisance(r.y_d - yh)
         mf.pred_d.append(yh)
         mf.resid_d.append(e)
         mf.rss.append(float(e @ e))
@@ -399,8 +375,8 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
         mf.taus.append(stats.integrated_time(e))
         y = r.ts.deflection
         yf = upsample(yh, r.q, y.size)
-        ef = y - yf
-        ef = ef - ef.mean()
+        mf.nuisance.append(nuisance_terms(y - yf, r.ts.time))
+        ef = remove_nuisance(y - yf)
         mf.rmse_records.append(float(np.sqrt(np.mean(ef ** 2))))
         sq += float(ef @ ef)
         cnt += ef.size
@@ -408,7 +384,7 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
         den += float(np.sum((y - y.mean()) ** 2))
     mf.rmse = math.sqrt(sq / cnt)
     mf.fit_pct = 100.0 * (1.0 - math.sqrt(num / den)) if den > 0 else math.nan
-    k = mf.k + (len(records) if n_offsets is None else n_offsets)
+    k = mf.k + (NUISANCE_TERMS * len(records) if n_offsets is None else n_offsets)
     n_eff = [n / t for n, t in zip(mf.n, mf.taus)]
     mf.bic = stats.bic(mf.rss, mf.n, n_eff, k)
     mf.aic = stats.aic(mf.rss, mf.n, n_eff, k)
@@ -433,8 +409,8 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     core = ActuatorModel(mf.device, [e for e in mf.effects if e not in {o.id for o in outs}],
                          n_modes=mf.model.n_modes)
     raw = [simulate(core, None, r.t_sim, r.v_sim, rh=r.rh_model, hold=r.hold).deflection for r in records]
-    p0 = mf.model.params_at(records[0].rh if np.ndim(records[0].rh_model) == 0 else None)
-    ys = [r.y_d - r.y_d.mean() for r in records]
+    p0 = mf.model.params_at(records[0].rh_measured if np.ndim(records[0].rh_model) == 0 else None)
+    ys = [remove_nuisance(r.y_d) for r in records]
     scale = [1.0 / (np.std(y) * math.sqrt(y.size) or 1.0) for y in ys]
 
     def resid(theta):
@@ -444,7 +420,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
             for e in outs:
                 y = e.filter_output(y, r.fs_d, q)
             yh = sensor_filter(y, r.fs_d, r.sensor_bandwidth)[r.i0:]
-            preds.append(yh - yh.mean())
+            preds.append(remove_nuisance(yh))
         num = sum(float(ph @ y) for ph, y in zip(preds, ys))
         den = sum(float(ph @ ph) for ph in preds)
         a = num / den if den > 0 else 1.0
@@ -465,12 +441,56 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     mf.device = mf.device.with_params(**vals)
     mf.result.device = mf.device
     mf.model = ActuatorModel(mf.device, mf.effects, n_modes=mf.model.n_modes)
-    for i, prm in enumerate(mf.result.problem.params):
-        if prm.name in vals and prm.rh is None:
-            mf.result.fit.theta[i] = vals[prm.name]
-            mf.values[prm.label] = vals[prm.name]
+    _time_uncertainty(mf, names, best, resid, lo, hi)
     mf.spec.notes.append("parameters of " + ", ".join(e.id for e in outs) + " refined on the time records: "
                          + ", ".join(f"{k} = {v:.4g}" for k, v in vals.items()))
+
+
+def _time_uncertainty(mf: ModelFit, names: list[str], sol, resid, lo, hi) -> None:
+    """Values, standard errors, correlations and identifiability warnings of the parameters
+    ``names`` refined on the time records (least-squares solution ``sol`` of ``resid``),
+    replacing those of the FRF fit, which no longer describe them: the linearised covariance
+    s²(JᵀJ)⁻¹ with s² inflated by the residual's integrated autocorrelation time (Bates &
+    Watts 1988, §2.3; the gain is profiled out)."""
+    from ..identify.settings import REL_SE_LIMIT
+    r, J = resid(sol.x), np.asarray(sol.jac, dtype=float)
+    n, k = J.shape
+    s2 = float(r @ r) / max(n - k, 1) * stats.integrated_time(r)
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov = np.full((k, k), np.inf)
+    se = np.sqrt(np.abs(np.diag(cov)))
+    labels = mf.result.problem.labels
+    idx = {prm.name: i for i, prm in enumerate(mf.result.problem.params) if prm.rh is None}
+    fit = mf.result.fit
+    corr = mf.correlation if mf.correlation is not None else np.full((len(labels),) * 2, np.nan)
+    stale = [n_ for n_ in names]
+    mf.warnings = [w for w in mf.warnings if not any(w.startswith(n_ + " ") for n_ in stale)]
+    for a, name in enumerate(names):
+        i = idx[name]
+        v = float(sol.x[a])
+        fit.theta[i] = v
+        mf.values[labels[i]] = v
+        mf.std_errors[labels[i]] = float(se[a])
+        rel = float(se[a] / abs(v)) if v != 0 else math.inf
+        mf.rel_std_errors[labels[i]] = rel
+        fit.std_error[i], fit.rel_std_error[i] = se[a], rel
+        corr[i, :] = np.nan
+        corr[:, i] = np.nan
+        corr[i, i] = 1.0
+        if not math.isfinite(rel) or rel > REL_SE_LIMIT:
+            mf.warnings.append(f"{name} is not identifiable from these data: relative standard error "
+                               f"{'∞' if not math.isfinite(rel) else f'{100 * rel:.3g} %'} (> {100 * REL_SE_LIMIT:g} %)")
+        span = hi[a] - lo[a]
+        if v <= lo[a] + 1e-6 * span or v >= hi[a] - 1e-6 * span:
+            mf.warnings.append(f"{name} ended on a bound of its search range [{lo[a]:g}, {hi[a]:g}]: widen the "
+                               "bounds or fix it; its interval is not meaningful")
+    for a, na in enumerate(names):
+        for b, nb in enumerate(names):
+            if a != b and se[a] > 0 and se[b] > 0:
+                corr[idx[na], idx[nb]] = cov[a, b] / (se[a] * se[b])
+    mf.correlation = corr
 
 
 def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
@@ -488,8 +508,8 @@ def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
         return preds
     num = den = 0.0
     for r, p in zip(records, preds):
-        pc = p - p.mean()
-        num += float(pc @ (r.y_d - r.y_d.mean()))
+        pc = remove_nuisance(p)
+        num += float(pc @ remove_nuisance(r.y_d))
         den += float(pc @ pc)
     if den <= 0 or not math.isfinite(num / den) or num / den <= 0:
         return preds
@@ -537,8 +557,8 @@ def compare_fits(base: ModelFit, cand: ModelFit, nested: bool, taus: Sequence[fl
     taus = list(cand.taus if taus is None else taus)
     n_eff = [n / t for n, t in zip(cand.n, taus)]
     dk = cand.k - base.k
-    kb = base.k + len(base.n)
-    kc = cand.k + len(cand.n)
+    kb = base.k + NUISANCE_TERMS * len(base.n)
+    kc = cand.k + NUISANCE_TERMS * len(cand.n)
     bb = stats.bic(base.rss, base.n, n_eff, kb)
     bc = stats.bic(cand.rss, cand.n, n_eff, kc)
     ab = stats.aic(base.rss, base.n, n_eff, kb)
@@ -567,7 +587,7 @@ def prediction_distance(a: ModelFit, b: ModelFit) -> float:
     """RMS difference [m] between two fitted models' predictions (decimated, offsets removed)."""
     sq, cnt = 0.0, 0
     for pa, pb in zip(a.pred_d, b.pred_d):
-        d = (pa - pa.mean()) - (pb - pb.mean())
+        d = remove_nuisance(pa - pb)
         sq += float(d @ d)
         cnt += d.size
     return math.sqrt(sq / max(cnt, 1))

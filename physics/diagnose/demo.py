@@ -27,7 +27,6 @@ gives every case all of these records (every candidate can then be evaluated).
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -35,17 +34,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import signals
-from ..device import HumidityMap, load_device
+from ..device import Device, load_device
 from ..errors import InputError
 from ..frequency import frequency_response
+from ..identify.parameters import switchable
 from ..model import ActuatorModel
 from ..sensor import SensorModel
 from ..timedomain import simulate
 from ..timeseries import TimeSeries
+from ..effects import EFFECTS
 from .specs import spec_of
 
-HIDDEN = ("electrode_resistance", "fractional_coupling", "solvent_diffusion", "viscoelastic", "humidity",
-          "nonlinear_charge")
 #: record kinds that satisfy each ``reveal`` rule of an effect's spec beyond the sweep
 _RULE_RECORDS = {"hold_s": "pulse", "rh_levels": "rh", "amplitude_levels": "amplitudes"}
 RICH = ("sweep", "pulse", "rh", "amplitudes")
@@ -80,37 +79,24 @@ def design_for(effect: str | None) -> tuple[str, ...]:
     return ("sweep",) + tuple(kind for key, kind in _RULE_RECORDS.items() if key in rule)
 
 
-def _truth(effect, dev, rng):
+def hidden_effects() -> tuple[str, ...]:
+    """Effects a demo or test bed can hide: those whose module says how to draw a hidden
+    truth (the ``draw_truth`` hook, :mod:`physics.effects.base`)."""
+    return tuple(e for e, cls in EFFECTS.items() if spec_of(e) and callable(getattr(cls, "draw_truth", None)))
+
+
+def draw_truth(effect: str | None, dev: Device, rng: np.random.Generator) -> tuple[Device, dict]:
+    """The device of a hidden-effect case: the base's gain, damping and stiffness drawn
+    around the device's (kf ×U(0.8, 1.25), beta_f ×U(0.8, 1.25), Y ×U(0.85, 1.15)), then the
+    hidden effect's own parameters drawn by its ``draw_truth`` hook.  Returns (device, the
+    values drawn)."""
     p = dev.params
     tp = {"kf": p["kf"] * rng.uniform(0.8, 1.25), "beta_f": p["beta_f"] * rng.uniform(0.8, 1.25),
           "Y": p["Y"] * rng.uniform(0.85, 1.15)}
-    h = 0.5 * p["t_polymer"]
-    maps = None
-    if effect == "electrode_resistance":
-        tp["Rs"] = float(np.exp(rng.uniform(np.log(20.0), np.log(150.0))))
-    elif effect == "fractional_coupling":
-        a = rng.uniform(0.25, 0.6)
-        w = 2 * math.pi
-        w_lo = 2 * math.pi * p.get("frac_f_lo", 1e-4)
-        tp["frac_a"], tp["frac_b"] = a, 0.0
-        tp["kf0"] = tp["kf"] * rng.uniform(0.7, 1.4) * abs((1j * w + w_lo) ** a)
-    elif effect == "solvent_diffusion":
-        tp["D_solvent"] = h * h / float(np.exp(rng.uniform(np.log(8.0), np.log(60.0))))
-    elif effect == "viscoelastic":
-        tp["dma_scale"] = rng.uniform(0.75, 1.35)
-    elif effect == "humidity":
-        g = rng.uniform(0.7, 1.3)
-        maps = {}
-        for name, m in dev.humidity_maps.items():
-            ref = float(np.interp(dev.reference_rh, m.rh, m.values))
-            maps[name] = HumidityMap(name, m.rh, ref * (m.values / ref) ** g, m.mode, f"{m.source} (power {g:.3g})")
-        tp["humidity_power"] = g
-    elif effect == "nonlinear_charge":
-        tp["C_max"] = float(np.exp(rng.uniform(np.log(1500.0), np.log(8000.0))))
-    dev_params = {k: v for k, v in tp.items() if k != "humidity_power"}
-    truth = dev.with_params(**dev_params)
-    if maps is not None:
-        truth = dataclasses.replace(truth, humidity_maps=maps)
+    truth = dev.with_params(**tp)
+    if effect is not None:
+        truth, own = EFFECTS[effect].draw_truth(truth, rng)
+        tp.update(own)
     return truth, tp
 
 
@@ -119,15 +105,15 @@ def hidden_effect_case(effect: str | None = None, seed: int = 0, *, device: str 
                        design: str | tuple = "auto", sensor: SensorModel | None = None) -> HiddenEffectCase:
     """Measurements of ``device`` with ``effect`` added to ``base_effects`` (None: no hidden
     effect); see the module doc.  ``fs`` [Hz] and ``duration`` [s] of each record."""
-    if effect is not None and effect not in HIDDEN:
-        raise InputError(f"--effect {effect!r}: choose one of {', '.join(HIDDEN)}")
+    if effect is not None and effect not in hidden_effects():
+        raise InputError(f"effect {effect!r}: choose one of {', '.join(hidden_effects())}")
     rng = np.random.default_rng(seed)
     dev = load_device(device)
     base_ids = ActuatorModel(dev, base_effects).effect_ids
     if effect in base_ids:
         raise InputError(f"{effect} is already in the base effects {list(base_ids)}")
-    truth_dev, tp = _truth(effect, dev, rng)
-    truth_ids = tuple(e for e in base_ids if e != "double_layer") + ((effect,) if effect else ())
+    truth_dev, tp = draw_truth(effect, dev, rng)
+    truth_ids = switchable(base_ids) + ((effect,) if effect else ())
     truth = ActuatorModel(truth_dev, truth_ids or "none")
     parts = RICH if design == "rich" else (design_for(effect) if design == "auto" else tuple(design))
     rh_list = [60.0] + ([40.0, 100.0] if "rh" in parts else [])
@@ -138,7 +124,7 @@ def hidden_effect_case(effect: str | None = None, seed: int = 0, *, device: str 
         warnings.simplefilter("ignore", UserWarning)
         peak = max(float(np.max(np.abs(frequency_response(truth, None, f, rh=rh).deflection))) for rh in rh_list)
     amp = float(f"{min(1.0, PEAK_M / peak):.2g}")
-    if effect == "nonlinear_charge" or "amplitudes" in parts:
+    if "amplitudes" in parts:
         amp = float(f"{min(0.1, PEAK_M / peak / 4):.2g}")
     sensor = sensor or SensorModel()
     plan = []
@@ -172,7 +158,7 @@ def run_hidden_effect(effect: str | None = None, seed: int = 0, *, out=None, dev
     from .diagnosis import diagnose
     from .report import write_diagnosis
     if effect == "random":
-        effect = HIDDEN[int(np.random.default_rng(seed).integers(len(HIDDEN)))]
+        effect = hidden_effects()[int(np.random.default_rng(seed).integers(len(hidden_effects())))]
     case = hidden_effect_case(effect, seed, device=device, design=design, fs=fs, duration=duration)
     res = diagnose(case.measurements, device, case.base_effects, progress=progress, seed=seed, **kw)
     if out is not None:
@@ -189,13 +175,13 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
     """Measurements of the bare ``device`` (effects none) with physics the catalog does not
     have, made here and nowhere else: ``creep`` (tip load × (1 + r/(1+sτ)), r U(0.25, 0.4), τ
     log-uniform 10–30 s), ``backlash`` (a play of width U(60, 100) µm on the output), ``twin``
-    (a viscoelastic polymer with another law than the DMA table: storage +U(8, 12) % per
-    decade, loss tangent U(0.10, 0.16)).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
+    (an effect's near twin, drawn by its ``draw_twin`` hook: a viscoelastic polymer with
+    another law than the DMA table).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
     sweep), ~2 mm peak, the default sensor.  Returns (records, truth parameters)."""
     from scipy.signal import lfilter
     from .adequacy import play
     if kind not in OUTSIDE:
-        raise InputError(f"--kind {kind!r}: choose one of {', '.join(OUTSIDE)}")
+        raise InputError(f"kind {kind!r}: choose one of {', '.join(OUTSIDE)}")
     rng = np.random.default_rng(seed)
     dev = load_device(device)
     truth, tp = ActuatorModel(dev, "none"), {}
@@ -204,13 +190,9 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
     elif kind == "backlash":
         tp = {"play_width_m": float(rng.uniform(60e-6, 100e-6))}
     else:
-        t = dev.tables["dma"]
-        f = np.geomspace(0.01, 100, 25)
-        tp = {"storage_rise_per_decade": float(rng.uniform(0.08, 0.12)), "tan_delta": float(rng.uniform(0.10, 0.16))}
-        E1 = float(np.interp(0.0, np.log10(t["freq"]), t["storage"]))
-        Es = E1 * (1 + tp["storage_rise_per_decade"]) ** np.log10(f)
-        table = {"freq": f, "storage": Es, "loss": tp["tan_delta"] * Es}
-        truth = ActuatorModel(dataclasses.replace(dev, tables={**dev.tables, "dma": table}), "viscoelastic")
+        twin = next(e for e, c in EFFECTS.items() if callable(getattr(c, "draw_twin", None)))
+        twin_dev, tp = EFFECTS[twin].draw_twin(dev, rng)
+        truth = ActuatorModel(twin_dev, twin)
     plan = [(signals.sweep(1.0, 0.1, 50.0, duration, fs), "cubic")]
     if kind != "twin":
         plan.append((signals.square(1.0, t_on=20.0, t_off=40.0, cycles=1, fs=fs), "linear"))

@@ -1,35 +1,29 @@
-"""The diagnosis: where the model fails, which effect is missing, and whether the data can tell.
+"""The diagnosis: where the model fails, which effects are missing, and whether the data can tell.
 
-:func:`diagnose` runs, in order:
+:func:`diagnose` runs its phases in order, each a function here:
 
-1. **Records** (:mod:`.records`): classification, amplitude and RH levels, decimation,
-   noise floor; H1 / stepped-sine frequency-response targets.
-2. **Base fit**: the user's model (device + effects) with its free parameters fitted on
-   the FRF targets (:func:`physics.identify.fit_lsq`), then simulated on every record
-   (:func:`.candidates.score`).
-3. **Where it fails** (:mod:`.residuals`): correlations with 99 % bands, residual FRF
-   with its noise floor, errors by band, amplitude, RH and after steps, findings.
-4. **Candidates** (:mod:`.candidates`): each catalog effect the model lacks and the data
-   can reveal (:func:`.signatures.revealable`) is switched on, refitted with the base's
-   free parameters and scored against the base: ΔBIC, ΔAIC and a p-value with one
-   effective sample size for every comparison, n/τ_int of the residual closest to noise
-   (the best-fitting model's; :mod:`.stats`); its residual signature (:mod:`.signatures`)
-   is checked.  Effects the data cannot reveal are listed with the
-   reason and the excitation that would reveal them.
-5. **Support** of the model's own effects: in the final model (the base, plus the missing
-   effect when one is found) each is switched off and refitted; an effect whose removal
-   does not cost at least ΔBIC = 6 is "not supported by these data".
-6. **Verdict**: the best candidate is the missing effect when (a) ΔBIC ≤ −10 (very strong,
-   Kass & Raftery), (b) its p-value is below 0.01/m for m candidates evaluated
-   (Bonferroni), (c) it lowers the RMS error by at least 10 % and the base's error
-   exceeds 1.2× the noise floor (when the noise floor is known) — an improvement inside
-   the noise is not a finding — and (d) it is distinguishable from the runner-up
-   (pairwise ΔBIC ≤ −6 and predictions differing by more than the noise); if two
-   candidates cannot be told apart the verdict is null and both are named.  Confidence:
-   the Schwarz weight exp(−ΔBIC/2) of the winner among the base and the candidates that
-   pass (c) (approximate posterior probability, equal priors); for a null verdict the
-   base's weight.  A winner whose residual signature is absent keeps the verdict but its
-   confidence label is lowered one step.
+1. :func:`read_records` — classification, amplitude and RH levels, decimation, noise floor
+   (:mod:`.records`); frequency-response targets for the fits.
+2. :func:`fit_base` — the user's model (device + effects) with its free parameters fitted on
+   the FRF targets (:func:`physics.identify.fit_lsq`), then simulated on every record with
+   the per-record nuisance terms (offset, linear drift) removed (:func:`.candidates.score`).
+3. Where it fails (:mod:`.residuals`): correlations with 99 % bands, residual FRF with its
+   noise floor, errors by band, amplitude, RH and after steps, findings.
+4. :func:`try_candidates` — each effect the model lacks (catalog and user effects) that
+   the data can reveal (:func:`.signatures.revealable`) is switched on, refitted with the
+   base's free parameters and scored against the base (:func:`compare_step`: ΔBIC, ΔAIC
+   and a p-value with one effective sample size for every comparison, :mod:`physics.stats`;
+   the residual signature, :mod:`.signatures`).  Effects the data cannot reveal are listed
+   with the excitation that would.
+5. :func:`select` — forward selection: the step's decision (:func:`.verdict.decide`:
+   evidence, quality flags, weights, the pick or the ambiguity); after a pick the
+   remaining candidates are tried again on top of it while one passes, up to
+   ``max_effects``.
+6. Adequacy of the final model and what remains (:mod:`.adequacy`, :mod:`.verdict`).
+7. :func:`assess_support` — in the final model each of its own effects is switched off and
+   refitted; an effect whose removal does not cost ΔBIC ≥ 6 is "not supported by these data".
+
+The verdict (:class:`.verdict.Verdict`) is the one object every output renders.
 """
 from __future__ import annotations
 
@@ -41,34 +35,34 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..compare import FRFOptions
+from .. import stats
 from ..device import Device, all_param_specs, load_device
-from ..errors import InputError, ModelError
+from ..effects import EFFECTS, ensure_registered, user_effect_files
+from ..errors import InputError, ModelError, arg
 from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
-from ..effects import EFFECTS, ensure_registered, user_effect_files
+from ..identify.parameters import switchable
+from ..identify.options import FitOptions
 from ..model import ActuatorModel, resolve_effects
-from ..parallel import ParallelSettings, map_tasks, warm_up
+from ..parallel import map_tasks, warm_up
 from ..threads import single_threaded
 from . import candidates as C
-from . import stats
-from .records import Record, frf_measurements, prepare_records
-from .adequacy import ADEQUATE_RATIO, Adequacy, assess
+from .adequacy import Adequacy, assess
+from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
 from .specs import declared_default, excitation, spec_of
+from .verdict import ADEQUATE_RATIO, Decision, Pick, Verdict, decide, nuisance_summary, remaining_of
 
-DELTA_BIC_MIN = 10.0
-ALPHA = 0.01
-MIN_IMPROVEMENT = 0.10
-NOISE_MARGIN = 1.2
-DISTINCT_BIC = 6.0
+#: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
 SUPPORT_BIC = 6.0
+#: Default length of the forward-selection chain.
+MAX_EFFECTS = 2
 
 
 @dataclass
 class CandidateResult:
-    """One catalog effect tried (or not) as the missing one."""
+    """One effect tried (or not) as a missing one, at step ``step`` of the selection."""
 
     effect: str
     status: str                                  # evaluated | not_revealable | failed
@@ -79,6 +73,8 @@ class CandidateResult:
     indistinguishable_from: list[str] = field(default_factory=list)
     explanation: str = ""
     passes: dict = field(default_factory=dict)
+    quality: list[str] = field(default_factory=list)
+    step: int = 1
 
     @property
     def evaluated(self) -> bool:
@@ -90,22 +86,22 @@ class CandidateResult:
         statistically detectable, and is then called what it is."""
         d = self.comparison.delta_bic
         gain = 1.0 - self.fit.rmse / base.rmse if base.rmse > 0 else 0.0
-        if d <= -2 and gain < MIN_IMPROVEMENT:
+        if d <= -2 and gain < 0.10:
             return f"detectable but negligible ({100 * gain:.2g} % lower error)"
         return stats.evidence_label(d)
 
-    def row(self, base: C.ModelFit) -> dict:
+    def row(self, base: C.ModelFit, weight: float | None = None) -> dict:
         f, c = self.fit, self.comparison
-        out = {"effect": self.effect, "status": self.status}
+        out = {"effect": self.effect, "status": self.status, "step": self.step}
         if self.evaluated:
             out.update({"rmse_after": f.rmse, "fit_pct_after": f.fit_pct, "delta_bic": c.delta_bic,
-                        "delta_aic": c.delta_aic, "p_value": c.p_value, "test": c.test,
+                        "delta_aic": c.delta_aic, "p_value": c.p_value, "test": c.test, "weight": weight,
                         "evidence": self.evidence(base), "explanation": self.explanation,
                         "rmse_ratio": f.rmse / base.rmse if base.rmse > 0 else None,
                         "n_eff": c.n_eff, "tau_samples": c.tau, "extra_parameters": c.dk,
                         "parameters": {k: {"value": v, "std_error": f.std_errors.get(k),
                                            "rel_std_error": f.rel_std_errors.get(k)} for k, v in f.values.items()},
-                        "effect_parameters": C.effect_values(f, self.effect),
+                        "effect_parameters": C.effect_values(f, self.effect), "quality_flags": self.quality,
                         "signature": self.signature, "indistinguishable_from": self.indistinguishable_from,
                         "identifiability_warnings": f.warnings, "notes": f.spec.notes,
                         "passes": self.passes, "fit_s": f.fit_s, "score_s": f.score_s})
@@ -130,28 +126,40 @@ class SupportResult:
                 "rmse_without": self.rmse_without, "explanation": self.explanation}
 
 
-#: Verdict statuses (:func:`_apply_adequacy`).
-STATUSES = ("explained", "partly explained", "ambiguous", "not explained by the catalog", "nothing to explain")
+@dataclass
+class Step:
+    """One step of the forward selection: its base, its candidates and its decision."""
+
+    index: int
+    base: C.ModelFit
+    candidates: list[CandidateResult]
+    decision: Decision
+
+    @property
+    def ranking(self) -> list[CandidateResult]:
+        return sorted([c for c in self.candidates if c.evaluated], key=lambda c: self.decision.evidence[c.effect])
 
 
 @dataclass
-class Verdict:
-    missing_effect: str | None
-    confidence: float
-    label: str
-    reason: str
-    ambiguous: list[str] = field(default_factory=list)
-    alpha_bonferroni: float = ALPHA
-    status: str = ""
-    remaining: str = ""
+class Data:
+    """The records of a diagnosis and what the fits are made on (:func:`read_records`)."""
 
-    def to_dict(self) -> dict:
-        return {"status": self.status, "missing_effect": self.missing_effect, "confidence": self.confidence,
-                "confidence_label": self.label, "reason": self.reason, "remaining": self.remaining,
-                "ambiguous": self.ambiguous, "alpha_bonferroni": self.alpha_bonferroni,
-                "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA,
-                             "min_rmse_reduction": MIN_IMPROVEMENT, "noise_margin": NOISE_MARGIN,
-                             "distinct_delta_bic": DISTINCT_BIC}}
+    records: list[Record]
+    targets: list
+    target_records: list[Record]
+    band: tuple[float, float]
+    noise: float
+    noise_d: float
+    noise_source: str
+    df_cache: dict = field(default_factory=dict)
+    white: float = math.nan           # the records' white noise floor [m] (before any wander)
+    white_d: float = math.nan
+    wander: float = 0.0               # slow wander added to it [m] (:func:`add_wander`)
+
+    @property
+    def estimated(self) -> bool:
+        """True when the noise floors were estimated from the records (no sensor metadata)."""
+        return all(r.noise_source.startswith("estimated") for r in self.records)
 
 
 @dataclass
@@ -161,7 +169,7 @@ class DiagnosisResult:
     device: Device
     records: list[Record]
     base: C.ModelFit
-    candidates: list[CandidateResult]
+    steps: list[Step]
     support: list[SupportResult]
     verdict: Verdict
     analysis_base: ResidualAnalysis
@@ -172,21 +180,39 @@ class DiagnosisResult:
     settings: dict
     timings: dict
     warnings: list[str] = field(default_factory=list)
-    adequacy: Adequacy | None = None
+
+    @property
+    def candidates(self) -> list[CandidateResult]:
+        """The candidates of the first step (evaluated, ranked, then the others)."""
+        s = self.steps[0]
+        return s.ranking + [c for c in s.candidates if not c.evaluated]
 
     @property
     def ranking(self) -> list[CandidateResult]:
-        return [c for c in self.candidates if c.evaluated]
+        return self.steps[0].ranking
+
+    @property
+    def adequacy(self) -> Adequacy | None:
+        return self.verdict.adequacy
 
     @property
     def winner(self) -> CandidateResult | None:
-        if self.verdict.missing_effect is None:
-            return None
-        return next(c for c in self.candidates if c.effect == self.verdict.missing_effect)
+        """The first pick (None for a null verdict)."""
+        return self.steps[0].decision.pick
+
+    @property
+    def picks(self) -> list[CandidateResult]:
+        return [s.decision.pick for s in self.steps if s.decision.pick is not None]
+
+    @property
+    def final(self) -> C.ModelFit:
+        """The final model: the base with every pick of the chain."""
+        p = self.picks
+        return p[-1].fit if p else self.base
 
     @property
     def best(self) -> CandidateResult | None:
-        """The top-ranked candidate (whatever the verdict)."""
+        """The top-ranked candidate of the first step (whatever the verdict)."""
         r = self.ranking
         return r[0] if r else None
 
@@ -202,11 +228,16 @@ class DiagnosisResult:
                                         "rel_std_error": b.rel_std_errors.get(k)} for k, v in b.values.items()},
                      "identifiability_warnings": b.warnings, "tau_samples": b.taus,
                      "n_samples_analysed": b.n},
-            "noise_floor_m": self.noise_floor, "tau_reference_samples": self.settings.get("tau_reference"), "resonance_Hz": self.resonance_hz,
-            "ranking": [c.row(b) for c in self.ranking],
-            "not_evaluated": [c.row(b) for c in self.candidates if not c.evaluated],
-            "support": [s.row() for s in self.support],
+            "noise_floor_m": self.noise_floor, "resonance_Hz": self.resonance_hz,
             "verdict": self.verdict.to_dict(),
+            "steps": [{"step": s.index, "base_effects": list(s.base.effects), "base_rmse": s.base.rmse,
+                       "ranking": [c.row(s.base, s.decision.weights.get(c.effect)) for c in s.ranking],
+                       "weight_of_base": s.decision.weights.get("base"),
+                       "picked": s.decision.pick.effect if s.decision.pick else None}
+                      for s in self.steps],
+            "ranking": [c.row(b, self.steps[0].decision.weights.get(c.effect)) for c in self.ranking],
+            "not_evaluated": [c.row(b) for c in self.steps[0].candidates if not c.evaluated],
+            "support": [s.row() for s in self.support],
             "adequacy": self.adequacy.to_dict() if self.adequacy else None,
             "where_it_fails": self.analysis_base.to_dict(),
             "after_winner": self.analysis_after.to_dict() if self.analysis_after else None,
@@ -215,17 +246,17 @@ class DiagnosisResult:
             "excitation_needed": {e: excitation(e) for e in EFFECTS if excitation(e)},
             "statistics": {
                 "n_eff": "n / tau_int per record, tau_int from the autocorrelation (Sokal's window) of the residual "
-                         "closest to noise (the best-fitting model's); one n_eff for every comparison",
-                "bic": "sum_r n_eff,r ln(RSS_r/n_r) + k ln(sum n_eff) (Schwarz 1978); k = free parameters + one "
-                       "offset per record",
+                         "closest to noise (the best-fitting model's); one n_eff for every comparison of a step",
+                "bic": "sum_r n_eff,r ln(RSS_r/n_r) + k ln(sum n_eff) (Schwarz 1978); k = free parameters + "
+                       f"{NUISANCE_TERMS} nuisance terms per record (offset, linear drift)",
                 "p_value": "nested: Wilks likelihood ratio on the effective scale vs chi2(dk) (conservative at the "
                            "'off' boundary); otherwise Vuong's test; compare with alpha/m (Bonferroni)",
-                "confidence": "Schwarz weight exp(-dBIC/2) of the verdict among the base and the candidates that "
-                              "lower the error by at least 10 % (approximate posterior probability, equal priors)"},
+                "weight": "Schwarz weight exp(-E/2), E = dBIC + 10 per quality flag, among the step's base and its "
+                          "candidates (approximate posterior probability, equal priors)"},
             "settings": self.settings, "timings_s": self.timings, "warnings": self.warnings})
 
 
-# ============================================================================ driver
+# ============================================================================ the phases
 
 
 def _log(cb, msg):
@@ -233,143 +264,137 @@ def _log(cb, msg):
         cb(msg)
 
 
-@single_threaded
-def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] | str | None = None, *,
-             per_rh: Sequence[str] | str = (), candidates: Sequence[str] | str | None = None, force: bool = False,
-             check_support: bool = True, rh: float | None = None, start=None, bounds=None,
-             frf_options: FRFOptions | None = None, sensor_bandwidth="auto", rh_tolerance: float = 2.5,
-             noise_floor: float | None = None, fs_max: float | None = None, n_starts: int = 4, seed: int = 0,
-             n_modes: int = 4, progress: Callable[[str], None] | None = None,
-             settings: ParallelSettings | None = None) -> DiagnosisResult:
-    """Diagnose ``device`` with ``effects`` against ``measurements`` (paths or
-    :class:`~physics.timeseries.TimeSeries`); see the module doc.
-
-    ``free``: the base's free parameters (default: gain, stiffness, ``beta_f``);
-    ``per_rh``: base parameters fitted per RH level; ``candidates``: effects to try
-    (default: every catalog effect the model lacks except ``thermal``); ``force``: also try
-    effects the data cannot reveal; ``noise_floor`` [m]: overrides the records' own;
-    ``fs_max`` [Hz]: cap on the analysis sampling rate (default ≥ 5× the highest excited
-    frequency); ``progress``: a callback for one-line progress messages; ``settings``: where
-    the candidate fits run (:mod:`physics.parallel`; the same verdict for any worker count)."""
-    t_all = time.perf_counter()
-    warm_up(settings)   # the workers start beside the base fit and the residual analysis
-    timings: dict = {}
-    dev = load_device(device)
-    base_ids = resolve_effects(effects, dev)
-    free_l = parse_names(free) if free not in (None, "") else C.default_free(base_ids)
-    per_rh_l = parse_names(per_rh, "--per-rh")
-    specs = all_param_specs()
-    for name in free_l + per_rh_l:
-        if name not in specs:
-            raise InputError(f"--free: unknown parameter {name!r}")
-        if not C.param_used(name, base_ids):
-            raise InputError(f"--free: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
-                             f"free parameters of this model by default: {', '.join(C.default_free(base_ids))}")
-    if candidates in (None, "", "default"):
-        cand_ids = [e for e in C.default_candidates() if e not in base_ids]
-    else:
-        cand_ids = parse_names(candidates, "--candidates")
-        bad = [e for e in cand_ids if not spec_of(e)]
-        if bad:
-            raise InputError(f"--candidates: unknown or fixed effect(s) {', '.join(bad)} (no diagnosis spec); "
-                             f"catalog: {', '.join(e for e in EFFECTS if spec_of(e))}")
-        already = [e for e in cand_ids if e in base_ids]
-        if already:
-            raise InputError(f"--candidates: {', '.join(already)} already in the model (--effects)")
-    if n_starts < 1:
-        raise InputError("n_starts must be at least 1")
-
-    # 1. records and targets
-    t0 = time.perf_counter()
-    records = prepare_records(measurements, rh=rh, sensor_bandwidth=sensor_bandwidth, fs_max=fs_max,
-                              noise_floor=noise_floor, rh_tolerance=rh_tolerance)
+def read_records(measurements, options: FitOptions, *, noise_floor: float | None = None,
+                 fs_max: float | None = None) -> Data:
+    """Phase 1: the records (:func:`.records.prepare_records`) and the FRF targets of the fits."""
+    records = prepare_records(measurements, rh=options.rh, sensor_bandwidth=options.sensor_bandwidth,
+                              fs_max=fs_max, noise_floor=noise_floor, rh_tolerance=options.rh_tolerance)
     ms, trecs = frf_measurements(records)
     if not ms:
         raise InputError("the diagnosis fits the model on frequency responses: give at least one broadband record "
                          "(swept sine, multisine, noise) or tone record besides steps/pulses")
-    opts = frf_options or FRFOptions()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        targets = build_targets(ms, frf_options=opts, sensor_bandwidth=sensor_bandwidth, rh_tolerance=rh_tolerance)
+        targets = build_targets(ms, frf_options=options.frf, rh_tolerance=options.rh_tolerance,
+                                sensor_bandwidth=options.sensor_bandwidth, weighting=options.weighting,
+                                min_coherence=options.min_coherence)
     band = (min(float(t.freq.min()) for t in targets), max(float(t.freq.max()) for t in targets))
-    timings["records"] = time.perf_counter() - t0
     n_all = [r.ts.n for r in records]
     nf = [r.noise_floor for r in records]
-    noise = math.sqrt(sum(n * x * x for n, x in zip(n_all, nf)) / sum(n_all)) if all(map(math.isfinite, nf)) else math.nan
-    _log(progress, f"{len(records)} record(s), {sum(t.freq.size for t in targets)} FRF lines over "
-                   f"{band[0]:.3g}–{band[1]:.3g} Hz; noise floor {1e6 * noise:.3g} µm")
+    noise = math.sqrt(sum(n * x * x for n, x in zip(n_all, nf)) / sum(n_all)) if all(map(math.isfinite, nf)) \
+        else math.nan
+    noise_d = _pooled_noise_d(records)
+    return Data(records, targets, trecs, band, noise, noise_d, _noise_source(records), white=noise, white_d=noise_d)
 
-    # 2. base
-    t0 = time.perf_counter()
-    df_cache: dict = {}
-    base_spec = C.ModelSpec("base", base_ids, list(free_l), list(per_rh_l), parse_assignments(start),
-                            parse_assignments(bounds, ranges=True, what="--bounds"))
-    for name, v in base_spec.start.items():
+
+def add_wander(data: Data, fits) -> None:
+    """When the noise floors were estimated from the records (white part only), add the slow
+    wander the best of ``fits`` leaves below the excited band (:func:`.records.slow_wander`):
+    a drift beyond the removed linear trend is noise for the adequacy, not physics."""
+    if not data.estimated or not math.isfinite(data.white):
+        return
+    ws = [w for w in (slow_wander(data.records, f.resid_d, f.nuisance) for f in fits) if math.isfinite(w)]
+    if not ws:
+        return
+    w = min(ws)
+    data.wander = w
+    data.noise = math.sqrt(data.white ** 2 + w ** 2)
+    data.noise_d = math.sqrt(data.white_d ** 2 + w ** 2) if math.isfinite(data.white_d) else data.noise_d
+    data.noise_source = (f"{_noise_source(data.records)}; plus a slow wander of {1e6 * w:.3g} µm RMS (a drift beyond "
+                         "the linear trend: the residual below the excited band, random-walk spectrum assumed)"
+                         if w > 0 else _noise_source(data.records))
+
+
+def _noise_source(records) -> str:
+    """One phrase for where the noise floors of the records came from."""
+    kinds = []
+    for r in records:
+        src = r.noise_source
+        k = ("estimated from the records' deflection spectra (the white level where the response has fallen away; "
+             "drift not included)") if src.startswith("estimated") else src
+        if k not in kinds:
+            kinds.append(k)
+    return "; ".join(kinds)
+
+
+def fit_base(data: Data, dev: Device, base_ids, options: FitOptions, free_l, per_rh_l, n_starts: int) -> C.ModelFit:
+    """Phase 2: the user's model with its free parameters fitted and scored."""
+    spec = C.ModelSpec("base", base_ids, list(free_l), list(per_rh_l), parse_assignments(options.start),
+                       parse_assignments(options.bounds, ranges=True, what=arg("bounds")))
+    for name in spec.start:
         if name not in free_l + per_rh_l:
-            raise InputError(f"--start: {name} is not a free parameter")
+            raise InputError(f"{arg('start')}: {name} is not a free parameter")
     for name in free_l:
-        if name not in dev.params and name not in base_spec.start:
+        if name not in dev.params and name not in spec.start:
             default = declared_default(name)
             if default is None:
-                raise InputError(f"device {dev.name!r} has no value for free parameter {name}; give one with --start")
-            base_spec.start[name] = default
-    base = C.fit_model(base_spec, dev, targets, trecs, n_starts=n_starts, seed=seed, n_modes=n_modes,
-                       df_cache=df_cache)
+                raise InputError(f"device {dev.name!r} has no value for free parameter {name}; give a start value with "
+                                 f"{arg('start')}")
+            spec.start[name] = default
+    base = C.fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
+                       n_modes=options.n_modes, df_cache=data.df_cache)
     if not base.ok:
         raise ModelError(f"the base model could not be fitted: {base.error}")
-    C.score(base, records)
+    C.score(base, data.records)
     if not base.ok:
         raise ModelError(f"the base model could not be simulated: {base.error}")
-    timings["base"] = time.perf_counter() - t0
-    _log(progress, f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
-    dev_fit = base.device
-    resonance = _resonance(base, band, records)
+    return base
 
-    # 3. where it fails
-    t0 = time.perf_counter()
-    ra_base = analyse("base", records, base.resid_d, base.pred_d, resonance_hz=resonance)
-    feats = features(ra_base, records, resonance)
-    timings["residual_analysis"] = time.perf_counter() - t0
 
-    # 4. candidates (fitted as independent tasks: in this process, or on workers)
-    n_levels = len({t.rh for t in targets})
+def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, options: FitOptions, n_starts: int,
+                   force: bool, resonance, timings: dict, progress) -> list[CandidateResult]:
+    """Phase 4: each candidate switched on in ``base``, fitted and scored (independent tasks,
+    in this process or on workers: :func:`physics.parallel.map_tasks`)."""
+    n_levels = len({t.level for t in data.targets})
     results: list[CandidateResult] = []
     tasks, slots = [], []
+    settings = options.settings
     for eff in cand_ids:
-        ok, why = revealable(eff, records, resonance)
+        ok, why = revealable(eff, data.records, resonance)
         if not ok and not force:
-            results.append(CandidateResult(eff, "not_revealable", reason=f"the data cannot reveal {eff}: {why}"))
+            results.append(CandidateResult(eff, "not_revealable", reason=f"the data cannot reveal {eff}: {why}",
+                                           step=step))
             continue
         try:
-            spec = C.candidate_spec(eff, base_ids, base.spec.free, base.spec.per_rh, dev_fit, band, n_levels)
+            spec = C.candidate_spec(eff, base.effects, base.spec.free, base.spec.per_rh, base.device, data.band,
+                                    n_levels)
         except (InputError, KeyError) as exc:
-            results.append(CandidateResult(eff, "failed", reason=f"{eff} cannot be added to this device: {exc}"))
+            results.append(CandidateResult(eff, "failed", reason=f"{eff} cannot be added to this device: {exc}",
+                                           step=step))
             continue
         if not ok:
             spec.notes.append(f"forced: the data cannot reveal {eff} ({why})")
         slots.append(len(results))
-        results.append(CandidateResult(eff, "pending", reason=why if ok else f"forced ({why})"))
-        tasks.append({"spec": spec, "device": dev_fit, "targets": targets, "trecs": trecs, "records": records,
-                      "n_starts": n_starts, "seed": seed, "n_modes": n_modes, "effect_files": user_effect_files(),
-                      "df_cache": df_cache if settings is None or settings.serial else None})
+        results.append(CandidateResult(eff, "pending", reason=why if ok else f"forced ({why})", step=step))
+        tasks.append({"spec": spec, "device": base.device, "targets": data.targets, "trecs": data.target_records,
+                      "records": data.records, "n_starts": n_starts, "seed": options.seed,
+                      "n_modes": options.n_modes, "effect_files": user_effect_files(),
+                      "df_cache": data.df_cache if settings is None or settings.serial else None})
     fitted = map_tasks(_fit_candidate, tasks, settings, desc="candidates", progress=False, cost=_candidate_cost)
     for k, (mf, wall) in zip(slots, fitted):
         c = results[k]
         if not mf.ok:
             results[k] = CandidateResult(c.effect, "failed", reason=f"{c.effect}: fit or simulation failed: {mf.error}",
-                                         fit=mf)
+                                         fit=mf, step=step)
             continue
         c.status, c.fit = "evaluated", mf
-        timings[f"candidate {c.effect}"] = wall
-        _log(progress, f"  +{c.effect:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({wall:.1f} s)")
-    # one noise model for every comparison: the autocorrelation of the residual closest to
-    # noise (the best-fitting model's), so that n_eff does not change from candidate to candidate
+        timings[f"step {step}: candidate {c.effect}" if step > 1 else f"candidate {c.effect}"] = wall
+        _log(progress, f"  {'+' * step}{c.effect:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({wall:.1f} s)")
+    return results
+
+
+def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Data, feats: dict) -> list:
+    """Every evaluated candidate against ``base`` with one noise model: the autocorrelation
+    of the residual closest to noise (the best-fitting model's), so that n_eff does not change
+    from candidate to candidate.  Fills comparisons and signatures; returns τ per record."""
     fits = [base] + [c.fit for c in results if c.evaluated]
     ref = min(fits, key=lambda f: sum(f.rss))
     taus_ref = list(ref.taus)
     n_eff_ref = [n / t for n, t in zip(base.n, taus_ref)]
-    base.bic = stats.bic(base.rss, base.n, n_eff_ref, base.k + len(records))
-    base.aic = stats.aic(base.rss, base.n, n_eff_ref, base.k + len(records))
+    k_base = base.k + NUISANCE_TERMS * len(data.records)
+    base.bic = stats.bic(base.rss, base.n, n_eff_ref, k_base)
+    base.aic = stats.aic(base.rss, base.n, n_eff_ref, k_base)
+    sigs = signatures(feats, [c.effect for c in results])
     for c in results:
         if c.evaluated:
             # an effect fitted through per-RH parameters nests only when they were freed (≥ 2 RH levels)
@@ -377,50 +402,229 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
             c.comparison = C.compare_fits(base, c.fit, nested, taus_ref)
             c.fit.bic = base.bic + c.comparison.delta_bic
             c.fit.aic = base.aic + c.comparison.delta_aic
-    sigs = signatures(feats, [c.effect for c in results])
-    for c in results:
+            d = C.prediction_distance(c.fit, base)
+            if c.comparison.delta_bic > -10 and math.isfinite(data.noise_d) and d < data.noise_d:
+                c.indistinguishable_from.append("base")
         c.signature = sigs.get(c.effect)
-    ranked = sorted([c for c in results if c.evaluated], key=lambda c: c.comparison.delta_bic)
-    others = [c for c in results if not c.evaluated]
+    return taus_ref
 
-    # distinguishability
-    noise_d = _pooled_noise_d(records)
-    for c in ranked:
-        d = C.prediction_distance(c.fit, base)
-        if c.comparison.delta_bic > -DELTA_BIC_MIN and math.isfinite(noise_d) and d < noise_d:
-            c.indistinguishable_from.append("base")
-    verdict = _verdict(base, ranked, noise, noise_d, taus_ref)
-    win = next((c for c in ranked if c.effect == verdict.missing_effect), None)
-    adequacy = assess(f"base + {win.effect}" if win else "base", win.fit if win else base, records, noise)
-    _apply_adequacy(verdict, adequacy, base, noise)
-    for c in ranked:
-        c.explanation = _explain(c, base, noise)
+
+def select(data: Data, base: C.ModelFit, cand_ids, options: FitOptions, n_starts: int, force: bool, max_effects: int,
+           resonance, feats: dict, timings: dict, progress) -> list[Step]:
+    """Phase 5: forward selection (module doc).  Returns the steps (the first always)."""
+    steps: list[Step] = []
+    step_base, left, step_feats = base, list(cand_ids), feats
+    while True:
+        k = len(steps) + 1
+        t0 = time.perf_counter()
+        results = try_candidates(k, step_base, left, data, options, n_starts, force, resonance, timings, progress)
+        taus = compare_step(step_base, results, data, step_feats)
+        ranked = [c for c in results if c.evaluated]
+        decision = decide(step_base, ranked, data.noise, data.noise_d, taus, data.records, C.compare_fits,
+                          C.prediction_distance)
+        for c in ranked:
+            c.explanation = _explain(c, step_base)
+        steps.append(Step(k, step_base, results, decision))
+        timings[f"step {k}"] = time.perf_counter() - t0
+        pick = decision.pick
+        if pick is None or k >= max_effects:
+            break
+        left = [e for e in left if e != pick.effect and e not in pick.fit.effects]
+        ad = assess("", pick.fit, data.records, data.noise, describe=False)
+        if not left or ad.adequate:
+            break
+        step_base = pick.fit
+        ra = analyse(f"+{pick.effect}", data.records, pick.fit.resid_d, pick.fit.pred_d,
+                     resonance_hz=_resonance(pick.fit, data.band, data.records))
+        step_feats = features(ra, data.records, resonance)
+        _log(progress, f"step {k + 1}: the remaining candidates on top of {pick.effect}")
+    return steps
+
+
+def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: int) -> Verdict:
+    """Phase 6: the chain of picks, the adequacy of the final model and what remains."""
+    picks = []
+    for s in steps:
+        p = s.decision.pick
+        if p is None:
+            break
+        own = C.effect_values(p.fit, p.effect)
+        picks.append(Pick(s.index, p.effect, s.decision.weight, s.base.rmse, p.fit.rmse, p.comparison.delta_bic,
+                          p.comparison.p_value,
+                          {n: {"value": v, "std_error": p.fit.std_errors.get(n)} for n, v in own.items()},
+                          list(p.quality), s.decision.reason))
+    final = picks and steps[len(picks) - 1].decision.pick.fit or base
+    label = "base" + "".join(f" + {p.effect}" for p in picks)
+    ad = assess(label, final, data.records, data.noise)
+    first = steps[0].decision
+    within = math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * data.noise
+    if within:
+        status = "nothing to explain"
+    elif picks:
+        status = {True: "explained", False: "partly explained", None: "found (adequacy not assessed)"}[ad.adequate]
+    elif first.ambiguous:
+        status = "ambiguous"
+    else:
+        status = "not explained by the catalog"
+    kind, forms = remaining_of(ad)
+    stopped = ""
+    if picks and len(picks) < len(steps):
+        stopped = f"no further candidate passes on top of {picks[-1].effect} ({steps[len(picks)].decision.reason})"
+    elif picks and len(picks) == max_effects and ad.adequate is False:
+        stopped = f"the chain reached max_effects = {max_effects}"
+    reason = first.reason if not picks else picks[0].reason
+    return Verdict(status, picks, first.weights, ad, base.rmse, data.noise, data.noise_source, reason,
+                   list(first.ambiguous), first.separating, forms, kind, stopped, first.alpha,
+                   nuisance_summary(final, data.records))
+
+
+def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, options: FitOptions, n_starts: int,
+                  resonance, progress) -> list[SupportResult]:
+    """Phase 7: switch each effect of the final model off (but the double layer and the picks)
+    and refit: does the data support it?"""
+    out = []
+    base_ids = final.effects
+    for eff in [e for e in base_ids if e not in picked]:
+        if eff not in switchable([eff]):
+            continue
+        ok, why = revealable(eff, data.records, resonance)
+        if not ok:
+            out.append(SupportResult(eff, "not_assessable",
+                                     explanation=f"cannot be assessed: the data cannot reveal {eff} ({why})"))
+            continue
+        try:
+            spec = C.removal_spec(eff, base_ids, final.spec.free, final.spec.per_rh, final.device, data.band)
+        except (InputError, KeyError) as exc:
+            out.append(SupportResult(eff, "failed", explanation=str(exc)))
+            continue
+        if not spec.free and not spec.per_rh:
+            out.append(SupportResult(eff, "failed", explanation="no free parameter left without it"))
+            continue
+        mf = C.fit_model(spec, final.device, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
+                         n_modes=options.n_modes, df_cache=data.df_cache)
+        if mf.ok:
+            C.score(mf, data.records)
+        if not mf.ok:
+            out.append(SupportResult(eff, "failed", explanation=f"the model without {eff} failed: {mf.error}"))
+            continue
+        cmp = C.compare_fits(mf, final, C.is_nested(eff))
+        supported = cmp.delta_bic <= -SUPPORT_BIC
+        if supported:
+            txt = (f"supported: removing {eff} raises the RMS error from {1e6 * final.rmse:.4g} to "
+                   f"{1e6 * mf.rmse:.4g} µm (ΔBIC {-cmp.delta_bic:+.4g} against removal)")
+        elif cmp.delta_bic <= -2:
+            txt = (f"weakly supported: without {eff} the RMS error is {1e6 * mf.rmse:.4g} µm instead of "
+                   f"{1e6 * final.rmse:.4g} µm (ΔBIC {-cmp.delta_bic:+.4g}); the data barely need it")
+        else:
+            txt = (f"not supported by these data: without {eff} the model fits as well ({1e6 * mf.rmse:.4g} vs "
+                   f"{1e6 * final.rmse:.4g} µm RMS, ΔBIC {-cmp.delta_bic:+.4g} for removing it)")
+        out.append(SupportResult(eff, "assessed", supported, -cmp.delta_bic, cmp.p_value, mf.rmse, txt))
+        _log(progress, f"  -{eff:22s} RMS {1e6 * mf.rmse:9.4g} µm  {'supported' if supported else 'not supported'}")
+    return out
+
+
+# ============================================================================ the driver
+
+
+def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list, list, list]:
+    free_l = parse_names(free) if free not in (None, "") else C.default_free(base_ids)
+    per_rh_l = parse_names(per_rh, arg("per_rh"))
+    specs = all_param_specs()
+    for name in free_l + per_rh_l:
+        if name not in specs:
+            raise InputError(f"{arg('free')}: unknown parameter {name!r}")
+        if not C.param_used(name, base_ids):
+            raise InputError(f"{arg('free')}: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
+                             f"free parameters of this model by default: {', '.join(C.default_free(base_ids))}")
+    if candidates in (None, "", "default"):
+        cand_ids = [e for e in C.default_candidates() if e not in base_ids]
+    else:
+        cand_ids = parse_names(candidates, arg("candidates"))
+        bad = [e for e in cand_ids if not spec_of(e)]
+        if bad:
+            raise InputError(f"{arg('candidates')}: unknown or fixed effect(s) {', '.join(bad)} (no diagnosis spec); "
+                             f"catalog: {', '.join(e for e in EFFECTS if spec_of(e))}")
+        already = [e for e in cand_ids if e in base_ids]
+        if already:
+            raise InputError(f"{arg('candidates')}: {', '.join(already)} already in the model ({arg('effects')})")
+    return free_l, per_rh_l, cand_ids
+
+
+@single_threaded
+def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] | str | None = None, *,
+             options: FitOptions | None = None, candidates: Sequence[str] | str | None = None, force: bool = False,
+             check_support: bool = True, max_effects: int = MAX_EFFECTS, noise_floor: float | None = None,
+             fs_max: float | None = None, progress: Callable[[str], None] | None = None,
+             **shared) -> DiagnosisResult:
+    """Diagnose ``device`` with ``effects`` against ``measurements`` (paths or
+    :class:`~physics.timeseries.TimeSeries`); see the module doc.
+
+    ``free``: the base's free parameters (default: gain, stiffness, ``beta_f``);
+    ``options``: measurement and fit options shared with ``identify``
+    (:class:`~physics.identify.options.FitOptions`; its fields may also be given as keywords,
+    e.g. ``rh_tolerance=1.0``, ``n_starts=4``, ``settings=...``); ``candidates``: effects to try
+    (default: every effect with a diagnosis spec that the model lacks, except those tried only
+    on request); ``force``: also try effects the data cannot reveal; ``max_effects``: the
+    longest chain of picks (forward selection); ``noise_floor`` [m]: overrides the records'
+    own; ``fs_max`` [Hz]: cap on the analysis sampling rate (default ≥ 5× the highest
+    frequency that matters); ``progress``: a callback for one-line progress messages."""
+    t_all = time.perf_counter()
+    opts = FitOptions.merged(options, **({"free": free} if free not in (None, "") else {}), **shared)
+    n_starts = 4 if opts.n_starts is None else int(opts.n_starts)
+    if n_starts < 1:
+        raise InputError(f"{arg('n_starts')} must be at least 1")
+    if int(max_effects) < 1:
+        raise InputError(f"{arg('max_effects')}={max_effects!r} must be at least 1")
+    warm_up(opts.settings)   # the workers start beside the base fit and the residual analysis
+    timings: dict = {}
+    dev = load_device(device)
+    base_ids = resolve_effects(effects, dev)
+    free_l, per_rh_l, cand_ids = _check_names(dev, base_ids, opts.free, opts.per_rh, candidates)
+
+    t0 = time.perf_counter()
+    data = read_records(measurements, opts, noise_floor=noise_floor, fs_max=fs_max)
+    timings["records"] = time.perf_counter() - t0
+    _log(progress, f"{len(data.records)} record(s), {sum(t.freq.size for t in data.targets)} FRF lines over "
+                   f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
+
+    t0 = time.perf_counter()
+    base = fit_base(data, dev, base_ids, opts, free_l, per_rh_l, n_starts)
+    timings["base"] = time.perf_counter() - t0
+    _log(progress, f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
+    add_wander(data, [base])
+    resonance = _resonance(base, data.band, data.records)
+
+    t0 = time.perf_counter()
+    ra_base = analyse("base", data.records, base.resid_d, base.pred_d, resonance_hz=resonance)
+    feats = features(ra_base, data.records, resonance)
+    timings["residual_analysis"] = time.perf_counter() - t0
+
+    steps = select(data, base, cand_ids, opts, n_starts, force, int(max_effects), resonance, feats, timings, progress)
+    add_wander(data, [base] + [s.decision.pick.fit for s in steps if s.decision.pick is not None])
+    verdict = build_verdict(data, base, steps, int(max_effects))
+    picks = [s.decision.pick for s in steps if s.decision.pick is not None]
+    final = picks[-1].fit if picks else base
+
     support: list[SupportResult] = []
     if check_support:
-        # against the final model: the base, or the base with the missing effect when one was found
         t0 = time.perf_counter()
-        win = next((c for c in ranked if c.effect == verdict.missing_effect), None)
-        final = win.fit if win is not None else base
-        support = _support(final, [e for e in final.effects if e != verdict.missing_effect], final.device, targets,
-                           trecs, records, band, resonance, n_starts, seed, n_modes, df_cache, progress)
+        support = assess_support(final, [p.effect for p in picks], data, opts, n_starts, resonance, progress)
         timings["support"] = time.perf_counter() - t0
 
-    # 5. after
     ra_after = None
-    w = next((c for c in ranked if c.effect == verdict.missing_effect), None)
-    shown = w or (ranked[0] if ranked else None)
+    shown = picks[-1] if picks else (steps[0].ranking[0] if steps[0].ranking else None)
     if shown is not None:
-        res_fr = _resonance(shown.fit, band, records)
-        ra_after = analyse(f"+{shown.effect}", records, shown.fit.resid_d, shown.fit.pred_d, resonance_hz=res_fr)
+        ra_after = analyse("+" + " +".join(p.effect for p in picks) if picks else f"+{shown.effect}", data.records,
+                           shown.fit.resid_d, shown.fit.pred_d, resonance_hz=_resonance(shown.fit, data.band,
+                                                                                        data.records))
     timings["total"] = time.perf_counter() - t_all
     settings = {"effects": list(base_ids), "free": base.spec.free, "per_rh": base.spec.per_rh,
-                "candidates": cand_ids, "force": force, "n_starts": n_starts, "seed": seed, "n_modes": n_modes,
-                "sensor_bandwidth": sensor_bandwidth, "rh_tolerance_pct": rh_tolerance, "fs_max_Hz": fs_max,
-                "frf": vars(opts).copy(), "noise_floor_given_m": noise_floor,
-                "tau_reference": {"model": ref.spec.label, "tau_samples": taus_ref}}
-    warns = list(base.warnings)
-    return DiagnosisResult(dev, records, base, ranked + others, support, verdict, ra_base, ra_after, feats, noise,
-                           resonance, settings, timings, warns, adequacy)
+                "candidates": cand_ids, "force": force, "max_effects": int(max_effects), "n_starts": n_starts,
+                "options": opts.describe(), "noise_floor_given_m": noise_floor, "fs_max_Hz": fs_max}
+    settings["noise"] = {"white_m": data.white, "wander_m": data.wander, "floor_m": data.noise,
+                         "source": data.noise_source}
+    return DiagnosisResult(dev, data.records, base, steps, support, verdict, ra_base, ra_after, feats, data.noise,
+                           resonance, settings, timings, list(base.warnings))
 
 
 def _candidate_cost(task: dict) -> float:
@@ -446,7 +650,7 @@ def _fit_candidate(task: dict):
 def _resonance(mf: C.ModelFit, band, records) -> float | None:
     try:
         f = np.geomspace(max(band[0], 0.05), band[1] * 1.5, 400)
-        fr = frequency_response(mf.model, None, f, rh=records[0].rh)
+        fr = frequency_response(mf.model, None, f, rh=records[0].rh_measured)
         r = fr.resonance()
         return float(r[0]) if r else None
     except (InputError, ModelError):
@@ -461,96 +665,6 @@ def _pooled_noise_d(records) -> float:
     return math.sqrt(sum(a * b * b for a, b in zip(n, v)) / sum(n))
 
 
-def _verdict(base: C.ModelFit, ranked: list[CandidateResult], noise: float, noise_d: float, taus_ref) -> Verdict:
-    m = max(len(ranked), 1)
-    alpha = ALPHA / m
-    within_noise = math.isfinite(noise) and base.rmse <= NOISE_MARGIN * noise
-    for c in ranked:
-        f, cmp = c.fit, c.comparison
-        c.passes = {"very_strong_bic": bool(cmp.delta_bic <= -DELTA_BIC_MIN),
-                    "p_below_alpha_over_m": bool(math.isfinite(cmp.p_value) and cmp.p_value <= alpha),
-                    "error_reduced_10pct": bool(f.rmse <= (1 - MIN_IMPROVEMENT) * base.rmse),
-                    "base_above_noise": not within_noise}
-    practical = [c for c in ranked if c.passes["error_reduced_10pct"] and c.passes["base_above_noise"]]
-    bics = [0.0] + [c.comparison.delta_bic for c in practical]
-    weights = stats.bic_weights(bics)
-    wmap = {c.effect: float(wt) for c, wt in zip(practical, weights[1:])}
-    base_w = float(weights[0])
-    eligible = [c for c in ranked if all(c.passes.values())]
-    if not eligible:
-        if within_noise:
-            reason = (f"the base model already fits to within {NOISE_MARGIN}× the noise floor "
-                      f"({1e6 * base.rmse:.3g} µm vs {1e6 * noise:.3g} µm): there is nothing left for an effect to explain")
-        elif not ranked:
-            reason = "no candidate could be evaluated on these data (see not_evaluated)"
-        else:
-            top = ranked[0]
-            failed = [k for k, v in top.passes.items() if not v]
-            reason = (f"no candidate passes every criterion; the best, {top.effect}, fails "
-                      f"{', '.join(failed)} (ΔBIC {top.comparison.delta_bic:.3g}, p = {top.comparison.p_value:.2g}, "
-                      f"RMS {1e6 * base.rmse:.3g} → {1e6 * top.fit.rmse:.3g} µm)")
-        return Verdict(None, base_w, _label(base_w), reason, alpha_bonferroni=alpha)
-    top = eligible[0]
-    if len(eligible) > 1:
-        ru = eligible[1]
-        pair = C.compare_fits(ru.fit, top.fit, nested=False, taus=taus_ref)
-        dist = C.prediction_distance(top.fit, ru.fit)
-        if pair.delta_bic > -DISTINCT_BIC or (math.isfinite(noise_d) and dist < noise_d):
-            top.indistinguishable_from.append(ru.effect)
-            ru.indistinguishable_from.append(top.effect)
-            reason = (f"{top.effect} and {ru.effect} both explain the failure and the data cannot tell them apart "
-                      f"(ΔBIC between them {pair.delta_bic:.3g}, predictions differ by {1e6 * dist:.3g} µm RMS); "
-                      f"{_design_hint(top.effect, ru.effect)}")
-            conf = wmap.get(top.effect, 0.0) + wmap.get(ru.effect, 0.0)
-            return Verdict(None, conf, _label(conf), reason, ambiguous=[top.effect, ru.effect], alpha_bonferroni=alpha)
-    conf = wmap.get(top.effect, 0.0)
-    label = _label(conf)
-    reason = (f"{top.effect}: ΔBIC {top.comparison.delta_bic:.4g} ({stats.evidence_label(top.comparison.delta_bic)}), "
-              f"p = {top.comparison.p_value:.2g} (< {alpha:.2g}), RMS error {1e6 * base.rmse:.4g} → "
-              f"{1e6 * top.fit.rmse:.4g} µm")
-    score = (top.signature or {}).get("score")
-    if score is not None and score == 0:
-        label = {"high": "medium", "medium": "low"}.get(label, label)
-        reason += "; but its residual signature is not observed, so the confidence label is lowered"
-    return Verdict(top.effect, conf, label, reason, alpha_bonferroni=alpha)
-
-
-def _apply_adequacy(v: Verdict, ad: Adequacy, base: C.ModelFit, noise: float) -> None:
-    """Set the verdict's status from the adequacy of the final model (module doc of
-    :mod:`.adequacy`): a winner that leaves more than noise only partly explains the
-    failure (confidence label "low"); no winner with a base above the noise is a failure
-    the catalog does not explain, described by the residual's descriptors."""
-    found = [d["text"] for d in ad.descriptors if d.get("significant")]
-    described = ("; what remains looks like " + "; and ".join(found)) if found else \
-        "; no simple descriptor (slow pole, hysteresis, amplitude or RH dependence) fits what remains"
-    template = " — to model it, write an effect like examples/effects/creep.py and pass it with --effects-path"
-    if math.isfinite(noise) and base.rmse <= NOISE_MARGIN * noise:
-        v.status = "nothing to explain"
-    elif v.ambiguous:
-        v.status = "ambiguous"
-    elif v.missing_effect is not None:
-        if ad.adequate is False:
-            v.status = "partly explained"
-            v.label = "low"
-            v.remaining = (f"after adding {v.missing_effect} the RMS error is still {ad.ratio:.2f}× the noise floor "
-                           f"(adequate: ≤ {ADEQUATE_RATIO}×): the catalog explains part of the failure and something "
-                           f"else remains" + described + template)
-        else:
-            v.status = "explained"
-    else:
-        v.status = "not explained by the catalog"
-        v.remaining = (f"no catalog effect explains the failure (RMS error {ad.ratio:.2f}× the noise floor)"
-                       + described + template)
-
-
-def _label(w: float) -> str:
-    return "high" if w >= 0.99 else ("medium" if w >= 0.9 else "low")
-
-
-def _design_hint(a: str, b: str) -> str:
-    return (f"to separate them: {a} needs {excitation(a) or '?'}; {b} needs {excitation(b) or '?'}")
-
-
 def _fmt_params(values: dict, errors: dict) -> str:
     specs = all_param_specs()
     parts = []
@@ -562,7 +676,7 @@ def _fmt_params(values: dict, errors: dict) -> str:
     return ", ".join(parts)
 
 
-def _explain(c: CandidateResult, base: C.ModelFit, noise: float) -> str:
+def _explain(c: CandidateResult, base: C.ModelFit) -> str:
     f, cmp = c.fit, c.comparison
     vals = C.effect_values(f, c.effect)
     txt = (f"Adding {c.effect}" + (f" ({_fmt_params(vals, f.std_errors)})" if vals else "") +
@@ -583,54 +697,12 @@ def _explain(c: CandidateResult, base: C.ModelFit, noise: float) -> str:
     others = [x for x in c.indistinguishable_from if x != "base"]
     if others:
         txt += f" Cannot be told apart from {', '.join(others)} with these data."
-    eff_params = set(C.effect_params(c.effect))
-    weak = [w for w in f.warnings if any(p in w for p in eff_params)]
-    if weak:
-        txt += " Identifiability: " + "; ".join(weak) + "."
+    if c.quality:
+        txt += " Quality flags (evidence against it): " + "; ".join(c.quality) + "."
     for n in f.spec.notes:
         txt += f" Note: {n}."
     return txt
 
 
-def _support(base, check_ids, dev_fit, targets, trecs, records, band, resonance, n_starts, seed, n_modes, df_cache,
-             progress) -> list[SupportResult]:
-    """Switch each effect of ``check_ids`` off in the fitted model ``base`` and refit."""
-    out = []
-    base_ids = base.effects
-    for eff in check_ids:
-        if eff == "double_layer":
-            continue
-        ok, why = revealable(eff, records, resonance)
-        if not ok:
-            out.append(SupportResult(eff, "not_assessable",
-                                     explanation=f"cannot be assessed: the data cannot reveal {eff} ({why})"))
-            continue
-        try:
-            spec = C.removal_spec(eff, base_ids, base.spec.free, base.spec.per_rh, dev_fit, band)
-        except (InputError, KeyError) as exc:
-            out.append(SupportResult(eff, "failed", explanation=str(exc)))
-            continue
-        if not spec.free and not spec.per_rh:
-            out.append(SupportResult(eff, "failed", explanation="no free parameter left without it"))
-            continue
-        mf = C.fit_model(spec, dev_fit, targets, trecs, n_starts=n_starts, seed=seed, n_modes=n_modes,
-                         df_cache=df_cache)
-        if mf.ok:
-            C.score(mf, records)
-        if not mf.ok:
-            out.append(SupportResult(eff, "failed", explanation=f"the model without {eff} failed: {mf.error}"))
-            continue
-        cmp = C.compare_fits(mf, base, C.is_nested(eff))
-        supported = cmp.delta_bic <= -SUPPORT_BIC
-        if supported:
-            txt = (f"supported: removing {eff} raises the RMS error from {1e6 * base.rmse:.4g} to {1e6 * mf.rmse:.4g} µm "
-                   f"(ΔBIC {-cmp.delta_bic:+.4g} against removal)")
-        elif cmp.delta_bic <= -2:
-            txt = (f"weakly supported: without {eff} the RMS error is {1e6 * mf.rmse:.4g} µm instead of "
-                   f"{1e6 * base.rmse:.4g} µm (ΔBIC {-cmp.delta_bic:+.4g}); the data barely need it")
-        else:
-            txt = (f"not supported by these data: without {eff} the model fits as well ({1e6 * mf.rmse:.4g} vs "
-                   f"{1e6 * base.rmse:.4g} µm RMS, ΔBIC {-cmp.delta_bic:+.4g} for removing it)")
-        out.append(SupportResult(eff, "assessed", supported, -cmp.delta_bic, cmp.p_value, mf.rmse, txt))
-        _log(progress, f"  -{eff:22s} RMS {1e6 * mf.rmse:9.4g} µm  {'supported' if supported else 'not supported'}")
-    return out
+__all__ = ["diagnose", "DiagnosisResult", "CandidateResult", "SupportResult", "Step", "Data", "read_records",
+           "fit_base", "try_candidates", "compare_step", "select", "build_verdict", "assess_support", "MAX_EFFECTS"]

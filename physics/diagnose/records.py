@@ -5,19 +5,22 @@ Each time-series record is
 * **classified** by its excitation — ``broadband`` (swept sine, multisine, noise: an H1
   frequency response over a band), ``tone`` (one sine: a stepped-sine point), ``steps``
   (square pulses, steps: time only) — from the metadata written by ``eap simulate`` /
-  :mod:`physics.signals` when present, otherwise from the voltage itself;
+  :mod:`physics.signals` when present, otherwise from the voltage itself
+  (:func:`physics.frf_estimation.detect_excitation`);
 * given an **amplitude level** [V] (robust peak of |v − median v|; records whose
   amplitudes differ by less than a factor :data:`AMPLITUDE_RATIO` share a level) and an
   **RH level** [%] (:func:`physics.compare.cluster_rh`);
 * **decimated** for the time-domain work to ``fs_d`` ≥ :data:`OVERSAMPLING` × the highest
-  excited frequency (scipy's polyphase FIR with zero phase, applied to the voltage and
-  the deflection alike, so a linear model driven by the decimated voltage is compared
-  with the equally filtered measurement);
-* given its **noise floor** [m]: the RMS of measurement minus sensor-filtered truth, from
-  the record's sensor metadata (``meta["sensor"]["noise_floor_m"]``, written by
-  :class:`physics.sensor.SensorModel`) or, failing that, estimated from the deflection
-  spectrum above the excitation band (white-noise level × Nyquist band; drift and
-  quantisation below that level are missed, so the estimate is a lower bound).
+  frequency that matters: the excited band and the response standing above the noise
+  (a step excites the resonance whatever its "band"; scipy's polyphase FIR with zero
+  phase, applied to the voltage and the deflection alike, so a linear model driven by the
+  decimated voltage is compared with the equally filtered measurement);
+* given its **noise floor** [m]: the RMS of what a perfect model would leave — the
+  sensor's white noise and quantisation and the part of its drift that the nuisance
+  terms (per-record offset and linear drift, :func:`remove_nuisance`) do not absorb —
+  from the record's sensor metadata (written by :class:`physics.sensor.SensorModel`) or,
+  failing that, estimated from the deflection spectrum where the response has fallen
+  away (:func:`deflection_spectrum`: the white part only, and the source says so).
 
 Frequency-response targets for the fits come from the broadband records through
 :func:`physics.identify.build_targets` (H1, thinned to log-spaced lines) and from tone
@@ -35,9 +38,10 @@ from scipy import signal as sps
 
 from ..compare import (FRFOptions, cluster_rh, load_measurements, model_rh, sensor_bandwidth_of,
                        sensor_response, source_name)
-from ..errors import InputError
-from ..frf_estimation import stepped_sine
+from ..errors import InputError, arg
+from ..frf_estimation import detect_excitation, noise_level, stepped_sine
 from ..frfdata import FRFData
+from ..metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
 from ..timeseries import TimeSeries
 
 #: fs_d / highest excited frequency after decimation.
@@ -59,7 +63,7 @@ class Record:
     ts: TimeSeries                 # as read (full rate)
     kind: str                      # broadband | tone | steps | other
     amplitude: float               # V, robust peak of |v − median|
-    rh: float                      # RH level [%]
+    rh: float                      # nominal RH of the record's humidity level [%] (a label)
     rh_model: object               # RH given to the time solver (constant or series at fs_d)
     band: tuple[float, float]      # excited band [Hz]
     tone_hz: float | None
@@ -72,6 +76,8 @@ class Record:
     i0: int = 0                    # pre-roll samples at fs_d before the record starts
     amplitude_level: float = 0.0   # V (set by prepare_records)
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))   # step indices at fs_d
+    kind_how: str = ""             # how the excitation kind was decided
+    rh_measured: float = math.nan  # the record's own (median) RH [%], what a model is evaluated at
 
     @property
     def fs(self) -> float:
@@ -99,55 +105,46 @@ class Record:
         """Noise floor after decimation: white noise and quantisation scale with the kept
         bandwidth (1/q of the power), the slow drift does not."""
         meta = self.ts.meta.get("sensor") if isinstance(self.ts.meta.get("sensor"), dict) else None
-        if meta and all(k in meta for k in ("deflection_noise", "deflection_step", "deflection_drift")):
+        if meta and all(isinstance(meta.get(k), (int, float)) for k in ("deflection_noise", "deflection_step",
+                                                                          "deflection_drift")):
             white = meta["deflection_noise"] ** 2 + meta["deflection_step"] ** 2 / 12.0
-            return math.sqrt(white / self.q + meta["deflection_drift"] ** 2 / 2.0)
+            return math.sqrt(white / self.q + WALK_AFTER_TREND * meta["deflection_drift"] ** 2)
         return self.noise_floor / math.sqrt(self.q)
 
     def describe(self) -> dict:
         return {"source": self.source, "kind": self.kind, "samples": self.ts.n, "fs_Hz": self.fs,
                 "duration_s": self.ts.duration, "amplitude_V": self.amplitude,
-                "amplitude_level_V": self.amplitude_level, "rh_pct": self.rh,
+                "amplitude_level_V": self.amplitude_level, "rh_pct": self.rh, "rh_measured_pct": self.rh_measured,
                 "band_Hz": list(self.band), "tone_Hz": self.tone_hz, "decimation": self.q,
                 "fs_analysis_Hz": self.fs_d, "sensor_bandwidth_Hz": self.sensor_bandwidth,
                 "noise_floor_m": self.noise_floor, "noise_floor_source": self.noise_source,
+                "excitation_from": self.kind_how,
                 "steps": int(self.steps.size)}
 
 
-def classify(ts: TimeSeries) -> tuple[str, tuple[float, float], float | None]:
-    """(kind, excited band [Hz], tone frequency [Hz] or None) of a record's excitation."""
+def classify(ts: TimeSeries) -> tuple[str, tuple[float, float], float | None, str]:
+    """(kind, excited band [Hz], tone frequency [Hz] or None, how it was decided) of a
+    record's excitation: from its metadata when they say, otherwise from the voltage
+    (:func:`physics.frf_estimation.detect_excitation`)."""
     sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
     kind = str(sig.get("kind", ""))
-    nyq = ts.fs / 2
     if kind in _BROADBAND and "f_start_Hz" in sig and "f_stop_Hz" in sig:
-        return "broadband", (float(sig["f_start_Hz"]), float(sig["f_stop_Hz"])), None
+        return "broadband", (float(sig["f_start_Hz"]), float(sig["f_stop_Hz"])), None, f"metadata: {kind}"
     if kind == "tone" and "frequency_Hz" in sig:
         f0 = float(sig["frequency_Hz"])
-        return "tone", (f0, f0), f0
-    v = ts.voltage - np.median(ts.voltage)
-    if kind in _STEPS or _looks_piecewise_constant(v):
-        return "steps", _steps_band(ts), None
-    # from the input spectrum: one dominant line is a tone, otherwise a band
-    V = np.abs(np.fft.rfft(v - v.mean())) ** 2
-    f = np.fft.rfftfreq(v.size, 1.0 / ts.fs)
-    if V[1:].sum() <= 0:
-        raise InputError(f"{ts.source or 'record'}: the voltage is constant; nothing is excited")
-    k = int(np.argmax(V[1:])) + 1
-    near = np.abs(f - f[k]) <= 2.5 * ts.fs / v.size
-    if V[near].sum() > 0.9 * V[1:].sum():
-        return "tone", (float(f[k]), float(f[k])), float(f[k])
-    cum = np.cumsum(V[1:]) / V[1:].sum()
-    lo = float(f[1:][np.searchsorted(cum, 0.005)])
-    hi = float(f[1:][min(np.searchsorted(cum, 0.995), cum.size - 1)])
-    return ("broadband" if hi > 2 * max(lo, f[1]) else "other"), (max(lo, f[1]), min(hi, nyq)), None
-
-
-def _looks_piecewise_constant(v: np.ndarray) -> bool:
-    dv = np.abs(np.diff(v))
-    span = np.ptp(v)
-    if span <= 0:
-        return False
-    return bool(np.mean(dv < 1e-3 * span) > 0.95 and np.any(dv > 0.3 * span))
+        return "tone", (f0, f0), f0, "metadata: tone"
+    if kind in _STEPS:
+        return "steps", _steps_band(ts), None, f"metadata: {kind}"
+    try:
+        ex = detect_excitation(ts.voltage, ts.fs)
+    except InputError:
+        raise InputError(f"{ts.source or 'record'}: the voltage is constant; nothing is excited") from None
+    how = f"from the voltage: {ex.how}"
+    if ex.kind == "steps":
+        return "steps", _steps_band(ts), None, how
+    if ex.kind == "tone":
+        return "tone", ex.band, ex.tone_hz, how
+    return ("broadband" if ex.kind in ("sweep", "periodic", "noise") else "other"), ex.band, None, how
 
 
 def _steps_band(ts: TimeSeries) -> tuple[float, float]:
@@ -162,6 +159,8 @@ def find_steps(v: np.ndarray, fs: float) -> np.ndarray:
     k = max(1, int(round(0.02 * fs)))
     jump = np.abs(v[k:] - v[:-k]) > 0.3 * span
     idx = np.flatnonzero(jump[1:] & ~jump[:-1]) + 1
+    if jump.size and jump[0]:                  # a step right at the start of the record
+        idx = np.concatenate([[0], idx])
     return idx
 
 
@@ -189,24 +188,90 @@ def _decimate(x: np.ndarray, q: int) -> np.ndarray:
     return xd[:PAD + int(math.ceil(x.size / q))]
 
 
-def estimate_noise_floor(ts: TimeSeries, f_hi: float) -> tuple[float, str]:
-    """(noise floor [m], how it was obtained) — see the module doc."""
+#: Mean square of a unit random walk (value 1 at the end) left after removing its
+#: least-squares offset and linear drift: 1/15 (the nuisance terms of :func:`remove_nuisance`).
+WALK_AFTER_TREND = 1.0 / 15.0
+def sensor_noise_floor(ts: TimeSeries) -> tuple[float, str] | None:
+    """The noise floor [m] the record's sensor metadata state, or None: white noise,
+    quantisation and the part of a random-walk drift that a linear trend does not remove,
+    sqrt(σ² + q²/12 + d²/15); a bare ``noise_floor_m`` as given."""
     sensor = ts.meta.get("sensor") if isinstance(ts.meta.get("sensor"), dict) else None
-    if sensor and isinstance(sensor.get("noise_floor_m"), (int, float)) and sensor["noise_floor_m"] > 0:
+    if not sensor:
+        return None
+    if all(isinstance(sensor.get(k), (int, float)) for k in ("deflection_noise", "deflection_step",
+                                                             "deflection_drift")):
+        white = sensor["deflection_noise"] ** 2 + sensor["deflection_step"] ** 2 / 12.0
+        return math.sqrt(white + WALK_AFTER_TREND * sensor["deflection_drift"] ** 2), "sensor metadata"
+    if isinstance(sensor.get("noise_floor_m"), (int, float)) and sensor["noise_floor_m"] > 0:
         return float(sensor["noise_floor_m"]), "sensor metadata"
-    y = ts.deflection - np.mean(ts.deflection)
-    f, P = sps.welch(y, fs=ts.fs, nperseg=min(y.size, 4096))
-    lo = max(4.0 * f_hi, 0.4 * ts.fs / 2)
-    hi_band = (f > lo) & (f < 0.95 * ts.fs / 2)
-    if hi_band.sum() < 4:
-        return float("nan"), "unknown (no band above the excitation to estimate it from)"
-    level = float(np.median(P[hi_band]))
-    return math.sqrt(level * ts.fs / 2), f"estimated from the deflection spectrum above {lo:.3g} Hz (white part only)"
+    return None
+
+
+def deflection_spectrum(ts: TimeSeries) -> tuple[float, float, str]:
+    """(white noise level as an RMS over the full band [m], highest frequency where the
+    response stands above it [Hz], how the level was found) from the deflection alone
+    (:func:`physics.frf_estimation.noise_level`)."""
+    level, f_resp, (a, b) = noise_level(ts.deflection, ts.fs)
+    if not math.isfinite(level):
+        return math.nan, ts.fs / 2, "unknown (the record is too short or too slowly sampled to estimate it)"
+    how = (f"estimated from the deflection spectrum (white level in {a:.3g}–{b:.3g} Hz, where the response has "
+           "fallen away; drift and anything below that level not included)")
+    return math.sqrt(level * ts.fs / 2), f_resp, how
+
+
+#: Mean square of a random walk left after its linear trend, per mean square of the fitted
+#: trend's rise over the record: 1/15 ÷ 6/5·(…) = 0.0566 (Brownian motion, computed).
+WANDER_PER_TREND = 0.0566
+
+
+def slow_wander(records: Sequence["Record"], resid_d: Sequence[np.ndarray], nuisance) -> float:
+    """RMS [m] of a slow wander (a sensor's drift beyond the linear trend the nuisance terms
+    remove) in a model's residuals, assuming a random-walk drift, from two independent
+    signs of it, pooled by their degrees of freedom:
+
+    * the fitted drift rates b of the records (``nuisance``: (offset, drift) per record): a
+      random walk leaves, after its trend, WANDER_PER_TREND × (b·T)² on average (T the
+      record's duration; one degree of freedom per record);
+    * the broadband records' residual below half their lowest excited frequency, where the
+      input has no power (the white noise's share removed; two degrees of freedom per line),
+      extrapolated with the share of a detrended random walk's variance those lines hold.
+
+    NaN when no record can show it."""
+    num = dof = 0.0
+    for r, e, (_, b) in zip(records, resid_d, nuisance):
+        T = r.ts.duration
+        num += WANDER_PER_TREND * (b * T) ** 2
+        dof += 1.0
+        n = e.size
+        k_max = int(math.floor(0.5 * r.band[0] * n / r.fs_d)) if r.kind == "broadband" else 0
+        if k_max < 1 or not math.isfinite(r.noise_floor_d):
+            continue
+        E = np.fft.rfft(e)[1:k_max + 1]
+        low = 2.0 * float(np.sum(np.abs(E) ** 2)) / n ** 2
+        white = r.noise_floor_d ** 2 * 2.0 * k_max / n
+        share = _WALK_SHARE[min(k_max, len(_WALK_SHARE)) - 1]
+        num += 2.0 * k_max * max(low - white, 0.0) / share
+        dof += 2.0 * k_max
+    return math.sqrt(num / dof) if dof else math.nan
+
+
+#: Share of a linearly detrended random walk's variance in its first k spectral lines (k = 1…10; computed).
+_WALK_SHARE = (0.46, 0.66, 0.75, 0.80, 0.84, 0.86, 0.88, 0.89, 0.90, 0.91)
+
+
+def estimate_noise_floor(ts: TimeSeries, f_hi: float | None = None) -> tuple[float, str]:
+    """(noise floor [m], how it was obtained): the sensor metadata
+    (:func:`sensor_noise_floor`), else the deflection spectrum (:func:`deflection_spectrum`)."""
+    known = sensor_noise_floor(ts)
+    if known is not None:
+        return known
+    level, _, how = deflection_spectrum(ts)
+    return level, how
 
 
 def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_bandwidth="auto",
                     fs_max: float | None = None, noise_floor: float | None = None,
-                    rh_tolerance: float = 2.5) -> list[Record]:
+                    rh_tolerance: float = 1.0) -> list[Record]:
     """Prepare loaded time series (see the module doc).  FRF files are refused: the
     diagnosis needs time records (residuals in time, steps, amplitudes)."""
     ms = load_measurements(measurements, rh=rh)
@@ -220,12 +285,14 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         if m.deflection is None:
             raise InputError(f"{where}: no deflection; the diagnosis needs measured deflection_m")
         if m.rh is None and rh is None:
-            raise InputError(f"{where}: no relative humidity; add an rh_pct column or give --rh")
+            raise InputError(f"{where}: no relative humidity; add an rh_pct column or give {arg('rh')}")
         rh_series = m.rh if m.rh is not None else np.full(m.n, float(rh))
         if m.n < 64:
             raise InputError(f"{where}: only {m.n} samples; a diagnosis needs a record of at least 64")
-        kind, band, tone_hz = classify(m)
-        q = _decimation(m.fs, band[1], fs_max)
+        kind, band, tone_hz, how = classify(m)
+        level, f_resp, spec_how = deflection_spectrum(m)
+        # decimate to keep what the sensor saw: the excited band and the response above the noise
+        q = _decimation(m.fs, max(band[1], min(f_resp, m.fs / 2)), fs_max)
         v_sim, y_d = _decimate(m.voltage, q), _decimate(m.deflection, q)[PAD:]
         n_d = int(math.ceil(m.n / q))
         rm = model_rh(rh_series, m.fs, rh_tolerance)
@@ -234,13 +301,14 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         if noise_floor is not None:
             nf, src = float(noise_floor), "given"
         else:
-            nf, src = estimate_noise_floor(m, band[1])
+            nf, src = sensor_noise_floor(m) or (level, spec_how)
         amp = float(np.percentile(np.abs(m.voltage - np.median(m.voltage)), 99.5))
         if amp <= 0:
             raise InputError(f"{where}: the voltage is constant; nothing is excited")
         rec = Record(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
-                     sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD)
+                     sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD, kind_how=how)
         rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
+        rec.rh_measured = float(np.median(rh_series))
         out.append(rec)
         rhs.append(float(np.median(rh_series)))
     if not out:
@@ -285,7 +353,7 @@ def frf_measurements(records: Sequence[Record]) -> tuple[list, list[Record]]:
             meta = {"sensor": r.ts.meta.get("sensor")} if isinstance(r.ts.meta.get("sensor"), dict) else {}
             eps = float(est.rel_error[0])
             coh = 1.0 / (1.0 + 2.0 * eps ** 2)          # γ² with ε = sqrt((1−γ²)/(2γ²))
-            ms.append(FRFData(est.freq, est.response, np.array([coh]), rh=r.rh, meta=meta,
+            ms.append(FRFData(est.freq, est.response, np.array([coh]), rh=r.rh_measured, meta=meta,
                               source=r.source))
             src.append(r)
     return ms, src
@@ -329,5 +397,5 @@ def amplitude_groups(records: Sequence[Record]) -> dict[float, list[float]]:
 
 
 __all__ = ["Record", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
-           "upsample", "estimate_noise_floor", "amplitude_levels", "rh_levels", "amplitude_groups",
+           "upsample", "estimate_noise_floor", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
            "FRFOptions"]

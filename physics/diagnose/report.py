@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..columns import band
+from ..columns import ONE, Column, band
 from ..fileio import write_json, write_text
 from ..identify import write_device
+from ..identify.parameters import switchable
 from ..outputs import final_path
 from ..report import Report, header, jsonable
 from .diagnosis import DiagnosisResult
@@ -76,7 +77,7 @@ def _plot_ranking(res: DiagnosisResult, path) -> None:
     names = [c.effect for c in rk]
     y = np.arange(len(rk))[::-1]
     d = [c.comparison.delta_bic for c in rk]
-    col = ["C2" if c.effect == res.verdict.missing_effect else ("C1" if c.comparison.delta_bic <= -10 else "C7")
+    col = ["C2" if c.effect in res.verdict.chain else ("C1" if c.comparison.delta_bic <= -10 else "C7")
            for c in rk]
     ax[0].barh(y, d, color=col)
     ax[0].set_xscale("symlog", linthresh=10)
@@ -101,7 +102,7 @@ def _plot_overlay(res: DiagnosisResult, path) -> None:
     import matplotlib.pyplot as plt
     from ..plotting import save
     recs = res.records[:4]
-    shown = res.winner or res.best
+    shown = res.picks[-1] if res.picks else res.best
     fig, axes = plt.subplots(len(recs), 2, figsize=(12, 2.6 * len(recs)), squeeze=False)
     for k, r in enumerate(recs):
         t = np.arange(r.y_d.size) / r.fs_d
@@ -115,7 +116,7 @@ def _plot_overlay(res: DiagnosisResult, path) -> None:
         a.plot(t[sl], 1e6 * ym[sl], color="k", lw=1.2, label="measured")
         a.plot(t[sl], 1e6 * (ym - eb)[sl], color="C3", lw=1, label="base")
         if shown is not None:
-            a.plot(t[sl], 1e6 * (ym - shown.fit.resid_d[k])[sl], color="C2", lw=1, ls="--", label=f"+{shown.effect}")
+            a.plot(t[sl], 1e6 * (ym - shown.fit.resid_d[k])[sl], color="C2", lw=1, ls="--", label=_label(res, shown))
         a.set_ylabel("deflection [µm]")
         a.set_title(f"{Path(r.source).name}: zoom where the base fails most", fontsize=9)
         a.legend(fontsize=7)
@@ -124,7 +125,7 @@ def _plot_overlay(res: DiagnosisResult, path) -> None:
         a.plot(t, 1e6 * eb, color="C3", lw=0.7, label=f"error base ({1e6 * res.base.rmse_records[k]:.3g} µm RMS)")
         if shown is not None:
             a.plot(t, 1e6 * shown.fit.resid_d[k], color="C2", lw=0.7,
-                   label=f"error +{shown.effect} ({1e6 * shown.fit.rmse_records[k]:.3g} µm RMS)")
+                   label=f"error {_label(res, shown)} ({1e6 * shown.fit.rmse_records[k]:.3g} µm RMS)")
         a.set_ylabel("error [µm]")
         a.legend(fontsize=7)
         a.grid(alpha=0.3)
@@ -132,6 +133,10 @@ def _plot_overlay(res: DiagnosisResult, path) -> None:
     axes[-1, 1].set_xlabel("time [s]")
     fig.tight_layout()
     save(fig, path)
+
+
+def _label(res: DiagnosisResult, shown) -> str:
+    return "+" + " +".join(p.effect for p in res.picks) if res.picks else f"+{shown.effect} (not picked)"
 
 
 def _plot_breakdown(res: DiagnosisResult, path) -> None:
@@ -169,12 +174,13 @@ def _plot_breakdown(res: DiagnosisResult, path) -> None:
 def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name: str | None = None,
                     provenance: dict | None = None, protect=()) -> dict:
     """Write ``diagnosis.json``, the PNGs and the page ``index.html`` into ``out_dir``; with
-    ``apply`` also the extended device file ``NAME.yaml`` (the fitted device with the
-    missing effect added to its ``default_effects``; nothing when the verdict is null).
-    Returns the JSON dict."""
+    ``apply`` also the extended device file ``NAME.yaml`` (the fitted final model: the base
+    with every effect of the verdict's chain added to its ``default_effects``; nothing when
+    the verdict is null).  Paths in the outputs are the final ones (the command line writes
+    into a temporary folder renamed at the end).  Returns the JSON dict."""
     d = Path(out_dir)
     if d.exists() and not d.is_dir():
-        raise InputError(f"--out {d} exists and is not a folder")
+        raise InputError(f"{d} exists and is not a folder")
     d.mkdir(parents=True, exist_ok=True)
     out = res.to_dict()
     pngs = {"where_it_fails.png": _plot_where, "ranking.png": _plot_ranking, "overlay.png": _plot_overlay,
@@ -186,18 +192,20 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
         fun(res, d / fn)
         written.append(fn)
     applied = None
-    w = res.winner
+    picks = res.picks
     if apply:
-        if w is None:
-            applied = {"written": None, "reason": "no missing effect was found (verdict null): nothing to apply"}
+        if not picks:
+            applied = {"written": None, "reason": "no missing effect was found (null verdict): nothing to apply"}
         else:
-            dev_name = name or f"{res.device.name}_{w.effect}"
-            path = write_device(w.fit.result, d / f"{dev_name}.yaml", name=dev_name,
+            chain = [p.effect for p in picks]
+            dev_name = name or f"{res.device.name}_{'_'.join(chain)}"
+            path = write_device(picks[-1].fit.result, d / f"{dev_name}.yaml", name=dev_name,
                                 date=_dt.date.today().isoformat(), protect=protect)
             text = path.read_text(encoding="utf-8").replace(
-                "written by eap identify on", f"written by eap diagnose --apply ({w.effect} added) on", 1)
+                "written by eap identify on", f"written by eap diagnose --apply ({' + '.join(chain)} added) on", 1)
             write_text(path, text, protect=tuple(protect))
-            applied = {"written": path.name, "effects": [e for e in w.fit.effects if e != "double_layer"],
+            applied = {"written": path.name, "path": str(final_path(path)),
+                       "effects": list(switchable(picks[-1].fit.effects)),
                        "usage": f"eap compare MEASUREMENT --model {final_path(path)} --effects default"}
             written.append(path.name)
     out["applied"] = applied
@@ -222,18 +230,10 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
                  subtitle=f"{res.device.name} [{', '.join(b.effects)}] against {len(res.records)} record(s)",
                  provenance=header(provenance))
     rep.heading("Verdict")
-    if v.missing_effect:
-        w = res.winner
-        rep.paragraph(f"Missing effect: {v.missing_effect} (confidence {v.confidence:.3g}, {v.label}). "
-                      f"RMS error {_fmt(b.rmse, 'µm', 1e6)} → {_fmt(w.fit.rmse, 'µm', 1e6)}, fit "
-                      f"{b.fit_pct:.2f} % → {w.fit.fit_pct:.2f} %.")
-    else:
-        rep.paragraph(f"No missing effect identified (confidence {v.confidence:.3g}, {v.label}).")
-    rep.paragraph(v.reason, note=True)
-    if v.ambiguous:
-        rep.warning(f"cannot be told apart: {', '.join(v.ambiguous)}")
+    for line in v.lines():
+        rep.paragraph(line)
     if out.get("applied") and out["applied"].get("written"):
-        rep.paragraph(f"Extended device written: {out['applied']['written']} ({out['applied']['usage']}).")
+        rep.paragraph(f"Extended device written: {out['applied']['path']} (use it: {out['applied']['usage']}).")
     rep.table({"base effects": ", ".join(b.effects), "free parameters": ", ".join(b.spec.free + b.spec.per_rh),
                "RMS error [µm]": 1e6 * b.rmse, "fit [%]": b.fit_pct, "BIC (effective n)": b.bic,
                "noise floor [µm]": 1e6 * res.noise_floor if math.isfinite(res.noise_floor) else None,
@@ -251,11 +251,19 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     rep.heading("Candidate effects, ranked")
     if res.ranking:
         rep.image(d / "ranking.png", caption="ΔBIC (effective sample size) and RMS error after adding each effect")
-        rep.table([{"effect": c.effect, "RMS after [µm]": 1e6 * c.fit.rmse, "fit after [%]": c.fit.fit_pct,
-                    "ΔBIC": c.comparison.delta_bic, "p": c.comparison.p_value, "test": c.comparison.test,
-                    "evidence": c.evidence(res.base), "signature": (c.signature or {}).get("score"),
-                    "cannot be told apart from": ", ".join(c.indistinguishable_from)} for c in res.ranking])
-        for c in res.ranking:
+    for s in res.steps:
+        if not s.ranking:
+            continue
+        w = s.decision.weights
+        rep.table([{"effect": c.effect, "weight": w.get(c.effect), "RMS after [µm]": 1e6 * c.fit.rmse,
+                    "fit after [%]": c.fit.fit_pct, "ΔBIC": c.comparison.delta_bic, "p": c.comparison.p_value,
+                    "evidence": c.evidence(s.base), "quality flags": len(c.quality),
+                    "signature": (c.signature or {}).get("score"),
+                    "cannot be told apart from": ", ".join(c.indistinguishable_from)} for c in s.ranking],
+                  caption=f"step {s.index}: on top of [{', '.join(s.base.effects)}] (RMS {1e6 * s.base.rmse:.4g} µm; "
+                          f"weight of staying with it {w.get('base', 0):.3g})",
+                  headers={"weight": Column("weight", ONE), "quality flags": Column("quality flags", ONE)})
+        for c in s.ranking:
             rep.paragraph(f"{c.effect}: {c.explanation}")
     ne = [c for c in res.candidates if not c.evaluated]
     if ne:
@@ -281,7 +289,6 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
                        "fs_analysis_Hz", "noise_floor_m", "noise_floor_source"])
     rep.heading("How the statistics work")
     rep.bullets([f"{k}: {t}" for k, t in out["statistics"].items()])
-    rep.json_block(out["verdict"], "verdict (JSON)")
     rep.json_block(out["settings"], "settings")
     if provenance:
         rep.json_block(jsonable(provenance), "provenance")

@@ -26,9 +26,10 @@ double_layer       ``props(p, T)``, ``realize(d, w_hi)`` (linearised PNP, always
 charge_law         ``small_signal(s, d, p)``, ``compiled(d, p)`` → ``evaluate(Q)``, ``excess(Q)``
 line               ``distribution(s, Yp, p, z)``, ``series_conductances(p, edges)``
 solvent            ``solvent_factor(s, p)``, ``solvent_diffusivity(p)``
-coupling           ``kf(s, p)``
-modulus            ``polymer_modulus(p, layered)``
-section            ``section(p, polymer, y_factor)``, attribute ``layered``
+coupling           ``kf(s, p)``; roles: ``gain_equivalent(p, w)``, ``gain_start(value, p, w)``
+modulus            ``polymer_modulus(p, layered)``; roles: ``modulus_equivalent(p, f, layered)``,
+                   ``modulus_start(value, p, f, layered)``
+section            ``section(p, polymer, y_factor)``, ``layer_modulus(p)``, attribute ``layered``
 humidity           ``params_at(base, rh)``, ``stiffness_factor(rh)``, ``coupling_factor(rh)``,
                    ``electrochemistry_varies()``
 temperature        ``network(p, edges)`` (None: isothermal)
@@ -71,6 +72,11 @@ from ..parameters import ParamSpec, TableSpec
 #: True for a large-signal effect fitted through the describing function; ``by_default`` False
 #: to try it only on request (``--candidates``).  An effect may also define a classmethod
 #: ``diagnosis_start(device) -> {name: value}`` for starts derived from the device (e.g. a table).
+#: Further optional class hooks, read by the diagnosis, its demos and test beds: ``draw_truth(device,
+#: rng) -> (device, values)`` draws a plausible hidden truth of the effect; ``draw_twin(device, rng)``
+#: a near twin outside its own parametrisation; ``describing_grid(device) -> (parameter, coordinates,
+#: scale)`` the large-signal parameter of a ``describing_function`` effect and its grid (c = scale /
+#: parameter); ``hints`` {parameter: sentence}: why a parameter may have no effect.
 DIAGNOSIS_KEYS = ("free", "bounds", "starts", "nested", "off", "excitation", "reveal", "signature", "roles", "per_rh",
                   "describing_function", "by_default")
 #: ``reveal`` rules: {"f_hi_min": Hz}, {"decades_min": n}, {"f_lo_max": Hz, "hold_s": s} (either),

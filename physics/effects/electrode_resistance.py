@@ -47,6 +47,12 @@ class ElectrodeResistance(EquipotentialElectrodes):
         "signature": [("hf_phase_lag", 1.0)],
     }
 
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: Rs log-uniform 20–150 Ω/□."""
+        rs = float(np.exp(rng.uniform(np.log(20.0), np.log(150.0))))
+        return device.with_params(Rs=rs), {"Rs": rs}
+
     def distribution(self, s, Yp, p, z) -> np.ndarray:
         L = p["L_total"] - p["L_clamp"]
         m = np.sqrt(2.0 * p["Rs"] * np.asarray(Yp, dtype=complex))[:, None]

@@ -27,6 +27,15 @@ class ConstantCoupling(Effect):
         """Load constant kf(s) [N m/mol] (humidity already applied to ``p``)."""
         return np.full(np.shape(s), p["kf"], dtype=complex)
 
+    def gain_equivalent(self, p, w: float) -> float:
+        """Role hook (the diagnosis translates starts between models): the constant coupling
+        gain [N m/mol] equivalent to this stage's at ω = ``w`` [rad/s]."""
+        return float(p["kf"])
+
+    def gain_start(self, value: float, p, w: float) -> dict:
+        """Role hook: this stage's parameters giving the coupling gain ``value`` at ω = ``w``."""
+        return {"kf": float(value)}
+
 
 class FractionalCoupling(ConstantCoupling):
     id = "fractional_coupling"
@@ -51,6 +60,30 @@ class FractionalCoupling(ConstantCoupling):
         "reveal": {"decades_min": 1.0},
         "signature": [("constant_slope_phase", 1.0), ("lf_excess_lag", 0.5), ("step_creep", 0.5)],
     }
+
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: frac_a U(0.25, 0.6), kf0 so that |kf(1 Hz)| is the
+        device's kf × U(0.7, 1.4)."""
+        p = device.params
+        a = float(rng.uniform(0.25, 0.6))
+        w_lo = 2 * np.pi * p.get("frac_f_lo", 1e-4)
+        kf0 = float(p["kf"] * rng.uniform(0.7, 1.4) * abs((2j * np.pi + w_lo) ** a))
+        vals = {"frac_a": a, "frac_b": 0.0, "kf0": kf0}
+        return device.with_params(**vals), vals
+
+    #: Identification hints: why a parameter may have no effect ({name: sentence}).
+    hints = {"frac_p": "frac_p has no effect when frac_b = 0",
+             "kf": "the load is then kf0/((j2πf)^a (j2πf+p)^b) and a humidity map on kf acts as a ratio on kf0"}
+    #: Fractional order a start translated from a constant gain begins with.
+    START_ORDER = 0.3
+
+    def gain_equivalent(self, p, w: float) -> float:
+        return float(abs(self.kf(np.array([1j * w]), p)[0]))
+
+    def gain_start(self, value: float, p, w: float) -> dict:
+        q = {**p, "frac_a": self.START_ORDER, "kf0": 1.0, "frac_b": p.get("frac_b", 0.0), "frac_p": p.get("frac_p", 0.0)}
+        return {"frac_a": self.START_ORDER, "kf0": float(value) / float(abs(self.kf(np.array([1j * w]), q)[0]))}
 
     def kf(self, s, p) -> np.ndarray:
         s = np.asarray(s, dtype=complex)

@@ -23,6 +23,11 @@ class HomogeneousSection(Effect):
     layered = False
     summary = "homogeneous strip (whole-strip modulus Y, polymer density)"
 
+    def layer_modulus(self, p) -> float:
+        """Role hook (the diagnosis translates starts between models): the electrode layers'
+        bending stiffness as an added modulus of the polymer section [Pa] (0: none)."""
+        return 0.0
+
     def section(self, p, polymer: Prony, y_factor: float = 1.0) -> tuple[Prony, float]:
         """(EI*(s) as a Prony series [N m²], mass per length ρA [kg/m])."""
         w, t = p["width"], p["t_polymer"]
@@ -46,6 +51,10 @@ class LayeredBeam(HomogeneousSection):
         "reveal": {"spans_resonance": True},
         "signature": [("resonance_error", 1.0)],
     }
+
+    def layer_modulus(self, p) -> float:
+        h, te = 0.5 * p["t_polymer"], p["t_electrode"]
+        return float(p["Y_electrode"] * 8.0 * ((h + te) ** 3 - h ** 3) / p["t_polymer"] ** 3)
 
     def section(self, p, polymer: Prony, y_factor: float = 1.0) -> tuple[Prony, float]:
         w, t, te = p["width"], p["t_polymer"], p["t_electrode"]

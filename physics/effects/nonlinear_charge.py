@@ -94,6 +94,24 @@ class NonlinearCharge(LinearCharge):
         "signature": [("amplitude_dependence", 1.0), ("harmonics", 0.5)],
     }
 
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: C_max log-uniform 1500–8000 mol/m³."""
+        c = float(np.exp(rng.uniform(np.log(1500.0), np.log(8000.0))))
+        return device.with_params(C_max=c), {"C_max": c}
+
+    #: Identification hints: why a parameter may have no effect ({name: sentence}).
+    hints = {"C_max": "C_max acts only in the large-signal (time-domain) response of nonlinear_charge"}
+    #: Grid of the steric ratio ν = C⁻/C_max on which the describing function is tabulated.
+    NU_GRID = (0.0, 0.02, 0.06, 0.12, 0.2, 0.3, 0.42, 0.55, 0.68, 0.8, 0.9, 0.96)
+
+    @classmethod
+    def describing_grid(cls, device) -> tuple[str, tuple[float, ...], float]:
+        """The describing-function hook (:mod:`physics.diagnose.describing`): (the large-signal
+        parameter, its grid of coordinates c, scale) with c = scale/parameter: ν = C⁻/C_max
+        from 0 (plain Poisson–Boltzmann layers) to 0.96."""
+        return "C_max", cls.NU_GRID, float(device.params["C_anion"])
+
     def nu(self, p) -> float:
         return float(p["C_anion"] / p.get("C_max", np.inf))
 

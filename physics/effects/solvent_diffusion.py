@@ -51,6 +51,14 @@ class SolventDiffusion(SolventDrag):
         "signature": [("lf_droop_lead", 1.0), ("step_back_relaxation", 1.0)],
     }
 
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: h²/Ds log-uniform 8–60 s (a water-like solvent; the
+        IPMC's ethylene glycol is ~1 h)."""
+        h = 0.5 * device.params["t_polymer"]
+        ds = float(h * h / np.exp(rng.uniform(np.log(8.0), np.log(60.0))))
+        return device.with_params(D_solvent=ds), {"D_solvent": ds}
+
     def solvent_diffusivity(self, p) -> float:
         return float(p["D_solvent"])
 

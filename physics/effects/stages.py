@@ -82,6 +82,13 @@ class CouplingStage(Protocol):
     def kf(self, s, p) -> np.ndarray:
         """kf(s) [N m/mol] at ``s`` (humidity already applied to ``p``)."""
 
+    def gain_equivalent(self, p, w: float) -> float:
+        """The constant gain [N m/mol] equivalent to this stage's at ω = ``w`` [rad/s] (the
+        diagnosis translates fitted values into starts when an effect takes the role over)."""
+
+    def gain_start(self, value: float, p, w: float) -> dict:
+        """This stage's parameters {name: SI} that give the constant gain ``value`` at ``w``."""
+
 
 @runtime_checkable
 class ModulusStage(Protocol):
@@ -90,6 +97,13 @@ class ModulusStage(Protocol):
     def polymer_modulus(self, p, layered: bool):
         """E*(s) as a :class:`~physics.effects.viscoelastic.Prony` series [Pa]; ``layered``: the
         bare membrane's (the section adds the electrode layers)."""
+
+    def modulus_equivalent(self, p, f: float, layered: bool) -> float:
+        """The elastic polymer modulus [Pa] equivalent to this stage's at ``f`` [Hz] (role
+        translation of starts, as :meth:`CouplingStage.gain_equivalent`)."""
+
+    def modulus_start(self, value: float, p, f: float, layered: bool) -> dict:
+        """This stage's parameters {name: SI} that give the polymer modulus ``value`` at ``f``."""
 
 
 @runtime_checkable
@@ -100,6 +114,9 @@ class SectionStage(Protocol):
 
     def section(self, p, polymer, y_factor: float = 1.0):
         """(EI*(s) Prony series [N m²], mass per length ρA [kg/m]) with the humidity factor."""
+
+    def layer_modulus(self, p) -> float:
+        """Stiffness the section adds to the polymer's, as a modulus of the polymer section [Pa]."""
 
 
 @runtime_checkable

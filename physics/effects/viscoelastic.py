@@ -59,6 +59,15 @@ class ElasticModulus(Effect):
     def polymer_modulus(self, p, layered: bool) -> Prony:
         return Prony(p["Y_polymer"] if layered else p["Y"])
 
+    def modulus_equivalent(self, p, f: float, layered: bool) -> float:
+        """Role hook (the diagnosis translates starts between models): the elastic polymer
+        modulus [Pa] equivalent to this stage's at ``f`` [Hz]."""
+        return float(p["Y_polymer"] if layered else p["Y"])
+
+    def modulus_start(self, value: float, p, f: float, layered: bool) -> dict:
+        """Role hook: this stage's parameters giving the polymer modulus ``value`` at ``f``."""
+        return {("Y_polymer" if layered else "Y"): float(value)}
+
 
 class Viscoelastic(ElasticModulus):
     id = "viscoelastic"
@@ -79,6 +88,12 @@ class Viscoelastic(ElasticModulus):
         "reveal": {"spans_resonance": True},
         "signature": [("resonance_error", 1.0), ("lf_small_lag", 0.5)],
     }
+
+    @classmethod
+    def draw_truth(cls, device, rng):
+        """A hidden truth for test beds and demos: dma_scale U(0.75, 1.35) on the device's DMA table."""
+        s = float(rng.uniform(0.75, 1.35))
+        return device.with_params(dma_scale=s), {"dma_scale": s}
     tables = (
         TableSpec("dma", {"freq": "Hz", "storage": "Pa", "loss": "Pa"},
                   "DMA storage and loss modulus of the whole strip vs frequency", optional=False),
@@ -87,11 +102,39 @@ class Viscoelastic(ElasticModulus):
     )
 
     @classmethod
+    def draw_twin(cls, device, rng):
+        """A near twin for demos and tests: a polymer with another law than the device's DMA
+        table — storage rising U(8, 12) % per decade from its 1 Hz value, loss tangent
+        U(0.10, 0.16) — outside ``dma_scale`` (only the free shape reaches it)."""
+        import dataclasses
+        t = device.tables["dma"]
+        f = np.geomspace(0.01, 100, 25)
+        tp = {"storage_rise_per_decade": float(rng.uniform(0.08, 0.12)), "tan_delta": float(rng.uniform(0.10, 0.16))}
+        E1 = float(np.interp(0.0, np.log10(t["freq"]), t["storage"]))
+        Es = E1 * (1 + tp["storage_rise_per_decade"]) ** np.log10(f)
+        table = {"freq": f, "storage": Es, "loss": tp["tan_delta"] * Es}
+        return dataclasses.replace(device, tables={**device.tables, "dma": table}), tp
+
+    @classmethod
     def diagnosis_start(cls, device) -> dict:
         """Start of the free shape: the shape of the device's DMA table (:func:`dma_shape`)."""
         if "dma" not in device.tables:
             return {}
         return dict(zip(("ve_slope", "ve_tan_delta"), dma_shape(device.tables["dma"])))
+
+    def _storage(self, f: float, layered: bool) -> float | None:
+        t = self.device.tables.get("dma_membrane" if layered else "dma")
+        if t is None:
+            return None
+        return float(np.exp(np.interp(np.log(f), np.log(t["freq"]), np.log(t["storage"]))))
+
+    def modulus_equivalent(self, p, f: float, layered: bool) -> float:
+        st = self._storage(f, layered)
+        return float(p.get("dma_scale", 1.0) * st) if st else float(p["Y"])
+
+    def modulus_start(self, value: float, p, f: float, layered: bool) -> dict:
+        st = self._storage(f, layered)
+        return {"dma_scale": float(np.clip(value / st, 0.06, 15.0)) if st else 1.0}
 
     def polymer_modulus(self, p, layered: bool) -> Prony:
         name = "dma_membrane" if layered else "dma"

@@ -12,7 +12,7 @@ import yaml
 from ..device import Device, HumidityMap, all_param_specs, parse_device
 from ..errors import InputError, ModelError
 from ..units import to_si
-from .parameters import _section_of
+from .parameters import _section_of, switchable
 from .result import IdentificationResult
 
 
@@ -103,7 +103,7 @@ def identified_device_raw(result: IdentificationResult, *, name: str | None = No
     new_name = name or f"{base.name}_identified"
     dev = dataclasses.replace(result.device, name=new_name,
                               title=(f"{base.title} — identified" if base.title else new_name),
-                              default_effects=tuple(e for e in prob.effects if e != "double_layer"))
+                              default_effects=switchable(prob.effects))
     # dataclass equality of HumidityMap with arrays is ambiguous: compare explicitly
     raw = device_to_raw(dataclasses.replace(dev, humidity_maps={}))
     raw.pop("humidity_maps", None)
@@ -139,12 +139,20 @@ def identified_device_raw(result: IdentificationResult, *, name: str | None = No
         val = _from_si(float(fit.theta[i]), str(unit), p.unit)
         se = _from_si(float(fit.std_error[i]), str(unit), p.unit) - _from_si(0.0, str(unit), p.unit) \
             if np.isfinite(fit.std_error[i]) else math.inf
+        if result.kept_start:
+            raw.setdefault(sec, {})[p.name] = {
+                "value": _num(_from_si(p.initial, str(unit), p.unit)), "unit": unit,
+                "source": f"start value kept by eap identify on {date} (the fit was worse than its start)",
+                "note": f"rejected fitted value {_num(val, 6)} {unit}"}
+            continue
         raw.setdefault(sec, {})[p.name] = {
             "value": _num(val), "unit": unit, "source": f"{src} ({fit.method})",
             "note": (f"standard error {se:.3g} {unit} ({100 * fit.rel_std_error[i]:.3g} %), start value "
                      f"{_num(_from_si(p.initial, str(unit), p.unit), 6)} {unit}") if math.isfinite(se)
             else "standard error: not determined (see the identification report)"}
     notes = list(raw.get("notes") or [])
+    if result.kept_start:
+        notes.append(f"WARNING ({date}): {result.check['message']}")
     notes.append(f"{src}: free {', '.join(prob.free) or '-'}"
                  + (f", per RH {', '.join(prob.per_rh)} at {', '.join(f'{x:g}' for x in prob.levels)} %" if prob.per_rh else "")
                  + f"; method {fit.method}; effects {', '.join(prob.effects)}; J_err {result.j_err_initial:.4g} -> "
@@ -192,7 +200,8 @@ def write_device(result: IdentificationResult, path, *, name: str | None = None,
     """Write the fitted device file atomically (never over an input in ``protect``)."""
     from ..fileio import write_text
     raw = identified_device_raw(result, name=name, date=date)
-    header = (f"# {raw['name']}: written by eap identify on {date or _dt.date.today().isoformat()}.\n"
+    warn = f"# WARNING: {result.check['message']}\n" if result.kept_start else ""
+    header = (warn + f"# {raw['name']}: written by eap identify on {date or _dt.date.today().isoformat()}.\n"
               f"# Loads with physics.load_device(path) / eap ... --device {Path(path).name}\n")
     text = header + yaml.dump(raw, Dumper=_DeviceDumper, sort_keys=False, allow_unicode=True, width=110)
     return write_text(path, text, protect=tuple(protect))

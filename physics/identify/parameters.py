@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..device import all_param_specs
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..parameters import BASE_SECTIONS
 from ..units import to_si
 from .settings import DEFAULT_DECADES
@@ -17,21 +17,38 @@ from .settings import DEFAULT_DECADES
 
 
 
-_HINTS = {
-    "Y": "Y sets the modulus only with viscoelastic off (the DMA table does otherwise) and "
-         "without layered_beam (Y_polymer then); with humidity it can be fitted per RH (per_rh)",
-    "Y_polymer": "Y_polymer is used only with layered_beam and viscoelastic off",
-    "Y_electrode": "Y_electrode is used only with layered_beam",
-    "kf": "with fractional_coupling on, the load is kf0/((j2πf)^a (j2πf+p)^b) and kf is unused "
-          "(a humidity map on kf then acts as a ratio on kf0)",
-    "kf0": "kf0 is used only with fractional_coupling",
-    "frac_a": "fractional orders are used only with fractional_coupling",
-    "frac_b": "frac_b is used only with fractional_coupling",
-    "frac_p": "frac_p has no effect when frac_b = 0",
-    "D_solvent": "D_solvent is used only with solvent_diffusion",
-    "Rs": "Rs is used only with electrode_resistance",
-    "C_max": "C_max acts only in the large-signal (time-domain) response of nonlinear_charge",
-}
+def hint(name: str, effects) -> str:
+    """Why parameter ``name`` may not act in a model with ``effects``: the effects that use it
+    (their ``params``/``requires``), the effect whose parameter takes its role over (its
+    diagnosis spec's ``roles``), per-RH fits (``per_rh``) and the effects' own ``hints``
+    ({parameter: sentence}) — everything read from the effect modules."""
+    from ..effects import EFFECTS
+    on = set(effects)
+    parts = [c.hints[name] for c in EFFECTS.values() if name in (getattr(c, "hints", None) or {})]
+    owners = [e for e, c in EFFECTS.items() if any(q.name == name for q in c.params) or name in c.requires]
+    if owners and not on & set(owners):
+        parts.append(f"{name} is used only with {' or '.join(owners)}")
+    for e, c in EFFECTS.items():
+        spec = c.diagnosis or {}
+        for role, (param, _) in spec.get("roles", {}).items():
+            if param == name and e not in on:
+                parts.append(f"{name} takes over the {role} only with {e}")
+            elif param != name and e in on and name in _BASE_ROLES.get(role, ()):
+                parts.append(f"with {e} on, {param} takes over the {role} from {name}")
+        if name in spec.get("per_rh", ()):
+            parts.append(f"with {e} it can be fitted once per RH level (per_rh)")
+    return "; ".join(dict.fromkeys(parts))
+
+
+#: The base's own parameters of each role (before an effect takes it over).
+_BASE_ROLES = {"gain": ("kf",), "stiffness": ("Y",)}
+
+
+def switchable(ids) -> tuple[str, ...]:
+    """The effects of ``ids`` that can be switched off: all but the model's core (a stage
+    default that carries an id, always on)."""
+    from ..effects import CORE
+    return tuple(e for e in ids if e not in CORE)
 
 
 class IdentifiabilityWarning(UserWarning):
@@ -81,7 +98,7 @@ class FreeParameter:
         return float(self.to_x(self.lower)), float(self.to_x(self.upper))
 
 
-def parse_names(text: str | Sequence[str] | None, what: str = "--free") -> list[str]:
+def parse_names(text: str | Sequence[str] | None, what: str = arg("free")) -> list[str]:
     """``"kf,beta_f"`` or a list → names (duplicates refused)."""
     if text is None:
         return []
@@ -109,7 +126,7 @@ def _value_with_unit(text: str, name: str, spec_unit: str, where: str) -> float:
     return float(v)
 
 
-def parse_assignments(text: str | Mapping | None, *, ranges: bool = False, what: str = "--start") -> dict:
+def parse_assignments(text: str | Mapping | None, *, ranges: bool = False, what: str = arg("start")) -> dict:
     """``"kf=0.004,Y=0.2 GPa"`` → {name: SI value}; with ``ranges`` ``"kf=1e-4:1e-1"`` →
     {name: (lo, hi)} (a unit after the range applies to both ends).  SI when no unit."""
     if text is None:
@@ -164,7 +181,7 @@ def _make_param(name, initial, spec, bounds, rh=None) -> FreeParameter:
     elif scale == "log":
         if initial <= 0:
             raise InputError(f"{where}: start value {initial:g} {spec.unit} is not positive; it is searched "
-                             f"in log space: give a positive start value (start={{'{name}': ...}} / --start)")
+                             f"in log space: give a positive start value ({arg('start')}: {name}=...)")
         lo = max(spec.lo, initial * 10 ** -DEFAULT_DECADES)
         hi = min(spec.hi, initial * 10 ** DEFAULT_DECADES)
     else:

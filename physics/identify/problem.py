@@ -13,12 +13,13 @@ from ..compare import (FRFOptions, cluster_rh, estimate_record_frf, model_rh,
                       sensor_bandwidth_of, sensor_lowpass, sensor_response, source_name, thin_log,
                       valid_points)
 from ..device import Device, HumidityMap, all_param_specs, load_device
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..frequency import response_per_volt
+from ..frf_estimation import detect_excitation
 from ..frfdata import FRFData
 from ..model import ActuatorModel, resolve_effects
 from ..timeseries import TimeSeries
-from .parameters import FreeParameter, _HINTS, _make_param, _suggest
+from .parameters import FreeParameter, _make_param, _suggest, hint as _hint
 from .settings import EPS_FLOOR
 
 
@@ -27,7 +28,8 @@ from .settings import EPS_FLOOR
 @dataclass
 class FRFTarget:
     """One measured frequency response to fit: ``freq`` Hz, ``response`` complex m/V,
-    ``weight`` per frequency (relative), ``rh`` the RH level [%] the model is evaluated at."""
+    ``weight`` per frequency (relative), ``rh`` the record's RH [%] the model is evaluated
+    at, ``level`` the nominal RH of its humidity group [%] (the key of per-RH parameters)."""
 
     source: str
     freq: np.ndarray
@@ -39,6 +41,12 @@ class FRFTarget:
     estimator: dict
     record: TimeSeries | None = None
     rh_model: object = None          # RH given to the time solver (constant or smoothed series)
+    level: float | None = None       # nominal RH of the record's humidity group [%]
+    use_frf: bool = True             # False: a step record, used in the time domain only
+
+    def __post_init__(self):
+        if self.level is None:
+            self.level = self.rh
 
     @property
     def s(self) -> np.ndarray:
@@ -57,7 +65,7 @@ def _weights(eps: np.ndarray | None, n: int, weighting: str) -> np.ndarray:
 
 
 def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = None,
-                  min_coherence: float = 0.0, weighting: str = "coherence", rh_tolerance: float = 2.5,
+                  min_coherence: float = 0.0, weighting: str = "coherence", rh_tolerance: float = 1.0,
                   sensor_bandwidth="auto", default_rh: float | None = None) -> list[FRFTarget]:
     """FRF targets from loaded measurements (see the module doc)."""
     if weighting not in ("coherence", "uniform"):
@@ -84,10 +92,10 @@ def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = No
             eps = est.rel_error[idx]
             raw.append(dict(source=where, freq=est.freq[idx], response=est.response[idx],
                             eps=eps, rh=float(np.median(rh)), coherence=est.coherence[idx], bw=bw,
-                            estimator=info, record=m, rh_series=rh))
+                            estimator=info, record=m, rh_series=rh, steps=_is_steps(m)))
         elif isinstance(m, FRFData):
             if m.rh is None and default_rh is None:
-                raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with --rh")
+                raise InputError(f"{where}: the FRF file has no rh_pct column; give the RH with {arg('rh')}")
             rh = float(np.mean(m.rh)) if m.rh is not None else float(default_rh)
             ok = np.ones(m.freq.size, bool)
             if m.coherence is not None and min_coherence > 0:
@@ -103,19 +111,37 @@ def build_targets(measurements: Sequence, *, frf_options: FRFOptions | None = No
                 eps = np.sqrt(1 - g) / np.sqrt(2 * g)
             raw.append(dict(source=where, freq=m.freq[idx], response=m.response[idx], eps=eps, rh=rh,
                             coherence=None if m.coherence is None else m.coherence[idx], bw=bw,
-                            estimator={"method": "file"}, record=None, rh_series=None))
+                            estimator={"method": "file"}, record=None, rh_series=None, steps=False))
         else:
             raise InputError(f"{where}: expected a TimeSeries or FRFData, got {type(m).__name__}")
     if not raw:
         raise InputError("no measurement given")
+    if any(r["steps"] for r in raw) and not all(r["steps"] for r in raw):
+        for r in raw:     # a step's response need not end at rest within the record: its FRF leaks
+            if r["steps"]:
+                r["estimator"] = {**r["estimator"], "use": "time only: a step record beside broadband ones (the "
+                                  "FRF of a transient that does not end at rest is biased)"}
     levels = cluster_rh([r["rh"] for r in raw], rh_tolerance)
     out = []
     for r, lv in zip(raw, levels):
         rec = r["record"]
         out.append(FRFTarget(r["source"], r["freq"], r["response"], _weights(r["eps"], r["freq"].size, weighting),
-                             lv, r["coherence"], r["bw"], r["estimator"], rec,
-                             None if rec is None else model_rh(r["rh_series"], rec.fs, rh_tolerance)))
+                             r["rh"], r["coherence"], r["bw"], r["estimator"], rec,
+                             None if rec is None else model_rh(r["rh_series"], rec.fs, rh_tolerance), lv,
+                             not (r["steps"] and not all(x["steps"] for x in raw))))
     return out
+
+
+def _is_steps(ts: TimeSeries) -> bool:
+    """True when a record's excitation is steps or pulses (its metadata, else its voltage)."""
+    sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
+    kind = str(sig.get("kind", ""))
+    if kind:
+        return kind in ("square", "steps")
+    try:
+        return detect_excitation(ts.voltage, ts.fs).kind == "steps"
+    except InputError:
+        return False
 
 
 # ============================================================================ the problem
@@ -149,10 +175,10 @@ class IdentificationProblem:
                 raise InputError(f"residual='time' needs time-series records; {bad[0]} is a frequency-response file")
         free, per_rh = list(free), list(per_rh)
         if not free and not per_rh:
-            raise InputError("no free parameter: name at least one (e.g. --free kf,beta_f)")
+            raise InputError(f"no free parameter: name at least one (e.g. {arg('free')} kf,beta_f)")
         both = sorted(set(free) & set(per_rh))
         if both:
-            raise InputError(f"{', '.join(both)}: a parameter is either shared (--free) or per RH (--per-rh), not both")
+            raise InputError(f"{', '.join(both)}: a parameter is either shared ({arg('free')}) or per RH ({arg('per_rh')}), not both")
         specs = all_param_specs()
         start = dict(start or {})
         bounds = dict(bounds or {})
@@ -162,8 +188,9 @@ class IdentificationProblem:
         for name in free + per_rh:
             if name not in specs:
                 raise InputError(f"unknown parameter {name!r}{_suggest(name, specs)}")
-        # RH levels
-        self.levels = sorted({t.rh for t in self.targets})
+        # RH levels: nominal labels; each evaluated at the mean RH of its records
+        self.levels = sorted({t.level for t in self.targets})
+        self.level_rh = {lv: float(np.mean([t.rh for t in self.targets if t.level == lv])) for lv in self.levels}
         self.model0 = ActuatorModel(self.device, self.effects, n_modes=self.n_modes)
         hum_on = self.model0.needs_rh
         if per_rh:
@@ -179,9 +206,11 @@ class IdentificationProblem:
                 v0 = start[name]
             elif name in self.device.params:
                 v0 = self.device.params[name]
+            elif specs[name].default is not None:
+                v0 = float(specs[name].default)
             else:
                 raise InputError(f"device {self.device.name!r} has no value for {name!r}; give a start value "
-                                 f"(start={{'{name}': ...}} / --start {name}=...)")
+                                 f"({arg('start')}: {name}=...)")
             self.params.append(_make_param(name, v0, specs[name], bounds.get(name)))
         for name in per_rh:
             for lv in self.levels:
@@ -218,6 +247,7 @@ class IdentificationProblem:
     def _effective_value(self, name: str, rh: float) -> float:
         if name not in self.device.params:
             raise InputError(f"device {self.device.name!r} has no value for {name!r}; give a start value")
+        rh = self.level_rh.get(rh, rh)
         if name == "Y":
             return float(self.device.params["Y"] * self.model0.hook("stiffness_factor")(rh))
         return float(self.model0.params_at(rh)[name])
@@ -231,8 +261,8 @@ class IdentificationProblem:
             maps = dict(dev.humidity_maps)
             for name in self.per_rh:
                 vals = np.array([v for p, v in zip(self.params, theta) if p.name == name and p.rh is not None])
-                maps[name] = HumidityMap(name, np.array(self.levels, dtype=float), vals, "absolute",
-                                         "identified per RH")
+                maps[name] = HumidityMap(name, np.array([self.level_rh[lv] for lv in self.levels], dtype=float), vals,
+                                         "absolute", "identified per RH (nodes at each level's mean RH)")
             dev = dataclasses.replace(dev, humidity_maps=maps)
         return dev
 
@@ -254,6 +284,8 @@ class IdentificationProblem:
         """Weighted complex-log residuals, real and imaginary parts stacked."""
         parts = []
         for t, H in zip(self.targets, self.responses(theta)):
+            if not t.use_frf:
+                continue
             with np.errstate(divide="ignore", invalid="ignore"):
                 ratio = H / t.response
             if not np.all(np.isfinite(ratio)) or np.any(ratio == 0):
@@ -266,15 +298,18 @@ class IdentificationProblem:
 
     def magnitude_residuals(self, theta) -> np.ndarray:
         """|H_model| − |H_meas| [m/V] over all targets (the residuals of eq. 13)."""
-        return np.concatenate([np.abs(H) - np.abs(t.response) for t, H in zip(self.targets, self.responses(theta))])
+        return np.concatenate([np.abs(H) - np.abs(t.response) for t, H in zip(self.targets, self.responses(theta))
+                               if t.use_frf])
 
     def j_err(self, theta) -> float:
         """Thesis cost eq. 13 over every fitted frequency [m/V]."""
         r = self.magnitude_residuals(theta)
         return float(np.sqrt(np.mean(r ** 2)))
 
-    def time_residuals(self, theta) -> np.ndarray:
-        """(ŷ − y − mean)/std(y) for each time record after ``skip_s``, stacked."""
+    def time_errors(self, theta) -> list[np.ndarray]:
+        """Simulated minus measured deflection [m] of each time record after ``skip_s``, its
+        offset and linear drift removed (:func:`physics.metrics.remove_nuisance`)."""
+        from ..metrics import remove_nuisance
         from ..timedomain import simulate
         model = self.model_for(theta)
         self.n_eval += 1
@@ -288,10 +323,21 @@ class IdentificationProblem:
             y_hat = simulate(model, None, tt, v, rh=t.rh_model, hold="cubic").deflection
             y_hat = sensor_lowpass(y_hat, ts.fs, t.sensor_bandwidth)
             i0 = int(math.ceil(self.skip_s * ts.fs))
-            e = (y_hat - ts.deflection)[i0:]
-            e = e - e.mean()
-            parts.append(e / np.std(ts.deflection[i0:]))
-        return np.concatenate(parts)
+            parts.append(remove_nuisance((y_hat - ts.deflection)[i0:]))
+        return parts
+
+    def time_rmse(self, theta) -> float:
+        """RMS of :meth:`time_errors` over all time records [m] (NaN without time records)."""
+        parts = self.time_errors(theta)
+        if not parts:
+            return math.nan
+        return float(np.sqrt(sum(float(e @ e) for e in parts) / sum(e.size for e in parts)))
+
+    def time_residuals(self, theta) -> np.ndarray:
+        """:meth:`time_errors` of each record divided by the std of its measurement, stacked."""
+        i0s = [int(math.ceil(self.skip_s * t.record.fs)) for t in self.targets if t.record is not None]
+        recs = [t.record for t in self.targets if t.record is not None]
+        return np.concatenate([e / np.std(ts.deflection[i0:]) for e, ts, i0 in zip(self.time_errors(theta), recs, i0s)])
 
     def residuals(self, theta) -> np.ndarray:
         if self.residual == "frf":
@@ -301,6 +347,14 @@ class IdentificationProblem:
         a, b = self.frf_residuals(theta), self.time_residuals(theta)
         return np.concatenate([a, b * math.sqrt(a.size / b.size)])
 
+    def criterion(self, theta, method: str = "lsq") -> float:
+        """The cost a method minimises at θ: 0.5‖r‖² of the least-squares residual, J_err
+        (eq. 13) for Nelder–Mead."""
+        if method == "nelder-mead":
+            return self.j_err(theta)
+        r = self.residuals(theta)
+        return float(0.5 * r @ r)
+
     def residuals_x(self, x) -> np.ndarray:
         return self.residuals(self.from_x(x))
 
@@ -309,7 +363,7 @@ class IdentificationProblem:
 
     @property
     def _mag_rms(self) -> float:
-        return float(np.sqrt(np.mean(np.concatenate([np.abs(t.response) ** 2 for t in self.targets]))))
+        return float(np.sqrt(np.mean(np.concatenate([np.abs(t.response) ** 2 for t in self.targets if t.use_frf]))))
 
     # --- checks ----------------------------------------------------------------------------
     def _check_params_used(self) -> None:
@@ -324,7 +378,7 @@ class IdentificationProblem:
             x[i] = x0[i] + step if x0[i] + step <= hi[i] else x0[i] - step
             H = np.concatenate(self.responses(self.from_x(x)))
             if np.max(np.abs(H - base)) <= 1e-10 * scale:
-                hint = _HINTS.get(p.name, "")
+                hint = _hint(p.name, self.effects)
                 raise InputError(f"parameter {p.label} has no effect on the frequency response of "
                                  f"{self.device.name!r} with effects [{', '.join(self.effects)}]"
                                  + (f": {hint}" if hint else "") + "; choose other free parameters or effects")

@@ -3,16 +3,17 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
-from typing import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Sequence
 
 
-from ..compare import (FRFOptions, load_measurements, source_name)
+from ..compare import load_measurements, source_name
 from ..device import Device
-from ..errors import InputError
-from ..parallel import ParallelSettings, warm_up
+from ..errors import InputError, arg
+from ..parallel import warm_up
 from ..threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
+from .options import FitOptions
 from .parameters import IdentifiabilityWarning, parse_assignments, parse_names
 from .problem import IdentificationProblem, build_targets
 from .settings import THESIS_MAX_ITER, THESIS_SECONDS_PER_FREQUENCY, THESIS_TOL
@@ -32,6 +33,14 @@ class IdentificationResult:
     sources: list[str]
     settings: dict
     wall_s: float
+    #: The check of the fit on the time records (:func:`_check_against_start`): the RMS error
+    #: [m] at the start and at the fit, and whether the start values were kept.
+    check: dict = field(default_factory=dict)
+
+    @property
+    def kept_start(self) -> bool:
+        """True when the fit made the time records worse and the device keeps the start values."""
+        return bool(self.check.get("kept_start"))
 
     @property
     def fit(self) -> Fit:
@@ -48,7 +57,7 @@ class IdentificationResult:
 
     @property
     def warnings(self) -> list[str]:
-        return list(self.fit.warnings)
+        return ([self.check["message"]] if self.kept_start else []) + list(self.fit.warnings)
 
     @property
     def n_evaluations(self) -> int:
@@ -87,6 +96,9 @@ class IdentificationResult:
             "effects": list(self.problem.effects), "free": self.problem.free, "per_rh": self.problem.per_rh,
             "rh_levels_pct": self.problem.levels, "primary": self.primary, "fits": fits,
             "j_err_initial_m_per_V": self.j_err_initial, "j_err_final_m_per_V": self.fit.j_err,
+            "criterion": {"name": self.fit.residual_kind, "start": self.check.get("cost_start"),
+                          "fitted": self.fit.cost},
+            "time_check": self.check,
             "model_evaluations": self.n_evaluations, "wall_s": self.wall_s,
             "thesis_loop_equivalent_s": self.thesis_equivalent_s(),
             "thesis_loop_assumption": "100 Nelder-Mead iterations x 1 model evaluation x 15 min per frequency "
@@ -101,38 +113,39 @@ class IdentificationResult:
 
 @single_threaded
 def identify(measurements: Sequence, device, effects=None, free: Sequence[str] | str = (), *,
-             per_rh: Sequence[str] | str = (), method: str = "lsq", n_starts: int | None = None, seed: int = 0,
-             start: Mapping | str | None = None, bounds: Mapping | str | None = None, residual: str = "frf",
-             fit_phase: bool = True, frf_options: FRFOptions | None = None, min_coherence: float = 0.0,
-             weighting: str = "coherence", rh_tolerance: float = 2.5, sensor_bandwidth="auto",
-             n_modes: int = 4, start_spread: float = 1.0, rh: float | None = None, skip_s: float = 0.0,
-             max_nfev: int | None = None, warn: bool = True,
-             settings: ParallelSettings | None = None) -> IdentificationResult:
+             options: FitOptions | None = None, method: str = "lsq", residual: str = "frf", fit_phase: bool = True,
+             start_spread: float = 1.0, skip_s: float = 0.0, max_nfev: int | None = None, warn: bool = True,
+             **shared) -> IdentificationResult:
     """Identify ``free`` (shared) and ``per_rh`` parameters of ``device`` with ``effects``
     from ``measurements`` (paths, :class:`TimeSeries` or :class:`FRFData`).
 
-    ``method``: ``"lsq"`` (default), ``"nelder-mead"`` (thesis) or ``"both"`` (the device
-    uses the least-squares fit).  ``start``/``bounds``: {name: SI value} / {name: (lo, hi)}
-    or the text forms ``"kf=0.004,Y=0.2 GPa"`` / ``"kf=1e-4:1e-1"``.  ``n_starts`` defaults
-    to 5 for FRF residuals and 1 for time residuals.  Identifiability problems are
-    listed in the result and, with ``warn``, issued as :class:`IdentifiabilityWarning`.
-    ``settings``: where the least-squares starts run (:mod:`physics.parallel`; default here).
-    See the module doc for everything else."""
+    ``options``: the measurement and fit options shared with ``diagnose``
+    (:class:`~physics.identify.options.FitOptions`: ``per_rh``, ``start``/``bounds`` as
+    {name: SI value} / {name: (lo, hi)} or ``"kf=0.004,Y=0.2 GPa"`` / ``"kf=1e-4:1e-1"``,
+    ``n_starts`` (default 5 for FRF residuals, 1 for time residuals), ``seed``, ``frf``,
+    ``rh``, ``rh_tolerance``, ``sensor_bandwidth``, ``min_coherence``, ``weighting``,
+    ``n_modes``, ``settings``: where the least-squares starts run); its fields may also be
+    given as keywords.  ``method``: ``"lsq"`` (default), ``"nelder-mead"`` (thesis) or
+    ``"both"`` (the device uses the least-squares fit).  Identifiability problems are listed
+    in the result and, with ``warn``, issued as :class:`IdentifiabilityWarning`.  A fit worse
+    than its start is not written (:func:`_check_against_start`).  See the module doc."""
     t0 = time.perf_counter()
+    opts = FitOptions.merged(options, **({"free": free} if free not in (None, "", ()) else {}), **shared)
     if method not in ("lsq", "nelder-mead", "both"):
         raise InputError(f"method {method!r}: expected lsq, nelder-mead or both")
-    if n_starts is None:
-        n_starts = 5 if residual == "frf" else 1
+    n_starts = opts.n_starts if opts.n_starts is not None else (5 if residual == "frf" else 1)
     if int(n_starts) < 1:
-        raise InputError(f"n_starts={n_starts!r} must be at least 1")
+        raise InputError(f"{arg('n_starts')}={n_starts!r} must be at least 1")
+    settings = opts.settings
     warm_up(settings)   # the workers start while the measurements are read and the FRFs estimated
-    ms = load_measurements(measurements, rh=rh)
-    targets = build_targets(ms, frf_options=frf_options, min_coherence=min_coherence, weighting=weighting,
-                            rh_tolerance=rh_tolerance, sensor_bandwidth=sensor_bandwidth, default_rh=rh)
-    problem = IdentificationProblem(device, effects, targets, parse_names(free), parse_names(per_rh, "--per-rh"),
-                                    start=parse_assignments(start), bounds=parse_assignments(bounds, ranges=True,
-                                                                                             what="--bounds"),
-                                    n_modes=n_modes, fit_phase=fit_phase, residual=residual, skip_s=skip_s)
+    ms = load_measurements(measurements, rh=opts.rh)
+    targets = build_targets(ms, frf_options=opts.frf, min_coherence=opts.min_coherence, weighting=opts.weighting,
+                            rh_tolerance=opts.rh_tolerance, sensor_bandwidth=opts.sensor_bandwidth, default_rh=opts.rh)
+    problem = IdentificationProblem(device, effects, targets, parse_names(opts.free or ()),
+                                    parse_names(opts.per_rh, arg("per_rh")), start=parse_assignments(opts.start),
+                                    bounds=parse_assignments(opts.bounds, ranges=True, what=arg("bounds")),
+                                    n_modes=opts.n_modes, fit_phase=fit_phase, residual=residual, skip_s=skip_s)
+    seed = opts.seed
     j0 = problem.j_err(problem.theta0)
     fits: dict[str, Fit] = {}
     if method in ("nelder-mead", "both"):
@@ -141,20 +154,45 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
         fits["lsq"] = fit_lsq(problem, n_starts=int(n_starts), seed=seed, start_spread=start_spread,
                               max_nfev=max_nfev, settings=settings)
     primary = "lsq" if "lsq" in fits else "nelder-mead"
-    dev = problem.device_for(fits[primary].theta)
+    check = _check_against_start(problem, fits[primary])
+    dev = problem.device_for(problem.theta0 if check.get("kept_start") else fits[primary].theta)
     sources = [source_name(m, k) for k, m in enumerate(ms)]
     settings = {"method": method, "n_starts": n_starts, "seed": seed, "start_spread_decades": start_spread,
-                "residual": residual, "fit_phase": fit_phase, "weighting": weighting,
-                "min_coherence": min_coherence, "rh_tolerance_pct": rh_tolerance,
-                "sensor_bandwidth": sensor_bandwidth, "n_modes": n_modes, "skip_s": skip_s,
-                "frf": vars(frf_options or FRFOptions()).copy(),
+                "residual": residual, "fit_phase": fit_phase, "weighting": opts.weighting,
+                "min_coherence": opts.min_coherence, "rh_tolerance_pct": opts.rh_tolerance,
+                "sensor_bandwidth": opts.sensor_bandwidth, "n_modes": opts.n_modes, "skip_s": skip_s,
+                "frf": vars(opts.frf).copy(),
                 "thesis_nelder_mead": {"max_iter": THESIS_MAX_ITER, "xatol": THESIS_TOL, "fatol": THESIS_TOL,
                                        "tolerance_on": "parameters / start values and J_err / RMS |H_meas|"}}
-    res = IdentificationResult(problem, fits, primary, dev, j0, sources, settings, time.perf_counter() - t0)
+    res = IdentificationResult(problem, fits, primary, dev, j0, sources, settings, time.perf_counter() - t0, check)
     if warn:
         for w in res.warnings:
             warnings.warn(w, IdentifiabilityWarning, stacklevel=2)
     return res
+
+
+def _check_against_start(problem: IdentificationProblem, fit: Fit) -> dict:
+    """The fit is never written as the result when it is worse than its start: on its own
+    criterion (the method's cost) and, with time records, on the time-domain RMS error of
+    the records (what a user compares; an FRF fit can improve its FRF cost on biased
+    estimates while the records get worse).  Then the start values are kept and the
+    message says so plainly."""
+    start_cost = problem.criterion(problem.theta0, fit.method)
+    out: dict = {"cost_start": start_cost, "cost_fitted": fit.cost, "kept_start": False}
+    worse = []
+    if fit.cost > start_cost * (1 + 1e-9):
+        worse.append(f"its criterion ({fit.residual_kind}) rose from {start_cost:.4g} to {fit.cost:.4g}")
+    if any(t.record is not None for t in problem.targets):
+        e0, e1 = problem.time_rmse(problem.theta0), problem.time_rmse(fit.theta)
+        out.update(time_rmse_start_m=e0, time_rmse_fitted_m=e1)
+        if e1 > e0 * (1 + 1e-3):
+            worse.append(f"the RMS error of the time records rose from {1e6 * e0:.4g} to {1e6 * e1:.4g} µm")
+    if worse:
+        out["kept_start"] = True
+        out["message"] = ("the fit is worse than its start: " + "; ".join(worse) + ". The device file keeps the "
+                          "start values (the rejected fit is in report.json); check the free parameters, the FRF "
+                          "method (--frf-method) and the records")
+    return out
 
 
 # ============================================================================ device file

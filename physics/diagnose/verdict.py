@@ -1,0 +1,401 @@
+"""The verdict: two answers, each calibrated, in one object that every output renders.
+
+**Which effect is missing.**  The candidates of a step (:mod:`.diagnosis`: the catalog and
+user effects the model lacks, each fitted on top of the step's base) are weighed by their
+evidence E = ΔBIC + :data:`QUALITY_BIC` × (quality flags): the Schwarz weight
+exp(−E/2), normalised over the step's base (E = 0) and every evaluated candidate, is an
+approximate posterior probability (equal priors; Schwarz 1978, Kass & Raftery 1995)
+penalised by what makes a fit suspect.  A candidate's **quality flags** (:func:`quality`):
+one of its parameters ends on a bound of its range; its relative standard error exceeds
+50 %; it is correlated with another parameter beyond |ρ| = 0.99 (only a combination is
+determined); its expected residual signature is absent.  Each flag counts as very strong
+evidence against it (ΔBIC +10).  A candidate can be picked when it passes the criteria
+of :data:`CRITERIA` (very strong ΔBIC, Bonferroni p-value, ≥ 10 % lower error, a base
+above the noise); the pick is the one with the lowest E.  Its confidence is its weight,
+labelled "high" at ≥ 0.99 (it clearly dominates the base and every other candidate),
+"medium" at ≥ 0.9, else "low" — whatever error remains, which is the second answer.  Two
+candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6 or
+predictions within the noise) *and* on quality (the same number of flags); the verdict then
+names the record that would separate them (:func:`separating_record`).  After a pick the
+remaining candidates are tried again on top of it (forward selection, up to
+``max_effects``); the verdict is the chain of picks with the error after each.
+
+**Is the final model adequate.**  Its RMS error against the noise floor: adequate within
+:data:`ADEQUATE_RATIO` × (:mod:`.adequacy`), and a plain statement of what remains —
+structured (the residual forms that describe it, :func:`.adequacy.describe_missing`) or
+unstructured (a small mismatch of the base model itself).  When the base is already within
+the threshold there is **nothing to explain**.  A null answer carries no confidence, and
+"explained" is never claimed without a noise floor.
+
+:class:`Verdict` holds both answers; :meth:`Verdict.lines` is the one text the terminal,
+the page and ``diagnosis.json`` show.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..device import all_param_specs
+from ..metrics import remove_nuisance
+from .. import stats
+from .adequacy import ADEQUATE_RATIO, Adequacy
+from .specs import effect_params, excitation
+
+#: Evidence against a candidate per quality flag, in BIC units ("very strong", Kass & Raftery).
+QUALITY_BIC = 10.0
+#: Relative standard error and |correlation| beyond which a parameter is flagged.
+REL_SE_FLAG, CORR_FLAG = 0.5, 0.99
+#: Pick criteria (ΔBIC, p-value, error reduction, base above the noise).
+DELTA_BIC_MIN, ALPHA, MIN_IMPROVEMENT = 10.0, 0.01, 0.10
+CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "error_reduced_10pct", "base_above_noise")
+#: Two candidates closer than this in pairwise ΔBIC are close on fit.
+DISTINCT_BIC = 6.0
+STATUSES = ("explained", "partly explained", "found (adequacy not assessed)", "ambiguous",
+            "not explained by the catalog", "nothing to explain")
+
+
+def label_of(weight: float) -> str:
+    return "high" if weight >= 0.99 else ("medium" if weight >= 0.9 else "low")
+
+
+# ============================================================================ quality
+
+
+def _on_bound(prm, value: float) -> bool:
+    x, (lo, hi) = float(prm.to_x(value)), prm.x_bounds
+    tol = 1e-3 * max(1.0, hi - lo) if prm.scale == "linear" else 1e-3
+    return x <= lo + tol or x >= hi - tol
+
+
+def quality(c) -> list[str]:
+    """The quality flags of a fitted candidate (module doc), as sentences."""
+    f = c.fit
+    own = set(effect_params(c.effect)) | set(_role_params(c.effect))
+    problem = f.result.problem
+    labels = problem.labels
+    mine = [i for i, p in enumerate(problem.params) if p.name in own]
+    flags = []
+    for i in mine:
+        prm, lab = problem.params[i], labels[i]
+        v = f.values.get(lab, float(f.result.fit.theta[i]))
+        if _on_bound(prm, v):
+            flags.append(f"{lab} = {v:.4g} {prm.unit} is on a bound of its range [{prm.lower:.3g}, {prm.upper:.3g}]")
+        rel = f.rel_std_errors.get(lab)
+        if rel is not None and (not math.isfinite(rel) or rel > REL_SE_FLAG):
+            flags.append(f"{lab} is not determined (relative standard error "
+                         f"{'∞' if not math.isfinite(rel) else f'{100 * rel:.3g} %'})")
+    corr = f.correlation
+    if corr is not None:
+        for i in mine:
+            for j in range(len(labels)):
+                if j == i or (j in mine and j < i):
+                    continue
+                r = corr[i, j]
+                if math.isfinite(r) and abs(r) > CORR_FLAG:
+                    flags.append(f"{labels[i]} and {labels[j]} are correlated (ρ = {r:+.4f}): only a combination "
+                                 "is determined")
+    sig = c.signature or {}
+    if sig.get("score") == 0:
+        flags.append(f"its residual signature ({', '.join(sig.get('expected', []))}) is absent")
+    return flags
+
+
+def _role_params(effect: str) -> list[str]:
+    from .specs import spec_of
+    return [r[0] for r in spec_of(effect).get("roles", {}).values()]
+
+
+# ============================================================================ one step
+
+
+@dataclass
+class Decision:
+    """What one step of the forward selection concluded."""
+
+    pick: object | None                   # the CandidateResult picked, or None
+    weights: dict                         # {"base": w, effect: w, ...}
+    evidence: dict                        # {effect: E = ΔBIC + quality penalty}
+    ambiguous: list[str] = field(default_factory=list)
+    separating: str = ""
+    reason: str = ""
+    alpha: float = ALPHA
+
+    @property
+    def weight(self) -> float | None:
+        return None if self.pick is None else self.weights.get(self.pick.effect)
+
+
+def decide(base, ranked: Sequence, noise: float, noise_d: float, taus_ref, records,
+           compare_fits, prediction_distance) -> Decision:
+    """One step: flags, evidence, weights, the pick or the ambiguity (module doc).  ``ranked``
+    are the step's evaluated CandidateResults with their comparison to ``base``."""
+    m = max(len(ranked), 1)
+    alpha = ALPHA / m
+    within = math.isfinite(noise) and base.rmse <= ADEQUATE_RATIO * noise
+    for c in ranked:
+        c.quality = quality(c)
+        cmp = c.comparison
+        c.passes = {"very_strong_bic": bool(cmp.delta_bic <= -DELTA_BIC_MIN),
+                    "p_below_alpha_over_m": bool(math.isfinite(cmp.p_value) and cmp.p_value <= alpha),
+                    "error_reduced_10pct": bool(c.fit.rmse <= (1 - MIN_IMPROVEMENT) * base.rmse),
+                    "base_above_noise": not within}
+    ev = {c.effect: c.comparison.delta_bic + QUALITY_BIC * len(c.quality) for c in ranked}
+    w = stats.bic_weights([0.0] + list(ev.values()))
+    weights = {"base": float(w[0]), **{e: float(x) for e, x in zip(ev, w[1:])}}
+    eligible = sorted([c for c in ranked if all(c.passes.values())], key=lambda c: ev[c.effect])
+    if not eligible:
+        return Decision(None, weights, ev, reason=_no_pick_reason(base, ranked, noise, within), alpha=alpha)
+    top = eligible[0]
+    if len(eligible) > 1:
+        ru = eligible[1]
+        pair = compare_fits(ru.fit, top.fit, nested=False, taus=taus_ref)
+        dist = prediction_distance(top.fit, ru.fit)
+        close_fit = pair.delta_bic > -DISTINCT_BIC or (math.isfinite(noise_d) and dist < noise_d)
+        if close_fit and len(top.quality) == len(ru.quality):
+            top.indistinguishable_from.append(ru.effect)
+            ru.indistinguishable_from.append(top.effect)
+            sep = separating_record(top, ru, records, noise)
+            reason = (f"{top.effect} and {ru.effect} both explain the failure and these data cannot tell them apart: "
+                      f"ΔBIC between them {pair.delta_bic:.3g}, predictions differ by {1e6 * dist:.3g} µm RMS, "
+                      f"{len(top.quality)} quality flag(s) each")
+            return Decision(None, weights, ev, [top.effect, ru.effect], sep, reason, alpha)
+    cmp = top.comparison
+    reason = (f"ΔBIC {cmp.delta_bic:.4g} ({stats.evidence_label(cmp.delta_bic)}), p = {cmp.p_value:.2g} "
+              f"(< {alpha:.2g}), RMS error {1e6 * base.rmse:.4g} → {1e6 * top.fit.rmse:.4g} µm")
+    if top.quality:
+        reason += "; quality flags: " + "; ".join(top.quality)
+    rivals = [c for c in eligible[1:] if len(c.quality) > len(top.quality)
+              and c.comparison.delta_bic < cmp.delta_bic]
+    if rivals:
+        reason += (f"; {', '.join(c.effect for c in rivals)} lowered the error as much or more but "
+                   f"{'is' if len(rivals) == 1 else 'are'} less credible (" +
+                   "; ".join(f"{c.effect}: " + "; ".join(c.quality) for c in rivals) + ")")
+    return Decision(top, weights, ev, reason=reason, alpha=alpha)
+
+
+def _no_pick_reason(base, ranked, noise, within) -> str:
+    if within:
+        return (f"the base model already fits to within {ADEQUATE_RATIO}× the noise floor "
+                f"({1e6 * base.rmse:.3g} µm vs {1e6 * noise:.3g} µm)")
+    if not ranked:
+        return "no candidate could be evaluated on these data (see the candidates not evaluated)"
+    top = min(ranked, key=lambda c: c.comparison.delta_bic)
+    failed = [k.replace("_", " ") for k, v in top.passes.items() if not v]
+    return (f"no candidate passes every criterion; the best, {top.effect}, fails: {', '.join(failed)} "
+            f"(ΔBIC {top.comparison.delta_bic:.3g}, p = {top.comparison.p_value:.2g}, RMS {1e6 * base.rmse:.3g} → "
+            f"{1e6 * top.fit.rmse:.3g} µm)")
+
+
+# ============================================================================ separating record
+
+
+def separating_record(a, b, records, noise: float) -> str:
+    """The record (among a few standard designs) on which the fitted models of candidates
+    ``a`` and ``b`` differ most, relative to the noise floor: a long pulse, a slow sweep, a
+    sweep beyond the measured band, another RH, another amplitude."""
+    from .. import signals
+    from ..timedomain import simulate
+    amp = float(np.median([r.amplitude for r in records]))
+    rh = float(np.median([r.rh for r in records]))
+    f_hi = max(r.band[1] for r in records)
+    designs = [("a square pulse held 60 s", signals.square(amp, t_on=60.0, t_off=60.0, cycles=1, fs=50.0), rh),
+               ("a swept sine 0.01–1 Hz (200 s)", signals.sweep(amp, 0.01, 1.0, 200.0, 20.0), rh),
+               (f"a swept sine up to {2 * f_hi:.3g} Hz", signals.sweep(amp, 0.5 * f_hi, 2 * f_hi, 20.0, 10 * f_hi), rh)]
+    if a.fit.model.needs_rh or b.fit.model.needs_rh:
+        other = rh - 20.0 if rh > 50 else rh + 20.0
+        designs.append((f"the same sweep at RH {other:g} %", signals.sweep(amp, 0.1, f_hi, 60.0, 5 * f_hi), other))
+    if not (a.fit.model.is_linear and b.fit.model.is_linear):
+        designs.append(("the sweep at 4× the amplitude", signals.sweep(4 * amp, 0.1, f_hi, 60.0, 5 * f_hi), rh))
+    best = None
+    for text, sig, rh_d in designs:
+        try:
+            ya = simulate(a.fit.model, None, sig.t, sig.v, rh=rh_d).deflection
+            yb = simulate(b.fit.model, None, sig.t, sig.v, rh=rh_d).deflection
+        except Exception:       # a design a model cannot run says nothing
+            continue
+        d = float(np.sqrt(np.mean(remove_nuisance(ya - yb, sig.t) ** 2)))
+        if best is None or d > best[1]:
+            best = (text, d)
+    if best is None:
+        return f"to separate them: {a.effect} needs {excitation(a.effect) or '?'}; {b.effect} needs " \
+               f"{excitation(b.effect) or '?'}"
+    ratio = f" ({best[1] / noise:.3g}× the noise floor)" if math.isfinite(noise) and noise > 0 else ""
+    return (f"{best[0]} would separate them: their fitted models' predictions differ there by "
+            f"{1e6 * best[1]:.3g} µm RMS{ratio}")
+
+
+# ============================================================================ the verdict
+
+
+@dataclass
+class Pick:
+    """One effect of the chain: picked at step ``step`` on top of the effects before it."""
+
+    step: int
+    effect: str
+    weight: float
+    rmse_before: float
+    rmse_after: float
+    delta_bic: float
+    p_value: float
+    parameters: dict
+    quality: list
+    reason: str
+
+    @property
+    def label(self) -> str:
+        return label_of(self.weight)
+
+    def to_dict(self) -> dict:
+        return {"step": self.step, "effect": self.effect, "confidence": self.weight, "confidence_label": self.label,
+                "rmse_before_m": self.rmse_before, "rmse_after_m": self.rmse_after, "delta_bic": self.delta_bic,
+                "p_value": self.p_value, "parameters": self.parameters, "quality_flags": self.quality,
+                "reason": self.reason}
+
+
+@dataclass
+class Verdict:
+    """Both answers (module doc); :meth:`lines` is the one text of every output."""
+
+    status: str
+    picks: list[Pick]
+    weights: dict
+    adequacy: Adequacy | None
+    base_rmse: float
+    noise_floor: float
+    noise_source: str
+    reason: str = ""
+    ambiguous: list[str] = field(default_factory=list)
+    separating: str = ""
+    remaining: list[dict] = field(default_factory=list)      # described forms of what remains
+    remaining_kind: str = ""                                 # none | described | base mismatch | unknown
+    stopped: str = ""                                        # why the chain stopped
+    alpha_bonferroni: float = ALPHA
+    nuisance: dict = field(default_factory=dict)
+
+    # --- the first answer, as before the chain existed ---------------------------------
+    @property
+    def missing_effect(self) -> str | None:
+        return self.picks[0].effect if self.picks else None
+
+    @property
+    def confidence(self) -> float | None:
+        """Weight of the first pick; None for a null answer (no confidence is claimed)."""
+        return self.picks[0].weight if self.picks else None
+
+    @property
+    def label(self) -> str | None:
+        return self.picks[0].label if self.picks else None
+
+    @property
+    def chain(self) -> list[str]:
+        return [p.effect for p in self.picks]
+
+    @property
+    def final_rmse(self) -> float:
+        return self.picks[-1].rmse_after if self.picks else self.base_rmse
+
+    def lines(self) -> list[str]:
+        """The verdict as sentences: status, which effect, adequacy, what remains, nuisance."""
+        out = [f"Verdict: {self.status}."]
+        if self.picks:
+            for k, p in enumerate(self.picks):
+                head = "Which effect: " if k == 0 else "Then, on top of it: "
+                params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
+                out.append(f"{head}{p.effect} (confidence {p.label}, weight {_w(p.weight)}) — RMS error "
+                           f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {p.delta_bic:.4g}"
+                           + (f"; {params}" if params else "") + ".")
+                if p.quality:
+                    out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
+            if self.stopped:
+                out.append(f"The chain stops: {self.stopped}.")
+        elif self.ambiguous:
+            out.append(f"Which effect: ambiguous between {' and '.join(self.ambiguous)} — {self.reason}. "
+                       f"{_cap(self.separating)}." if self.separating else
+                       f"Which effect: ambiguous between {' and '.join(self.ambiguous)} — {self.reason}.")
+        elif self.status == "nothing to explain":
+            out.append(f"Which effect: none is needed — {self.reason}.")
+        else:
+            out.append(f"Which effect: none named — {self.reason}.")
+        out.append("Is the model adequate: " + self._adequacy_text())
+        if self.remaining_kind and self.status != "nothing to explain":
+            out.append("What remains: " + self._remaining_text())
+        if self.nuisance:
+            out.append(f"Nuisance terms (estimated per record, not physics): {self.nuisance['text']}.")
+        return out
+
+    def _adequacy_text(self) -> str:
+        ad = self.adequacy
+        model = "the base" if not self.picks else "base + " + " + ".join(self.chain)
+        if ad is None or ad.adequate is None:
+            return f"not assessed — the noise floor is unknown ({self.noise_source})."
+        verdict = "yes" if ad.adequate else "no"
+        return (f"{verdict} — {model} leaves {1e6 * ad.rmse:.4g} µm RMS = {ad.ratio:.2f}× the noise floor of "
+                f"{1e6 * self.noise_floor:.3g} µm ({self.noise_source}; adequate within {ADEQUATE_RATIO}×).")
+
+    def _remaining_text(self) -> str:
+        if self.remaining_kind == "described":
+            return "; and ".join(d["text"] for d in self.remaining) + \
+                " — to model it, write an effect like examples/effects/creep.py and pass it with --effects-path."
+        if self.remaining_kind == "base mismatch":
+            return ("no residual form describes it: an unstructured mismatch of the model's own base forms "
+                    "(its physics differs a little from the device's), not a missing effect of the catalog.")
+        if self.remaining_kind == "none":
+            return "nothing beyond the noise."
+        return "unknown (no noise floor to compare with)."
+
+    def to_dict(self) -> dict:
+        return {"status": self.status, "chain": [p.to_dict() for p in self.picks],
+                "missing_effect": self.missing_effect, "confidence": self.confidence,
+                "confidence_label": self.label, "weights": self.weights, "reason": self.reason,
+                "ambiguous": self.ambiguous, "separating_record": self.separating,
+                "adequacy": self.adequacy.to_dict() if self.adequacy else None,
+                "remaining_kind": self.remaining_kind, "remaining": self.remaining, "chain_stopped": self.stopped,
+                "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
+                "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA, "min_rmse_reduction": MIN_IMPROVEMENT,
+                             "adequate_ratio": ADEQUATE_RATIO, "distinct_delta_bic": DISTINCT_BIC,
+                             "quality_penalty_bic": QUALITY_BIC, "rel_se_flag": REL_SE_FLAG, "corr_flag": CORR_FLAG}}
+
+
+def _w(w: float) -> str:
+    return f"{w:.3f}" if w >= 1e-3 else f"{w:.2g}"
+
+
+def _cap(s: str) -> str:
+    return s[:1].upper() + s[1:] if s else s
+
+
+def _fmt_param(name: str, v: dict) -> str:
+    spec = all_param_specs().get(name.split("@")[0])
+    unit = spec.unit if spec and spec.unit != "1" else ""
+    se = v.get("std_error")
+    se_txt = f" ± {se:.2g}" if se is not None and math.isfinite(se) else ""
+    return f"{name} = {v['value']:.4g}{se_txt}{(' ' + unit) if unit else ''}"
+
+
+def remaining_of(ad: Adequacy | None) -> tuple[str, list[dict]]:
+    """(kind, described forms) of what the final model leaves (module doc)."""
+    if ad is None or ad.adequate is None:
+        return "unknown", []
+    if ad.adequate:
+        return "none", []
+    found = [d for d in ad.descriptors if d.get("significant")]
+    return ("described", found) if found else ("base mismatch", [])
+
+
+def nuisance_summary(fit, records) -> dict:
+    """Offsets [µm] and drifts [µm/min] of the final model's residual, per record."""
+    rows = [{"record": r.source, "offset_um": 1e6 * o, "drift_um_per_min": 60e6 * d}
+            for r, (o, d) in zip(records, fit.nuisance)]
+    if not rows:
+        return {}
+    text = "; ".join(f"{x['record']}: offset {x['offset_um']:+.4g} µm, drift {x['drift_um_per_min']:+.3g} µm/min"
+                     for x in rows)
+    return {"records": rows, "text": text}
+
+
+__all__ = ["Verdict", "Pick", "Decision", "decide", "quality", "separating_record", "remaining_of", "label_of",
+           "nuisance_summary", "STATUSES", "CRITERIA", "QUALITY_BIC"]

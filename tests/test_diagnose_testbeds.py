@@ -1,0 +1,185 @@
+"""The diagnosis loop on the test beds of issue 24 (physics.diagnose.testbeds): lab-like records
+(mm columns, offsets, drift, hygrometer jitter, no excitation metadata) and a perturbed
+simulator.  A small fast subset runs by default; the seed survey is ``-m slow``."""
+from __future__ import annotations
+
+import html
+import json
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physics.diagnose import diagnose
+from physics.diagnose.testbeds import lab_case, make_case, perturbed_case, truths
+from physics.diagnose.verdict import STATUSES, decide
+
+CREEP = Path(__file__).resolve().parents[1] / "examples" / "effects" / "creep.py"
+
+
+def _quiet(fn, *a, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*a, **kw)
+
+
+# ------------------------------------------------------------------ fast: the loop as a user runs it
+
+
+def test_lab_records_on_the_command_line(tmp_path, capsys):
+    """Lab exports with electrode_resistance left out: the command names it with high confidence,
+    the error after the pick is within 1.5× the true model's, the page shows the terminal's
+    verdict text in full and readable, and suggested commands name final paths."""
+    from nnmodel.cli import main
+    case = lab_case("electrode_resistance", seed=0)
+    files = [str(f) for f in case.write(tmp_path / "lab")]
+    out = tmp_path / "dx"
+    rc = main(["diagnose", *files, "--device", "ipmc_pt_eg", *case.param_args(), "--effects", case.effects,
+               "--candidates", "electrode_resistance,fractional_coupling", "--no-support", "--out", str(out),
+               "--apply", "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "Which effect: electrode_resistance (confidence high" in text, text
+    d = json.loads((out / "diagnosis.json").read_text())
+    v = d["verdict"]
+    assert v["chain"][0]["effect"] == "electrode_resistance"
+    assert v["chain"][-1]["rmse_after_m"] <= 1.5 * case.true_error()
+    assert v["adequacy"]["adequate"] is True and v["status"] == "explained"
+    # one verdict text: terminal = diagnosis.json = page
+    for line in v["text"]:
+        assert line in text
+    page = (out / "index.html").read_text()
+    for line in v["text"]:
+        assert html.escape(line, quote=False) in page or html.escape(line) in page, line
+    assert "\\u0394" not in page and ".eap-tmp-" not in page and ".eap-tmp-" not in text
+    assert str(out / "ipmc_pt_eg_electrode_resistance.yaml") in text
+    # the noise floor was estimated from the records and said so; the nuisance terms reported
+    assert "estimated from the records' deflection spectra" in text
+    assert "Nuisance terms (estimated per record, not physics)" in text
+
+
+def test_nothing_hidden_gives_nothing_to_explain_without_a_confidence():
+    case = lab_case("none", seed=0)
+    res = _quiet(diagnose, case.measurements, case.device, case.effects, candidates="fractional_coupling",
+                 check_support=False)
+    v = res.verdict
+    assert v.status == "nothing to explain" and v.picks == [] and v.confidence is None and v.label is None
+    assert v.status in STATUSES
+    assert "none is needed" in " ".join(v.lines())
+
+
+def test_quality_flags_decide_between_close_candidates(monkeypatch):
+    """Two candidates lower the error alike; the one whose parameters are on bounds and
+    correlated loses, and the pick's confidence reflects that it dominates."""
+    from physics.diagnose import verdict as V
+
+    class Fit:
+        def __init__(self, rmse):
+            self.rmse = rmse
+
+    class Cmp:
+        def __init__(self, d):
+            self.delta_bic, self.p_value = d, 1e-30
+
+    class Cand:
+        def __init__(self, effect, d, rmse, flags):
+            self.effect, self.comparison, self.fit, self._flags = effect, Cmp(d), Fit(rmse), flags
+            self.indistinguishable_from, self.quality, self.passes = [], [], {}
+            self.signature = None
+
+    base = Fit(50e-6)
+    flexible = Cand("flexible", -5020.0, 2.00e-6, ["a on a bound", "a and b correlated", "signature absent"])
+    user = Cand("user_creep", -5000.0, 2.01e-6, [])
+    monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
+    dec = decide(base, [flexible, user], 1.5e-6, 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-5.0),
+                 lambda a, b: 1e-6)
+    assert dec.pick is user and dec.ambiguous == []
+    assert dec.weights["user_creep"] > 0.99 and V.label_of(dec.weight) == "high"
+    assert "less credible" in dec.reason
+    # close on fit *and* quality: ambiguous, no pick
+    twin = Cand("twin", -5001.0, 2.0e-6, [])
+    monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a square pulse held 60 s would separate them")
+    dec = decide(base, [user, twin], 1.5e-6, 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-1.0), lambda a, b: 1e-6)
+    assert dec.pick is None and set(dec.ambiguous) == {"user_creep", "twin"} and "pulse" in dec.separating
+
+
+def test_identify_keeps_the_start_when_the_fit_is_worse(tmp_path):
+    """A fit that makes the time records worse than its start is not written as the result."""
+    from physics.identify import identify, write_identification
+    from physics.identify.result import _check_against_start
+    case = lab_case("none", seed=2)
+    res = _quiet(identify, case.measurements[:1], case.device, case.effects, "kf,beta_f", n_starts=1)
+    assert not res.kept_start and res.check["time_rmse_fitted_m"] <= res.check["time_rmse_start_m"]
+    bad = res.fit
+    bad.theta = np.array([res.problem.theta0[0] * 1.5, res.problem.theta0[1]])
+    chk = _check_against_start(res.problem, bad)
+    assert chk["kept_start"] and "worse than its start" in chk["message"]
+    res.check = chk
+    res.device = res.problem.device_for(res.problem.theta0)
+    out = write_identification(res, tmp_path / "id")
+    text = (tmp_path / "id" / out["device_written"]).read_text()
+    assert text.startswith("# WARNING: the fit is worse than its start") and "start value kept" in text
+
+
+# ------------------------------------------------------------------ slow: the survey of the issue's Tests section
+
+SEEDS = (0, 1, 2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("suite", ["lab", "perturbed"])
+@pytest.mark.parametrize("truth", sorted(set(truths("lab")) & set(truths("perturbed")) - {"none", "creep", "lowpass",
+                                                                                            "drift", "play"}))
+def test_catalog_effect_named_with_high_confidence_in_most_seeds(suite, truth):
+    hits, rows = 0, []
+    for seed in SEEDS:
+        case = make_case(suite, truth, seed)
+        res = _quiet(diagnose, case.measurements, case.device, case.effects, seed=seed, check_support=False)
+        v = res.verdict
+        ok = bool(v.picks) and v.picks[0].effect == truth and v.label == "high" and \
+            v.final_rmse <= 1.5 * case.true_error()
+        hits += ok
+        rows.append((seed, v.status, v.chain, v.label, 1e6 * v.final_rmse, 1e6 * case.true_error()))
+    assert hits >= 2, rows
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("suite", ["lab", "perturbed"])
+def test_nothing_hidden_is_nothing_to_explain(suite):
+    statuses = []
+    for seed in SEEDS:
+        case = make_case(suite, "none", seed)
+        res = _quiet(diagnose, case.measurements, case.device, case.effects, seed=seed, check_support=False)
+        statuses.append(res.verdict.status)
+    assert statuses.count("nothing to explain") >= 2, statuses
+
+
+@pytest.mark.slow
+def test_creep_with_the_example_file_is_creep():
+    from physics.effects import effect_classes_in_file, register, unregister
+    (cls,) = effect_classes_in_file(CREEP)
+    register(cls)
+    try:
+        for seed in SEEDS[:2]:
+            case = perturbed_case("creep", seed)
+            res = _quiet(diagnose, case.measurements, case.device, case.effects, seed=seed, check_support=False)
+            v = res.verdict
+            assert v.picks and v.picks[0].effect == "creep" and v.label == "high", v.lines()
+            tau = v.picks[0].parameters["creep_tau"]
+            assert tau["value"] == pytest.approx(case.truth_params["creep_tau_s"], rel=0.2)
+            assert not any("on a bound" in q for q in v.picks[0].quality)
+    finally:
+        unregister("creep")
+
+
+@pytest.mark.slow
+def test_forward_selection_finds_two_missing_effects():
+    """The lab device with two of its default effects left out: the chain names both."""
+    case = lab_case("electrode_resistance", seed=0)
+    res = _quiet(diagnose, case.measurements, case.device, "default,-electrode_resistance,-solvent_diffusion",
+                 check_support=False)
+    assert res.verdict.chain[:2] == ["electrode_resistance", "solvent_diffusion"] or \
+        set(res.verdict.chain) == {"electrode_resistance", "solvent_diffusion"}, res.verdict.lines()
+    assert math.isfinite(res.verdict.final_rmse) and res.verdict.final_rmse <= 1.5 * case.true_error()
