@@ -1,11 +1,12 @@
-"""Peak memory (RSS) and wall time of `eap predict` and `eap compare` on long records.
+"""Peak memory (RSS) and wall time of `eap predict` and `eap compare` (physics model and
+neural bundle) on long records.
 
 Each measurement runs the command in a fresh process and reads that process's own peak
 RSS; an address-space cap (``--cap-GB``) keeps a run that would exhaust the machine from
 doing so (it then reports the package's out-of-memory error instead of a figure).
 
     python bench/memory_long_records.py                 # 1e5, 1e6, 1e7 samples
-    python bench/memory_long_records.py --sizes 1e5,1e6
+    python bench/memory_long_records.py --sizes 2e6,1e7 --commands predict,compare-nn
 """
 from __future__ import annotations
 
@@ -76,6 +77,7 @@ def main() -> None:
     ap.add_argument("--sizes", default="1e5,1e6,1e7", help="record lengths [samples]")
     ap.add_argument("--fs-Hz", type=float, default=1000.0)
     ap.add_argument("--cap-GB", type=float, default=12.0, help="address-space cap per run")
+    ap.add_argument("--commands", default="predict,compare,compare-nn", help="which runs to measure")
     args = ap.parse_args()
     sizes = [int(float(s)) for s in args.sizes.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
@@ -83,19 +85,23 @@ def main() -> None:
         bundle = _bundle(tmp, args.fs_Hz)
         base = _measure(args.cap_GB, ["effects"])
         print(f"baseline (imports, `eap effects`): {base.get('peak_MB', float('nan')):.0f} MB")
-        print(f"{'samples':>10s} {'command':8s} {'peak MB':>9s} {'time s':>8s}  note")
+        print(f"{'samples':>10s} {'command':10s} {'peak MB':>9s} {'time s':>8s}  note")
         for n in sizes:
             rec = tmp / f"r{n}.csv"
             _record(rec, n, args.fs_Hz)
             runs = {"predict": ["predict", "--model", str(bundle), "--input", str(rec), "--out",
                                 str(tmp / f"p{n}.csv"), "--overwrite"],
                     "compare": ["compare", str(rec), "--model", "ip2c_pedot_water", "--out", str(tmp / f"c{n}"),
-                                "--overwrite"]}
+                                "--overwrite"],
+                    "compare-nn": ["compare", str(rec), "--model", str(bundle), "--out", str(tmp / f"n{n}"),
+                                   "--overwrite"]}
             for name, argv in runs.items():
+                if name not in args.commands.split(","):
+                    continue
                 t0 = time.perf_counter()
                 r = _measure(args.cap_GB, argv)
                 note = "" if r.get("rc") == 0 else f"FAILED: {' '.join(r.get('error', []))[:120]}"
-                print(f"{n:10d} {name:8s} {r.get('peak_MB', float('nan')):9.0f} "
+                print(f"{n:10d} {name:10s} {r.get('peak_MB', float('nan')):9.0f} "
                       f"{r.get('s', time.perf_counter() - t0):8.1f}  {note}", flush=True)
             rec.unlink()
 

@@ -86,7 +86,7 @@ def main() -> None:
         yh = m.simulate(us, y_init=ys[:m.n_init_])
         e = rmse(ys[skip:], yh[skip:])
         met &= e <= 0.8 * e_arx
-        start = (getattr(m, "linear_start_", None) or {}).get("end", {}).get("kept", "-")
+        start = (getattr(m, "reference_start_", None) or {}).get("end", {}).get("kept", "-")
         print(f"{name:6s} test free-run RMSE {e:.4f} ({100 * (e / e_arx - 1):+.0f} % vs ARX), trained in {wall:.0f} s, "
               f"kept after training: {start}", flush=True)
     print(f"target: every model at least 20 % below the best ARX -> {'MET' if met else 'NOT MET'}")

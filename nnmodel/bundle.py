@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from physics.errors import InputError
-from physics.fileio import sha256_file
+from physics.fileio import load_json, sha256_file
 
 from .data import check_fs, check_voltage
 from .models import MODELS
@@ -143,10 +143,7 @@ def _read_card(folder: Path) -> dict:
     cp = folder / CARD
     if not cp.is_file():
         raise InputError(f"{folder} is not a model bundle (no {CARD})")
-    try:
-        card = json.loads(cp.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{cp}: not valid JSON ({exc})") from None
+    card = load_json(cp, "bundle card")
     if not isinstance(card, dict) or card.get("format") != FORMAT:
         raise InputError(f"{cp}: not an {FORMAT} card")
     if card.get("format_version") != FORMAT_VERSION:
@@ -184,7 +181,10 @@ def load(path: str | os.PathLike) -> "Bundle":
     if not folder.is_dir():
         raise InputError(f"model bundle {folder} not found (expected a folder with {CARD} and {WEIGHTS})")
     card = _read_card(folder)
-    wfile = folder / card.get("weights", {}).get("file", WEIGHTS)
+    weights = card.get("weights") or {}
+    if not isinstance(weights.get("file", WEIGHTS), str):
+        raise InputError(f"{folder / CARD}: weights.file must be a file name, got {weights.get('file')!r}")
+    wfile = folder / weights.get("file", WEIGHTS)
     if wfile.parent.resolve() != folder.resolve() or not wfile.is_file():
         raise InputError(f"{folder}: weights file {wfile.name} missing or outside the bundle")
     cls = MODELS[card["model"]]
@@ -194,7 +194,7 @@ def load(path: str | os.PathLike) -> "Bundle":
                "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
                "card_extra": {k: card[k] for k in cls.card_keys() if k in card}}
     _check_size(cls, hp, learned, wfile, folder)
-    expected = card.get("weights", {}).get("sha256")
+    expected = weights.get("sha256")
     if expected and sha256_file(wfile) != expected:
         raise InputError(f"{wfile}: content does not match the SHA-256 in {CARD} (corrupt or altered)")
     try:

@@ -12,11 +12,13 @@ import pkgutil
 import signal
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import yaml
 
-from physics.errors import InputError, ModelError
+from physics.errors import InputError, InputNotice, ModelError
+from physics.outputs import protecting
 
 from . import commands
 
@@ -67,15 +69,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _terminated)   # first: a signal during start-up is clean too
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+    except (KeyboardInterrupt, Terminated) as exc:
+        signal.signal(signal.SIGTERM, previous)
+        print("eap: interrupted", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
     if not getattr(args, "_run", None):
+        signal.signal(signal.SIGTERM, previous)
         parser.print_help()
         return 2
-    previous = signal.signal(signal.SIGTERM, _terminated)
+    shown = warnings.showwarning
+    warnings.showwarning = _notice(args.command)
     try:
         _load_effects(getattr(args, "effects_path", []))
-        with tempfile.TemporaryDirectory(prefix="eap-param-") as tmp:
+        with protecting(_inputs_of(args)), tempfile.TemporaryDirectory(prefix="eap-param-") as tmp:
             _apply_params(args, Path(tmp))
             return int(args._run(args) or 0)
     except InputError as exc:
@@ -96,8 +106,46 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`
         sys.stderr.close()
         return 0
+    except SystemExit as exc:   # user code (an effect file) called sys.exit: nothing may look complete
+        print(f"eap {args.command}: error: user code called sys.exit({exc.code!r}) during the run; nothing was "
+              "written (an effect file must not exit)", file=sys.stderr)
+        return 2
     finally:
         signal.signal(signal.SIGTERM, previous)
+        warnings.showwarning = shown
+
+
+#: Options that name files or folders a command reads (protected from every output).
+_INPUT_OPTIONS = ("device", "model", "input", "config", "dataset", "measurements", "effects_path", "template",
+                  "train", "validation", "test", "check", "physics")
+
+
+def _inputs_of(args) -> list[Path]:
+    """Existing files and folders named by the input options of ``args`` (a dataset part
+    ``FILE[START:STOP]`` counts as FILE)."""
+    out = []
+    for name in _INPUT_OPTIONS:
+        value = getattr(args, name, None)
+        for item in value if isinstance(value, list) else [value]:
+            if isinstance(item, str) and item:
+                path = Path(item.split("[", 1)[0] if item.endswith("]") else item)
+                if path.exists():
+                    out.append(path)
+    return out
+
+
+def _notice(command: str):
+    """``warnings.showwarning`` for the command line: one line per warning, ``eap CMD: note: …``
+    for an :class:`~physics.errors.InputNotice`, ``eap CMD: warning: …`` otherwise."""
+    said = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        kind = "note" if issubclass(category, InputNotice) else "warning"
+        text = f"eap {command}: {kind}: {' '.join(str(message).split())}"
+        if text not in said:   # a file read twice (two sample ranges of it) says it once
+            said.add(text)
+            print(text, file=file or sys.stderr)
+    return show
 
 
 def flag_speller(parser: argparse.ArgumentParser, command: str):

@@ -17,7 +17,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from physics.errors import InputError
-from physics.timeseries import check_finite, check_range
+from physics.record import check_finite, check_range
 # One definition of the fit metrics for the whole package (NRMSE = RMSE / std(y), fit % =
 # 100 (1 - NRMSE)): physics.metrics, re-exported here for the neural-model code.
 from physics.metrics import fit_percent, nrmse, rmse

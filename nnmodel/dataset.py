@@ -15,10 +15,11 @@ from one seed.
 from __future__ import annotations
 
 import hashlib
-import json
+import math
+import re
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 import numpy as np
@@ -27,12 +28,14 @@ from physics.yamlio import load_yaml
 from physics import signals
 from physics.device import config_dir, load_device
 from physics.errors import InputError
-from physics.fileio import sha256_file, write_json
+from physics.fileio import load_json, sha256_file, write_json
+from physics.limits import FS_RANGE_HZ
 from physics.model import ActuatorModel, resolve_effects
 from physics.parallel import ParallelSettings, map_tasks, warm_up
 from physics.outputs import output_folder, preflight
 from physics.sensor import SensorModel
 from physics.timedomain import simulate
+from physics.record import OutputQuantity
 from physics.timeseries import read_timeseries, write_timeseries
 
 from .data import Experiment
@@ -191,7 +194,7 @@ def _generate_record(task: dict) -> dict:
             "rh_pct": spec.rh if np.ndim(spec.rh) == 0 else {"varying": list(spec.rh)},
             "heldout_rh": spec.heldout, "extra_effects": list(spec.extra_effects),
             "effects": list(model.effect_ids), "seed": spec.seed, "samples": int(sig.t.size),
-            "sha256": sha256_file(path)}
+            "sha256": sha256_file(path), "sidecar_sha256": sha256_file(path.with_suffix(".yaml"))}
 
 
 def _record_cost(task: dict) -> float:
@@ -232,7 +235,8 @@ def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool
 
 @dataclass
 class Dataset:
-    """A loaded dataset: ``meta`` (dataset.json) and ``path``; files are checked against their hashes."""
+    """A loaded dataset: ``meta`` (dataset.json, validated) and ``path``; files are checked
+    against their hashes (:func:`load_dataset`)."""
 
     path: Path
     meta: dict
@@ -240,6 +244,11 @@ class Dataset:
     @property
     def fs(self) -> float:
         return float(self.meta["fs_Hz"])
+
+    @property
+    def output(self) -> OutputQuantity:
+        """What the records' output is (default: the tip deflection in m)."""
+        return OutputQuantity.from_dict(self.meta.get("output"))
 
     @property
     def hash(self) -> str:
@@ -252,9 +261,9 @@ class Dataset:
         for e in self.meta["files"]:
             if split is not None and e["split"] != split:
                 continue
-            if heldout is not None and bool(e["heldout_rh"]) != heldout:
+            if heldout is not None and bool(e.get("heldout_rh")) != heldout:
                 continue
-            if measurement_like is not None and bool(e["extra_effects"]) != measurement_like:
+            if measurement_like is not None and bool(e.get("extra_effects")) != measurement_like:
                 continue
             out.append(e)
         return out
@@ -268,29 +277,136 @@ class Dataset:
         return self.meta.get("rh_levels") is not None
 
     def record(self, entry: dict) -> Experiment:
-        ts = read_timeseries(self.path / entry["path"], rh=None if self.has_rh else 0.0)
+        ts = read_timeseries(self.path / entry["path"], rh=None if self.has_rh else 0.0, output=self.output)
+        if abs(ts.fs - self.fs) > 1e-6 * self.fs:
+            raise InputError(f"{self.path / entry['path']}: sampled at {ts.fs:g} Hz but dataset.json says fs_Hz "
+                             f"{self.fs:g}; the dataset was changed — rebuild it")
         return Experiment(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
 
 
+# --------------------------------------------------------------------------- a closed world
+
+_SHA = re.compile(r"^[0-9a-f]{64}$")
+
+
+def _fault(mf: Path, what: str) -> InputError:
+    return InputError(f"{mf}: {what}; the dataset description is damaged — rebuild it with eap dataset or eap "
+                      "generate")
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _check_meta(meta, mf: Path) -> None:
+    """The schema of dataset.json, one clear error per fault (the first found)."""
+    if not isinstance(meta, dict):
+        raise _fault(mf, f"expected a JSON object, got {type(meta).__name__}")
+    if meta.get("schema") != SCHEMA:
+        raise _fault(mf, f"schema {meta.get('schema')!r} is not {SCHEMA!r}")
+    lo, hi = FS_RANGE_HZ
+    fs = meta.get("fs_Hz")
+    if not (_number(fs) and lo <= fs <= hi):
+        raise _fault(mf, f"fs_Hz {fs!r} is not a sampling rate within {lo:g}–{hi:g} Hz")
+    vf = meta.get("val_fraction", 0.0)
+    if vf is not None and not (_number(vf) and 0.0 <= vf < 0.9):
+        raise _fault(mf, f"val_fraction {vf!r} must lie in [0, 0.9)")
+    levels = meta.get("rh_levels")
+    if levels is not None and not (isinstance(levels, dict) and all(
+            isinstance(levels.get(k, []), list) and all(_number(x) for x in levels.get(k, []))
+            for k in ("train", "held_out"))):
+        raise _fault(mf, f"rh_levels {levels!r} must be null or a mapping of RH lists (train, held_out) in %")
+    try:
+        OutputQuantity.from_dict(meta.get("output"), f"{mf}: output")
+    except InputError as exc:
+        raise _fault(mf, str(exc).removeprefix(f"{mf}: ")) from None
+    floor = meta.get("noise_floor_m")
+    if floor is not None and not (_number(floor) and floor >= 0):
+        raise _fault(mf, f"noise_floor_m {floor!r} must be null or a non-negative number of metres")
+    files = meta.get("files")
+    if not isinstance(files, list) or not files:
+        raise _fault(mf, f"files must be a non-empty list of records, got {type(files).__name__}")
+    seen: set[str] = set()
+    for k, e in enumerate(files):
+        where = f"files[{k}]"
+        if not isinstance(e, dict):
+            raise _fault(mf, f"{where} must be an object (path, split, sha256, ...), got {type(e).__name__}")
+        path = e.get("path")
+        if not isinstance(path, str) or not path:
+            raise _fault(mf, f"{where}.path {path!r} must be a relative file path")
+        where = f"{where} ({path})"
+        parts = PurePosixPath(path).parts
+        if PurePosixPath(path).is_absolute() or "\\" in path or ".." in parts or not path.lower().endswith(".csv"):
+            raise _fault(mf, f"{where}: a record must be a .csv path inside the dataset folder (relative, no '..')")
+        if path in seen:
+            raise _fault(mf, f"{where} is listed twice")
+        seen.add(path)
+        if e.get("split") not in SPLITS:
+            raise _fault(mf, f"{where}: split {e.get('split')!r}; expected one of {', '.join(SPLITS)}")
+        if not (isinstance(e.get("sha256"), str) and _SHA.match(e["sha256"])):
+            raise _fault(mf, f"{where}: sha256 {e.get('sha256')!r} is not a SHA-256 (64 hex digits)")
+        side = e.get("sidecar_sha256")
+        if side is not None and not (isinstance(side, str) and _SHA.match(side)):
+            raise _fault(mf, f"{where}: sidecar_sha256 {side!r} is not null or a SHA-256")
+        n = e.get("samples")
+        if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and n >= 2):
+            raise _fault(mf, f"{where}: samples {n!r} must be a whole number ≥ 2")
+        if not isinstance(e.get("heldout_rh", False), bool):
+            raise _fault(mf, f"{where}: heldout_rh {e.get('heldout_rh')!r} must be true or false")
+        extra = e.get("extra_effects", [])
+        if not (isinstance(extra, list) and all(isinstance(x, str) for x in extra)):
+            raise _fault(mf, f"{where}: extra_effects {extra!r} must be a list of effect ids")
+        rh = e.get("rh_pct")
+        if rh is not None and not (_number(rh) and 0 <= rh <= 100) and not (
+                isinstance(rh, dict) and isinstance(rh.get("varying"), list)):
+            raise _fault(mf, f"{where}: rh_pct {rh!r} must be null, a number within 0–100 % or "
+                             "{\"varying\": [low, high]}")
+
+
+def _inside(root: Path, rel: str, mf: Path) -> Path:
+    """``root/rel`` after checking it is a regular file inside ``root`` reached without links."""
+    p = root
+    for part in PurePosixPath(rel).parts:
+        p = p / part
+        if p.is_symlink():
+            raise InputError(f"{mf}: {rel}: {p} is a symbolic link; a dataset holds its own files (a link could "
+                             "lead outside the folder) — copy the file in and rebuild the dataset")
+    if not p.is_file():
+        raise InputError(f"{mf}: listed file {rel} is missing")
+    if root not in p.resolve().parents:
+        raise InputError(f"{mf}: {rel} resolves outside the dataset folder; a dataset holds its own files")
+    return p
+
+
 def load_dataset(path: str | Path, verify: bool = True) -> Dataset:
-    """Load ``dataset.json`` of a dataset folder; with ``verify`` every file's SHA-256 is checked."""
+    """Load and validate ``dataset.json`` of a dataset folder (schema, every path a regular
+    file inside the folder, no entry twice); with ``verify`` every file's and sidecar's
+    SHA-256 is checked too.  A dataset is a closed world: nothing outside its folder is read."""
     path = Path(path)
     mf = path / "dataset.json"
-    if not mf.is_file():
+    if not mf.exists():
         raise InputError(f"{path} is not a dataset folder (no dataset.json)")
-    try:
-        meta = json.loads(mf.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{mf}: not valid JSON ({exc})") from None
-    if meta.get("schema") != SCHEMA:
-        raise InputError(f"{mf}: schema {meta.get('schema')!r} is not {SCHEMA!r}")
-    for e in meta.get("files", []):
-        f = path / e["path"]
-        if not f.is_file():
-            raise InputError(f"{mf}: listed file {e['path']} is missing")
-        if e.get("split") not in SPLITS:
-            raise InputError(f"{mf}: file {e['path']} has split {e.get('split')!r}; expected one of {SPLITS}")
-        if verify and sha256_file(f) != e["sha256"]:
+    meta = load_json(mf, "dataset description")
+    _check_meta(meta, mf)
+    root = path.resolve()
+    for e in meta["files"]:
+        f = _inside(root, e["path"], mf)
+        side = f.with_suffix(".yaml")
+        if "sidecar_sha256" in e and e["sidecar_sha256"] is None and (side.exists() or side.is_symlink()):
+            raise InputError(f"{side}: a sidecar the dataset does not list (dataset.json says {e['path']} has none); "
+                             "remove it or rebuild the dataset")
+        if not verify:
+            continue
+        if sha256_file(f) != e["sha256"]:
             raise InputError(f"{f}: content differs from the SHA-256 recorded in dataset.json "
                              f"(modified after generation)")
+        if e.get("sidecar_sha256") is not None:
+            if not side.is_file() or side.is_symlink():
+                raise InputError(f"{mf}: the sidecar {side.name} of {e['path']} is missing")
+            if sha256_file(side) != e["sidecar_sha256"]:
+                raise InputError(f"{side}: content differs from the SHA-256 recorded in dataset.json (the record's "
+                                 "metadata was modified after the dataset was written)")
+        elif "sidecar_sha256" not in e and side.exists():
+            raise InputError(f"{side}: dataset.json records no hash for this sidecar (an older eap wrote the "
+                             "dataset); rebuild the dataset")
     return Dataset(path, meta)

@@ -74,48 +74,73 @@ class LinearModel:
 
     def _forcing(self, un, rhn, before=None):
         """w[k] = sum_j b_j u[k-d-j] + c + e rh[k] (normalised), for every k; inputs before
-        the record are ``before`` (default: held at the first sample)."""
+        the record are ``before`` (a value held, or the last ``nb - 1 + delay`` inputs of the
+        previous piece; default: held at the first sample)."""
         pad = self.nb - 1 + self.delay
-        up = np.concatenate([np.full(pad, un[0] if before is None else before), un])
+        head = np.full(pad, un[0] if before is None else before) if np.ndim(before) == 0 else before
+        up = np.concatenate([head, un])
         w = np.convolve(up, np.r_[np.zeros(self.delay), self.b])[pad:pad + un.size] + self.c
         if self.e is not None:
             w = w + self.e * rhn
         return w
 
-    def simulate_norm(self, un, rhn, yn_init=None) -> np.ndarray:
-        """Free run in normalised units; ``yn_init``: measured outputs that start it (the
-        first ``len(yn_init)`` outputs are returned as given; inputs before the record held
-        at the first sample), else from rest: 0 V before the record and the output at its
-        0 V steady state (the convention of the networks' free run)."""
+    def _tail(self, before, un) -> np.ndarray:
+        """The last ``nb - 1 + delay`` inputs up to the end of ``un`` (the next piece's past)."""
+        pad = self.nb - 1 + self.delay
+        return np.concatenate([before, un])[len(before) + un.size - pad:]
+
+    def free_run_norm(self, un, rhn, yn_init=None, state=None):
+        """Free run in normalised units, as ``(y, state)``; ``state``: where the previous
+        piece of the record ended (None: the record's start), the returned one continues
+        the run on the next piece (same output as one run over the whole record).  At the
+        start, ``yn_init`` (measured outputs) start it: the first ``len(yn_init)`` outputs
+        are returned as given, inputs before the record held at the first sample; else the
+        run starts from rest: 0 V before the record and the output at its 0 V steady state
+        (the convention of the networks' free run)."""
         den = np.r_[1.0, -self.a]
-        m = 0 if yn_init is None else len(yn_init)
-        if m:
-            w = self._forcing(un, rhn)
+        pad = self.nb - 1 + self.delay
+        m = 0 if state is not None or yn_init is None else len(yn_init)
+        if state is not None:
+            before, zi = state
+        elif m:
+            before = np.full(pad, un[0])
             past = np.asarray(yn_init, float)[::-1][:self.na]
             past = np.r_[past, np.full(self.na - past.size, past[-1])] if past.size else past
             zi = signal.lfiltic([1.0], den, past) if self.na else np.zeros(0)
         else:
             rest = -self.scale["u_mean"] / self.scale["u_std"]           # 0 V, normalised
-            w = self._forcing(un, rhn, before=rest)
+            before = np.full(pad, rest)
             w0 = rest * float(np.sum(self.b)) + self.c + (0.0 if self.e is None else self.e * rhn[0])
             y0 = w0 / max(1e-12, 1.0 - float(np.sum(self.a)))
             zi = signal.lfiltic([1.0], den, np.full(self.na, y0)) if self.na else np.zeros(0)
+        w = self._forcing(un, rhn, before)
         with np.errstate(all="ignore"):
             if self.na:
-                y, _ = signal.lfilter([1.0], den, w[m:], zi=zi)
+                y, zf = signal.lfilter([1.0], den, w[m:], zi=zi)
             else:
-                y = w[m:].copy()
+                y, zf = w[m:].copy(), zi
         y = np.clip(np.nan_to_num(y, nan=CLIP, posinf=CLIP, neginf=-CLIP), -CLIP, CLIP)
-        return np.concatenate([np.asarray(yn_init, float), y]) if m else y
+        y = np.concatenate([np.asarray(yn_init, float), y]) if m else y
+        return y, (self._tail(before, un), zf)
 
-    def simulate(self, u, rh=None, y_init=None) -> np.ndarray:
-        """Free run in physical units (``y_init``: first measured outputs, returned as given)."""
+    def simulate_norm(self, un, rhn, yn_init=None) -> np.ndarray:
+        """Free run in normalised units over a whole record (see :meth:`free_run_norm`)."""
+        return self.free_run_norm(un, rhn, yn_init)[0]
+
+    def free_run(self, u, rh=None, y_init=None, state=None):
+        """Free run in physical units, as ``(y, state)`` (``y_init``: first measured outputs,
+        returned as given; ``state``: see :meth:`free_run_norm`)."""
         un = self._norm("u", u)
         rhn = self._norm("rh", rh) if self.uses_rh else None
         if rhn is not None and rhn.ndim == 0:
             rhn = np.full(un.size, float(rhn))
         yi = None if y_init is None or len(y_init) == 0 else self._norm("y", y_init)
-        return self.simulate_norm(un, rhn, yi) * self.scale["y_std"] + self.scale["y_mean"]
+        y, state = self.free_run_norm(un, rhn, yi, state)
+        return y * self.scale["y_std"] + self.scale["y_mean"], state
+
+    def simulate(self, u, rh=None, y_init=None) -> np.ndarray:
+        """Free run in physical units (``y_init``: first measured outputs, returned as given)."""
+        return self.free_run(u, rh, y_init)[0]
 
     def one_step(self, u, rh, y) -> np.ndarray:
         """One-step-ahead prediction from the measured past (physical units)."""

@@ -317,7 +317,7 @@ def _train_one(task: dict) -> dict:
            "inference_samples_per_s": _speed(free, ds, entries),
            "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None,
            "training": _budget(model), "history": list(getattr(model, "history_", None) or [])}
-    save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True,
+    save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True, output=(ds.output.name, ds.output.unit),
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
                 notes=f"trained by eap train-compare on {final_path(ds.path)}",
                 extra={"tuning": task["tuning"]} if task.get("tuning") else None)
@@ -602,7 +602,7 @@ def _report(summary: dict, out: Path) -> None:
                       f"NRMSE {100 * lin['free_run']['test']['nrmse']:.2f} %. " + "; ".join(
                           f"{k} {abs(r['vs_linear_pct']):.0f} % {'below' if r['vs_linear_pct'] < 0 else 'above'} it"
                           for k, r in summary["models"].items() if r.get("vs_linear_pct") is not None) + ".")
-    for n in notes(summary, diagnosis=diagnose_command(summary)):
+    for n in notes(summary, diagnosis=diagnose_command(summary), with_shortfalls=False):
         rep.why(n["text"], n["links"])
     findings = [f for r in summary["models"].values() for f in r.get("shortfalls", [])]
     if findings:

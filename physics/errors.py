@@ -54,3 +54,9 @@ class InputError(ValueError):
 class ModelError(RuntimeError):
     """A model cannot be built or solved with the given parameters (for example a
     realisation that cannot meet its accuracy target)."""
+
+
+class InputNotice(UserWarning):
+    """Something in the user's input was read in a way worth saying aloud (a unit taken from
+    a column header, an output that is not a length); the command line prints each as one
+    line ``eap CMD: note: …``."""

@@ -126,6 +126,29 @@ def welch_averages(window: np.ndarray, step: int, n_segments: int) -> float:
     return n_segments / (1 + 2 * np.sum((1 - shifts / n_segments) * rho**2))
 
 
+#: Samples of the segments whose spectra are taken at once: on a long record the Welch
+#: averages are accumulated block by block (memory bounded, the same mean).
+WELCH_BLOCK = 1 << 21
+
+
+def _welch(u: np.ndarray, y: np.ndarray, kw: dict):
+    """(freq, S_uy, S_uu, S_yy): Welch averages (scipy's csd/welch with ``kw``) over the
+    segments of ``u``, ``y``, taken a block of whole segments at a time, so a long record
+    never has all its windowed segments in memory at once."""
+    nperseg, step = kw["nperseg"], kw["nperseg"] - kw["noverlap"]
+    n_seg = 1 + (u.size - nperseg) // step
+    per = max(1, WELCH_BLOCK // nperseg)
+    sums = None
+    for s0 in range(0, n_seg, per):
+        s1 = min(n_seg, s0 + per)
+        a, b = s0 * step, (s1 - 1) * step + nperseg
+        freq, s_uy = signal.csd(u[a:b], y[a:b], **kw)
+        parts = (s_uy, signal.welch(u[a:b], **kw)[1], signal.welch(y[a:b], **kw)[1])
+        w = s1 - s0
+        sums = [w * p for p in parts] if sums is None else [acc + w * p for acc, p in zip(sums, parts)]
+    return (freq, *(acc / n_seg for acc in sums)) if per < n_seg else (freq, *parts)
+
+
 def estimate_frf(u, y, fs: float, *, nperseg: int | None = None, window="hann",
                  overlap: float = 0.5, detrend="constant",
                  band: tuple[float, float] | None = None, confidence: float = 0.95,
@@ -161,9 +184,7 @@ def estimate_frf(u, y, fs: float, *, nperseg: int | None = None, window="hann",
     if noverlap >= nperseg:
         raise InputError(f"overlap={overlap!r} leaves no step between segments of {nperseg}")
     kw = dict(fs=fs, window=window, nperseg=nperseg, noverlap=noverlap, detrend=detrend)
-    freq, s_uy = signal.csd(u, y, **kw)
-    _, s_uu = signal.welch(u, **kw)
-    _, s_yy = signal.welch(y, **kw)
+    freq, s_uy, s_uu, s_yy = _welch(u, y, kw)
     if band is not None:
         f_lo, f_hi = band
         if not 0 <= f_lo < f_hi:

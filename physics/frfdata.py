@@ -15,9 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .timeseries import (Locate, check_finite, check_input_path, check_range, parse_header,
-                         read_sidecar, read_table, write_table)
+from .csvtable import check_input_path, read_table, write_table
+from .record import Locate, check_finite, check_range
+from .sidecar import read_sidecar
+from .timeseries import parse_header
 
+#: Largest |H| [m/V] a file may hold: strips give µm–mm per volt; far beyond is a unit error.
+PLAUSIBLE_GAIN = 1e3
 #: quantity -> {unit: scale to stored units}; ``coherence`` has no unit.
 FRF_UNITS: dict[str, dict[str, float]] = {
     "freq": {"Hz": 1.0},
@@ -119,6 +123,8 @@ def read_frf(path) -> FRFData:
     if bad.size:
         raise InputError(f"{p}, {table.locate(bad[0])}, column {names['mag']!r}: magnitude "
                          f"{float(values['mag'][bad[0]])!r} is negative; expected |H| >= 0")
+    check_range(values["mag"], 0.0, PLAUSIBLE_GAIN, str(p), table.locate, f"column {names['mag']!r}",
+                "m/V (a larger gain is a unit or export error, and overflows the metrics)")
     response = values["mag"] * np.exp(1j * np.radians(values["phase"]))
     _check_frf(values["freq"], response, values.get("coherence"), values.get("rh"), str(p),
                table.locate)

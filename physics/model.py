@@ -22,6 +22,7 @@ from .device import Device, load_device
 from .effects import CHAIN, CORE, EFFECTS, Effect, stage_of
 from .effects.double_layer import DoubleLayerProps
 from .errors import InputError, arg
+from .limits import MAX_MODES, check_count
 
 
 _GROUPS = ("default", "all", "linear", "none")
@@ -78,9 +79,9 @@ class ActuatorModel:
     def __init__(self, device, effects=None, *, n_modes: int = 4):
         self.device: Device = load_device(device)
         self.effect_ids = resolve_effects(effects, self.device)
-        self.n_modes = int(n_modes)
-        if self.n_modes < 1:
-            raise InputError("n_modes must be at least 1")
+        self.n_modes = check_count(n_modes if isinstance(n_modes, int) else int(n_modes), 1, MAX_MODES,
+                                   arg("n_modes"), "higher modes lie far above any measured band; the rest is "
+                                   "kept quasi-statically")
         on = [EFFECTS[e] for e in self.effect_ids]
         #: the chain: each stage's name → the effect filling it (its default or the one replacing it)
         self.stages: dict[str, Effect] = {}
@@ -145,7 +146,7 @@ class ActuatorModel:
     def modes(self) -> CantileverModes:
         return CantileverModes(self.free_length, self.n_modes)
 
-    def check_rh(self, rh, what: str = "rh"):
+    def check_rh(self, rh, what: str = arg("rh")):
         """Validate RH [%]; None is allowed only when the humidity effect is off."""
         if rh is None:
             if self.needs_rh:
@@ -153,7 +154,7 @@ class ActuatorModel:
             return self.device.reference_rh
         arr = np.asarray(rh, dtype=float)
         if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > 100):
-            raise InputError(f"{what} must be finite and within 0–100 %")
+            raise InputError(f"{what} {float(np.max(arr)) if arr.size else rh!r}: must be finite and within 0–100 %")
         return arr if arr.ndim else float(arr)
 
     def params_at(self, rh=None) -> dict:

@@ -17,18 +17,26 @@
 Tasks are plain data (dicts of numbers, strings and paths) and ``fn`` a module-level
 function, so nothing unpicklable (open files, closures) crosses to a worker.  Every task
 carries its own seed, so results are identical to the serial run whatever the worker
-count.  A failing task raises :class:`~physics.errors.ModelError` naming the task.
+count.  A task that fails on the user's input raises that error alone (the user's message,
+never a dump of the task); any other failure raises :class:`~physics.errors.ModelError`
+naming the task.
+
+Resources are bounded before anything starts: local workers at most the machine's cores
+(more only queue behind each other), a scheduler address must be ``[tcp|tls]://HOST:PORT``
+and must answer within :data:`CONNECT_TIMEOUT_S` seconds.
 """
 from __future__ import annotations
 
 import atexit
 import os
+import re
+import socket
 import threading
 from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-from .errors import InputError, ModelError
+from .errors import InputError, ModelError, arg
 from .progress import Progress
 
 #: Environment variable naming an existing Dask scheduler.
@@ -37,6 +45,27 @@ SCHEDULER_ENV = "EAP_SCHEDULER"
 #: do not pay a scheduler round trip each, while the load still balances.
 BATCHES_PER_WORKER = 16
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+#: Seconds a scheduler has to accept a connection and answer as a Dask scheduler.
+CONNECT_TIMEOUT_S = 15.0
+_ADDRESS = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[0-9a-fA-F:]+\]|[A-Za-z0-9._-]+):(?P<port>\d{1,5})/?$")
+
+
+def cores() -> int:
+    """CPU cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def check_address(address: str) -> str:
+    """``address`` of a Dask scheduler after checking its form (``tcp://HOST:PORT``,
+    ``tls://HOST:PORT`` or ``HOST:PORT``)."""
+    m = _ADDRESS.match(str(address).strip())
+    if not m or m["scheme"] not in (None, "tcp", "tls") or not 1 <= int(m["port"]) <= 65535:
+        raise InputError(f"{arg('scheduler')} {address!r}: not a Dask scheduler address; expected tcp://HOST:PORT "
+                         f"(e.g. tcp://10.0.0.5:8786; the variable {SCHEDULER_ENV} takes the same form)")
+    return str(address).strip()
 
 
 @dataclass(frozen=True)
@@ -48,7 +77,13 @@ class ParallelSettings:
 
     def __post_init__(self):
         if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
-            raise InputError(f"--workers {self.workers!r}: must be a positive whole number")
+            raise InputError(f"{arg('workers')} {self.workers!r}: must be a positive whole number")
+        if self.scheduler:
+            check_address(self.scheduler)
+        elif self.workers > cores():
+            raise InputError(f"{arg('workers')} {self.workers}: this machine gives {cores()} core(s); more local workers "
+                             f"than cores only queue behind each other — use at most that many, or {arg('scheduler')} for "
+                             "a cluster")
 
     @classmethod
     def resolve(cls, workers: int | None = None, scheduler: str | None = None) -> "ParallelSettings":
@@ -61,11 +96,29 @@ class ParallelSettings:
 
 
 def _run_one(fn, task):
-    """Run one task in a worker; failures come back as data (the traceback stays readable)."""
+    """Run one task in a worker; failures come back as data: the error itself when it is
+    the user's (:class:`InputError`, :class:`ModelError`), else its type and message."""
     try:
         return True, fn(task)
-    except Exception as exc:  # reported with the task's inputs by map_tasks
+    except (InputError, ModelError) as exc:   # the user's message, raised as it is
+        return False, exc
+    except Exception as exc:  # reported with the task's name by map_tasks
         return False, f"{type(exc).__name__}: {exc}"
+
+
+def _failure(desc: str, task, value) -> Exception:
+    """The error to raise for a failed task: the user's error alone, else a ModelError
+    naming the task briefly (its ``name``, or its plain settings — never a dump of its data)."""
+    if isinstance(value, (InputError, ModelError)):
+        return value
+    if isinstance(task, dict) and isinstance(task.get("name"), str):
+        label = repr(task["name"])
+    else:
+        plain = {k: v for k, v in task.items() if isinstance(v, (int, float, str, bool))} \
+            if isinstance(task, dict) else task
+        label = repr(plain)
+        label = label if len(label) <= 80 else label[:80] + "…"
+    return ModelError(f"{desc}: task {label} failed: {value}")
 
 
 def _run_batch(fn, batch):
@@ -78,11 +131,6 @@ def _run_batch(fn, batch):
             return False, (k, value)
         out.append(value)
     return True, out
-
-
-def _describe(task, limit: int = 200) -> str:
-    text = repr(task)
-    return text if len(text) <= limit else text[:limit] + "…"
 
 
 def map_tasks(fn: Callable, tasks: Sequence, settings: ParallelSettings | None = None, *,
@@ -99,7 +147,7 @@ def map_tasks(fn: Callable, tasks: Sequence, settings: ParallelSettings | None =
             for t in tasks:
                 ok, value = _run_one(fn, t)
                 if not ok:
-                    raise ModelError(f"{desc}: task {_describe(t)} failed: {value}")
+                    raise _failure(desc, t, value)
                 out.append(value)
                 bar.update()
         return out
@@ -116,7 +164,7 @@ class _Work:
         self.batches = _batches(order, costs, BATCHES_PER_WORKER * n_workers)
         self.results: list = [None] * len(tasks)
         self.lock = threading.Lock()
-        self.failure: str | None = None
+        self.failure: Exception | None = None
         self.done = 0
 
     def take(self):
@@ -134,8 +182,8 @@ class _Work:
     def store(self, batch, ok, value, desc) -> int:
         with self.lock:
             if not ok:
-                k, msg = value
-                self.failure = self.failure or f"{desc}: task {_describe(self.tasks[batch[k]])} failed: {msg}"
+                k, err = value
+                self.failure = self.failure or _failure(desc, self.tasks[batch[k]], err)
                 return 0
             for i, v in zip(batch, value):
                 self.results[i] = v
@@ -164,7 +212,7 @@ def _map_dask(fn, tasks, order, costs, settings: ParallelSettings, desc: str, pr
     task goes to the existing cluster."""
     local = not settings.scheduler
     work = _Work(tasks, order, costs, settings.workers if local else 1)
-    remote = _Remote(fn, work, settings, desc)
+    remote = _Remote(fn, work, settings, desc, None if local else _connect(settings.scheduler))
     label = f"{desc} on {settings.workers} workers" if local else f"{desc} on the cluster"
     with Progress(len(tasks), label, enabled=progress) as bar:
         seen = 0
@@ -184,7 +232,7 @@ def _map_dask(fn, tasks, order, costs, settings: ParallelSettings, desc: str, pr
             remote.stop.set()
             remote.join()
     if work.failure:
-        raise ModelError(work.failure)
+        raise work.failure
     if work.done < len(tasks):
         raise remote.error or ModelError(f"{desc}: {len(tasks) - work.done} task(s) were not run")
     return work.results
@@ -195,19 +243,17 @@ class _Remote(threading.Thread):
     flight per worker until the queue is empty, store the results; on an error, hand the
     unfinished batches back (this process then runs them) and keep the error."""
 
-    def __init__(self, fn, work: _Work, settings: ParallelSettings, desc: str):
+    def __init__(self, fn, work: _Work, settings: ParallelSettings, desc: str, client=None):
         super().__init__(daemon=True)
-        self.fn, self.work, self.settings, self.desc = fn, work, settings, desc
+        self.fn, self.work, self.settings, self.desc, self.client = fn, work, settings, desc, client
         self.stop = threading.Event()
         self.error: BaseException | None = None
 
     def run(self) -> None:
-        client = None
+        client = self.client
         flying: dict = {}
         try:
-            if self.settings.scheduler:
-                client = _connect(self.settings.scheduler)
-            else:
+            if client is None:
                 starting = _local_cluster(self.settings.workers)
                 while not starting.done():   # this process works meanwhile; stop when nothing is left
                     if self.stop.wait(0.1) or not self.work.pending():
@@ -241,13 +287,37 @@ class _Remote(threading.Thread):
 
 
 def _connect(address: str):
-    """A client of the existing Dask scheduler at ``address``."""
-    from distributed import Client
+    """A client of the existing Dask scheduler at ``address``: the port must accept a
+    connection, and a Dask scheduler answer there, within :data:`CONNECT_TIMEOUT_S`."""
+    m = _ADDRESS.match(check_address(address))
+    host, port = m["host"].strip("[]"), int(m["port"])
+    hint = f"start a scheduler there (dask scheduler) or unset {SCHEDULER_ENV}"
     try:
-        return Client(address, timeout="20s")
-    except (OSError, TimeoutError) as exc:
-        raise InputError(f"--scheduler {address}: cannot connect ({exc}); start a scheduler there or unset "
-                         f"{SCHEDULER_ENV}") from None
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        why = "timed out" if isinstance(exc, TimeoutError) else exc.strerror or str(exc)
+        raise InputError(f"{arg('scheduler')} {address}: cannot connect ({why}); {hint}") from None
+    result: dict = {}
+
+    def connect():
+        try:
+            from distributed import Client
+            result["client"] = Client(address if m["scheme"] else f"tcp://{address}", timeout=CONNECT_TIMEOUT_S)
+        except BaseException as exc:   # reported below
+            result["error"] = exc
+    t = threading.Thread(target=connect, daemon=True)
+    t.start()
+    t.join(CONNECT_TIMEOUT_S + 5.0)
+    if "client" not in result:
+        err = result.get("error")
+        if t.is_alive():
+            why = f"no Dask scheduler answered within {CONNECT_TIMEOUT_S:g} s"
+        elif isinstance(err, (OSError, TimeoutError)):
+            why = f"cannot connect ({' '.join(str(err).split())[:160]})"
+        else:   # a reply that is not Dask's protocol (e.g. a length of exabytes): not a scheduler
+            why = "something answers there, but not as a Dask scheduler"
+        raise InputError(f"{arg('scheduler')} {address}: {why}; {hint}")
+    return result["client"]
 
 
 _CLUSTERS: dict[int, Future] = {}
@@ -277,8 +347,12 @@ def _local_cluster(workers: int) -> Future:
 
 def _start_cluster(workers: int, fut: Future) -> None:
     try:
+        import warnings
+
         import dask
         from distributed import Client, LocalCluster
+        # another cluster on this machine holds the dashboard port: not the user's concern
+        warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
         cores = os.cpu_count() or 1
         env = {v: str(max(1, cores // workers)) for v in _THREAD_VARS}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env, "distributed.worker.daemon": False,

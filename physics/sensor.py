@@ -27,7 +27,7 @@ import numpy as np
 from scipy import signal
 
 from .errors import InputError
-from .timeseries import TimeSeries
+from .record import TimeSeries
 
 _DAQ_LSB_10V = 20.0 / 2**16  # V, NI 6052E on its ±10 V range
 _STREAMS = ("deflection", "drift", "voltage", "current", "rh", "temperature")

@@ -1,4 +1,4 @@
-"""Time-series records: one experiment (voltage in, tip deflection out) per file.
+"""Time-series records: one experiment (voltage in, measured output out) per file.
 
 File format (``DATA_FORMAT.md``): a CSV with one row per sample and columns named
 ``quantity_unit``:
@@ -18,48 +18,52 @@ Rules applied by :func:`read_timeseries` (every violation is an
 :class:`~physics.errors.InputError` naming the file, the line or column and what was
 expected):
 
-* ``time``, ``voltage`` and (unless ``require_deflection=False``) ``deflection`` are
-  required; a file without a time column needs ``fs=``.  Unknown columns are errors; a
-  nameless, completely empty column (a trailing comma on every line) is ignored.
-* Every value must be a finite number.  Time must be strictly increasing and uniform:
-  each step may differ from the median step by at most :data:`UNIFORM_RTOL` (timestamps
-  printed with few digits), otherwise the file is rejected unless ``resample=True``,
-  which interpolates every channel linearly onto the median step and records it in
-  ``meta["resampled"]``.
+* ``time``, ``voltage`` and (unless ``require_deflection=False``) the output are required;
+  a file without a time column needs ``fs=``.  Unknown columns are errors; a nameless,
+  completely empty column (a trailing comma on every line) is ignored.
+* Every value must be a finite number and plausible for its quantity (a tip deflection
+  within ±1 m, a drive within ±1 kV: a value beyond is a unit or export error).  Time must
+  be strictly increasing and uniform: each step may differ from the median step by at most
+  :data:`~physics.record.UNIFORM_RTOL` (timestamps printed with few digits), otherwise the
+  file is rejected unless ``resample=True``, which interpolates every channel linearly
+  onto the median step and records it in ``meta["resampled"]``.
 * Relative humidity comes, in this order of precedence, from an explicit ``rh=`` (always
   wins), the ``rh_pct`` column, or the key ``rh_pct`` of the sidecar; with none of them
   the file is rejected (never a silent default).  RH must lie within 0–100 %.
-* Arbitrary files (e.g. public benchmarks with columns ``V1``, ``V2``) are read through an
-  explicit column map ``{"voltage": "V1", "deflection": "V2"}`` whose columns hold values
-  in the stored units above; only mapped columns are read, others are ignored.
+* **The output.**  By default the output is the tip deflection (stored in m).  Another
+  quantity is named with ``output=`` (:class:`~physics.record.OutputQuantity`, e.g.
+  ``level:V``): its column in a standard file is ``level_V``, its values are stored in its
+  unit and checked against the plausibility rule of that quantity.
+* **Column maps** read other files (a lab's export, public benchmarks with columns ``V1``,
+  ``V2``): ``{"voltage": "V1", "deflection": "V2"}``; only mapped columns are read.  An
+  entry may carry the unit of its column, ``deflection=Tip (mm):mm``; without one, a unit
+  in the column's header (``Tip (mm)``, ``Tip [mm]``) is used and said aloud (a
+  :class:`~physics.errors.InputNotice`); without either, the values are in the stored
+  unit (s, V, m, %, A, °C).  An output column in a unit that is not a length
+  (``deflection=y:V``, a laser sensor's volts) makes the output that quantity, unless a
+  sensor ``gain`` to metres is given (``"2.5mm/V"``).  A quantity or a column may appear
+  only once in a map.
 * ``.mat`` files are read with :func:`scipy.io.loadmat`: variables named like the CSV
   columns, or through the column map; each must be a numeric vector.
-* An optional sidecar ``NAME.yaml`` next to ``NAME.csv``/``NAME.mat`` (a YAML mapping:
-  device, geometry, RH, excitation, sensor, provenance...) is read into ``meta``.
-
-The table and sidecar helpers here are shared with :mod:`physics.frfdata`.
+* An optional sidecar ``NAME.yaml`` next to ``NAME.csv``/``NAME.mat`` is read into
+  ``meta`` (keys and units: :mod:`physics.sidecar`).
 """
 from __future__ import annotations
 
-import copy
-import csv
-import os
 import re
-from dataclasses import dataclass, field, fields
+import warnings
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Mapping
 
 import numpy as np
-import pandas as pd
-import scipy.io
-import yaml
 
-from .errors import InputError
-from .fileio import atomic_path
-from .yamlio import load_yaml
-
-#: Largest accepted deviation of a time step from the median step, relative to it.
-UNIFORM_RTOL = 1e-2
+from .csvtable import check_input_path, iter_table, read_table, write_table
+from .errors import InputError, InputNotice, arg
+from .limits import MAX_DRIVE_V
+from .record import (CHANNELS, DEFLECTION, UNIFORM_RTOL, OutputQuantity, TimeSeries,  # noqa: F401 (TimeSeries: public)
+                     check_range, check_record)
+from .sidecar import read_sidecar
+from .units import UnitError, parse_unit
 
 #: quantity -> {unit: (scale, offset)}; stored value = scale * file value + offset.
 TIMESERIES_UNITS: dict[str, dict[str, tuple[float, float]]] = {
@@ -73,337 +77,28 @@ TIMESERIES_UNITS: dict[str, dict[str, tuple[float, float]]] = {
 #: Unit each quantity is stored (and by default written) in.
 STORED_UNITS = {"time": "s", "voltage": "V", "deflection": "m", "rh": "pct",
                 "current": "A", "temperature": "C"}
-CHANNELS = ("voltage", "deflection", "rh", "current", "temperature")
-#: Plausible ranges (stored units) of columns named ``quantity_unit``: a value outside is
-#: a unit or export error (a tip deflection of 1e300 m, a drive of 1 MV), not a measurement.
-PLAUSIBLE = {"deflection": (-1.0, 1.0, "m (tip deflection of a strip)"),
-             "voltage": (-1e3, 1e3, "V (drive voltage)"),
+#: Plausible ranges (stored units): a value outside is a unit or export error (a tip
+#: deflection of 1e300 m, a drive of 1 MV), not a measurement.  The output's rule is its
+#: quantity's (:meth:`~physics.record.OutputQuantity.bounds`).
+PLAUSIBLE = {"voltage": (-MAX_DRIVE_V, MAX_DRIVE_V, "V (drive voltage)"),
              "current": (-1e3, 1e3, "A (absorbed current)"),
              "temperature": (-273.15, 1e3, "°C (ambient temperature)")}
-#: Magnitude bound of column-mapped values (arbitrary plants, any unit): beyond it squares
-#: and sums overflow and every metric is meaningless.
-MAPPED_LIMIT = 1e15
-Locate = Callable[[int], str]
-
-
-# --------------------------------------------------------------------------- records
-
-@dataclass
-class TimeSeries:
-    """One uniformly sampled experiment.
-
-    Units: ``time`` s (uniform, strictly increasing), ``voltage`` V, ``deflection`` m
-    (tip), ``rh`` % per sample, ``current`` A, ``temperature`` °C.  Optional channels are
-    ``None``.  ``meta`` holds the sidecar metadata, ``source`` the file read from.
-    Construction validates lengths and values (same rules as the file reader).
-    """
-    time: np.ndarray
-    voltage: np.ndarray
-    deflection: np.ndarray | None = None
-    rh: np.ndarray | None = None
-    current: np.ndarray | None = None
-    temperature: np.ndarray | None = None
-    meta: dict = field(default_factory=dict)
-    source: str | None = None
-
-    def __post_init__(self):
-        where = self.source or "time series"
-        arrays = {}
-        for name in ("time",) + CHANNELS:
-            value = getattr(self, name)
-            if value is None:
-                continue
-            arr = np.asarray(value, dtype=float)
-            if arr.ndim != 1:
-                raise InputError(f"{where}: {name} must be a 1-D array, got shape {arr.shape}")
-            arrays[name] = arr
-        if arrays["time"].size < 2:
-            raise InputError(f"{where}: needs at least 2 samples, got {arrays['time'].size}")
-        for name, arr in arrays.items():
-            if arr.size != arrays["time"].size:
-                raise InputError(f"{where}: {name} has {arr.size} samples but time has "
-                                 f"{arrays['time'].size}")
-        check_record(arrays, where, lambda i: f"sample {i}")
-        for name, arr in arrays.items():
-            setattr(self, name, arr)
-
-    @property
-    def n(self) -> int:
-        """Number of samples."""
-        return int(self.time.size)
-
-    @property
-    def fs(self) -> float:
-        """Sampling frequency (Hz) from the mean step."""
-        return (self.n - 1) / float(self.time[-1] - self.time[0])
-
-    @property
-    def duration(self) -> float:
-        """Record length n/fs (s): the span covered by n sample periods."""
-        return self.n / self.fs
-
-    def slice(self, i0: int, i1: int) -> "TimeSeries":
-        """Samples ``i0:i1`` of every channel as an independent record."""
-        return self._map(lambda a: a[i0:i1].copy())
-
-    def copy(self) -> "TimeSeries":
-        """Deep copy (arrays and metadata)."""
-        return self._map(np.copy)
-
-    def _map(self, fn) -> "TimeSeries":
-        kw = {f.name: getattr(self, f.name) for f in fields(self)}
-        for name in ("time",) + CHANNELS:
-            if kw[name] is not None:
-                kw[name] = fn(kw[name])
-        kw["meta"] = copy.deepcopy(self.meta)
-        return TimeSeries(**kw)
-
-
-def check_record(arrays: dict[str, np.ndarray], where: str, locate: Locate,
-                 labels: Mapping[str, str] | None = None, *,
-                 resample: bool = False) -> tuple[dict[str, np.ndarray], dict | None]:
-    """Validate the channels of a record (stored units) and return them, resampled if
-    asked for and needed, with the resampling record (or ``None``).
-
-    ``where`` names the file, ``locate(i)`` the position of sample ``i``, ``labels`` the
-    column of each quantity (default: the quantity name).
-    """
-    label = {name: name for name in arrays} | dict(labels or {})
-    for name, arr in arrays.items():
-        check_finite(arr, where, locate, label[name])
-    t = arrays["time"]
-    dt = np.diff(t)
-    bad = np.flatnonzero(dt <= 0)
-    if bad.size:
-        i = bad[0] + 1
-        raise InputError(f"{where}, {locate(i)}, {label['time']}: {float(t[i])!r} s is not after the previous "
-                         f"{float(t[i - 1])!r} s; time must be strictly increasing")
-    if "rh" in arrays:
-        check_range(arrays["rh"], 0.0, 100.0, where, locate, label["rh"], "% (relative humidity)")
-    step = float(np.median(dt))
-    dev = np.abs(dt - step) / step
-    bad = np.flatnonzero(dev > UNIFORM_RTOL)
-    if not bad.size:
-        return arrays, None
-    if not resample:
-        i = bad[0] + 1
-        raise InputError(f"{where}, {locate(i)}, {label['time']}: step {float(dt[i - 1])!r} s differs from the "
-                         f"median step {step!r} s by {100 * dev[i - 1]:.3g} % (more than "
-                         f"{100 * UNIFORM_RTOL:g} %); sampling must be uniform, or pass --resample "
-                         "to interpolate onto the median step")
-    new_t = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step * (1 + 1e-12))) + 1)
-    out = {name: np.interp(new_t, t, arr) for name, arr in arrays.items()}
-    out["time"] = new_t
-    info = {"method": "linear interpolation onto the median step", "step_s": step,
-            "samples_before": int(t.size), "samples_after": int(new_t.size),
-            "max_step_deviation": float(dev.max())}
-    return out, info
-
-
-def check_finite(arr: np.ndarray, where: str, locate: Locate, name: str) -> None:
-    """Raise naming the first NaN or infinite value of ``arr``."""
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        raise InputError(f"{where}, {locate(bad[0])}, {name}: value {float(arr[bad[0]])!r} is not "
-                         "finite; expected a finite number")
-
-
-def check_range(arr: np.ndarray, lo: float, hi: float, where: str, locate: Locate,
-                name: str, unit: str) -> None:
-    """Raise naming the first value of ``arr`` outside ``[lo, hi]``."""
-    bad = np.flatnonzero((arr < lo) | (arr > hi))
-    if bad.size:
-        raise InputError(f"{where}, {locate(bad[0])}, {name}: value {float(arr[bad[0]])!r} is "
-                         f"outside {lo:g}–{hi:g} {unit}")
-
-
-# --------------------------------------------------------------------------- tables
-
-@dataclass
-class Table:
-    """Columns of a CSV or .mat file before unit conversion.
-
-    ``columns`` maps each name (file order) to its raw values (CSV: text; .mat: array),
-    ``locate(i)`` names the line (CSV) or element (.mat) of value ``i``.
-    """
-    path: Path
-    columns: dict[str, np.ndarray]
-    locate: Locate
-
-    def floats(self, name: str, label: str | None = None) -> np.ndarray:
-        """Column ``name`` as finite floats; errors name line/element and column."""
-        raw = self.columns[name]
-        label = label or f"column {name!r}"
-        if raw.dtype.kind in "biuf":
-            values = raw.astype(float, copy=False)
-        else:
-            values = pd.to_numeric(pd.Series(raw), errors="coerce").to_numpy(dtype=float)
-            i = next((i for i in np.flatnonzero(np.isnan(values))
-                      if raw[i].strip().lower() != "nan"), None)
-            if i is not None:
-                text = raw[i].strip()
-                what = "empty cell" if not text else f"{text!r} is not a number"
-                raise InputError(f"{self.path}, {self.locate(i)}, column {name!r}: {what}; "
-                                 "expected a finite number")
-        check_finite(values, str(self.path), self.locate, label)
-        return values
-
-
-def check_input_path(path, suffixes: tuple[str, ...]) -> Path:
-    """``path`` as a :class:`Path` after checking that it is an existing file with one of
-    ``suffixes`` (lower case, with the dot)."""
-    p = Path(path)
-    if p.suffix.lower() not in suffixes:
-        raise InputError(f"{p}: unsupported file type {p.suffix or '(no extension)'!r}; "
-                         f"expected {' or '.join(suffixes)}")
-    if not p.is_file():
-        raise InputError(f"{p}: file not found")
-    return p
-
-
-#: Field separators recognised in a CSV header line, in order of preference.
-DELIMITERS = (",", ";", "\t", "|")
-#: Encodings tried in turn: UTF-8 (with or without BOM), then Latin-1 (never fails).
-ENCODINGS = ("utf-8-sig", "latin-1")
-
-
-def sniff_dialect(path: Path) -> tuple[str, str, str]:
-    """(encoding, delimiter, decimal mark) of a CSV from its first 64 kB.
-
-    The delimiter is the separator most frequent in the header line (comma, semicolon,
-    tab, bar; runs of blanks if none); a decimal comma is recognised when the separator
-    is not a comma and data cells look like ``1,5``.
-    """
-    with path.open("rb") as fh:
-        head = fh.read(1 << 16)
-    if b"\x00" in head or re.search(rb"[\x01-\x08\x0e-\x1a]", head):
-        raise InputError(f"{path}: not a UTF-8 text file (binary content); expected a CSV")
-    try:
-        text, encoding = head.decode("utf-8-sig"), "utf-8-sig"
-    except UnicodeDecodeError as exc:
-        if exc.start < len(head) - 4:  # not merely a multi-byte character cut at the chunk end
-            text, encoding = head.decode("latin-1"), "latin-1"
-        else:
-            text, encoding = head[:exc.start].decode("utf-8-sig"), "utf-8-sig"
-    lines = text.splitlines()
-    header = lines[0] if lines else ""
-    counts = {d: header.count(d) for d in DELIMITERS}
-    delim = max(DELIMITERS, key=lambda d: counts[d]) if any(counts.values()) else \
-        (r"\s+" if len(header.split()) > 1 else ",")
-    decimal = "."
-    if delim != ",":
-        body = "\n".join(lines[1:50])
-        if re.search(r"\d,\d", body) and not re.search(r"\d\.\d", body):
-            decimal = ","
-    return encoding, delim, decimal
-
-
-def csv_header(path: Path) -> list[str]:
-    """Column names of a CSV's header line (dialect sniffed as by :func:`read_table`)."""
-    encoding, delim, _ = sniff_dialect(path)
-    with open(path, encoding=encoding, newline="") as fh:
-        header_line = fh.readline()
-    if delim == r"\s+":
-        return header_line.split()
-    return [n.strip() for n in next(csv.reader([header_line], delimiter=delim), [])]
-
-
-def read_table(path: Path) -> Table:
-    """Read a CSV (header line of names) or .mat file into a :class:`Table`.
-
-    CSV dialects are sniffed (:func:`sniff_dialect`): comma, semicolon, tab or blank
-    separated, decimal point or comma, UTF-8 (BOM allowed) or Latin-1, LF or CRLF.  Numeric
-    files are parsed straight to floats (8 bytes per value); a file with a non-numeric,
-    empty or NaN cell is re-read as text to name the line and column.
-    """
-    if path.suffix.lower() == ".mat":
-        return _read_mat(path)
-    if path.stat().st_size == 0:
-        raise InputError(f"{path}: empty file; expected a header line of column names "
-                         "followed by data rows")
-    encoding, delim, decimal = sniff_dialect(path)
-    names = csv_header(path)
-    if not any(names):
-        raise InputError(f"{path}: empty file; expected a header line of column names "
-                         "followed by data rows")
-    opts = dict(sep=delim, header=None, skiprows=1, names=list(range(len(names))), decimal=decimal,
-                encoding=encoding, skip_blank_lines=False, engine="c")
-    try:
-        try:  # in chunks: the parser's buffers stay small; peak ≈ 2 × the values
-            chunks = [c.to_numpy() for c in pd.read_csv(path, dtype=float, chunksize=1 << 18, **opts)]
-            values = np.concatenate(chunks) if chunks else np.empty((0, len(names)))
-            del chunks
-            if values.size and np.isnan(values).any():
-                nonblank = np.flatnonzero(~np.isnan(values).all(axis=1))
-                end = nonblank[-1] + 1 if nonblank.size else 0
-                if np.isnan(values[:end]).any() or end == 0:
-                    raise ValueError("NaN or empty cell")
-                values = values[:end]
-            raw = None
-        except ValueError:
-            df = pd.read_csv(path, dtype=str, keep_default_na=False, **opts)
-            raw = df.to_numpy(dtype=object).copy()
-    except pd.errors.EmptyDataError:
-        raise InputError(f"{path}: empty file; the header is not followed by any data row") from None
-    except pd.errors.ParserError as exc:
-        raise InputError(f"{path}: cannot be parsed as CSV ({' '.join(str(exc).split())}); "
-                         f"every line must have the {len(names)} fields of the header "
-                         f"(separator {delim!r})") from None
-    if raw is not None:
-        raw[pd.isna(raw)] = ""
-        end = raw.shape[0]
-        while end and not any(str(v).strip() for v in raw[end - 1]):
-            end -= 1  # drop trailing blank lines
-        values = raw[:end]
-        if decimal == ",":
-            values = np.vectorize(lambda v: str(v).replace(",", "."), otypes=[object])(values) \
-                if values.size else values
-    if values.shape[0] == 0:
-        raise InputError(f"{path}: empty file; the header is not followed by any data row")
-    columns: dict[str, np.ndarray] = {}
-    for k, name in enumerate(names):
-        col = np.ascontiguousarray(values[:, k]) if raw is None else values[:, k].astype(str)
-        if not name:
-            if (np.isnan(col).all() if raw is None else (np.char.strip(col) == "").all()):
-                continue  # trailing separator: nameless, empty column
-            raise InputError(f"{path}: column {k + 1} has data but no name in the header")
-        if name in columns:
-            raise InputError(f"{path}: column {name!r} appears twice in the header")
-        columns[name] = col
-    return Table(path, columns, lambda i: f"line {i + 2}")
-
-
-def _read_mat(path: Path) -> Table:
-    try:
-        data = scipy.io.loadmat(path)
-    except NotImplementedError:
-        raise InputError(f"{path}: MATLAB v7.3 (HDF5) files are not supported; save with "
-                         "-v7 or export a CSV") from None
-    except Exception as exc:  # scipy raises various types for corrupt files
-        raise InputError(f"{path}: cannot be read as a MATLAB file ({exc})") from None
-    columns = {}
-    for name, value in data.items():
-        if name.startswith("__"):
-            continue
-        arr = np.asarray(value)
-        if arr.dtype.kind not in "biuf" or arr.ndim > 2 or (arr.ndim == 2 and min(arr.shape) != 1):
-            raise InputError(f"{path}: variable {name!r} must be a real numeric vector, got "
-                             f"{arr.dtype} array of shape {arr.shape}")
-        columns[name] = arr.ravel()
-    if not columns or all(c.size == 0 for c in columns.values()):
-        raise InputError(f"{path}: empty file; expected vectors named like the CSV columns")
-    return Table(path, columns, lambda i: f"element {i + 1}")
+#: Other spellings of units in column maps and headers.
+_UNIT_ALIASES = {"%": "pct", "%RH": "pct", "pct": "pct", "degC": "C", "°C": "C", "µm": "um", "μm": "um"}
+_COLUMNS, _OUTPUT = arg("columns"), arg("output")   # how messages name the column map and the output
+_HEADER_UNIT = re.compile(r"^(?P<name>.*?)\s*(?:\((?P<a>[^()]+)\)|\[(?P<b>[^\[\]]+)\])\s*$")
 
 
 def parse_header(name: str, units: Mapping[str, Mapping[str, object]],
-                 where: Path) -> tuple[str, str]:
+                 where: Path, hint: str = "") -> tuple[str, str]:
     """Split a ``quantity_unit`` column name into (quantity, unit) and check both against
-    ``units`` (quantity -> accepted units; a unitless quantity maps to ``{"": ...}``)."""
+    ``units`` (quantity -> accepted units; a unitless quantity maps to ``{"": ...}``);
+    ``hint`` ends the message of an unknown column (how to read other files)."""
     quantity, _, unit = name.partition("_")
     if quantity not in units:
         accepted = ", ".join(f"{q}_{u}" if u else q for q in units for u in units[q])
         raise InputError(f"{where}: unknown column {name!r}; expected columns named "
-                         f"quantity_unit among: {accepted} (use a column map for other files)")
+                         f"quantity_unit among: {accepted}{hint}")
     if unit not in units[quantity]:
         accepted = ", ".join(u or "(none)" for u in units[quantity])
         raise InputError(f"{where}: column {name!r}: cannot parse unit {unit or '(none)'!r} of "
@@ -411,118 +106,57 @@ def parse_header(name: str, units: Mapping[str, Mapping[str, object]],
     return quantity, unit
 
 
-def read_sidecar(path: Path) -> dict:
-    """Metadata of the optional sidecar ``NAME.yaml`` next to ``path`` ({} if absent),
-    checked by :func:`check_sidecar`."""
-    side = path.with_suffix(".yaml")
-    if not side.is_file():
-        return {}
-    meta = load_yaml(side, "sidecar")
-    if meta is None:
-        return {}
-    if not isinstance(meta, dict):
-        raise InputError(f"{side}: expected a mapping of metadata keys, got {type(meta).__name__}")
-    check_sidecar(meta, side)
-    return meta
+
+def header_unit(column: str) -> str | None:
+    """The unit written in a column's header, ``Tip (mm)`` / ``Tip [mm]`` → ``mm`` (None when
+    there is none, or when the brackets hold something that is not a unit: ``Sensor (raw)``)."""
+    m = _HEADER_UNIT.match(column)
+    if not m:
+        return None
+    unit = (m["a"] or m["b"]).strip()
+    try:
+        parse_unit(_UNIT_ALIASES.get(unit, unit).replace("pct", "%"))
+    except UnitError:
+        return None
+    return unit
 
 
-_TINY = float(np.finfo(float).tiny)
-#: Sidecar keys of the signal description that must be positive numbers.
-_POSITIVE_SIGNAL_KEYS = ("period_s", "duration_s", "fs_Hz", "f_start_Hz", "f_stop_Hz", "frequency_Hz")
+def unit_scale(quantity: str, unit: str) -> tuple[float, float] | None:
+    """(scale, offset) from ``unit`` to the stored unit of ``quantity`` (time, voltage,
+    deflection, rh, current, temperature); None when ``unit`` is not a unit of it."""
+    unit = _UNIT_ALIASES.get(unit, unit)
+    table = TIMESERIES_UNITS[quantity]
+    if unit in table:
+        return table[unit]
+    if quantity in ("rh", "temperature"):
+        return None
+    try:
+        q, ref = parse_unit(unit), parse_unit(STORED_UNITS[quantity])
+    except UnitError:
+        return None
+    return (q.factor / ref.factor, 0.0) if q.same_dimension(ref) else None
 
 
-def check_sidecar(meta: dict, side: Path) -> None:
-    """Check the sidecar keys the package reads (types, units, ranges); errors name the
-    file and the key."""
-    def number(value, key, lo=-np.inf, hi=np.inf, allow_none=False):
-        if value is None and allow_none:
-            return
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) \
-                or not lo <= value <= hi:
-            rng = " > 0" if lo == _TINY else "" if (lo, hi) == (-np.inf, np.inf) else f" within {lo:g}–{hi:g}"
-            raise InputError(f"{side}: {key}: {value!r} is not valid; expected a finite number{rng}")
-
-    if "rh_pct" in meta:
-        number(meta["rh_pct"], "rh_pct", 0.0, 100.0)
-    for section in ("signal", "excitation"):
-        sig = meta.get(section)
-        if sig is None:
-            continue
-        if not isinstance(sig, dict):
-            raise InputError(f"{side}: {section}: expected a mapping (kind, frequencies...), got {sig!r}")
-        for key in _POSITIVE_SIGNAL_KEYS:
-            if key in sig:
-                number(sig[key], f"{section}.{key}", _TINY)
-        if "periods" in sig and (isinstance(sig["periods"], bool) or not isinstance(sig["periods"], int)
-                                 or sig["periods"] < 1):
-            raise InputError(f"{side}: {section}.periods: {sig['periods']!r} is not valid; expected a "
-                             "whole number of periods ≥ 1")
-    sensor = meta.get("sensor")
-    if sensor is not None:
-        if not isinstance(sensor, dict):
-            raise InputError(f"{side}: sensor: expected a mapping of sensor settings, got {sensor!r}")
-        from .sensor import SensorModel
-        known = {f.name for f in fields(SensorModel)}
-        for key in known & set(sensor):
-            number(sensor[key], f"sensor.{key}", allow_none=key in ("bandwidth", "adc_bits"))
-        try:
-            SensorModel(**{k: sensor[k] for k in known & set(sensor)})
-        except InputError as exc:
-            raise InputError(f"{side}: {exc}") from None
-        for key in ("noise_floor_m",):
-            if key in sensor:
-                number(sensor[key], f"sensor.{key}", 0.0)
+def parse_gain(text: str) -> tuple[float, str]:
+    """A sensor gain to metres, ``"2.5mm/V"`` → (2.5e-3, "V"): metres per unit of the
+    output column, and that unit."""
+    m = re.match(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S+)\s*$", str(text))
+    if not m:
+        raise InputError(f"sensor gain {text!r}: expected a number and a unit, e.g. 2.5mm/V")
+    value, unit = float(m.group(1)), m.group(2)
+    num, sep, den = unit.partition("/")
+    scale = unit_scale("deflection", num) if sep else None
+    if scale is None or not den or not np.isfinite(value) or value == 0:
+        raise InputError(f"sensor gain {text!r}: expected a non-zero length per unit of the output column, "
+                         "e.g. 2.5mm/V")
+    return value * scale[0], den
 
 
-def write_table(columns: dict[str, np.ndarray], meta: dict, path, *, overwrite: bool,
-                protect) -> Path:
-    """Atomically write ``columns`` as CSV (shortest round-trip float repr) to ``path``
-    (``.csv``) and ``meta`` to the sidecar ``NAME.yaml`` (removing a stale sidecar when
-    ``meta`` is empty).  Inputs in ``protect`` (and their sidecars) are never targets."""
-    target = Path(path)
-    if target.suffix.lower() != ".csv":
-        raise InputError(f"{target}: output must be a .csv file")
-    side = target.with_suffix(".yaml")
-    protect = tuple(Path(p) for p in protect)
-    protect = protect + tuple(p.with_suffix(".yaml") for p in protect)
-    for p in (target, side):  # check both before writing either
-        if any(p.resolve() == q.resolve() for q in protect):
-            raise InputError(f"refusing to overwrite the input file {p}; choose another output path")
-        if p.exists() and not overwrite:
-            raise InputError(f"{p} already exists; choose another output path or pass --overwrite")
-    if meta:
-        text = yaml.safe_dump(plain(meta), sort_keys=False, allow_unicode=True)
-        with atomic_path(side, overwrite=True) as tmp:
-            tmp.write_text(text, encoding="utf-8")
-    elif side.exists():
-        side.unlink()
-    with atomic_path(target, overwrite=True) as tmp:
-        pd.DataFrame(columns).to_csv(tmp, index=False, lineterminator="\n")
-    return target
-
-
-def plain(obj, key: str = "meta"):
-    """``obj`` converted to plain YAML/JSON types (numpy scalars and arrays, tuples, paths)."""
-    if isinstance(obj, dict):
-        return {str(k): plain(v, f"{key}.{k}") for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [plain(v, f"{key}[{i}]") for i, v in enumerate(obj)]
-    if isinstance(obj, np.ndarray):
-        return plain(obj.tolist(), key)
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, os.PathLike):
-        return str(obj)
-    if obj is None or isinstance(obj, (bool, int, float, str)):
-        return obj
-    raise InputError(f"{key}: cannot store a {type(obj).__name__} in metadata; use numbers, "
-                     "strings, lists or mappings")
-
-
-# --------------------------------------------------------------------------- read / write
-
-def parse_column_map(text: str) -> dict[str, str]:
-    """Parse ``"time=t,voltage=V1,deflection=V2"`` into ``{"time": "t", ...}`` (CLI form)."""
+def parse_column_map(text: str, output: OutputQuantity | None = None) -> dict[str, str]:
+    """Parse ``"time=t,voltage=V1,deflection=Tip (mm):mm"`` into ``{"time": "t", ...}``
+    (CLI form; a column's unit stays in the value and is read by :func:`read_timeseries`).
+    Keys are stored quantities or the output (``output``, or its name); a quantity or a
+    column given twice is an error."""
     mapping: dict[str, str] = {}
     for item in filter(None, (s.strip() for s in text.split(","))):
         quantity, sep, column = (s.strip() for s in item.partition("="))
@@ -534,86 +168,224 @@ def parse_column_map(text: str) -> dict[str, str]:
         mapping[quantity] = column
     if not mapping:
         raise InputError(f"column map {text!r} is empty; expected e.g. voltage=V1,deflection=V2")
-    _check_column_map(mapping)
+    channels: dict[str, str] = {}
+    names: list[tuple[set[str], str]] = []   # (spellings of a column with or without its unit, quantity)
+    for quantity, column in mapping.items():
+        channel = _map_quantity(quantity, output)
+        if channel in channels:
+            raise InputError(f"column map {text!r}: {channels[channel]!r} and {quantity!r} both give the {channel}")
+        channels[channel] = quantity
+        spellings = {column, column.rpartition(":")[0].strip() or column}
+        for other, q in names:
+            if spellings & other:
+                raise InputError(f"column map {text!r}: column {min(spellings & other)!r} is mapped to both {q} "
+                                 f"and {quantity}; each column gives one quantity")
+        names.append((spellings, quantity))
     return mapping
 
 
-def _check_column_map(mapping: Mapping[str, str]) -> None:
-    unknown = sorted(set(mapping) - set(TIMESERIES_UNITS))
-    if unknown:
-        raise InputError(f"column map: unknown quantity {unknown[0]!r}; expected some of "
-                         f"{', '.join(TIMESERIES_UNITS)}")
+def _map_quantity(quantity: str, output: OutputQuantity | None) -> str:
+    """The channel a map key fills: a stored quantity, or the output (its name, or ``output``)."""
+    if quantity in TIMESERIES_UNITS:
+        return quantity
+    if quantity == "output" or (output is not None and quantity == output.name):
+        return "deflection"
+    extra = f", {output.name}" if output is not None and output.name != "deflection" else ""
+    raise InputError(f"column map: unknown quantity {quantity!r}; expected some of "
+                     f"{', '.join(TIMESERIES_UNITS)}, output{extra}")
 
 
-def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | None = None,
-                    rh: float | None = None, require_deflection: bool = True,
-                    resample: bool = False) -> TimeSeries:
-    """Read a time-series record (``.csv`` or ``.mat``) following ``DATA_FORMAT.md``.
+def _resolve_map(columns: Mapping[str, str], table, output, where: str) -> dict[str, tuple[str, str | None, str]]:
+    """channel -> (column, unit or None, where the unit came from) of a column map."""
+    out: dict[str, tuple[str, str | None, str]] = {}
+    used: dict[str, str] = {}
+    for quantity, text in columns.items():
+        channel = _map_quantity(quantity, output)
+        if channel in out:
+            raise InputError(f"column map: {quantity!r} and another entry both give the {channel}; keep one")
+        text = str(text)
+        col, unit, how = text, None, ""
+        if text not in table.columns and ":" in text:
+            col, _, unit = (s.strip() for s in text.rpartition(":"))
+            how = "the column map"
+        if col not in table.columns:
+            raise InputError(f"{where}: column {col!r} (mapped to {quantity}) is missing; the file has "
+                             f"{', '.join(map(repr, table.columns))} — fix the map given with {_COLUMNS}")
+        if col in used:
+            raise InputError(f"{where}: column {col!r} is mapped to both {used[col]} and {quantity}; each column "
+                             f"gives one quantity — fix {_COLUMNS}")
+        used[col] = quantity
+        said = header_unit(col)
+        if unit is None and said is not None:
+            unit, how = said, "its header"
+        elif unit is not None and said is not None and said != unit:
+            raise InputError(f"{where}: column {col!r} is mapped with unit {unit} but its header says {said}; "
+                             f"correct the unit in {_COLUMNS}")
+        out[channel] = (col, unit, how)
+    return out
 
-    ``columns`` maps quantities to the file's columns (values in stored units: s, V, m,
-    %, A, °C); ``fs`` (Hz) gives the time base of a file without a time column; ``rh``
-    (%) is the relative humidity when the file has no ``rh_pct`` column (it wins over the
-    column and the sidecar); ``resample`` allows non-uniform time (see module doc).
-    """
-    p = check_input_path(path, (".csv", ".mat"))
-    table = read_table(p)
-    where = str(p)
-    values: dict[str, np.ndarray] = {}
-    labels: dict[str, str] = {}
-    if columns is not None:
-        _check_column_map(columns)
-        for quantity, col in columns.items():
-            if col not in table.columns:
-                raise InputError(f"{where}: column {col!r} (mapped to {quantity}) is missing; "
-                                 f"the file has {', '.join(map(repr, table.columns))}")
-            labels[quantity] = f"column {col!r} ({quantity})"
-            values[quantity] = table.floats(col, labels[quantity])
-    else:
-        found: dict[str, str] = {}
-        for name in table.columns:
-            quantity, unit = parse_header(name, TIMESERIES_UNITS, p)
-            if quantity in found:
-                raise InputError(f"{where}: columns {found[quantity]!r} and {name!r} both "
-                                 f"give {quantity}; keep one")
-            found[quantity] = name
-            labels[quantity] = f"column {name!r}"
-            scale, offset = TIMESERIES_UNITS[quantity][unit]
-            values[quantity] = table.floats(name)
-            if (scale, offset) != (1.0, 0.0):
-                values[quantity] = values[quantity] * scale + offset
-    for quantity, arr in values.items():
-        if columns is None and quantity in PLAUSIBLE:
-            lo, hi, what = PLAUSIBLE[quantity]
-        elif quantity in ("voltage", "deflection", "current"):
-            lo, hi, what = -MAPPED_LIMIT, MAPPED_LIMIT, "(mapped column; larger values overflow the metrics)"
+
+def _convert(table, channel: str, col: str, unit: str | None, how: str, output: OutputQuantity | None,
+             gain, where: str) -> tuple[np.ndarray, OutputQuantity | None]:
+    """Values of a mapped column in the stored unit of ``channel`` (and, for the output
+    channel, the output quantity they are)."""
+    label = f"column {col!r}"
+    values = table.floats(col, label)
+    if channel != "deflection":
+        if unit is None:
+            return values, None
+        scale = unit_scale(channel, unit)
+        if scale is None:
+            raise InputError(f"{where}: {label} ({channel}) is in {unit!r} according to {how}, which is not a unit "
+                             f"of {channel}; accepted: {', '.join(TIMESERIES_UNITS[channel])} and other "
+                             f"units of {STORED_UNITS[channel]} — correct {_COLUMNS}")
+        if how == "its header":
+            warnings.warn(f"{where}: {label} read as {channel} in {unit} (the unit in its header)", InputNotice,
+                          stacklevel=3)
+        return (values * scale[0] + scale[1]) if scale != (1.0, 0.0) else values, None
+    return _convert_output(values, label, unit, how, output, gain, where)
+
+
+def _convert_output(values, label, unit, how, output, gain, where):
+    """Values of the output column and the output quantity they are (module doc)."""
+    if unit is None and output is not None:
+        unit, how = output.unit, _OUTPUT
+    if gain is not None:
+        metres_per, per_unit = parse_gain(gain)
+        if unit is None:
+            raise InputError(f"{where}: {label}: a sensor gain needs the column's unit; give it in the column map, "
+                             f"e.g. deflection=COLUMN:{per_unit}")
+        if unit != per_unit:
+            raise InputError(f"{where}: {label} is in {unit} but the sensor gain is per {per_unit}; give the gain "
+                             f"per {unit}")
+        warnings.warn(f"{where}: {label} read in {unit} × sensor gain {gain} → tip deflection in m", InputNotice,
+                      stacklevel=4)
+        return values * metres_per, DEFLECTION
+    if unit is None:
+        return values, DEFLECTION
+    if output is None or output.name == "deflection":
+        scale = unit_scale("deflection", unit)
+        if scale is not None:   # a length: the tip deflection, stored in m
+            if how == "its header":
+                warnings.warn(f"{where}: {label} read as the tip deflection in {unit} (the unit in its header)",
+                              InputNotice, stacklevel=4)
+            return (values * scale[0] if scale != (1.0, 0.0) else values), DEFLECTION
+    if output is not None and output.name != "deflection":
+        q = 1.0 if unit == output.unit else _dimension_scale(unit, output.unit)
+        if q is None:
+            raise InputError(f"{where}: {label} is in {unit} according to {how}, but the output is "
+                             f"{output.name} in {output.unit}; correct {_COLUMNS} or {_OUTPUT}")
+        return (values * q if q != 1.0 else values), output
+    try:
+        parse_unit(unit)
+        quantity = OutputQuantity("deflection", unit)
+    except (InputError, UnitError):
+        raise InputError(f"{where}: {label}: {unit!r} (from {how}) is not a unit this reader knows (m, mm, um, V, "
+                         f"mV, …); correct {_COLUMNS}, or declare the output with {_OUTPUT} NAME:UNIT") from None
+    warnings.warn(f"{where}: {label} is in {unit} according to {how}, not a length: the output is the deflection "
+                  f"read in {unit} (give a sensor gain to metres to compare with a physics model)", InputNotice,
+                  stacklevel=4)
+    return values, quantity
+
+
+def _dimension_scale(unit: str, to: str) -> float | None:
+    try:
+        a, b = parse_unit(unit), parse_unit(to)
+    except UnitError:
+        return None
+    return a.factor / b.factor if a.same_dimension(b) else None
+
+
+def _standard_columns(table, p: Path, output: OutputQuantity | None):
+    """Channels of a file with standard ``quantity_unit`` headers: values (stored units),
+    labels, the output quantity (another output than the deflection: ``NAME_UNIT``, in
+    its unit or one of the same dimension)."""
+    other = output is not None and output.name != "deflection"
+    values, labels, found = {}, {}, {}
+    quantity_out = output if other else DEFLECTION
+    for name in table.columns:
+        head, _, unit = name.partition("_")
+        if other and head == output.name:
+            q = 1.0 if unit == output.unit else _dimension_scale(unit, output.unit)
+            if q is None:
+                raise InputError(f"{p}: column {name!r}: {unit!r} is not a unit of the output {output.name} "
+                                 f"({output.unit}); name it {output.column}")
+            quantity, scale = "deflection", (q, 0.0)
         else:
-            continue
-        check_range(arr, lo, hi, where, table.locate, labels[quantity], what)
-    required = ["voltage"] + (["deflection"] if require_deflection else [])
-    for quantity in required:
-        if quantity not in values:
-            raise InputError(f"{where}: missing column {quantity}_{STORED_UNITS[quantity]} "
-                             f"({quantity} in {', '.join(TIMESERIES_UNITS[quantity])})"
-                             + (" or a column map entry" if columns is not None else ""))
+            quantity, unit = parse_header(name, TIMESERIES_UNITS, p, (f" or the output {output.column}" if other else "")
+                                          + f"; read other files with a column map, e.g. {_COLUMNS} time=t,voltage=u")
+            if other and quantity == "deflection":
+                raise InputError(f"{p}: column {name!r}: the output here is {output.name} ({output.column}), not "
+                                 f"the deflection; name the column {output.column} or map it with {_COLUMNS} "
+                                 f"{output.name}=COLUMN")
+            scale = TIMESERIES_UNITS[quantity][unit]
+        if quantity in found:
+            raise InputError(f"{p}: columns {found[quantity]!r} and {name!r} both give {quantity}; keep one")
+        found[quantity] = name
+        labels[quantity] = f"column {name!r}"
+        values[quantity] = table.floats(name)
+        if scale != (1.0, 0.0):
+            values[quantity] = values[quantity] * scale[0] + scale[1]
+    return values, labels, quantity_out
+
+
+def _output_arg(output, columns) -> OutputQuantity | None:
+    if isinstance(output, str):
+        output = OutputQuantity.parse(output)
+    if output is not None and output.name == "deflection" and unit_scale("deflection", output.unit) is None \
+            and columns is None:
+        raise InputError(f"output {output.name}:{output.unit}: a deflection read in {output.unit} needs a column "
+                         "map (deflection=COLUMN:UNIT)")
+    return output
+
+
+def _channels_of(table, p: Path, meta: dict, *, columns, fs, rh, require_deflection, output, gain, first: int = 0):
+    """(values in stored units, labels, output quantity) of the rows of ``table`` (rows
+    ``first``… of the file), with time, RH and plausibility as the module doc says."""
+    where = str(p)
+    if columns is not None:
+        values, labels, quantity_out = {}, {}, DEFLECTION
+        for channel, (col, unit, how) in _resolve_map(columns, table, output, where).items():
+            labels[channel] = f"column {col!r} ({channel if channel != 'deflection' else 'output'})"
+            values[channel], q = _convert(table, channel, col, unit, how, output, gain, where)
+            quantity_out = q or quantity_out
+    else:
+        if gain is not None:
+            raise InputError(f"{where}: a sensor gain applies to a mapped output column; give a column map")
+        values, labels, quantity_out = _standard_columns(table, p, output)
+    for quantity, arr in values.items():
+        if quantity == "deflection":
+            lo, hi, what = quantity_out.bounds()
+            hint = (f"; if the output is another quantity or unit, say so with {_OUTPUT} NAME:UNIT (e.g. "
+                    f"{_OUTPUT} level:V) or a unit in {_COLUMNS} (deflection=COLUMN:V)") if quantity_out.is_deflection \
+                else ""
+            check_range(arr, lo, hi, where, table.locate, labels[quantity], what + hint)
+        elif quantity in PLAUSIBLE:
+            lo, hi, what = PLAUSIBLE[quantity]
+            check_range(arr, lo, hi, where, table.locate, labels[quantity], what)
+    if "voltage" not in values:
+        raise InputError(f"{where}: missing column voltage_V (voltage in {', '.join(TIMESERIES_UNITS['voltage'])})"
+                         + (" or a column map entry" if columns is not None else ""))
+    if require_deflection and "deflection" not in values:
+        want = quantity_out.column if output is not None else "deflection_m (deflection in m, mm or um)"
+        raise InputError(f"{where}: missing column {want}"
+                         + (" or a column map entry" if columns is not None else ""))
     n = values["voltage"].size
     if fs is not None:
         if "time" in values:
             raise InputError(f"{where}: has a time column, so a sampling rate must not be given too")
         if not np.isfinite(fs) or fs <= 0:
-            raise InputError(f"{where}: sampling rate --fs-Hz {fs!r} must be a positive number")
-        values["time"] = np.arange(n) / float(fs)
+            raise InputError(f"{where}: sampling rate {arg('fs_Hz', 'fs')} {fs!r} must be a positive number")
+        values["time"] = (first + np.arange(n)) / float(fs)
     elif "time" not in values:
         raise InputError(f"{where}: missing column time_s (time in s or ms); give the "
-                         "sampling rate with --fs-Hz for a file without a time column")
-    if n < 2:
-        raise InputError(f"{where}: needs at least 2 samples, got {n}")
-    meta = read_sidecar(p)
+                         f"sampling rate with {arg('fs_Hz', 'fs')} for a file without a time column")
     if "rh" in values and meta.get("rh_pct") is not None and rh is None:
         col_rh = float(np.mean(values["rh"]))
         if abs(col_rh - float(meta["rh_pct"])) > 5.0:
             raise InputError(f"{where}: the sidecar {p.with_suffix('.yaml').name} says rh_pct={meta['rh_pct']!r} "
                              f"but the {labels['rh']} averages {col_rh:.3g} %; correct one of them (or give "
-                             "--rh to override both)")
+                             f"{arg('rh')} to override both)")
     if rh is not None:
         if not np.isfinite(rh) or not 0.0 <= rh <= 100.0:
             raise InputError(f"{where}: relative humidity rh={rh!r} must lie within 0–100 %")
@@ -622,35 +394,94 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
         side_rh = meta.get("rh_pct")
         if side_rh is None:
             raise InputError(f"{where}: no relative humidity: add an rh_pct column, the key "
-                             "rh_pct to the sidecar, or give the RH with --rh")
-        if isinstance(side_rh, bool) or not isinstance(side_rh, (int, float)) \
-                or not 0.0 <= side_rh <= 100.0:
-            raise InputError(f"{p.with_suffix('.yaml')}: rh_pct={side_rh!r} must be a number "
-                             "within 0–100 %")
+                             f"rh_pct to the sidecar, or give the RH with {arg('rh')}")
         values["rh"] = np.full(n, float(side_rh))
-    values, info = check_record(values, where, table.locate, labels, resample=resample)
+    return values, labels, quantity_out
+
+
+def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | None = None,
+                    rh: float | None = None, require_deflection: bool = True, resample: bool = False,
+                    output: OutputQuantity | str | None = None, gain: str | None = None) -> TimeSeries:
+    """Read a time-series record (``.csv`` or ``.mat``) following ``DATA_FORMAT.md``.
+
+    ``columns`` maps quantities to the file's columns (with optional units, module doc);
+    ``fs`` (Hz) gives the time base of a file without a time column; ``rh`` (%) is the
+    relative humidity when the file has no ``rh_pct`` column (it wins over the column and
+    the sidecar); ``resample`` allows non-uniform time; ``output`` names the measured
+    output (default: the tip deflection in m; ``"level:V"``); ``gain`` converts an output
+    column in another unit to metres (``"2.5mm/V"``).
+    """
+    output = _output_arg(output, columns)
+    p = check_input_path(path, (".csv", ".mat"))
+    table = read_table(p)
+    meta = read_sidecar(p)
+    values, labels, quantity_out = _channels_of(table, p, meta, columns=columns, fs=fs, rh=rh, output=output,
+                                                require_deflection=require_deflection, gain=gain)
+    if values["voltage"].size < 2:
+        raise InputError(f"{p}: needs at least 2 samples, got {values['voltage'].size}")
+    values, info = check_record(values, str(p), table.locate, labels, resample=resample)
     if info is not None:
         meta["resampled"] = info
-    return TimeSeries(**values, meta=meta, source=where)
+    return TimeSeries(**values, meta=meta, source=str(p), output=quantity_out)
 
 
-def write_timeseries(ts: TimeSeries, path, *, units: dict[str, str] | None = None,
-                     overwrite: bool = False, protect=()) -> Path:
-    """Write ``ts`` atomically as CSV (``quantity_unit`` headers, full float precision)
-    plus the sidecar ``NAME.yaml`` when ``ts.meta`` is non-empty.
+def read_timeseries_pieces(path, *, rows: int = 1 << 20, columns: dict[str, str] | None = None,
+                           fs: float | None = None, rh: float | None = None, require_deflection: bool = True,
+                           output: OutputQuantity | str | None = None, gain: str | None = None):
+    """A CSV record as consecutive :class:`TimeSeries` pieces of about ``rows`` samples,
+    each checked as :func:`read_timeseries` checks a record, the time uniform across pieces
+    too (every step within :data:`~physics.record.UNIFORM_RTOL` of the first piece's median
+    step); no resampling.  For records longer than memory; the pieces share ``meta``."""
+    output = _output_arg(output, columns)
+    p = check_input_path(path, (".csv",))
+    meta = read_sidecar(p)
+    kw = dict(columns=columns, fs=fs, rh=rh, require_deflection=require_deflection, output=output, gain=gain)
+    step = last = None
+    first = 0
+    for table in iter_table(p, rows):
+        values, labels, quantity_out = _channels_of(table, p, meta, first=first, **kw)
+        first += values["voltage"].size
+        if values["voltage"].size < 2:
+            raise InputError(f"{p}: needs at least 2 samples, got {values['voltage'].size}")
+        locate = table.locate
+        values, _ = check_record(values, str(p), locate, labels)
+        t = values["time"]
+        here = float(np.median(np.diff(t)))
+        if step is None:
+            step = here
+        elif abs(here - step) > UNIFORM_RTOL * step or abs(t[0] - last - step) > UNIFORM_RTOL * step:
+            bad = t[0] - last if abs(t[0] - last - step) > UNIFORM_RTOL * step else here
+            raise InputError(f"{p}, {locate(0)}, {labels['time']}: step {bad!r} s differs from the step "
+                             f"{step!r} s of the first lines by more than {100 * UNIFORM_RTOL:g} %; sampling must "
+                             "be uniform (resample the file first)")
+        last = float(t[-1])
+        yield TimeSeries(**values, meta=meta, source=str(p), output=quantity_out)
 
-    ``units`` chooses the unit per quantity (default: stored units); ``protect`` lists
-    input files that must never be overwritten.
-    """
+
+def columns_of(ts: TimeSeries, units: dict[str, str] | None = None) -> dict[str, np.ndarray]:
+    """The CSV columns of ``ts`` (``quantity_unit`` headers, the output column named after
+    ``ts.output``); ``units`` chooses the unit per quantity (default: stored units; not for an
+    output other than the deflection)."""
     units = dict(units or {})
     for quantity, unit in units.items():
-        parse_header(f"{quantity}_{unit}", TIMESERIES_UNITS, Path(path))
+        parse_header(f"{quantity}_{unit}", TIMESERIES_UNITS, Path(ts.source or "record"))
     cols = {}
     for quantity in ("time",) + CHANNELS:
         arr = getattr(ts, quantity)
         if arr is None:
             continue
+        if quantity == "deflection" and not ts.output.is_deflection:
+            cols[ts.output.column] = arr
+            continue
         unit = units.get(quantity, STORED_UNITS[quantity])
         scale, offset = TIMESERIES_UNITS[quantity][unit]
-        cols[f"{quantity}_{unit}"] = (arr - offset) / scale
-    return write_table(cols, ts.meta, path, overwrite=overwrite, protect=protect)
+        cols[f"{quantity}_{unit}"] = (arr - offset) / scale if (scale, offset) != (1.0, 0.0) else arr
+    return cols
+
+
+def write_timeseries(ts: TimeSeries, path, *, units: dict[str, str] | None = None,
+                     overwrite: bool = False, protect=()) -> Path:
+    """Write ``ts`` atomically as CSV (:func:`columns_of`, full float precision) plus the
+    sidecar ``NAME.yaml`` when ``ts.meta`` is non-empty; ``protect`` lists input files that
+    must never be overwritten."""
+    return write_table(columns_of(ts, units), ts.meta, path, overwrite=overwrite, protect=protect)

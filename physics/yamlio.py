@@ -1,8 +1,11 @@
 """Reading user YAML (sidecars, device files, dataset and training configs) safely.
 
 ``yaml.safe_load`` never runs code, but it still expands aliases: a few hundred bytes of
-nested ``&a [*b, *b, ...]`` grow into gigabytes (a "billion laughs" file).  Files read
-here are limited in size and may not use anchors or aliases; every problem is an
+nested ``&a [*b, *b, ...]`` grow into gigabytes (a "billion laughs" file); it recurses once
+per level of nesting (``[[[[…]]]]`` 400 deep, under 1 kB, exhausts the stack); and it keeps
+the last of two equal keys without a word.  Files read here are limited in size
+(:data:`MAX_YAML_BYTES`) and nesting (:data:`~physics.fileio.MAX_DEPTH`) and may not use
+anchors, aliases or a key twice in one mapping; every problem is an
 :class:`~physics.errors.InputError` naming the file.
 """
 from __future__ import annotations
@@ -12,15 +15,27 @@ from pathlib import Path
 import yaml
 
 from .errors import InputError
+from .fileio import MAX_DEPTH
 
 #: Largest YAML file read (bytes); metadata and configs are a few kB.
 MAX_YAML_BYTES = 1 << 20
 
 
 class _NoAliasLoader(yaml.SafeLoader):
-    """SafeLoader that refuses anchors and aliases (no expansion bombs)."""
+    """SafeLoader that refuses anchors and aliases (no expansion bombs), nesting deeper than
+    :data:`~physics.fileio.MAX_DEPTH` and repeated keys."""
 
     def compose_node(self, parent, index):
+        self._depth = getattr(self, "_depth", 0) + 1
+        try:
+            return self._compose_checked(parent, index)
+        finally:
+            self._depth -= 1
+
+    def _compose_checked(self, parent, index):
+        if self._depth > MAX_DEPTH:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"nested more than {MAX_DEPTH} levels deep", self.peek_event().start_mark)
         if self.check_event(yaml.AliasEvent):
             event = self.peek_event()
             raise yaml.constructor.ConstructorError(
@@ -30,6 +45,16 @@ class _NoAliasLoader(yaml.SafeLoader):
             raise yaml.constructor.ConstructorError(
                 None, None, f"anchors (&{event.anchor}) are not allowed", event.start_mark)
         return super().compose_node(parent, index)
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if isinstance(key, (str, int, float, bool)) and key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} appears twice in one mapping", key_node.start_mark)
+            seen.add(key) if isinstance(key, (str, int, float, bool)) else None
+        return super().construct_mapping(node, deep=deep)
 
 
 def load_yaml(path, what: str = "YAML file"):
@@ -55,4 +80,5 @@ def loads_yaml(text: str, where: str, what: str = "YAML"):
     try:
         return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
-        raise InputError(f"{where}: invalid YAML in the {what} ({' '.join(str(exc).split())})") from None
+        text = " ".join(str(exc).replace('in "<unicode string>", ', "at ").split())
+        raise InputError(f"{where}: invalid YAML in the {what} ({text})") from None

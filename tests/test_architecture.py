@@ -18,12 +18,9 @@ from physics.errors import InputError, arg
 
 ROOT = Path(__file__).resolve().parent.parent
 
-#: physics modules whose raises still name flags, (module, count): physics/diagnose/**,
-#: physics/identify/**, physics/compare/** are converted by the `dx` track, the readers and
-#: writers (timeseries, outputs, fileio, parallel) by the `io` track.  Only ever shrinks.
-FLAG_ALLOWLIST = {
-    "physics/fileio.py": 1, "physics/outputs.py": 3, "physics/parallel.py": 2, "physics/timeseries.py": 6,
-}
+#: physics modules whose raises still name flags, (module, count): every module is converted
+#: (the `dx` and `io` tracks); the list only ever shrinks.
+FLAG_ALLOWLIST: dict[str, int] = {}
 _FLAG = re.compile(r"(?<![\w-])--[A-Za-z][\w-]*")
 
 

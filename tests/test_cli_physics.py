@@ -64,7 +64,7 @@ def test_bad_options_give_one_clear_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "unknown effect(s) magic" in err and "Traceback" not in err
     assert main(["frf", "--device", "ipmc_pt_eg", "--effects", "humidity", "--json", str(tmp_path / "y.json")]) == 2
-    assert "give rh" in capsys.readouterr().err
+    assert "give --rh" in capsys.readouterr().err
 
 
 def test_top_level_help_lists_every_command(capsys):

@@ -79,7 +79,7 @@ def test_compare_on_nonsense_exits_cleanly_and_writes_nothing(tmp_path, capsys):
 @pytest.mark.parametrize("sidecar,message", [
     ("signal: {kind: sweep, f_start_Hz: abc}\n", r"signal\.f_start_Hz: 'abc' is not valid"),
     ("signal: {kind: multisine, periods: many}\n", r"signal\.periods: 'many' is not valid"),
-    ("sensor: {deflection_noise: loud}\n", r"sensor\.deflection_noise: 'loud' is not valid"),
+    ("sensor: {deflection_noise: loud}\n", r"sensor\.deflection_noise: 'loud' is not"),
     ("sensor: {bandwidth: -3}\n", r"bandwidth"),
     ("rh_pct: 30\n", r"says rh_pct=30 but the column 'rh_pct' averages 60"),
     ("a: &x [1, 2]\nb: [*x, *x]\n", r"anchors \(&x\) are not allowed"),

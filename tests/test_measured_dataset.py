@@ -45,7 +45,7 @@ def test_dataset_from_measurements_and_train_compare(tmp_path, capsys):
 def test_check_names_a_changed_file_and_a_changed_source(tmp_path, capsys):
     a = _plant(tmp_path / "a.csv")
     ds = tmp_path / "ds"
-    assert main(["dataset", "--train", str(a), "--test", f"{a}[1000:1500]", "--columns",
+    assert main(["dataset", "--train", f"{a}[0:1000]", "--test", f"{a}[1000:1500]", "--columns",
                  "time=t,voltage=u,deflection=y", "--out", str(ds)]) == 0
     _plant(a, seed=3)  # the source changes after the dataset was built
     assert main(["dataset", "--check", str(ds)]) == 0
@@ -65,8 +65,11 @@ def test_bad_combinations_are_refused(tmp_path, capsys):
                  "--out", str(tmp_path / "y")]) == 2
     assert "--holdout-rh needs records with a relative humidity" in capsys.readouterr().err
     ds = tmp_path / "ds"
-    assert main(["dataset", "--train", str(a), "--test", str(a), "--columns", "time=t,voltage=u,deflection=y",
-                 "--out", str(ds)]) == 0
+    leak = ["dataset", "--train", str(a), "--test", str(a), "--columns", "time=t,voltage=u,deflection=y", "--out",
+            str(ds)]
+    assert main(leak) == 2 and "share samples 0:1500 of the same file" in capsys.readouterr().err
+    assert main(leak + ["--allow-overlap"]) == 0 and "1 pair(s) of records share samples" in capsys.readouterr().out
+    assert json.loads((ds / "dataset.json").read_text())["overlap"][0]["samples"] == [0, 1500]
     assert main(["train-compare", str(ds), "--models", "hybrid", "--out", str(tmp_path / "h")]) == 2
     assert "--physics" in capsys.readouterr().err
     assert load_dataset(ds).has_rh is False

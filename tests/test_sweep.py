@@ -51,7 +51,7 @@ def _square_and_pid(task):
 def test_failed_task_names_its_inputs(workers):
     with pytest.raises(ModelError, match=r"task \{'x': 3\} failed: ValueError: bad x"):
         map_tasks(_fails_on_three, [{"x": i} for i in range(5)], ParallelSettings(workers), progress=False)
-    with pytest.raises(InputError, match="--workers"):
+    with pytest.raises(InputError, match="workers 0: must be a positive"):
         ParallelSettings(0)
 
 

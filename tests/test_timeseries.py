@@ -94,9 +94,13 @@ def test_column_map_and_sampling_rate_for_benchmark_style_file(tmp_path):
 
 def test_column_map_reads_mapped_time_and_ignores_other_columns(tmp_path):
     p = write(tmp_path, "t,u,d,junk\n0,1,5,x\n0.5,2,6,y\n")
-    ts = read_timeseries(p, columns=parse_column_map("time=t, voltage=u, deflection=d"), rh=30)
+    ts = read_timeseries(p, columns=parse_column_map("time=t, voltage=u, deflection=d:V"), rh=30)
     np.testing.assert_array_equal(ts.time, [0.0, 0.5])
     np.testing.assert_array_equal(ts.deflection, [5.0, 6.0])
+    assert ts.output.to_dict() == {"name": "deflection", "unit": "V"}
+    # without a unit a mapped output is a tip deflection in metres: 5 m is refused at once, with the way out
+    with pytest.raises(InputError, match=r"line 2, column 'd' \(output\): value 5.0 is outside -1–1 m .*output level:V"):
+        read_timeseries(p, columns=parse_column_map("time=t, voltage=u, deflection=d"), rh=30)
 
 
 @pytest.mark.skipif(not SILVERBOX.is_file(), reason="shared Silverbox benchmark not available")
@@ -160,7 +164,7 @@ def test_mat_file_with_named_variables_and_with_column_map(tmp_path):
     np.testing.assert_allclose(ts.deflection, [1e-3, 2e-3, 3e-3])
     q = tmp_path / "raw.mat"
     scipy.io.savemat(q, {"u": np.array([1.0, 2, 3]), "y": np.array([4.0, 5, 6])})
-    ts = read_timeseries(q, columns={"voltage": "u", "deflection": "y"}, fs=10.0, rh=40.0)
+    ts = read_timeseries(q, columns={"voltage": "u", "deflection": "y:V"}, fs=10.0, rh=40.0)
     np.testing.assert_array_equal(ts.deflection, [4, 5, 6])
     np.testing.assert_allclose(ts.time, [0, 0.1, 0.2])
 
@@ -260,7 +264,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
     "missing-voltage": ("time_s,deflection_m,rh_pct\n0,1,50\n1,1,50\n", {},
                         ["missing column voltage_V"]),
     "missing-time": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {},
-                     ["missing column time_s", "sampling rate with --fs-Hz"]),
+                     ["missing column time_s", "sampling rate with fs"]),
     "unknown-column": ("time_s,voltage_V,deflection_m,rh_pct,force_N\n0,1,0,50,1\n1,1,0,50,1\n", {},
                        ["unknown column 'force_N'", "deflection_mm"]),
     "unparseable-unit": ("time_s,voltage_V,deflection_cm,rh_pct\n0,1,0,50\n1,1,0,50\n", {},
@@ -295,7 +299,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
     "nameless-data": ("time_s,voltage_V,deflection_m,rh_pct,\n0,1,0,50,7\n1,1,0,50,\n", {},
                       ["column 5 has data but no name"]),
     "extra-field": (H + "0,1,0,50\n1,1,0,50,9\n", {}, ["line 3", "4 fields"]),
-    "map-rh-out-of-range": ("V1,V2,H\n1,2,50\n3,4,-3\n", {"columns": {"voltage": "V1", "deflection": "V2",
+    "map-rh-out-of-range": ("V1,V2,H\n1,0.2,50\n3,0.4,-3\n", {"columns": {"voltage": "V1", "deflection": "V2",
                                                                     "rh": "H"}, "fs": 10.0},
                             ["line 3", "column 'H' (rh)", "-3.0", "0–100"]),
     "map-missing-column": ("V1,V2\n1,2\n3,4\n", {"columns": {"voltage": "V1", "deflection": "V3"},
@@ -305,7 +309,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
                                            "fs": 10.0, "rh": 50},
                       ["line 3", "column 'V1'", "'x' is not a number"]),
     "fs-and-time": (GOOD, {"fs": 100.0}, ["time column", "sampling rate"]),
-    "bad-fs": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {"fs": -5.0}, ["--fs-Hz -5.0"]),
+    "bad-fs": ("voltage_V,deflection_m,rh_pct\n1,0,50\n1,0,50\n", {"fs": -5.0}, ["fs -5.0"]),
 }
 
 

@@ -77,6 +77,26 @@ def writing(args, inputs=()):
     return output_folder(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False))
 
 
+def check_result(deflection, model) -> None:
+    """Refuse a simulated tip deflection [m] that is not finite or beyond the strip's length
+    (an unstable user effect or a parameter out of its range), naming the effects."""
+    import numpy as np
+
+    from physics.errors import ModelError
+    d = np.asarray(deflection)
+    bad = np.flatnonzero(~np.isfinite(d))
+    where = f"{model.device.name} [{', '.join(model.effect_ids)}]"
+    if bad.size:
+        raise ModelError(f"the simulation of {where} is not finite from sample {bad[0]} on (an unstable effect or "
+                         "a parameter out of its range); nothing was written")
+    length = float(model.free_length)
+    peak = float(np.max(np.abs(d))) if d.size else 0.0
+    if peak > length:
+        raise ModelError(f"the simulation of {where} reaches a tip deflection of {peak:.3g} m, beyond the strip's "
+                         f"free length ({length:.3g} m): not physics (an unstable effect or a parameter out of its "
+                         "range); nothing was written")
+
+
 def provenance(argv=None, inputs=()) -> dict:
     from importlib.metadata import PackageNotFoundError, version
     try:

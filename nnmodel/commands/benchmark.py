@@ -37,20 +37,12 @@ def add_arguments(p):
 
 
 def parse_sets(items, models) -> dict:
-    import yaml
-
-    out: dict = {}
-    for item in items or []:
-        if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise InputError(f"--set {item!r}: expected MODEL.KEY=VALUE, e.g. narx.lr=0.001")
-        key, val = item.split("=", 1)
-        model, param = key.split(".", 1)
-        if model not in models:
-            raise InputError(f"--set {item!r}: model {model!r} is not among the models run ({', '.join(models)})")
-        try:
-            out.setdefault(model, {})[param] = yaml.safe_load(val)
-        except yaml.YAMLError:
-            raise InputError(f"--set {item!r}: cannot parse the value {val!r}") from None
+    """``--set MODEL.KEY=VALUE`` items (as train-compare reads them) for the models run."""
+    from .train_compare import parse_overrides
+    out = parse_overrides(items or [])
+    bad = sorted(set(out) - set(models))
+    if bad:
+        raise InputError(f"--set: model {bad[0]!r} is not among the models run ({', '.join(models)})")
     return out
 
 

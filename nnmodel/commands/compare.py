@@ -4,9 +4,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
+
 from physics.compare import (CallablePredictor, FRFOptions, PhysicsPredictor, Predictor, compare,
                              load_measurements, parse_bands, write_comparison_report)
 from physics.errors import InputError
+from physics.record import DEFLECTION, OutputQuantity
 from physics.timeseries import TimeSeries, parse_column_map
 
 from ._common import add_output_options, add_quiet_option, check_out, provenance, stage_log, writing
@@ -26,7 +29,11 @@ def add_measurement_arguments(p) -> None:
                    help="relative humidity [%%] of the records: needed for files without an rh_pct column or "
                         "sidecar key, and overrides them when given")
     p.add_argument("--columns", default=None,
-                   help="column map for arbitrary files, e.g. time=t,voltage=V1,deflection=V2 (stored units)")
+                   help="column map for other files, e.g. time=t,voltage=V1,deflection=V2 (values in s, V, m), with "
+                        "units where they differ: deflection=Tip (mm):mm (a unit in a header, Tip [mm], is used too)")
+    p.add_argument("--sensor-gain", default=None, metavar="GAIN",
+                   help="convert an output column read in another unit to tip deflection in metres, e.g. 2.5mm/V "
+                        "(with --columns deflection=COLUMN:V)")
     p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of files without a time column")
     p.add_argument("--resample", action="store_true", help="resample non-uniform time onto the median step")
 
@@ -97,20 +104,31 @@ def sensor_setting(text: str):
 MIN_SAMPLES = 32
 
 
-def read_measurements(args) -> list:
+def read_measurements(args, output: OutputQuantity | None = None) -> list:
+    """The measurements of ``args``; ``output``: what the model predicts (default: the tip
+    deflection in m), which every time-series record's output must be."""
     for m in args.measurements:
         if not Path(m).exists():
             raise InputError(f"measurement file {m} not found")
-    columns = parse_column_map(args.columns) if args.columns else None
+    want = output or DEFLECTION
+    columns = parse_column_map(args.columns, want) if args.columns else None
     if args.fs_Hz is not None and not args.fs_Hz > 0:
         raise InputError(f"--fs-Hz {args.fs_Hz!r}: the sampling rate must be a positive number of Hz")
     ms = load_measurements(args.measurements, rh=args.rh, columns=columns, fs=args.fs_Hz,
-                           resample=args.resample)
+                           resample=args.resample, output=None if want.is_deflection else want,
+                           gain=getattr(args, "sensor_gain", None))
     for m in ms:
         n = getattr(m, "n", None)
         if isinstance(m, TimeSeries) and n < MIN_SAMPLES:
             raise InputError(f"{m.source}: {n} samples; comparing a model with a record needs at least "
                              f"{MIN_SAMPLES} (an FRF estimate and time metrics over a few periods)")
+        if isinstance(m, TimeSeries) and m.output != want:
+            raise InputError(f"{m.source}: the measured output is {m.output.label()} but the model predicts "
+                             f"{want.label()}" + (" — give --sensor-gain (e.g. 2.5mm/V) to convert it to metres"
+                                                  if want.is_deflection else ""))
+        if isinstance(m, TimeSeries) and np.ptp(m.deflection) == 0:
+            raise InputError(f"{m.source}: the measured {m.output.name} is constant ({float(m.deflection[0]):g}); "
+                             "there is nothing to compare — check the column (--columns) or the record")
         if isinstance(getattr(m, "meta", None), dict) and "geometry" in m.meta:
             raise InputError(f"{Path(str(m.source)).with_suffix('.yaml')}: geometry: the sidecar's geometry is not "
                              "applied to the model (it would be silently ignored); put it in a device YAML (copy "
@@ -135,7 +153,7 @@ def bundle_predictor(path: Path) -> Predictor:
 
     card = getattr(bundle, "card", {}) or {}
     info = {"kind": "neural bundle", "path": str(path),
-            **{k: card[k] for k in ("model", "fs_hz", "rh_range_pct", "inputs") if k in card}}
+            **{k: card[k] for k in ("model", "fs_hz", "rh_range_pct", "inputs", "output") if k in card}}
     return CallablePredictor(run, name=f"{card.get('model', 'bundle')} ({path.name})", info=info)
 
 
@@ -178,8 +196,10 @@ def run(args) -> int:
     log = stage_log(args, args.measurements)
     check_out(args, _inputs(args))
     log(f"reading {len(args.measurements)} measurement file(s)")
-    ms = read_measurements(args)
     predictor = resolve_predictor(args.model, args.effects, args.n_modes, args.hold)
+    output = OutputQuantity.from_dict(predictor.info.get("output"), f"{args.model}: output") \
+        if isinstance(getattr(predictor, "info", None), dict) else DEFLECTION
+    ms = read_measurements(args, output)
     res = compare(ms, predictor, frf_options=frf_options(args), offset=args.offset, skip_s=args.skip_s,
                   min_coherence=args.min_coherence, bands=parse_bands(args.bands) if args.bands else None,
                   rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
@@ -187,7 +207,7 @@ def run(args) -> int:
     log("writing the report")
     with writing(args, inputs=_inputs(args)) as tmp:
         write_comparison_report(res, tmp, provenance=provenance(inputs=args.measurements),
-                                title=f"eap compare: {predictor.name}")
+                                title=f"eap compare: {predictor.name}", output=output)
     from physics.columns import quantity
     d = Path(args.out)
     print(f"model: {predictor.name}")
@@ -197,19 +217,20 @@ def run(args) -> int:
         if tm:
             rt = tm["residual_tests"]
             parts.append(f"fit {tm['fit_percent']:.1f} %, NRMSE {100 * tm['nrmse']:.3g} %, corr "
-                         f"{100 * tm['correlation']:.1f} %, RMSE {quantity(tm['rmse'], 'm')}; residual "
+                         f"{100 * tm['correlation']:.1f} %, RMSE {quantity(tm['rmse'], output.unit)}; residual "
                          f"{'white' if rt['white'] else 'correlated'} ({rt['autocorrelation_outside']}/"
                          f"{rt['autocorrelation_lags']} lags outside 99 %), "
                          f"{'independent of' if rt['independent_of_input'] else 'correlated with'} the input "
                          f"({rt['cross_correlation_outside']}/{rt['cross_correlation_lags']});")
         if fe.get("j_err_m_per_V") is not None:
-            parts.append(f"J_err {1e3 * fe['j_err_m_per_V']:.3g} mm/V, |H| error {fe['log_mag_rms_dB']:.3g} dB rms, "
+            parts.append(f"J_err {quantity(fe['j_err_m_per_V'], output.unit + '/V')}, |H| error {fe['log_mag_rms_dB']:.3g} dB rms, "
                          f"phase {fe['phase_rms_deg']:.3g} deg rms ({fe['n_points']} freq.)")
         print("  " + " ".join(parts))
     if len(res.by_rh) >= 2:
         print("  by RH: " + "; ".join(
             f"{row['rh_pct']:g} %: " + (f"fit {row['fit_percent']:.1f} %, " if row["fit_percent"] is not None else "")
-            + (f"J_err {1e3 * row['j_err_m_per_V']:.3g} mm/V" if row["j_err_m_per_V"] is not None else "")
+            + (f"J_err {quantity(row['j_err_m_per_V'], output.unit + '/V')}" if row["j_err_m_per_V"] is not None
+               else "")
             for row in res.by_rh))
     for w in res.warnings:
         print(f"  warning: {w}")

@@ -1,7 +1,10 @@
 """``eap dataset``: build a training dataset folder from measurement files (or check one)."""
 from __future__ import annotations
 
+import math
+
 from physics.errors import InputError
+from physics.record import OutputQuantity
 from physics.timeseries import parse_column_map
 
 from ._common import add_output_options
@@ -10,8 +13,10 @@ NAME = "dataset"
 HELP = "build a dataset folder (dataset.json + standard CSVs) from your measurement files, or --check one"
 DESCRIPTION = (HELP + ". Files are read with the same rules as every command (DATA_FORMAT.md, --columns for "
                "other files); FILE[START:STOP] takes a sample range (e.g. the standard split of one long "
-               "record). Without --validation files, train-compare holds out --val-fraction of each training "
-               "record. The schema of dataset.json is in the README.")
+               "record); records that share samples are refused unless --allow-overlap. The output is the tip "
+               "deflection in m unless --output NAME:UNIT (or a unit in --columns) says otherwise; it is checked "
+               "against that quantity's plausible range here, once. Without --validation files, train-compare "
+               "holds out --val-fraction of each training record. The schema of dataset.json is in the README.")
 
 
 def add_arguments(p):
@@ -21,7 +26,18 @@ def add_arguments(p):
     p.add_argument("--val-fraction", type=float, default=0.2,
                    help="with no --validation: fraction at the end of each training record used for validation")
     p.add_argument("--holdout-rh", default="", help="RH levels [%%] held out of training, e.g. 50,70")
-    p.add_argument("--columns", default=None, help="column map, e.g. voltage=V1,deflection=V2 (stored units)")
+    p.add_argument("--columns", default=None,
+                   help="column map, e.g. time=t,voltage=V1,deflection=V2 (values in s, V, m), with units where "
+                        "they differ: deflection=Tip (mm):mm, time=t:ms (a unit in a header, Tip [mm], is used too)")
+    p.add_argument("--output", default=None, metavar="NAME:UNIT",
+                   help="what the measured output is when it is not the tip deflection, e.g. level:V (its column "
+                        "is NAME_UNIT in standard files, or mapped with --columns NAME=COLUMN)")
+    p.add_argument("--sensor-gain", default=None, metavar="GAIN",
+                   help="convert an output column read in another unit to tip deflection in metres, e.g. 2.5mm/V "
+                        "for a laser sensor giving volts (with --columns deflection=COLUMN:V)")
+    p.add_argument("--allow-overlap", action="store_true",
+                   help="keep records that share samples (the same file or overlapping ranges; marked in "
+                        "dataset.json) instead of refusing them")
     p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of files without a time column")
     p.add_argument("--rh", type=float, default=None, help="relative humidity [%%] of files without one")
     p.add_argument("--resample", action="store_true", help="resample non-uniform time onto the median step")
@@ -39,19 +55,29 @@ def run(args) -> int:
         return 0
     if args.fs_Hz is not None and not args.fs_Hz > 0:
         raise InputError(f"--fs-Hz {args.fs_Hz!r}: must be a positive sampling rate")
+    if not (math.isfinite(args.val_fraction) and 0.0 <= args.val_fraction < 0.9):
+        raise InputError(f"--val-fraction {args.val_fraction!r}: must lie in [0, 0.9)")
     try:
         held = [float(x) for x in args.holdout_rh.split(",") if x.strip()]
     except ValueError:
         raise InputError(f"--holdout-rh {args.holdout_rh!r}: expected RH levels in %, e.g. 50,70") from None
+    if not all(math.isfinite(h) and 0 <= h <= 100 for h in held):
+        raise InputError(f"--holdout-rh {args.holdout_rh!r}: RH levels must lie within 0–100 %")
+    output = OutputQuantity.parse(args.output) if args.output else None
     out = build_dataset(args.out, train=args.train, validation=args.validation, test=args.test,
                         val_fraction=args.val_fraction, holdout_rh=held,
-                        columns=parse_column_map(args.columns) if args.columns else None, fs=args.fs_Hz,
-                        rh=args.rh, resample=args.resample, overwrite=args.overwrite,
+                        columns=parse_column_map(args.columns, output) if args.columns else None, fs=args.fs_Hz,
+                        rh=args.rh, resample=args.resample, output=output, gain=args.sensor_gain,
+                        allow_overlap=args.allow_overlap, overwrite=args.overwrite,
                         command="eap " + " ".join(__import__("sys").argv[1:]))
     from nnmodel.dataset import load_dataset
     ds = load_dataset(out)
     counts = {s: len(ds.entries(s)) for s in ("train", "validation", "test")}
+    floor = ds.meta.get("noise_floor_m")
     print(f"dataset {out}: {counts['train']} train / {counts['validation']} validation / {counts['test']} test "
-          f"records at {ds.fs:g} Hz, {sum(e['samples'] for e in ds.meta['files'])} samples"
-          + ("" if ds.has_rh else ", no relative humidity"))
+          f"records at {ds.fs:g} Hz, {sum(e['samples'] for e in ds.meta['files'])} samples, output "
+          f"{ds.output.label()}" + ("" if ds.has_rh else ", no relative humidity")
+          + (f", sensor noise floor {1e6 * floor:.3g} µm" if floor else "")
+          + (f"; {len(ds.meta['overlap'])} pair(s) of records share samples (--allow-overlap)"
+             if ds.meta.get("overlap") else ""))
     return 0

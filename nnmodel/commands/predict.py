@@ -1,30 +1,36 @@
 """``eap predict``: run a saved model bundle on a voltage record (CSV) and write the prediction."""
 from __future__ import annotations
 
+import itertools
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from physics.columns import quantity
-from physics.errors import InputError
+from physics.errors import InputError, ModelError
 
 from ._common import add_quiet_option, provenance, stage_log
 
 NAME = "predict"
-HELP = "predict tip deflection with a trained model bundle for a voltage (+RH) record"
-DESCRIPTION = (HELP + ". The input CSV follows DATA_FORMAT.md (time_s, voltage_V, optional rh_pct, "
-               "optional deflection_m). The prediction is written as a time-series CSV whose "
-               "deflection column is the model output; if the input carries a measured deflection, "
-               "the fit is printed. A sampling rate other than the training rate is refused unless "
-               "--resample is given; RH outside the trained range gives a warning.")
+HELP = "predict the output of a trained model bundle (tip deflection, or the quantity it was trained on) for a record"
+DESCRIPTION = (HELP + ". The input CSV follows DATA_FORMAT.md (time_s, voltage_V, optional rh_pct, optional "
+               "measured output, e.g. deflection_m), or any file through --columns. The prediction is written as a "
+               "time-series CSV whose output column is named after the model's output (deflection_m, level_V, ...); "
+               "if the input carries the measured output, the fit is printed. A sampling rate other than the "
+               "training rate is refused unless --resample is given; RH outside the trained range gives a warning.")
 
 
 def add_arguments(p):
     p.add_argument("--model", required=True, help="model bundle folder (e.g. RUN/models/narx)")
     p.add_argument("--input", required=True, help="input time-series CSV (voltage, optional RH)")
+    p.add_argument("--columns", default=None,
+                   help="column map for other files, e.g. time=t,voltage=u (units as time=t:ms; the measured output "
+                        "as output=y)")
+    p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of a file without a time column")
     p.add_argument("--out", required=True, help="output CSV for the prediction (never the input file)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out CSV (and its sidecar)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --out CSV (and its sidecar) written by eap (never other files)")
     add_quiet_option(p)
     p.add_argument("--rh", type=float, default=None,
                    help="relative humidity [%%] when the file has no rh_pct column (wins over it)")
@@ -39,87 +45,143 @@ def add_arguments(p):
                         "(default: free-run simulation)")
 
 
-def _read(path, rh, uses_rh: bool, need_y: bool):
-    from physics.timeseries import read_timeseries
+#: Samples per piece of a record predicted in pieces.
+STREAM_SAMPLES = 1 << 18
+#: Input files larger than this (about 10⁶ rows) are predicted in pieces when the model can
+#: (a free run at the training rate): memory then grows with a piece, not with the record.
+STREAM_BYTES = 40 << 20
 
+
+def _pieces(args, output, uses_rh: bool, need_y: bool, stream: bool):
+    """(the input record's pieces — one, or consecutive pieces of a long CSV —, whether it
+    carries a relative humidity)."""
+    from physics.timeseries import parse_column_map, read_timeseries, read_timeseries_pieces
+
+    columns = parse_column_map(args.columns, output) if args.columns else None
+    kw = dict(columns=columns, fs=args.fs_Hz, require_deflection=need_y, output=output)
+
+    def read(rh):
+        if stream:
+            gen = read_timeseries_pieces(args.input, rows=STREAM_SAMPLES, rh=rh, **kw)
+            first = next(gen)
+            return itertools.chain([first], gen)
+        return iter([read_timeseries(args.input, rh=rh, **kw)])
     try:
-        return read_timeseries(path, rh=rh, require_deflection=need_y), True
+        return read(args.rh), True
     except InputError as exc:
         # a model without humidity input does not need RH: read with a placeholder, drop it
-        if uses_rh or rh is not None or "relative humidity" not in str(exc):
+        if uses_rh or args.rh is not None or "relative humidity" not in str(exc):
             raise
-    return read_timeseries(path, rh=0.0, require_deflection=need_y), False
+    return read(0.0), False
 
 
-def _check_out(args) -> None:
-    """Refuse a bad ``--out`` before any work."""
-    out, inp = Path(args.out), Path(args.input)
-    if out.suffix.lower() != ".csv":
-        raise InputError(f"--out {out}: the prediction is written as CSV; give a path ending in .csv")
-    for p in (out, out.with_suffix(".yaml")):
-        if p.resolve() in (inp.resolve(), inp.with_suffix(".yaml").resolve()):
-            raise InputError(f"--out {out} would overwrite the input {p}; choose another --out")
-        if p.exists() and not args.overwrite:
-            raise InputError(f"--out: {p} already exists; choose another --out or pass --overwrite")
+class _Fit:
+    """RMSE and fit % of a prediction against a measured output, accumulated piece by piece
+    (the values of :func:`physics.metrics.rmse` and :func:`~physics.metrics.fit_percent`)."""
+
+    def __init__(self):
+        self.n, self.sy, self.syy, self.see = 0, 0.0, 0.0, 0.0
+
+    def add(self, y, yhat) -> None:
+        e = y - yhat
+        self.n += y.size
+        self.sy += float(np.sum(y))
+        self.syy += float(np.dot(y, y))
+        self.see += float(np.dot(e, e))
+
+    def result(self) -> dict:
+        out = {"rmse": float(np.sqrt(self.see / self.n))}
+        spread = self.syy - self.sy ** 2 / self.n
+        if spread > 1e-24 * max(self.syy, 1e-300):   # a constant measured output: relative fit undefined
+            out["fit_percent"] = 100.0 * (1.0 - float(np.sqrt(self.see / spread)))
+        return out
+
+
+def _streams(args, bundle, k, size: int) -> bool:
+    """Whether the record is predicted in pieces: a long CSV, free run, a model that
+    continues from its state (see :attr:`nnmodel.models.base.NeuralModel.streams`)."""
+    return (k is None and not args.resample and Path(args.input).suffix.lower() == ".csv"
+            and size > STREAM_BYTES and getattr(bundle.model, "streams", False))
 
 
 def run(args) -> int:
-    from physics.timeseries import TimeSeries, write_timeseries
-    from physics.metrics import fit_percent, rmse
-
-    from ..bundle import load
+    from physics.csvtable import append_rows, write_sidecar
+    from physics.outputs import output_files, preflight_files
+    from physics.record import OutputQuantity
+    from physics.timeseries import columns_of
 
     log = stage_log(args, [args.input])
-    _check_out(args)
+    if Path(args.out).suffix.lower() != ".csv":
+        raise InputError(f"--out {args.out}: the prediction is written as CSV; give a path ending in .csv")
+    preflight_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model])
+    from ..bundle import FS_RTOL, load
     bundle = load(args.model)
-    uses_rh = bundle.model.uses_rh
+    output = OutputQuantity.from_dict(bundle.card.get("output"), f"{args.model}: card output")
+    model, uses_rh = bundle.model, bundle.model.uses_rh
     k = args.steps_ahead
     if k is not None and k < 1:
         raise InputError(f"--steps-ahead must be a positive integer, got {k}")
     n_init = args.init_samples
     if n_init is not None and n_init < 0:
         raise InputError(f"--init-samples {n_init}: must be 0 (start from rest) or a positive number of samples")
-    if n_init and n_init < bundle.model.n_init_:
-        raise InputError(f"--init-samples {n_init}: this model starts from its last {bundle.model.n_init_} "
+    if n_init and n_init < model.n_init_:
+        raise InputError(f"--init-samples {n_init}: this model starts from its last {model.n_init_} "
                          "outputs; give at least that many, or 0 to start from rest")
-    log(f"reading {args.input}")
-    ts, rh_read = _read(args.input, args.rh, uses_rh, need_y=k is not None or bool(n_init))
-    log(f"predicting {ts.n:,} samples with {bundle.card['model']}")
+    stream = Path(args.input).is_file() and _streams(args, bundle, k, Path(args.input).stat().st_size)
+    log(f"reading {args.input}" + (" in pieces" if stream else ""))
+    pieces, rh_read = _pieces(args, output, uses_rh, need_y=k is not None or bool(n_init), stream=stream)
+    first = next(pieces)
+    pieces = itertools.chain([first], pieces)
     # free run: initialised from the first measured outputs when the file has them (honest start)
-    init = ts.deflection if (k is None and n_init != 0) else None
-    with warnings.catch_warnings(record=True) as caught:
+    init = first.deflection if (k is None and n_init != 0) else None
+    if stream:
+        if abs(first.fs - bundle.fs) > FS_RTOL * bundle.fs:
+            raise InputError(f"the input is sampled at {first.fs:g} Hz but the model was trained at {bundle.fs:g} Hz; "
+                             "resample the input, or pass --resample")
+        a, b = itertools.tee(pieces)
+        y0 = None if init is None else init[:model.n_init_]
+        predicted = zip(a, model.simulate_pieces(((ts.voltage, ts.rh if uses_rh else None) for ts in b), y0))
+    else:
+        predicted = ((ts, bundle.predict(ts.voltage, rh=ts.rh if uses_rh else None, fs=ts.fs, steps_ahead=k,
+                                         resample=args.resample, deflection=ts.deflection if k else init))
+                     for ts in pieces)
+    fit, n, meta = _Fit(), 0, dict(first.meta)
+    log(f"predicting with {bundle.card['model']} and writing {args.out}")
+    with warnings.catch_warnings(record=True) as caught, \
+            output_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model]) as (tmp,):
         warnings.simplefilter("always")
-        pred = bundle.predict(ts.voltage, rh=ts.rh if uses_rh else None, fs=ts.fs, steps_ahead=k,
-                              resample=args.resample, deflection=ts.deflection if k else init)
-    notes = [str(w.message) for w in caught if issubclass(w.category, (RuntimeWarning, UserWarning))]
-    for n in notes:
-        print(f"eap predict: warning: {n}")
-    out_unit = bundle.card.get("output", {}).get("unit", "m")
-    meta = dict(ts.meta)
-    meta["prediction"] = {
-        "model": bundle.card["model"], "bundle": str(args.model), "input": str(args.input),
-        "output_unit_of_model": out_unit, "fs_hz_model": bundle.fs, "fs_hz_input": ts.fs,
-        "resampled": bool(abs(ts.fs - bundle.fs) > 1e-4 * bundle.fs),
-        "mode": "free run" if k is None else f"{k}-step-ahead", "warnings": notes,
-        "initialised_from_measured_samples": (bundle.model.n_init_ if init is not None else 0) if k is None else None,
-        "rh_range_trained_pct": bundle.rh_range, "provenance": provenance(),
-    }
-    line = (f"predicted {ts.n} samples at {ts.fs:g} Hz with {bundle.card['model']} "
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
+            for ts, pred in predicted:
+                bad = np.flatnonzero(~np.isfinite(pred))
+                if bad.size:
+                    raise ModelError(f"{args.model}: the model's free run diverged on {args.input} (non-finite from "
+                                     f"t = {ts.time[bad[0]]:g} s); nothing was written — the input may lie outside "
+                                     "what it was trained on")
+                if ts.deflection is not None:
+                    fit.add(ts.deflection, pred)
+                cols = columns_of(type(ts)(time=ts.time, voltage=ts.voltage, deflection=pred, output=output,
+                                           rh=ts.rh if (rh_read or uses_rh) else None, source=str(args.out)))
+                append_rows(fh, cols, header=n == 0)
+                n += ts.n
+        notes = list(dict.fromkeys(str(w.message) for w in caught
+                                   if issubclass(w.category, (RuntimeWarning, UserWarning))))
+        meta["prediction"] = {
+            "model": bundle.card["model"], "bundle": str(args.model), "input": str(args.input),
+            "output_unit_of_model": output.unit, "fs_hz_model": bundle.fs, "fs_hz_input": first.fs,
+            "resampled": bool(abs(first.fs - bundle.fs) > 1e-4 * bundle.fs),
+            "mode": "free run" if k is None else f"{k}-step-ahead", "warnings": notes,
+            "initialised_from_measured_samples": (model.n_init_ if init is not None else 0) if k is None else None,
+            "rh_range_trained_pct": bundle.rh_range, "in_pieces": stream, "provenance": provenance()}
+        if fit.n:
+            meta["prediction"]["against_measured"] = fit.result()
+        write_sidecar(meta, tmp.with_suffix(".yaml"))
+    for note in notes:
+        print(f"eap predict: warning: {note}")
+    line = (f"predicted {n} samples at {first.fs:g} Hz with {bundle.card['model']} "
             f"({'free run' if k is None else f'{k}-step-ahead'})")
-    if not np.all(np.isfinite(pred)):
-        raise InputError("the model produced non-finite values for this input (diverged)")
-    if ts.deflection is not None:
-        fit = {"rmse": rmse(ts.deflection, pred)}
-        line += f"; against the measured deflection: RMSE {quantity(fit['rmse'], out_unit)}"
-        try:
-            fit["fit_percent"] = fit_percent(ts.deflection, pred)
-            line += f", fit {fit['fit_percent']:.1f} %"
-        except InputError:  # constant measured deflection: relative fit undefined
-            pass
-        meta["prediction"]["against_measured"] = fit
-    out = TimeSeries(time=ts.time, voltage=ts.voltage, deflection=pred,
-                     rh=ts.rh if (rh_read or uses_rh) else None, meta=meta, source=str(args.out))
-    log(f"writing {args.out}")
-    path = write_timeseries(out, args.out, overwrite=args.overwrite, protect=(args.input,))
-    print(f"{line}; wrote {path}")
+    if fit.n:
+        res = fit.result()
+        line += f"; against the measured {output.name}: RMSE {quantity(res['rmse'], output.unit)}"
+        line += f", fit {res['fit_percent']:.1f} %" if "fit_percent" in res else ""
+    print(f"{line}; wrote {args.out} ({output.column})")
     return 0

@@ -12,9 +12,10 @@ from physics.fileio import atomic_path, write_json
 from physics.model import ActuatorModel
 from physics.plotting import plot_timeseries
 from physics.timedomain import FIELDS, simulate
-from physics.timeseries import read_timeseries, write_timeseries
+from physics.limits import FREQ_RANGE_HZ, FS_RANGE_HZ, MAX_DRIVE_V, MAX_SAMPLES, check_range
+from physics.timeseries import parse_column_map, read_timeseries, write_timeseries
 
-from ._common import add_model_options, add_output_options, check_out, provenance, writing
+from ._common import add_model_options, add_output_options, check_out, check_result, provenance, writing
 
 NAME = "simulate"
 HELP = "simulate tip deflection and current for a voltage signal; writes CSV + plots"
@@ -24,6 +25,8 @@ def add_arguments(p):
     add_model_options(p)
     p.add_argument("--signal", choices=sorted(signals.GENERATORS), default="sweep", help="excitation")
     p.add_argument("--input", default=None, help="read the voltage (and RH) from a time-series CSV instead")
+    p.add_argument("--columns", default=None, help="column map of an --input file in another layout, e.g. "
+                                                   "time=t:ms,voltage=u")
     p.add_argument("--duration-s", type=float, default=100.0, help="record length [s]")
     p.add_argument("--fs-Hz", type=float, default=1000.0, help="sampling rate [Hz]")
     p.add_argument("--amplitude-V", type=float, default=2.0, help="amplitude (sweep, tone, square) [V]")
@@ -47,6 +50,17 @@ def make_signal(args) -> signals.Signal:
         value = getattr(args, flag)
         if not np.isfinite(value) or value <= 0:
             raise InputError(f"--{flag.replace('_', '-')} {value!r}: must be a positive number")
+    lo, hi = FS_RANGE_HZ
+    check_range(args.fs_Hz, lo, hi, "--fs-Hz", "Hz")
+    for flag in ("f_start_Hz", "f_stop_Hz", "frequency_Hz"):
+        check_range(getattr(args, flag), *FREQ_RANGE_HZ, f"--{flag.replace('_', '-')}", "Hz")
+    for flag in ("amplitude_V", "rms_V"):
+        check_range(getattr(args, flag), 0.0, MAX_DRIVE_V, f"--{flag.replace('_', '-')}",
+                    "V; the drive of a strip is a few volts")
+    n = args.duration_s * args.fs_Hz
+    if not 16 <= n <= MAX_SAMPLES:
+        raise InputError(f"--duration-s {args.duration_s:g} × --fs-Hz {args.fs_Hz:g} = {n:.3g} samples; a record "
+                         f"needs 16 to {MAX_SAMPLES:.3g} (split a longer run)")
     if args.f_start_Hz >= args.f_stop_Hz:
         raise InputError(f"--f-start-Hz {args.f_start_Hz:g} must be below --f-stop-Hz {args.f_stop_Hz:g}")
     k = args.signal
@@ -70,7 +84,8 @@ def run(args) -> int:
     model = ActuatorModel(args.device, args.effects, n_modes=args.n_modes)
     fields = tuple(f.strip() for f in args.fields.split(",") if f.strip())
     if args.input:
-        ts = read_timeseries(args.input, rh=args.rh, require_deflection=False)
+        columns = parse_column_map(args.columns) if args.columns else None
+        ts = read_timeseries(args.input, rh=args.rh, require_deflection=False, columns=columns)
         t, v, rh = ts.time - ts.time[0], ts.voltage, ts.rh
         sig_meta = {"kind": "file", "path": str(args.input)}
         hold = args.hold or "cubic"
@@ -82,6 +97,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     res = simulate(model, None, t, v, rh=rh, fields=fields, hold=hold, progress=True)
     elapsed = time.perf_counter() - t0
+    check_result(res.deflection, model)
     ts = res.to_timeseries()
     ts.meta.update({"signal": sig_meta, "provenance": provenance()})
     with writing(args, inputs=[args.input] if args.input else []) as d:

@@ -5,7 +5,7 @@ import time
 from pathlib import Path
 
 from physics.errors import InputError
-from physics.fileio import atomic_path
+from physics.outputs import output_files, preflight_files
 
 from ._common import add_model_options, add_parallel_options, parallel_settings
 
@@ -25,7 +25,7 @@ def add_arguments(p):
     p.add_argument("--frequency-Hz", type=float, default=1.0, help="simulate: sine frequency")
     p.add_argument("--amplitude-V", type=float, default=1.0, help="simulate: sine amplitude (unless in the grid)")
     p.add_argument("--out", required=True, help="output table (.csv)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out table")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out table written by eap")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_parallel_options(p)
 
@@ -36,8 +36,7 @@ def run(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".csv":
         raise InputError(f"--out {out}: the sweep is written as a CSV table; give a path ending in .csv")
-    if out.exists() and not args.overwrite:
-        raise InputError(f"--out {out} already exists; choose another --out or pass --overwrite")
+    preflight_files([out], overwrite=args.overwrite)
     try:
         freqs = [float(x) for x in args.freqs_Hz.split(",") if x.strip()]
     except ValueError:
@@ -49,7 +48,7 @@ def run(args) -> int:
     table = run_sweep(args.device, args.effects, grid, kind=args.kind, rh=args.rh, freqs=freqs,
                       frequency=args.frequency_Hz, amplitude=args.amplitude_V, n_modes=args.n_modes,
                       settings=parallel_settings(args), progress=not args.quiet)
-    with atomic_path(out) as tmp:
+    with output_files([out], overwrite=args.overwrite) as (tmp,):
         table.to_csv(tmp, index=False, lineterminator="\n")
     print(f"sweep of {len(table)} points ({' × '.join(f'{k} {len(v)}' for k, v in grid.items())}) in "
           f"{time.perf_counter() - t0:.1f} s; wrote {out}")

@@ -1,9 +1,8 @@
 """``eap train-compare``: train FF / RBF / NARX / LSTM (/GRU) on a dataset and compare them."""
 from __future__ import annotations
 
-import yaml
-
 from physics.errors import InputError
+from physics.yamlio import loads_yaml
 
 from ._common import add_output_options, add_parallel_options, parallel_settings
 
@@ -52,7 +51,7 @@ def _value(text: str):
             return cast(text)
         except ValueError:
             pass
-    return yaml.safe_load(text)
+    return loads_yaml(text, f"--set value {text[:40]!r}", "value")
 
 
 def run(args) -> int:

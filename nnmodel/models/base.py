@@ -52,6 +52,8 @@ __all__ = ["NeuralModel", "NotFittedError", "PARTS", "SequenceCore"]
 PARTS = (TrainingConfig, InputFeatures, StructureSearch)
 #: Samples per piece of a free run (bounds the activations held at once on long records).
 SIM_CHUNK = 1 << 16
+#: Samples per piece whose input channels (memory filters) are computed at once in a free run.
+PIECE = 1 << 20
 
 
 class NotFittedError(InputError):
@@ -76,7 +78,7 @@ class NeuralModel:
     CARD_KEYS: tuple[str, ...] = ()
 
     _LEARNED = ("net_", "features_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
-                "training_summary_", "structure_search_", "init_report_", "linear_start_")
+                "training_summary_", "structure_search_", "init_report_", "reference_start_")
 
     # ------------------------------------------------------------------ hyper-parameters
     @classmethod
@@ -101,7 +103,8 @@ class NeuralModel:
     @classmethod
     def card_keys(cls) -> tuple[str, ...]:
         """Bundle-card entries besides the standard ones that :meth:`restore` reads."""
-        return ("rh_knots_pct", "memory_range_s", "linear_start", "structure_search") + tuple(cls.CARD_KEYS)
+        return ("rh_knots_pct", "memory_range_s", "linear_start", "structure_search",
+                "reference_start") + tuple(cls.CARD_KEYS)
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in self.param_names()}
@@ -226,15 +229,23 @@ class NeuralModel:
             self._release_channels()
             t0 = time.perf_counter()
             self._initialise(core, tr)
-            start = keep_if_better(core, va) if self.features_.linear is not None else None
+            reference = self._reference()
+            start = keep_if_better(core, va, reference) if reference else None
             history: list[dict] = []
             if self.max_epochs > 0:
                 history, self.training_summary_ = fit_core(core, tr, va, self.training)
             if start is not None:
-                self.linear_start_ = {"start": start, "end": keep_if_better(core, va)}
+                self.reference_start_ = {"reference": reference, "start": start,
+                                         "end": keep_if_better(core, va, reference)}
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history
             core.eval()
+
+    def _reference(self) -> str | None:
+        """What a residual core adds its correction to, which the model must never be worse
+        than on validation (:func:`keep_if_better`): ``"linear"`` with a linear start, else
+        None (the hybrid: ``"physics"``)."""
+        return "linear" if self.features_.linear is not None else None
 
     def _norm_record(self, r) -> Seq:
         U, R = self._channels(r.u, r.rh if "rh" in self.inputs_ else None, r.y)
@@ -270,14 +281,20 @@ class NeuralModel:
         measured output ``y``, held at the first samples (the steady state of the first input
         and output, so the memory filters start there whatever the record's start); without
         one, at rest (0 V, output 0, the first RH), the documented assumption of a free run."""
-        n = self.net_
+        up, rhp, yp, yn = self._pad(u, rh, y, pad)
+        un, rhn = self._channels(up, rhp, yp)
+        return un, rhn, yn
+
+    def _pad(self, u, rh, y, pad: int):
+        """(u, rh, y or None when unknown, normalised y) with ``pad`` samples in front, as
+        :meth:`_padded` says."""
         known = y is not None and y.size > 0
         up = np.concatenate([np.full(pad, u[0] if known else 0.0), u])
         rhp = None if rh is None else np.concatenate([np.full(pad, rh[0]), rh])
-        un, rhn = self._channels(up, rhp, np.concatenate([np.full(pad, y[0]), y]) if known else None)
-        yn = None if y is None else np.concatenate([np.full(pad, n.norm("y", float(y[0]) if known else 0.0)),
-                                                    n.norm("y", y)])
-        return un, rhn, yn
+        yp = np.concatenate([np.full(pad, y[0]), y]) if known else None
+        yn = None if y is None else np.concatenate([np.full(pad, self.net_.norm("y", float(y[0]) if known else 0.0)),
+                                                    self.net_.norm("y", y)])
+        return up, rhp, yp, yn
 
     @staticmethod
     def _t(x):
@@ -296,6 +313,10 @@ class NeuralModel:
         if m >= u.size:
             raise InputError(f"y_init has {m} samples but the input only {u.size}; y_init must be "
                              "shorter than the record it initialises")
+        if self.streams and u.size > PIECE:   # a long record: its channels one piece at a time
+            cuts = range(0, u.size, PIECE)
+            return np.concatenate(list(self.simulate_pieces(
+                ((u[a:a + PIECE], None if rh is None else rh[a:a + PIECE]) for a in cuts), y_init)))
         k = self.n_init_
         pad = max(0, k - m)
         un, rhn, yn = self._padded(u, rh, y_init if y_init is not None else np.zeros(0), pad)
@@ -316,6 +337,45 @@ class NeuralModel:
         if m:
             y_hat = np.concatenate([y_init, y_hat])
         return y_hat
+
+    @property
+    def streams(self) -> bool:
+        """True when :meth:`simulate_pieces` applies: the core continues from a state and the
+        channels are causal filters of the input (the hybrid's physics channel is not)."""
+        return type(self.net_.core).advance is not SequenceCore.advance and \
+            type(self)._channels is NeuralModel._channels
+
+    def simulate_pieces(self, pieces, y_init=None):
+        """Free run over a record given as consecutive pieces ``(u, rh)`` in physical units,
+        yielding the output of each piece: the values :meth:`simulate` gives on the whole
+        record (the memory filters and the core's state carry over), with one piece in
+        memory at a time.  ``y_init`` as in :meth:`simulate`, shorter than the first piece."""
+        if not self.streams:
+            raise InputError(f"{type(self).__name__} cannot simulate a record in pieces; use simulate()")
+        core, fm, k = self.net_.core, self.features_, self.n_init_
+        state = last = None
+        with torch.no_grad(), torch_threads(self.num_threads):
+            for u, rh in pieces:
+                u, rh, y0 = self._prepare(u, rh, y_init if state is None else None, "y_init")
+                head, s = np.zeros(0), 0
+                if state is None:
+                    m = 0 if y0 is None else y0.size
+                    if m >= u.size:
+                        raise InputError(f"y_init has {m} samples but the first piece only {u.size}; y_init must be "
+                                         "shorter than the piece it initialises")
+                    pad = max(0, k - m)
+                    u, rh, yp, yn = self._pad(u, rh, y0 if y0 is not None else np.zeros(0), pad)
+                    head, s = (y0 if m else head), pad + m
+                un, rhn, last = fm.channels_continued(u, rh, self.net_, last, yp if state is None else None)
+                if state is None:
+                    state = core.init_state(self._t(un[None, s - k:s]), self._t(yn[None, s - k:s]),
+                                            None if rhn is None else self._t(rhn[None, s - k:s]))
+                out = np.empty(un.shape[0] - s)
+                for a in range(s, un.shape[0], SIM_CHUNK):
+                    b = min(un.shape[0], a + SIM_CHUNK)
+                    o, state = core.advance(state, self._t(un[None, a:b]), None if rhn is None else self._t(rhn[None, a:b]))
+                    out[a - s:b - s] = o[0].double().numpy()
+                yield np.concatenate([head, self.net_.denorm("y", out)])
 
     def predict(self, u, rh=None, y=None, steps_ahead: int | None = None,
                 chunk: int = 4096) -> np.ndarray:
@@ -372,8 +432,8 @@ class NeuralModel:
         extra = {**self.features.card(self.features_), **self._card_extra()}
         if self.__dict__.get("structure_search_"):
             extra["structure_search"] = self.structure_search_
-        if self.__dict__.get("linear_start_") and "linear_start" in extra:
-            extra["linear_start"] = {**extra["linear_start"], "outcome": self.linear_start_}
+        if self.__dict__.get("reference_start_"):
+            extra["reference_start"] = self.reference_start_
         out = {"inputs": list(self.inputs_), "fs": self.fs_,
                "rh_range": None if self.rh_range_ is None else list(self.rh_range_),
                "n_init": self.n_init_, "fit_time_s": self.__dict__.get("fit_time_")}
@@ -411,24 +471,24 @@ class NeuralModel:
         return self
 
 
-def keep_if_better(core, val) -> dict:
-    """A network with a linear start starts and ends no worse than that linear model on
-    validation: when its correction (initialised by least squares, or trained) does not
-    lower the free-run error of ``val`` (normalised records), it is set to zero
-    (``core.zero_correction()``), leaving the linear model."""
+def keep_if_better(core, val, reference: str = "linear") -> dict:
+    """A residual core (a linear start, the hybrid's physics) starts and ends no worse than
+    its ``reference`` alone on validation: when its correction (initialised by least
+    squares, or trained) does not lower the free-run error of ``val`` (normalised
+    records), it is set to zero (``core.zero_correction()``), leaving the reference."""
     import copy
 
     from ..batches import free_run_error
     if not val:
         return {"kept": "network", "reason": "no validation data"}
     e_net = free_run_error(core, val)
-    lin = copy.deepcopy(core)
-    lin.zero_correction()
-    e_lin = free_run_error(lin, val)
-    kept = "network" if e_net < e_lin else "linear"
-    if kept == "linear":
-        core.load_state_dict(lin.state_dict())
-    return {"kept": kept, "validation_nrmse_network": e_net, "validation_nrmse_linear": e_lin}
+    ref = copy.deepcopy(core)
+    ref.zero_correction()
+    e_ref = free_run_error(ref, val)
+    kept = "network" if e_net < e_ref else reference
+    if kept == reference:
+        core.load_state_dict(ref.state_dict())
+    return {"kept": kept, "validation_nrmse_network": e_net, "validation_nrmse_reference": e_ref}
 
 
 def _missing(name: str):

@@ -60,15 +60,17 @@ def memory_taus(n: int, min_s: float, max_s: float) -> np.ndarray:
     return np.logspace(math.log10(min_s), math.log10(max_s), int(n))
 
 
-def memory_filters(u: np.ndarray, taus: np.ndarray, fs: float) -> np.ndarray:
+def memory_filters(u: np.ndarray, taus: np.ndarray, fs: float, last: np.ndarray | None = None) -> np.ndarray:
     """Low-pass filter bank of ``u`` (one column per time constant ``taus`` in s) at the
     sampling rate ``fs`` (Hz); shape (len(u), len(taus)), each filter in equilibrium with
-    ``u[0]`` before the first sample."""
+    ``u[0]`` before the first sample, or continuing from its output ``last[j]`` at the sample
+    before (a record filtered in pieces gives the values of the whole)."""
     u = np.asarray(u, dtype=float)
     out = np.empty((u.size, len(taus)))
     for j, tau in enumerate(taus):
         a = math.exp(-1.0 / (fs * float(tau)))
-        out[:, j], _ = signal.lfilter([1.0 - a], [1.0, -a], u, zi=np.array([a * u[0]]))
+        start = u[0] if last is None else last[j]
+        out[:, j], _ = signal.lfilter([1.0 - a], [1.0, -a], u, zi=np.array([a * start]))
     return out
 
 
@@ -282,13 +284,16 @@ class FeatureMap:
         """Hat channels that schedule a linear path on RH."""
         return len(self.knots) if self.use_rh else 0
 
-    def memory_raw(self, u: np.ndarray, net) -> np.ndarray:
+    def memory_raw(self, u: np.ndarray, net, last: np.ndarray | None = None) -> np.ndarray:
         """Memory filters of the normalised voltage (and of |V| / std(V) with
-        ``memory_abs``) for a voltage record ``u`` in V, unscaled."""
-        m = memory_filters(net.norm("u", u), self.taus, self.fs)
+        ``memory_abs``) for a voltage record ``u`` in V, unscaled; ``last``: their values at
+        the sample before ``u`` (a record in pieces), else at rest with ``u[0]``."""
+        n = self.n_filters
+        m = memory_filters(net.norm("u", u), self.taus, self.fs, None if last is None else last[:n])
         if self.memory_abs:
             _, sd = net.stat("u")
-            m = np.concatenate([m, memory_filters(np.abs(u) / sd, self.taus, self.fs)], 1)
+            m = np.concatenate([m, memory_filters(np.abs(u) / sd, self.taus, self.fs,
+                                                  None if last is None else last[n:])], 1)
         return m
 
     def memory(self, u: np.ndarray, net) -> np.ndarray:
@@ -314,23 +319,28 @@ class FeatureMap:
             parts.append(rh_hats(rh, self.knots))
         return np.concatenate(parts, 1) if len(parts) > 1 else parts[0]
 
-    def reference(self, u: np.ndarray, rh: np.ndarray | None, y: np.ndarray | None, net) -> np.ndarray:
-        """Free run of the linear start (normalised like the output), started from the
-        measured outputs ``y`` at the record's start when known, else from the steady state
-        of the first input."""
-        lin = self.linear
-        y0 = None if y is None or len(y) == 0 else np.asarray(y, float)[:lin.n_init]
-        return net.norm("y", lin.simulate(u, rh if lin.uses_rh else None, y_init=y0))
-
     def channels(self, u: np.ndarray, rh: np.ndarray | None, net,
                  y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """(``u`` channels (n, 1 + n_ref + n_mem), ``rh`` channels (n, n_rh) or None) of a
         record; ``y``: measured outputs from the record's start (only the linear start uses
         them, to start its free run)."""
+        return self.channels_continued(u, rh, net, None, y)[:2]
+
+    def channels_continued(self, u: np.ndarray, rh: np.ndarray | None, net, last, y: np.ndarray | None = None):
+        """:meth:`channels` of a piece of a record whose filters ended in the state ``last``
+        (None: the first piece, started from ``y`` as :meth:`channels` says), and the state at
+        its last sample (for the next piece): the memory filters' values and the linear
+        start's free-run state."""
+        mem_last, lin_last = (None, None) if last is None else last
         cols = [net.norm("u", u)[:, None]]
         if self.linear is not None:
-            cols.append(self.reference(u, rh, y, net)[:, None])
+            lin = self.linear
+            y0 = None if y is None or len(y) == 0 else np.asarray(y, float)[:lin.n_init]
+            ref, lin_last = lin.free_run(u, rh if lin.uses_rh else None, y_init=y0, state=lin_last)
+            cols.append(net.norm("y", ref)[:, None])
+        raw = None
         if self.n_mem:
-            cols.append(self.memory(u, net))
+            raw = self.memory_raw(u, net, mem_last)
+            cols.append(raw / net.mem_std.numpy() if hasattr(net, "mem_std") else raw)
         U = np.concatenate(cols, 1) if len(cols) > 1 else cols[0]
-        return U, self.rh_channels(rh, net)
+        return U, self.rh_channels(rh, net), (None if raw is None else raw[-1].copy(), lin_last)

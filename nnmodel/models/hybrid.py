@@ -21,6 +21,10 @@ correction ``f`` is the ``ff`` / ``narx`` map (linear bypass, least-squares init
 plus an MLP) on the *residual* y - y_phys.  With ``na = 0`` the correction is a static map
 of delayed inputs and physics outputs (one-step training is then free-run training); with
 ``na > 0`` it feeds back its own outputs and ``horizon > 1`` trains it in closed loop.
+A grey box is never worse than its physics prior on validation: the correction (its
+least-squares start, then the trained one) is kept only when it lowers the free-run
+validation error below the physics alone, else set to zero
+(:func:`~nnmodel.models.base.keep_if_better`; the card's ``reference_start`` says which).
 
 The physics is part of the model: a bundle's card stores the device document (the
 parsed YAML of the device file), the effect list and every parameter value, and loading
@@ -82,6 +86,14 @@ class HybridCore(LagSimulator):
         self.gain = None
         if gain_hidden:
             self.gain = nn.Sequential(nn.Linear(self.n_x, gain_hidden), nn.Tanh(), nn.Linear(gain_hidden, 1))
+            with torch.no_grad():
+                self.gain[-1].weight.zero_()
+                self.gain[-1].bias.zero_()
+
+    def zero_correction(self) -> None:
+        """Reduce the core to the physics alone (map and gain head at zero)."""
+        super().zero_correction()
+        if self.gain is not None:
             with torch.no_grad():
                 self.gain[-1].weight.zero_()
                 self.gain[-1].bias.zero_()
@@ -211,6 +223,9 @@ class HybridModel(NeuralModel):
     def _initialise(self, core, train):
         if self.arx_init:
             self.init_report_ = arx_init(core, train)
+
+    def _reference(self):
+        return "physics"
 
     def fit(self, train, val=None):
         if self.linear_start:

@@ -161,8 +161,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     i0 = int(math.ceil(skip_s * ts.fs))
     if ts.n - i0 < 3:
         raise InputError(f"{where}: skip_s={skip_s:g} s leaves fewer than 3 samples")
-    e_raw = y - yhat
-    c = float(np.mean(e_raw[i0:])) if offset == "mean" else 0.0
+    c = float(np.mean(y[i0:]) - np.mean(yhat[i0:])) if offset == "mean" else 0.0   # no residual copy
     y_al = y - c
     tm = metrics.summary(y_al[i0:], yhat[i0:])
     tm["offset_removed_m"] = c

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..errors import InputError, arg
 from ..frfdata import FRFData, read_frf
-from ..timeseries import TimeSeries, csv_header, read_timeseries
+from ..csvtable import csv_header
+from ..timeseries import TimeSeries, read_timeseries
 
 
 def is_frf_file(path) -> bool:
@@ -21,11 +22,12 @@ def is_frf_file(path) -> bool:
 
 
 def load_measurements(items: Iterable, *, rh: float | None = None, columns: dict | None = None,
-                      fs: float | None = None, resample: bool = False) -> list[TimeSeries | FRFData]:
+                      fs: float | None = None, resample: bool = False, output=None,
+                      gain: str | None = None) -> list[TimeSeries | FRFData]:
     """Measurements from paths (time-series ``.csv``/``.mat`` or FRF ``.csv``, told apart by
     the ``freq_Hz`` column) or ready :class:`TimeSeries`/:class:`FRFData` objects.
 
-    ``rh`` [%] for records without RH; ``columns``/``fs`` as in
+    ``rh`` [%] for records without RH; ``columns``/``fs``/``output``/``gain`` as in
     :func:`physics.timeseries.read_timeseries` (time series only)."""
     out: list[TimeSeries | FRFData] = []
     for item in items:
@@ -40,7 +42,8 @@ def load_measurements(items: Iterable, *, rh: float | None = None, columns: dict
                 frf = replace(frf, rh=float(rh))
             out.append(frf)
         else:
-            out.append(read_timeseries(item, columns=columns, fs=fs, rh=rh, resample=resample))
+            out.append(read_timeseries(item, columns=columns, fs=fs, rh=rh, resample=resample, output=output,
+                                       gain=gain))
     if not out:
         raise InputError("no measurement given: pass at least one time-series or FRF file")
     return out

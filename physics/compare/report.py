@@ -6,34 +6,42 @@ from pathlib import Path
 
 import numpy as np
 
+from ..columns import reading_unit
+from ..record import DEFLECTION, OutputQuantity
 from .comparison import ComparisonResult, RecordComparison
 
+
+def _display(output: OutputQuantity) -> tuple[float, str, str]:
+    """(scale, unit, name) the output is plotted in: its reading unit (a tip deflection in µm)."""
+    unit, scale = reading_unit(output.unit)
+    return scale, unit, output.name
 
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(text).stem)[:60] or "record"
 
 
-def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float | None = None) -> None:
-    """Measured and model deflection [µm], the residual below, and a zoom on the last
-    ``zoom_s`` seconds (default: 2 s or a tenth of the record, the shorter)."""
+def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float | None = None,
+                      output: OutputQuantity = DEFLECTION) -> None:
+    """Measured and model output (a deflection in µm), the residual below, and a zoom on the
+    last ``zoom_s`` seconds (default: 2 s or a tenth of the record, the shorter)."""
     import matplotlib.pyplot as plt
     from ..plotting import envelope, legend_outside, save
-    k = 1e6
+    k, unit, name = _display(output)
     fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
     ax[0].plot(*envelope(r.time, k * r.measured), lw=0.7, label="measured")
     ax[0].plot(*envelope(r.time, k * r.predicted), lw=0.7, label="model")
-    ax[0].set_ylabel("deflection [µm]")
+    ax[0].set_ylabel(f"{name} [{unit}]")
     legend_outside(ax[0])
     ax[1].plot(*envelope(r.time, k * (r.measured - r.predicted)), lw=0.6, color="k")
-    ax[1].set_ylabel("residual [µm]")
+    ax[1].set_ylabel(f"residual [{unit}]")
     ax[1].sharex(ax[0])
     span = float(r.time[-1] - r.time[0])
     zoom = min(2.0, 0.1 * span) if zoom_s is None else float(zoom_s)
     z = r.time >= r.time[-1] - zoom
     ax[2].plot(*envelope(r.time[z], k * r.measured[z]), lw=0.9, label="measured")
     ax[2].plot(*envelope(r.time[z], k * r.predicted[z]), lw=0.9, ls="--", label="model")
-    ax[2].set_ylabel(f"last {zoom:.3g} s [µm]")
+    ax[2].set_ylabel(f"last {zoom:.3g} s [{unit}]")
     ax[2].set_xlabel("time [s]")
     for a in ax:
         a.grid(alpha=0.3)
@@ -44,7 +52,7 @@ def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float 
     save(fig, path)
 
 
-def _plot_bode_record(r: RecordComparison, path):
+def _plot_bode_record(r: RecordComparison, path, output: OutputQuantity = DEFLECTION):
     from ..plotting import plot_bode_curves
     v = r.valid
     curves = {"measured (H1)" if r.kind == "timeseries" else "measured": (r.freq[v], r.H_meas[v], {"lw": 1.2})}
@@ -57,7 +65,8 @@ def _plot_bode_record(r: RecordComparison, path):
     bounds = (r.freq[v], r.mag_bounds[0][v], r.mag_bounds[1][v]) if r.mag_bounds is not None else None
     fe = r.summary["frf_metrics"]
     je = fe.get("j_err_m_per_V")
-    title = f"{Path(r.source).name}, RH {r.rh:.3g} %" + (f": J_err {1e3 * je:.3g} mm/V" if je is not None else "")
+    unit, k = reading_unit(f"{output.unit}/V")
+    title = f"{Path(r.source).name}, RH {r.rh:.3g} %" + (f": J_err {k * je:.3g} {unit}" if je is not None else "")
     plot_bode_curves(curves, path, coherence=coh, bounds=bounds, title=title)
 
 
@@ -113,9 +122,10 @@ def _plot_rh(res: ComparisonResult, path):
 
 
 def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict | None = None,
-                            title: str = "Model vs measurement") -> dict:
+                            title: str = "Model vs measurement", output: OutputQuantity = DEFLECTION) -> dict:
     """Write ``report.json``, ``metrics.csv``, ``bands.csv``, PNGs and the page ``index.html``
-    into ``out_dir`` (all atomically); returns the JSON dict."""
+    into ``out_dir`` (all atomically); returns the JSON dict.  ``output``: what the compared
+    output is (axis labels and units; default the tip deflection)."""
     from ..fileio import write_json
     from ..report import Report, format_value, header, jsonable, write_csv
     d = Path(out_dir)
@@ -125,10 +135,10 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
         slug = f"{k:02d}_{_slug(r.source)}"
         files = []
         if r.kind == "timeseries":
-            plot_time_overlay(r, d / f"time_{slug}.png")
+            plot_time_overlay(r, d / f"time_{slug}.png", output=output)
             files.append(f"time_{slug}.png")
         if r.valid is not None and r.valid.any():
-            _plot_bode_record(r, d / f"bode_{slug}.png")
+            _plot_bode_record(r, d / f"bode_{slug}.png", output)
             files.append(f"bode_{slug}.png")
         r.summary["plots"] = files
         plots[r.source] = files
@@ -140,6 +150,7 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
         extra.append("rh.png")
     out = jsonable(res.to_dict())
     out["plots"] = extra
+    out["output"] = output.to_dict()
     if provenance:
         out["provenance"] = provenance
     write_json(d / "report.json", out)
@@ -174,7 +185,10 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     rep.table([{k: v for k, v in row.items() if k != "source"} | {"record": Path(row["source"]).name}
                for row in rows], columns=["record", "kind", "rh_pct", "fit_percent", "nrmse", "rmse_m",
                                           "correlation", "j_err_m_per_V", "log_mag_rms_dB", "phase_rms_deg",
-                                          "frf_points"], caption="metrics per measurement",
+                                          "frf_points"],
+              caption="metrics per measurement" + ("" if output.is_deflection else
+                                                   f" (output {output.label()}: the columns named _m are in "
+                                                   f"{output.unit})"),
               missing="not defined for this kind of record (a frequency-response file has no time metrics)")
     if len(res.by_rh) >= 2:
         rep.heading("Error by relative humidity")

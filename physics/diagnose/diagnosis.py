@@ -163,6 +163,24 @@ class Data:
 
 
 @dataclass
+class Run:
+    """How this diagnosis runs: the shared options and its own settings, the resonance of the
+    base (for the reveal rules), where timings go, the progress callback."""
+
+    options: FitOptions
+    n_starts: int
+    force: bool = False
+    max_effects: int = 2
+    resonance: float | None = None
+    timings: dict = field(default_factory=dict)
+    progress: Callable[[str], None] | None = None
+
+    def log(self, msg: str) -> None:
+        if self.progress is not None:
+            self.progress(msg)
+
+
+@dataclass
 class DiagnosisResult:
     """Everything :func:`diagnose` found (see the module doc); JSON via :meth:`to_dict`."""
 
@@ -259,11 +277,6 @@ class DiagnosisResult:
 # ============================================================================ the phases
 
 
-def _log(cb, msg):
-    if cb is not None:
-        cb(msg)
-
-
 def read_records(measurements, options: FitOptions, *, noise_floor: float | None = None,
                  fs_max: float | None = None) -> Data:
     """Phase 1: the records (:func:`.records.prepare_records`) and the FRF targets of the fits."""
@@ -341,17 +354,16 @@ def fit_base(data: Data, dev: Device, base_ids, options: FitOptions, free_l, per
     return base
 
 
-def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, options: FitOptions, n_starts: int,
-                   force: bool, resonance, timings: dict, progress) -> list[CandidateResult]:
+def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, run: Run) -> list[CandidateResult]:
     """Phase 4: each candidate switched on in ``base``, fitted and scored (independent tasks,
     in this process or on workers: :func:`physics.parallel.map_tasks`)."""
     n_levels = len({t.level for t in data.targets})
     results: list[CandidateResult] = []
     tasks, slots = [], []
-    settings = options.settings
+    settings = run.options.settings
     for eff in cand_ids:
-        ok, why = revealable(eff, data.records, resonance)
-        if not ok and not force:
+        ok, why = revealable(eff, data.records, run.resonance)
+        if not ok and not run.force:
             results.append(CandidateResult(eff, "not_revealable", reason=f"the data cannot reveal {eff}: {why}",
                                            step=step))
             continue
@@ -367,8 +379,8 @@ def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, options: F
         slots.append(len(results))
         results.append(CandidateResult(eff, "pending", reason=why if ok else f"forced ({why})", step=step))
         tasks.append({"spec": spec, "device": base.device, "targets": data.targets, "trecs": data.target_records,
-                      "records": data.records, "n_starts": n_starts, "seed": options.seed,
-                      "n_modes": options.n_modes, "effect_files": user_effect_files(),
+                      "records": data.records, "n_starts": run.n_starts, "seed": run.options.seed,
+                      "n_modes": run.options.n_modes, "effect_files": user_effect_files(),
                       "df_cache": data.df_cache if settings is None or settings.serial else None})
     fitted = map_tasks(_fit_candidate, tasks, settings, desc="candidates", progress=False, cost=_candidate_cost)
     for k, (mf, wall) in zip(slots, fitted):
@@ -378,8 +390,8 @@ def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, options: F
                                          fit=mf, step=step)
             continue
         c.status, c.fit = "evaluated", mf
-        timings[f"step {step}: candidate {c.effect}" if step > 1 else f"candidate {c.effect}"] = wall
-        _log(progress, f"  {'+' * step}{c.effect:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({wall:.1f} s)")
+        run.timings[f"step {step}: candidate {c.effect}" if step > 1 else f"candidate {c.effect}"] = wall
+        run.log(f"  {'+' * step}{c.effect:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({wall:.1f} s)")
     return results
 
 
@@ -409,15 +421,14 @@ def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Data, f
     return taus_ref
 
 
-def select(data: Data, base: C.ModelFit, cand_ids, options: FitOptions, n_starts: int, force: bool, max_effects: int,
-           resonance, feats: dict, timings: dict, progress) -> list[Step]:
+def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> list[Step]:
     """Phase 5: forward selection (module doc).  Returns the steps (the first always)."""
     steps: list[Step] = []
     step_base, left, step_feats = base, list(cand_ids), feats
     while True:
         k = len(steps) + 1
         t0 = time.perf_counter()
-        results = try_candidates(k, step_base, left, data, options, n_starts, force, resonance, timings, progress)
+        results = try_candidates(k, step_base, left, data, run)
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
         decision = decide(step_base, ranked, data.noise, data.noise_d, taus, data.records, C.compare_fits,
@@ -425,9 +436,9 @@ def select(data: Data, base: C.ModelFit, cand_ids, options: FitOptions, n_starts
         for c in ranked:
             c.explanation = _explain(c, step_base)
         steps.append(Step(k, step_base, results, decision))
-        timings[f"step {k}"] = time.perf_counter() - t0
+        run.timings[f"step {k}"] = time.perf_counter() - t0
         pick = decision.pick
-        if pick is None or k >= max_effects:
+        if pick is None or k >= run.max_effects:
             break
         left = [e for e in left if e != pick.effect and e not in pick.fit.effects]
         ad = assess("", pick.fit, data.records, data.noise, describe=False)
@@ -436,8 +447,8 @@ def select(data: Data, base: C.ModelFit, cand_ids, options: FitOptions, n_starts
         step_base = pick.fit
         ra = analyse(f"+{pick.effect}", data.records, pick.fit.resid_d, pick.fit.pred_d,
                      resonance_hz=_resonance(pick.fit, data.band, data.records))
-        step_feats = features(ra, data.records, resonance)
-        _log(progress, f"step {k + 1}: the remaining candidates on top of {pick.effect}")
+        step_feats = features(ra, data.records, run.resonance)
+        run.log(f"step {k + 1}: the remaining candidates on top of {pick.effect}")
     return steps
 
 
@@ -478,8 +489,7 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
                    nuisance_summary(final, data.records))
 
 
-def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, options: FitOptions, n_starts: int,
-                  resonance, progress) -> list[SupportResult]:
+def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, run: Run) -> list[SupportResult]:
     """Phase 7: switch each effect of the final model off (but the double layer and the picks)
     and refit: does the data support it?"""
     out = []
@@ -487,7 +497,7 @@ def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, options
     for eff in [e for e in base_ids if e not in picked]:
         if eff not in switchable([eff]):
             continue
-        ok, why = revealable(eff, data.records, resonance)
+        ok, why = revealable(eff, data.records, run.resonance)
         if not ok:
             out.append(SupportResult(eff, "not_assessable",
                                      explanation=f"cannot be assessed: the data cannot reveal {eff} ({why})"))
@@ -500,8 +510,8 @@ def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, options
         if not spec.free and not spec.per_rh:
             out.append(SupportResult(eff, "failed", explanation="no free parameter left without it"))
             continue
-        mf = C.fit_model(spec, final.device, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
-                         n_modes=options.n_modes, df_cache=data.df_cache)
+        mf = C.fit_model(spec, final.device, data.targets, data.target_records, n_starts=run.n_starts,
+                         seed=run.options.seed, n_modes=run.options.n_modes, df_cache=data.df_cache)
         if mf.ok:
             C.score(mf, data.records)
         if not mf.ok:
@@ -519,7 +529,7 @@ def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, options
             txt = (f"not supported by these data: without {eff} the model fits as well ({1e6 * mf.rmse:.4g} vs "
                    f"{1e6 * final.rmse:.4g} µm RMS, ΔBIC {-cmp.delta_bic:+.4g} for removing it)")
         out.append(SupportResult(eff, "assessed", supported, -cmp.delta_bic, cmp.p_value, mf.rmse, txt))
-        _log(progress, f"  -{eff:22s} RMS {1e6 * mf.rmse:9.4g} µm  {'supported' if supported else 'not supported'}")
+        run.log(f"  -{eff:22s} RMS {1e6 * mf.rmse:9.4g} µm  {'supported' if supported else 'not supported'}")
     return out
 
 
@@ -570,61 +580,52 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     frequency that matters); ``progress``: a callback for one-line progress messages."""
     t_all = time.perf_counter()
     opts = FitOptions.merged(options, **({"free": free} if free not in (None, "") else {}), **shared)
-    n_starts = 4 if opts.n_starts is None else int(opts.n_starts)
-    if n_starts < 1:
+    run = Run(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects), progress=progress)
+    if run.n_starts < 1:
         raise InputError(f"{arg('n_starts')} must be at least 1")
-    if int(max_effects) < 1:
+    if run.max_effects < 1:
         raise InputError(f"{arg('max_effects')}={max_effects!r} must be at least 1")
     warm_up(opts.settings)   # the workers start beside the base fit and the residual analysis
-    timings: dict = {}
     dev = load_device(device)
     base_ids = resolve_effects(effects, dev)
     free_l, per_rh_l, cand_ids = _check_names(dev, base_ids, opts.free, opts.per_rh, candidates)
-
-    t0 = time.perf_counter()
-    data = read_records(measurements, opts, noise_floor=noise_floor, fs_max=fs_max)
-    timings["records"] = time.perf_counter() - t0
-    _log(progress, f"{len(data.records)} record(s), {sum(t.freq.size for t in data.targets)} FRF lines over "
-                   f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
-
-    t0 = time.perf_counter()
-    base = fit_base(data, dev, base_ids, opts, free_l, per_rh_l, n_starts)
-    timings["base"] = time.perf_counter() - t0
-    _log(progress, f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
+    data = _timed(run, "records", read_records, measurements, opts, noise_floor=noise_floor, fs_max=fs_max)
+    run.log(f"{len(data.records)} record(s), {sum(t.freq.size for t in data.targets)} FRF lines over "
+            f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
+    base = _timed(run, "base", fit_base, data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
+    run.log(f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
     add_wander(data, [base])
-    resonance = _resonance(base, data.band, data.records)
-
-    t0 = time.perf_counter()
-    ra_base = analyse("base", data.records, base.resid_d, base.pred_d, resonance_hz=resonance)
-    feats = features(ra_base, data.records, resonance)
-    timings["residual_analysis"] = time.perf_counter() - t0
-
-    steps = select(data, base, cand_ids, opts, n_starts, force, int(max_effects), resonance, feats, timings, progress)
-    add_wander(data, [base] + [s.decision.pick.fit for s in steps if s.decision.pick is not None])
-    verdict = build_verdict(data, base, steps, int(max_effects))
+    run.resonance = _resonance(base, data.band, data.records)
+    ra_base = _timed(run, "residual_analysis", analyse, "base", data.records, base.resid_d, base.pred_d,
+                     resonance_hz=run.resonance)
+    feats = features(ra_base, data.records, run.resonance)
+    steps = select(data, base, cand_ids, feats, run)
     picks = [s.decision.pick for s in steps if s.decision.pick is not None]
+    add_wander(data, [base] + [p.fit for p in picks])
+    verdict = build_verdict(data, base, steps, run.max_effects)
     final = picks[-1].fit if picks else base
-
-    support: list[SupportResult] = []
-    if check_support:
-        t0 = time.perf_counter()
-        support = assess_support(final, [p.effect for p in picks], data, opts, n_starts, resonance, progress)
-        timings["support"] = time.perf_counter() - t0
-
-    ra_after = None
+    support = _timed(run, "support", assess_support, final, [p.effect for p in picks], data, run) \
+        if check_support else []
     shown = picks[-1] if picks else (steps[0].ranking[0] if steps[0].ranking else None)
-    if shown is not None:
-        ra_after = analyse("+" + " +".join(p.effect for p in picks) if picks else f"+{shown.effect}", data.records,
-                           shown.fit.resid_d, shown.fit.pred_d, resonance_hz=_resonance(shown.fit, data.band,
-                                                                                        data.records))
-    timings["total"] = time.perf_counter() - t_all
+    ra_after = None if shown is None else analyse(
+        "+" + " +".join(p.effect for p in picks) if picks else f"+{shown.effect}", data.records, shown.fit.resid_d,
+        shown.fit.pred_d, resonance_hz=_resonance(shown.fit, data.band, data.records))
+    run.timings["total"] = time.perf_counter() - t_all
     settings = {"effects": list(base_ids), "free": base.spec.free, "per_rh": base.spec.per_rh,
-                "candidates": cand_ids, "force": force, "max_effects": int(max_effects), "n_starts": n_starts,
-                "options": opts.describe(), "noise_floor_given_m": noise_floor, "fs_max_Hz": fs_max}
-    settings["noise"] = {"white_m": data.white, "wander_m": data.wander, "floor_m": data.noise,
-                         "source": data.noise_source}
+                "candidates": cand_ids, "force": force, "max_effects": run.max_effects, "n_starts": run.n_starts,
+                "options": opts.describe(), "noise_floor_given_m": noise_floor, "fs_max_Hz": fs_max,
+                "noise": {"white_m": data.white, "wander_m": data.wander, "floor_m": data.noise,
+                          "source": data.noise_source}}
     return DiagnosisResult(dev, data.records, base, steps, support, verdict, ra_base, ra_after, feats, data.noise,
-                           resonance, settings, timings, list(base.warnings))
+                           run.resonance, settings, run.timings, list(base.warnings))
+
+
+def _timed(run: Run, label: str, fn, *args, **kw):
+    """``fn(*args, **kw)``, its wall time recorded in ``run.timings[label]``."""
+    t0 = time.perf_counter()
+    out = fn(*args, **kw)
+    run.timings[label] = time.perf_counter() - t0
+    return out
 
 
 def _candidate_cost(task: dict) -> float:
@@ -705,4 +706,4 @@ def _explain(c: CandidateResult, base: C.ModelFit) -> str:
 
 
 __all__ = ["diagnose", "DiagnosisResult", "CandidateResult", "SupportResult", "Step", "Data", "read_records",
-           "fit_base", "try_candidates", "compare_step", "select", "build_verdict", "assess_support", "MAX_EFFECTS"]
+           "fit_base", "try_candidates", "compare_step", "select", "build_verdict", "assess_support", "Run", "MAX_EFFECTS"]

@@ -229,21 +229,25 @@ def slow_wander(records: Sequence["Record"], resid_d: Sequence[np.ndarray], nuis
     remove) in a model's residuals, assuming a random-walk drift, from two independent
     signs of it, pooled by their degrees of freedom:
 
-    * the fitted drift rates b of the records (``nuisance``: (offset, drift) per record): a
-      random walk leaves, after its trend, WANDER_PER_TREND × (b·T)² on average (T the
-      record's duration; one degree of freedom per record);
+    * the fitted drift rates b of the broadband records (``nuisance``: (offset, drift) per
+      record): a random walk leaves, after its trend, WANDER_PER_TREND × (b·T)² on average (T
+      the record's duration; one degree of freedom per record);
     * the broadband records' residual below half their lowest excited frequency, where the
       input has no power (the white noise's share removed; two degrees of freedom per line),
       extrapolated with the share of a detrended random walk's variance those lines hold.
 
-    NaN when no record can show it."""
+    Only broadband records count: their input has no power at the lowest lines, so a linear
+    model's slow physics leaves nothing there, while a step record's creep or back-relaxation
+    would pass for drift.  NaN when no record can show it."""
     num = dof = 0.0
     for r, e, (_, b) in zip(records, resid_d, nuisance):
+        if r.kind != "broadband":      # a step's slow physics (creep, back-relaxation) would pass for drift
+            continue
         T = r.ts.duration
         num += WANDER_PER_TREND * (b * T) ** 2
         dof += 1.0
         n = e.size
-        k_max = int(math.floor(0.5 * r.band[0] * n / r.fs_d)) if r.kind == "broadband" else 0
+        k_max = int(math.floor(0.5 * r.band[0] * n / r.fs_d))
         if k_max < 1 or not math.isfinite(r.noise_floor_d):
             continue
         E = np.fft.rfft(e)[1:k_max + 1]

@@ -10,8 +10,10 @@ one of its parameters ends on a bound of its range; its relative standard error 
 50 %; it is correlated with another parameter beyond |ρ| = 0.99 (only a combination is
 determined); its expected residual signature is absent.  Each flag counts as very strong
 evidence against it (ΔBIC +10).  A candidate can be picked when it passes the criteria
-of :data:`CRITERIA` (very strong ΔBIC, Bonferroni p-value, ≥ 10 % lower error, a base
-above the noise); the pick is the one with the lowest E.  Its confidence is its weight,
+of :data:`CRITERIA` (very strong ΔBIC, Bonferroni p-value, at least a third of the
+failure explained — of the excess error power over the noise floor — and a base above the
+noise: a flexible effect that trims a little off an error it does not explain is no answer);
+the pick is the one with the lowest E.  Its confidence is its weight,
 labelled "high" at ≥ 0.99 (it clearly dominates the base and every other candidate),
 "medium" at ≥ 0.9, else "low" — whatever error remains, which is the second answer.  Two
 candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6 or
@@ -48,9 +50,11 @@ from .specs import effect_params, excitation
 QUALITY_BIC = 10.0
 #: Relative standard error and |correlation| beyond which a parameter is flagged.
 REL_SE_FLAG, CORR_FLAG = 0.5, 0.99
-#: Pick criteria (ΔBIC, p-value, error reduction, base above the noise).
-DELTA_BIC_MIN, ALPHA, MIN_IMPROVEMENT = 10.0, 0.01, 0.10
-CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "error_reduced_10pct", "base_above_noise")
+#: Pick criteria: very strong ΔBIC, a Bonferroni p-value, a share of the failure explained (the
+#: excess error power over the noise floor, rmse² − noise², that the candidate removes) and a
+#: base above the noise.
+DELTA_BIC_MIN, ALPHA, MIN_SHARE = 10.0, 0.01, 1.0 / 3.0
+CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "explains_a_third_of_the_excess", "base_above_noise")
 #: Two candidates closer than this in pairwise ΔBIC are close on fit.
 DISTINCT_BIC = 6.0
 STATUSES = ("explained", "partly explained", "found (adequacy not assessed)", "ambiguous",
@@ -140,7 +144,7 @@ def decide(base, ranked: Sequence, noise: float, noise_d: float, taus_ref, recor
         cmp = c.comparison
         c.passes = {"very_strong_bic": bool(cmp.delta_bic <= -DELTA_BIC_MIN),
                     "p_below_alpha_over_m": bool(math.isfinite(cmp.p_value) and cmp.p_value <= alpha),
-                    "error_reduced_10pct": bool(c.fit.rmse <= (1 - MIN_IMPROVEMENT) * base.rmse),
+                    "explains_a_third_of_the_excess": bool(excess_share(base.rmse, c.fit.rmse, noise) >= MIN_SHARE),
                     "base_above_noise": not within}
     ev = {c.effect: c.comparison.delta_bic + QUALITY_BIC * len(c.quality) for c in ranked}
     w = stats.bic_weights([0.0] + list(ev.values()))
@@ -174,6 +178,14 @@ def decide(base, ranked: Sequence, noise: float, noise_d: float, taus_ref, recor
                    f"{'is' if len(rivals) == 1 else 'are'} less credible (" +
                    "; ".join(f"{c.effect}: " + "; ".join(c.quality) for c in rivals) + ")")
     return Decision(top, weights, ev, reason=reason, alpha=alpha)
+
+
+def excess_share(before: float, after: float, noise: float) -> float:
+    """Share of the excess error power over the noise floor (rmse² − noise²) that going from
+    ``before`` to ``after`` [m RMS] removes (noise unknown: of the error power)."""
+    n2 = noise ** 2 if math.isfinite(noise) else 0.0
+    ex = before ** 2 - n2
+    return 1.0 - max(after ** 2 - n2, 0.0) / ex if ex > 0 else 0.0
 
 
 def _no_pick_reason(base, ranked, noise, within) -> str:
@@ -306,7 +318,7 @@ class Verdict:
                 head = "Which effect: " if k == 0 else "Then, on top of it: "
                 params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
                 out.append(f"{head}{p.effect} (confidence {p.label}, weight {_w(p.weight)}) — RMS error "
-                           f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {p.delta_bic:.4g}"
+                           f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {_signed(p.delta_bic)}"
                            + (f"; {params}" if params else "") + ".")
                 if p.quality:
                     out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
@@ -355,9 +367,13 @@ class Verdict:
                 "adequacy": self.adequacy.to_dict() if self.adequacy else None,
                 "remaining_kind": self.remaining_kind, "remaining": self.remaining, "chain_stopped": self.stopped,
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
-                "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA, "min_rmse_reduction": MIN_IMPROVEMENT,
+                "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA, "min_excess_share": MIN_SHARE,
                              "adequate_ratio": ADEQUATE_RATIO, "distinct_delta_bic": DISTINCT_BIC,
                              "quality_penalty_bic": QUALITY_BIC, "rel_se_flag": REL_SE_FLAG, "corr_flag": CORR_FLAG}}
+
+
+def _signed(x: float) -> str:
+    return f"{x:.4g}".replace("-", "−")
 
 
 def _w(w: float) -> str:
@@ -368,9 +384,22 @@ def _cap(s: str) -> str:
     return s[:1].upper() + s[1:] if s else s
 
 
+#: Units as a reader writes them.
+_READABLE = (("^2", "²"), ("^3", "³"), ("ohm", "Ω"), ("degC", "°C"), ("um", "µm"))
+
+
+def readable_unit(unit: str) -> str:
+    """``m^2/s`` → ``m²/s``, ``ohm`` → ``Ω`` (a dimensionless ``1`` → empty)."""
+    if unit == "1":
+        return ""
+    for a, b in _READABLE:
+        unit = unit.replace(a, b)
+    return unit
+
+
 def _fmt_param(name: str, v: dict) -> str:
     spec = all_param_specs().get(name.split("@")[0])
-    unit = spec.unit if spec and spec.unit != "1" else ""
+    unit = readable_unit(spec.unit) if spec else ""
     se = v.get("std_error")
     se_txt = f" ± {se:.2g}" if se is not None and math.isfinite(se) else ""
     return f"{name} = {v['value']:.4g}{se_txt}{(' ' + unit) if unit else ''}"

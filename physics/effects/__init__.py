@@ -90,6 +90,9 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
         spec.loader.exec_module(module)
     except InputError:
         raise
+    except SystemExit as exc:  # the file ended the program while being imported
+        raise InputError(f"{_PATH} {p}: importing it called sys.exit({exc.code!r}); an effect file must "
+                         "define effects, not run a program") from None
     except Exception as exc:  # a user's file: report what went wrong in it, one line
         raise InputError(f"{_PATH} {p}: importing it failed: {type(exc).__name__}: {exc}") from None
     classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, Effect)
@@ -103,8 +106,20 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
 
 
 def load_effects_file(path) -> list[str]:
-    """Register every user effect defined in ``path``; returns their ids."""
-    return [register(c).id for c in effect_classes_in_file(path)]
+    """Register every user effect defined in ``path`` after the fast checks of its contract
+    (:func:`check_effect`: declaration, builds, protocol, finite, stable, passive), refused
+    with the file and the failing check; returns their ids."""
+    import warnings
+
+    import numpy as np
+
+    classes = effect_classes_in_file(path)
+    for c in classes:
+        with np.errstate(all="ignore"), warnings.catch_warnings():   # the verdict says what failed
+            warnings.simplefilter("ignore", RuntimeWarning)
+            report = check_effect(c, fast=True)
+        report.raise_on_failure(f"{_PATH} {path}")
+    return [register(c).id for c in classes]
 
 
 def user_effect_files() -> list[str]:
