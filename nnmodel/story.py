@@ -2,20 +2,26 @@
 
 Devices and their physics → the dataset → the networks → the loop (records of an actuator
 with an effect the user's model lacks → where the model fails → the diagnosis → the model
-with the effect added → the error before and after).  Every section opens with one
-sentence computed from the results; figures are embedded (the page works offline, alone).
+with the effect added → the error before and after) → beyond the catalog (lab-like records
+with physics no catalog effect has → "not explained; here is what remains" → a drafted
+effect file → the diagnosis again with it → the error before and after).  Every section
+opens with one sentence computed from the results; figures are embedded (the page works
+offline, alone).
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
 
 from physics.plotting import plt, save
-from physics.report import Report, colour
+from physics.report import Report, colour, jsonable
 
 #: The loop's hidden effect and records (the demo of :mod:`physics.diagnose.demo`).
 LOOP_EFFECT, LOOP_DEVICE, LOOP_SEED, LOOP_DURATION_S = "solvent_diffusion", "ipmc_pt_eg", 0, 40.0
+#: The out-of-catalog loop: the physics in its lab-like records (:func:`physics.diagnose.demo.outside_catalog_case`).
+OUTSIDE_KIND, OUTSIDE_SEED, OUTSIDE_FS_HZ, OUTSIDE_DURATION_S = "creep", 0, 200.0, 60.0
 
 
 def loop_stage(d: Path) -> dict:
@@ -62,6 +68,105 @@ def _loop_figure(res, path: Path) -> None:
     save(fig, path)
 
 
+def outside_stage(d: Path) -> dict:
+    """The out-of-catalog loop (:func:`physics.diagnose.demo.outside_loop`): lab-like records
+    (``d/outside/records``, tip in mm, no excitation or sensor metadata) with physics no catalog
+    effect has → the diagnosis of the bare model → drafts of what remains (``d/outside/drafts``,
+    checked against the effect contract) → the diagnosis again with the kept drafts → the
+    figure ``d/outside.png``; returns the figures as a dict."""
+    from physics.diagnose.demo import outside_loop, outside_truth_text
+    t0 = time.perf_counter()
+    lp = outside_loop(OUTSIDE_KIND, OUTSIDE_SEED, d / "outside", device=LOOP_DEVICE, fs=OUTSIDE_FS_HZ,
+                      duration=OUTSIDE_DURATION_S)
+    before, after = lp.before, lp.after
+    _outside_figure(before, after, d / "outside.png")
+    drafted = [{"file": f"outside/drafts/{x.file_name}", "summary": x.summary, "seen": x.seen, "text": x.evidence["text"],
+                "contract": "; ".join(lp.checks[x.file_name]) or "passed",
+                "parameters": {p.name: {"value": p.default, "unit": p.unit} for p in x.params}} for x in lp.outcome.kept]
+    again = None
+    if after is not None:
+        again = {"verdict": after.verdict.to_dict(), "rmse_m": after.final.rmse,
+                 "ranking": [{"effect": c.effect, "rmse_um": 1e6 * c.fit.rmse, "delta_bic": c.comparison.delta_bic}
+                             for c in after.ranking[:4]]}
+    return jsonable({"kind": OUTSIDE_KIND, "truth": lp.truth, "truth_text": outside_truth_text(OUTSIDE_KIND, lp.truth),
+                     "device": LOOP_DEVICE, "true_error_m": lp.true_error, "runtime_s": time.perf_counter() - t0,
+                     "records": [f"outside/records/{f.name}" for f in lp.files],
+                     "before": {"verdict": before.verdict.to_dict(), "rmse_m": before.base.rmse,
+                                "noise_floor_m": before.noise_floor,
+                                "remaining": [x["text"] for x in before.adequacy.remaining()] if before.adequacy else []},
+                     "drafts": drafted, "not_kept": [f"{x.effect_id}: {why}" for x, why in lp.outcome.rejected],
+                     "after": again})
+
+
+def _outside_figure(before, after, path: Path) -> None:
+    """The pulse record (the last): measured vs the bare model and vs the model with the
+    diagnosis's picks once the drafts are passed back, and the residuals."""
+    r = before.records[-1]
+    t = np.arange(r.y_d.size) / r.fs_d
+    fig, ax = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    ax[0].plot(t, 1e6 * (r.y_d - r.y_d.mean()), color=colour("measurement"), lw=1.0, label="measurement")
+    curves = [("model (base)", before.base, colour("base"))]
+    picks = [c.effect for c in after.picks] if after is not None else []
+    if picks:
+        curves.append(("+ " + " + ".join(picks), after.final, colour(f"+{picks[0]}")))
+    for label, fit, c in curves:
+        p = fit.pred_d[-1]
+        ax[0].plot(t, 1e6 * (p - p.mean()), color=c, lw=0.9, label=label)
+        ax[1].plot(t, 1e6 * fit.resid_d[-1], color=c, lw=0.7, label=label)
+    ax[0].set_ylabel("deflection [µm]")
+    ax[1].set_ylabel("residual [µm]")
+    ax[1].set_xlabel("time [s]")
+    ax[0].legend(fontsize=8)
+    ax[1].legend(fontsize=8)
+    ax[0].set_title(f"{Path(str(r.source)).name}: measured vs the bare model and with the drafted effect")
+    save(fig, path)
+
+
+def _outside_section(rep: Report, d: Path, out: dict) -> None:
+    """The page's out-of-catalog loop (from :func:`outside_stage`)."""
+    b, a = out["before"], out["after"]
+    vb = b["verdict"]
+    nf = b["noise_floor_m"]
+    floor = f"the noise floor eap diagnose estimates from them: {1e6 * nf:.3g} µm" if nf is not None else \
+        "no noise floor could be estimated"
+    rep.heading("Beyond the catalog: physics no effect models")
+    rep.lead(f"Lab-like records of {out['device']} (tip in mm with 3 µm noise, an offset and a drift, no excitation "
+             f"or sensor metadata: {', '.join(Path(f).name for f in out['records'])}) with physics no catalog effect "
+             f"has — {out['truth_text']}. The bare model misses them by {1e6 * b['rmse_m']:.3g} µm RMS ({floor}; the "
+             f"true model's error is {1e6 * out['true_error_m']:.3g} µm).")
+    rep.heading("Not explained; what remains", level=3)
+    rep.lead(f"Verdict of eap diagnose ({vb['status']}):")
+    rep.bullets(vb["text"])
+    rep.heading("The drafted effect", level=3)
+    if not out["drafts"]:
+        rep.lead("No draft lowered the error: " + "; ".join(out["not_kept"]))
+    for x in out["drafts"]:
+        rep.lead(f"eap diagnose … --draft-effects wrote {x['file']}: {x['summary']}; {x['text']}. "
+                 f"Contract check: {x['contract']}.")
+        rep.table([{"parameter": f"{k} [{v['unit']}]", "value": v["value"]} for k, v in x["parameters"].items()],
+                  caption=f"{Path(x['file']).name}: its parameters, fitted with the model (the file's defaults), "
+                          "each in its row's unit")
+        rep.paragraph("What was seen: " + x["seen"], note=True)
+    if out["not_kept"]:
+        rep.bullets([f"not kept: {t}" for t in out["not_kept"]])
+    if a is not None:
+        va = a["verdict"]
+        rep.heading("Diagnosed again, with the draft", level=3)
+        rep.lead(f"Verdict ({va['status']}): "
+                 + (f"{va['missing_effect']}, confidence {va['confidence_label']}; " if va["missing_effect"] else "")
+                 + f"RMS error {1e6 * b['rmse_m']:.3g} → {1e6 * a['rmse_m']:.3g} µm (the true model: "
+                   f"{1e6 * out['true_error_m']:.3g} µm).")
+        rep.bullets(va["text"])
+        rep.table(a["ranking"], caption="candidates with the drafts passed back: RMS error after adding each [µm], "
+                                        "ΔBIC (negative: better)")
+    rep.paragraph("The same loop from the command line, in the output folder:", note=True)
+    rep.preformatted("\n".join(
+        [f"eap diagnose {' '.join(out['records'])} --effects none --draft-effects outside/drafts"]
+        + [f"eap diagnose {' '.join(out['records'])} --effects none --effects-path {x['file']}" for x in out["drafts"]]))
+    rep.image(d / "outside.png", "pulse record: measured vs model deflection [µm] (the bare model and with the "
+                                 "drafted effect), and the residuals [µm]")
+
+
 def _range_sentence(physics: dict) -> str:
     parts = []
     for dev, r in physics.items():
@@ -81,8 +186,16 @@ def story_line(report: dict) -> str:
     v = loop["verdict"]
     after = "" if loop["rmse_after_um"] is None else f" → {loop['rmse_after_um']:.3g} µm"
     named = v["missing_effect"] or f"no catalog effect ({v['status']})"
-    return (f"measurement-like records: base model {loop['rmse_before_um']:.3g} µm RMS → diagnosis: {named}"
+    line = (f"measurement-like records: base model {loop['rmse_before_um']:.3g} µm RMS → diagnosis: {named}"
             f"{after} (noise floor {1e6 * loop['noise_floor_m']:.3g} µm)")
+    out = report.get("outside")
+    if out:
+        drafted = ", ".join(Path(x["file"]).name for x in out["drafts"]) or "no draft kept"
+        after = f" → {1e6 * out['after']['rmse_m']:.3g} µm" if out["after"] else ""
+        line += (f"; beyond the catalog, lab-like records: {1e6 * out['before']['rmse_m']:.3g} µm "
+                 f"({out['before']['verdict']['status']}) → drafted {drafted}{after} (true model "
+                 f"{1e6 * out['true_error_m']:.3g} µm)")
+    return line
 
 
 def write_page(d: Path, report: dict, provenance: dict) -> Path:
@@ -145,6 +258,8 @@ def write_page(d: Path, report: dict, provenance: dict) -> Path:
         else:
             rep.lead(v.get("remaining") or "The error did not fall: see the diagnosis above.")
         rep.image(d / "loop.png", "measured vs model deflection [µm] before and after, and the residuals [µm]")
+    if report.get("outside"):
+        _outside_section(rep, d, report["outside"])
     rep.json_block(report, "report.json")
     return rep.write(d / "index.html")
 
@@ -168,4 +283,4 @@ def dataset_facts(ds_path: Path) -> dict:
             "heldout_rh": ds.meta["rh_levels"]["held_out"]}
 
 
-__all__ = ["loop_stage", "write_page", "story_line", "dataset_facts"]
+__all__ = ["loop_stage", "outside_stage", "write_page", "story_line", "dataset_facts"]

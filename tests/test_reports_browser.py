@@ -84,6 +84,11 @@ def test_run_page_tells_the_story(tmp_path):
     assert f"{loop['rmse_before_um']:.3g} µm" in text
     res = rep["physics"]["ipmc_pt_eg"]["resonance_Hz_by_rh"]
     assert f"{res['40']:.1f} Hz" in text
+    outside = rep["outside"]          # the out-of-catalog loop: what remains → a drafted effect → the error after
+    assert "Beyond the catalog: physics no effect models" in check["sections"]
+    assert outside["before"]["verdict"]["status"] in text and outside["drafts"], outside
+    assert all((out / x["file"]).is_file() and x["contract"] == "passed" for x in outside["drafts"])
+    assert f"{1e6 * outside['before']['rmse_m']:.3g} → {1e6 * outside['after']['rmse_m']:.3g} µm" in text
     assert "measurement-like" in text and "not in the training data" in text   # the odd number has its sentence
     assert page.with_name("index.screenshot.png").is_file()
     assert (out / "compare" / "index.html").is_file()

@@ -167,13 +167,16 @@ def test_near_twins_are_ambiguous_or_right():
     assert v.missing_effect == "viscoelastic" or set(v.ambiguous) == {"viscoelastic", "fractional_coupling"}, v
 
 
+@pytest.mark.slow
 def test_demo_missing_physics_runs_the_loop(tmp_path, capsys):
     from nnmodel.cli import main
     assert main(["demo", "missing-physics", "--out", str(tmp_path / "mp"), "--duration-s", "60"]) == 0
     out = capsys.readouterr().out
-    assert "loop: before not explained by the catalog" in out and "after adding creep: explained" in out
+    assert "loop: before not explained by the catalog" in out and "after adding drafted_slow_pole: explained" in out
     assert (tmp_path / "mp" / "before" / "index.html").is_file() and (tmp_path / "mp" / "after" / "index.html").is_file()
-    assert "creep" not in EFFECTS  # the demo leaves the registry as it found it
+    assert (tmp_path / "mp" / "drafts" / "drafted_slow_pole.py").is_file()
+    assert ".eap-tmp-" not in out                     # every path printed is a final one
+    assert "drafted_slow_pole" not in EFFECTS  # the demo leaves the registry as it found it
 
 
 def test_a_load_side_user_effect_works_in_both_solvers():

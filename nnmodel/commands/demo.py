@@ -1,12 +1,11 @@
 """``eap demo``: ``hidden-effect`` (a catalog effect hidden in synthetic measurements, then the
-diagnosis) and ``missing-physics`` (creep, outside the catalog: the diagnosis says so and
-describes it; the shipped example effect is added; the error falls)."""
+diagnosis) and ``missing-physics`` (physics outside the catalog: the diagnosis says so and
+describes what remains; it is drafted as an effect file; diagnosed again, the error falls)."""
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-from physics.diagnose.demo import hidden_effects, run_hidden_effect
+from physics.diagnose.demo import OUTSIDE, hidden_effects, run_hidden_effect
 from physics.errors import InputError
 
 from ._common import add_output_options, check_out, provenance, writing
@@ -16,22 +15,25 @@ NAME = "demo"
 HELP = ("demonstrations: `eap demo hidden-effect` hides a physical effect in synthetic measurements and diagnoses "
         "it; `eap demo missing-physics` shows the loop with an effect outside the catalog")
 SCENARIOS = ("hidden-effect", "missing-physics")
-#: The example effect file the missing-physics demo adds (the recipe for users).
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "effects" / "creep.py"
 
 
 def add_arguments(p):
     p.add_argument("scenario", choices=SCENARIOS, help="hidden-effect: measurements with an effect the model lacks; "
-                   "missing-physics: creep, outside the catalog, then the example effect added")
-    p.add_argument("--template", default=str(EXAMPLE), help="missing-physics: the effect file added in the second step")
+                   "missing-physics: physics outside the catalog, described, drafted as an effect, diagnosed again")
+    p.add_argument("--kind", default="creep", choices=OUTSIDE,
+                   help="missing-physics: the physics outside the catalog in the records")
     p.add_argument("--effect", default="random", help=f"the hidden effect: {', '.join(hidden_effects())}, none, or random")
     p.add_argument("--seed", type=int, default=0, help="seed of the random parameters, noise and choice")
     p.add_argument("--device", default="ipmc_pt_eg", help="device the measurements are simulated from")
     p.add_argument("--design", choices=["auto", "rich"], default="auto",
                    help="auto: the excitation that exposes the hidden effect; rich: sweeps at 3 RH levels and "
                         "2 amplitudes plus a square pulse, so every candidate is evaluated")
+    p.add_argument("--records", choices=["lab", "simulator"], default="lab",
+                   help="missing-physics: the records as a lab exports them (tip in mm with 3 µm noise, an offset "
+                        "and a drift, no excitation or sensor metadata) or as the simulator writes them")
     p.add_argument("--duration-s", type=float, default=60.0, help="length of each record [s]")
-    p.add_argument("--fs-Hz", type=float, default=500.0, help="sampling rate of the records [Hz]")
+    p.add_argument("--fs-Hz", type=float, default=None,
+                   help="sampling rate of the records [Hz] (default: 500; missing-physics 200)")
     add_output_options(p, "runs/demo_hidden_effect", "folder for the diagnosis report")
 
 
@@ -45,12 +47,12 @@ def run(args) -> int:
     check_out(args)
     with writing(args) as tmp:
         case, res = run_hidden_effect(eff, args.seed, out=tmp, device=args.device, design=args.design,
-                                      fs=args.fs_Hz, duration=args.duration_s, progress=log)
+                                      fs=args.fs_Hz or 500.0, duration=args.duration_s, progress=log)
     hidden = case.hidden
     tp = ", ".join(f"{k}={v:.4g}" for k, v in case.truth_params.items())
     print(f"hidden effect: {hidden or 'none'} (seed {args.seed}); truth parameters: {tp}")
     print(f"user's model: {case.device} [{', '.join(case.base_effects)}]; records: "
-          f"{', '.join(m.source for m in case.measurements)} ({args.duration_s:g} s at {args.fs_Hz:g} Hz, "
+          f"{', '.join(m.source for m in case.measurements)} ({args.duration_s:g} s at {args.fs_Hz or 500.0:g} Hz, "
           f"sensor noise floor {1e6 * case.noise_floor:.3g} µm)")
     print_summary(res)
     found = res.verdict.missing_effect
@@ -63,34 +65,48 @@ def run(args) -> int:
 
 
 def _missing_physics(args) -> int:
-    """Creep records → diagnosis (not explained, described) → + the example effect → diagnosis."""
-    from physics.diagnose.demo import outside_catalog_case
-    from physics.diagnose.diagnosis import diagnose
+    """Records with physics outside the catalog → diagnosis (not explained; what remains) →
+    drafted effect files → diagnosis with the drafts → the error before and after
+    (:func:`physics.diagnose.demo.outside_loop`)."""
+    from physics.diagnose.demo import outside_loop, outside_truth_text
     from physics.diagnose.report import write_diagnosis
-    from physics.effects import effect_classes_in_file, register, unregister
     check_out(args)
-    ms, tp = outside_catalog_case("creep", args.seed, device=args.device, fs=args.fs_Hz, duration=args.duration_s)
-    print(f"truth (outside the catalog): tip load × (1 + r/(1+sτ)), r = {tp['creep_r']:.3g}, "
-          f"τ = {tp['creep_tau_s']:.3g} s; user's model: {args.device} with effects 'none' (the bare double layer)")
-    before = diagnose(ms, args.device, "none")
-    print("\n1. the catalog alone:")
-    print_summary(before)
-    classes = effect_classes_in_file(args.template)
-    ids = [register(c).id for c in classes]
-    try:
-        after = diagnose(ms, args.device, "none")
-    finally:
-        for i in ids:
-            unregister(i)
-    print(f"\n2. with {args.template} added (--effects-path):")
-    print_summary(after)
+    lab = args.records == "lab"
     with writing(args) as tmp:
-        write_diagnosis(before, tmp / "before", provenance={**provenance(), "truth": tp})
-        write_diagnosis(after, tmp / "after", provenance={**provenance(), "truth": tp})
-    w = after.winner
-    print(f"\nloop: before {before.verdict.status} (RMS {1e6 * before.base.rmse:.3g} µm); after adding "
-          f"{', '.join(ids)}: {after.verdict.status}" + (f", RMS {1e6 * w.fit.rmse:.3g} µm "
-                                                          f"({w.fit.rmse / after.noise_floor:.2f}× the noise floor)"
-                                                          if w else ""))
-    print(f"reports: {args.out}/before/index.html, {args.out}/after/index.html")
+        lp = outside_loop(args.kind, args.seed, tmp, device=args.device, fs=args.fs_Hz or 200.0,
+                          duration=args.duration_s, lab=lab)
+        print(f"truth (outside the catalog): {outside_truth_text(args.kind, lp.truth)}; records: "
+              f"{', '.join(f'{args.out}/records/{f.name}' for f in lp.files)}"
+              + (" (as a lab exports them: tip in mm, no excitation or sensor metadata)" if lab else "")
+              + f"; user's model: {args.device} with effects 'none' (the bare double layer)")
+        print("\n1. the catalog alone:")
+        _final_summary(lp.before)
+        print("\n2. what remains, drafted as effect files:")
+        for line in lp.outcome.lines():
+            print(f"draft: {line}")
+        for name, problems in lp.checks.items():
+            print(f"draft: {args.out}/drafts/{name}: contract check " + ("; ".join(problems) or "passed"))
+        write_diagnosis(lp.before, tmp / "before", provenance={**provenance(), "truth": lp.truth})
+        if lp.after is not None:
+            print(f"\n3. the diagnosis again, with {', '.join(d.file_name for d in lp.outcome.kept)} (--effects-path):")
+            _final_summary(lp.after)
+            write_diagnosis(lp.after, tmp / "after", provenance={**provenance(), "truth": lp.truth})
+    before, after = lp.before, lp.after or lp.before
+    final = after.final.rmse
+    kept = ", ".join(d.effect_id for d in lp.outcome.kept)
+    print(f"\nloop: before {before.verdict.status} (RMS {1e6 * before.base.rmse:.3g} µm); "
+          + (f"after adding {kept}: {after.verdict.status}, " if kept else "no draft kept: ")
+          + f"RMS {1e6 * final:.3g} µm (the true model: {1e6 * lp.true_error:.3g} µm)")
+    print(f"records: {args.out}/records/; drafts: {args.out}/drafts/; reports: {args.out}/before/index.html"
+          + (f", {args.out}/after/index.html" if lp.after is not None else ""))
     return 0
+
+
+def _final_summary(res) -> None:
+    """:func:`print_summary` with the paths of records inside the output being written shown
+    as their final paths."""
+    import io
+    from physics.outputs import final_text
+    buf = io.StringIO()
+    print_summary(res, file=buf)
+    print(final_text(buf.getvalue()), end="")

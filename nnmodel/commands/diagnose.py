@@ -51,6 +51,9 @@ def add_arguments(p):
     add_parallel_options(p)
     p.add_argument("--apply", action="store_true", help="write the extended device file NAME.yaml into --out")
     p.add_argument("--name", default=None, help="name of the extended device (default: DEVICE_EFFECT)")
+    p.add_argument("--draft-effects", default=None, metavar="DIR",
+                   help="when the model is not adequate, write what remains as effect files into the new folder DIR "
+                        "(fitted with the model first; pass one back with --effects-path)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -96,6 +99,9 @@ def run(args) -> int:
         raise InputError(f"--max-effects {args.max_effects}: must be at least 1")
     protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
     check_out(args, protect)
+    if args.draft_effects is not None:
+        from physics.outputs import preflight
+        preflight(args.draft_effects, inputs=protect, overwrite=args.overwrite, flag="--draft-effects")
     ms = read_measurements(args)
     log = None if args.quiet else (lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True))
     opts = fit_options(args, free=args.free or None, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
@@ -114,4 +120,26 @@ def run(args) -> int:
         print(f"applied: {ap['path']} (use it: {ap['usage']})" if ap.get("written") else f"applied: {ap['reason']}")
     print(f"wrote {d}/diagnosis.json, {d}/index.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
           f"in {res.timings['total']:.1f} s")
+    if args.draft_effects is not None:
+        _write_draft_effects(res, args.draft_effects, lambda dev, eff, free, cands: diagnose(
+            ms, dev, eff, free, options=opts, candidates=cands, force=True, check_support=False, max_effects=1,
+            noise_floor=res.noise_floor, fs_max=args.fs_max_Hz), overwrite=args.overwrite, inputs=protect)
     return 0
+
+
+def _write_draft_effects(res, out, rediagnose, *, overwrite=False, inputs=()):
+    """Draft what remains after ``res`` (:func:`physics.diagnose.draft.draft_effects`), print
+    the outcome and write the kept drafts into the new folder ``out``; returns the outcome."""
+    from physics.diagnose.draft import draft_effects, write_drafts
+    outcome = draft_effects(res, rediagnose)
+    for line in outcome.lines():
+        print(f"draft: {line}")
+    if not outcome.kept:
+        print(f"draft: nothing written to {out} (" + ("the model is adequate" if not outcome.rejected
+                                                       else "no draft lowers the error") + ")")
+        return outcome
+    checks = write_drafts(outcome.kept, out, overwrite=overwrite, inputs=inputs)
+    for name, problems in checks.items():
+        print(f"draft: {Path(out) / name}: contract check " + ("passed" if not problems else "FAILED: " + "; ".join(problems)))
+    print(f"draft: try it with --effects-path {Path(out) / outcome.kept[0].file_name}")
+    return outcome

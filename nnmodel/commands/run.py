@@ -94,7 +94,7 @@ def run(args) -> int:
 
 def _write_report(d: Path, args, t0: float) -> dict:
     from nnmodel.explain import notes
-    from nnmodel.story import DIAGNOSIS_ANCHOR, dataset_facts, loop_stage, write_page
+    from nnmodel.story import DIAGNOSIS_ANCHOR, dataset_facts, loop_stage, outside_stage, write_page
     from nnmodel.traincompare import table_rows
     report = {"physics": _physics_stage(d)}
     if not args.physics_only:
@@ -104,6 +104,7 @@ def _write_report(d: Path, args, t0: float) -> dict:
                                  "dataset": dataset_facts(d / "dataset"),
                                  "notes": notes(summary, diagnosis=DIAGNOSIS_ANCHOR)})
     report["loop"] = loop_stage(d)
+    report["outside"] = outside_stage(d)
     report["runtime_s"] = time.perf_counter() - t0
     report["provenance"] = provenance()
     write_json(d / "report.json", report)

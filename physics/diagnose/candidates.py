@@ -269,10 +269,14 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     try:
         kw = dict(start={k: v for k, v in spec.start.items() if k in spec.free},
                   bounds={k: v for k, v in spec.bounds.items() if k in spec.free}, n_modes=n_modes)
+        time_only = time_only_params(spec, device)
         if any(spec_of(e).get("describing_function") for e in spec.effects):
             problem, df_info = _df_problem(spec, device, targets, target_records, kw, df_cache)
         else:
-            problem, df_info = IdentificationProblem(device, spec.effects, targets, spec.free, spec.per_rh, **kw), None
+            frf_free = [n for n in spec.free if n not in time_only]
+            kw = {**kw, "start": {k: v for k, v in kw["start"].items() if k in frf_free},
+                  "bounds": {k: v for k, v in kw["bounds"].items() if k in frf_free}}
+            problem, df_info = IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **kw), None
         extra = []
         for e in spec.extra_starts:
             th = problem.theta0.copy()
@@ -294,9 +298,20 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     mf = ModelFit(spec, res, res.device, ActuatorModel(res.device, spec.effects, n_modes=n_modes),
                   values=dict(zip(labels, fit.theta.tolist())), std_errors=dict(zip(labels, fit.std_error.tolist())),
                   rel_std_errors=dict(zip(labels, fit.rel_std_error.tolist())), warnings=list(fit.warnings),
-                  k=len(labels), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0, df_info=df_info,
-                  correlation=np.array(fit.correlation, dtype=float))
+                  k=len(labels) + len(time_only), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0,
+                  df_info=df_info, correlation=np.array(fit.correlation, dtype=float))
+    for n in time_only:     # set on the time records (_refine_output_effects)
+        mf.values[n] = float(res.device.params.get(n, declared_default(n)))
     return mf
+
+
+def time_only_params(spec: ModelSpec, device: Device) -> list[str]:
+    """Free parameters of output effects that do not change the frequency response (e.g. an
+    additive drift, :func:`physics.contract.time_only_params`): fitted on the time
+    records only, never on the FRF targets."""
+    from ..contract import time_only_params as blind
+    p = {n: float(device.params.get(n, declared_default(n) or 0.0)) for n in spec.free}
+    return blind(ActuatorModel(device, spec.effects), spec.free, {**device.params, **p})
 
 
 def _df_problem(spec, device, targets, target_records, kw, df_cache):
@@ -468,17 +483,17 @@ def _time_uncertainty(mf: ModelFit, names: list[str], sol, resid, lo, hi) -> Non
     stale = [n_ for n_ in names]
     mf.warnings = [w for w in mf.warnings if not any(w.startswith(n_ + " ") for n_ in stale)]
     for a, name in enumerate(names):
-        i = idx[name]
         v = float(sol.x[a])
-        fit.theta[i] = v
-        mf.values[labels[i]] = v
-        mf.std_errors[labels[i]] = float(se[a])
         rel = float(se[a] / abs(v)) if v != 0 else math.inf
-        mf.rel_std_errors[labels[i]] = rel
-        fit.std_error[i], fit.rel_std_error[i] = se[a], rel
-        corr[i, :] = np.nan
-        corr[:, i] = np.nan
-        corr[i, i] = 1.0
+        i = idx.get(name)       # None: a parameter the FRF cannot see, fitted on the time records only
+        label = name if i is None else labels[i]
+        mf.values[label], mf.std_errors[label], mf.rel_std_errors[label] = v, float(se[a]), rel
+        if i is not None:
+            fit.theta[i] = v
+            fit.std_error[i], fit.rel_std_error[i] = se[a], rel
+            corr[i, :] = np.nan
+            corr[:, i] = np.nan
+            corr[i, i] = 1.0
         if not math.isfinite(rel) or rel > REL_SE_LIMIT:
             mf.warnings.append(f"{name} is not identifiable from these data: relative standard error "
                                f"{'∞' if not math.isfinite(rel) else f'{100 * rel:.3g} %'} (> {100 * REL_SE_LIMIT:g} %)")
@@ -488,7 +503,7 @@ def _time_uncertainty(mf: ModelFit, names: list[str], sol, resid, lo, hi) -> Non
                                "bounds or fix it; its interval is not meaningful")
     for a, na in enumerate(names):
         for b, nb in enumerate(names):
-            if a != b and se[a] > 0 and se[b] > 0:
+            if a != b and se[a] > 0 and se[b] > 0 and na in idx and nb in idx:
                 corr[idx[na], idx[nb]] = cov[a, b] / (se[a] * se[b])
     mf.correlation = corr
 

@@ -166,20 +166,44 @@ def run_hidden_effect(effect: str | None = None, seed: int = 0, *, out=None, dev
     return case, res
 
 
+def outside_truth_text(kind: str, tp: dict) -> str:
+    """The truth of an :func:`outside_catalog_case` in words, with its parameters and units."""
+    if kind == "creep":
+        return f"a creeping tip: load × (1 + r/(1 + sτ)), r = {tp['creep_r']:.3g}, τ = {tp['creep_tau_s']:.3g} s"
+    if kind == "backlash":
+        return f"a play (backlash) of width {1e6 * tp['play_width_m']:.3g} µm on the output"
+    if kind == "lowpass":
+        return f"a first-order low-pass on the output (a slow sensor), cut-off {tp['cutoff_Hz']:.3g} Hz"
+    if kind == "drift":
+        return (f"an additive drift {1e6 * tp['drift_m']:+.3g} µm × (1 − e^(−t/τ)) from each record's start, "
+                f"τ = {tp['drift_tau_s']:.3g} s")
+    return (f"a viscoelastic polymer with another law than the DMA table: storage "
+            f"+{100 * tp['storage_rise_per_decade']:.3g} % per decade, loss tangent {tp['tan_delta']:.3g}")
+
+
 #: Truths outside the catalog (:func:`outside_catalog_case`), each with its randomised parameters.
-OUTSIDE = ("creep", "backlash", "twin")
+OUTSIDE = ("creep", "backlash", "twin", "lowpass", "drift")
 
 
 def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg", fs: float = 500.0,
-                         duration: float = 60.0) -> tuple[list[TimeSeries], dict]:
+                         duration: float = 60.0, lab: bool = False, clean: bool = False):
     """Measurements of the bare ``device`` (effects none) with physics the catalog does not
     have, made here and nowhere else: ``creep`` (tip load × (1 + r/(1+sτ)), r U(0.25, 0.4), τ
     log-uniform 10–30 s), ``backlash`` (a play of width U(60, 100) µm on the output), ``twin``
     (an effect's near twin, drawn by its ``draw_twin`` hook: a viscoelastic polymer with
-    another law than the DMA table).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
-    sweep), ~2 mm peak, the default sensor.  Returns (records, truth parameters)."""
+    another law than the DMA table), ``lowpass`` (a first-order low-pass on the output,
+    cut-off log-uniform 12–25 Hz, that the sensor metadata do not state), ``drift`` (an
+    additive A·(1 − e^(−t/τ)) from each record's start, |A| log-uniform 8–20 µm with a random
+    sign, τ log-uniform 5–60 s).  A sweep 0.1–50 Hz and a 20 s pulse (the twin: the
+    sweep), ~2 mm peak, the default sensor.  ``lab``: records as a lab exports them (a sensor with
+    3 µm white noise, 0.1 µm steps, an offset ±U(0.03, 0.07) mm, a random-walk drift U(3, 10) µm
+    and 0.15 % RMS hygrometer jitter; metadata state neither the excitation nor the sensor;
+    write them with ``units={"deflection": "mm"}``).
+    Returns (records, truth parameters), and the true deflection per record [m] (what the
+    sensor sees) with ``clean``."""
     from scipy.signal import lfilter
-    from .adequacy import play
+    from .forms.play import play
+    from .records import sensor_filter
     if kind not in OUTSIDE:
         raise InputError(f"kind {kind!r}: choose one of {', '.join(OUTSIDE)}")
     rng = np.random.default_rng(seed)
@@ -189,6 +213,11 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
         tp = {"creep_r": float(rng.uniform(0.25, 0.4)), "creep_tau_s": float(np.exp(rng.uniform(np.log(10), np.log(30))))}
     elif kind == "backlash":
         tp = {"play_width_m": float(rng.uniform(60e-6, 100e-6))}
+    elif kind == "lowpass":
+        tp = {"cutoff_Hz": float(np.exp(rng.uniform(np.log(12.0), np.log(25.0))))}
+    elif kind == "drift":
+        tp = {"drift_m": float(rng.choice([-1.0, 1.0]) * np.exp(rng.uniform(np.log(8e-6), np.log(20e-6)))),
+              "drift_tau_s": float(np.exp(rng.uniform(np.log(5.0), np.log(60.0))))}
     else:
         twin = next(e for e, c in EFFECTS.items() if callable(getattr(c, "draw_twin", None)))
         twin_dev, tp = EFFECTS[twin].draw_twin(dev, rng)
@@ -196,7 +225,7 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
     plan = [(signals.sweep(1.0, 0.1, 50.0, duration, fs), "cubic")]
     if kind != "twin":
         plan.append((signals.square(1.0, t_on=20.0, t_off=40.0, cycles=1, fs=fs), "linear"))
-    out = []
+    out, true = [], []
     for k, (sig, hold) in enumerate(plan):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
@@ -208,7 +237,70 @@ def outside_catalog_case(kind: str, seed: int = 0, *, device: str = "ipmc_pt_eg"
             y = y + tp["creep_r"] * lfilter([1 - a], [1, -a], y)
         elif kind == "backlash":
             y = play(y, tp["play_width_m"])
+        elif kind == "lowpass":
+            y = sensor_filter(y, fs, tp["cutoff_Hz"])        # exact in continuous time (a discrete
+            #                                                   filter's phase error near fs/10 is not physics)
+        elif kind == "drift":
+            y = y - tp["drift_m"] * np.expm1(-sig.t / tp["drift_tau_s"])
         ts = TimeSeries(sig.t, v, y, rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe()},
                         source=f"{kind}_{'sweep' if k == 0 else 'pulse'}")
-        out.append(SensorModel().apply(ts, seed=int(rng.integers(2 ** 31))))
-    return out, tp
+        sensor = SensorModel(deflection_noise=3e-6, deflection_step=1e-7, bandwidth=None, rh_noise=0.15,
+                             deflection_offset=float(rng.choice([-1.0, 1.0]) * rng.uniform(3e-5, 7e-5)),
+                             deflection_drift=float(rng.uniform(3e-6, 10e-6))) if lab else SensorModel()
+        m = sensor.apply(ts, seed=int(rng.integers(2 ** 31)))
+        if lab:
+            m.meta.pop("signal", None)
+            m.meta.pop("sensor", None)
+        out.append(m)
+        true.append(y)
+    return (out, tp, true) if clean else (out, tp)
+
+
+@dataclass
+class OutsideLoop:
+    """The out-of-catalog loop run by :func:`outside_loop` (diagnoses of :mod:`.diagnosis`,
+    the drafting outcome of :mod:`.draft`)."""
+
+    kind: str
+    truth: dict
+    files: list                       # the records as written (CSV)
+    true_error: float                 # m: measurement − true deflection, nuisance terms removed (as scored)
+    before: object                    # diagnosis of the bare model
+    outcome: object                   # the drafts (kept, rejected) with their evidence
+    checks: dict                      # kept draft file → contract problems ([] = passed)
+    after: object | None              # diagnosis with the kept drafts as candidates (None: none kept)
+
+
+def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs: float = 200.0,
+                 duration: float = 60.0, lab: bool = True) -> OutsideLoop:
+    """The loop a user runs on records with physics outside the catalog: the records of
+    :func:`outside_catalog_case` written into ``folder/records`` (``lab``: as a lab exports
+    them, tip in mm) and read back, the diagnosis of the bare ``device`` (effects none), what
+    remains drafted as effect files (:func:`.draft.draft_effects`) into ``folder/drafts``
+    (contract-checked), and the diagnosis again with the kept drafts as candidates (what
+    ``--effects-path`` does).  ``folder`` is created; its parent must exist."""
+    from pathlib import Path
+    from ..effects import load_effects_file, unregister
+    from ..metrics import remove_nuisance
+    from ..timeseries import write_timeseries
+    from .diagnosis import diagnose
+    from .draft import draft_effects, write_drafts
+    folder = Path(folder)
+    ms, truth, clean = outside_catalog_case(kind, seed, device=device, fs=fs, duration=duration, lab=lab, clean=True)
+    (folder / "records").mkdir(parents=True)
+    files = [write_timeseries(m, folder / "records" / f"{m.source}.csv", units={"deflection": "mm"} if lab else None)
+             for m in ms]
+    err = [remove_nuisance(m.deflection - y, m.time) for m, y in zip(ms, clean)]
+    true_error = float(np.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err)))
+    before = diagnose(files, device, "none")
+    outcome = draft_effects(before, lambda dev, eff, free, cands: diagnose(
+        files, dev, eff, free, candidates=cands, force=True, check_support=False, max_effects=1,
+        noise_floor=before.noise_floor))
+    checks = write_drafts(outcome.kept, folder / "drafts") if outcome.kept else {}
+    ids = [i for d in outcome.kept for i in load_effects_file(folder / "drafts" / d.file_name)]
+    try:
+        after = diagnose(files, device, "none") if ids else None
+    finally:
+        for i in ids:
+            unregister(i)
+    return OutsideLoop(kind, truth, files, true_error, before, outcome, checks, after)

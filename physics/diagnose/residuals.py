@@ -87,6 +87,7 @@ class ResidualAnalysis:
     by_rh: list[dict]
     after_steps: list[dict]
     findings: list[str] = field(default_factory=list)
+    trend: list[dict] = field(default_factory=list)
 
     @property
     def acf_outside(self) -> float:
@@ -113,7 +114,7 @@ class ResidualAnalysis:
                 "cross_correlation": {"lag_s": self.ccf_lag_s.tolist(), "rho": self.ccf.tolist(),
                                       "band_99": self.ccf_band, "fraction_outside": self.ccf_outside},
                 "ljung_box": self.ljung_box, "residual_frf": frf, "by_band": self.by_band,
-                "by_amplitude": self.by_amplitude, "by_rh": self.by_rh, "after_steps": self.after_steps,
+                "by_amplitude": self.by_amplitude, "by_rh": self.by_rh, "after_steps": self.after_steps, "trend": self.trend,
                 "findings": self.findings}
 
 
@@ -316,8 +317,21 @@ def analyse(label: str, records: Sequence[Record], resid: Sequence[np.ndarray], 
     ra = ResidualAnalysis(label, lag_s, acf, ab, ccf_lag, ccf, cb, lb, frf, bands,
                           by_group(records, resid, preds, "amplitude"), by_group(records, resid, preds, "rh"),
                           after_steps(records, resid, noise if math.isfinite(noise) else 0.0))
+    ra.trend = trend(records, resid)
     ra.findings = findings(ra, records, resonance_hz=resonance_hz)
     return ra
+
+
+def trend(records, resid) -> list[dict]:
+    """Net change of each record's residual from its first to its last tenth [m] (a slow
+    trend whatever the input), significant beyond 3× the record's noise floor."""
+    out = []
+    for r, e in zip(records, resid):
+        k = max(e.size // 10, 1)
+        change = float(np.mean(e[-k:]) - np.mean(e[:k]))
+        out.append({"record": r.source, "change_m": change,
+                    "significant": bool(math.isfinite(r.noise_floor_d) and abs(change) > 3 * r.noise_floor_d)})
+    return out
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

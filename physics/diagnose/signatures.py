@@ -43,7 +43,9 @@ thermal                     (not by default) long large-amplitude records
   levels: ``nonlinear_charge``; ``harmonics`` — > 5 % of the residual at harmonics;
 * ``rh_dependence`` — the measured/model gain differs by > 5 % between RH levels: ``humidity``;
 * ``step_back_relaxation`` / ``step_creep`` — after steps the measurement relaxes back
-  (``solvent_diffusion``) or keeps creeping (``fractional_coupling``) relative to the model.
+  (``solvent_diffusion``) or keeps creeping (``fractional_coupling``) relative to the model;
+* ``slow_trend`` — the residual moves by more than 3× the noise floor from the first to the
+  last tenth of every record, in the same direction (a drift of the reading).
 
 Which features each effect is expected to leave is its spec's ``signature``.  Each effect's
 score is the weighted share of its expected features that are present,
@@ -73,6 +75,7 @@ FEATURE_TEXT = {
     "rh_dependence": "gain that depends on RH",
     "step_back_relaxation": "back-relaxation after steps",
     "step_creep": "creep after steps",
+    "slow_trend": "a slow trend of the same sign in every record",
 }
 
 
@@ -214,6 +217,10 @@ def features(ra: ResidualAnalysis, records: Sequence[Record], resonance_hz: floa
     else:
         out["step_back_relaxation"] = {"present": None}
         out["step_creep"] = {"present": None}
+    tr = getattr(ra, "trend", [])
+    same_sign = len({np.sign(t["change_m"]) for t in tr}) == 1
+    out["slow_trend"] = {"present": bool(tr and same_sign and all(t["significant"] for t in tr)) if tr else None,
+                         "change_m": [t["change_m"] for t in tr]}
     return out
 
 

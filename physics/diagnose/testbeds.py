@@ -60,8 +60,9 @@ from ..model import ActuatorModel
 from ..sensor import SensorModel
 from ..timedomain import simulate
 from ..timeseries import TimeSeries, write_timeseries
-from .adequacy import play
+from .forms.play import play
 from .demo import PEAK_M, design_for, draw_truth, hidden_effects
+from .records import sensor_filter
 from ..metrics import remove_nuisance
 
 #: Physics outside the catalog (module doc).
@@ -280,9 +281,8 @@ def _apply_outside(truth: str, p: dict, y: np.ndarray, fs: float, rng) -> np.nda
     if truth == "creep":
         a = math.exp(-1.0 / (p["creep_tau_s"] * fs))
         return y + p["creep_r"] * lfilter([1 - a], [1, -a], y)
-    if truth == "lowpass":
-        a = math.exp(-2 * math.pi * p["lowpass_Hz"] / fs)
-        return lfilter([1 - a], [1, -a], y, zi=[a * y[0]])[0]
+    if truth == "lowpass":      # exact in continuous time (a one-pole recursion leads by half a sample)
+        return sensor_filter(y, fs, p["lowpass_Hz"])
     if truth == "drift":
         n = y.size
         a = math.exp(-1.0 / (p["drift_time_s"] * fs))

@@ -24,7 +24,7 @@ remaining candidates are tried again on top of it (forward selection, up to
 
 **Is the final model adequate.**  Its RMS error against the noise floor: adequate within
 :data:`ADEQUATE_RATIO` × (:mod:`.adequacy`), and a plain statement of what remains —
-structured (the residual forms that describe it, :func:`.adequacy.describe_missing`) or
+structured (the residual forms that describe it, :func:`.forms.describe`) or
 unstructured (a small mismatch of the base model itself).  When the base is already within
 the threshold there is **nothing to explain**.  A null answer carries no confidence, and
 "explained" is never claimed without a noise floor.
@@ -351,7 +351,8 @@ class Verdict:
     def _remaining_text(self) -> str:
         if self.remaining_kind == "described":
             return "; and ".join(d["text"] for d in self.remaining) + \
-                " — to model it, write an effect like examples/effects/creep.py and pass it with --effects-path."
+                (" — to model it, `eap diagnose … --draft-effects DIR` drafts effect files for it (or write one like "
+                 "examples/effects/creep.py); pass one back with --effects-path.")
         if self.remaining_kind == "base mismatch":
             return ("no residual form describes it: an unstructured mismatch of the model's own base forms "
                     "(its physics differs a little from the device's), not a missing effect of the catalog.")
@@ -411,7 +412,7 @@ def remaining_of(ad: Adequacy | None) -> tuple[str, list[dict]]:
         return "unknown", []
     if ad.adequate:
         return "none", []
-    found = [d for d in ad.descriptors if d.get("significant")]
+    found = ad.remaining()
     return ("described", found) if found else ("base mismatch", [])
 
 
