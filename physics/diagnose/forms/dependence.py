@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from . import Form, FormFit, Residual
+from .base import Form, FormFit, Residual
 
 #: Relative-residual ratio between extreme levels called a dependence.
 DEPENDENCE_RATIO = 1.5

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Form, FormFit, Residual, best_on_grid
+from ..effect_draft import EffectDraft, Param
+from .base import Form, FormFit, Residual, best_on_grid
 
 
 class Drift(Form):
@@ -31,7 +32,6 @@ class Drift(Form):
                            f"τ ≈ {tau:.3g} s from each record's start (initial rate {1e6 * rate:+.3g} µm/s)")
 
     def draft(self, ff: FormFit, res: Residual):
-        from ..draft import EffectDraft, Param
         amp, tau = ff.params["amplitude_m"], ff.params["tau_s"]
         return EffectDraft(
             form=self.id, effect_id="drafted_drift", class_name="DraftedDrift",

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import PURE, Form, FormFit, Residual, best_on_grid
+from .base import PURE, Form, FormFit, Residual, best_on_grid
 
 
 class _InputNonlinearity(Form):

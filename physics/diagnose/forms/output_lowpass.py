@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 
-from . import PURE, Form, FormFit, Residual, best_on_grid, lowpass
+from ..effect_draft import EffectDraft, Param
+from .base import PURE, Form, FormFit, Residual, best_on_grid, lowpass
 
 
 class OutputLowPass(Form):
@@ -38,7 +39,6 @@ class OutputLowPass(Form):
         return ff
 
     def draft(self, ff: FormFit, res: Residual):
-        from ..draft import EffectDraft, Param
         fc = ff.params["cutoff_Hz"]
         tau = 1.0 / (2 * math.pi * fc)
         # its phase lag reaches 17° at 0.3 f_c; the records it was found in reach that far

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Form, FormFit, Residual, best_on_grid
+from .base import Form, FormFit, Residual, best_on_grid
 
 
 class OutputSaturation(Form):

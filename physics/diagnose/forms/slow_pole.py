@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Form, FormFit, Residual, best_on_grid, lowpass
+from ..effect_draft import EffectDraft, Param
+from .base import Form, FormFit, Residual, best_on_grid, lowpass
 
 
 def slowest(res: Residual) -> float:
@@ -36,7 +37,6 @@ class SlowPole(Form):
                            f"g = {g:+.3g})")
 
     def draft(self, ff: FormFit, res: Residual):
-        from ..draft import EffectDraft, Param
         tau, g = ff.params["tau_s"], ff.params["gain"]
         r = float(np.clip(g, -0.85, 4.5))
         f_lo = 1.0 / (2 * np.pi * tau)
