@@ -2,8 +2,9 @@
 neural bundle) on long records.
 
 Each measurement runs the command in a fresh process and reads that process's own peak
-RSS; an address-space cap (``--cap-GB``) keeps a run that would exhaust the machine from
-doing so (it then reports the package's out-of-memory error instead of a figure).
+RSS (``VmHWM``; ``ru_maxrss`` would also count this script's size at the fork); an
+address-space cap (``--cap-GB``) keeps a run that would exhaust the machine from doing so
+(it then reports the package's out-of-memory error instead of a figure).
 
     python bench/memory_long_records.py                 # 1e5, 1e6, 1e7 samples
     python bench/memory_long_records.py --sizes 2e6,1e7 --commands predict,compare-nn
@@ -27,8 +28,8 @@ resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 from nnmodel.cli import main
 t0 = time.perf_counter()
 rc = main(sys.argv[2:])
-print(json.dumps({"rc": rc, "s": time.perf_counter() - t0,
-                  "peak_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")]
+print(json.dumps({"rc": rc, "s": time.perf_counter() - t0, "peak_MB": int(hwm[0].split()[1]) / 1024}))
 """
 
 

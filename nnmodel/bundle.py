@@ -209,6 +209,9 @@ def load(path: str | os.PathLike) -> "Bundle":
     bad = [k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all())]
     if bad:
         raise InputError(f"{wfile}: weights {bad[:3]} contain NaN or infinite values; the bundle is corrupt")
+    if isinstance(hp.get("layers"), int) and hp["layers"] > len(state):   # each layer holds a tensor; checked
+        raise InputError(f"{folder / CARD}: layers={hp['layers']} but {wfile.name} holds {len(state)} tensors "
+                         "(each layer has its own); the card does not belong to these weights")  # before building
     try:
         with torch.device("meta"), warnings.catch_warnings():  # shapes only: nothing is allocated
             warnings.simplefilter("ignore", UserWarning)  # "copying ... to a meta parameter is a no-op"
@@ -217,8 +220,10 @@ def load(path: str | os.PathLike) -> "Bundle":
     except InputError as exc:
         raise InputError(f"{folder}: {exc}") from None
     except (RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
-        raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's "
-                         f"hyper-parameters ({' '.join(str(exc).split())[:300]})") from None
+        sizes = ", ".join(f"{k}={v}" for k, v in hp.items() if (k in cls._model_params() or k == "memory_filters")
+                          and isinstance(v, int) and not isinstance(v, bool))
+        raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's sizes "
+                         f"{sizes} ({' '.join(str(exc).split())[:300]})") from None
     return Bundle(model, card, folder)
 
 

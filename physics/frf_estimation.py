@@ -331,7 +331,7 @@ SWEEP_RANK = 0.9
 SWEEP_DECADES = 0.6
 
 
-def detect_excitation(v, fs: float) -> Excitation:
+def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
     """Classify the voltage record ``v`` sampled at ``fs`` [Hz] (see :class:`Excitation`).
 
     Steps: the samples sit on a few levels (histogram of 2 %-of-span bins) and jump between
@@ -339,14 +339,14 @@ def detect_excitation(v, fs: float) -> Excitation:
     reaches :data:`PERIODIC_CORRELATION` at a lag L ≤ n/2 (two periods or more).  Sweep: the
     power-weighted mean log-frequency of 24 successive segments is monotone in time (Spearman
     rank correlation ≥ :data:`SWEEP_RANK`) over ≥ :data:`SWEEP_DECADES` decades.  Noise: the rest
-    of the broadband records."""
+    of the broadband records.  ``source`` names the record in errors."""
     v = _as_signal(v, "voltage")
     x = v - np.median(v)
     n = x.size
     lo, hi = np.percentile(x, [0.5, 99.5])
     span = float(hi - lo)
     if span <= 0 or not np.any(x - x.mean()):
-        raise InputError("the voltage is constant; nothing is excited")
+        raise InputError(f"{source + ': ' if source else ''}the voltage is constant; nothing is excited")
     X = np.abs(np.fft.rfft(x - x.mean())) ** 2
     f = np.fft.rfftfreq(n, 1.0 / fs)
     cum = np.cumsum(X[1:]) / X[1:].sum()

@@ -228,6 +228,12 @@ def _map_dask(fn, tasks, order, costs, settings: ParallelSettings, desc: str, pr
                     break
                 bar.update(work.done - seen)
                 seen = work.done
+        except BaseException:     # Ctrl-C, SIGTERM: stop the workers before the caller cleans up after
+            remote.stop.set()     # them (a worker mid-task would write into a removed temporary folder)
+            remote.join()
+            if local:
+                shutdown()
+            raise
         finally:
             remote.stop.set()
             remote.join()

@@ -208,7 +208,9 @@ def check_record(arrays: dict[str, np.ndarray], where: str, locate: Locate,
     if not lo <= 1.0 / step <= hi:
         raise InputError(f"{where}, {label['time']}: time step {step!r} s is a sampling rate of {1.0 / step:.3g} Hz, "
                          f"outside {lo:g}–{hi:g} Hz; check the time column's unit (s or ms) or {arg('fs_Hz', 'fs')}")
-    dev = np.abs(dt - step) / step
+    dev = dt - step                      # |dt − step| / step, in place (long records: one array)
+    np.abs(dev, out=dev)
+    dev /= step
     bad = np.flatnonzero(dev > UNIFORM_RTOL)
     if not bad.size:
         return arrays, None

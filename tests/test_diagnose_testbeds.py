@@ -70,24 +70,29 @@ def test_nothing_hidden_gives_nothing_to_explain_without_a_confidence():
     assert "none is needed" in " ".join(v.lines())
 
 
+class Fit:
+    """Stand-ins for a fitted candidate in :func:`decide` (its quality flags given)."""
+
+    def __init__(self, rmse):
+        self.rmse = rmse
+
+
+class Cmp:
+    def __init__(self, d):
+        self.delta_bic, self.p_value = d, 1e-30
+
+
+class Cand:
+    def __init__(self, effect, d, rmse, flags):
+        self.effect, self.comparison, self.fit, self._flags = effect, Cmp(d), Fit(rmse), flags
+        self.indistinguishable_from, self.quality, self.passes = [], [], {}
+        self.signature = None
+
+
 def test_quality_flags_decide_between_close_candidates(monkeypatch):
     """Two candidates lower the error alike; the one whose parameters are on bounds and
     correlated loses, and the pick's confidence reflects that it dominates."""
     from physics.diagnose import verdict as V
-
-    class Fit:
-        def __init__(self, rmse):
-            self.rmse = rmse
-
-    class Cmp:
-        def __init__(self, d):
-            self.delta_bic, self.p_value = d, 1e-30
-
-    class Cand:
-        def __init__(self, effect, d, rmse, flags):
-            self.effect, self.comparison, self.fit, self._flags = effect, Cmp(d), Fit(rmse), flags
-            self.indistinguishable_from, self.quality, self.passes = [], [], {}
-            self.signature = None
 
     base = Fit(50e-6)
     flexible = Cand("flexible", -5020.0, 2.00e-6, ["a on a bound", "a and b correlated", "signature absent"])
@@ -103,6 +108,23 @@ def test_quality_flags_decide_between_close_candidates(monkeypatch):
     monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a square pulse held 60 s would separate them")
     dec = decide(base, [user, twin], 1.5e-6, 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-1.0), lambda a, b: 1e-6)
     assert dec.pick is None and set(dec.ambiguous) == {"user_creep", "twin"} and "pulse" in dec.separating
+
+
+def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
+    """On top of a pick the error left is mostly the base's own mismatch: a flexible effect
+    that lowers it a lot (huge ΔBIC) but with its signature absent is picked on the first step,
+    never on a later one; a clean one is."""
+    from physics.diagnose import verdict as V
+
+    monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
+    base, floor = Fit(1.7e-6), 1.04e-6
+    mimic = Cand("mimic", -13000.0, 1.22e-6, ["its residual signature (phase lag) is absent"])
+    args = (floor, floor, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
+    assert decide(base, [mimic], *args).pick is mimic
+    later = decide(base, [mimic], *args, after_pick=True)
+    assert later.pick is None and "no quality flag after a pick" in later.reason
+    clean = Cand("clean", -40.0, 1.3e-6, [])
+    assert decide(base, [mimic, clean], *args, after_pick=True).pick is clean
 
 
 def test_identify_keeps_the_start_when_the_fit_is_worse(tmp_path):

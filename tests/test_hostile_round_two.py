@@ -610,6 +610,29 @@ def test_any_edit_of_a_bundle_card_loads_or_is_refused(bundle, tmp_path, path, v
         pass
 
 
+def test_card_asking_for_1e8_layers_or_width_is_refused_naming_it(tmp_path, monkeypatch, capsys):
+    """Issue 27: `layers: 100000000` in a card ran past 240 s at 4 GB; the weights hold a few tensors."""
+    from nnmodel.bundle import save
+    from nnmodel.data import Experiment
+    from nnmodel.models import MODELS
+    t = np.arange(300) / 100.0
+    u = np.sin(2 * np.pi * 2 * t)
+    m = MODELS["ff"](na=1, nb=4, hidden=4, layers=2, max_epochs=1, progress_bar=False)
+    m.fit([Experiment(u=u, y=1e-4 * np.sin(2 * np.pi * 2 * t - 0.3), rh=np.full(300, 60.0), fs=100.0)], None)
+    b = save(m, tmp_path / "ff")
+    card = json.loads((b / "card.json").read_text())
+    card["hyper_parameters"]["layers"] = 10 ** 8
+    (b / "card.json").write_text(json.dumps(card))
+    _record(tmp_path / "r.csv")
+    monkeypatch.chdir(tmp_path)
+    assert main(["predict", "--model", "ff", "--input", "r.csv", "--out", "p.csv"]) == 2
+    assert "layers=100000000" in _err(capsys) and not (tmp_path / "p.csv").exists()
+    card["hyper_parameters"].update(layers=2, nb=10 ** 8)     # a width the weights contradict: the sizes named
+    (b / "card.json").write_text(json.dumps(card))
+    assert main(["predict", "--model", "ff", "--input", "r.csv", "--out", "p.csv"]) == 2
+    assert "nb=100000000" in _err(capsys) and not (tmp_path / "p.csv").exists()
+
+
 def test_nothing_is_left_behind_by_refused_outputs(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(SIM + ["--amplitude-V", "1e6", "--out", "S"]) == 2

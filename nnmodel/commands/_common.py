@@ -31,6 +31,22 @@ def add_output_options(p: argparse.ArgumentParser, default: str | None, what: st
                    help="replace an existing --out folder written by eap (never one holding other files)")
 
 
+def add_record_options(p: argparse.ArgumentParser, *, gain: bool = True, fs: bool = True) -> None:
+    """``--columns`` (a column map with units, for files in another layout) and, with ``fs``,
+    ``--fs-Hz``, with ``gain``, ``--sensor-gain``: how every command that reads records reads
+    other files."""
+    p.add_argument("--columns", default=None,
+                   help="column map for files in another layout, e.g. time=t,voltage=V1,deflection=V2 (values in s, "
+                        "V, m), with units where they differ: deflection=Tip (mm):mm, time=t:ms (a unit in a header, "
+                        "Tip [mm], is used too)")
+    if fs:
+        p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of files without a time column")
+    if gain:
+        p.add_argument("--sensor-gain", default=None, metavar="GAIN",
+                       help="convert an output column read in another unit to tip deflection in metres, e.g. 2.5mm/V "
+                            "for a laser sensor giving volts (with --columns deflection=COLUMN:V)")
+
+
 def add_quiet_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr (the summary is still printed)")
 

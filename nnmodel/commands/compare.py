@@ -12,7 +12,8 @@ from physics.errors import InputError
 from physics.record import DEFLECTION, OutputQuantity
 from physics.timeseries import TimeSeries, parse_column_map
 
-from ._common import add_output_options, add_quiet_option, check_out, provenance, stage_log, writing
+from ._common import (add_output_options, add_quiet_option, add_record_options, check_out, provenance, stage_log,
+                      writing)
 
 NAME = "compare"
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
@@ -28,13 +29,7 @@ def add_measurement_arguments(p) -> None:
     p.add_argument("--rh", type=float, default=None,
                    help="relative humidity [%%] of the records: needed for files without an rh_pct column or "
                         "sidecar key, and overrides them when given")
-    p.add_argument("--columns", default=None,
-                   help="column map for other files, e.g. time=t,voltage=V1,deflection=V2 (values in s, V, m), with "
-                        "units where they differ: deflection=Tip (mm):mm (a unit in a header, Tip [mm], is used too)")
-    p.add_argument("--sensor-gain", default=None, metavar="GAIN",
-                   help="convert an output column read in another unit to tip deflection in metres, e.g. 2.5mm/V "
-                        "(with --columns deflection=COLUMN:V)")
-    p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of files without a time column")
+    add_record_options(p)
     p.add_argument("--resample", action="store_true", help="resample non-uniform time onto the median step")
 
 

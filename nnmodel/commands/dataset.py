@@ -7,7 +7,7 @@ from physics.errors import InputError
 from physics.record import OutputQuantity
 from physics.timeseries import parse_column_map
 
-from ._common import add_output_options
+from ._common import add_output_options, add_record_options
 
 NAME = "dataset"
 HELP = "build a dataset folder (dataset.json + standard CSVs) from your measurement files, or --check one"
@@ -26,19 +26,13 @@ def add_arguments(p):
     p.add_argument("--val-fraction", type=float, default=0.2,
                    help="with no --validation: fraction at the end of each training record used for validation")
     p.add_argument("--holdout-rh", default="", help="RH levels [%%] held out of training, e.g. 50,70")
-    p.add_argument("--columns", default=None,
-                   help="column map, e.g. time=t,voltage=V1,deflection=V2 (values in s, V, m), with units where "
-                        "they differ: deflection=Tip (mm):mm, time=t:ms (a unit in a header, Tip [mm], is used too)")
+    add_record_options(p)
     p.add_argument("--output", default=None, metavar="NAME:UNIT",
                    help="what the measured output is when it is not the tip deflection, e.g. level:V (its column "
                         "is NAME_UNIT in standard files, or mapped with --columns NAME=COLUMN)")
-    p.add_argument("--sensor-gain", default=None, metavar="GAIN",
-                   help="convert an output column read in another unit to tip deflection in metres, e.g. 2.5mm/V "
-                        "for a laser sensor giving volts (with --columns deflection=COLUMN:V)")
     p.add_argument("--allow-overlap", action="store_true",
                    help="keep records that share samples (the same file or overlapping ranges; marked in "
                         "dataset.json) instead of refusing them")
-    p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of files without a time column")
     p.add_argument("--rh", type=float, default=None, help="relative humidity [%%] of files without one")
     p.add_argument("--resample", action="store_true", help="resample non-uniform time onto the median step")
     p.add_argument("--check", default=None, metavar="DS", help="re-verify the dataset folder DS and its sources")

@@ -10,7 +10,7 @@ import numpy as np
 from physics.columns import quantity
 from physics.errors import InputError, ModelError
 
-from ._common import add_quiet_option, provenance, stage_log
+from ._common import add_quiet_option, add_record_options, provenance, stage_log
 
 NAME = "predict"
 HELP = "predict the output of a trained model bundle (tip deflection, or the quantity it was trained on) for a record"
@@ -24,10 +24,7 @@ DESCRIPTION = (HELP + ". The input CSV follows DATA_FORMAT.md (time_s, voltage_V
 def add_arguments(p):
     p.add_argument("--model", required=True, help="model bundle folder (e.g. RUN/models/narx)")
     p.add_argument("--input", required=True, help="input time-series CSV (voltage, optional RH)")
-    p.add_argument("--columns", default=None,
-                   help="column map for other files, e.g. time=t,voltage=u (units as time=t:ms; the measured output "
-                        "as output=y)")
-    p.add_argument("--fs-Hz", type=float, default=None, help="sampling rate of a file without a time column")
+    add_record_options(p, gain=False)
     p.add_argument("--out", required=True, help="output CSV for the prediction (never the input file)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing --out CSV (and its sidecar) written by eap (never other files)")

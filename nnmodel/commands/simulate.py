@@ -15,7 +15,8 @@ from physics.timedomain import FIELDS, simulate
 from physics.limits import FREQ_RANGE_HZ, FS_RANGE_HZ, MAX_DRIVE_V, MAX_SAMPLES, check_range
 from physics.timeseries import parse_column_map, read_timeseries, write_timeseries
 
-from ._common import add_model_options, add_output_options, check_out, check_result, provenance, writing
+from ._common import (add_model_options, add_output_options, add_record_options, check_out, check_result,
+                      provenance, writing)
 
 NAME = "simulate"
 HELP = "simulate tip deflection and current for a voltage signal; writes CSV + plots"
@@ -25,8 +26,7 @@ def add_arguments(p):
     add_model_options(p)
     p.add_argument("--signal", choices=sorted(signals.GENERATORS), default="sweep", help="excitation")
     p.add_argument("--input", default=None, help="read the voltage (and RH) from a time-series CSV instead")
-    p.add_argument("--columns", default=None, help="column map of an --input file in another layout, e.g. "
-                                                   "time=t:ms,voltage=u")
+    add_record_options(p, gain=False, fs=False)
     p.add_argument("--duration-s", type=float, default=100.0, help="record length [s]")
     p.add_argument("--fs-Hz", type=float, default=1000.0, help="sampling rate [Hz]")
     p.add_argument("--amplitude-V", type=float, default=2.0, help="amplitude (sweep, tone, square) [V]")

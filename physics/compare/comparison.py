@@ -184,7 +184,8 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
         Hc = np.full(f.shape, np.nan, dtype=complex)     # only where compared and plotted
         pos = sel & (f > 0)
         Hc[pos] = predictor.frequency_response(f[pos], mean) * sensor_response(f[pos], bw)
-    rec = RecordComparison(where, "timeseries", mean, time=ts.time - ts.time[0], measured=y_al,
+    t = ts.time - ts.time[0] if ts.time[0] else ts.time     # no copy for a record that starts at 0 s
+    rec = RecordComparison(where, "timeseries", mean, time=t, measured=y_al,
                            predicted=yhat, freq=f, H_meas=est_m.response, H_model_est=est_p.response,
                            H_model_closed=Hc, coherence=est_m.coherence, mag_bounds=est_m.mag_bounds,
                            valid=sel)

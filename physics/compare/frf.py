@@ -58,7 +58,7 @@ class FRFOptions:
         period = sig.get("period_s")
         how = f"{self.method} (as asked)" if self.method != "auto" else f"auto: the metadata say {kind}"
         if self.method == "auto" and kind not in _KNOWN_KINDS:
-            ex = detect_excitation(ts.voltage, ts.fs)
+            ex = detect_excitation(ts.voltage, ts.fs, ts.source)
             kind = {"periodic": "multisine", "steps": "square"}.get(ex.kind, ex.kind)
             if ex.kind == "periodic":
                 period, periods = ex.period_s, int(round(n / ts.fs / ex.period_s))
@@ -214,19 +214,30 @@ def frf_errors(freq, H_meas, H_model, mask=None) -> dict:
 
 def residual_by_band(e: np.ndarray, y: np.ndarray, fs: float, bands) -> list[dict]:
     """RMS of the residual ``e`` [m] within each band and its ratio to the RMS of the
-    (offset-free) measurement ``y`` in that band (one-sided spectra, Parseval)."""
+    (offset-free) measurement ``y`` in that band (one-sided spectra, Parseval).  Each
+    spectrum is reduced to its cumulative power at once, so a long record costs a few
+    bytes per sample."""
     n = e.size
     f = np.fft.rfftfreq(n, 1.0 / fs)
-    E, Y = np.fft.rfft(e), np.fft.rfft(y - y.mean())
-    w = np.full(f.size, 2.0)
-    w[0] = 1.0
-    if n % 2 == 0:
-        w[-1] = 1.0
+
+    def cumulative_power(x, offset_free: bool = False):   # Σ w |X|² up to each frequency (w = 2 but DC, Nyquist)
+        X = np.fft.rfft(x)
+        if offset_free:   # the mean removed: only the DC line changes
+            X[0] = 0.0
+        p = X.real ** 2 + X.imag ** 2
+        del X
+        p *= 2.0
+        p[0] /= 2.0
+        if n % 2 == 0:
+            p[-1] /= 2.0
+        return np.concatenate([[0.0], np.cumsum(p)])
+
+    ce, cy = cumulative_power(e), cumulative_power(y, offset_free=True)
     out = []
     for lo, hi in bands:
-        m = (f >= lo) & (f < hi) if hi != bands[-1][1] else (f >= lo) & (f <= hi)
-        pe = float(np.sum(w[m] * np.abs(E[m]) ** 2)) / n ** 2
-        py = float(np.sum(w[m] * np.abs(Y[m]) ** 2)) / n ** 2
-        out.append({"band_Hz": [lo, hi], "residual_rms_m": math.sqrt(pe),
+        a = int(np.searchsorted(f, lo, "left"))
+        b = int(np.searchsorted(f, hi, "right" if hi == bands[-1][1] else "left"))
+        pe, py = (ce[b] - ce[a]) / n ** 2, (cy[b] - cy[a]) / n ** 2
+        out.append({"band_Hz": [lo, hi], "residual_rms_m": math.sqrt(max(pe, 0.0)),
                     "nrmse_in_band": math.sqrt(pe / py) if py > 0 else None})
     return out

@@ -415,7 +415,8 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     (milliseconds): bounded least squares over the effect's parameters, the coupling gain
     solved in closed form at each step, from the FRF estimate and the spec's starts.  Slow
     effects (creep) that a frequency response over 0.1–50 Hz cannot determine are then set
-    by the steps and holds of the records."""
+    by the steps and holds of the records.  A nested effect is also started from its off values
+    (the model without it), so that its fit never ends worse than the base on this criterion."""
     from scipy.optimize import least_squares
     outs = [e for e in mf.model.outputs if spec_of(e.id)]
     names = [n for e in outs for n in effect_params(e.id) if n in mf.spec.free]
@@ -446,6 +447,9 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     x_now = np.array([float(mf.device.params.get(n, declared_default(n))) for n in names])
     starts = [x_now] + [np.array([float(st.get(n, x)) for n, x in zip(names, x_now)])
                         for e in outs for st in start_points(e.id, mf.device)]
+    off = {n: v for e in outs for n, v in (spec_of(e.id).get("off") or {}).items()}
+    if any(n in off for n in names):       # a nested effect also starts from the model without it
+        starts.append(np.array([float(off.get(n, x)) for n, x in zip(names, x_now)]))
     best = None
     for x0 in starts:
         x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))

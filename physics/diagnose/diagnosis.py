@@ -48,11 +48,12 @@ from ..parallel import map_tasks, warm_up
 from ..threads import single_threaded
 from . import candidates as C
 from .adequacy import Adequacy, assess
-from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records, slow_wander
+from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records
+from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
 from .specs import declared_default, excitation, spec_of
-from .verdict import ADEQUATE_RATIO, Decision, Pick, Verdict, decide, nuisance_summary, remaining_of
+from .verdict import ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, nuisance_summary, remaining_of
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
 SUPPORT_BIC = 6.0
@@ -155,6 +156,8 @@ class Data:
     white: float = math.nan           # the records' white noise floor [m] (before any wander)
     white_d: float = math.nan
     wander: float = 0.0               # slow wander added to it [m] (:func:`add_wander`)
+    wander_total: float = 0.0         # the whole slow wander [m], the records' shared part included
+    wander_split: object = None       # what the records share of it (:class:`.wander.WanderSplit`)
 
     @property
     def estimated(self) -> bool:
@@ -302,19 +305,29 @@ def read_records(measurements, options: FitOptions, *, noise_floor: float | None
 
 def add_wander(data: Data, fits) -> None:
     """When the noise floors were estimated from the records (white part only), add the slow
-    wander the best of ``fits`` leaves below the excited band (:func:`.records.slow_wander`):
-    a drift beyond the removed linear trend is noise for the adequacy, not physics."""
+    wander below the excited band (:func:`.wander.slow_wander`): a drift beyond the removed
+    linear trend is noise for the adequacy, not physics — but only the part the records do not
+    share (:func:`.wander.shared_wander`): a drift common to the records is deterministic, left to
+    be described (and drafted).  The least such wander any of ``fits`` leaves counts (so the
+    floor never grows when a pick is added)."""
     if not data.estimated or not math.isfinite(data.white):
         return
-    ws = [w for w in (slow_wander(data.records, f.resid_d, f.nuisance) for f in fits) if math.isfinite(w)]
+    ws = []
+    for f in fits:
+        w = slow_wander(data.records, f.resid_d, f.nuisance)
+        if math.isfinite(w):
+            split = shared_wander(data.records, f.resid_d, f.nuisance, w)
+            ws.append((w * math.sqrt(1.0 - split.fraction) if split.testable else w, w, split))
     if not ws:
         return
-    w = min(ws)
-    data.wander = w
-    data.noise = math.sqrt(data.white ** 2 + w ** 2)
-    data.noise_d = math.sqrt(data.white_d ** 2 + w ** 2) if math.isfinite(data.white_d) else data.noise_d
-    data.noise_source = (f"{_noise_source(data.records)}; plus a slow wander of {1e6 * w:.3g} µm RMS (a drift beyond "
-                         "the linear trend: the residual below the excited band, random-walk spectrum assumed)"
+    counted, w, split = min(ws, key=lambda x: x[0])
+    data.wander, data.wander_total, data.wander_split = counted, w, split
+    data.noise = math.sqrt(data.white ** 2 + counted ** 2)
+    data.noise_d = math.sqrt(data.white_d ** 2 + counted ** 2) if math.isfinite(data.white_d) else data.noise_d
+    data.noise_source = (f"{_noise_source(data.records)}; plus a slow wander of {1e6 * counted:.3g} µm RMS (a drift "
+                         "beyond the linear trend: the residual below the excited band, random-walk spectrum assumed"
+                         + (f"; of {1e6 * w:.3g} µm, {split.text()}" if split.testable and split.fraction > 0 else
+                            f"; {split.text()}") + ")"
                          if w > 0 else _noise_source(data.records))
 
 
@@ -432,7 +445,7 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
         decision = decide(step_base, ranked, data.noise, data.noise_d, taus, data.records, C.compare_fits,
-                          C.prediction_distance)
+                          C.prediction_distance, after_pick=k > 1)
         for c in ranked:
             c.explanation = _explain(c, step_base)
         steps.append(Step(k, step_base, results, decision))
@@ -469,7 +482,12 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
     ad = assess(label, final, data.records, data.noise)
     first = steps[0].decision
     within = math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * data.noise
-    if within:
+    split = data.wander_split
+    unattributed = (within and split is not None and (not split.testable or split.inconclusive)
+                    and base.rmse > ADEQUATE_RATIO * data.white)
+    if unattributed:        # within the noise only by counting a wander the records cannot attribute
+        status = UNATTRIBUTED
+    elif within:
         status = "nothing to explain"
     elif picks:
         status = {True: "explained", False: "partly explained", None: "found (adequacy not assessed)"}[ad.adequate]
@@ -484,6 +502,11 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
     elif picks and len(picks) == max_effects and ad.adequate is False:
         stopped = f"the chain reached max_effects = {max_effects}"
     reason = first.reason if not picks else picks[0].reason
+    if unattributed:
+        reason = (f"the base leaves {1e6 * base.rmse:.4g} µm, within {ADEQUATE_RATIO}× the noise floor only because "
+                  f"the floor counts a slow wander of {1e6 * data.wander:.3g} µm, and {split.why or split.text()}; if "
+                  f"the sensor does not drift, state its noise ({arg('noise_floor')}) and what remains is described "
+                  "and drafted, or record the test again (more records sharpen the test)")
     return Verdict(status, picks, first.weights, ad, base.rmse, data.noise, data.noise_source, reason,
                    list(first.ambiguous), first.separating, forms, kind, stopped, first.alpha,
                    nuisance_summary(final, data.records))
@@ -614,7 +637,9 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     settings = {"effects": list(base_ids), "free": base.spec.free, "per_rh": base.spec.per_rh,
                 "candidates": cand_ids, "force": force, "max_effects": run.max_effects, "n_starts": run.n_starts,
                 "options": opts.describe(), "noise_floor_given_m": noise_floor, "fs_max_Hz": fs_max,
-                "noise": {"white_m": data.white, "wander_m": data.wander, "floor_m": data.noise,
+                "noise": {"white_m": data.white, "wander_m": data.wander, "wander_total_m": data.wander_total,
+                          "wander_shared": None if data.wander_split is None else data.wander_split.text(),
+                          "floor_m": data.noise,
                           "source": data.noise_source}}
     return DiagnosisResult(dev, data.records, base, steps, support, verdict, ra_base, ra_after, feats, data.noise,
                            run.resonance, settings, run.timings, list(base.warnings))

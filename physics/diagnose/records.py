@@ -219,50 +219,6 @@ def deflection_spectrum(ts: TimeSeries) -> tuple[float, float, str]:
     return math.sqrt(level * ts.fs / 2), f_resp, how
 
 
-#: Mean square of a random walk left after its linear trend, per mean square of the fitted
-#: trend's rise over the record: 1/15 ÷ 6/5·(…) = 0.0566 (Brownian motion, computed).
-WANDER_PER_TREND = 0.0566
-
-
-def slow_wander(records: Sequence["Record"], resid_d: Sequence[np.ndarray], nuisance) -> float:
-    """RMS [m] of a slow wander (a sensor's drift beyond the linear trend the nuisance terms
-    remove) in a model's residuals, assuming a random-walk drift, from two independent
-    signs of it, pooled by their degrees of freedom:
-
-    * the fitted drift rates b of the broadband records (``nuisance``: (offset, drift) per
-      record): a random walk leaves, after its trend, WANDER_PER_TREND × (b·T)² on average (T
-      the record's duration; one degree of freedom per record);
-    * the broadband records' residual below half their lowest excited frequency, where the
-      input has no power (the white noise's share removed; two degrees of freedom per line),
-      extrapolated with the share of a detrended random walk's variance those lines hold.
-
-    Only broadband records count: their input has no power at the lowest lines, so a linear
-    model's slow physics leaves nothing there, while a step record's creep or back-relaxation
-    would pass for drift.  NaN when no record can show it."""
-    num = dof = 0.0
-    for r, e, (_, b) in zip(records, resid_d, nuisance):
-        if r.kind != "broadband":      # a step's slow physics (creep, back-relaxation) would pass for drift
-            continue
-        T = r.ts.duration
-        num += WANDER_PER_TREND * (b * T) ** 2
-        dof += 1.0
-        n = e.size
-        k_max = int(math.floor(0.5 * r.band[0] * n / r.fs_d))
-        if k_max < 1 or not math.isfinite(r.noise_floor_d):
-            continue
-        E = np.fft.rfft(e)[1:k_max + 1]
-        low = 2.0 * float(np.sum(np.abs(E) ** 2)) / n ** 2
-        white = r.noise_floor_d ** 2 * 2.0 * k_max / n
-        share = _WALK_SHARE[min(k_max, len(_WALK_SHARE)) - 1]
-        num += 2.0 * k_max * max(low - white, 0.0) / share
-        dof += 2.0 * k_max
-    return math.sqrt(num / dof) if dof else math.nan
-
-
-#: Share of a linearly detrended random walk's variance in its first k spectral lines (k = 1…10; computed).
-_WALK_SHARE = (0.46, 0.66, 0.75, 0.80, 0.84, 0.86, 0.88, 0.89, 0.90, 0.91)
-
-
 def estimate_noise_floor(ts: TimeSeries, f_hi: float | None = None) -> tuple[float, str]:
     """(noise floor [m], how it was obtained): the sensor metadata
     (:func:`sensor_noise_floor`), else the deflection spectrum (:func:`deflection_spectrum`)."""

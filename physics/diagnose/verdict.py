@@ -12,8 +12,11 @@ determined); its expected residual signature is absent.  Each flag counts as ver
 evidence against it (ΔBIC +10).  A candidate can be picked when it passes the criteria
 of :data:`CRITERIA` (very strong ΔBIC, Bonferroni p-value, at least a third of the
 failure explained — of the excess error power over the noise floor — and a base above the
-noise: a flexible effect that trims a little off an error it does not explain is no answer);
-the pick is the one with the lowest E.  Its confidence is its weight,
+noise: a flexible effect that trims a little off an error it does not explain is no answer;
+on a later step of the chain, no quality flag at all: there the error is mostly the base's own
+mismatch (or a pick's fit short of its optimum), which any flexible effect absorbs in part with
+a ΔBIC as large as the records are long — only a clean fit whose signature is seen in what the
+picks leave is evidence that *this* effect is missing); the pick is the one with the lowest E.  Its confidence is its weight,
 labelled "high" at ≥ 0.99 (it clearly dominates the base and every other candidate),
 "medium" at ≥ 0.9, else "low" — whatever error remains, which is the second answer.  Two
 candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6 or
@@ -26,7 +29,9 @@ remaining candidates are tried again on top of it (forward selection, up to
 :data:`ADEQUATE_RATIO` × (:mod:`.adequacy`), and a plain statement of what remains —
 structured (the residual forms that describe it, :func:`.forms.describe`) or
 unstructured (a small mismatch of the base model itself).  When the base is already within
-the threshold there is **nothing to explain**.  A null answer carries no confidence, and
+the threshold there is **nothing to explain** — unless it is within only because the floor
+counts a slow wander the records cannot attribute (:data:`UNATTRIBUTED`: one record cannot tell
+the sensor's drift from a drift of the setup).  A null answer carries no confidence, and
 "explained" is never claimed without a noise floor.
 
 :class:`Verdict` holds both answers; :meth:`Verdict.lines` is the one text the terminal,
@@ -54,11 +59,16 @@ REL_SE_FLAG, CORR_FLAG = 0.5, 0.99
 #: excess error power over the noise floor, rmse² − noise², that the candidate removes) and a
 #: base above the noise.
 DELTA_BIC_MIN, ALPHA, MIN_SHARE = 10.0, 0.01, 1.0 / 3.0
-CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "explains_a_third_of_the_excess", "base_above_noise")
+CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "explains_a_third_of_the_excess", "base_above_noise",
+            "no_quality_flag_after_a_pick")
 #: Two candidates closer than this in pairwise ΔBIC are close on fit.
 DISTINCT_BIC = 6.0
+#: Status of a base within the noise floor only because the floor counts a slow wander that the
+#: records cannot attribute (one record, or records that hint at sharing it without confirming:
+#: the sensor's own drift, or a drift of the setup?).
+UNATTRIBUTED = "within the noise only if its slow wander is the sensor's"
 STATUSES = ("explained", "partly explained", "found (adequacy not assessed)", "ambiguous",
-            "not explained by the catalog", "nothing to explain")
+            "not explained by the catalog", "nothing to explain", UNATTRIBUTED)
 
 
 def label_of(weight: float) -> str:
@@ -133,9 +143,10 @@ class Decision:
 
 
 def decide(base, ranked: Sequence, noise: float, noise_d: float, taus_ref, records,
-           compare_fits, prediction_distance) -> Decision:
+           compare_fits, prediction_distance, after_pick: bool = False) -> Decision:
     """One step: flags, evidence, weights, the pick or the ambiguity (module doc).  ``ranked``
-    are the step's evaluated CandidateResults with their comparison to ``base``."""
+    are the step's evaluated CandidateResults with their comparison to ``base`` (``after_pick``:
+    a later step of the chain, on top of a pick)."""
     m = max(len(ranked), 1)
     alpha = ALPHA / m
     within = math.isfinite(noise) and base.rmse <= ADEQUATE_RATIO * noise
@@ -145,7 +156,8 @@ def decide(base, ranked: Sequence, noise: float, noise_d: float, taus_ref, recor
         c.passes = {"very_strong_bic": bool(cmp.delta_bic <= -DELTA_BIC_MIN),
                     "p_below_alpha_over_m": bool(math.isfinite(cmp.p_value) and cmp.p_value <= alpha),
                     "explains_a_third_of_the_excess": bool(excess_share(base.rmse, c.fit.rmse, noise) >= MIN_SHARE),
-                    "base_above_noise": not within}
+                    "base_above_noise": not within,
+                    "no_quality_flag_after_a_pick": not (after_pick and c.quality)}
     ev = {c.effect: c.comparison.delta_bic + QUALITY_BIC * len(c.quality) for c in ranked}
     w = stats.bic_weights([0.0] + list(ev.values()))
     weights = {"base": float(w[0]), **{e: float(x) for e, x in zip(ev, w[1:])}}
@@ -333,7 +345,7 @@ class Verdict:
         else:
             out.append(f"Which effect: none named — {self.reason}.")
         out.append("Is the model adequate: " + self._adequacy_text())
-        if self.remaining_kind and self.status != "nothing to explain":
+        if self.remaining_kind and self.status not in ("nothing to explain", UNATTRIBUTED):
             out.append("What remains: " + self._remaining_text())
         if self.nuisance:
             out.append(f"Nuisance terms (estimated per record, not physics): {self.nuisance['text']}.")
@@ -428,4 +440,4 @@ def nuisance_summary(fit, records) -> dict:
 
 
 __all__ = ["Verdict", "Pick", "Decision", "decide", "quality", "separating_record", "remaining_of", "label_of",
-           "nuisance_summary", "STATUSES", "CRITERIA", "QUALITY_BIC"]
+           "nuisance_summary", "STATUSES", "UNATTRIBUTED", "CRITERIA", "QUALITY_BIC"]

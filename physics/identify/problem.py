@@ -139,7 +139,7 @@ def _is_steps(ts: TimeSeries) -> bool:
     if kind:
         return kind in ("square", "steps")
     try:
-        return detect_excitation(ts.voltage, ts.fs).kind == "steps"
+        return detect_excitation(ts.voltage, ts.fs, ts.source).kind == "steps"
     except InputError:
         return False
 

@@ -1,0 +1,68 @@
+"""The records' slow wander: the part they share (a drift of the setup, deterministic) is told
+from the part each record has on its own (a sensor's random walk, noise) — physics.diagnose.wander."""
+import math
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from physics.diagnose.wander import SHARED_ALPHA, shared_wander, slow_wander
+
+
+@dataclass
+class _Rec:
+    kind: str = "broadband"
+    band: tuple = (0.1, 20.0)
+    fs_d: float = 20.0
+    noise_floor_d: float = 1e-6
+    ts: object = None
+
+
+def _records(n_rec, shared, walk, seed, duration=60.0, fs=20.0, white=1e-6):
+    """``n_rec`` residuals [m] of ``duration`` s: ``shared(t)`` (the same in each) + an
+    independent random walk of std ``walk`` at the end + white noise; nuisance removed like a fit."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(duration * fs)) / fs
+    recs, resid, nui = [], [], []
+    for k in range(n_rec):
+        y = shared(t) + np.cumsum(rng.normal(0.0, walk / math.sqrt(t.size), t.size)) + rng.normal(0, white, t.size)
+        A = np.column_stack([np.ones_like(t), t])
+        c = np.linalg.lstsq(A, y, rcond=None)[0]
+        recs.append(_Rec("broadband" if k == 0 else "steps", fs_d=fs, noise_floor_d=white,
+                         ts=SimpleNamespace(duration=duration)))
+        resid.append(y - A @ c)
+        nui.append((float(c[0]), float(c[1])))
+    return recs, resid, nui
+
+
+def _split(recs, resid, nui):
+    return shared_wander(recs, resid, nui, slow_wander(recs, resid, nui))
+
+
+def test_independent_wanders_are_noise():
+    """Sensor random walks differing per record: rarely called shared (≈ the test's level)."""
+    shared = [_split(*_records(2, lambda t: 0 * t, 5e-6, seed)).fraction > 0 for seed in range(40)]
+    assert sum(shared) <= 3, sum(shared)             # α = 1 %: ≥ 4 of 40 has probability < 1 %
+
+
+def test_a_drift_the_records_share_is_told_from_the_sensors_wander():
+    """A·(1 − e^(−t/τ)) from each record's start, larger than the independent wander: shared,
+    and most of the slow power is the shared part."""
+    drift = lambda t: 15e-6 * -np.expm1(-t / 8.0)    # noqa: E731
+    splits = [_split(*_records(3, drift, 3e-6, seed)) for seed in range(5)]
+    assert all(s.testable and s.p_value < SHARED_ALPHA and s.fraction > 0.5 for s in splits), splits
+    assert "common to the 3 records" in splits[0].text()
+
+
+def test_one_record_cannot_attribute_its_wander():
+    s = _split(*_records(1, lambda t: 0 * t, 5e-6, 0))
+    assert not s.testable and "one record" in s.text()
+
+
+def test_a_hint_of_sharing_short_of_the_test_level_is_called_inconclusive():
+    from physics.diagnose.wander import HINT_P, WanderSplit
+    hint = WanderSplit(0.0, 0.5 * (SHARED_ALPHA + HINT_P), 2, 5)
+    assert hint.inconclusive and "cannot confirm" in hint.text()
+    assert not WanderSplit(0.0, 0.5, 2, 5).inconclusive and "does not repeat" in WanderSplit(0.0, 0.5, 2, 5).text()
+    assert not WanderSplit(0.8, 1e-4, 2, 5).inconclusive
