@@ -58,3 +58,11 @@ def test_a_drift_the_records_share_is_told_from_the_sensors_wander():
 def test_one_record_cannot_attribute_its_wander():
     s = _split(*_records(1, lambda t: 0 * t, 5e-6, 0))
     assert not s.testable and "one record" in s.text()
+
+
+def test_a_hint_of_sharing_short_of_the_test_level_is_called_inconclusive():
+    from physics.diagnose.wander import HINT_P, WanderSplit
+    hint = WanderSplit(0.0, 0.5 * (SHARED_ALPHA + HINT_P), 2, 5)
+    assert hint.inconclusive and "cannot confirm" in hint.text()
+    assert not WanderSplit(0.0, 0.5, 2, 5).inconclusive and "does not repeat" in WanderSplit(0.0, 0.5, 2, 5).text()
+    assert not WanderSplit(0.8, 1e-4, 2, 5).inconclusive

@@ -483,7 +483,8 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
     first = steps[0].decision
     within = math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * data.noise
     split = data.wander_split
-    unattributed = within and split is not None and not split.testable and base.rmse > ADEQUATE_RATIO * data.white
+    unattributed = (within and split is not None and (not split.testable or split.inconclusive)
+                    and base.rmse > ADEQUATE_RATIO * data.white)
     if unattributed:        # within the noise only by counting a wander the records cannot attribute
         status = UNATTRIBUTED
     elif within:
@@ -503,9 +504,9 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
     reason = first.reason if not picks else picks[0].reason
     if unattributed:
         reason = (f"the base leaves {1e6 * base.rmse:.4g} µm, within {ADEQUATE_RATIO}× the noise floor only because "
-                  f"the floor counts a slow wander of {1e6 * data.wander:.3g} µm, and {split.why}: if the sensor does "
-                  f"not drift, state its noise ({arg('noise_floor')}) and what remains is described and drafted; or "
-                  "record the test twice")
+                  f"the floor counts a slow wander of {1e6 * data.wander:.3g} µm, and {split.why or split.text()}; if "
+                  f"the sensor does not drift, state its noise ({arg('noise_floor')}) and what remains is described "
+                  "and drafted, or record the test again (more records sharpen the test)")
     return Verdict(status, picks, first.weights, ad, base.rmse, data.noise, data.noise_source, reason,
                    list(first.ambiguous), first.separating, forms, kind, stopped, first.alpha,
                    nuisance_summary(final, data.records))

@@ -64,7 +64,8 @@ CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "explains_a_third_of_the_
 #: Two candidates closer than this in pairwise ΔBIC are close on fit.
 DISTINCT_BIC = 6.0
 #: Status of a base within the noise floor only because the floor counts a slow wander that the
-#: records cannot attribute (one record: the sensor's own drift, or a drift of the setup?).
+#: records cannot attribute (one record, or records that hint at sharing it without confirming:
+#: the sensor's own drift, or a drift of the setup?).
 UNATTRIBUTED = "within the noise only if its slow wander is the sensor's"
 STATUSES = ("explained", "partly explained", "found (adequacy not assessed)", "ambiguous",
             "not explained by the catalog", "nothing to explain", UNATTRIBUTED)

@@ -66,6 +66,9 @@ _WALK_SHARE = (0.46, 0.66, 0.75, 0.80, 0.84, 0.86, 0.88, 0.89, 0.90, 0.91)
 #: Significance of the test that the records share part of their slow wander (the F-test of
 #: :func:`shared_wander`; one-sided, the false alarms when they wander independently).
 SHARED_ALPHA = 0.01
+#: Below this p-value (the conventional "suggestive" level) but not below SHARED_ALPHA, the
+#: test is inconclusive: the records hint at a shared part they cannot confirm.
+HINT_P = 0.10
 #: At most this many cosine lines per record enter the test.
 MAX_LINES = 24
 
@@ -84,12 +87,21 @@ class WanderSplit:
     def testable(self) -> bool:
         return math.isfinite(self.fraction)
 
+    @property
+    def inconclusive(self) -> bool:
+        """The records hint at a shared part (p < :data:`HINT_P`) without confirming it."""
+        return self.testable and self.fraction == 0 and self.p_value < HINT_P
+
     def text(self) -> str:
         if not self.testable:
             return self.why
         if self.fraction > 0:
             return (f"{100 * self.fraction:.0f} % of it is common to the {self.records} records (F-test on "
                     f"{self.dims} slow components each, p = {self.p_value:.2g}): a drift they share, described, not noise")
+        if self.inconclusive:
+            return (f"the {self.records} records hint that they share part of it but cannot confirm it (F-test on "
+                    f"{self.dims} slow components each, p = {self.p_value:.2g}, not below {SHARED_ALPHA:g}): counted "
+                    "as noise")
         return (f"it does not repeat from record to record (F-test on {self.dims} slow components of the "
                 f"{self.records} records, p = {self.p_value:.2g}): the sensor's own wander, counted as noise")
 
@@ -165,4 +177,4 @@ def shared_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wa
     return WanderSplit(frac, p, R, d)
 
 
-__all__ = ["slow_wander", "shared_wander", "slow_components", "WanderSplit", "WANDER_PER_TREND", "SHARED_ALPHA"]
+__all__ = ["slow_wander", "shared_wander", "slow_components", "WanderSplit", "WANDER_PER_TREND", "SHARED_ALPHA", "HINT_P"]
