@@ -34,6 +34,7 @@ from physics.fileio import load_json, sha256_file
 from .data import check_fs, check_voltage
 from .models import MODELS
 from .models.base import NeuralModel
+from .models.params import MAX_PARAMETERS
 
 __all__ = ["save", "load", "Bundle", "resample", "FORMAT", "FORMAT_VERSION"]
 
@@ -75,12 +76,13 @@ def _jsonable(obj):
 
 def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | None = None,
          metrics: dict | None = None, output: tuple[str, str] = ("deflection", "m"),
-         notes: str = "", overwrite: bool = False) -> Path:
+         notes: str = "", overwrite: bool = False, extra: dict | None = None) -> Path:
     """Save a trained model as the folder ``path`` (atomically).
 
     ``output`` names the output quantity and its unit (default tip deflection in m; the
     Silverbox benchmark saves ``("V2", "V")``).  An existing folder is replaced only with
-    ``overwrite=True``.
+    ``overwrite=True``.  ``extra``: further card entries (e.g. ``tuning``, the trials of
+    ``train-compare --tune``), which may not replace a standard one.
     """
     model._check_fitted()
     target = Path(path)
@@ -118,7 +120,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "weights": {"file": WEIGHTS, "sha256": sha256_file(tmp / WEIGHTS), "format": "torch state_dict"},
         }
-        for key, value in (learned.get("card_extra") or {}).items():  # e.g. the hybrid's physics
+        for key, value in {**(learned.get("card_extra") or {}), **(extra or {})}.items():  # e.g. the hybrid's physics
             if key in card:
                 raise InputError(f"model {model.kind!r}: card entry {key!r} would overwrite a standard field")
             card[key] = value
@@ -185,6 +187,13 @@ def load(path: str | os.PathLike) -> "Bundle":
     wfile = folder / weights.get("file", WEIGHTS)
     if wfile.parent.resolve() != folder.resolve() or not wfile.is_file():
         raise InputError(f"{folder}: weights file {wfile.name} missing or outside the bundle")
+    cls = MODELS[card["model"]]
+    hp = _card_hyper_parameters(card, cls, folder / CARD)
+    learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
+               "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
+               "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
+               "card_extra": {k: card[k] for k in cls.card_keys() if k in card}}
+    _check_size(cls, hp, learned, wfile, folder)
     expected = weights.get("sha256")
     if expected and sha256_file(wfile) != expected:
         raise InputError(f"{wfile}: content does not match the SHA-256 in {CARD} (corrupt or altered)")
@@ -200,15 +209,9 @@ def load(path: str | os.PathLike) -> "Bundle":
     bad = [k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all())]
     if bad:
         raise InputError(f"{wfile}: weights {bad[:3]} contain NaN or infinite values; the bundle is corrupt")
-    cls = MODELS[card["model"]]
-    hp = _card_hyper_parameters(card, cls, folder / CARD)
     if isinstance(hp.get("layers"), int) and hp["layers"] > len(state):   # each layer holds a tensor; checked
         raise InputError(f"{folder / CARD}: layers={hp['layers']} but {wfile.name} holds {len(state)} tensors "
                          "(each layer has its own); the card does not belong to these weights")  # before building
-    learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
-               "rh_range": card.get("rh_range_pct"), "n_init": card.get("n_init"),
-               "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
-               "card_extra": {k: card[k] for k in cls.card_keys() if k in card}}
     try:
         with torch.device("meta"), warnings.catch_warnings():  # shapes only: nothing is allocated
             warnings.simplefilter("ignore", UserWarning)  # "copying ... to a meta parameter is a no-op"
@@ -222,6 +225,30 @@ def load(path: str | os.PathLike) -> "Bundle":
         raise InputError(f"{folder}: the weights do not match a {card['model']!r} model with the card's sizes "
                          f"{sizes} ({' '.join(str(exc).split())[:300]})") from None
     return Bundle(model, card, folder)
+
+
+def _check_size(cls, hp: dict, learned: dict, wfile: Path, folder: Path) -> None:
+    """Refuse a card describing a network too large to hold, before anything is allocated:
+    every size parameter within its cap (the model's value checks), the network built on
+    torch's meta device (shapes only) within :data:`MAX_PARAMETERS`, and a weights file no
+    larger than such a network needs."""
+    try:
+        model = cls(**hp)
+        with torch.device("meta"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            n = model.restore(learned, None).n_parameters
+    except InputError as exc:
+        raise InputError(f"{folder}: {exc}") from None
+    except (RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
+        raise InputError(f"{folder}: the card does not describe a {cls.kind!r} model "
+                         f"({' '.join(str(exc).split())[:300]})") from None
+    if n > MAX_PARAMETERS:
+        raise InputError(f"{folder}: the card describes a {cls.kind!r} network of {n:,} parameters, more than "
+                         f"the {MAX_PARAMETERS:,} a bundle may hold; refused before loading")
+    limit = 16 * n + (16 << 20)     # float32 weights, float64 buffers, and the container
+    if wfile.stat().st_size > limit:
+        raise InputError(f"{wfile}: {wfile.stat().st_size:,} bytes, more than a network of {n:,} parameters "
+                         "needs; refused before loading")
 
 
 def _card_hyper_parameters(card: dict, cls, where: Path) -> dict:

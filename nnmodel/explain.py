@@ -3,9 +3,10 @@
 :func:`notes` reads a train-compare summary (``compare.json``) and returns, for each odd
 number on the page, one note ``{"text": ..., "links": {words: address}}``: records where
 every model fails by design (measurement-like records carry physics absent from training),
-networks worse than the physics row or than the linear row, a hybrid below its parents
-(and what budget would change it), and why the training and validation losses differ by
-orders of magnitude.  Every number in a note is read from the summary; nothing is assumed
+networks worse than the physics row, a hybrid below its parents (and what budget would
+change it), where a network falls short of the linear or physics row and why
+(:mod:`nnmodel.shortfalls`, the findings the summary holds), and why the training and
+validation losses differ by orders of magnitude.  Every number in a note is read from the summary; nothing is assumed
 about a dataset, a model list or a row's name beyond the roles in the summary.
 """
 from __future__ import annotations
@@ -90,7 +91,7 @@ def measurement_like(summary: dict, diagnosis: str | None = None) -> list[dict]:
 
 
 def reference_rows(summary: dict) -> list[dict]:
-    """Networks worse than the physics row or than the linear row."""
+    """Networks worse than the physics row."""
     models = summary.get("models") or {}
     g = _group(models)
     label = "held-out RH" if g == "heldout_rh" else "test records"
@@ -110,16 +111,6 @@ def reference_rows(summary: dict) -> list[dict]:
                 why = f"the physics row is the device {phys.get('device')} named with --physics"
             out.append(note(f"{', '.join(worse)} ({', '.join(_pct(nets[k]) for k in worse)} on {label}) "
                             f"{'is' if len(worse) == 1 else 'are'} above the physics row ({_pct(p)}): {why}."))
-    lin = {k: _nrmse(v, g) for k, v in models.items() if _is_linear(k, v)}
-    lin = {k: v for k, v in lin.items() if v is not None}
-    if lin and nets:
-        lk = min(lin, key=lin.get)
-        worse = sorted((k for k, v in nets.items() if v > lin[lk]), key=nets.get)
-        if worse:
-            out.append(note(f"{', '.join(worse)} {'is' if len(worse) == 1 else 'are'} worse than the linear model "
-                            f"{lk} ({_pct(lin[lk])} on {label}): a network that cannot beat a linear model on the "
-                            "same split is not worth its parameters here — too few records or RH levels, too short "
-                            "a training budget, or an offset the network was not given."))
     return out
 
 
@@ -199,10 +190,20 @@ def losses(summary: dict) -> list[dict]:
                  "from measured outputs and a free run over whole records.")]
 
 
-def notes(summary: dict, *, diagnosis: str | None = None) -> list[dict]:
+def shortfalls(summary: dict) -> list[dict]:
+    """Each network's shortfall findings (``models.NAME.shortfalls``) as one note: what
+    falls short, then each likely cause and what to do."""
+    from .shortfalls import sentences
+    return [note(" ".join(sentences(f))) for r in (summary.get("models") or {}).values()
+            for f in r.get("shortfalls") or []]
+
+
+def notes(summary: dict, *, diagnosis: str | None = None, with_shortfalls: bool = True) -> list[dict]:
     """Every note for a comparison's page (see the module doc).  ``diagnosis``: a page
-    anchor (``#…``) or a command that diagnoses the measurement-like records."""
-    return measurement_like(summary, diagnosis) + reference_rows(summary) + hybrid(summary) + losses(summary)
+    anchor (``#…``) or a command that diagnoses the measurement-like records;
+    ``with_shortfalls``: False where the page lists the shortfalls in a section of their own."""
+    return (measurement_like(summary, diagnosis) + reference_rows(summary) + hybrid(summary)
+            + (shortfalls(summary) if with_shortfalls else []) + losses(summary))
 
 
 def group_facts(entries: list[dict], group_of) -> dict[str, Any]:
@@ -219,4 +220,4 @@ def group_facts(entries: list[dict], group_of) -> dict[str, Any]:
     return out
 
 
-__all__ = ["notes", "note", "group_facts", "measurement_like", "reference_rows", "hybrid", "losses"]
+__all__ = ["notes", "note", "group_facts", "measurement_like", "reference_rows", "hybrid", "shortfalls", "losses"]

@@ -1,6 +1,7 @@
 """Training recipes: ``configs/train/NAME.yaml``, one per network (the model's hyper-parameters).
 
-A recipe is ``{model, description, hyper_parameters}``; :func:`load_recipe` layers the
+A recipe is ``{model, description, hyper_parameters, tune}`` (``tune``: the search space of
+``eap train-compare --tune``, :mod:`nnmodel.tuning`); :func:`load_recipe` layers the
 model's defaults, the file, then the caller's overrides (``--set MODEL.KEY=VALUE``), and
 refuses unknown keys and invalid values before any training; :func:`make_model` builds the
 model.  This module sits above both the model registry and the training loop (it imports
@@ -17,7 +18,7 @@ from physics.errors import InputError
 
 __all__ = ["recipe_dir", "load_recipe", "make_model"]
 
-_RECIPE_KEYS = {"model", "description", "hyper_parameters"}
+_RECIPE_KEYS = {"model", "description", "hyper_parameters", "tune"}
 
 
 def recipe_dir() -> Path:
@@ -32,7 +33,7 @@ def recipe_dir() -> Path:
 def load_recipe(name: str, overrides: dict | None = None, directory: str | os.PathLike | None = None) -> dict:
     """Read the recipe ``NAME.yaml`` and apply ``overrides`` (hyper-parameter -> value).
 
-    Returns ``{"model": kind, "description": str, "hyper_parameters": {...}}`` where the
+    Returns ``{"model": kind, "description": str, "hyper_parameters": {...}, "tune": {...}}`` where the
     hyper-parameters are the model's defaults updated by the file and then the overrides.
     Unknown keys (in the file or in the overrides) raise :class:`InputError`.
     """
@@ -70,7 +71,11 @@ def load_recipe(name: str, overrides: dict | None = None, directory: str | os.Pa
     params.update(hp)
     params.update(overrides or {})
     cls(**params)  # validates values (raises InputError)
-    return {"model": kind, "description": str(doc.get("description", "")), "hyper_parameters": params}
+    tune = doc.get("tune") or {}
+    if not isinstance(tune, dict):
+        raise InputError(f"{path}: tune must be a mapping of hyper-parameter -> {{low, high}} or {{choices}}")
+    return {"model": kind, "description": str(doc.get("description", "")), "hyper_parameters": params,
+            "tune": tune}
 
 
 def make_model(name: str, overrides: dict | None = None, directory=None):

@@ -12,7 +12,11 @@ prediction on the test records, grouped as
 
 The physics simulator that generated the data is scored on the same records: it is the
 reference the networks learned from (its error is the sensor noise, except on the
-measurement-like records).  Scores are pooled over records: NRMSE = sqrt(Σe²/Σ(y−ȳ)²)
+measurement-like records).  The best linear model of the same training data
+(:func:`nnmodel.linear.fit_linear`: ARX orders chosen on the validation data, refined for
+the output error where that helps) is the row ``linear``, the yardstick every network is
+measured against (``vs_linear_pct``: how far its test error lies below or above it).
+Scores are pooled over records: NRMSE = sqrt(Σe²/Σ(y−ȳ)²)
 (ȳ per record), fit % = 100 (1 − NRMSE) as MATLAB ``compare``.
 """
 from __future__ import annotations
@@ -38,10 +42,15 @@ from physics.parallel import ParallelSettings, map_tasks, warm_up
 
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
+from .linear import LinearModel, fit_linear
 from .explain import group_facts, notes
 from .recipes import load_recipe, make_model
+from .shortfalls import data_facts, explain, sentences
+from .tuning import tune as run_tuning
 
 GROUPS = ("train_rh", "heldout_rh", "varying_rh", "measurement_like")
+#: name of the linear yardstick's row
+LINEAR = "linear"
 SKIP = 50   # samples at the start of each test record used only for initialisation
 
 
@@ -59,8 +68,9 @@ def _pooled(ys, yhats) -> dict:
     n = sum(y.size for y in ys)
     nr = float(np.sqrt(e2 / v2)) if v2 > 0 else float("nan")
     corr = float(np.mean([np.corrcoef(y, yh)[0, 1] for y, yh in zip(ys, yhats)]))
+    bias = sum(float(np.sum(y - yh)) for y, yh in zip(ys, yhats)) / n
     return {"rmse_m": float(np.sqrt(e2 / n)), "nrmse": nr, "fit_pct": 100.0 * (1.0 - nr), "correlation": corr,
-            "records": len(ys)}
+            "mean_error": bias, "records": len(ys)}
 
 
 def _score(predict, ds: Dataset, entries: list[dict], skip: int) -> dict:
@@ -102,21 +112,24 @@ def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: f
 def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/train-compare",
                   *, overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
                   progress: bool = True, overwrite: bool = False, physics: str | None = None,
-                  settings: ParallelSettings | None = None) -> dict:
+                  settings: ParallelSettings | None = None, tune: int | None = None) -> dict:
     """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
     ``compare.json``, ``metrics.csv``, plots and the page ``index.html`` in ``out`` (a folder written
     atomically under the policy of :mod:`physics.outputs`).  ``physics``: a device (name or
     YAML) whose simulator is scored beside the networks — by default the dataset's generator,
     none for measured data.  ``settings``: where the models train (:mod:`physics.parallel`:
-    one task per model, each reading the dataset from its path; default here)."""
+    one task per model, each reading the dataset from its path; default here).  ``tune``:
+    trials per model of the search on validation data (:mod:`nnmodel.tuning`), the best
+    trial's settings are trained and saved."""
     preflight(out, inputs=[dataset], overwrite=overwrite)
     warm_up(settings)   # the workers start while the dataset is read and the physics scored
     ds = load_dataset(dataset)
     with output_folder(out, inputs=[dataset], overwrite=overwrite) as tmp:
-        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress, physics, settings)
+        return _train_compare(ds, dataset, models, tmp, overrides, max_time_s, progress, physics, settings, tune)
 
 
-def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress, physics, settings) -> dict:
+def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progress, physics, settings,
+                   tune=None) -> dict:
     if not ds.entries("train"):
         raise InputError(f"{dataset}: no training records")
     test_entries = ds.entries("test")
@@ -129,26 +142,14 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     results: dict[str, dict] = {}
     physics_rows = {}
     if device is not None:
-        if not ds.has_rh:
-            raise InputError(f"--physics {device}: the dataset has no relative humidity, which the physics "
-                             "model needs; build it with --rh")
-        physics_model = PhysicsPredictor.from_device(device, effects)
-
-        def physics_predict(rec):   # measured RH is noisy: the physics gets the slow RH (compare.model_rh)
-            return physics_model(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
-
-        t0 = time.perf_counter()
-        kind = "physics simulator (generator)" if physics is None else f"physics model {device} (--physics)"
-        results["physics"] = {"kind": kind, "effects": list(physics_model.model.effect_ids),
-                              "free_run": _score(physics_predict, ds, test_entries, SKIP),
-                              "n_parameters": None, "train_time_s": 0.0}
-        results["physics"]["inference_samples_per_s"] = _speed(lambda r: physics_predict(r), ds, test_entries)
-        results["physics"]["eval_time_s"] = time.perf_counter() - t0
-        physics_rows["physics"] = physics_predict
+        results["physics"], physics_rows["physics"] = _physics_row(ds, device, effects, physics is None, test_entries)
     local = settings is None or settings.serial
-    tasks = []
+    val_fraction = _val_fraction(ds)
+    tasks = [{"name": LINEAR, "dataset": str(ds.path), "val_fraction": val_fraction, "echo": progress and local}]
     for name in models:
         ov = dict((overrides or {}).get(name, {}))
+        if val_fraction is not None:        # the dataset's own split when it has no validation records
+            ov.setdefault("val_fraction", val_fraction)
         if not progress or not local:
             ov.setdefault("progress_bar", False)
         if max_time_s is not None:
@@ -160,38 +161,137 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         make_model(name, ov)                  # a bad recipe or --set fails here, before any training
         tasks.append({"name": name, "overrides": ov, "dataset": str(ds.path), "bundle": str(out / "models" / name),
                       "echo": progress and local, "effect_files": user_effect_files()})
+    tuning = _tune(tasks[1:], tune, str(ds.path), settings, progress) if tune else {}
     if progress and not local:
         print(f"training {', '.join(models)} on {settings.workers if not settings.scheduler else 'the cluster'} "
               f"worker(s) ...", flush=True)
     runs = map_tasks(_train_one, tasks, settings, desc="models", progress=False, cost=_training_cost)
-    trained = {}
+    trained, linear_rows = {}, {}
     for task, res in zip(tasks, runs):
         name = task["name"]
+        if name == LINEAR:
+            results[name] = res
+            lin = LinearModel.from_card(res["linear"])
+            linear_rows[name] = lambda rec, lin=lin: lin.simulate(rec.u, rec.rh if lin.uses_rh else None,
+                                                                  y_init=rec.y[:lin.n_init])
+            if progress and not local:
+                _echo_result(name, res)
+            continue
         model = load_bundle(task["bundle"]).model
         if name == "hybrid":
             base = _physics_base_row(model, gen, ds, test_entries)
             if base is not None:   # the physics the hybrid starts from, alone
                 results["physics_base"], physics_rows["physics_base"] = base
         results[name] = res
+        if name in tuning:
+            res["tuning"] = tuning[name]
         trained[name] = model
         if progress and not local:
             _echo_result(name, res)
+    _compare_with_linear(results)
+    facts = data_facts(ds)
+    for name, model in trained.items():
+        results[name]["shortfalls"] = explain(name, results[name], results, model, facts, LINEAR)
     summary = {"dataset": str(final_path(ds.path)), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
                "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
                "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
                "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
                "best_heldout": _best(results), "test_groups": group_facts(test_entries, group_of)}
-    _plots(ds, test_entries, physics_rows, trained, results, out)
+    _plots(ds, test_entries, physics_rows, linear_rows, trained, results, out)
+    if tuning:
+        _tuning_plot(tuning, out)
     write_json(out / "compare.json", summary)
     write_csv(table_rows(results), out / "metrics.csv")
     _report(summary, out)
     return summary
 
 
+def _physics_row(ds, device, effects, is_generator: bool, entries) -> tuple[dict, object]:
+    """(result row, predict) of the physics simulator of ``device`` on the test records."""
+    if not ds.has_rh:
+        raise InputError(f"--physics {device}: the dataset has no relative humidity, which the physics "
+                         "model needs; build it with --rh")
+    physics_model = PhysicsPredictor.from_device(device, effects)
+
+    def predict(rec):   # measured RH is noisy: the physics gets the slow RH (compare.model_rh)
+        return physics_model(rec.u, model_rh(rec.rh, rec.fs), rec.fs)
+
+    t0 = time.perf_counter()
+    kind = "physics simulator (generator)" if is_generator else f"physics model {device} (--physics)"
+    row = {"kind": kind, "effects": list(physics_model.model.effect_ids),
+           "free_run": _score(predict, ds, entries, SKIP), "n_parameters": None, "train_time_s": 0.0,
+           "inference_samples_per_s": _speed(predict, ds, entries)}
+    row["eval_time_s"] = time.perf_counter() - t0
+    return row, predict
+
+
+def _tune(tasks: list[dict], n_trials: int, dataset: str, settings, progress: bool) -> dict:
+    """Tune each model task (:mod:`nnmodel.tuning`) and set its overrides to the best trial's
+    (the caller's ``--set`` values win); returns the tuning record of each model."""
+    tuning = {}
+    for task in tasks:
+        name = task["name"]
+        if progress:
+            print(f"tuning {name}: {n_trials} trials on the validation data ...", flush=True)
+        tuning[name] = run_tuning(name, load_recipe(name, task["overrides"]), task["overrides"], n_trials,
+                                  dataset, settings, task["effect_files"], print if progress else None)
+        task["overrides"] = {**tuning[name]["best"]["overrides"], **task["overrides"]}
+        task["tuning"] = tuning[name]
+    return tuning
+
+
+def _val_fraction(ds: Dataset) -> float | None:
+    """The dataset's validation fraction when it has no validation records (else None)."""
+    if ds.entries("validation"):
+        return None
+    vf = ds.meta.get("val_fraction")
+    return None if vf is None else float(vf)
+
+
+def _train_linear(task: dict) -> dict:
+    """Fit and score the linear yardstick (a task like :func:`_train_one`)."""
+    ds = load_dataset(task["dataset"])
+    train, val = ds.records("train"), ds.records("validation") or None
+    entries = ds.entries("test")
+    if task["echo"]:
+        print("fitting the linear yardstick ...", flush=True)
+    t1 = time.perf_counter()
+    lin = fit_linear(train, val, 0.2 if task["val_fraction"] is None else task["val_fraction"])
+    fit_time = time.perf_counter() - t1
+    skip = max(SKIP, lin.n_init)
+
+    def free(rec):
+        return lin.simulate(rec.u, rec.rh if lin.uses_rh else None, y_init=rec.y[:lin.n_init])
+
+    def one_step(rec):
+        return lin.one_step(rec.u, rec.rh if lin.uses_rh else None, rec.y)
+
+    res = {"kind": lin.label(), "n_parameters": lin.na + lin.nb + 1 + int(lin.uses_rh), "train_time_s": fit_time,
+           "free_run": _score(free, ds, entries, skip), "one_step": _score(one_step, ds, entries, skip),
+           "inference_samples_per_s": _speed(free, ds, entries), "linear": lin.card()}
+    if task["echo"]:
+        _echo_result(LINEAR, res)
+    return res
+
+
+def _compare_with_linear(results: dict) -> None:
+    """Every row but the yardstick says how far its test error lies from the linear row's
+    (``vs_linear_pct``: negative below, positive above)."""
+    lin = results.get(LINEAR)
+    if lin is None:
+        return
+    ref = lin["free_run"]["test"]["nrmse"]
+    for name, row in results.items():
+        if name != LINEAR and np.isfinite(ref) and ref > 0:
+            row["vs_linear_pct"] = 100.0 * (row["free_run"]["test"]["nrmse"] / ref - 1.0)
+
+
 def _train_one(task: dict) -> dict:
     """Train, score and save one model (a task of :func:`physics.parallel.map_tasks`: in this
     process or on a worker, which reads the dataset from its path); returns its result row."""
+    if task["name"] == LINEAR:
+        return _train_linear(task)
     ensure_registered(task["effect_files"])
     ds = load_dataset(task["dataset"])
     train, val = ds.records("train"), ds.records("validation") or None
@@ -219,7 +319,8 @@ def _train_one(task: dict) -> dict:
            "training": _budget(model), "history": list(getattr(model, "history_", None) or [])}
     save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True, output=(ds.output.name, ds.output.unit),
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
-                notes=f"trained by eap train-compare on {final_path(ds.path)}")
+                notes=f"trained by eap train-compare on {final_path(ds.path)}",
+                extra={"tuning": task["tuning"]} if task.get("tuning") else None)
     if task["echo"]:
         _echo_result(name, res)
     return res
@@ -234,7 +335,10 @@ def _budget(model) -> dict:
 
 def _training_cost(task: dict) -> float:
     """Relative training cost, to start the dearest models first: recurrent and hybrid
-    models train by back-propagation through time, FF/RBF mostly by least squares."""
+    models train by back-propagation through time, FF/RBF mostly by least squares, the
+    linear yardstick in seconds."""
+    if task["name"] == LINEAR:
+        return 0.1
     return 1.0 if load_recipe(task["name"], task["overrides"])["model"] in ("ff", "rbf") else 4.0
 
 
@@ -265,6 +369,11 @@ def _is_physics(name: str, row: dict) -> bool:
     return row.get("n_parameters") is None and str(row.get("kind", "")).startswith("physics")
 
 
+def is_reference(name: str, row: dict) -> bool:
+    """Rows that are not networks: the physics rows and the linear yardstick."""
+    return name == LINEAR or _is_physics(name, row)
+
+
 def _speed(predict, ds: Dataset, entries) -> float:
     rec = ds.record(max(entries, key=lambda e: e["samples"]))
     t0 = time.perf_counter()
@@ -274,7 +383,7 @@ def _speed(predict, ds: Dataset, entries) -> float:
 
 def _best(results: dict) -> dict:
     """The best network on held-out RH (or on the whole test set when nothing is held out)."""
-    nets = {k: v for k, v in results.items() if not _is_physics(k, v)}
+    nets = {k: v for k, v in results.items() if not is_reference(k, v)}
     group = "heldout_rh" if any("heldout_rh" in v["free_run"] for v in nets.values()) else "test"
     nets = {k: v for k, v in nets.items() if group in v["free_run"]}
     if not nets:
@@ -296,7 +405,8 @@ def table_rows(results: dict) -> list[dict]:
                      "nrmse_measurement_like_pct": 100 * fr.get("measurement_like", {}).get("nrmse", float("nan")),
                      "fit_heldout_pct": fr.get("heldout_rh", {}).get("fit_pct", float("nan")),
                      "corr_heldout": fr.get("heldout_rh", {}).get("correlation", float("nan")),
-                     "one_step_nrmse_test_pct": 100 * r["one_step"]["test"]["nrmse"] if "one_step" in r else None})
+                     "one_step_nrmse_test_pct": 100 * r["one_step"]["test"]["nrmse"] if "one_step" in r else None,
+                     "vs_linear_pct": r.get("vs_linear_pct")})
     return rows
 
 
@@ -306,18 +416,54 @@ def format_table(summary: dict) -> str:
             ("varying %", "nrmse_varying_rh_pct", 9), ("meas-like %", "nrmse_measurement_like_pct", 11)]
     cols = [c for c in cols if c[1] == "nrmse_test_pct" or any(np.isfinite(r[c[1]]) for r in rows)]
     head = f"{'model':8s} {'params':>8s} {'train s':>8s} {'samples/s':>10s} " + \
-        " ".join(f"{h:>{w}s}" for h, _, w in cols) + f" {'1-step %':>8s}"
+        " ".join(f"{h:>{w}s}" for h, _, w in cols) + f" {'1-step %':>8s} {'vs linear':>9s}"
     lines = [head, "-" * len(head)]
     for r in rows:
         p = "-" if r["parameters"] is None else str(r["parameters"])
         one = "-" if r["one_step_nrmse_test_pct"] is None else f"{r['one_step_nrmse_test_pct']:.2f}"
+        vs = "-" if r["vs_linear_pct"] is None else f"{r['vs_linear_pct']:+.0f} %"
         lines.append(f"{r['model']:8s} {p:>8s} {r['train_time_s']:8.1f} {r['samples_per_s']:10.3g} "
-                     + " ".join(f"{r[k]:{w}.2f}" for _, k, w in cols) + f" {one:>8s}")
+                     + " ".join(f"{r[k]:{w}.2f}" for _, k, w in cols) + f" {one:>8s} {vs:>9s}")
     phys = summary.get("physics")
     note = "" if phys is None else ("; the physics row is the simulator that generated the data" if phys["is_generator"]
                                     else f"; the physics row is the device {phys['device']} named with --physics")
+    lin = summary["models"].get(LINEAR)
+    if lin is not None:
+        note += f"; the linear row is {lin['kind']}, 'vs linear' the test error relative to it"
     lines.append("free-run NRMSE (RMSE/std of the measurement, pooled over records)" + note)
     return "\n".join(lines)
+
+
+def tuning_rows(tuned: dict) -> list[dict]:
+    """One row per trial of every tuned model (the page's trial table)."""
+    rows = []
+    for name, t in tuned.items():
+        for r in t["trials"]:
+            v = r["validation_nrmse"]
+            rows.append({"model": name, "trial": r["trial"], "best": "yes" if r["trial"] == t["best"]["trial"] else "",
+                         "validation_nrmse_pct": None if v is None else 100 * v, "fit_s": r["fit_time_s"],
+                         "settings": ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
+                                               for k, v in r["params"].items()) + (f" (failed: {r['error']})"
+                                                                                   if r["error"] else "")})
+    return rows
+
+
+def _tuning_plot(tuned: dict, out: Path) -> None:
+    """Validation score of every trial, and the best so far, per tuned model."""
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for name, t in tuned.items():
+        x = [r["trial"] for r in t["trials"]]
+        y = [np.nan if r["validation_nrmse"] is None else 100 * r["validation_nrmse"] for r in t["trials"]]
+        ax.plot(x, y, "o", ms=4, color=colour(name), alpha=0.6, label=f"{name} trials")
+        ax.plot(x, np.fmin.accumulate(np.where(np.isnan(y), np.inf, y)), "-", color=colour(name),
+                label=f"{name} best so far")
+    ax.set_xlabel("trial")
+    ax.set_ylabel("free-run NRMSE on validation [%]")
+    ax.set_yscale("log")
+    plain_log_axis(ax)
+    ax.grid(alpha=0.3, which="both")
+    legend_outside(ax)
+    save(fig, out / "tuning.png")
 
 
 #: How each test group reads in a caption.
@@ -325,7 +471,7 @@ GROUP_LABELS = {"train_rh": "trained-RH", "heldout_rh": "held-out-RH", "varying_
                 "measurement_like": "measurement-like"}
 
 
-def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
+def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) -> None:
     output = ds.meta.get("output") or {"name": "deflection", "unit": "m"}
     qty = output["name"]
     unit, k = reading_unit(output["unit"])
@@ -338,7 +484,7 @@ def _plots(ds, entries, physics_rows, trained, results, out: Path) -> None:
         t = np.arange(rec.u.size) / rec.fs
         fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
         ax[0].plot(t, k * rec.y, color=colour("measurement"), lw=1.0, label="measurement")
-        for label, predict in physics_rows.items():
+        for label, predict in {**physics_rows, **linear_rows}.items():
             ax[0].plot(t, k * predict(rec), color=colour(label), lw=0.8, label=label)
         for name, m in trained.items():
             yh = m.simulate(rec.u, rec.rh, y_init=rec.y[:m.n_init_])
@@ -450,8 +596,30 @@ def _report(summary: dict, out: Path) -> None:
     if best:
         rep.lead(f"Best free-run NRMSE on {best.get('group', 'held-out RH')}: {best['model']} "
                  f"{100 * best['nrmse']:.2f} %.")
-    for n in notes(summary, diagnosis=diagnose_command(summary)):
+    lin = summary["models"].get(LINEAR)
+    if lin is not None:
+        rep.paragraph(f"Linear yardstick: {lin['kind']}, orders chosen on the validation data, free-run test "
+                      f"NRMSE {100 * lin['free_run']['test']['nrmse']:.2f} %. " + "; ".join(
+                          f"{k} {abs(r['vs_linear_pct']):.0f} % {'below' if r['vs_linear_pct'] < 0 else 'above'} it"
+                          for k, r in summary["models"].items() if r.get("vs_linear_pct") is not None) + ".")
+    for n in notes(summary, diagnosis=diagnose_command(summary), with_shortfalls=False):
         rep.why(n["text"], n["links"])
+    findings = [f for r in summary["models"].values() for f in r.get("shortfalls", [])]
+    if findings:
+        rep.heading("Where a network falls short, and why")
+        for f in findings:
+            first, *causes = sentences(f)
+            rep.paragraph(first)
+            rep.bullets(causes)
+    tuned = {k: r["tuning"] for k, r in summary["models"].items() if r.get("tuning")}
+    if tuned:
+        rep.heading("Tuning on the validation data")
+        first = next(iter(tuned.values()))
+        rep.paragraph(f"{first['n_trials']} trials per model, {first['sampler']}, asked and told in batches of "
+                      f"{first['batch']} (the same trials for any worker count); score: {first['score']}. "
+                      "The best trial's settings were trained again and saved.")
+        rep.image(out / "tuning.png", "free-run NRMSE [%] on the validation data of every trial, and the best so far")
+        rep.table(tuning_rows(tuned), caption="every trial: its validation score and settings")
     for img, cap in (("error_by_rh.png", "free-run NRMSE [%] by nominal RH level, per model (grey: held-out levels)"),
                      ("bode.png", "small-signal response |H| [mm/V] and phase [°] of each network beside the "
                                   "physics closed form"),

@@ -21,8 +21,10 @@ import datetime
 import logging
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -35,6 +37,7 @@ from torch.utils.data import BatchSampler, DataLoader, Dataset, DistributedSampl
 
 from physics.errors import InputError
 
+from .batches import free_run_error, pad_batch, split_batch
 from .data import window_starts
 
 __all__ = ["WindowDataModule", "SimulationTask", "fit_core", "free_run_error", "execution"]
@@ -72,26 +75,6 @@ class _Windows(Dataset):
 
 def _collate_none(batch):
     return batch
-
-
-def _pad_batch(seqs, n_init: int) -> dict:
-    """Whole records as one padded batch: history = first ``n_init`` samples."""
-    L = max(len(s) for s in seqs)
-    B = len(seqs)
-    u = np.zeros((B, L) + np.shape(seqs[0].u)[1:], np.float32)
-    y = np.zeros((B, L), np.float32)
-    rh = np.zeros((B, L) + np.shape(seqs[0].rh)[1:], np.float32) if seqs[0].rh is not None else None
-    mask = np.zeros((B, L), np.float32)
-    for i, s in enumerate(seqs):
-        n = len(s)
-        u[i, :n], y[i, :n] = s.u, s.y
-        u[i, n:] = s.u[-1]  # padding: hold the last input (masked out of the error anyway)
-        if rh is not None:
-            rh[i, :n] = s.rh
-            rh[i, n:] = s.rh[-1]
-        mask[i, n_init:n] = 1.0
-    t = lambda a: None if a is None else torch.as_tensor(a)  # noqa: E731
-    return {"u": t(u), "y": t(y), "rh": t(rh), "mask": t(mask)}
 
 
 #: Fewest optimizer steps per epoch: the batch shrinks on short records (a recipe's batch of
@@ -150,17 +133,11 @@ class WindowDataModule(pl.LightningDataModule):
     def val_dataloader(self):
         if not self.val_seqs:
             return []
-        return DataLoader([_pad_batch(self.val_seqs, self.n_init)], batch_size=None,
+        return DataLoader([pad_batch(self.val_seqs, self.n_init)], batch_size=None,
                           collate_fn=_collate_none)
 
 
 # ====================================================================== module
-def _split(batch, k):
-    u, y, rh = batch["u"], batch["y"], batch["rh"]
-    hist = (u[:, :k], y[:, :k], None if rh is None else rh[:, :k])
-    return hist, u[:, k:], y[:, k:], None if rh is None else rh[:, k:]
-
-
 class SimulationTask(pl.LightningModule):
     """Simulation-error training of a :class:`nnmodel.models.core.SequenceCore`."""
 
@@ -175,7 +152,7 @@ class SimulationTask(pl.LightningModule):
 
     def training_step(self, batch, batch_idx):
         k = self.core.n_init
-        hist, u, y, rh = _split(batch, k)
+        hist, u, y, rh = split_batch(batch, k)
         y_hat = self.core.simulate(self.core.init_state(*hist), u, rh)
         loss = torch.mean((y_hat - y) ** 2)
         self.log("train_loss", loss, on_step=False, on_epoch=True, prog_bar=True,
@@ -187,7 +164,7 @@ class SimulationTask(pl.LightningModule):
 
     def validation_step(self, batch, batch_idx):
         k = self.core.n_init
-        hist, u, y, rh = _split(batch, k)
+        hist, u, y, rh = split_batch(batch, k)
         mask = batch["mask"][:, k:]
         y_hat = self.core.simulate(self.core.init_state(*hist), u, rh)
         err = torch.nan_to_num((y_hat - y) ** 2, nan=1e12, posinf=1e12) * mask
@@ -268,6 +245,23 @@ def _quiet_lightning():
                 logging.getLogger(n).setLevel(lvl)
 
 
+def _fit_interruptible(trainer, task, dm) -> None:
+    """``trainer.fit`` that lets Ctrl-C through: Lightning answers a KeyboardInterrupt with a
+    graceful shutdown, ``sys.exit(1)`` and SIGINT ignored from then on; here the handler is
+    restored and the KeyboardInterrupt raised again, so the command ends as on any other
+    Ctrl-C (exit 130, nothing that looks complete)."""
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        trainer.fit(task, datamodule=dm)
+    except SystemExit as exc:
+        if isinstance(exc.__context__, KeyboardInterrupt):
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, handler)
+
+
 def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
     """Train ``core`` in place with Lightning as ``config`` (a
     :class:`~nnmodel.models.config.TrainingConfig`) says; restores the best (validation
@@ -311,7 +305,7 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
                 enable_model_summary=False, num_sanity_val_steps=0, log_every_n_steps=1,
                 gradient_clip_val=c.grad_clip, default_root_dir=ckdir)
             t_fit = time.monotonic()
-            trainer.fit(task, datamodule=dm)
+            _fit_interruptible(trainer, task, dm)
             elapsed = time.monotonic() - t_fit
         # with spawned processes (DDP) the callback's state stays in them: the file is the record
         best = ckpt.best_model_path or str(Path(ckdir) / "best.ckpt")
@@ -337,19 +331,3 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
                       f"{max_epochs} epochs: the result depends on this machine's speed; raise max_time or "
                       "lower max_epochs for a reproducible budget", RuntimeWarning, stacklevel=2)
     return hist.rows, summary
-
-
-def free_run_error(core, seqs) -> float:
-    """Free-run NRMSE (normalised units) of ``core`` over whole records, each initialised
-    from its first ``n_init`` samples (the validation metric, outside Lightning)."""
-    batch = _pad_batch(seqs, core.n_init)
-    k = core.n_init
-    hist, u, y, rh = _split(batch, k)
-    mask = batch["mask"][:, k:]
-    was_training = core.training
-    core.eval()
-    with torch.no_grad():
-        y_hat = core.simulate(core.init_state(*hist), u, rh)
-    core.train(was_training)
-    err = torch.nan_to_num((y_hat - y) ** 2, nan=1e12, posinf=1e12) * mask
-    return min(math.sqrt(float(err.sum()) / max(float(mask.sum()), 1.0)), 1e6)

@@ -56,3 +56,16 @@ def test_groups_of_a_dataset():
                                                                               "extra_effects": []}]
     g = group_facts(entries, lambda e: "measurement_like" if e["extra_effects"] else "train_rh")
     assert g["measurement_like"] == {"records": 1, "rh_pct": [70], "extra_effects": ["x"], "paths": ["a.csv"]}
+
+
+def test_shortfalls_are_the_notes_about_the_linear_row():
+    """A network above the linear row is told once, by its shortfall finding (cause and what
+    to do); the page that lists the findings in a section of its own leaves them out."""
+    finding = {"finding": "ff: its free-run test error (3.00 %) is above the linear model's (2.00 %)",
+               "causes": [{"cause": "too few RH levels", "action": "record at 3 or more RH levels"}]}
+    ff = {**_row("ff", 3.0, n=100), "shortfalls": [finding]}
+    s = _summary(linear=_row("linear ARX (na=2, nb=4)", 2.0, n=7), ff=ff)
+    texts = [n["text"] for n in notes(s)]
+    assert texts == ["ff: its free-run test error (3.00 %) is above the linear model's (2.00 %). "
+                     "Likely cause: too few RH levels. What to do: record at 3 or more RH levels."]
+    assert notes(s, with_shortfalls=False) == []

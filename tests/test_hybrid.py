@@ -55,6 +55,23 @@ def test_hybrid_learns_the_discrepancy_its_physics_alone_misses(hybrid, data):
     assert e_hyb < 0.01, (e_hyb, e_phys)
 
 
+def test_a_correction_that_does_not_validate_better_than_its_physics_is_dropped(data):
+    """A grey box is never worse than its physics prior on validation: a correction fitted
+    to a training-only offset (the validation records are the physics itself) is set to
+    zero, and the hybrid simulates its physics; where the correction does help (the GAIN
+    discrepancy in every split) it is kept."""
+    val = [Experiment(r.u, r.y / GAIN, r.rh, FS, r.name) for r in data["val"]]
+    off = 0.3 * np.std(val[0].y)
+    train = [Experiment(r.u, r.y / GAIN + off, r.rh, FS, r.name) for r in data["train"]]
+    m = MODELS["hybrid"](nb=3, max_epochs=0, **QUIET).fit(train, val)
+    assert m.reference_start_["start"]["kept"] == "physics" and m.reference_start_["end"]["kept"] == "physics"
+    r = val[0]
+    e_phys = nrmse(r.y, m.physics_output(r.u, r.rh)[0])
+    assert nrmse(r.y, m.simulate(r.u, rh=r.rh, y_init=r.y[:m.n_init_])) <= e_phys + 1e-4
+    assert MODELS["hybrid"](nb=3, max_epochs=0, **QUIET).fit(data["train"], data["val"]) \
+        .reference_start_["end"]["kept"] == "network"
+
+
 def test_a_zero_correction_reproduces_the_physics_exactly(data):
     m = MODELS["hybrid"](nb=2, layers=0, arx_init=False, max_epochs=0, **QUIET).fit(data["train"], data["val"])
     r = data["test"][0]

@@ -150,3 +150,24 @@ def test_resample_preserves_a_slow_sine():
     x = np.sin(2 * np.pi * 3 * t)
     y = resample(x, 1000.0, 250.0)
     np.testing.assert_allclose(y, np.sin(2 * np.pi * 3 * np.arange(y.size) / 250.0), atol=2e-2)
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"layers": 100_000_000}, r"layers=100000000 is invalid; expected at most 64"),
+    ({"hidden": 4096, "layers": 64}, r"network of [\d,]+ parameters, more than the 50,000,000"),
+    ({"nb": 10 ** 9}, r"nb=1000000000 is invalid; expected at most 1,000"),
+])
+def test_an_oversized_card_is_refused_before_anything_is_allocated(saved, change, match):
+    """A card is input: sizes are capped and the network is sized on torch's meta device
+    before the weights are read (a card `layers: 100000000` once ran for minutes and GBs)."""
+    import resource
+    import time
+    card = json.loads((saved / CARD).read_text())
+    card["hyper_parameters"].update(change)
+    (saved / CARD).write_text(json.dumps(card))
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    with pytest.raises(InputError, match=match):
+        load(saved)
+    assert time.perf_counter() - t0 < 30      # a guard against hanging, not a speed target
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0 < 200_000   # kB: no allocation of the network

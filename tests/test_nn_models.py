@@ -346,3 +346,26 @@ def test_ff_scores_structures_by_their_least_squares_start_and_trains_only_the_w
     assert all(s["scored_as"] == "linear least-squares start" for s in m.structure_search_)
     assert m.na == 4 and m.layers == 1 and m.max_epochs == 2   # the winner, with the recipe's own training
     assert m.training_summary_["epochs_run"] >= 1
+
+
+@pytest.mark.parametrize("kind", ["narx", "ff"])
+def test_a_linear_start_continues_across_pieces(kind):
+    """simulate_pieces carries the linear start's free run over (its filter state and past
+    inputs) as it does the memory filters: the pieces give the whole-record output."""
+    from nnmodel.data import Experiment
+    from nnmodel.models import MODELS
+    from scipy.signal import lfilter
+    rng = np.random.default_rng(2)
+    u = np.convolve(rng.normal(size=1500), np.ones(5) / 5, "same")
+    y = lfilter([0.05], [1, -0.95], np.tanh(u)) * 1e-3
+    rec = Experiment(u=u, y=y, rh=np.full(u.size, 50.0), fs=100.0)
+    m = MODELS[kind](progress_bar=False, linear_start=True, max_epochs=1, memory_filters=2,
+                     **({"horizon": 20, "stride": 20} if kind == "narx" else {}))
+    m.fit([rec], [rec])
+    assert m.features_.linear is not None and m.streams
+    for y0 in (None, y[:12]):
+        whole = m.simulate(u, 50.0, y_init=y0)
+        cuts = [0, 30, 33, 700, 1500]
+        parts = np.concatenate(list(m.simulate_pieces(((u[a:b], np.full(b - a, 50.0))
+                                                       for a, b in zip(cuts, cuts[1:])), y0)))
+        assert np.max(np.abs(parts - whole)) <= 1e-5 * np.max(np.abs(whole))

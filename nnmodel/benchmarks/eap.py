@@ -102,9 +102,10 @@ def _pct(row: dict, group: str, which: str = "free_run"):
 
 
 def _report(summary: dict, names, quick: bool, ds_path: Path, wall: float, out: Path) -> dict:
+    from ..traincompare import is_reference   # physics rows and the linear yardstick
     rows = []
     for key, r in summary["models"].items():
-        rows.append({"model": key, "role": "reference" if r.get("n_parameters") is None else "model",
+        rows.append({"model": key, "role": "reference" if is_reference(key, r) else "model",
                      "kind": r.get("kind"),
                      "nrmse_pct": {g: _pct(r, g) for g in GROUPS + ("test",)},
                      "nrmse_by_rh_pct": {k: 100.0 * v for k, v in r["free_run"].get("by_rh", {}).items()},

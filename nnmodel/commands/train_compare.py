@@ -23,6 +23,10 @@ def add_arguments(p):
                    help="processes (CPU) or GPUs that train each network together (Lightning)")
     p.add_argument("--strategy", default=None,
                    help="Lightning strategy for --devices > 1 (default: ddp_spawn, gloo on CPUs; ddp on GPUs)")
+    p.add_argument("--tune", type=int, default=None, metavar="N",
+                   help="search each model's settings (its recipe's tune section) with N trials scored on the "
+                        "validation data (Optuna TPE, seeded; trials run on --workers/--scheduler), then train and "
+                        "save the best")
     add_parallel_options(p)
     p.add_argument("--physics", default=None, metavar="DEVICE_OR_YAML",
                    help="score this device's simulator beside the networks (default: the dataset's generator; "
@@ -66,10 +70,14 @@ def run(args) -> int:
     with execution(args.devices, strategy):
         summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
                                 max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet,
-                                physics=args.physics, settings=settings)
+                                physics=args.physics, settings=settings, tune=args.tune)
     print(format_table(summary))
     best = summary["best_heldout"]
     if best:
         print(f"best free-run NRMSE on {best['group']}: {best['model']} {100 * best['nrmse']:.2f} %")
+    from nnmodel.shortfalls import sentences
+    for f in (f for r in summary["models"].values() for f in r.get("shortfalls", [])):
+        first, *causes = sentences(f)
+        print(first + "".join(f"\n  - {c}" for c in causes))
     print(f"report: {args.out}/index.html")
     return 0

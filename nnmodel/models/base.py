@@ -78,7 +78,7 @@ class NeuralModel:
     CARD_KEYS: tuple[str, ...] = ()
 
     _LEARNED = ("net_", "features_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
-                "training_summary_", "structure_search_", "init_report_")
+                "training_summary_", "structure_search_", "init_report_", "reference_start_")
 
     # ------------------------------------------------------------------ hyper-parameters
     @classmethod
@@ -103,7 +103,8 @@ class NeuralModel:
     @classmethod
     def card_keys(cls) -> tuple[str, ...]:
         """Bundle-card entries besides the standard ones that :meth:`restore` reads."""
-        return ("rh_knots_pct", "memory_range_s", "structure_search") + tuple(cls.CARD_KEYS)
+        return ("rh_knots_pct", "memory_range_s", "linear_start", "structure_search",
+                "reference_start") + tuple(cls.CARD_KEYS)
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in self.param_names()}
@@ -160,9 +161,11 @@ class NeuralModel:
     def _release_channels(self) -> None:
         """Hook after the training records are normalised (drop caches)."""
 
-    def _channels(self, u: np.ndarray, rh: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-        """Normalised core channels of a record in physical units (:meth:`FeatureMap.channels`)."""
-        return self.features_.channels(u, rh, self.net_)
+    def _channels(self, u: np.ndarray, rh: np.ndarray | None,
+                  y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Normalised core channels of a record in physical units (:meth:`FeatureMap.channels`;
+        ``y``: measured outputs from the record's start, when known)."""
+        return self.features_.channels(u, rh, self.net_, y)
 
     def _card_extra(self) -> dict:
         """Model-specific bundle-card entries (named in :attr:`CARD_KEYS`)."""
@@ -196,7 +199,7 @@ class NeuralModel:
         from ..training import fit_core  # Lightning is imported only when training
 
         with torch_threads(self.num_threads):
-            self.features_ = self.features.fit(self.kind, fs, train, use_rh)
+            self.features_ = self.features.fit(self.kind, fs, train, use_rh, val, self.val_fraction)
             core = self._build_core(self.features_)
             min_len = core.n_init + 2
             # channels (memory filters, physics) are computed on whole records and then cut,
@@ -226,15 +229,26 @@ class NeuralModel:
             self._release_channels()
             t0 = time.perf_counter()
             self._initialise(core, tr)
+            reference = self._reference()
+            start = keep_if_better(core, va, reference) if reference else None
             history: list[dict] = []
             if self.max_epochs > 0:
                 history, self.training_summary_ = fit_core(core, tr, va, self.training)
+            if start is not None:
+                self.reference_start_ = {"reference": reference, "start": start,
+                                         "end": keep_if_better(core, va, reference)}
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history
             core.eval()
 
+    def _reference(self) -> str | None:
+        """What a residual core adds its correction to, which the model must never be worse
+        than on validation (:func:`keep_if_better`): ``"linear"`` with a linear start, else
+        None (the hybrid: ``"physics"``)."""
+        return "linear" if self.features_.linear is not None else None
+
     def _norm_record(self, r) -> Seq:
-        U, R = self._channels(r.u, r.rh if "rh" in self.inputs_ else None)
+        U, R = self._channels(r.u, r.rh if "rh" in self.inputs_ else None, r.y)
         return Seq(U, self.net_.norm("y", r.y), R)
 
     @property
@@ -267,18 +281,20 @@ class NeuralModel:
         measured output ``y``, held at the first samples (the steady state of the first input
         and output, so the memory filters start there whatever the record's start); without
         one, at rest (0 V, output 0, the first RH), the documented assumption of a free run."""
-        up, rhp, yn = self._pad(u, rh, y, pad)
-        un, rhn = self._channels(up, rhp)
+        up, rhp, yp, yn = self._pad(u, rh, y, pad)
+        un, rhn = self._channels(up, rhp, yp)
         return un, rhn, yn
 
     def _pad(self, u, rh, y, pad: int):
-        """(u, rh, normalised y) with ``pad`` samples in front, as :meth:`_padded` says."""
+        """(u, rh, y or None when unknown, normalised y) with ``pad`` samples in front, as
+        :meth:`_padded` says."""
         known = y is not None and y.size > 0
         up = np.concatenate([np.full(pad, u[0] if known else 0.0), u])
         rhp = None if rh is None else np.concatenate([np.full(pad, rh[0]), rh])
+        yp = np.concatenate([np.full(pad, y[0]), y]) if known else None
         yn = None if y is None else np.concatenate([np.full(pad, self.net_.norm("y", float(y[0]) if known else 0.0)),
                                                     self.net_.norm("y", y)])
-        return up, rhp, yn
+        return up, rhp, yp, yn
 
     @staticmethod
     def _t(x):
@@ -348,9 +364,9 @@ class NeuralModel:
                         raise InputError(f"y_init has {m} samples but the first piece only {u.size}; y_init must be "
                                          "shorter than the piece it initialises")
                     pad = max(0, k - m)
-                    u, rh, yn = self._pad(u, rh, y0 if y0 is not None else np.zeros(0), pad)
+                    u, rh, yp, yn = self._pad(u, rh, y0 if y0 is not None else np.zeros(0), pad)
                     head, s = (y0 if m else head), pad + m
-                un, rhn, last = fm.channels_continued(u, rh, self.net_, last)
+                un, rhn, last = fm.channels_continued(u, rh, self.net_, last, yp if state is None else None)
                 if state is None:
                     state = core.init_state(self._t(un[None, s - k:s]), self._t(yn[None, s - k:s]),
                                             None if rhn is None else self._t(rhn[None, s - k:s]))
@@ -416,6 +432,8 @@ class NeuralModel:
         extra = {**self.features.card(self.features_), **self._card_extra()}
         if self.__dict__.get("structure_search_"):
             extra["structure_search"] = self.structure_search_
+        if self.__dict__.get("reference_start_"):
+            extra["reference_start"] = self.reference_start_
         out = {"inputs": list(self.inputs_), "fs": self.fs_,
                "rh_range": None if self.rh_range_ is None else list(self.rh_range_),
                "n_init": self.n_init_, "fit_time_s": self.__dict__.get("fit_time_")}
@@ -423,8 +441,9 @@ class NeuralModel:
             out["card_extra"] = extra
         return out
 
-    def restore(self, learned: dict, state_dict: dict) -> "NeuralModel":
-        """Rebuild the network from ``learned_state()`` and load its weights."""
+    def restore(self, learned: dict, state_dict: dict | None) -> "NeuralModel":
+        """Rebuild the network from ``learned_state()`` and load its weights (``None``: the
+        shapes only, e.g. on torch's meta device to size a network before loading it)."""
         self._validate()
         inputs = list(learned["inputs"])
         if inputs not in (["voltage"], ["voltage", "rh"]):
@@ -434,7 +453,7 @@ class NeuralModel:
         features = self.features.restore(self.kind, learned["fs"], "rh" in inputs, extra)
         core = self._build_core(features)
         net = Normalized(core, features.n_mem)
-        missing, unexpected = net.load_state_dict(state_dict, strict=False)
+        missing, unexpected = net.load_state_dict(state_dict, strict=False) if state_dict is not None else ((), ())
         if missing or unexpected:
             raise InputError(f"saved weights do not match a {self.kind!r} model with these "
                              f"hyper-parameters (missing {missing}, unexpected {unexpected})")
@@ -450,6 +469,26 @@ class NeuralModel:
         if extra.get("structure_search"):
             self.structure_search_ = extra["structure_search"]
         return self
+
+
+def keep_if_better(core, val, reference: str = "linear") -> dict:
+    """A residual core (a linear start, the hybrid's physics) starts and ends no worse than
+    its ``reference`` alone on validation: when its correction (initialised by least
+    squares, or trained) does not lower the free-run error of ``val`` (normalised
+    records), it is set to zero (``core.zero_correction()``), leaving the reference."""
+    import copy
+
+    from ..batches import free_run_error
+    if not val:
+        return {"kept": "network", "reason": "no validation data"}
+    e_net = free_run_error(core, val)
+    ref = copy.deepcopy(core)
+    ref.zero_correction()
+    e_ref = free_run_error(ref, val)
+    kept = "network" if e_net < e_ref else reference
+    if kept == reference:
+        core.load_state_dict(ref.state_dict())
+    return {"kept": kept, "validation_nrmse_network": e_net, "validation_nrmse_reference": e_ref}
 
 
 def _missing(name: str):

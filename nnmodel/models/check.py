@@ -74,8 +74,8 @@ def check_class(cls, params=None, ctx=None) -> None:
     sig = inspect.signature(cls.__init__)
     _expect(any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values()), "class",
             "__init__ must take **settings (training, features and structure settings go to their parts)")
-    nodefault = [k for k, p in sig.parameters.items() if k != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD
-                 and p.default is inspect.Parameter.empty]
+    nodefault = [k for k, p in sig.parameters.items()
+                 if k != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD and p.default is inspect.Parameter.empty]
     _expect(not nodefault, "class", f"constructor parameters without a default: {nodefault}")
     shared = set(cls._model_params()) & {n for part in PARTS for n in part.names()}
     _expect(not shared, "class", f"constructor repeats shared settings {sorted(shared)}; take them through **settings")
@@ -91,7 +91,8 @@ def check_params(cls, params=None, ctx=None) -> None:
     _expect(len(set(names)) == len(names), "params", f"a hyper-parameter is declared twice: {names}")
     _expect(set(m.get_params()) == set(names) == set(cls.default_params()), "params",
             "get_params(), param_names() and default_params() must name the same hyper-parameters")
-    _expect(m.get_params() == cls.default_params(), "params", "a default model's get_params() differs from default_params()")
+    _expect(m.get_params() == cls.default_params(), "params",
+            "a default model's get_params() differs from default_params()")
     again = cls(**m.get_params())
     _expect(again.get_params() == m.get_params(), "params", "cls(**model.get_params()) does not rebuild the same model")
     t = cls(max_epochs=3, lr=5e-4)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .params import Part, flag, pos_float, pos_int
+from .params import Part, flag, pos_float, pos_int, size
 
 __all__ = ["TrainingConfig", "TRAINING_FIELDS"]
 
@@ -33,11 +33,11 @@ class TrainingConfig(Part):
         "seed": lambda v: pos_int(v, zero=True),
         "lr": pos_float,
         "weight_decay": lambda v: pos_float(v, zero=True),
-        "batch_size": pos_int,
+        "batch_size": size(1_000_000),
         "max_epochs": lambda v: pos_int(v, zero=True),
         "max_time": lambda v: None if v is None else pos_float(v),
-        "horizon": pos_int,
-        "stride": pos_int,
+        "horizon": size(1_000_000),
+        "stride": size(1_000_000),
         "patience": pos_int,
         "val_fraction": lambda v: None if (pos_float(v, zero=True) is None and v < 1) else "a number in [0, 1)",
         "grad_clip": lambda v: None if v is None else pos_float(v),

@@ -40,7 +40,7 @@ from scipy import signal
 
 from physics.errors import InputError
 
-from .params import Part, flag, pos_float, pos_int
+from .params import MAX_FILTERS, Part, flag, pos_float, size
 
 __all__ = ["memory_taus", "memory_filters", "rh_hats", "check_knots", "auto_knots", "InputFeatures",
            "FeatureMap", "MEMORY_MIN_SAMPLES", "MEMORY_MAX_FRACTION"]
@@ -142,16 +142,20 @@ class InputFeatures(Part):
     with time constants ``memory_min_s``..``memory_max_s`` (s; adapted to the data, see
     :meth:`fit`), with ``memory_abs`` the same filters of |V|; ``rh_knots`` (%, ``"auto"``:
     the training RH levels, None/[]: none) schedule the linear paths on RH; ``inputs``:
-    ``auto`` (voltage, + RH when the records carry it), ``voltage`` or ``voltage+rh``."""
+    ``auto`` (voltage, + RH when the records carry it), ``voltage`` or ``voltage+rh``;
+    ``linear_start``: the network starts from the best linear model of the training data
+    (:func:`nnmodel.linear.fit_linear`): its free-run output is a reference channel and the
+    network's output is that reference plus a correction that starts at zero."""
 
     ATTR = "features"
     CHECKS = {
-        "memory_filters": lambda v: pos_int(v, zero=True),
+        "memory_filters": size(MAX_FILTERS, zero=True),
         "memory_min_s": pos_float,
         "memory_max_s": pos_float,
         "memory_abs": flag,
         "rh_knots": lambda v: None if v is None else check_knots(v),
         "inputs": lambda v: None if v in ("auto", "voltage", "voltage+rh") else "'auto', 'voltage' or 'voltage+rh'",
+        "linear_start": flag,
     }
 
     memory_filters: int = 0
@@ -160,6 +164,7 @@ class InputFeatures(Part):
     memory_abs: bool = False
     rh_knots: list | str | None = None
     inputs: str = "auto"
+    linear_start: bool = False
 
     def uses_rh(self, kind: str, has_rh: bool) -> bool:
         """Whether a model fitted on records with (``has_rh``) or without RH takes RH."""
@@ -168,12 +173,14 @@ class InputFeatures(Part):
                              "records carry no relative humidity")
         return has_rh and self.inputs != "voltage"
 
-    def fit(self, kind: str, fs: float, records, use_rh: bool) -> "FeatureMap":
+    def fit(self, kind: str, fs: float, records, use_rh: bool, val=None, val_fraction: float = 0.2) -> "FeatureMap":
         """The features for these training records: the RH knots (``"auto"``: the records'
         levels, :func:`auto_knots`) and the memory time constants fitted to the data — none
         faster than :data:`MEMORY_MIN_SAMPLES` sample periods, none slower than
         :data:`MEMORY_MAX_FRACTION` of the median record; the recipe's range is kept where
-        the data support it (a warning says when it is not)."""
+        the data support it (a warning says when it is not); with ``linear_start`` the
+        linear model fitted on ``records`` and validated on ``val`` (or the last
+        ``val_fraction`` of each record)."""
         if self.rh_knots == "auto":
             knots = auto_knots([r.rh for r in records]) if use_rh else []
         else:
@@ -191,7 +198,12 @@ class InputFeatures(Part):
                               f"(sample period {1 / fs:.3g} s, records of ~{ceiling / MEMORY_MAX_FRACTION:.3g} s); "
                               f"using {lo:.3g}–{hi:.3g} s", UserWarning, stacklevel=4)
             rng = (lo, hi)
-        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs))
+        linear = None
+        if self.linear_start:
+            from ..linear import fit_linear
+            linear = fit_linear(records, val, val_fraction, use_rh=use_rh)
+        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs),
+                          linear)
 
     def card(self, fm: "FeatureMap") -> dict:
         """Bundle-card entries of fitted features (what :meth:`restore` needs)."""
@@ -200,6 +212,8 @@ class InputFeatures(Part):
             out["rh_knots_pct"] = list(fm.knots)
         if fm.memory_range:
             out["memory_range_s"] = [float(x) for x in fm.memory_range]
+        if fm.linear is not None:
+            out["linear_start"] = fm.linear.card()
         return out
 
     def restore(self, kind: str, fs: float, use_rh: bool, card: dict) -> "FeatureMap":
@@ -215,16 +229,25 @@ class InputFeatures(Part):
         if rng is None and self.memory_filters:   # cards written before the range adapted to the data
             rng = (self.memory_min_s, self.memory_max_s)
         rng = None if rng is None else (float(rng[0]), float(rng[1]))
-        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs))
+        linear = None
+        if self.linear_start:
+            from ..linear import LinearModel
+            if card.get("linear_start") is None:
+                raise InputError(f"model {kind!r} with linear_start needs its linear model (card entry "
+                                 "linear_start); the bundle lacks it")
+            linear = LinearModel.from_card(card["linear_start"], "card entry linear_start")
+        return FeatureMap(float(fs), bool(use_rh), knots, rng, int(self.memory_filters), bool(self.memory_abs),
+                          linear)
 
 
 @dataclass
 class FeatureMap:
     """Fitted input features: records in physical units -> normalised core channels.
 
-    ``u`` channels: normalised voltage, then the memory filters (each divided by its
-    standard deviation over the training records, held by the :class:`~.normalise.Normalized`
-    module as ``mem_std``); ``rh`` channels: normalised RH, then one hat per RH knot."""
+    ``u`` channels: normalised voltage, then (``linear``) the free run of the linear start in
+    the output's normalisation, then the memory filters (each divided by its standard
+    deviation over the training records, held by the :class:`~.normalise.Normalized` module
+    as ``mem_std``); ``rh`` channels: normalised RH, then one hat per RH knot."""
 
     fs: float
     use_rh: bool
@@ -232,6 +255,12 @@ class FeatureMap:
     memory_range: tuple | None
     n_filters: int
     memory_abs: bool
+    linear: object = None
+
+    @property
+    def n_ref(self) -> int:
+        """Reference channels (the linear start's output) after the voltage."""
+        return 0 if self.linear is None else 1
 
     @property
     def taus(self) -> np.ndarray:
@@ -290,17 +319,28 @@ class FeatureMap:
             parts.append(rh_hats(rh, self.knots))
         return np.concatenate(parts, 1) if len(parts) > 1 else parts[0]
 
-    def channels(self, u: np.ndarray, rh: np.ndarray | None, net) -> tuple[np.ndarray, np.ndarray | None]:
-        """(``u`` channels (n, 1 + n_mem), ``rh`` channels (n, n_rh) or None) of a record."""
-        return self.channels_continued(u, rh, net, None)[:2]
+    def channels(self, u: np.ndarray, rh: np.ndarray | None, net,
+                 y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(``u`` channels (n, 1 + n_ref + n_mem), ``rh`` channels (n, n_rh) or None) of a
+        record; ``y``: measured outputs from the record's start (only the linear start uses
+        them, to start its free run)."""
+        return self.channels_continued(u, rh, net, None, y)[:2]
 
-    def channels_continued(self, u: np.ndarray, rh: np.ndarray | None, net, last: np.ndarray | None):
-        """:meth:`channels` of a piece of a record whose memory filters ended at ``last``
-        (None: the first piece), and the filters' values at its last sample (for the next)."""
+    def channels_continued(self, u: np.ndarray, rh: np.ndarray | None, net, last, y: np.ndarray | None = None):
+        """:meth:`channels` of a piece of a record whose filters ended in the state ``last``
+        (None: the first piece, started from ``y`` as :meth:`channels` says), and the state at
+        its last sample (for the next piece): the memory filters' values and the linear
+        start's free-run state."""
+        mem_last, lin_last = (None, None) if last is None else last
         cols = [net.norm("u", u)[:, None]]
+        if self.linear is not None:
+            lin = self.linear
+            y0 = None if y is None or len(y) == 0 else np.asarray(y, float)[:lin.n_init]
+            ref, lin_last = lin.free_run(u, rh if lin.uses_rh else None, y_init=y0, state=lin_last)
+            cols.append(net.norm("y", ref)[:, None])
         raw = None
         if self.n_mem:
-            raw = self.memory_raw(u, net, last)
+            raw = self.memory_raw(u, net, mem_last)
             cols.append(raw / net.mem_std.numpy() if hasattr(net, "mem_std") else raw)
         U = np.concatenate(cols, 1) if len(cols) > 1 else cols[0]
-        return U, self.rh_channels(rh, net), None if raw is None else raw[-1].copy()
+        return U, self.rh_channels(rh, net), (None if raw is None else raw[-1].copy(), lin_last)

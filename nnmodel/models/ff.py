@@ -18,26 +18,31 @@ from __future__ import annotations
 
 from .base import NeuralModel
 from .lag import ACTIVATIONS, LagSimulator, MLPMap, arx_init
-from .params import flag, pos_int
+from .params import MAX_LAGS, MAX_LAYERS, MAX_WIDTH, flag, pos_int, size
 
 #: value checks of the tapped-delay parameters (shared by ff, narx, rbf, hybrid)
 LAG_CHECKS = {
-    "na": lambda v: pos_int(v, zero=True),
-    "nb": pos_int,
-    "hidden": pos_int,
-    "layers": lambda v: pos_int(v, zero=True),
+    "na": size(MAX_LAGS, zero=True),
+    "nb": size(MAX_LAGS),
+    "hidden": size(MAX_WIDTH),
+    "layers": size(MAX_LAYERS, zero=True),
     "activation": lambda v: None if v in ACTIVATIONS else f"one of {sorted(ACTIVATIONS)}",
     "feedthrough": flag,
     "arx_init": flag,
-    "poly_degree": pos_int,
+    "poly_degree": size(9),
 }
 
 
-def lag_core(model, features, n_tap: int = 1, n_extra: int = 0, core_cls=LagSimulator, **core_kw) -> LagSimulator:
+def lag_core(model, features, n_tap: int | None = None, n_extra: int = 0, core_cls=LagSimulator,
+             **core_kw) -> LagSimulator:
     """The LagSimulator of a tapped-delay model with an MLP map and linear bypass:
-    ``n_tap`` delayed input channels (the voltage; the hybrid adds its physics output),
-    ``n_extra`` undelayed channels besides the memory filters, RH channels and scheduling
-    from the fitted ``features``."""
+    ``n_tap`` delayed input channels (default: the voltage, and the linear start's output
+    when there is one, which the core then adds to the map: a residual core; the hybrid
+    passes its physics output), ``n_extra`` undelayed channels besides the memory filters,
+    RH channels and scheduling from the fitted ``features``."""
+    if n_tap is None:
+        n_tap = 1 + features.n_ref
+        core_kw.setdefault("residual", features.n_ref > 0)
     n_mem = features.n_mem + n_extra
     fmap = MLPMap(model.na, n_tap * model.nb + n_mem + features.n_rh, model.hidden, model.layers,
                   model.activation, linear=True, poly_degree=model.poly_degree, n_sched=features.n_sched)
@@ -60,7 +65,7 @@ class LagModel(NeuralModel):
         return lag_core(self, features)
 
     def _initialise(self, core, train):
-        if self.arx_init:
+        if self.arx_init:   # with a linear start: fitted to its residual (kept if it validates better)
             self.init_report_ = arx_init(core, train)
 
 

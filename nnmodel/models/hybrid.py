@@ -21,6 +21,10 @@ correction ``f`` is the ``ff`` / ``narx`` map (linear bypass, least-squares init
 plus an MLP) on the *residual* y - y_phys.  With ``na = 0`` the correction is a static map
 of delayed inputs and physics outputs (one-step training is then free-run training); with
 ``na > 0`` it feeds back its own outputs and ``horizon > 1`` trains it in closed loop.
+A grey box is never worse than its physics prior on validation: the correction (its
+least-squares start, then the trained one) is kept only when it lowers the free-run
+validation error below the physics alone, else set to zero
+(:func:`~nnmodel.models.base.keep_if_better`; the card's ``reference_start`` says which).
 
 The physics is part of the model: a bundle's card stores the device document (the
 parsed YAML of the device file), the effect list and every parameter value, and loading
@@ -38,7 +42,7 @@ from .base import NeuralModel
 from .features import memory_filters
 from .ff import LAG_CHECKS, lag_core
 from .lag import LagSimulator, arx_init
-from .params import pos_int
+from .params import MAX_WIDTH, size
 
 #: internal physics signals the correction may see: name -> (SimulationResult attribute, unit)
 PHYSICS_STATES = {"cs_up": ("cs_up", "mol/m^3"), "current": ("current", "A")}
@@ -86,6 +90,14 @@ class HybridCore(LagSimulator):
                 self.gain[-1].weight.zero_()
                 self.gain[-1].bias.zero_()
 
+    def zero_correction(self) -> None:
+        """Reduce the core to the physics alone (map and gain head at zero)."""
+        super().zero_correction()
+        if self.gain is not None:
+            with torch.no_grad():
+                self.gain[-1].weight.zero_()
+                self.gain[-1].bias.zero_()
+
     def reference(self, u_all, x, k: int):
         base = u_all[:, k:, 1]
         if self.gain is None:
@@ -104,7 +116,7 @@ class HybridModel(NeuralModel):
               "physics_states": _distinct_names(PHYSICS_STATES),
               "physics_inputs": _distinct_names(PHYSICS_INPUTS),
               "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'",
-              "gain_hidden": lambda v: pos_int(v, zero=True)}
+              "gain_hidden": size(MAX_WIDTH, zero=True)}
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "device": "ipmc_pt_eg", "effects": "none"}
     CARD_KEYS = ("physics",)
     _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")
@@ -185,7 +197,7 @@ class HybridModel(NeuralModel):
     def _release_channels(self):
         self._cache = {}
 
-    def _channels(self, u, rh):
+    def _channels(self, u, rh, y=None):
         """Channels of the correction: voltage and physics output (both delayed), the physics
         states and extra runs (normalised), the memory filters of the voltage and of the
         physics output, and the RH channels."""
@@ -212,7 +224,12 @@ class HybridModel(NeuralModel):
         if self.arx_init:
             self.init_report_ = arx_init(core, train)
 
+    def _reference(self):
+        return "physics"
+
     def fit(self, train, val=None):
+        if self.linear_start:
+            raise InputError("model 'hybrid': linear_start must be false (the hybrid starts from its physics)")
         if self.inputs == "voltage":
             raise InputError("model 'hybrid': inputs must be 'auto' or 'voltage+rh' (its physics part "
                              "needs the relative humidity of every record)")

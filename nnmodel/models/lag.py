@@ -106,6 +106,17 @@ class MLPMap(nn.Module):
                     out = out + self.lin_y(self.powers(yl))[..., 0]
         return out
 
+    def zero(self) -> None:
+        """f = 0: every output weight and the bypass set to zero."""
+        with torch.no_grad():
+            for p in (self.out.weight, self.out.bias) if self.hidden_size else ():
+                p.zero_()
+            if self.linear:
+                for layer in (self.lin_y, self.lin_x):
+                    if layer is not None:
+                        layer.weight.zero_()
+                self.lin_x.bias.zero_()
+
     def set_linear(self, a: np.ndarray, b: np.ndarray, c) -> None:
         """Set the linear bypass: weights ``a`` of the output-lag terms and ``b`` of the input
         terms (each ordered as :meth:`powers`: all lags, then their squares, ...), bias ``c``;
@@ -136,6 +147,12 @@ class RBFMap(nn.Module):
         self.weight = nn.Parameter(torch.zeros(n_centres))
         self.lin = nn.Parameter(torch.zeros((K, d - K) if K else (d,)))
         self.bias = nn.Parameter(torch.zeros((K,) if K else ()))
+
+    def zero(self) -> None:
+        """f = 0: output weights, bypass and bias set to zero."""
+        with torch.no_grad():
+            for p in (self.weight, self.lin, self.bias):
+                p.zero_()
 
     def features(self, z):
         """Gaussian activations (..., M) of full regressors z (..., n_y + n_x)."""
@@ -215,6 +232,10 @@ class LagSimulator(SequenceCore):
     def init_state(self, u_hist, y_hist, rh_hist):
         k = self.n_init
         return (u_hist[:, -k:], y_hist[:, -k:], None if rh_hist is None else rh_hist[:, -k:])
+
+    def zero_correction(self) -> None:
+        """Reduce a residual core to its reference (the map outputs zero)."""
+        self.fmap.zero()
 
     def reference(self, u_all, x, k: int):
         """The output the map is added to: input channel 1 for a residual core, else None."""

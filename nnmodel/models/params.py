@@ -19,7 +19,16 @@ import numpy as np
 
 from physics.errors import InputError
 
-__all__ = ["pos_int", "pos_float", "flag", "Part", "PartField", "check_values"]
+__all__ = ["pos_int", "pos_float", "flag", "size", "Part", "PartField", "check_values", "MAX_PARAMETERS"]
+
+#: Size caps, checked before anything is allocated (a bundle card is input like any file):
+#: lags, widths, depth, centres ... and the learned parameters of a whole network.
+MAX_LAGS = 1000
+MAX_WIDTH = 4096
+MAX_LAYERS = 64
+MAX_CENTRES = 20000
+MAX_FILTERS = 256
+MAX_PARAMETERS = 50_000_000
 
 Check = Callable[[object], "str | None"]
 
@@ -28,6 +37,14 @@ def pos_int(v, zero: bool = False) -> str | None:
     """None for a positive (``zero``: non-negative) whole number, else what was expected."""
     ok = isinstance(v, (int, np.integer)) and not isinstance(v, bool) and (v >= 0 if zero else v >= 1)
     return None if ok else ("a non-negative integer" if zero else "a positive integer")
+
+
+def size(most: int, zero: bool = False) -> Check:
+    """Check of a size parameter: a positive (``zero``: non-negative) whole number up to ``most``."""
+    def check(v):
+        return pos_int(v, zero) or (None if v <= most else f"at most {most:,} (a size cap; larger networks "
+                                                                  "are refused before anything is allocated)")
+    return check
 
 
 def pos_float(v, zero: bool = False) -> str | None:

@@ -18,7 +18,7 @@ import torch
 from .base import NeuralModel
 from .ff import LAG_CHECKS
 from .lag import LagSimulator, RBFMap, _normal_equations, ridge
-from .params import flag, pos_float, pos_int
+from .params import MAX_CENTRES, flag, pos_float, pos_int, size
 
 
 class RBFModel(NeuralModel):
@@ -27,11 +27,11 @@ class RBFModel(NeuralModel):
     kind = "rbf"
     DEFAULTS = {"max_epochs": 0, "grad_clip": 1.0}
     CHECKS = {"na": LAG_CHECKS["na"], "nb": LAG_CHECKS["nb"], "feedthrough": flag,
-              "n_centres": pos_int,
+              "n_centres": size(MAX_CENTRES),
               "width_factor": pos_float,
-              "width_neighbours": pos_int,
+              "width_neighbours": size(MAX_CENTRES),
               "alpha": lambda v: pos_float(v, zero=True),
-              "kmeans_samples": pos_int}
+              "kmeans_samples": size(10_000_000)}
     CHECK_PARAMS = {"n_centres": 6}
 
     def __init__(self, na: int = 2, nb: int = 20, n_centres: int = 100, width_factor: float = 1.0,
@@ -40,8 +40,11 @@ class RBFModel(NeuralModel):
         self._set_params_from(locals())
 
     def _build_core(self, features):
-        fmap = RBFMap(self.na, self.nb + features.n_mem + features.n_rh, self.n_centres, n_sched=features.n_sched)
-        return LagSimulator(self.na, self.nb, features.n_rh, fmap, self.feedthrough, n_mem=features.n_mem)
+        n_tap = 1 + features.n_ref      # the voltage, and the linear start's output (a residual core)
+        fmap = RBFMap(self.na, n_tap * self.nb + features.n_mem + features.n_rh, self.n_centres,
+                      n_sched=features.n_sched)
+        return LagSimulator(self.na, self.nb, features.n_rh, fmap, self.feedthrough, n_mem=features.n_mem,
+                            n_tap=n_tap, residual=features.n_ref > 0)
 
     def _initialise(self, core, train):
         from sklearn.cluster import KMeans

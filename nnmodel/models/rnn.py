@@ -23,7 +23,7 @@ import numpy as np
 from .base import NeuralModel
 from .core import SequenceCore
 from .lag import _normal_equations
-from .params import flag, pos_int
+from .params import MAX_LAGS, MAX_LAYERS, MAX_WIDTH, flag, size
 
 
 def _channels(x):
@@ -31,20 +31,22 @@ def _channels(x):
 
 
 class RNNSimulator(SequenceCore):
-    """Recurrent core; inputs: voltage (+ ``n_mem`` memory-filter channels) and ``n_rh`` RH
-    channels, tensors (batch, time) or (batch, time, channels)."""
+    """Recurrent core; inputs: voltage (+ ``n_ref`` reference channel: the linear start's
+    output, which is then added to the output; + ``n_mem`` memory-filter channels) and
+    ``n_rh`` RH channels, tensors (batch, time) or (batch, time, channels)."""
 
     def __init__(self, cell: str, n_rh: int, hidden: int, layers: int, n_init: int,
-                 encoder_hidden: int, n_mem: int = 0, n_sched: int = 0):
+                 encoder_hidden: int, n_mem: int = 0, n_sched: int = 0, n_ref: int = 0):
         super().__init__()
-        self.cell, self.n_rh, self.n_mem = cell, int(n_rh), int(n_mem)
+        self.cell, self.n_rh, self.n_mem, self.n_ref = cell, int(n_rh), int(n_mem), int(n_ref)
         self.n_sched = int(n_sched)
         self.hidden_size, self.layers, self.n_init = int(hidden), int(layers), int(n_init)
-        n_in = 1 + self.n_mem + self.n_rh
+        n_in = 1 + self.n_ref + self.n_mem + self.n_rh
         rnn_cls = nn.LSTM if cell == "lstm" else nn.GRU
         self.rnn = rnn_cls(n_in, hidden, layers, batch_first=True)
         self.n_parts = 2 if cell == "lstm" else 1
-        self.encoder = nn.Sequential(nn.Linear(2 * n_init + self.n_rh + self.n_mem, encoder_hidden), nn.Tanh(),
+        self.encoder = nn.Sequential(nn.Linear((2 + self.n_ref) * n_init + self.n_rh + self.n_mem, encoder_hidden),
+                                     nn.Tanh(),
                                      nn.Linear(encoder_hidden, self.n_parts * layers * hidden))
         self.readout = nn.Linear(hidden, 1)
         # direct linear path; scheduled: one set of weights per RH knot (last n_sched inputs)
@@ -58,17 +60,19 @@ class RNNSimulator(SequenceCore):
         return (self.skip(x[..., :-K]) * x[..., -K:]).sum(-1)
 
     def _inputs(self, u, rh):
-        u = _channels(u)[..., :1 + self.n_mem]
+        u = _channels(u)[..., :1 + self.n_ref + self.n_mem]
         return u if not self.n_rh else torch.cat([u, _channels(rh)[..., :self.n_rh]], -1)
 
     def init_state(self, u_hist, y_hist, rh_hist):
         k = self.n_init
         u_hist = _channels(u_hist)
         parts = [u_hist[:, -k:, 0], y_hist[:, -k:]]
+        if self.n_ref:
+            parts.append(u_hist[:, -k:, 1])
         if self.n_rh:
             parts.append(_channels(rh_hist)[:, -1, :self.n_rh])
         if self.n_mem:
-            parts.append(u_hist[:, -1, 1:1 + self.n_mem])
+            parts.append(u_hist[:, -1, 1 + self.n_ref:1 + self.n_ref + self.n_mem])
         s = self.encoder(torch.cat(parts, 1))
         B = s.shape[0]
         s = s.view(B, self.n_parts, self.layers, self.hidden_size).permute(1, 2, 0, 3)
@@ -82,14 +86,22 @@ class RNNSimulator(SequenceCore):
     def advance(self, state, u, rh):
         x = self._inputs(u, rh)
         out, state = self.rnn(x, state)
-        return self.readout(out)[..., 0] + self.direct(x), state
+        y = self.readout(out)[..., 0] + self.direct(x)
+        return (y + x[..., 1] if self.n_ref else y), state
+
+    def zero_correction(self) -> None:
+        """Reduce the core to its reference (read-out and direct path at zero)."""
+        with torch.no_grad():
+            for p in (self.readout.weight, self.readout.bias, self.skip.weight, self.skip.bias):
+                p.zero_()
 
 
 class _RNNModel(NeuralModel):
     cell = "lstm"
     DEFAULTS = {"lr": 3e-3, "batch_size": 32, "max_epochs": 300, "max_time": 600.0, "patience": 20,
                 "grad_clip": 1.0, "horizon": 200, "stride": 50}
-    CHECKS = {"hidden": pos_int, "layers": pos_int, "n_init": pos_int, "encoder_hidden": pos_int, "skip_init": flag}
+    CHECKS = {"hidden": size(MAX_WIDTH), "layers": size(MAX_LAYERS), "n_init": size(MAX_LAGS),
+              "encoder_hidden": size(MAX_WIDTH), "skip_init": flag}
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "horizon": 20, "stride": 20, "n_init": 5}
 
     def __init__(self, hidden: int = 32, layers: int = 1, n_init: int = 20, encoder_hidden: int = 64,
@@ -98,18 +110,22 @@ class _RNNModel(NeuralModel):
 
     def _build_core(self, features):
         return RNNSimulator(self.cell, features.n_rh, self.hidden, self.layers, self.n_init, self.encoder_hidden,
-                            n_mem=features.n_mem, n_sched=features.n_sched)
+                            n_mem=features.n_mem, n_sched=features.n_sched, n_ref=features.n_ref)
 
     def _initialise(self, core, train):
         """``skip_init``: least-squares fit of the direct path on the training records
-        (normalised), recurrent read-out set to zero."""
+        (normalised; with a linear start on its residual, kept if it validates better),
+        recurrent read-out set to zero.  A linear start without ``skip_init`` starts as that
+        linear model (read-out and direct path at zero)."""
+        if core.n_ref:
+            core.zero_correction()
         if not self.skip_init:
             return
         xs = [np.concatenate([s.u if s.u.ndim == 2 else s.u[:, None]]
                              + ([s.rh if s.rh.ndim == 2 else s.rh[:, None]] if core.n_rh else []), 1)
               for s in train]
         X = np.concatenate(xs)
-        t = np.concatenate([s.y for s in train])
+        t = np.concatenate([s.y - (s.u[:, 1] if core.n_ref else 0.0) for s in train])
         K = core.n_sched
         if K:
             S, Xl = X[:, -K:], X[:, :-K]

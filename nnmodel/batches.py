@@ -1,0 +1,55 @@
+"""Normalised records as torch batches, and the free-run error (the validation metric).
+
+Shared by the training loop (:mod:`nnmodel.training`) and the models (which compare a
+trained network with its start without importing Lightning)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+__all__ = ["pad_batch", "split_batch", "free_run_error"]
+
+
+def pad_batch(seqs, n_init: int) -> dict:
+    """Whole records as one padded batch: history = first ``n_init`` samples."""
+    L = max(len(s) for s in seqs)
+    B = len(seqs)
+    u = np.zeros((B, L) + np.shape(seqs[0].u)[1:], np.float32)
+    y = np.zeros((B, L), np.float32)
+    rh = np.zeros((B, L) + np.shape(seqs[0].rh)[1:], np.float32) if seqs[0].rh is not None else None
+    mask = np.zeros((B, L), np.float32)
+    for i, s in enumerate(seqs):
+        n = len(s)
+        u[i, :n], y[i, :n] = s.u, s.y
+        u[i, n:] = s.u[-1]  # padding: hold the last input (masked out of the error anyway)
+        if rh is not None:
+            rh[i, :n] = s.rh
+            rh[i, n:] = s.rh[-1]
+        mask[i, n_init:n] = 1.0
+    t = lambda a: None if a is None else torch.as_tensor(a)  # noqa: E731
+    return {"u": t(u), "y": t(y), "rh": t(rh), "mask": t(mask)}
+
+
+def split_batch(batch, k: int):
+    """(history, inputs, outputs, RH) of a batch: the first ``k`` samples are history."""
+    u, y, rh = batch["u"], batch["y"], batch["rh"]
+    hist = (u[:, :k], y[:, :k], None if rh is None else rh[:, :k])
+    return hist, u[:, k:], y[:, k:], None if rh is None else rh[:, k:]
+
+
+def free_run_error(core, seqs) -> float:
+    """Free-run NRMSE (normalised units) of ``core`` over whole records, each initialised
+    from its first ``n_init`` samples (the validation metric, outside Lightning)."""
+    batch = pad_batch(seqs, core.n_init)
+    k = core.n_init
+    hist, u, y, rh = split_batch(batch, k)
+    mask = batch["mask"][:, k:]
+    was_training = core.training
+    core.eval()
+    with torch.no_grad():
+        y_hat = core.simulate(core.init_state(*hist), u, rh)
+    core.train(was_training)
+    err = torch.nan_to_num((y_hat - y) ** 2, nan=1e12, posinf=1e12) * mask
+    return min(math.sqrt(float(err.sum()) / max(float(mask.sum()), 1.0)), 1e6)

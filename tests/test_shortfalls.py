@@ -1,0 +1,56 @@
+"""Why a network falls short, in plain words: each finding is tied to the evidence that
+triggers it (and none is given when a network falls short nowhere)."""
+from types import SimpleNamespace
+
+from nnmodel.shortfalls import BIAS_RATIO, explain
+
+
+def _row(test, one_rmse=1.0, one_bias=0.0):
+    return {"free_run": {"test": {"nrmse": test}}, "one_step": {"test": {"rmse_m": one_rmse, "mean_error": one_bias}}}
+
+
+def _model(n_parameters=100, uses_rh=True, memory=None):
+    return SimpleNamespace(n_parameters=n_parameters, uses_rh=uses_rh, memory_filters=16 if memory else 0,
+                           memory_max_s=200.0, memory_range_=memory)
+
+
+FACTS = dict(train_samples=100_000, record_s=60.0, rh_levels=[40.0, 60.0, 80.0], train_mean=0.0, test_mean=0.0,
+             output_std=1e-3, unit="m", quantity="deflection")
+RESULTS = {"linear": _row(0.10), "physics": _row(0.05)}
+
+
+def test_no_finding_when_the_network_beats_linear_and_physics_without_bias():
+    assert explain("ff", _row(0.04, one_bias=0.1), RESULTS, _model(), FACTS) == []
+
+
+def test_worse_than_linear_with_few_samples_per_parameter_says_so_and_what_to_do():
+    f = explain("narx", _row(0.2), RESULTS, _model(n_parameters=50_000), FACTS)
+    assert len(f) == 1 and "above the linear model's (10.00 %)" in f[0]["finding"]
+    assert f[0]["causes"][0]["cause"].startswith("too short records: 100,000 training samples for 50,000 parameters")
+    assert "fewer parameters" in f[0]["causes"][0]["action"]
+
+
+def test_a_biased_residual_with_shifted_output_means_is_an_offset_not_removed():
+    facts = {**FACTS, "test_mean": 2e-3}
+    f = explain("ff", _row(0.04, one_rmse=2e-3, one_bias=(BIAS_RATIO + 0.4) * 2e-3), RESULTS, _model(), facts)
+    assert "one-step residual is biased: it sits 1.8 mm off zero (90 % of its RMS)" in f[0]["finding"]
+    cause = f[0]["causes"][0]
+    assert cause["cause"].startswith("offset not removed") and "by 2 mm (2.0 standard deviations)" in cause["cause"]
+    assert "subtract its rest value" in cause["action"]
+
+
+def test_too_few_rh_levels_and_short_records_for_slow_dynamics():
+    facts = {**FACTS, "rh_levels": [40.0, 80.0], "record_s": 30.0}
+    f = explain("lstm", _row(0.08), RESULTS, _model(memory=(0.01, 15.0)), facts)
+    causes = [c["cause"] for c in f[0]["causes"]]
+    assert any(c.startswith("too few RH levels: trained at 2 (40, 80 %)") for c in causes)
+    assert any(c.startswith("records may be too short for slow dynamics") for c in causes)
+    assert all("physics model's (5.00 %)" in x["finding"] for x in f)
+    other = explain("lstm", _row(0.08), RESULTS, _model(uses_rh=False), {**facts, "record_s": 1e4})
+    assert not any(c["cause"].startswith("too few RH levels") for c in other[0]["causes"])
+
+
+def test_a_shortfall_without_a_cause_in_the_data_points_to_tuning():
+    f = explain("gru", _row(0.2), RESULTS, _model(), FACTS)
+    (cause,) = f[0]["causes"]
+    assert cause["cause"].startswith("no cause found in the data") and "--models gru --tune 20" in cause["action"]
