@@ -505,8 +505,9 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
     if unattributed:
         reason = (f"the base leaves {1e6 * base.rmse:.4g} µm, within {ADEQUATE_RATIO}× the noise floor only because "
                   f"the floor counts a slow wander of {1e6 * data.wander:.3g} µm, and {split.why or split.text()}; if "
-                  f"the sensor does not drift, state its noise ({arg('noise_floor')}) and what remains is described "
-                  "and drafted, or record the test again (more records sharpen the test)")
+                  "the sensor does not drift, state its noise floor (eap diagnose --noise-floor-um, noise_floor= in "
+                  "Python) and what remains is described and drafted, or record the test again (more records sharpen "
+                  "the test)")
     return Verdict(status, picks, first.weights, ad, base.rmse, data.noise, data.noise_source, reason,
                    list(first.ambiguous), first.separating, forms, kind, stopped, first.alpha,
                    nuisance_summary(final, data.records))

@@ -16,9 +16,10 @@ noise: a flexible effect that trims a little off an error it does not explain is
 on a later step of the chain, no quality flag at all: there the error is mostly the base's own
 mismatch (or a pick's fit short of its optimum), which any flexible effect absorbs in part with
 a ΔBIC as large as the records are long — only a clean fit whose signature is seen in what the
-picks leave is evidence that *this* effect is missing); the pick is the one with the lowest E.  Its confidence is its weight,
-labelled "high" at ≥ 0.99 (it clearly dominates the base and every other candidate),
-"medium" at ≥ 0.9, else "low" — whatever error remains, which is the second answer.  Two
+picks leave is evidence that *this* effect is missing); the pick is the one with the lowest E.
+Its confidence is its weight, labelled "high" at ≥ 0.99 (it clearly dominates the base and
+every other candidate), "medium" at ≥ 0.9, else "low" — whatever error remains, which is the
+second answer.  Two
 candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6 or
 predictions within the noise) *and* on quality (the same number of flags); the verdict then
 names the record that would separate them (:func:`separating_record`).  After a pick the

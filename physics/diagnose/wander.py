@@ -97,7 +97,8 @@ class WanderSplit:
             return self.why
         if self.fraction > 0:
             return (f"{100 * self.fraction:.0f} % of it is common to the {self.records} records (F-test on "
-                    f"{self.dims} slow components each, p = {self.p_value:.2g}): a drift they share, described, not noise")
+                    f"{self.dims} slow components each, p = {self.p_value:.2g}): a drift they share, described, "
+                    "not noise")
         if self.inconclusive:
             return (f"the {self.records} records hint that they share part of it but cannot confirm it (F-test on "
                     f"{self.dims} slow components each, p = {self.p_value:.2g}, not below {SHARED_ALPHA:g}): counted "
@@ -177,4 +178,5 @@ def shared_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wa
     return WanderSplit(frac, p, R, d)
 
 
-__all__ = ["slow_wander", "shared_wander", "slow_components", "WanderSplit", "WANDER_PER_TREND", "SHARED_ALPHA", "HINT_P"]
+__all__ = ["slow_wander", "shared_wander", "slow_components", "WanderSplit", "WANDER_PER_TREND", "SHARED_ALPHA",
+           "HINT_P"]
