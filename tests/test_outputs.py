@@ -159,9 +159,11 @@ def test_predict_and_train_compare_have_distinct_defaults():
 def test_interruption_prints_one_line_and_leaves_nothing(tmp_path, sig):
     import signal as signal_mod
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    # Ctrl-C as from a terminal: a suite run as a background job (`pytest &`) inherits an ignored
+    # SIGINT, which eap rightly keeps ignoring; the child gets the default disposition back.
     proc = subprocess.Popen([sys.executable, "-m", "nnmodel.cli", "generate", "--config", "default", "--out",
                              str(tmp_path / "ds")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-                            text=True)
+                            text=True, preexec_fn=lambda: signal_mod.signal(signal_mod.SIGINT, signal_mod.SIG_DFL))
     deadline = time.time() + 60
     while time.time() < deadline and not list(tmp_path.glob(".ds.eap-tmp-*/**/*.csv")):
         time.sleep(0.2)
