@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.plotting import plt, save
+from physics.plotting import legend_outside, plt, save
 from physics.report import Report, colour, jsonable
 
 #: The loop's hidden effect and records (the demo of :mod:`physics.diagnose.demo`).
@@ -46,25 +46,30 @@ def loop_stage(d: Path) -> dict:
 
 
 def _loop_figure(res, path: Path) -> None:
-    """Measured vs the base and vs the model with the effect added, on the first record."""
-    r = res.records[-1]
+    """Measured vs the base and vs the model with the effect added, on the last record."""
+    w = res.winner
+    curves = [("model (base)", res.base, colour("base"))]
+    if w is not None:
+        curves.append((f"+ {w.effect}", w.fit, colour(f"+{w.effect}")))
+    _before_after_figure(res.records[-1], curves, "measured vs model before and after", path)
+
+
+def _before_after_figure(r, curves, title: str, path: Path) -> None:
+    """Record ``r``'s measured tip (mean removed) with each curve's prediction above and its
+    residual below, in µm; ``curves`` are (label, fit, colour), the fits' last records."""
     t = np.arange(r.y_d.size) / r.fs_d
     fig, ax = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
     ax[0].plot(t, 1e6 * (r.y_d - r.y_d.mean()), color=colour("measurement"), lw=1.0, label="measurement")
-    base_p = res.base.pred_d[-1]
-    ax[0].plot(t, 1e6 * (base_p - base_p.mean()), color=colour("base"), lw=0.9, label="model (base)")
-    ax[1].plot(t, 1e6 * res.base.resid_d[-1], color=colour("base"), lw=0.7, label="base")
-    w = res.winner
-    if w is not None:
-        p = w.fit.pred_d[-1]
-        ax[0].plot(t, 1e6 * (p - p.mean()), color=colour(f"+{w.effect}"), lw=0.9, label=f"+ {w.effect}")
-        ax[1].plot(t, 1e6 * w.fit.resid_d[-1], color=colour(f"+{w.effect}"), lw=0.7, label=f"+ {w.effect}")
+    for label, fit, c in curves:
+        p = fit.pred_d[-1]
+        ax[0].plot(t, 1e6 * (p - p.mean()), color=c, lw=0.9, label=label)
+        ax[1].plot(t, 1e6 * fit.resid_d[-1], color=c, lw=0.7, label=label)
     ax[0].set_ylabel("deflection [µm]")
     ax[1].set_ylabel("residual [µm]")
     ax[1].set_xlabel("time [s]")
-    ax[0].legend(fontsize=8)
-    ax[1].legend(fontsize=8)
-    ax[0].set_title(f"{Path(str(r.source)).name}: measured vs model before and after")
+    legend_outside(ax[0])
+    legend_outside(ax[1])
+    ax[0].set_title(f"{Path(str(r.source)).name}: {title}")
     save(fig, path)
 
 
@@ -101,25 +106,11 @@ def outside_stage(d: Path) -> dict:
 def _outside_figure(before, after, path: Path) -> None:
     """The pulse record (the last): measured vs the bare model and vs the model with the
     diagnosis's picks once the drafts are passed back, and the residuals."""
-    r = before.records[-1]
-    t = np.arange(r.y_d.size) / r.fs_d
-    fig, ax = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
-    ax[0].plot(t, 1e6 * (r.y_d - r.y_d.mean()), color=colour("measurement"), lw=1.0, label="measurement")
     curves = [("model (base)", before.base, colour("base"))]
     picks = [c.effect for c in after.picks] if after is not None else []
     if picks:
         curves.append(("+ " + " + ".join(picks), after.final, colour(f"+{picks[0]}")))
-    for label, fit, c in curves:
-        p = fit.pred_d[-1]
-        ax[0].plot(t, 1e6 * (p - p.mean()), color=c, lw=0.9, label=label)
-        ax[1].plot(t, 1e6 * fit.resid_d[-1], color=c, lw=0.7, label=label)
-    ax[0].set_ylabel("deflection [µm]")
-    ax[1].set_ylabel("residual [µm]")
-    ax[1].set_xlabel("time [s]")
-    ax[0].legend(fontsize=8)
-    ax[1].legend(fontsize=8)
-    ax[0].set_title(f"{Path(str(r.source)).name}: measured vs the bare model and with the drafted effect")
-    save(fig, path)
+    _before_after_figure(before.records[-1], curves, "measured vs the bare model and with the drafted effect", path)
 
 
 def _outside_section(rep: Report, d: Path, out: dict) -> None:

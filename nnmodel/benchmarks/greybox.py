@@ -220,6 +220,7 @@ def _write_outputs(out: Path, report: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from physics.plotting import legend_outside
 
     write_json(out / "greybox.json", report)
     h, r = _curve_rows(report)
@@ -244,10 +245,10 @@ def _write_outputs(out: Path, report: dict) -> None:
     ax.set_ylabel("free-run NRMSE on held-out RH [%]")
     ax.set_title(f"grey-box study: data efficiency ({_missing_physics(report)} missing from the hybrid's physics)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    legend_outside(ax)
     fig.tight_layout()
     with atomic_path(out / "greybox_efficiency.png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png")
     plt.close(fig)
 
     blocks = [

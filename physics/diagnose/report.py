@@ -71,7 +71,7 @@ def _plot_where(res: DiagnosisResult, path) -> None:
 
 def _plot_ranking(res: DiagnosisResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..plotting import legend_outside, save
     rk = res.ranking
     fig, ax = plt.subplots(1, 2, figsize=(11, 0.6 + 0.45 * max(len(rk), 1)), sharey=True)
     names = [c.effect for c in rk]
@@ -92,7 +92,7 @@ def _plot_ranking(res: DiagnosisResult, path) -> None:
         ax[1].axvline(1e6 * res.noise_floor, color="k", ls="--", lw=0.9, label="noise floor")
     ax[1].set_xscale("log")
     ax[1].set_xlabel("RMS error after adding [µm]")
-    ax[1].legend(fontsize=8)
+    legend_outside(ax[1])
     ax[1].grid(alpha=0.3, axis="x", which="both")
     fig.tight_layout()
     save(fig, path)

@@ -48,7 +48,7 @@ def _plot_corr(labels, corr, path) -> None:
 
 def _plot_rh_maps(result: IdentificationResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import rh_axis, save
+    from ..plotting import legend_outside, rh_axis, save
     prob, fit = result.problem, result.fit
     names = prob.per_rh
     fig, axes = plt.subplots(1, len(names), figsize=(4 * len(names), 3.2), squeeze=False)
@@ -60,7 +60,7 @@ def _plot_rh_maps(result: IdentificationResult, path) -> None:
         rh_axis(ax, rh)
         ax.set_ylabel(f"{name} [{prob.params[idx[0]].unit}]")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        legend_outside(ax)
     fig.tight_layout()
     save(fig, path)
 
