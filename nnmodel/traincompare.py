@@ -471,6 +471,12 @@ GROUP_LABELS = {"train_rh": "trained-RH", "heldout_rh": "held-out-RH", "varying_
                 "measurement_like": "measurement-like"}
 
 
+def group_label(group: str, with_rh: bool) -> str:
+    """A test group as a caption names it ("trained-RH test record"); records without a humidity
+    channel are plain test records."""
+    return f"{GROUP_LABELS[group]} test" if with_rh or group != "train_rh" else "test"
+
+
 def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) -> None:
     output = ds.meta.get("output") or {"name": "deflection", "unit": "m"}
     qty = output["name"]
@@ -494,7 +500,7 @@ def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) 
         ax[1].set_ylabel(f"residual [{unit}]")
         ax[1].set_xlabel("time [s]")
         legend_outside(ax[0])
-        ax[0].set_title(f"{GROUP_LABELS[g]} record {es[0]['path']}", fontsize=10)
+        ax[0].set_title(f"{group_label(g, ds.has_rh)} record {es[0]['path']}", fontsize=10)
         save(fig, out / f"overlay_{g}.png")
     _plot_losses(results, out / "losses.png")
     if not ds.has_rh or not physics_rows:
@@ -625,8 +631,9 @@ def _report(summary: dict, out: Path) -> None:
                                   "physics closed form"),
                      ("losses.png", "training curves: √train_loss (dotted) and val_loss (solid), both RMS errors of "
                                     "the normalised output"),
-                     *[(f"overlay_{g}.png", f"a {GROUP_LABELS[g]} test record: measured and predicted, and the "
-                                            "residual of each network") for g in GROUPS]):
+                     *[(f"overlay_{g}.png", f"a {group_label(g, bool(facts.get('rh_pct')))} record: measured and "
+                                            "predicted, and the residual of each network")
+                       for g, facts in (summary.get("test_groups") or {}).items() if g in GROUP_LABELS]):
         if (out / img).is_file():
             rep.image(out / img, cap)
     rep.json_block(summary, "compare.json")

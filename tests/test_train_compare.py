@@ -159,3 +159,10 @@ def test_ctrl_c_during_network_training_exits_130_and_leaves_nothing(run, tmp_pa
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 130 and err[-1] == f"eap train-compare: interrupted; nothing written to {tmp_path / 'x'}"
     assert not (tmp_path / "x").exists() and signal.getsignal(signal.SIGINT) is handler
+
+
+def test_group_captions_name_humidity_only_when_the_records_have_it():
+    from nnmodel.traincompare import group_label
+    assert group_label("train_rh", True) == "trained-RH test"
+    assert group_label("heldout_rh", True) == "held-out-RH test"
+    assert group_label("train_rh", False) == "test"   # a plant without a humidity channel
