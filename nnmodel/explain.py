@@ -18,6 +18,9 @@ from physics.columns import number
 
 #: A network's held-out error this much above a reference row counts as "worse" (ratio).
 WORSE = 1.1
+#: Errors within this relative difference are the same (a hybrid whose correction was dropped
+#: scores its physics part to rounding).
+SAME = 1e-3
 
 
 def _nrmse(row: dict, group: str) -> float | None:
@@ -134,8 +137,12 @@ def hybrid(summary: dict) -> list[dict]:
         if pure:
             best = min(pure, key=pure.get)
             parents[f"the best pure network ({best})"] = pure[best]
-        below = {k: v for k, v in parents.items() if h > v}
+        below = {k: v for k, v in parents.items() if h > v * (1 + SAME)}
         if not below:
+            if part is not None and abs(h - parents.get("its physics part alone", math.inf)) <= SAME * h:
+                out.append(note(f"The hybrid ({_pct(h)}) equals its physics part alone: its correction did not "
+                                "validate better than the physics, so it was dropped (the card's "
+                                "'reference_start' says so)."))
             continue
         text = (f"The hybrid ({_pct(h)}) is behind " + " and ".join(f"{k} ({_pct(v)})" for k, v in below.items())
                 + ". Its output is the physics plus a correction fitted to what the physics misses"

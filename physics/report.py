@@ -77,7 +77,7 @@ TABLE_BUDGET_PX = 1040
 #: The same colour for the same name in every figure of every report (matplotlib "tab10").
 COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
            "#bcbd22", "#17becf")
-_NAMED = {"measurement": "#000000", "physics": "#555555"}
+_NAMED = {"measurement": "#000000", "physics": "#555555", "linear": "#999999"}   # references in greys
 
 
 def colour(name: str) -> str:

@@ -69,3 +69,11 @@ def test_shortfalls_are_the_notes_about_the_linear_row():
     assert texts == ["ff: its free-run test error (3.00 %) is above the linear model's (2.00 %). "
                      "Likely cause: too few RH levels. What to do: record at 3 or more RH levels."]
     assert notes(s, with_shortfalls=False) == []
+
+
+def test_a_hybrid_that_dropped_its_correction_equals_its_physics_not_behind_it():
+    s = _summary(physics=_row("physics simulator (generator)", 0.408), narx=_row("narx", 1.1, n=50),
+                 hybrid=_row("hybrid", 0.408 * (1 + 1e-9), n=60))
+    text = " ".join(n["text"] for n in notes(s))
+    assert "is behind" not in text
+    assert "The hybrid (0.408 %) equals its physics part alone" in text and "dropped" in text
