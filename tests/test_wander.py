@@ -66,3 +66,22 @@ def test_a_hint_of_sharing_short_of_the_test_level_is_called_inconclusive():
     assert hint.inconclusive and "cannot confirm" in hint.text()
     assert not WanderSplit(0.0, 0.5, 2, 5).inconclusive and "does not repeat" in WanderSplit(0.0, 0.5, 2, 5).text()
     assert not WanderSplit(0.8, 1e-4, 2, 5).inconclusive
+
+
+def test_wander_per_trend_is_brownian_motion_theory():
+    """The constants against the covariance min(s, t) of a Brownian motion (no sampling):
+    mean square left after the least-squares line 1/15, the line's rise (slope × T) 6/5."""
+    import numpy as np
+    from physics.diagnose.records import WALK_AFTER_TREND
+    from physics.diagnose.wander import WANDER_PER_TREND
+    n = 800
+    t = (np.arange(n) + 0.5) / n
+    C = np.minimum.outer(t, t)
+    tc = t - t.mean()
+    A = np.column_stack([np.ones(n), tc])
+    Q = np.eye(n) - A @ np.linalg.pinv(A)
+    left = np.trace(Q @ C @ Q) / n
+    rise = tc @ C @ tc / (tc @ tc) ** 2
+    assert abs(left - WALK_AFTER_TREND) < 2e-3 * WALK_AFTER_TREND
+    assert abs(rise - 1.2) < 2e-3
+    assert abs(WANDER_PER_TREND - left / rise) < 2e-3 * WANDER_PER_TREND

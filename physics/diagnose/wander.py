@@ -20,8 +20,9 @@ import numpy as np
 from .records import WALK_AFTER_TREND
 
 #: Mean square of a random walk left after its linear trend, per mean square of the fitted
-#: trend's rise over the record: 1/15 ÷ 6/5·(…) = 0.0566 (Brownian motion, computed).
-WANDER_PER_TREND = 0.0566
+#: trend's rise over the record: (σ²T/15) / (6σ²T/5) = 1/18 (Brownian motion of variance σ²t on
+#: [0, T]: its least-squares slope has variance 6σ²/(5T)).
+WANDER_PER_TREND = WALK_AFTER_TREND / (6.0 / 5.0)
 
 
 def slow_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance) -> float:
