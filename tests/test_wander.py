@@ -94,6 +94,23 @@ def test_a_shared_drift_is_found_with_its_time_constant():
     assert np.median([s.amplitude for s in found]) == pytest.approx(12e-6, rel=0.3)
 
 
+def test_the_wander_left_as_noise_is_the_records_own():
+    """With a shared drift found, the wander still counted as noise, wander·sqrt(1 − fraction),
+    estimates each record's own random walk after its trend: RMS walk/sqrt(15) (Brownian motion
+    theory, :data:`WALK_AFTER_TREND`), in mean square over seeds."""
+    from physics.diagnose.records import WALK_AFTER_TREND
+    drift = lambda t: -12e-6 * np.expm1(-t / 6.0)    # noqa: E731
+    left = []
+    for seed in range(30):
+        recs, resid, nui = _records(2, drift, 5e-6, seed)
+        w = slow_wander(recs, resid, nui)
+        s = shared_wander(recs, resid, nui, w)
+        if s.fraction > 0:
+            left.append(w * math.sqrt(1.0 - s.fraction))
+    assert len(left) >= 20
+    assert math.sqrt(np.mean(np.square(left))) == pytest.approx(5e-6 * math.sqrt(WALK_AFTER_TREND), rel=0.15)
+
+
 def test_one_record_cannot_attribute_its_wander():
     s = _split(*_records(1, lambda t: 0 * t, 5e-6, 0))
     assert not s.testable and "one record" in s.text()

@@ -18,7 +18,6 @@ from typing import Sequence
 import numpy as np
 
 from .forms.drift import shape as drift_shape, tau_grid
-from ..metrics import nuisance_terms, remove_nuisance
 from .records import WALK_AFTER_TREND
 
 #: Mean square of a random walk left after its linear trend, per mean square of the fitted
@@ -187,9 +186,12 @@ def shared_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wa
     scanned over :func:`.forms.drift.tau_grid`, σ² unknown) against none: its statistic
     (:func:`_shared_statistic`) is referred to its exact null distribution, drawn
     (:data:`NULL_DRAWS`, fixed seed) with the same records, whitening and τ.  The records share a
-    part at p < :data:`SHARED_ALPHA`; its fraction of the slow wander is 1 − (w′/w)², w′ the slow
-    wander (:func:`slow_wander`) left once the best-fitting shared form (A by generalised least
-    squares, its τ) is taken out of every record: what the records do not share.  A shared drift that is nearly a straight line over the records
+    part at p < :data:`SHARED_ALPHA`; its fraction of the slow wander is 1 − σ̂², σ̂² = (|u|² −
+    e)/(Rd − 1) the whitened power per component that the best-fitting shared form (A by
+    generalised least squares, its τ) leaves: 1 when the records wander independently at the
+    scale ``wander`` assumed by the whitening (the slow components are a random walk's, the white
+    noise's share is small), so ``wander``·σ̂ is the wander the records do not share, estimated
+    on all Rd components (:func:`slow_wander` sees the broadband records only).  A shared drift that is nearly a straight line over the records
     is told from a random walk's trend only as far as its size exceeds the walk's spread."""
     got = "no slow wander to split"
     if math.isfinite(wander) and wander > 0:
@@ -208,21 +210,8 @@ def shared_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wa
     amp, tau = float(hu[best] / hh[best]), float(taus[best])
     if p >= SHARED_ALPHA:
         return WanderSplit(0.0, p, R, d, tau=tau)
-    left = slow_wander(records, *_without(records, resid_d, nuisance, amp, tau))
-    frac = max(1.0 - (left / wander) ** 2, 0.0) if math.isfinite(left) else 0.0
-    return WanderSplit(frac, p, R, d, tau=tau, amplitude=amp)
-
-
-def _without(records, resid_d, nuisance, amp: float, tau: float) -> tuple[list, list]:
-    """(residuals, nuisance terms) of the records once the shared form amp·(1 − e^(−t/τ))
-    [m, s] is taken out of each (its offset and linear trend refitted)."""
-    out, nui = [], []
-    for r, e, (_, b) in zip(records, resid_d, nuisance):
-        t = np.arange(e.size) / r.fs_d
-        raw = np.asarray(e, float) + b * t - amp * drift_shape(t, tau)[:, 0]
-        nui.append(nuisance_terms(raw, t))
-        out.append(remove_nuisance(raw, t))
-    return out, nui
+    left = (float(u.ravel() @ u.ravel()) - hu[best] ** 2 / hh[best]) / (R * d - 1)     # σ² of what it leaves
+    return WanderSplit(min(max(1.0 - left, 0.0), 1.0), p, R, d, tau=tau, amplitude=amp)
 
 
 __all__ = ["slow_wander", "shared_wander", "slow_components", "WanderSplit", "WANDER_PER_TREND", "SHARED_ALPHA",
