@@ -444,7 +444,7 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         results = try_candidates(k, step_base, left, data, run)
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
-        decision = decide(step_base, ranked, data.noise, data.noise_d, taus, data.records, C.compare_fits,
+        decision = decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
                           C.prediction_distance, after_pick=k > 1)
         for c in ranked:
             c.explanation = _explain(c, step_base)
