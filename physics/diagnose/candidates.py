@@ -25,7 +25,9 @@ A parameter that moves between roles (``kf`` ↔ ``kf0``, ``Y`` ↔ ``dma_scale`
 ``Y_polymer``) starts from the base's fitted value translated to the new role (same
 gain at the band's geometric mid-frequency, same modulus).  Each fit is bounded
 least squares on the complex log FRF (:func:`physics.identify.fit_lsq`, multi-start, plus a
-grid of starts over the effect's own parameter, whose scale is unknown); linear models
+grid of starts over the effect's own parameter, whose scale is unknown); a parameter that
+ends on the edge of its default search window (3 decades around a start that may itself be
+far off) is searched again around that edge (:func:`_on_search_window_edge`); linear models
 cost milliseconds per evaluation.  ``nonlinear_charge`` uses the describing function of
 :mod:`.describing` in the FRF fit.  Its ``C_max`` is fitted only when it changes the
 large-signal gain by more than 10 % across its range; otherwise (the Poisson–Boltzmann
@@ -52,7 +54,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..device import Device
+from ..device import Device, all_param_specs
+from ..identify.settings import DEFAULT_DECADES
 from ..errors import InputError, ModelError
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
 from ..effects import EFFECTS
@@ -67,6 +70,11 @@ from .specs import (declared_default, default_candidates, effect_params, is_nest
 ROLE_GAIN, ROLE_STIFF = "gain", "stiffness"
 #: The large-signal parameter is fitted when it changes the large-signal gain by more than this (relative).
 DF_MIN_SENSITIVITY = 0.10
+#: A parameter ending on the edge of its default search window is searched again around it at most this often.
+RECENTRE_ROUNDS = 3
+#: ... when that lowers the fit's cost by more than this share (else the window edge lies along a
+#: valley the data leave flat, e.g. the gain and the stiffness together, and the first fit stands).
+RECENTRE_GAIN = 1e-3
 
 
 def gain_param(ids) -> str:
@@ -270,13 +278,19 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
         kw = dict(start={k: v for k, v in spec.start.items() if k in spec.free},
                   bounds={k: v for k, v in spec.bounds.items() if k in spec.free}, n_modes=n_modes)
         time_only = time_only_params(spec, device)
-        if any(spec_of(e).get("describing_function") for e in spec.effects):
-            problem, df_info = _df_problem(spec, device, targets, target_records, kw, df_cache)
-        else:
+        df = any(spec_of(e).get("describing_function") for e in spec.effects)
+        if not df:
             frf_free = [n for n in spec.free if n not in time_only]
             kw = {**kw, "start": {k: v for k, v in kw["start"].items() if k in frf_free},
                   "bounds": {k: v for k, v in kw["bounds"].items() if k in frf_free}}
-            problem, df_info = IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **kw), None
+
+        def build(start):
+            k = {**kw, "start": start}
+            if df:
+                return _df_problem(spec, device, targets, target_records, k, df_cache)
+            return IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **k), None
+
+        problem, df_info = build(kw["start"])
         extra = []
         for e in spec.extra_starts:
             th = problem.theta0.copy()
@@ -289,6 +303,19 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
             warnings.simplefilter("ignore", RuntimeWarning)
             j0 = problem.j_err(problem.theta0)
             fit = fit_lsq(problem, n_starts=n_starts, seed=seed, extra_starts=extra)
+            for _ in range(RECENTRE_ROUNDS):
+                edge = _on_search_window_edge(problem, fit.x, set(kw["bounds"]))
+                if not edge:
+                    break
+                start = {**kw["start"], **{prm.name: float(v) for prm, v in zip(problem.params, fit.theta)
+                                           if prm.rh is None}}
+                moved, info = build(start)
+                again = fit_lsq(moved, n_starts=1, seed=seed, extra_starts=[fit.theta])
+                if again.cost >= (1.0 - RECENTRE_GAIN) * fit.cost:      # a flat valley is not worth following
+                    break
+                problem, df_info, fit = moved, info, again
+                spec.notes.append(f"{', '.join(edge)} ended on the edge of {DEFAULT_DECADES:g} decades around its "
+                                  "start (a search window, not a physical bound): searched again around it")
         res = IdentificationResult(problem, {"lsq": fit}, "lsq", problem.device_for(fit.theta), j0,
                                    [t.source for t in targets], {"method": "lsq", "diagnosis": spec.label},
                                    time.perf_counter() - t0)
@@ -303,6 +330,26 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     for n in time_only:     # set on the time records (_refine_output_effects)
         mf.values[n] = float(res.device.params.get(n, declared_default(n)))
     return mf
+
+
+def _on_search_window_edge(problem, x, explicit: set) -> list[str]:
+    """Shared log-scaled parameters of ``problem`` whose search coordinates ``x`` end on the
+    edge of their default window (:data:`~physics.identify.settings.DEFAULT_DECADES` around the
+    start), neither a range given for them (``explicit``: the spec's or the user's) nor the
+    edge of their admissible range: the window is centred on a start that may be far off
+    (a base fitted along a degenerate valley hands its candidates such starts)."""
+    specs = all_param_specs()
+    lo, hi = problem.x_bounds
+    out = []
+    for i, prm in enumerate(problem.params):
+        if prm.rh is not None or prm.scale != "log" or prm.name in explicit:
+            continue
+        adm = specs[prm.name]
+        tol = 1e-3 * (hi[i] - lo[i])
+        if (x[i] <= lo[i] + tol and prm.lower > adm.lo * (1 + 1e-9)) or \
+                (x[i] >= hi[i] - tol and prm.upper < adm.hi * (1 - 1e-9)):
+            out.append(prm.name)
+    return out
 
 
 def time_only_params(spec: ModelSpec, device: Device) -> list[str]:
