@@ -2,8 +2,10 @@
 bound, and a fit with an added effect never ends worse than the model without it."""
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
+import numpy as np
 import pytest
 
 from physics.device import load_device
@@ -40,3 +42,42 @@ def test_a_start_far_off_is_not_held_by_its_search_window(clean):
     assert far.values["kf"] == pytest.approx(near.values["kf"], rel=1e-3)
     assert far.frf_cost == pytest.approx(near.frf_cost, rel=1e-3)
     assert any("search window" in n for n in far.spec.notes) and not near.spec.notes
+
+
+def test_a_nested_effect_starts_from_the_base_optimum_with_it_off(clean):
+    """The candidate's starts include the base's fitted values with the effect at its off
+    values (the role it takes over translated the off way: kf0 = kf at frac_a = 0)."""
+    case, data = clean
+    dev = load_device(case.device).with_params(kf=0.0052, Y=2.1e8, beta_f=9e-4)     # "fitted" base
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    spec = C.candidate_spec("fractional_coupling", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
+    assert {"frac_a": 0.0, "kf0": 0.0052} in spec.extra_starts
+    spec = C.candidate_spec("electrode_resistance", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
+    lo = spec.bounds["Rs"][0]
+    assert {"Rs": lo} in spec.extra_starts                  # off (0) clipped into its range
+
+
+def test_a_nested_effect_never_ends_worse_than_the_base(clean):
+    """A fit with an added effect that ends worse than the base on the time records (here
+    forced: Rs held in 1–10 kΩ/□, a strong lag) is replaced by the base with the effect off,
+    scored exactly as the base, and says so; a fit that ends better is left alone."""
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    base = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
+                       n_starts=2)
+    C.score(base, data.records)
+    spec = C.candidate_spec("electrode_resistance", ids, ["kf", "Y", "beta_f"], [], base.device, data.band, 1)
+    spec.bounds["Rs"] = (1000.0, 1e4)
+    spec.start["Rs"], spec.extra_starts = 3000.0, []
+    forced = C.score(C.fit_model(spec, base.device, data.targets, data.target_records, n_starts=1), data.records)
+    assert forced.rmse > base.rmse
+    kept = C.no_worse_than_base(forced, base)
+    assert kept.rmse == base.rmse and kept.rss == base.rss and kept.k == forced.k
+    assert kept.values["Rs"] == 0.0 and kept.device.params["Rs"] == 0.0
+    assert "ended worse than the model without it" in kept.spec.notes[-1]
+    # the off model really is the base: simulated, it gives the base's predictions
+    for r, p in zip(data.records, base.pred_d):
+        assert np.allclose(C.predict(kept.model, r), p, rtol=0, atol=1e-3 * np.max(np.abs(p)))
+    poorer = dataclasses.replace(base, rss=[1.01 * x for x in forced.rss])      # a base the fit beats
+    assert C.no_worse_than_base(forced, poorer) is forced

@@ -38,6 +38,9 @@ held at the device value and the report says so.
 :mod:`.records`; the sensor's low-pass applied; the model starts at rest at the record's
 first voltage).  The deflection is exactly proportional to the coupling gain, so that
 free parameter is then refined on the time records in closed form (:func:`_refine_gain`).
+A nested effect starts (among its other starts) from the base's optimum with the effect at
+its ``off`` values, and a fit that still ends worse than the base on the time records is
+replaced by that point, the model without it (:func:`no_worse_than_base`).
 The residual (measured minus model, its nuisance terms — offset and linear drift of each
 record, :func:`.records.remove_nuisance` — removed) gives the RMS error and fit %
 at the full rate (the prediction interpolated back) and, on the decimated samples, the
@@ -64,8 +67,8 @@ from ..timedomain import simulate
 from .. import stats
 from .describing import DescribingFunction, charge_effects
 from .records import NUISANCE_TERMS, Record, nuisance_terms, remove_nuisance, sensor_filter, upsample
-from .specs import (declared_default, default_candidates, effect_params, is_nested, param_bounds, param_used,
-                    role_family, role_param, spec_of, start_points)
+from .specs import (declared_default, default_candidates, effect_params, is_nested, off_values, param_bounds,
+                    param_used, role_family, role_param, spec_of, start_points)
 
 ROLE_GAIN, ROLE_STIFF = "gain", "stiffness"
 #: The large-signal parameter is fitted when it changes the large-signal gain by more than this (relative).
@@ -192,8 +195,12 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
                 v = math.sqrt(b[0] * b[1]) if b[0] > 0 else 0.5 * (b[0] + b[1])
             start[name] = v
         start[name] = float(np.clip(start[name], b[0], b[1]))
-    # starts over the effect's own parameters (unknown scale)
+    # starts over the effect's own parameters (unknown scale), and the base's optimum with the effect
+    # off (a nested effect: its fit then never ends worse than the base on the FRF criterion)
     extra = [st for st in ({k: v for k, v in pt.items() if k in free} for pt in start_points(effect, device)) if st]
+    off = {k: v for k, v in off_values(effect, device).items() if k in free} if is_nested(effect) else {}
+    if off:
+        extra.append({k: float(np.clip(v, *bounds[k])) if k in bounds else v for k, v in off.items()})
     return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)
 
 
@@ -494,7 +501,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     x_now = np.array([float(mf.device.params.get(n, declared_default(n))) for n in names])
     starts = [x_now] + [np.array([float(st.get(n, x)) for n, x in zip(names, x_now)])
                         for e in outs for st in start_points(e.id, mf.device)]
-    off = {n: v for e in outs for n, v in (spec_of(e.id).get("off") or {}).items()}
+    off = {n: v for e in outs for n, v in off_values(e.id, mf.device).items()}
     if any(n in off for n in names):       # a nested effect also starts from the model without it
         starts.append(np.array([float(off.get(n, x)) for n, x in zip(names, x_now)]))
     best = None
@@ -602,6 +609,32 @@ def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
     return [a * p for p in preds]
 
 
+def no_worse_than_base(mf: ModelFit, base: ModelFit) -> ModelFit:
+    """``mf`` — the base with a nested effect added, fitted and scored — or, when it ends worse
+    than ``base`` on the time records (its FRF optimum need not be theirs), the base itself
+    with the effect at its off values (the model without it, so the base's scores are exact),
+    said in its notes.  A nested effect can thus never make the model worse."""
+    eff = mf.spec.added
+    if not mf.ok or eff is None or not is_nested(eff) or sum(mf.rss) <= sum(base.rss):
+        return mf
+    off = off_values(eff, base.device)
+    if not off:
+        return mf
+    dev = base.device.with_params(**off)
+    kept = dataclasses.replace(
+        mf, device=dev, model=ActuatorModel(dev, mf.effects, n_modes=mf.model.n_modes),
+        values={k: float(dev.params.get(k, base.values.get(k, v))) for k, v in mf.values.items()},
+        std_errors={k: math.nan for k in mf.values}, rel_std_errors={k: math.nan for k in mf.values},
+        pred_d=list(base.pred_d), resid_d=list(base.resid_d), rss=list(base.rss), n=list(base.n),
+        taus=list(base.taus), rmse_records=list(base.rmse_records), rmse=base.rmse, fit_pct=base.fit_pct,
+        nuisance=list(base.nuisance), correlation=None)
+    kept.spec = dataclasses.replace(mf.spec, notes=mf.spec.notes + [
+        f"fitted, the model with {eff} ended worse than the model without it on the time records "
+        f"({1e6 * mf.rmse:.4g} vs {1e6 * base.rmse:.4g} µm RMS): the model without it ({eff} at its off values, "
+        + ", ".join(f"{k} = {v:.4g}" for k, v in off.items()) + ") is kept"])
+    return kept
+
+
 @dataclass
 class Comparison:
     """Candidate against base on the same records (see :mod:`.stats`)."""
@@ -660,4 +693,4 @@ def prediction_distance(a: ModelFit, b: ModelFit) -> float:
 
 
 __all__ = ["default_candidates", "ModelSpec", "ModelFit", "Comparison", "candidate_spec", "removal_spec", "fit_model",
-           "score", "compare_fits", "default_free", "map_free", "param_used", "predict", "prediction_distance"]
+           "score", "no_worse_than_base", "compare_fits", "default_free", "map_free", "param_used", "predict", "prediction_distance"]

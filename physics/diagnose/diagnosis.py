@@ -402,9 +402,9 @@ def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, run: Run) 
             results[k] = CandidateResult(c.effect, "failed", reason=f"{c.effect}: fit or simulation failed: {mf.error}",
                                          fit=mf, step=step)
             continue
-        c.status, c.fit = "evaluated", mf
+        c.status, c.fit = "evaluated", C.no_worse_than_base(mf, base)
         run.timings[f"step {step}: candidate {c.effect}" if step > 1 else f"candidate {c.effect}"] = wall
-        run.log(f"  {'+' * step}{c.effect:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({wall:.1f} s)")
+        run.log(f"  {'+' * step}{c.effect:22s} RMS {1e6 * c.fit.rmse:9.4g} µm  ({wall:.1f} s)")
     return results
 
 
