@@ -81,3 +81,28 @@ def test_a_nested_effect_never_ends_worse_than_the_base(clean):
         assert np.allclose(C.predict(kept.model, r), p, rtol=0, atol=1e-3 * np.max(np.abs(p)))
     poorer = dataclasses.replace(base, rss=[1.01 * x for x in forced.rss])      # a base the fit beats
     assert C.no_worse_than_base(forced, poorer) is forced
+
+
+def test_a_pick_stopped_short_is_refined_on_the_time_records(clean):
+    """A fit left short of the time records' optimum (its damping and gain moved off it, as an
+    FRF optimum of a model that cannot match the device exactly is) is refitted on them: the
+    error falls back to the optimum's, the uncertainties are those of the time residual."""
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    best = C.score(C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets,
+                               data.target_records, n_starts=2), data.records)
+    short = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
+                        n_starts=2)
+    labels = short.result.problem.labels
+    short.result.fit.theta[labels.index("beta_f")] *= 1.6
+    short.result.fit.theta[labels.index("Y")] *= 1.1
+    short.device = short.result.problem.device_for(short.result.fit.theta)
+    short.model = C.ActuatorModel(short.device, short.effects)
+    C.score(short, data.records)
+    assert short.rmse > 2 * best.rmse
+    assert C.refine_on_time(short, data.records)
+    assert short.rmse <= 1.02 * best.rmse
+    assert short.values["beta_f"] == pytest.approx(best.values["beta_f"], rel=0.05)
+    assert "refined on the time records" in short.spec.notes[-1]
+    assert all(np.isfinite(short.rel_std_errors[k]) for k in labels)
