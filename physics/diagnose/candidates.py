@@ -73,8 +73,9 @@ from .specs import (declared_default, default_candidates, effect_params, is_nest
 ROLE_GAIN, ROLE_STIFF = "gain", "stiffness"
 #: The large-signal parameter is fitted when it changes the large-signal gain by more than this (relative).
 DF_MIN_SENSITIVITY = 0.10
-#: Evaluations (simulations of every record) of the time-domain refinement of a pick (:func:`refine_on_time`).
-TIME_REFINE_NFEV = 40
+#: Simulations of every record the time-domain refinement of a pick may spend, its finite-difference
+#: Jacobians and final uncertainty included (:func:`refine_on_time`).
+TIME_REFINE_SIMS = 60
 #: A parameter ending on the edge of its default search window is searched again around it at most this often.
 RECENTRE_ROUNDS = 3
 #: ... when that lowers the fit's cost by more than this share (else the window edge lies along a
@@ -618,9 +619,11 @@ def refine_on_time(mf: ModelFit, records: Sequence[Record]) -> bool:
     by the large slow motion: with a base that cannot match the device exactly the two optima
     differ.  Bounded least squares in the FRF fit's search coordinates (at most
     :data:`TIME_REFINE_NFEV` evaluations, each a simulation of every record at the analysis
-    rate); the uncertainties are then those of the time residual (Bates & Watts, the
-    covariance inflated by its autocorrelation time).  Linear models only: a large-signal
-    model runs the implicit stepper, ~10× dearer."""
+    rate) within :data:`TIME_REFINE_SIMS` simulations of the records (each iteration costs one
+    per parameter for its Jacobian, the uncertainty two per parameter); the uncertainties are
+    then those of the time residual (Bates & Watts, the covariance inflated by its
+    autocorrelation time).  Linear models only: a large-signal model runs the implicit stepper,
+    ~10× dearer."""
     from scipy.optimize import least_squares
     from ..identify.fitting import uncertainty
     if not mf.ok or not mf.model.is_linear:
@@ -641,10 +644,14 @@ def refine_on_time(mf: ModelFit, records: Sequence[Record]) -> bool:
         return np.concatenate([remove_nuisance(r.y_d - predict(m, r)) for r in records]) / scale
 
     x0 = np.clip(problem.to_x(fit.theta), lo + 1e-9 * span, hi - 1e-9 * span)
+    p = x0.size
+    iterations = (TIME_REFINE_SIMS - 2 * p - 1) // (p + 1)
+    if iterations < 1:
+        return False
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         r0 = resid(x0)
-        sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=TIME_REFINE_NFEV)
+        sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=iterations)
         if not sol.cost < 0.5 * float(r0 @ r0) * (1.0 - 1e-9):
             return False
         unc = uncertainty(problem, sol.x, resid, inflate=stats.integrated_time(sol.fun))
