@@ -107,8 +107,8 @@ class WanderSplit:
         if not self.testable:
             return self.why
         if self.fraction > 0:
-            return (f"{100 * self.fraction:.0f} % of it is common to the {self.records} records ({self._test()}, "
-                    f"τ ≈ {self.tau:.3g} s): a drift they share, described, not noise")
+            return (f"{100 * self.fraction:.0f} % of it is common to the {self.records} records ({self._test()}; "
+                    f"A ≈ {1e6 * self.amplitude:+.3g} µm, τ ≈ {self.tau:.3g} s): a drift they share, not counted as noise")
         if self.inconclusive:
             return (f"the {self.records} records hint that they share part of it but cannot confirm it ({self._test()}, "
                     f"not below {SHARED_ALPHA:g}): counted as noise")
