@@ -1,0 +1,58 @@
+"""A correction on a reference (linear start, the hybrid's physics) is kept only when its
+validation gain stands out from the gain's own uncertainty (batch means over blocks)."""
+import numpy as np
+import torch
+from torch import nn
+
+from nnmodel.models.base import GAIN_BLOCKS, keep_if_better
+from nnmodel.models.core import SequenceCore
+from nnmodel.models.normalise import Seq
+
+N, SEG = 1000, 100     # a validation record of 10 segments, one block each
+
+
+class _Residual(SequenceCore):
+    """Output = the reference (input channel 1) + w × the correction (input channel 2)."""
+
+    n_init = 1
+
+    def __init__(self):
+        super().__init__()
+        self.w = nn.Parameter(torch.ones(()))
+
+    def init_state(self, u_hist, y_hist, rh_hist):
+        return None
+
+    def simulate(self, state, u, rh):
+        return u[..., 0] + self.w * u[..., 1]
+
+    def zero_correction(self):
+        with torch.no_grad():
+            self.w.zero_()
+
+
+def _record(signs, a):
+    """y = reference + s (s = ±1 by segment); the correction is a·s where ``signs`` is +1
+    (it removes part of the error) and −a·s where it is −1 (it adds to it)."""
+    s = np.repeat(np.where(np.arange(N // SEG) % 2 == 0, 1.0, -1.0), SEG)
+    ref = np.sin(np.arange(N) / 30.0)
+    corr = a * s * np.repeat(np.asarray(signs, float), SEG)
+    return [Seq(np.stack([ref, corr], 1).astype(np.float32), (ref + s).astype(np.float32), None)]
+
+
+def test_a_gain_the_validation_cannot_tell_from_chance_leaves_the_reference():
+    assert GAIN_BLOCKS == N // SEG
+    # right on 6 segments, wrong on 4: the pooled error is lower (4a − 10a² > 0 per segment) ...
+    val = _record([1, 1, 1, 1, 1, 1, -1, -1, -1, -1], 0.2)
+    core = _Residual()
+    out = keep_if_better(core, val)
+    assert out["validation_nrmse_network"] < out["validation_nrmse_reference"]    # the old rule kept it
+    assert out["kept"] == "linear" and core.w.item() == 0.0                      # ... within 2 SE: dropped
+    assert out["validation_gain"] < 2 * out["validation_gain_se"] and "standard errors" in out["reason"]
+
+
+def test_a_gain_everywhere_is_kept():
+    core = _Residual()
+    out = keep_if_better(core, _record([1] * 10, 0.5))
+    assert out["kept"] == "network" and core.w.item() == 1.0
+    assert out["validation_gain"] > 2 * out["validation_gain_se"]
