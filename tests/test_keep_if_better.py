@@ -43,12 +43,13 @@ def _record(signs, a):
 def test_a_gain_the_validation_cannot_tell_from_chance_leaves_the_reference():
     assert GAIN_BLOCKS == N // SEG
     # right on 6 segments, wrong on 4: the pooled error is lower (4a − 10a² > 0 per segment) ...
-    val = _record([1, 1, 1, 1, 1, 1, -1, -1, -1, -1], 0.2)
+    val = _record([1, 1, -1, 1, -1, 1, -1, 1, -1, 1], 0.2)
     core = _Residual()
     out = keep_if_better(core, val)
     assert out["validation_nrmse_network"] < out["validation_nrmse_reference"]    # the old rule kept it
-    assert out["kept"] == "linear" and core.w.item() == 0.0                      # ... within 2 SE: dropped
-    assert out["validation_gain"] < 2 * out["validation_gain_se"] and "standard errors" in out["reason"]
+    assert out["kept"] == "linear" and core.w.item() == 0.0                      # ... within its uncertainty: dropped
+    assert out["validation_blocks"] >= 2 and out["validation_gain"] < 2 * out["validation_gain_se"]
+    assert "within its uncertainty" in out["reason"]
 
 
 def test_a_gain_everywhere_is_kept():
@@ -56,3 +57,25 @@ def test_a_gain_everywhere_is_kept():
     out = keep_if_better(core, _record([1] * 10, 0.5))
     assert out["kept"] == "network" and core.w.item() == 1.0
     assert out["validation_gain"] > 2 * out["validation_gain_se"]
+
+
+def test_the_correlation_time_of_an_ar1_series_is_its_textbook_value():
+    """AR(1) with coefficient φ: integrated autocorrelation time (1 + φ) / (1 − φ) (19 for 0.9)."""
+    from scipy.signal import lfilter
+
+    from nnmodel.batches import correlation_time
+    x = lfilter([1.0], [1.0, -0.9], np.random.default_rng(0).normal(size=200_000))
+    assert abs(correlation_time(x) - 19.0) < 1.5
+    assert abs(correlation_time(np.random.default_rng(1).normal(size=50_000)) - 1.0) < 0.1
+
+
+def test_blocks_are_no_shorter_than_the_correlation_time():
+    """A slowly varying difference (AR(1) with φ = 0.99: correlation time ~ 200 samples) on
+    1000 samples gives a handful of blocks, not the 10 asked for: the standard error is not
+    understated."""
+    from scipy.signal import lfilter
+
+    from nnmodel.batches import paired_gain
+    d = 0.05 + lfilter([1.0], [1.0, -0.99], np.random.default_rng(2).normal(size=1000)) * 0.01
+    gain, se, blocks = paired_gain([d + 1.0], [np.ones(1000)], 10)
+    assert 2 <= blocks <= 7 and abs(gain - d.mean()) < 1e-12

@@ -203,8 +203,9 @@ class NeuralModel:
             self.features_ = self.features.fit(self.kind, fs, train, use_rh, val, self.val_fraction)
             core = self._build_core(self.features_)
             min_len = core.n_init + 2
-            # channels (memory filters, physics) are computed on whole records and then cut,
-            # so a validation tail continues the filter states of its record
+            # training channels (memory filters, physics) are computed on whole records and then
+            # cut; a validation tail is a record of its own, started as the free run of a new
+            # record starts (filters held at its first sample), so that it scores what a user gets
             cuts = None
             full = list(train)
             if val is None and self.val_fraction > 0:
@@ -226,7 +227,7 @@ class NeuralModel:
             else:
                 seqs = [self._norm_record(r) for r in full]
                 tr = [s[:k] if k else s for s, k in zip(seqs, cuts)]
-                va = [s[k:] for s, k in zip(seqs, cuts) if k]
+                va = [self._norm_record(r[k:]) for r, k in zip(full, cuts) if k]
             self._release_channels()
             t0 = time.perf_counter()
             self._initialise(core, tr)
@@ -474,19 +475,23 @@ class NeuralModel:
 
 #: blocks the validation data are cut into to judge a correction's gain (:func:`keep_if_better`)
 GAIN_BLOCKS = 10
-#: a correction is kept when its validation gain exceeds this many standard errors
-GAIN_Z = 2.0
+#: one-sided confidence with which a correction's validation gain must exceed zero (Student's t
+#: quantile for the blocks' degrees of freedom: 2.0 standard errors with 60 blocks, 2.3 with 10)
+GAIN_CONFIDENCE = 0.975
 
 
 def keep_if_better(core, val, reference: str = "linear") -> dict:
     """A residual core (a linear start, the hybrid's physics) starts and ends no worse than
     its ``reference`` alone on validation: its correction (initialised by least squares, or
     trained) is kept only when it lowers the free-run squared error of ``val`` (normalised
-    records) by more than :data:`GAIN_Z` standard errors of that gain (batch means over
-    :data:`GAIN_BLOCKS` blocks, :func:`nnmodel.batches.paired_gain`): a gain the validation
-    data cannot tell from chance (short or few records) leaves the reference
-    (``core.zero_correction()``)."""
+    records) by more than its uncertainty — the gain over Student's t quantile
+    (:data:`GAIN_CONFIDENCE`) times its standard error by batch means
+    (:func:`nnmodel.batches.paired_gain`, :data:`GAIN_BLOCKS` blocks, none shorter than the
+    errors' correlation time).  A gain the validation data cannot tell from chance (short
+    or few records: few independent blocks) leaves the reference (``core.zero_correction()``)."""
     import copy
+
+    from scipy.stats import t as student
 
     from ..batches import free_run_errors, paired_gain
     if not val:
@@ -495,17 +500,19 @@ def keep_if_better(core, val, reference: str = "linear") -> dict:
     ref = copy.deepcopy(core)
     ref.zero_correction()
     e_ref = free_run_errors(ref, val)
-    gain, se = paired_gain(e_ref, e_net, GAIN_BLOCKS)
+    gain, se, blocks = paired_gain(e_ref, e_net, GAIN_BLOCKS)
     n = max(1, sum(e.size for e in e_net))
     r_net, r_ref = (min(float(np.sqrt(sum(float(x.sum()) for x in e) / n)), 1e6) for e in (e_net, e_ref))
-    kept = "network" if r_net < r_ref and gain > GAIN_Z * se else reference
+    z = float(student.ppf(GAIN_CONFIDENCE, blocks - 1)) if blocks >= 2 else math.inf
+    kept = "network" if r_net < r_ref and gain > z * se else reference
     out = {"kept": kept, "validation_nrmse_network": r_net, "validation_nrmse_reference": r_ref,
-           "validation_gain": gain, "validation_gain_se": se if math.isfinite(se) else None}
+           "validation_gain": gain, "validation_gain_se": se if math.isfinite(se) else None,
+           "validation_blocks": blocks}
     if kept == reference:
         core.load_state_dict(ref.state_dict())
         if r_net < r_ref:
-            out["reason"] = (f"its validation gain is within {GAIN_Z:g} standard errors of zero "
-                             "(validation data too short or too few to tell it from chance)")
+            out["reason"] = (f"its validation gain is within its uncertainty ({blocks} independent block(s) of "
+                             "validation data: too short or too few records to tell it from chance)")
     return out
 
 
