@@ -83,18 +83,17 @@ def select_structure(model, train, val) -> None:
 
 def validation_nrmse(model, train, val) -> float:
     """Pooled free-run NRMSE of a fitted ``model`` on ``val`` records, or (without them) on
-    the last ``val_fraction`` of each training record, simulated as a record of its own (as
-    the training loop scores it); inf when the simulation diverges."""
+    the last ``val_fraction`` of each training record simulated from its start; inf when
+    the simulation diverges."""
     if val:
-        parts = list(val)
+        parts = [(r, 0) for r in val]
     else:
-        cuts = [split_index(len(r), model.val_fraction, model.n_init_ + 2) for r in train]
-        parts = [r[k:] for r, k in zip(train, cuts) if k] or list(train)   # no tail: the whole records
+        parts = [(r, split_index(len(r), model.val_fraction, model.n_init_ + 2) or 0) for r in train]
     e2 = v2 = 0.0
-    for r in parts:
+    for r, k in parts:
         with np.errstate(all="ignore"):
             yh = model.simulate(r.u, r.rh, y_init=r.y[:model.n_init_])
-        s = model.n_init_
+        s = max(k, model.n_init_)
         y, e = r.y[s:], yh[s:] - r.y[s:]
         if not np.all(np.isfinite(e)):
             return math.inf
