@@ -203,9 +203,8 @@ class NeuralModel:
             self.features_ = self.features.fit(self.kind, fs, train, use_rh, val, self.val_fraction)
             core = self._build_core(self.features_)
             min_len = core.n_init + 2
-            # training channels (memory filters, physics) are computed on whole records and then
-            # cut; a validation tail is a record of its own, started as the free run of a new
-            # record starts (filters held at its first sample), so that it scores what a user gets
+            # channels (memory filters, physics) are computed on whole records and then cut,
+            # so a validation tail continues the filter states of its record
             cuts = None
             full = list(train)
             if val is None and self.val_fraction > 0:
@@ -227,7 +226,7 @@ class NeuralModel:
             else:
                 seqs = [self._norm_record(r) for r in full]
                 tr = [s[:k] if k else s for s, k in zip(seqs, cuts)]
-                va = [self._norm_record(r[k:]) for r, k in zip(full, cuts) if k]
+                va = [s[k:] for s, k in zip(seqs, cuts) if k]
             self._release_channels()
             t0 = time.perf_counter()
             self._initialise(core, tr)
