@@ -47,15 +47,8 @@ def load_plugins() -> list[str]:
     entry ``NAME = module:Class``); returns their kinds.  A network's recipe ``KIND.yaml``
     is read from the recipe folder, else from beside its module
     (:func:`nnmodel.recipes.load_recipe`)."""
-    from importlib.metadata import entry_points
-    kinds = []
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            cls = ep.load()
-        except Exception as exc:
-            raise InputError(f"entry point {ep.name!r} ({ep.value}) of group {ENTRY_POINT_GROUP}: {exc}") from None
-        kinds.append(register(cls).kind)
-    return kinds
+    from physics.plugins import load_entry_points
+    return [cls.kind for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
 
 
 __all__ = ["MODELS", "BUILT_IN_MODELS", "ENTRY_POINT_GROUP", "register", "load_plugins", "NeuralModel", "NotFittedError", "FFModel", "RBFModel",
