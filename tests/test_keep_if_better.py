@@ -4,7 +4,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from nnmodel.models.base import GAIN_BLOCKS, keep_if_better
+from nnmodel.models.base import GAIN_BLOCKS, GAIN_SE, keep_if_better
 from nnmodel.models.core import SequenceCore
 from nnmodel.models.normalise import Seq
 
@@ -48,7 +48,7 @@ def test_a_gain_the_validation_cannot_tell_from_chance_leaves_the_reference():
     out = keep_if_better(core, val)
     assert out["validation_nrmse_network"] < out["validation_nrmse_reference"]    # the old rule kept it
     assert out["kept"] == "linear" and core.w.item() == 0.0                      # ... within its uncertainty: dropped
-    assert out["validation_blocks"] >= 2 and out["validation_gain"] < 2 * out["validation_gain_se"]
+    assert out["validation_blocks"] >= 2 and 0 < out["validation_gain"] < GAIN_SE * out["validation_gain_se"]
     assert "within its uncertainty" in out["reason"]
 
 
@@ -56,7 +56,7 @@ def test_a_gain_everywhere_is_kept():
     core = _Residual()
     out = keep_if_better(core, _record([1] * 10, 0.5))
     assert out["kept"] == "network" and core.w.item() == 1.0
-    assert out["validation_gain"] > 2 * out["validation_gain_se"]
+    assert out["validation_gain"] > GAIN_SE * out["validation_gain_se"]
 
 
 def test_the_correlation_time_of_an_ar1_series_is_its_textbook_value():
