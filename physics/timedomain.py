@@ -227,11 +227,13 @@ def _check_record(t, voltage):
         raise InputError(f"voltage has {v.size} samples but t has {t.size}")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
         raise InputError("t and voltage must be finite (no NaN or inf)")
-    dtv = np.diff(t)
-    if np.any(dtv <= 0):
-        raise InputError("t must be strictly increasing")
-    if np.max(np.abs(dtv - dtv.mean())) > 1e-6 * dtv.mean():
-        raise InputError("t must be uniformly sampled (resample the record first)")
+    step = (t[-1] - t[0]) / (t.size - 1)                 # the mean step [s]
+    for a in range(0, t.size - 1, PIECE_SAMPLES):        # in pieces: no step array of a long record
+        dtv = np.diff(t[a:a + PIECE_SAMPLES + 1])
+        if np.any(dtv <= 0):
+            raise InputError("t must be strictly increasing")
+        if np.max(np.abs(dtv - step)) > 1e-6 * step:
+            raise InputError("t must be uniformly sampled (resample the record first)")
     return t, v
 
 
@@ -420,12 +422,12 @@ def _realize(fn, band, what: str, fit: bool = True):
 
 class _Stage:
     """A linear stage (a :class:`~physics.lti.StateSpace`, or a plain gain) fed in pieces
-    (:class:`physics.lti.Stream`: (n_in, B, m) in, (n_out, B, k) out), started in equilibrium
+    (:class:`physics.lti.Stream`: (n_in, 1, m) in, (n_out, 1, k) out), started in equilibrium
     with its first input sample (``x0_of(u[..., 0])``); ``periodic``: the whole record is run
     at ``finish`` as one period of a periodic input (:func:`physics.lti.simulate`)."""
 
-    def __init__(self, f, dt: float, hold: str, periodic: bool, x0_of=None, batch: int = 1):
-        self.f, self.dt, self.hold, self.periodic, self.batch = f, dt, hold, periodic, batch
+    def __init__(self, f, dt: float, hold: str, periodic: bool, x0_of=None):
+        self.f, self.dt, self.hold, self.periodic = f, dt, hold, periodic
         self.x0_of = x0_of or (lambda u0: _steady_state(f, 1.0)[:, None] * u0[0][None, :])
         self.stream, self.held = None, []
 
@@ -434,14 +436,14 @@ class _Stage:
             return self.f * u
         if self.periodic or not u.shape[-1]:
             self.held += [u] if self.periodic else []
-            return np.zeros((self.f.n_outputs, self.batch, 0))
+            return np.zeros((self.f.n_outputs, 1, 0))
         if self.stream is None:
-            self.stream = lti.Stream(self.f, self.dt, self.x0_of(u[..., 0]), self.hold, batch=self.batch)
+            self.stream = lti.Stream(self.f, self.dt, self.x0_of(u[..., 0]), self.hold)
         return self.stream.push(u)
 
     def finish(self) -> np.ndarray:
         if not isinstance(self.f, StateSpace):
-            return np.zeros((1, self.batch, 0))
+            return np.zeros((1, 1, 0))
         if self.periodic:
             u = np.concatenate(self.held, axis=-1)
             self.held = []
@@ -466,7 +468,8 @@ class _Chain:
         self.coupling(np.array([np.min(rh_t), np.max(rh_t)]))   # its warnings once, for the whole record's range
         n_loads = model.n_modes + 1
         self.cs_stage = None if cs_filter is None else _Stage(cs_filter, dt, hold, periodic)
-        self.load_stage = _Stage(load_filter, dt, hold, periodic, batch=n_loads)
+        # one stage per row: a batch of rows would multiply the recursion's working memory
+        self.load_stages = [_Stage(load_filter, dt, hold, periodic) for _ in range(n_loads)]
         self.mechanics = _Mechanics(model, base, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
         self.cs = np.empty(rh_t.size) if cs_filter is not None else None
         self.tip = np.empty(rh_t.size)
@@ -477,7 +480,8 @@ class _Chain:
         if self.cs_stage is not None:
             self._cs(self.cs_stage.finish() if last else self.cs_stage.push(rows[None, :1]))
             rows = None if last else rows[1:]
-        loads = (self.load_stage.finish() if last else self.load_stage.push(rows[None]))[0]
+        loads = np.vstack([(s.finish() if last else s.push(rows[None, k:k + 1]))[0]
+                           for k, s in enumerate(self.load_stages)])
         a, b = self.k_load, self.k_load + loads.shape[1]
         with warnings.catch_warnings():                     # given once, in __init__
             warnings.simplefilter("ignore")
