@@ -25,7 +25,9 @@ A parameter that moves between roles (``kf`` ↔ ``kf0``, ``Y`` ↔ ``dma_scale`
 ``Y_polymer``) starts from the base's fitted value translated to the new role (same
 gain at the band's geometric mid-frequency, same modulus).  Each fit is bounded
 least squares on the complex log FRF (:func:`physics.identify.fit_lsq`, multi-start, plus a
-grid of starts over the effect's own parameter, whose scale is unknown); linear models
+grid of starts over the effect's own parameter, whose scale is unknown); a parameter that
+ends on the edge of its default search window (3 decades around a start that may itself be
+far off) is searched again around that edge (:func:`_on_search_window_edge`); linear models
 cost milliseconds per evaluation.  ``nonlinear_charge`` uses the describing function of
 :mod:`.describing` in the FRF fit.  Its ``C_max`` is fitted only when it changes the
 large-signal gain by more than 10 % across its range; otherwise (the Poisson–Boltzmann
@@ -36,6 +38,9 @@ held at the device value and the report says so.
 :mod:`.records`; the sensor's low-pass applied; the model starts at rest at the record's
 first voltage).  The deflection is exactly proportional to the coupling gain, so that
 free parameter is then refined on the time records in closed form (:func:`_refine_gain`).
+A nested effect starts (among its other starts) from the base's optimum with the effect at
+its ``off`` values, and a fit that still ends worse than the base on the time records is
+replaced by that point, the model without it (:func:`no_worse_than_base`).
 The residual (measured minus model, its nuisance terms — offset and linear drift of each
 record, :func:`.records.remove_nuisance` — removed) gives the RMS error and fit %
 at the full rate (the prediction interpolated back) and, on the decimated samples, the
@@ -52,7 +57,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..device import Device
+from ..device import Device, all_param_specs
+from ..identify.settings import DEFAULT_DECADES
 from ..errors import InputError, ModelError
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
 from ..effects import EFFECTS
@@ -61,12 +67,20 @@ from ..timedomain import simulate
 from .. import stats
 from .describing import DescribingFunction, charge_effects
 from .records import NUISANCE_TERMS, Record, nuisance_terms, remove_nuisance, sensor_filter, upsample
-from .specs import (declared_default, default_candidates, effect_params, is_nested, param_bounds, param_used,
-                    role_family, role_param, spec_of, start_points)
+from .specs import (declared_default, default_candidates, effect_params, is_nested, off_values, param_bounds,
+                    param_used, role_family, role_param, spec_of, start_points)
 
 ROLE_GAIN, ROLE_STIFF = "gain", "stiffness"
 #: The large-signal parameter is fitted when it changes the large-signal gain by more than this (relative).
 DF_MIN_SENSITIVITY = 0.10
+#: Simulations of every record the time-domain refinement of a pick may spend, its finite-difference
+#: Jacobians and final uncertainty included (:func:`refine_on_time`).
+TIME_REFINE_SIMS = 60
+#: A parameter ending on the edge of its default search window is searched again around it at most this often.
+RECENTRE_ROUNDS = 3
+#: ... when that lowers the fit's cost by more than this share (else the window edge lies along a
+#: valley the data leave flat, e.g. the gain and the stiffness together, and the first fit stands).
+RECENTRE_GAIN = 1e-3
 
 
 def gain_param(ids) -> str:
@@ -184,8 +198,12 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
                 v = math.sqrt(b[0] * b[1]) if b[0] > 0 else 0.5 * (b[0] + b[1])
             start[name] = v
         start[name] = float(np.clip(start[name], b[0], b[1]))
-    # starts over the effect's own parameters (unknown scale)
+    # starts over the effect's own parameters (unknown scale), and the base's optimum with the effect
+    # off (a nested effect: its fit then never ends worse than the base on the FRF criterion)
     extra = [st for st in ({k: v for k, v in pt.items() if k in free} for pt in start_points(effect, device)) if st]
+    off = {k: v for k, v in off_values(effect, device).items() if k in free} if is_nested(effect) else {}
+    if off:
+        extra.append({k: float(np.clip(v, *bounds[k])) if k in bounds else v for k, v in off.items()})
     return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)
 
 
@@ -270,13 +288,19 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
         kw = dict(start={k: v for k, v in spec.start.items() if k in spec.free},
                   bounds={k: v for k, v in spec.bounds.items() if k in spec.free}, n_modes=n_modes)
         time_only = time_only_params(spec, device)
-        if any(spec_of(e).get("describing_function") for e in spec.effects):
-            problem, df_info = _df_problem(spec, device, targets, target_records, kw, df_cache)
-        else:
+        df = any(spec_of(e).get("describing_function") for e in spec.effects)
+        if not df:
             frf_free = [n for n in spec.free if n not in time_only]
             kw = {**kw, "start": {k: v for k, v in kw["start"].items() if k in frf_free},
                   "bounds": {k: v for k, v in kw["bounds"].items() if k in frf_free}}
-            problem, df_info = IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **kw), None
+
+        def build(start):
+            k = {**kw, "start": start}
+            if df:
+                return _df_problem(spec, device, targets, target_records, k, df_cache)
+            return IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **k), None
+
+        problem, df_info = build(kw["start"])
         extra = []
         for e in spec.extra_starts:
             th = problem.theta0.copy()
@@ -289,6 +313,19 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
             warnings.simplefilter("ignore", RuntimeWarning)
             j0 = problem.j_err(problem.theta0)
             fit = fit_lsq(problem, n_starts=n_starts, seed=seed, extra_starts=extra)
+            for _ in range(RECENTRE_ROUNDS):
+                edge = _on_search_window_edge(problem, fit.x, set(kw["bounds"]))
+                if not edge:
+                    break
+                start = {**kw["start"], **{prm.name: float(v) for prm, v in zip(problem.params, fit.theta)
+                                           if prm.rh is None}}
+                moved, info = build(start)
+                again = fit_lsq(moved, n_starts=1, seed=seed, extra_starts=[fit.theta])
+                if again.cost >= (1.0 - RECENTRE_GAIN) * fit.cost:      # a flat valley is not worth following
+                    break
+                problem, df_info, fit = moved, info, again
+                spec.notes.append(f"{', '.join(edge)} ended on the edge of {DEFAULT_DECADES:g} decades around its "
+                                  "start (a search window, not a physical bound): searched again around it")
         res = IdentificationResult(problem, {"lsq": fit}, "lsq", problem.device_for(fit.theta), j0,
                                    [t.source for t in targets], {"method": "lsq", "diagnosis": spec.label},
                                    time.perf_counter() - t0)
@@ -303,6 +340,26 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
     for n in time_only:     # set on the time records (_refine_output_effects)
         mf.values[n] = float(res.device.params.get(n, declared_default(n)))
     return mf
+
+
+def _on_search_window_edge(problem, x, explicit: set) -> list[str]:
+    """Shared log-scaled parameters of ``problem`` whose search coordinates ``x`` end on the
+    edge of their default window (:data:`~physics.identify.settings.DEFAULT_DECADES` around the
+    start), neither a range given for them (``explicit``: the spec's or the user's) nor the
+    edge of their admissible range: the window is centred on a start that may be far off
+    (a base fitted along a degenerate valley hands its candidates such starts)."""
+    specs = all_param_specs()
+    lo, hi = problem.x_bounds
+    out = []
+    for i, prm in enumerate(problem.params):
+        if prm.rh is not None or prm.scale != "log" or prm.name in explicit:
+            continue
+        adm = specs[prm.name]
+        tol = 1e-3 * (hi[i] - lo[i])
+        if (x[i] <= lo[i] + tol and prm.lower > adm.lo * (1 + 1e-9)) or \
+                (x[i] >= hi[i] - tol and prm.upper < adm.hi * (1 - 1e-9)):
+            out.append(prm.name)
+    return out
 
 
 def time_only_params(spec: ModelSpec, device: Device) -> list[str]:
@@ -447,7 +504,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
     x_now = np.array([float(mf.device.params.get(n, declared_default(n))) for n in names])
     starts = [x_now] + [np.array([float(st.get(n, x)) for n, x in zip(names, x_now)])
                         for e in outs for st in start_points(e.id, mf.device)]
-    off = {n: v for e in outs for n, v in (spec_of(e.id).get("off") or {}).items()}
+    off = {n: v for e in outs for n, v in off_values(e.id, mf.device).items()}
     if any(n in off for n in names):       # a nested effect also starts from the model without it
         starts.append(np.array([float(off.get(n, x)) for n, x in zip(names, x_now)]))
     best = None
@@ -555,6 +612,93 @@ def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
     return [a * p for p in preds]
 
 
+def refine_on_time(mf: ModelFit, records: Sequence[Record]) -> bool:
+    """Refit the FRF-fitted free parameters of ``mf`` on the time records, from the FRF
+    optimum (in place; True when the error fell).  The FRF fit weighs the frequencies by
+    their coherence on a log scale; the verdict's error is the time records' RMS, dominated
+    by the large slow motion: with a base that cannot match the device exactly the two optima
+    differ.  Bounded least squares in the FRF fit's search coordinates (at most
+    :data:`TIME_REFINE_NFEV` evaluations, each a simulation of every record at the analysis
+    rate) within :data:`TIME_REFINE_SIMS` simulations of the records (each iteration costs one
+    per parameter for its Jacobian, the uncertainty two per parameter); the uncertainties are
+    then those of the time residual (Bates & Watts, the covariance inflated by its
+    autocorrelation time).  Linear models only: a large-signal model runs the implicit stepper,
+    ~10× dearer."""
+    from scipy.optimize import least_squares
+    from ..identify.fitting import uncertainty
+    if not mf.ok or not mf.model.is_linear:
+        return False
+    problem, fit = mf.result.problem, mf.result.fit
+    own = {p.name for p in problem.params}
+    extra = {n: mf.device.params[n] for n in mf.spec.free if n not in own and n in mf.device.params}
+    lo, hi = problem.x_bounds
+    span = hi - lo
+    scale = math.sqrt(sum(mf.rss) / sum(mf.n)) or 1.0
+
+    def model_at(x):
+        dev = problem.device_for(problem.from_x(x))
+        return ActuatorModel(dev.with_params(**extra) if extra else dev, mf.effects, n_modes=mf.model.n_modes)
+
+    def resid(x):
+        m = model_at(x)
+        return np.concatenate([remove_nuisance(r.y_d - predict(m, r)) for r in records]) / scale
+
+    x0 = np.clip(problem.to_x(fit.theta), lo + 1e-9 * span, hi - 1e-9 * span)
+    p = x0.size
+    iterations = (TIME_REFINE_SIMS - 2 * p - 1) // (p + 1)
+    if iterations < 1:
+        return False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        r0 = resid(x0)
+        sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=iterations)
+        if not sol.cost < 0.5 * float(r0 @ r0) * (1.0 - 1e-9):
+            return False
+        unc = uncertainty(problem, sol.x, resid, inflate=stats.integrated_time(sol.fun))
+    before = mf.rmse
+    theta = problem.from_x(sol.x)
+    fit.theta[:], fit.x[:] = theta, sol.x
+    fit.std_error[:], fit.rel_std_error[:], fit.ci95[:] = unc["std_error"], unc["rel_std_error"], unc["ci95"]
+    labels = problem.labels
+    mf.model = model_at(sol.x)
+    mf.device = mf.result.device = mf.model.device
+    mf.values.update(zip(labels, theta.tolist()))
+    mf.std_errors.update(zip(labels, unc["std_error"].tolist()))
+    mf.rel_std_errors.update(zip(labels, unc["rel_std_error"].tolist()))
+    mf.correlation = np.array(unc["correlation"], dtype=float)
+    mf.warnings = unc["warnings"] + [w for w in mf.warnings if any(w.startswith(n + " ") for n in extra)]
+    score(mf, records)
+    mf.spec.notes.append(f"{', '.join(labels)} refined on the time records from the FRF optimum: RMS error "
+                         f"{1e6 * before:.4g} → {1e6 * mf.rmse:.4g} µm")
+    return True
+
+
+def no_worse_than_base(mf: ModelFit, base: ModelFit) -> ModelFit:
+    """``mf`` — the base with a nested effect added, fitted and scored — or, when it ends worse
+    than ``base`` on the time records (its FRF optimum need not be theirs), the base itself
+    with the effect at its off values (the model without it, so the base's scores are exact),
+    said in its notes.  A nested effect can thus never make the model worse."""
+    eff = mf.spec.added
+    if not mf.ok or eff is None or not is_nested(eff) or sum(mf.rss) <= sum(base.rss):
+        return mf
+    off = off_values(eff, base.device)
+    if not off:
+        return mf
+    dev = base.device.with_params(**off)
+    kept = dataclasses.replace(
+        mf, device=dev, model=ActuatorModel(dev, mf.effects, n_modes=mf.model.n_modes),
+        values={k: float(dev.params.get(k, base.values.get(k, v))) for k, v in mf.values.items()},
+        std_errors={k: math.nan for k in mf.values}, rel_std_errors={k: math.nan for k in mf.values},
+        pred_d=list(base.pred_d), resid_d=list(base.resid_d), rss=list(base.rss), n=list(base.n),
+        taus=list(base.taus), rmse_records=list(base.rmse_records), rmse=base.rmse, fit_pct=base.fit_pct,
+        nuisance=list(base.nuisance), correlation=None)
+    kept.spec = dataclasses.replace(mf.spec, notes=mf.spec.notes + [
+        f"fitted, the model with {eff} ended worse than the model without it on the time records "
+        f"({1e6 * mf.rmse:.4g} vs {1e6 * base.rmse:.4g} µm RMS): the model without it ({eff} at its off values, "
+        + ", ".join(f"{k} = {v:.4g}" for k, v in off.items()) + ") is kept"])
+    return kept
+
+
 @dataclass
 class Comparison:
     """Candidate against base on the same records (see :mod:`.stats`)."""
@@ -613,4 +757,4 @@ def prediction_distance(a: ModelFit, b: ModelFit) -> float:
 
 
 __all__ = ["default_candidates", "ModelSpec", "ModelFit", "Comparison", "candidate_spec", "removal_spec", "fit_model",
-           "score", "compare_fits", "default_free", "map_free", "param_used", "predict", "prediction_distance"]
+           "score", "no_worse_than_base", "refine_on_time", "compare_fits", "default_free", "map_free", "param_used", "predict", "prediction_distance"]

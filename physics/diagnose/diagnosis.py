@@ -402,9 +402,9 @@ def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, run: Run) 
             results[k] = CandidateResult(c.effect, "failed", reason=f"{c.effect}: fit or simulation failed: {mf.error}",
                                          fit=mf, step=step)
             continue
-        c.status, c.fit = "evaluated", mf
+        c.status, c.fit = "evaluated", C.no_worse_than_base(mf, base)
         run.timings[f"step {step}: candidate {c.effect}" if step > 1 else f"candidate {c.effect}"] = wall
-        run.log(f"  {'+' * step}{c.effect:22s} RMS {1e6 * mf.rmse:9.4g} µm  ({wall:.1f} s)")
+        run.log(f"  {'+' * step}{c.effect:22s} RMS {1e6 * c.fit.rmse:9.4g} µm  ({wall:.1f} s)")
     return results
 
 
@@ -422,9 +422,7 @@ def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Data, f
     sigs = signatures(feats, [c.effect for c in results])
     for c in results:
         if c.evaluated:
-            # an effect fitted through per-RH parameters nests only when they were freed (≥ 2 RH levels)
-            nested = C.is_nested(c.effect) and (not spec_of(c.effect).get("per_rh") or bool(c.fit.spec.per_rh))
-            c.comparison = C.compare_fits(base, c.fit, nested, taus_ref)
+            c.comparison = C.compare_fits(base, c.fit, _nested(c), taus_ref)
             c.fit.bic = base.bic + c.comparison.delta_bic
             c.fit.aic = base.aic + c.comparison.delta_aic
             d = C.prediction_distance(c.fit, base)
@@ -432,6 +430,12 @@ def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Data, f
                 c.indistinguishable_from.append("base")
         c.signature = sigs.get(c.effect)
     return taus_ref
+
+
+def _nested(c: CandidateResult) -> bool:
+    """Whether the candidate's model nests the base (an effect fitted through per-RH parameters
+    only when they were freed, ≥ 2 RH levels)."""
+    return C.is_nested(c.effect) and (not spec_of(c.effect).get("per_rh") or bool(c.fit.spec.per_rh))
 
 
 def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> list[Step]:
@@ -444,8 +448,12 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         results = try_candidates(k, step_base, left, data, run)
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
-        decision = decide(step_base, ranked, data.noise, data.noise_d, taus, data.records, C.compare_fits,
+        decision = decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
                           C.prediction_distance, after_pick=k > 1)
+        if decision.pick is not None and C.refine_on_time(decision.pick.fit, data.records):
+            # the pick refitted on the time records (its FRF optimum is not theirs); the decision stands
+            decision.pick.comparison = C.compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
+            run.log(f"  {decision.pick.effect} refined on the time records: RMS {1e6 * decision.pick.fit.rmse:.4g} µm")
         for c in ranked:
             c.explanation = _explain(c, step_base)
         steps.append(Step(k, step_base, results, decision))

@@ -99,6 +99,12 @@ def start_points(effect: str, device: Device) -> list[dict]:
     return [{k: _scaled(v, device) for k, v in st.items()} for st in spec_of(effect).get("starts", [])]
 
 
+def off_values(effect: str, device: Device) -> dict:
+    """The values of the spec's ``off`` with their device scales applied: those at which the
+    model with ``effect`` is the model without it ({} when the spec declares none)."""
+    return {k: _scaled(v, device) for k, v in (spec_of(effect).get("off") or {}).items()}
+
+
 def declared_default(name: str) -> float | None:
     """The documented default of an optional parameter (its ParamSpec ``default``), else None."""
     for cls in EFFECTS.values():

@@ -12,8 +12,8 @@ suites make harder records, each a function of (truth, seed) returning a :class:
   neither the excitation nor the sensor noise.
 * :func:`perturbed_case` — a **perturbed simulator**: the base forms varied a little so the
   user's model (ours) can never fit down to the noise: the second bending mode shifted by
-  4–10 % in frequency (a slightly non-uniform strip) and a double layer charging like a
-  constant-phase element (exponent n = 0.85–0.95) instead of an ideal capacitor (rough
+  8–20 % in frequency (a slightly non-uniform strip) and a double layer charging like a
+  constant-phase element (exponent n = 0.75–0.9) instead of an ideal capacitor (rough
   electrodes).  Records as our simulator writes them (1 µm laser noise, sidecars with the
   excitation and the sensor).
 

@@ -20,8 +20,9 @@ picks leave is evidence that *this* effect is missing); the pick is the one with
 Its confidence is its weight, labelled "high" at ≥ 0.99 (it clearly dominates the base and
 every other candidate), "medium" at ≥ 0.9, else "low" — whatever error remains, which is the
 second answer.  Two
-candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6 or
-predictions within the noise) *and* on quality (the same number of flags); the verdict then
+candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6, or
+the better leaves more than two thirds of the other's excess error power over the noise floor,
+the share a pick must explain) *and* on quality (the same number of flags); the verdict then
 names the record that would separate them (:func:`separating_record`).  After a pick the
 remaining candidates are tried again on top of it (forward selection, up to
 ``max_effects``); the verdict is the chain of picks with the error after each.
@@ -143,7 +144,7 @@ class Decision:
         return None if self.pick is None else self.weights.get(self.pick.effect)
 
 
-def decide(base, ranked: Sequence, noise: float, noise_d: float, taus_ref, records,
+def decide(base, ranked: Sequence, noise: float, taus_ref, records,
            compare_fits, prediction_distance, after_pick: bool = False) -> Decision:
     """One step: flags, evidence, weights, the pick or the ambiguity (module doc).  ``ranked``
     are the step's evaluated CandidateResults with their comparison to ``base`` (``after_pick``:
@@ -170,13 +171,17 @@ def decide(base, ranked: Sequence, noise: float, noise_d: float, taus_ref, recor
         ru = eligible[1]
         pair = compare_fits(ru.fit, top.fit, nested=False, taus=taus_ref)
         dist = prediction_distance(top.fit, ru.fit)
-        close_fit = pair.delta_bic > -DISTINCT_BIC or (math.isfinite(noise_d) and dist < noise_d)
+        # close on fit: the data do not separate them (ΔBIC), or the better one removes less than
+        # MIN_SHARE of what the other leaves above the noise floor (a difference that matters)
+        close_fit = pair.delta_bic > -DISTINCT_BIC or excess_share(ru.fit.rmse, top.fit.rmse, noise) < MIN_SHARE
         if close_fit and len(top.quality) == len(ru.quality):
             top.indistinguishable_from.append(ru.effect)
             ru.indistinguishable_from.append(top.effect)
             sep = separating_record(top, ru, records, noise)
             reason = (f"{top.effect} and {ru.effect} both explain the failure and these data cannot tell them apart: "
                       f"ΔBIC between them {pair.delta_bic:.3g}, predictions differ by {1e6 * dist:.3g} µm RMS, "
+                      f"{top.effect} removes {100 * excess_share(ru.fit.rmse, top.fit.rmse, noise):.3g} % of the "
+                      f"error {ru.effect} leaves above the noise floor, "
                       f"{len(top.quality)} quality flag(s) each")
             return Decision(None, weights, ev, [top.effect, ru.effect], sep, reason, alpha)
     cmp = top.comparison

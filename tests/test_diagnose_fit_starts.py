@@ -1,0 +1,108 @@
+"""Where the diagnosis's fits start and when they stop: a default search window is not a
+bound, and a fit with an added effect never ends worse than the model without it."""
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+from physics.device import load_device
+from physics.diagnose import candidates as C
+from physics.diagnose.demo import hidden_effect_case
+from physics.diagnose.diagnosis import read_records
+from physics.identify.options import FitOptions
+
+
+@pytest.fixture(scope="module")
+def clean():
+    """A base-only case (nothing hidden), its records and FRF targets."""
+    case = hidden_effect_case(None, seed=0, duration=20.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_records(case.measurements, FitOptions())
+    return case, data
+
+
+def test_a_start_far_off_is_not_held_by_its_search_window(clean):
+    """kf started 3000× too high: its default window (3 decades either side) excludes the
+    optimum; the fit searches again around the edge it stopped on and ends where a fit from
+    the device's value ends."""
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    fits = []
+    for factor in (1.0, 3000.0):
+        spec = C.ModelSpec("base", ids, ["kf", "beta_f"], start={"kf": factor * dev.params["kf"]})
+        fits.append(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=2))
+    near, far = fits
+    assert near.ok and far.ok, (near.error, far.error)
+    assert far.values["kf"] < 3.0 * dev.params["kf"]            # below its first window
+    assert far.values["kf"] == pytest.approx(near.values["kf"], rel=1e-3)
+    assert far.frf_cost == pytest.approx(near.frf_cost, rel=1e-3)
+    assert any("search window" in n for n in far.spec.notes) and not near.spec.notes
+
+
+def test_a_nested_effect_starts_from_the_base_optimum_with_it_off(clean):
+    """The candidate's starts include the base's fitted values with the effect at its off
+    values (the role it takes over translated the off way: kf0 = kf at frac_a = 0)."""
+    case, data = clean
+    dev = load_device(case.device).with_params(kf=0.0052, Y=2.1e8, beta_f=9e-4)     # "fitted" base
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    spec = C.candidate_spec("fractional_coupling", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
+    assert {"frac_a": 0.0, "kf0": 0.0052} in spec.extra_starts
+    spec = C.candidate_spec("electrode_resistance", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
+    lo = spec.bounds["Rs"][0]
+    assert {"Rs": lo} in spec.extra_starts                  # off (0) clipped into its range
+
+
+def test_a_nested_effect_never_ends_worse_than_the_base(clean):
+    """A fit with an added effect that ends worse than the base on the time records (here
+    forced: Rs held in 1–10 kΩ/□, a strong lag) is replaced by the base with the effect off,
+    scored exactly as the base, and says so; a fit that ends better is left alone."""
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    base = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
+                       n_starts=2)
+    C.score(base, data.records)
+    spec = C.candidate_spec("electrode_resistance", ids, ["kf", "Y", "beta_f"], [], base.device, data.band, 1)
+    spec.bounds["Rs"] = (1000.0, 1e4)
+    spec.start["Rs"], spec.extra_starts = 3000.0, []
+    forced = C.score(C.fit_model(spec, base.device, data.targets, data.target_records, n_starts=1), data.records)
+    assert forced.rmse > base.rmse
+    kept = C.no_worse_than_base(forced, base)
+    assert kept.rmse == base.rmse and kept.rss == base.rss and kept.k == forced.k
+    assert kept.values["Rs"] == 0.0 and kept.device.params["Rs"] == 0.0
+    assert "ended worse than the model without it" in kept.spec.notes[-1]
+    # the off model really is the base: simulated, it gives the base's predictions
+    for r, p in zip(data.records, base.pred_d):
+        assert np.allclose(C.predict(kept.model, r), p, rtol=0, atol=1e-3 * np.max(np.abs(p)))
+    poorer = dataclasses.replace(base, rss=[1.01 * x for x in forced.rss])      # a base the fit beats
+    assert C.no_worse_than_base(forced, poorer) is forced
+
+
+def test_a_pick_stopped_short_is_refined_on_the_time_records(clean):
+    """A fit left short of the time records' optimum (its damping and gain moved off it, as an
+    FRF optimum of a model that cannot match the device exactly is) is refitted on them: the
+    error falls back to the optimum's, the uncertainties are those of the time residual."""
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    best = C.score(C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets,
+                               data.target_records, n_starts=2), data.records)
+    short = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
+                        n_starts=2)
+    labels = short.result.problem.labels
+    short.result.fit.theta[labels.index("beta_f")] *= 1.6
+    short.result.fit.theta[labels.index("Y")] *= 1.1
+    short.device = short.result.problem.device_for(short.result.fit.theta)
+    short.model = C.ActuatorModel(short.device, short.effects)
+    C.score(short, data.records)
+    assert short.rmse > 2 * best.rmse
+    assert C.refine_on_time(short, data.records)
+    assert short.rmse <= 1.02 * best.rmse
+    assert short.values["beta_f"] == pytest.approx(best.values["beta_f"], rel=0.05)
+    assert "refined on the time records" in short.spec.notes[-1]
+    assert all(np.isfinite(short.rel_std_errors[k]) for k in labels)
