@@ -227,8 +227,17 @@ class Stream:
 
     def finish(self, tail: np.ndarray | None = None) -> np.ndarray:
         """The outputs still owed (the last ``hi`` samples); the final state is ``x``."""
-        if self.n_out == 0 and self._raw.shape[-1] < 2:
-            raise ValueError("a streamed record needs at least 2 samples")
+        if self.n_out == 0:                     # short records, as simulate() treats them
+            k = self._raw.shape[-1]
+            if k == 0:
+                raise ValueError("a streamed record needs at least one sample")
+            if k == 1:                          # the initial state alone
+                self.n_out = 1
+                return (self.ss.D @ self._raw[:, :, 0] + self.ss.C @ self.x)[:, :, None]
+            if k == 2 and self.hi and tail is None:   # too short for cubic hold: linear
+                self.nodes, self.lo, self.hi = _HOLD_NODES["linear"], 0, 0
+                if self.ss.n_states and not self.modal:
+                    self._expm_setup()
         if tail is None:
             last, prev = self._last2[..., -1:], self._last2[..., -2:-1]
             tail = last + (last - prev) * np.arange(1, self.hi + 1)
@@ -271,7 +280,7 @@ class Stream:
         """Emit the outputs whose look-ahead samples have arrived (all of them with ``tail``)."""
         n_out_ch = self.ss.n_outputs
         if self.n_out == 0:
-            if self._raw.shape[-1] < 2:
+            if self._raw.shape[-1] < (3 if self.hi else 2) and tail is None:
                 return np.zeros((n_out_ch, self.B, 0))
             first = self._start()
         else:

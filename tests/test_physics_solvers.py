@@ -181,3 +181,8 @@ def test_streamed_state_space_equals_the_whole_record(hold):
         assert ys.shape == y.shape
         assert np.max(np.abs(ys - y)) < 1e-12 * np.max(np.abs(y))
         assert np.max(np.abs(s.x - xf)) < 1e-12 * np.max(np.abs(xf))
+        for n in (1, 2, 3):                  # records too short for the hold, as simulate() treats them
+            y, xf = lti.simulate(ss, u[..., :n], 1e-2, x0=x0, hold=hold)
+            s = lti.Stream(ss, 1e-2, x0, hold, batch=3)
+            ys = np.concatenate([s.push(u[..., k:k + 1]) for k in range(n)] + [s.finish()], axis=-1)
+            assert ys.shape == y.shape and np.allclose(ys, y, rtol=1e-12, atol=0) and np.allclose(s.x, xf)
