@@ -30,20 +30,20 @@ def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float 
     k, unit, name = _display(output)
     fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
 
-    def line(a, t, y, **kw):   # thinned first, then scaled: no full-length copy of a long record
+    def line(a, t, y, shift=0.0, **kw):   # thinned, then shifted and scaled: no copy of a long record
         tt, yy = envelope(t, y)
-        a.plot(tt, k * yy, **kw)
-    line(ax[0], r.time, r.measured, lw=0.7, label="measured")
+        a.plot(tt, k * (yy - shift), **kw)
+    line(ax[0], r.time, r.measured, r.offset, lw=0.7, label="measured")     # aligned with the model
     line(ax[0], r.time, r.predicted, lw=0.7, label="model")
     ax[0].set_ylabel(f"{name} [{unit}]")
     legend_outside(ax[0])
-    line(ax[1], r.time, r.measured - r.predicted, lw=0.6, color="k")
+    line(ax[1], r.time, r.measured - r.predicted, r.offset, lw=0.6, color="k")
     ax[1].set_ylabel(f"residual [{unit}]")
     ax[1].sharex(ax[0])
     span = float(r.time[-1] - r.time[0])
     zoom = min(2.0, 0.1 * span) if zoom_s is None else float(zoom_s)
     z = r.time >= r.time[-1] - zoom
-    line(ax[2], r.time[z], r.measured[z], lw=0.9, label="measured")
+    line(ax[2], r.time[z], r.measured[z], r.offset, lw=0.9, label="measured")
     line(ax[2], r.time[z], r.predicted[z], lw=0.9, ls="--", label="model")
     ax[2].set_ylabel(f"last {zoom:.3g} s [{unit}]")
     ax[2].set_xlabel("time [s]")
