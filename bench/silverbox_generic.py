@@ -38,6 +38,7 @@ def _cli(argv: list[str]) -> float:
 
 def _rows(run: Path) -> dict:
     summary = json.loads((run / "compare.json").read_text())
+    # the output is y in V (eap dataset --output y:V): errors are stored in V under the key rmse_m
     return {k: {"mv": 1e3 * r["free_run"]["test"]["rmse_m"], "train_s": r["train_time_s"], "kind": r["kind"],
                 "vs_linear": r.get("vs_linear_pct"), "trials": len((r.get("tuning") or {}).get("trials", []))}
             for k, r in summary["models"].items()}
@@ -104,7 +105,7 @@ def main() -> None:
         out = Path(args.out)
         ds = out / "dataset"
         t = _cli(["dataset", "--train", data + SPLIT["train"], "--test", data + SPLIT["test"], "--columns",
-                  "voltage=V1,deflection=V2", "--fs-Hz", SPLIT["fs_Hz"], "--val-fraction", SPLIT["val_fraction"],
+                  "voltage=V1,output=V2", "--output", "y:V", "--fs-Hz", SPLIT["fs_Hz"], "--val-fraction", SPLIT["val_fraction"],
                   "--out", str(ds)])
         print(f"dataset in {t:.1f} s")
         common = ["--workers", str(args.workers), "--max-time-s", args.max_time_s, "--quiet"]

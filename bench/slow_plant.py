@@ -87,8 +87,10 @@ def main() -> None:
         e = rmse(ys[skip:], yh[skip:])
         met &= e <= 0.8 * e_arx
         start = (getattr(m, "reference_start_", None) or {}).get("end", {}).get("kept", "-")
+        tried = getattr(m, "structure_search_", None)
+        chosen = "" if not tried else f", structure {min(tried, key=lambda t: t['validation_free_run_nrmse'])['structure']}"
         print(f"{name:6s} test free-run RMSE {e:.4f} ({100 * (e / e_arx - 1):+.0f} % vs ARX), trained in {wall:.0f} s, "
-              f"kept after training: {start}", flush=True)
+              f"kept after training: {start}{chosen}", flush=True)
     print(f"target: every model at least 20 % below the best ARX -> {'MET' if met else 'NOT MET'}")
 
 

@@ -32,7 +32,7 @@ from physics.errors import InputError
 from physics.fileio import load_json, sha256_file
 
 from .data import check_fs, check_voltage
-from .models import MODELS
+from .models import MODELS, load_plugins
 from .models.base import NeuralModel
 from .models.params import MAX_PARAMETERS
 
@@ -149,6 +149,8 @@ def _read_card(folder: Path) -> dict:
     if card.get("format_version") != FORMAT_VERSION:
         raise InputError(f"{cp}: bundle format version {card.get('format_version')} is not "
                          f"supported (this package reads version {FORMAT_VERSION})")
+    if card.get("model") not in MODELS:
+        load_plugins()
     if card.get("model") not in MODELS:
         raise InputError(f"{cp}: unknown model type {card.get('model')!r}; known: {', '.join(MODELS)}")
     inputs = card.get("inputs")

@@ -197,6 +197,25 @@ def losses(summary: dict) -> list[dict]:
                  "from measured outputs and a free run over whole records.")]
 
 
+def dropped(summary: dict) -> list[dict]:
+    """Networks whose correction was dropped because its validation gain was within its
+    uncertainty (:func:`nnmodel.models.base.keep_if_better`): they equal their start."""
+    out = []
+    for name, row in _networks(summary.get("models") or {}).items():
+        end = (row.get("reference_start") or {}).get("end") or {}
+        ref = (row.get("reference_start") or {}).get("reference", end.get("kept"))
+        if end.get("kept") in (None, "network") or "reason" not in end or ref == "physics":  # hybrid(): its own note
+            continue
+        se = end.get("validation_gain_se")
+        gain = f", a gain of {end['validation_gain'] / se:.1f} standard errors" if se else ""
+        out.append(note(f"{name} equals its {ref} start: its correction lowered the validation error "
+                        f"({_pct(100 * end['validation_nrmse_reference'])} → "
+                        f"{_pct(100 * end['validation_nrmse_network'])} NRMSE){gain}, too little for the "
+                        "validation data to tell from chance, so it was dropped. Longer validation records, or "
+                        "records of their own (`eap dataset --validation FILE ...`), decide it."))
+    return out
+
+
 def shortfalls(summary: dict) -> list[dict]:
     """Each network's shortfall findings (``models.NAME.shortfalls``) as one note: what
     falls short, then each likely cause and what to do."""
@@ -209,7 +228,7 @@ def notes(summary: dict, *, diagnosis: str | None = None, with_shortfalls: bool 
     """Every note for a comparison's page (see the module doc).  ``diagnosis``: a page
     anchor (``#…``) or a command that diagnoses the measurement-like records;
     ``with_shortfalls``: False where the page lists the shortfalls in a section of their own."""
-    return (measurement_like(summary, diagnosis) + reference_rows(summary) + hybrid(summary)
+    return (measurement_like(summary, diagnosis) + reference_rows(summary) + hybrid(summary) + dropped(summary)
             + (shortfalls(summary) if with_shortfalls else []) + losses(summary))
 
 

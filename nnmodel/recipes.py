@@ -30,17 +30,35 @@ def recipe_dir() -> Path:
     return Path(__file__).resolve().parents[1] / "configs" / "train"
 
 
+def _beside_module(name: str) -> Path | None:
+    """``NAME.yaml`` next to the module of a registered network of that kind (a network
+    installed under ``eap.networks`` ships its recipe with its code), if there is one."""
+    import sys
+
+    from .models import MODELS
+    module = sys.modules.get(getattr(MODELS.get(name), "__module__", ""))
+    path = Path(getattr(module, "__file__", None) or ".").parent / f"{name}.yaml"
+    return path if getattr(module, "__file__", None) and path.is_file() else None
+
+
 def load_recipe(name: str, overrides: dict | None = None, directory: str | os.PathLike | None = None) -> dict:
     """Read the recipe ``NAME.yaml`` and apply ``overrides`` (hyper-parameter -> value).
+
+    The recipe is read from ``directory`` (default :func:`recipe_dir`); a network installed
+    under the entry-point group ``eap.networks`` (registered here) may ship it beside its
+    module instead.
 
     Returns ``{"model": kind, "description": str, "hyper_parameters": {...}, "tune": {...}}`` where the
     hyper-parameters are the model's defaults updated by the file and then the overrides.
     Unknown keys (in the file or in the overrides) raise :class:`InputError`.
     """
-    from .models import MODELS
+    from .models import MODELS, load_plugins
 
+    load_plugins()
     folder = Path(directory) if directory else recipe_dir()
     path = folder / f"{name}.yaml"
+    if not path.is_file():
+        path = _beside_module(name) or path
     if not path.is_file():
         avail = sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
         raise InputError(f"no training recipe {name!r} ({path} not found); available: "

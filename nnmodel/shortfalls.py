@@ -36,6 +36,7 @@ def data_facts(ds) -> dict:
             "rh_levels": None if levels is None else [float(v) for v in levels],
             "train_mean": float(np.mean(y_tr)), "test_mean": float(np.mean(y_te)),
             "output_std": float(np.std(y_tr)) or 1.0, "unit": str(out.get("unit", "m")),
+            "validation_records": len(ds.entries("validation")),
             "quantity": str(out.get("name", "deflection"))}
 
 
@@ -69,6 +70,17 @@ def _causes(name: str, model, facts: dict, biased: bool) -> list[tuple[str, str]
         out.append((f"too few RH levels: trained at {len(levels)} ({', '.join(f'{v:g}' for v in levels)} %), "
                     "too few to learn how humidity changes the response between them",
                     f"record at {MIN_RH_LEVELS} or more RH levels spanning the range you predict at"))
+    start = getattr(model, "reference_start_", None) or {}
+    end = start.get("end") or {}
+    if end.get("kept") == "network" and end.get("validation_gain_se") is not None:
+        own = facts.get("validation_records", 0)
+        out.append((f"its validation data could not foresee it: there it beat its {start['reference']} start "
+                    f"({100 * end['validation_nrmse_reference']:.2f} % → {100 * end['validation_nrmse_network']:.2f} % "
+                    f"NRMSE, a gain of {end['validation_gain'] / end['validation_gain_se']:.1f} standard errors) on "
+                    + (f"{own} validation record(s) unlike the test records" if own else
+                       "the tails of the training records, which resemble the training data more than the test"),
+                    "give validation records of their own that vary like the test conditions "
+                    "(`eap dataset --validation FILE ...`)"))
     if model is not None:
         per = facts["train_samples"] / max(1, model.n_parameters)
         if per < MIN_SAMPLES_PER_PARAMETER:

@@ -195,10 +195,10 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     summary = {"dataset": str(final_path(ds.path)), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
                "generator": {"device": gen.get("device"), "effects": gen.get("effects"), "tool": gen.get("tool")},
                "physics": None if device is None else {"device": str(device), "is_generator": physics is None},
-               "output": ds.meta.get("output", {"name": "deflection", "unit": "m"}),
+               "output": output_reading(ds),
                "noise_floor_m": ds.meta.get("noise_floor_m"), "skip_samples": SKIP, "models": results,
                "best_heldout": _best(results), "test_groups": group_facts(test_entries, group_of)}
-    _plots(ds, test_entries, physics_rows, linear_rows, trained, results, out)
+    _plots(ds, test_entries, physics_rows, linear_rows, trained, results, out, summary["output"])
     if tuning:
         _tuning_plot(tuning, out)
     write_json(out / "compare.json", summary)
@@ -316,7 +316,8 @@ def _train_one(task: dict) -> dict:
            "one_step": _score(one_step, ds, entries, skip),
            "inference_samples_per_s": _speed(free, ds, entries),
            "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None,
-           "training": _budget(model), "history": list(getattr(model, "history_", None) or [])}
+           "training": _budget(model), "history": list(getattr(model, "history_", None) or []),
+           "reference_start": getattr(model, "reference_start_", None)}
     save_bundle(model, task["bundle"], dataset_hash=ds.hash, overwrite=True, output=(ds.output.name, ds.output.unit),
                 metrics={"free_run": res["free_run"], "one_step": res["one_step"]},
                 notes=f"trained by eap train-compare on {final_path(ds.path)}",
@@ -477,10 +478,18 @@ def group_label(group: str, with_rh: bool) -> str:
     return f"{GROUP_LABELS[group]} test" if with_rh or group != "train_rh" else "test"
 
 
-def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path) -> None:
-    output = ds.meta.get("output") or {"name": "deflection", "unit": "m"}
+def output_reading(ds) -> dict:
+    """The dataset's output ``{name, unit}`` with ``magnitude``, the largest absolute value
+    of its training records, which picks the unit every table and plot of the page reads it
+    in (:func:`physics.columns.reading_unit`)."""
+    output = dict(ds.meta.get("output") or {"name": "deflection", "unit": "m"})
+    output["magnitude"] = float(max(np.max(np.abs(r.y)) for r in ds.records("train")))
+    return output
+
+
+def _plots(ds, entries, physics_rows, linear_rows, trained, results, out: Path, output: dict) -> None:
     qty = output["name"]
-    unit, k = reading_unit(output["unit"])
+    unit, k = reading_unit(output["unit"], output.get("magnitude"))
     # time overlays: one record of each group
     for g in GROUPS:
         es = [e for e in entries if group_of(e) == g]

@@ -11,8 +11,9 @@ like a name with its unit without an entry here.  A key whose unit cannot be rea
 ``unit=None`` and the page audit (``tests/browser_check.py``) flags its header.
 
 The output of a plant is a deflection in metres unless a dataset says otherwise
-(``{"name": "level", "unit": "V"}``); keys marked ``output`` are shown in the output's
-reading unit (:func:`reading_unit`: m → µm, V → mV).
+(``{"name": "level", "unit": "V"}``, with ``"magnitude"``: a typical size of its values);
+keys marked ``output`` are shown in the output's reading unit (:func:`reading_unit`: m → µm,
+V → mV, or the prefix that shows the magnitude as 0.1–1000).
 """
 from __future__ import annotations
 
@@ -50,7 +51,7 @@ class Column:
         """This column for a plant whose output is ``{"name", "unit"}`` (default: metres)."""
         if not self.output:
             return self
-        unit, scale = reading_unit((output or {}).get("unit") or "m")
+        unit, scale = reading_unit((output or {}).get("unit") or "m", (output or {}).get("magnitude"))
         return replace(self, unit=unit, scale=scale * self.si)
 
 
@@ -62,9 +63,38 @@ READING = {"m": ("µm", 1e6), "mm": ("µm", 1e3), "um": ("µm", 1.0), "µm": ("�
            "m/V": ("mm/V", 1e3)}
 
 
-def reading_unit(unit: str) -> tuple[str, float]:
-    """(unit shown, factor from ``unit``) for a stored unit (other units are shown as they are)."""
-    return READING.get(unit, (unit, 1.0))
+#: Engineering prefixes by power of ten (a reading unit chosen by magnitude, :func:`reading_unit`).
+PREFIXES = {-12: "p", -9: "n", -6: "µ", -3: "m", 0: "", 3: "k", 6: "M", 9: "G"}
+#: Units that take a prefix (a stored unit is one of these, possibly prefixed: mm, mV, kPa).
+PREFIXABLE = ("m", "V", "A", "W", "N", "Pa", "g", "s", "Hz", "Ω")
+_PREFIX_OF = {"u": -6, **{v: k for k, v in PREFIXES.items() if v}}
+
+
+def _split_prefix(unit: str) -> tuple[str, int] | None:
+    """(base unit, power of ten of its prefix) of a prefixable unit: "mm" → ("m", -3)."""
+    if unit in PREFIXABLE:
+        return unit, 0
+    if len(unit) > 1 and unit[0] in _PREFIX_OF and unit[1:] in PREFIXABLE:
+        return unit[1:], _PREFIX_OF[unit[0]]
+    return None
+
+
+def reading_unit(unit: str, magnitude: float | None = None) -> tuple[str, float]:
+    """(unit shown, factor from ``unit``) for a stored unit: its usual reading (tips in µm,
+    volts in mV; other units as they are); with ``magnitude`` (a typical size of the values
+    in ``unit``, e.g. the largest) the reading keeps that unit only if it shows the magnitude
+    as 0.1–1000, else takes the engineering prefix that does (a level of 35 V reads in V,
+    not 35 000 mV)."""
+    shown, scale = READING.get(unit, (unit, 1.0))
+    if magnitude is None or not math.isfinite(magnitude) or magnitude <= 0 or 0.1 <= magnitude * scale < 1000:
+        return shown, scale
+    split = _split_prefix(unit)
+    if split is None:
+        return shown, scale
+    base, p = split
+    e = 3 * math.floor((math.log10(magnitude) + p) / 3)     # the value in base units is magnitude × 10^p
+    e = min(max(e, min(PREFIXES)), max(PREFIXES))
+    return PREFIXES[e] + base, 10.0 ** (p - e)
 
 
 #: Unit suffixes of stored keys, longest first: (suffix, unit shown, scale, output quantity).

@@ -72,6 +72,19 @@ def test_tables_name_their_columns_with_units_and_explain_gaps(tmp_path):
     volts = Report("t", output={"name": "level", "unit": "V"})
     volts.table({"rmse_m": 1.2e-3})
     assert "RMSE [mV]" in volts.to_html() and ">1.20<" in volts.to_html()
+    level = Report("t", output={"name": "level", "unit": "V", "magnitude": 35.0})   # a level read up to 35 V
+    level.table({"rmse_m": 0.52})
+    assert "RMSE [V]" in level.to_html() and ">0.520<" in level.to_html()         # not 520 mV beside 35 000 mV
+
+
+def test_the_reading_unit_follows_the_magnitude_of_the_data():
+    from physics.columns import reading_unit
+    assert reading_unit("V") == ("mV", 1e3) and reading_unit("V", 0.3) == ("mV", 1e3)   # usual reading kept ...
+    assert reading_unit("V", 35.0) == ("V", 1.0) and reading_unit("V", 2e4) == ("kV", 1e-3)   # ... unless off 0.1–1000
+    assert reading_unit("m", 3e-5) == ("µm", 1e6) and reading_unit("m", 0.03) == ("mm", 1e3)
+    unit, k = reading_unit("mm", 3000.0)                 # a prefixed stored unit: 3000 mm read as 3 m
+    assert unit == "m" and abs(k - 1e-3) < 1e-15
+    assert reading_unit("level", 1e6) == ("level", 1.0)   # a unit without prefixes is shown as it is
 
 
 def test_pages_are_index_html_name_final_paths_and_keep_a_redirect(tmp_path):

@@ -91,3 +91,40 @@ def test_a_new_network_is_one_module_plus_its_recipe(tmp_path):
         assert np.allclose(saved.predict(recs[0].u, rh=40.0, fs=recs[0].fs), y, rtol=1e-6, atol=1e-12)
     finally:
         MODELS.pop(PoleNet.kind)
+
+
+def test_an_installed_network_is_found_by_the_eap_command(tmp_path, monkeypatch, capsys):
+    """A package declaring the network under the entry-point group ``eap.networks`` (its
+    recipe beside its module) is trained by ``eap train-compare --models polenet`` and its
+    bundle reloads, with no file of the package touched and nothing registered by hand."""
+    import inspect
+    import json
+
+    from nnmodel.cli import main
+    from nnmodel.dataset import generate
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "eap_polenet.py").write_text(
+        "import torch\nfrom torch import nn\nfrom nnmodel.models.base import NeuralModel\n"
+        "from nnmodel.models.core import SequenceCore\n\n\n"
+        + inspect.getsource(_PoleCore) + "\n\n" + inspect.getsource(PoleNet))
+    (site / "polenet.yaml").write_text(RECIPE)
+    dist = site / "eap_polenet-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: eap-polenet\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[eap.networks]\npolenet = eap_polenet:PoleNet\n")
+    monkeypatch.syspath_prepend(str(site))
+    ds = generate(tmp_path / "ds", dict(fs_Hz=100.0, f_max_Hz=20.0, duration_s=4.0, train_rh_pct=[40, 100],
+                                        heldout_rh_pct=[70], excitations=["noise"], validation_per_rh=1,
+                                        test_per_train_rh=1, test_per_heldout_rh=1), progress=False)
+    assert "polenet" not in MODELS
+    try:
+        assert main(["train-compare", str(ds), "--models", "polenet", "--quiet", "--out", str(tmp_path / "run")]) == 0
+        assert MODELS["polenet"].__module__ == "eap_polenet"      # the installed class, not this test's
+        card = json.loads((tmp_path / "run" / "models" / "polenet" / "card.json").read_text())
+        assert card["model"] == "polenet" and card["hyper_parameters"]["states"] == 3
+        assert "polenet" in capsys.readouterr().out
+    finally:
+        MODELS.pop("polenet", None)
+        import sys
+        sys.modules.pop("eap_polenet", None)

@@ -54,3 +54,28 @@ def test_a_shortfall_without_a_cause_in_the_data_points_to_tuning():
     f = explain("gru", _row(0.2), RESULTS, _model(), FACTS)
     (cause,) = f[0]["causes"]
     assert cause["cause"].startswith("no cause found in the data") and "--models gru --tune 20" in cause["action"]
+
+
+def test_a_network_kept_on_validation_but_worse_on_test_says_the_validation_did_not_foresee_it():
+    m = _model()
+    m.reference_start_ = {"reference": "linear", "end": {"kept": "network", "validation_nrmse_reference": 0.05,
+                                                          "validation_nrmse_network": 0.04, "validation_gain": 9e-4,
+                                                          "validation_gain_se": 3e-4}}
+    f = explain("narx", _row(0.12), RESULTS, m, {**FACTS, "validation_records": 0})
+    cause = f[0]["causes"][0]
+    assert cause["cause"].startswith("its validation data could not foresee it: there it beat its linear start "
+                                     "(5.00 % → 4.00 % NRMSE, a gain of 3.0 standard errors) on the tails of the "
+                                     "training records")
+    assert "--validation FILE" in cause["action"]
+
+
+def test_a_correction_dropped_within_its_uncertainty_is_said_on_the_page():
+    from nnmodel.explain import dropped
+    end = {"kept": "linear", "validation_nrmse_reference": 0.05, "validation_nrmse_network": 0.049,
+           "validation_gain": 1e-4, "validation_gain_se": 1e-4, "reason": "within 2 standard errors"}
+    summary = {"models": {"linear": {"kind": "linear ARX"}, "narx": {"kind": "narx", "reference_start":
+                                                                   {"reference": "linear", "end": end}},
+                          "ff": {"kind": "ff", "reference_start": {"reference": "linear", "end": {"kept": "network"}}}}}
+    (n,) = dropped(summary)
+    assert n["text"].startswith("narx equals its linear start: its correction lowered the validation error (5.00 % → "
+                                "4.90 % NRMSE), a gain of 1.0 standard errors, too little")

@@ -1,7 +1,8 @@
 """Neural and grey-box models of the actuator (one module per network).
 
 ``MODELS`` maps the registry name used in recipes and on the command line to the class:
-the built-ins of :data:`BUILT_IN_MODELS`, then any added with :func:`register`.  Every
+the built-ins of :data:`BUILT_IN_MODELS`, then any added with :func:`register` or by an
+installed package under the entry-point group ``eap.networks`` (:func:`load_plugins`).  Every
 class follows the contract of :class:`nnmodel.models.base.NeuralModel`, which
 :func:`nnmodel.check_model` checks.
 """
@@ -19,6 +20,8 @@ from .rnn import GRUModel, LSTMModel
 #: The networks shipped with the package.
 BUILT_IN_MODELS: tuple[type[NeuralModel], ...] = (FFModel, RBFModel, NARXModel, LSTMModel, GRUModel, HybridModel)
 MODELS: dict[str, type[NeuralModel]] = {cls.kind: cls for cls in BUILT_IN_MODELS}
+#: Entry-point group under which installed packages declare networks (``kind = module:Class``).
+ENTRY_POINT_GROUP = "eap.networks"
 
 
 def register(cls: type[NeuralModel]) -> type[NeuralModel]:
@@ -39,5 +42,14 @@ def register(cls: type[NeuralModel]) -> type[NeuralModel]:
     return cls
 
 
-__all__ = ["MODELS", "BUILT_IN_MODELS", "register", "NeuralModel", "NotFittedError", "FFModel", "RBFModel",
+def load_plugins() -> list[str]:
+    """Register the networks of installed packages (entry-point group ``eap.networks``, each
+    entry ``NAME = module:Class``); returns their kinds.  A network's recipe ``KIND.yaml``
+    is read from the recipe folder, else from beside its module
+    (:func:`nnmodel.recipes.load_recipe`)."""
+    from physics.plugins import load_entry_points
+    return [cls.kind for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
+
+
+__all__ = ["MODELS", "BUILT_IN_MODELS", "ENTRY_POINT_GROUP", "register", "load_plugins", "NeuralModel", "NotFittedError", "FFModel", "RBFModel",
            "NARXModel", "LSTMModel", "GRUModel", "HybridModel"]

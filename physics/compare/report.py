@@ -11,10 +11,19 @@ from ..record import DEFLECTION, OutputQuantity
 from .comparison import ComparisonResult, RecordComparison
 
 
-def _display(output: OutputQuantity) -> tuple[float, str, str]:
-    """(scale, unit, name) the output is plotted in: its reading unit (a tip deflection in µm)."""
-    unit, scale = reading_unit(output.unit)
+def _display(output: OutputQuantity, magnitude: float | None = None) -> tuple[float, str, str]:
+    """(scale, unit, name) the output is plotted in: its reading unit (a tip deflection in µm),
+    or the one that shows ``magnitude`` as 0.1–1000 (:func:`~physics.columns.reading_unit`)."""
+    unit, scale = reading_unit(output.unit, magnitude)
     return scale, unit, output.name
+
+
+def _magnitude(res: ComparisonResult) -> float | None:
+    """The largest measured output of the time records: the page reads every output value
+    in the unit that shows it as 0.1–1000."""
+    peaks = [float(np.max(np.abs(r.measured))) for r in res.records
+             if r.kind == "timeseries" and r.measured is not None and np.size(r.measured)]
+    return max(peaks) if peaks else None
 
 
 def _slug(text: str) -> str:
@@ -22,12 +31,12 @@ def _slug(text: str) -> str:
 
 
 def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float | None = None,
-                      output: OutputQuantity = DEFLECTION) -> None:
+                      output: OutputQuantity = DEFLECTION, magnitude: float | None = None) -> None:
     """Measured and model output (a deflection in µm), the residual below, and a zoom on the
     last ``zoom_s`` seconds (default: 2 s or a tenth of the record, the shorter)."""
     import matplotlib.pyplot as plt
     from ..plotting import envelope, legend_outside, save
-    k, unit, name = _display(output)
+    k, unit, name = _display(output, magnitude)
     fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
 
     def line(a, t, y, shift=0.0, **kw):   # thinned, then shifted and scaled: no copy of a long record
@@ -135,11 +144,12 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     plots: dict[str, list[str]] = {}
+    magnitude = _magnitude(res)
     for k, r in enumerate(res.records):
         slug = f"{k:02d}_{_slug(r.source)}"
         files = []
         if r.kind == "timeseries":
-            plot_time_overlay(r, d / f"time_{slug}.png", output=output)
+            plot_time_overlay(r, d / f"time_{slug}.png", output=output, magnitude=magnitude)
             files.append(f"time_{slug}.png")
         if r.valid is not None and r.valid.any():
             _plot_bode_record(r, d / f"bode_{slug}.png", output)
@@ -180,7 +190,7 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     write_csv(res.by_rh, d / "by_rh.csv")
     # HTML
     rep = Report(title, subtitle=f"model: {res.predictor.get('name')}; {len(res.records)} measurement(s)",
-                 provenance=header(provenance))
+                 provenance=header(provenance), output={**output.to_dict(), "magnitude": magnitude})
     for w in res.warnings:
         rep.warning(w)
     rep.heading("Summary")
@@ -190,9 +200,7 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
                for row in rows], columns=["record", "kind", "rh_pct", "fit_percent", "nrmse", "rmse_m",
                                           "correlation", "j_err_m_per_V", "log_mag_rms_dB", "phase_rms_deg",
                                           "frf_points"],
-              caption="metrics per measurement" + ("" if output.is_deflection else
-                                                   f" (output {output.label()}: the columns named _m are in "
-                                                   f"{output.unit})"),
+              caption="metrics per measurement" + ("" if output.is_deflection else f" (output {output.label()})"),
               missing="not defined for this kind of record (a frequency-response file has no time metrics)")
     if len(res.by_rh) >= 2:
         rep.heading("Error by relative humidity")

@@ -138,15 +138,8 @@ def ensure_registered(files) -> None:
 
 def load_plugins() -> list[str]:
     """Register the effects of installed packages (entry-point group ``eap.effects``)."""
-    from importlib.metadata import entry_points
-    ids = []
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            cls = ep.load()
-        except Exception as exc:
-            raise InputError(f"entry point {ep.name!r} ({ep.value}) of group {ENTRY_POINT_GROUP}: {exc}") from None
-        ids.append(register(cls).id)
-    return ids
+    from ..plugins import load_entry_points
+    return [cls.id for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
 
 
 __all__ = ["Effect", "OutputEffect", "LoadEffect", "EFFECTS", "CHAIN", "CORE", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
