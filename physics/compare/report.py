@@ -21,8 +21,8 @@ def _display(output: OutputQuantity, magnitude: float | None = None) -> tuple[fl
 def _magnitude(res: ComparisonResult) -> float | None:
     """The largest measured output of the time records: the page reads every output value
     in the unit that shows it as 0.1–1000."""
-    peaks = [float(np.max(np.abs(r.measured))) for r in res.records
-             if r.kind == "timeseries" and r.measured is not None and np.size(r.measured)]
+    peaks = [max(abs(float(np.max(r.measured)) - r.offset), abs(float(np.min(r.measured)) - r.offset))
+             for r in res.records if r.kind == "timeseries" and r.measured is not None and np.size(r.measured)]
     return max(peaks) if peaks else None
 
 
