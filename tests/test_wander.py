@@ -19,14 +19,16 @@ class _Rec:
     ts: object = None
 
 
-def _records(n_rec, shared, walk, seed, duration=60.0, fs=20.0, white=1e-6):
+def _records(n_rec, shared, walk, seed, duration=60.0, fs=20.0, white=1e-6, own=None):
     """``n_rec`` residuals [m] of ``duration`` s: ``shared(t)`` (the same in each) + an
-    independent random walk of std ``walk`` at the end + white noise; nuisance removed like a fit."""
+    independent random walk of std ``walk`` at the end + white noise (+ ``own(t, rng)``, drawn
+    for each record); nuisance removed like a fit."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(duration * fs)) / fs
     recs, resid, nui = [], [], []
     for k in range(n_rec):
         y = shared(t) + np.cumsum(rng.normal(0.0, walk / math.sqrt(t.size), t.size)) + rng.normal(0, white, t.size)
+        y = y + (own(t, rng) if own is not None else 0.0)
         A = np.column_stack([np.ones_like(t), t])
         c = np.linalg.lstsq(A, y, rcond=None)[0]
         recs.append(_Rec("broadband" if k == 0 else "steps", fs_d=fs, noise_floor_d=white,
@@ -52,7 +54,61 @@ def test_a_drift_the_records_share_is_told_from_the_sensors_wander():
     drift = lambda t: 15e-6 * -np.expm1(-t / 8.0)    # noqa: E731
     splits = [_split(*_records(3, drift, 3e-6, seed)) for seed in range(5)]
     assert all(s.testable and s.p_value < SHARED_ALPHA and s.fraction > 0.5 for s in splits), splits
-    assert "common to the 3 records" in splits[0].text()
+    assert "common to the 3 records" in splits[0].text() and "likelihood-ratio" in splits[0].text()
+
+
+def test_the_false_alarm_rate_is_the_tests_level():
+    """Under the null (independent random walks of one scale, white noise) the p-values are
+    uniform: the rate below 0.05 and below 0.2 stays within binomial bounds (a miscalibrated
+    null distribution, e.g. F(1, Rd − 1) at the best τ without the scan, fails the first)."""
+    from scipy.stats import binom
+    ps = np.array([_split(*_records(2, lambda t: 0 * t, 5e-6, 1000 + s)).p_value for s in range(150)])
+    for level in (0.05, 0.2):
+        hi = binom.ppf(0.999, ps.size, level)
+        lo = binom.ppf(0.001, ps.size, level)
+        assert lo <= np.count_nonzero(ps < level) <= hi, (level, np.count_nonzero(ps < level))
+
+
+def test_a_smooth_wander_of_each_record_is_not_a_shared_drift():
+    """The lab suite's per-record wander (doubly low-passed noise, 10 s, from each start, its own
+    in every record; not a random walk): called shared no more often than the level allows."""
+    from scipy.signal import lfilter
+    from scipy.stats import binom
+    a = math.exp(-1.0 / (10.0 * 20.0))           # 10 s at 20 Hz
+
+    def own(t, rng):
+        w = lfilter([1 - a], [1, -a], lfilter([1 - a], [1, -a], rng.normal(0, 1, t.size)))
+        return 12e-6 * w / w.std()
+    hits = sum(_split(*_records(2, lambda t: 0 * t, 1e-6, seed, own=own)).fraction > 0 for seed in range(60))
+    assert hits <= binom.ppf(0.999, 60, SHARED_ALPHA), hits
+
+
+def test_a_shared_drift_is_found_with_its_time_constant():
+    """The outside suite's drift (|A| 8–20 µm, τ 5–60 s) on two records with 3–10 µm random walks:
+    a short τ is found in most seeds, its τ and A near the truth."""
+    drift = lambda t: -12e-6 * np.expm1(-t / 6.0)     # noqa: E731
+    splits = [_split(*_records(2, drift, 5e-6, seed)) for seed in range(10)]
+    found = [s for s in splits if s.fraction > 0]
+    assert len(found) >= 7, [s.p_value for s in splits]
+    assert np.median([s.tau for s in found]) == pytest.approx(6.0, rel=0.6)
+    assert np.median([s.amplitude for s in found]) == pytest.approx(12e-6, rel=0.3)
+
+
+def test_the_wander_left_as_noise_is_the_records_own():
+    """With a shared drift found, the wander still counted as noise, wander·sqrt(1 − fraction),
+    estimates each record's own random walk after its trend: RMS walk/sqrt(15) (Brownian motion
+    theory, :data:`WALK_AFTER_TREND`), in mean square over seeds."""
+    from physics.diagnose.records import WALK_AFTER_TREND
+    drift = lambda t: -12e-6 * np.expm1(-t / 6.0)    # noqa: E731
+    left = []
+    for seed in range(30):
+        recs, resid, nui = _records(2, drift, 5e-6, seed)
+        w = slow_wander(recs, resid, nui)
+        s = shared_wander(recs, resid, nui, w)
+        if s.fraction > 0:
+            left.append(w * math.sqrt(1.0 - s.fraction))
+    assert len(left) >= 20
+    assert math.sqrt(np.mean(np.square(left))) == pytest.approx(5e-6 * math.sqrt(WALK_AFTER_TREND), rel=0.15)
 
 
 def test_one_record_cannot_attribute_its_wander():

@@ -17,6 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .forms.drift import shape as drift_shape, tau_grid
 from .records import WALK_AFTER_TREND
 
 #: Mean square of a random walk left after its linear trend, per mean square of the fitted
@@ -64,14 +65,17 @@ def slow_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance) -> f
 _WALK_SHARE = (0.46, 0.66, 0.75, 0.80, 0.84, 0.86, 0.88, 0.89, 0.90, 0.91)
 
 
-#: Significance of the test that the records share part of their slow wander (the F-test of
-#: :func:`shared_wander`; one-sided, the false alarms when they wander independently).
+#: Significance of the test that the records share part of their slow wander (the likelihood-
+#: ratio test of :func:`shared_wander`; one-sided, the false alarms when they wander independently).
 SHARED_ALPHA = 0.01
 #: Below this p-value (the conventional "suggestive" level) but not below SHARED_ALPHA, the
 #: test is inconclusive: the records hint at a shared part they cannot confirm.
 HINT_P = 0.10
 #: At most this many cosine lines per record enter the test.
 MAX_LINES = 24
+#: Draws of the null distribution of the test statistic (its p-value resolves 1/NULL_DRAWS),
+#: from a fixed seed: the same records give the same p-value.
+NULL_DRAWS = 4000
 
 
 @dataclass
@@ -79,10 +83,12 @@ class WanderSplit:
     """What the records' slow residuals share (:func:`shared_wander`)."""
 
     fraction: float          # share of the slow power common to the records (0 when not significant); NaN: not testable
-    p_value: float           # of the F-test (independent wanders)
+    p_value: float           # of the likelihood-ratio test (independent wanders)
     records: int             # records compared
     dims: int                # slow components per record (the trend and the cosine lines)
     why: str = ""            # why it could not be tested
+    tau: float = math.nan    # time constant [s] of the shared form that fits best
+    amplitude: float = math.nan   # its amplitude A [m] (when significant)
 
     @property
     def testable(self) -> bool:
@@ -93,19 +99,20 @@ class WanderSplit:
         """The records hint at a shared part (p < :data:`HINT_P`) without confirming it."""
         return self.testable and self.fraction == 0 and self.p_value < HINT_P
 
+    def _test(self) -> str:
+        return (f"likelihood-ratio test of a shared A(1 − e^(−t/τ)) from each record's start on {self.dims} slow "
+                f"components of the {self.records} records, p = {self.p_value:.2g}")
+
     def text(self) -> str:
         if not self.testable:
             return self.why
         if self.fraction > 0:
-            return (f"{100 * self.fraction:.0f} % of it is common to the {self.records} records (F-test on "
-                    f"{self.dims} slow components each, p = {self.p_value:.2g}): a drift they share, described, "
-                    "not noise")
+            return (f"{100 * self.fraction:.0f} % of it is common to the {self.records} records ({self._test()}; "
+                    f"A ≈ {1e6 * self.amplitude:+.3g} µm, τ ≈ {self.tau:.3g} s): a drift they share, not counted as noise")
         if self.inconclusive:
-            return (f"the {self.records} records hint that they share part of it but cannot confirm it (F-test on "
-                    f"{self.dims} slow components each, p = {self.p_value:.2g}, not below {SHARED_ALPHA:g}): counted "
-                    "as noise")
-        return (f"it does not repeat from record to record (F-test on {self.dims} slow components of the "
-                f"{self.records} records, p = {self.p_value:.2g}): the sensor's own wander, counted as noise")
+            return (f"the {self.records} records hint that they share part of it but cannot confirm it ({self._test()}, "
+                    f"not below {SHARED_ALPHA:g}): counted as noise")
+        return f"it does not repeat from record to record ({self._test()}): the sensor's own wander, counted as noise"
 
 
 def _operator(n: int, fs: float, span: float, k: int) -> np.ndarray:
@@ -123,15 +130,18 @@ def _operator(n: int, fs: float, span: float, k: int) -> np.ndarray:
     return np.vstack([rise, basis * (2.0 / n / math.sqrt(2.0))])
 
 
-def slow_components(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wander: float):
-    """(R × d array of whitened slow components, d) of the records' residuals on their common
-    span T from each record's start, or a string saying why they cannot show it.
+def slow_components(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wander: float, taus=()):
+    """(R × d whitened slow components, R × d × len(taus) whitened shared forms, d) of the
+    records' residuals on their common span T from each record's start, or a string saying why
+    they cannot show it.
 
     Each record's components (:func:`_operator`: trend and k = ⌊2T·f⌋ cosine lines below the
     broadband records' lowest excited frequency f, at most :data:`MAX_LINES`) are whitened by
     their covariance when the record wanders independently: a random walk detrended over its
     record whose RMS is ``wander`` [m] (:func:`slow_wander`) plus the record's white noise —
-    so that, wandering independently, every record's components are independent N(0, σ²)."""
+    so that, wandering independently, every record's components are independent N(0, σ²).
+    The same operator and whitening take the forms 1 − e^(−t/τ) (:func:`.forms.drift.shape`,
+    τ in ``taus`` [s]) to the components they would add."""
     broadband = [r for r in records if r.kind == "broadband"]
     if not broadband:
         return "no broadband record shows the wander below its excited band"
@@ -142,41 +152,66 @@ def slow_components(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, 
     k = min(int(math.floor(2.0 * span * f_lo)), MAX_LINES)
     if k < 1:
         return f"their common span ({span:.3g} s) is too short to show a wander below {f_lo:.3g} Hz"
-    rows = []
+    rows, forms = [], []
     for r, e, (_, b) in zip(records, resid_d, nuisance):
         n = int(round(span * r.fs_d))
+        t = np.arange(n) / r.fs_d
         M = _operator(n, r.fs_d, span, k)
-        raw = np.asarray(e[:n], float) + b * np.arange(n) / r.fs_d    # the record's own trend back in
+        raw = np.asarray(e[:n], float) + b * t                         # the record's own trend back in
         ML = np.cumsum(M[:, ::-1], axis=1)[:, ::-1]                    # M · (cumulative sum): a random walk
         walk = (ML @ ML.T) / n * (wander ** 2 / WALK_AFTER_TREND)
         white = (M @ M.T) * (r.noise_floor_d ** 2 if math.isfinite(r.noise_floor_d) else 0.0)
         L = np.linalg.cholesky(walk + white + 1e-12 * np.trace(walk + white) / (k + 1) * np.eye(k + 1))
         rows.append(np.linalg.solve(L, M @ raw))
-    return np.array(rows), k + 1
+        forms.append(np.linalg.solve(L, M @ drift_shape(t, taus)) if len(taus) else np.zeros((k + 1, 0)))
+    return np.array(rows), np.array(forms), k + 1
+
+
+def _shared_statistic(u: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """max over τ of Λ(τ) = e(τ) / ((|u|² − e(τ)) / (Rd − 1)), e(τ) = (Σ_r h_r·u_r)² / Σ_r |h_r|²
+    the whitened power a form A·h(τ) shared by the records explains (A fitted): the
+    likelihood-ratio statistic of the shared form against independent wanders of unknown scale
+    (F(1, Rd − 1) at one τ).  ``u``: (…, R, d), ``h``: R × d × τ."""
+    R, d = h.shape[:2]
+    e = np.einsum("...rd,rdt->...t", u, h) ** 2 / np.maximum(np.einsum("rdt,rdt->t", h, h), 1e-300)
+    total = (u ** 2).sum(axis=(-1, -2))[..., None]
+    return (e / np.maximum(total - e, 1e-300) * (R * d - 1)).max(axis=-1)
 
 
 def shared_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wander: float) -> WanderSplit:
-    """Do the records share part of their slow residual?  A one-way random-effects analysis on
-    the whitened slow components u_r (:func:`slow_components`; R records, d components): with
-    ū their mean, F = (R|ū|²/d) / (Σ_r|u_r − ū|²/(d(R − 1))) follows F(d, d(R − 1)) when the
-    records wander independently; at p < :data:`SHARED_ALPHA` the records share a part, and its
-    fraction of the slow power is |s|²/(|s|² + σ²) with |s|² = |ū|² − Σ|u_r − ū|²/(R(R − 1)) and
-    σ² = Σ|u_r − ū|²/(R − 1) (unbiased; the intraclass correlation)."""
-    from scipy.stats import f as fdist
-    got = slow_components(records, resid_d, nuisance, wander) if math.isfinite(wander) and wander > 0 else \
-        "no slow wander to split"
+    """Do the records share part of their slow residual?  A drift of the setup repeats from each
+    record's start; a sensor's wander does not.  On the whitened slow components u_r
+    (:func:`slow_components`; R records, d components, independent N(0, σ²) when the records
+    wander independently), a likelihood-ratio test of a shared form A(1 − e^(−t/τ)) (A fitted, τ
+    scanned over :func:`.forms.drift.tau_grid`, σ² unknown) against none: its statistic
+    (:func:`_shared_statistic`) is referred to its exact null distribution, drawn
+    (:data:`NULL_DRAWS`, fixed seed) with the same records, whitening and τ.  The records share a
+    part at p < :data:`SHARED_ALPHA`; its fraction of the slow wander is 1 − σ̂², σ̂² = (|u|² −
+    e)/(Rd − 1) the whitened power per component that the best-fitting shared form (A by
+    generalised least squares, its τ) leaves: 1 when the records wander independently at the
+    scale ``wander`` assumed by the whitening (the slow components are a random walk's, the white
+    noise's share is small), so ``wander``·σ̂ is the wander the records do not share, estimated
+    on all Rd components (:func:`slow_wander` sees the broadband records only).  A shared drift that is nearly a straight line over the records
+    is told from a random walk's trend only as far as its size exceeds the walk's spread."""
+    got = "no slow wander to split"
+    if math.isfinite(wander) and wander > 0:
+        span = min(e.size / r.fs_d for r, e in zip(records, resid_d)) if records else 0.0
+        got = slow_components(records, resid_d, nuisance, wander, tau_grid(span) if span > 0 else ())
     if isinstance(got, str):
         return WanderSplit(math.nan, math.nan, len(records), 0, got)
-    u, d = got
+    u, h, d = got
     R = len(u)
-    mean = u.mean(axis=0)
-    within = float(((u - mean) ** 2).sum())
-    F = (R * float(mean @ mean) / d) / (within / (d * (R - 1))) if within > 0 else math.inf
-    p = float(fdist.sf(F, d, d * (R - 1)))
-    shared = max(float(mean @ mean) - within / (R * (R - 1)), 0.0)
-    ind = within / (R - 1)
-    frac = shared / (shared + ind) if p < SHARED_ALPHA and shared + ind > 0 else 0.0
-    return WanderSplit(frac, p, R, d)
+    taus = tau_grid(min(e.size / r.fs_d for r, e in zip(records, resid_d)))
+    stat = float(_shared_statistic(u, h))
+    null = _shared_statistic(np.random.default_rng(0).normal(size=(NULL_DRAWS, R, d)), h)
+    p = float((1 + np.count_nonzero(null >= stat)) / (NULL_DRAWS + 1))
+    hu, hh = np.einsum("rd,rdt->t", u, h), np.maximum(np.einsum("rdt,rdt->t", h, h), 1e-300)
+    best = int(np.argmax(hu ** 2 / hh))
+    amp, tau = float(hu[best] / hh[best]), float(taus[best])
+    if p >= SHARED_ALPHA:
+        return WanderSplit(0.0, p, R, d, tau=tau)
+    left = (float(u.ravel() @ u.ravel()) - hu[best] ** 2 / hh[best]) / (R * d - 1)     # σ² of what it leaves
+    return WanderSplit(min(max(1.0 - left, 0.0), 1.0), p, R, d, tau=tau, amplitude=amp)
 
 
 __all__ = ["slow_wander", "shared_wander", "slow_components", "WanderSplit", "WANDER_PER_TREND", "SHARED_ALPHA",

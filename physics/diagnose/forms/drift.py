@@ -16,15 +16,24 @@ from ..effect_draft import EffectDraft, Param
 from .base import Form, FormFit, Residual, best_on_grid
 
 
+def tau_grid(span: float) -> np.ndarray:
+    """Time constants [s] scanned for a drift seen over ``span`` [s]: a step at the start
+    (span/30) to a straight line (30 span), 25 log-spaced."""
+    return np.geomspace(span / 30.0, span * 30.0, 25)
+
+
+def shape(t: np.ndarray, taus) -> np.ndarray:
+    """1 − exp(−t/τ) for t [s] from the record's start: len(t) × len(taus)."""
+    return -np.expm1(-np.outer(np.asarray(t, float), 1.0 / np.atleast_1d(np.asarray(taus, float))))
+
+
 class Drift(Form):
     id = "drift"
     title = "additive drift independent of the input"
 
     def fit(self, res: Residual) -> FormFit:
-        span = res.span_s
-        taus = np.geomspace(span / 30.0, span * 30.0, 25)
         t = [np.arange(e.size) / r.fs_d for r, e in zip(res.records, res.resid)]
-        tau, reg = best_on_grid(res, taus, lambda tt: [[1.0 - np.exp(-x / tt)] for x in t])
+        tau, reg = best_on_grid(res, tau_grid(res.span_s), lambda tt: [[shape(x, tt)[:, 0]] for x in t])
         amp = reg.gains[0]
         rate = amp / tau
         return self.scored(res, reg, {"amplitude_m": amp, "tau_s": tau}, {"amplitude_m": "m", "tau_s": "s"},
