@@ -95,6 +95,18 @@ class FRFEstimate:
                        None if self.coherence is None else self.coherence[keep], rh, meta=info)
 
 
+def power_spectrum(x: np.ndarray, zero_dc: bool = False) -> np.ndarray:
+    """|X_k|² of the real FFT of ``x`` (k = 0..n/2), squared in the FFT's own buffer, so a
+    long record costs the spectrum and its half (not |X|, |X|² and copies); ``zero_dc``:
+    the line of the mean set to 0 (the spectrum of x − mean(x))."""
+    X = np.fft.rfft(x)
+    if zero_dc:
+        X[0] = 0.0
+    parts = X.view(np.float64).reshape(-1, 2)        # (re, im) per line
+    np.square(parts, out=parts)
+    return parts.sum(axis=1)
+
+
 def _as_signal(x, name: str) -> np.ndarray:
     arr = np.asarray(x, dtype=float)
     if arr.ndim != 1 or arr.size < 2:
@@ -347,7 +359,7 @@ def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
     span = float(hi - lo)
     if span <= 0 or not np.any(x - x.mean()):
         raise InputError(f"{source + ': ' if source else ''}the voltage is constant; nothing is excited")
-    X = np.abs(np.fft.rfft(x - x.mean())) ** 2
+    X = power_spectrum(x, zero_dc=True)             # of x − mean(x)
     f = np.fft.rfftfreq(n, 1.0 / fs)
     cum = np.cumsum(X[1:]) / X[1:].sum()
     band = (float(max(f[1:][np.searchsorted(cum, 0.005)], f[1])),

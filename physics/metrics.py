@@ -21,7 +21,7 @@ def _pair(y, yhat, *, allow_complex: bool = False) -> tuple[np.ndarray, np.ndarr
         bad = np.flatnonzero(~np.isfinite(arr))
         if bad.size:
             raise InputError(f"{name}: element {bad[0]} is {arr[bad[0]]}; expected finite values")
-        arrays.append(arr if arr.dtype.kind == "c" else arr.astype(float))
+        arrays.append(arr if arr.dtype.kind == "c" else arr.astype(float, copy=False))   # no copy of a long record
     if arrays[0].shape != arrays[1].shape:
         raise InputError(f"y has {arrays[0].size} values but yhat has {arrays[1].size}")
     return arrays[0], arrays[1]
@@ -38,7 +38,8 @@ def _spread(y: np.ndarray, name: str = "y") -> float:
 def rmse(y, yhat) -> float:
     """Root-mean-square error sqrt(mean((y − ŷ)²)), in the unit of y."""
     y, yhat = _pair(y, yhat)
-    return float(np.sqrt(np.mean((y - yhat) ** 2)))
+    e = y - yhat                                   # one temporary of a long record, not two
+    return float(np.sqrt(np.dot(e, e) / e.size))
 
 
 def nrmse(y, yhat) -> float:
@@ -57,7 +58,8 @@ def fit_percent(y, yhat) -> float:
 def correlation(y, yhat) -> float:
     """Pearson correlation coefficient of y and ŷ (−1…1)."""
     y, yhat = _pair(y, yhat)
-    return float(np.dot(y - y.mean(), yhat - yhat.mean()) / (_spread(y) * _spread(yhat, "yhat")))
+    # Σ (y − ȳ)(ŷ − mean ŷ) = Σ (y − ȳ) ŷ: one centred copy of a long record, not two
+    return float(np.dot(y - y.mean(), yhat) / (_spread(y) * _spread(yhat, "yhat")))
 
 
 def j_err(mag_exp, mag_sim) -> float:

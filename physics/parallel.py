@@ -19,7 +19,9 @@ function, so nothing unpicklable (open files, closures) crosses to a worker.  Ev
 carries its own seed, so results are identical to the serial run whatever the worker
 count.  A task that fails on the user's input raises that error alone (the user's message,
 never a dump of the task); any other failure raises :class:`~physics.errors.ModelError`
-naming the task.
+naming the task.  Warnings raised in a worker process come back with its results and are
+given again in this process, so they read like every other warning of the command (one
+``eap CMD: warning: …`` line each) instead of a worker's raw ``UserWarning`` print-out.
 
 Resources are bounded before anything starts: local workers at most the machine's cores
 (more only queue behind each other), a scheduler address must be ``[tcp|tls]://HOST:PORT``
@@ -31,7 +33,9 @@ import atexit
 import os
 import re
 import socket
+import queue
 import threading
+import warnings
 from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -133,6 +137,18 @@ def _run_batch(fn, batch):
     return True, out
 
 
+def _run_batch_remote(fn, batch):
+    """:func:`_run_batch` in a worker process, with the warnings it raised returned as
+    (category, message) rather than printed there (categories of other packages — e.g. a
+    user's effect file — come back as UserWarning, which always unpickles)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ok, value = _run_batch(fn, batch)
+    ours = ("builtins", "physics", "nnmodel")
+    return ok, value, [(w.category if w.category.__module__.split(".")[0] in ours else UserWarning,
+                        str(w.message)) for w in caught]
+
+
 def map_tasks(fn: Callable, tasks: Sequence, settings: ParallelSettings | None = None, *,
               desc: str = "tasks", progress: bool = True, cost: Callable | None = None) -> list:
     """``[fn(t) for t in tasks]``, in order, run as ``settings`` says (module doc).
@@ -166,6 +182,16 @@ class _Work:
         self.lock = threading.Lock()
         self.failure: Exception | None = None
         self.done = 0
+        self.warnings: queue.SimpleQueue = queue.SimpleQueue()   # (category, message) from the workers
+
+    def warn(self) -> None:
+        """Give the workers' warnings received so far, in this process and thread."""
+        while True:
+            try:
+                category, message = self.warnings.get_nowait()
+            except queue.Empty:
+                return
+            warnings.warn(message, category, stacklevel=2)
 
     def take(self):
         with self.lock:
@@ -226,6 +252,7 @@ def _map_dask(fn, tasks, order, costs, settings: ParallelSettings, desc: str, pr
                     remote.join(0.2)
                 elif not (local and work.batches and not work.failure):   # else: batches handed back
                     break
+                work.warn()
                 bar.update(work.done - seen)
                 seen = work.done
         except BaseException:     # Ctrl-C, SIGTERM: stop the workers before the caller cleans up after
@@ -237,6 +264,7 @@ def _map_dask(fn, tasks, order, costs, settings: ParallelSettings, desc: str, pr
         finally:
             remote.stop.set()
             remote.join()
+    work.warn()
     if work.failure:
         raise work.failure
     if work.done < len(tasks):
@@ -272,7 +300,7 @@ class _Remote(threading.Thread):
                     batch = self.work.take()
                     if batch is None:
                         break
-                    fut = client.submit(_run_batch, self.fn, [self.work.tasks[i] for i in batch], pure=False)
+                    fut = client.submit(_run_batch_remote, self.fn, [self.work.tasks[i] for i in batch], pure=False)
                     flying[fut] = batch
                 if not flying:
                     break
@@ -281,7 +309,10 @@ class _Remote(threading.Thread):
                 except TimeoutError:   # nothing finished within the poll interval
                     continue
                 for fut in done:
-                    self.work.store(flying.pop(fut), *fut.result(), self.desc)
+                    ok, value, caught = fut.result()
+                    for w in caught:
+                        self.work.warnings.put(w)
+                    self.work.store(flying.pop(fut), ok, value, self.desc)
         except BaseException as exc:  # raised by the main thread if work is left undone
             self.error = exc
         finally:
@@ -353,8 +384,6 @@ def _local_cluster(workers: int) -> Future:
 
 def _start_cluster(workers: int, fut: Future) -> None:
     try:
-        import warnings
-
         import dask
         from distributed import Client, LocalCluster
         # another cluster on this machine holds the dashboard port: not the user's concern

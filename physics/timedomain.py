@@ -17,6 +17,7 @@ the closed-form transmission line to 0.2 % up to 100 Hz (or fs/4).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +39,10 @@ FIELDS = {
 }
 
 _W_LO = 2.0 * np.pi * 1e-5  # lowest frequency the realisations are accurate at [rad/s]
+#: Samples per piece in which a record runs through the stages (state carried from piece to
+#: piece, the result that of the whole record at once): memory grows with the outputs kept,
+#: not with the stages' intermediate signals.
+PIECE_SAMPLES = 1 << 18
 
 
 @dataclass
@@ -121,6 +126,8 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     reduce = np.vstack([base["n_solvation"] * lengths / base["L_total"],
                         np.hstack([np.zeros((modal.shape[0], 1)), modal])])
     flds = {}
+    load_filter, cs_filter = _load_filters(model, base, w_hi)
+    chain = _Chain(model, base, load_filter, cs_filter, rh_t, dt, hold, periodic)      # stages 2–4
     if stepper_needed:
         from . import stepper
         want = {"voltage": "U", "charge": "Q", "temperature": "T", "cation": "c"}
@@ -134,27 +141,25 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
             flds["charge"] = out["Q"][1:]
         if "temperature" in fields:
             flds["temperature"] = out["T"][1:]
-        reduced = reduce @ load
+        del out
+        for a in range(0, t.size, PIECE_SAMPLES):
+            chain.push(reduce @ load[:, a:a + PIECE_SAMPLES])
     else:
         p = model.params_at(float(rh_t[0]))
         per_segment = "cation" in fields
-        reduced, current, flds = _electrochemistry_lti(model, p, edges, v, dt, hold, fields, periodic,
-                                                       None if per_segment else reduce)
+        stage1 = _Electrochemistry(model, p, edges, v.size, dt, hold, fields, periodic, reduce, per_segment)
+        for a in range(0, v.size, PIECE_SAMPLES):
+            chain.push(stage1.push(v[a:a + PIECE_SAMPLES]))
+        chain.push(stage1.finish())
+        current, flds = stage1.current, stage1.fields
         if per_segment:
-            load, reduced = reduced, reduce @ reduced
-            c_up, c_low = load, -load
+            c_up = load = stage1.excess
+            c_low = -load
         if "temperature" in fields:
             flds["temperature"] = np.full((edges.size - 1, t.size), p["T_ext"])
     if "cation" in fields:
         flds["cation_upper"], flds["cation_lower"] = c_up[1:], c_low[1:]
-
-    # 2.–4. load filter, mechanics
-    load_filter, cs_filter = _load_filters(model, base, w_hi)
-    cs = _apply_filter(cs_filter, reduced[:1], dt, hold, periodic)[0]
-    loads = _modal_loads(model, reduced[1:], rh_t, load_filter, dt, hold, periodic)
-    del reduced                                      # the electrochemistry rows are no longer needed
-    tip = _mechanics(model, base, loads, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
-    del loads
+    cs, tip = chain.finish()
     tip = _output_effects(model, tip, rh_t, dt)
     return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs,
                             cs_low=-cs, device=model.device.name, effects=model.effect_ids,
@@ -188,10 +193,12 @@ def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_fa
 
 def _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic):
     """Stages 2–4 for per-segment loads ``ell`` (n_seg, N): projection onto the modes,
-    load filter and humidity (:func:`_modal_loads`), mechanics, then the output effects."""
-    loads = _modal_loads(model, _beam_projection(model, base, edges) @ ell, rh_t, load_filter, dt, hold, periodic)
-    tip = _mechanics(model, base, loads, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
-    return _output_effects(model, tip, rh_t, dt)
+    load filter and humidity, mechanics (:class:`_Chain`), then the output effects."""
+    chain = _Chain(model, base, load_filter, None, rh_t, dt, hold, periodic)
+    proj = _beam_projection(model, base, edges)
+    for a in range(0, rh_t.size, PIECE_SAMPLES):
+        chain.push(proj @ ell[:, a:a + PIECE_SAMPLES])
+    return _output_effects(model, chain.finish()[1], rh_t, dt)
 
 
 def _output_effects(model, tip, rh_t, dt) -> np.ndarray:
@@ -209,16 +216,6 @@ def _beam_projection(model, base, edges) -> np.ndarray:
     return np.vstack([proj.modal, proj.residual])
 
 
-def _modal_loads(model, pre, rh_t, load_filter, dt, hold, periodic) -> np.ndarray:
-    """Stage 3: projected loads ``pre`` (n_modes + 1, N) through the load filter kf(s)(·B(s))
-    and the humidity factor of the coupling, row by row in place (``pre`` is overwritten and
-    returned, so a long record needs one extra row, not a second array)."""
-    factor = model.hook("coupling_factor")(rh_t)
-    for k in range(pre.shape[0]):
-        pre[k] = _apply_filter(load_filter, pre[k:k + 1], dt, hold, periodic)[0] * factor
-    return pre
-
-
 def _check_record(t, voltage):
     if t is None or voltage is None:
         raise InputError("simulate needs the time vector t [s] and the voltage record [V]")
@@ -230,87 +227,109 @@ def _check_record(t, voltage):
         raise InputError(f"voltage has {v.size} samples but t has {t.size}")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
         raise InputError("t and voltage must be finite (no NaN or inf)")
-    dtv = np.diff(t)
-    if np.any(dtv <= 0):
-        raise InputError("t must be strictly increasing")
-    if np.max(np.abs(dtv - dtv.mean())) > 1e-6 * dtv.mean():
-        raise InputError("t must be uniformly sampled (resample the record first)")
+    step = (t[-1] - t[0]) / (t.size - 1)                 # the mean step [s]
+    for a in range(0, t.size - 1, PIECE_SAMPLES):        # in pieces: no step array of a long record
+        dtv = np.diff(t[a:a + PIECE_SAMPLES + 1])
+        if np.any(dtv <= 0):
+            raise InputError("t must be strictly increasing")
+        if np.max(np.abs(dtv - step)) > 1e-6 * step:
+            raise InputError("t must be uniformly sampled (resample the record first)")
     return t, v
 
 
 # ----------------------------------------------------------------------------------------
 # Stage 1: electrochemistry as an LTI system
 # ----------------------------------------------------------------------------------------
-def _electrochemistry_lti(model: ActuatorModel, p: dict, edges, v, dt, hold, fields, periodic=False,
-                          reduce: np.ndarray | None = None):
-    """Linear electrochemistry.  Returns (interface cation excess per branch, clamp branch
-    first (n_seg+1, N) [mol/m³] — or ``reduce`` (k, n_seg+1) applied to it, (k, N) —,
-    current (N) [A], fields)."""
-    d = model.double_layer_props(p)
-    branch = model.hook("realize")(d, np.pi / dt)
-    nc = branch.n_states
-    area = p["width"] * np.diff(edges)
-    n = area.size
-    g = model.hook("series_conductances")(p, edges)
-    Ab, Bb = branch.A, branch.B
-    Cj, Cc, Cq = branch.C[0:1], branch.C[1:2], branch.C[2:3]
-    Dj, Dc, Dq = branch.D[0, 0], branch.D[1, 0], branch.D[2, 0]
-    Ac_clamp = p["width"] * p["L_clamp"]
-    if g is None:
-        # every segment sees Vin: one branch stands for all of them
-        Ufrom_x, Ufrom_v = np.zeros((n, nc)), np.ones((n, 1))
-        A, B = Ab, Bb
-        seg_state = np.tile(np.eye(nc), (n, 1))              # maps the branch state to every segment
-        I_x = (area.sum() + Ac_clamp) * Cj
-        I_v = (area.sum() + Ac_clamp) * Dj
-        clamp_x, clamp_v = Cc, Dc
-    else:
-        L = np.zeros((n, n))
-        i = np.arange(n)
-        L[i, i] = g + np.append(g[1:], 0.0)
-        L[i[:-1], i[1:]] = L[i[1:], i[:-1]] = -g[1:]
-        M = L + Dj * np.diag(area)
-        Cj_blk = np.kron(np.diag(area), Cj)                   # current of every segment from its states
-        Minv = linalg.inv(M)
-        Ufrom_x = -Minv @ Cj_blk                                # U = Ufrom_x x + Ufrom_v Vin
-        Ufrom_v = (Minv[:, 0] * g[0])[:, None]
-        Bblk = np.kron(np.eye(n), Bb)
-        A_seg = np.kron(np.eye(n), Ab) + Bblk @ Ufrom_x
-        B_seg = Bblk @ Ufrom_v
-        # clamp branch (driven by Vin) appended after the segments
-        A = linalg.block_diag(A_seg, Ab)
-        B = np.vstack([B_seg, Bb])
-        seg_state = np.hstack([np.eye(n * nc), np.zeros((n * nc, nc))])
-        Ufrom_x = np.hstack([Ufrom_x, np.zeros((n, nc))])
-        I_x = np.hstack([-g[0] * Ufrom_x[0:1, :n * nc], Ac_clamp * Cj])
-        I_v = g[0] * (1.0 - Ufrom_v[0, 0]) + Ac_clamp * Dj
-        clamp_x = np.hstack([np.zeros((1, n * nc)), Cc])
-        clamp_v = Dc
-    # per-segment outputs: y_k = C_row x_k + D U_k with x_k = seg_state-block rows
-    Cc_blk = np.kron(np.eye(n), Cc) @ seg_state
-    c_x = Cc_blk + Dc * Ufrom_x
-    c_v = Dc * Ufrom_v
-    exc_C, exc_D = np.vstack([clamp_x, c_x]), np.vstack([[[clamp_v]], c_v])
-    if reduce is not None:
-        exc_C, exc_D = reduce @ exc_C, reduce @ exc_D
-    n_exc = exc_C.shape[0]
-    rows_C = [exc_C, I_x]
-    rows_D = [exc_D, np.array([[I_v]])]
-    if "voltage" in fields:
-        rows_C.append(Ufrom_x)
-        rows_D.append(Ufrom_v)
-    if "charge" in fields:
-        rows_C.append(np.kron(np.eye(n), Cq) @ seg_state + Dq * Ufrom_x)
-        rows_D.append(Dq * Ufrom_v)
-    ss = StateSpace(A, B, np.vstack(rows_C), np.vstack(rows_D))
-    y, _ = lti.simulate(ss, v[None, :], dt, x0=_steady_state(ss, v[0]), hold=hold, periodic=periodic)
-    excess, current = y[:n_exc], y[n_exc].copy()     # a copy, so the excess rows can be freed alone
-    flds, k = {}, n_exc + 1
-    if "voltage" in fields:
-        flds["voltage"], k = y[k:k + n], k + n
-    if "charge" in fields:
-        flds["charge"] = y[k:k + n]
-    return excess, current, flds
+class _Electrochemistry:
+    """Stage 1, linear: the electrochemistry as one LTI system fed with the voltage in
+    pieces.  ``push``/``finish`` return ``reduce`` (k, n_seg+1) applied to the interface
+    cation excess per branch (clamp branch first, [mol/m³]), (k, m), and fill ``current``
+    (N) [A], ``fields`` and, ``per_segment``, the excess itself ``excess`` (n_seg+1, N)."""
+
+    def __init__(self, model: ActuatorModel, p: dict, edges, N: int, dt, hold, fields, periodic,
+                 reduce: np.ndarray, per_segment: bool):
+        d = model.double_layer_props(p)
+        branch = model.hook("realize")(d, np.pi / dt)
+        nc = branch.n_states
+        area = p["width"] * np.diff(edges)
+        n = area.size
+        g = model.hook("series_conductances")(p, edges)
+        Ab, Bb = branch.A, branch.B
+        Cj, Cc, Cq = branch.C[0:1], branch.C[1:2], branch.C[2:3]
+        Dj, Dc, Dq = branch.D[0, 0], branch.D[1, 0], branch.D[2, 0]
+        Ac_clamp = p["width"] * p["L_clamp"]
+        if g is None:
+            # every segment sees Vin: one branch stands for all of them
+            Ufrom_x, Ufrom_v = np.zeros((n, nc)), np.ones((n, 1))
+            A, B = Ab, Bb
+            seg_state = np.tile(np.eye(nc), (n, 1))              # maps the branch state to every segment
+            I_x = (area.sum() + Ac_clamp) * Cj
+            I_v = (area.sum() + Ac_clamp) * Dj
+            clamp_x, clamp_v = Cc, Dc
+        else:
+            L = np.zeros((n, n))
+            i = np.arange(n)
+            L[i, i] = g + np.append(g[1:], 0.0)
+            L[i[:-1], i[1:]] = L[i[1:], i[:-1]] = -g[1:]
+            M = L + Dj * np.diag(area)
+            Cj_blk = np.kron(np.diag(area), Cj)                   # current of every segment from its states
+            Minv = linalg.inv(M)
+            Ufrom_x = -Minv @ Cj_blk                                # U = Ufrom_x x + Ufrom_v Vin
+            Ufrom_v = (Minv[:, 0] * g[0])[:, None]
+            Bblk = np.kron(np.eye(n), Bb)
+            A_seg = np.kron(np.eye(n), Ab) + Bblk @ Ufrom_x
+            B_seg = Bblk @ Ufrom_v
+            # clamp branch (driven by Vin) appended after the segments
+            A = linalg.block_diag(A_seg, Ab)
+            B = np.vstack([B_seg, Bb])
+            seg_state = np.hstack([np.eye(n * nc), np.zeros((n * nc, nc))])
+            Ufrom_x = np.hstack([Ufrom_x, np.zeros((n, nc))])
+            I_x = np.hstack([-g[0] * Ufrom_x[0:1, :n * nc], Ac_clamp * Cj])
+            I_v = g[0] * (1.0 - Ufrom_v[0, 0]) + Ac_clamp * Dj
+            clamp_x = np.hstack([np.zeros((1, n * nc)), Cc])
+            clamp_v = Dc
+        # per-segment outputs: y_k = C_row x_k + D U_k with x_k = seg_state-block rows
+        Cc_blk = np.kron(np.eye(n), Cc) @ seg_state
+        c_x = Cc_blk + Dc * Ufrom_x
+        c_v = Dc * Ufrom_v
+        exc_C, exc_D = np.vstack([clamp_x, c_x]), np.vstack([[[clamp_v]], c_v])
+        if not per_segment:
+            exc_C, exc_D = reduce @ exc_C, reduce @ exc_D
+        n_exc = exc_C.shape[0]
+        rows_C = [exc_C, I_x]
+        rows_D = [exc_D, np.array([[I_v]])]
+        if "voltage" in fields:
+            rows_C.append(Ufrom_x)
+            rows_D.append(Ufrom_v)
+        if "charge" in fields:
+            rows_C.append(np.kron(np.eye(n), Cq) @ seg_state + Dq * Ufrom_x)
+            rows_D.append(Dq * Ufrom_v)
+        ss = StateSpace(A, B, np.vstack(rows_C), np.vstack(rows_D))
+        self.stage = _Stage(ss, dt, hold, periodic, lambda u0: _steady_state(ss, float(u0[0, 0])))
+        self.n_exc, self.n, self.k = n_exc, n, 0
+        self.current = np.empty(N)
+        self.fields = {f: np.empty((n, N)) for f in ("voltage", "charge") if f in fields}
+        self.reduce = reduce
+        self.excess = np.empty((n_exc, N)) if per_segment else None
+
+    def push(self, v: np.ndarray) -> np.ndarray:
+        return self._emit(self.stage.push(v[None, None, :])[:, 0])
+
+    def finish(self) -> np.ndarray:
+        return self._emit(self.stage.finish()[:, 0])
+
+    def _emit(self, y: np.ndarray) -> np.ndarray:
+        """Store the rows of a piece of outputs; return what stages 2–4 need."""
+        a, b, n_exc = self.k, self.k + y.shape[1], self.n_exc
+        self.current[a:b] = y[n_exc]
+        k = n_exc + 1
+        for f in self.fields:
+            self.fields[f][:, a:b], k = y[k:k + self.n], k + self.n
+        self.k = b
+        if self.excess is None:
+            return y[:n_exc]
+        self.excess[:, a:b] = y[:n_exc]
+        return self.reduce @ y[:n_exc]
 
 
 def _steady_state(ss: StateSpace, u0: float) -> np.ndarray:
@@ -401,13 +420,88 @@ def _realize(fn, band, what: str, fit: bool = True):
     return fit_pole_residue(fn, band, what=what).statespace() if fit else None
 
 
-def _apply_filter(f, u: np.ndarray, dt: float, hold: str, periodic: bool = False) -> np.ndarray:
-    """Run every row of ``u`` through the SISO filter ``f`` (a StateSpace or a gain)."""
-    if not isinstance(f, StateSpace):
-        return f * u
-    x0 = _steady_state(f, 1.0)[:, None] * u[None, :, 0]
-    y, _ = lti.simulate(f, u[None], dt, x0=x0, hold=hold, periodic=periodic)
-    return y[0]
+class _Stage:
+    """A linear stage (a :class:`~physics.lti.StateSpace`, or a plain gain) fed in pieces
+    (:class:`physics.lti.Stream`: (n_in, 1, m) in, (n_out, 1, k) out), started in equilibrium
+    with its first input sample (``x0_of(u[..., 0])``); ``periodic``: the whole record is run
+    at ``finish`` as one period of a periodic input (:func:`physics.lti.simulate`)."""
+
+    def __init__(self, f, dt: float, hold: str, periodic: bool, x0_of=None):
+        self.f, self.dt, self.hold, self.periodic = f, dt, hold, periodic
+        self.x0_of = x0_of or (lambda u0: _steady_state(f, 1.0)[:, None] * u0[0][None, :])
+        self.stream, self.held = None, []
+
+    def push(self, u: np.ndarray) -> np.ndarray:
+        if not isinstance(self.f, StateSpace):
+            return self.f * u
+        if self.periodic or not u.shape[-1]:
+            self.held += [u] if self.periodic else []
+            return np.zeros((self.f.n_outputs, 1, 0))
+        if self.stream is None:
+            self.stream = lti.Stream(self.f, self.dt, self.x0_of(u[..., 0]), self.hold)
+        return self.stream.push(u)
+
+    def finish(self) -> np.ndarray:
+        if not isinstance(self.f, StateSpace):
+            return np.zeros((1, 1, 0))
+        if self.periodic:
+            u = np.concatenate(self.held, axis=-1)
+            self.held = []
+            return lti.simulate(self.f, u, self.dt, hold=self.hold, periodic=True)[0]
+        return self.stream.finish()
+
+    @property
+    def x(self) -> np.ndarray:
+        """The final state (after ``finish``)."""
+        return self.stream.x
+
+
+class _Chain:
+    """Stages 2–4 fed with the electrochemistry reduced to rows, in pieces (``push`` (k, m),
+    then ``finish`` → (cs (N) [mol/m³], tip (N) [m])): with a solvent filter ``cs_filter``,
+    row 0 is the solvent excess (→ cs) and the rest the projected loads, else all rows are
+    the projected loads (n_modes + 1): load filter kf(s)(·B(s)) and the humidity factor of
+    the coupling (stage 3), then the mechanics (stage 4, :class:`_Mechanics`)."""
+
+    def __init__(self, model, base, load_filter, cs_filter, rh_t, dt, hold, periodic):
+        self.rh_t, self.coupling = rh_t, model.hook("coupling_factor")
+        self.coupling(np.array([np.min(rh_t), np.max(rh_t)]))   # its warnings once, for the whole record's range
+        n_loads = model.n_modes + 1
+        self.cs_stage = None if cs_filter is None else _Stage(cs_filter, dt, hold, periodic)
+        # one stage per row: a batch of rows would multiply the recursion's working memory
+        self.load_stages = [_Stage(load_filter, dt, hold, periodic) for _ in range(n_loads)]
+        self.mechanics = _Mechanics(model, base, model.hook("stiffness_factor")(rh_t), dt, hold, periodic)
+        self.cs = np.empty(rh_t.size) if cs_filter is not None else None
+        self.tip = np.empty(rh_t.size)
+        self.k_cs = self.k_load = self.k_tip = 0
+
+    def push(self, rows: np.ndarray | None, last: bool = False) -> None:
+        """The next piece of rows (``last``: none, the end of the record)."""
+        if self.cs_stage is not None:
+            self._cs(self.cs_stage.finish() if last else self.cs_stage.push(rows[None, :1]))
+            rows = None if last else rows[1:]
+        loads = np.vstack([(s.finish() if last else s.push(rows[None, k:k + 1]))[0]
+                           for k, s in enumerate(self.load_stages)])
+        a, b = self.k_load, self.k_load + loads.shape[1]
+        with warnings.catch_warnings():                     # given once, in __init__
+            warnings.simplefilter("ignore")
+            loads *= self.coupling(self.rh_t[a:b])
+        self.k_load = b
+        self._tip(self.mechanics.push(loads))
+        if last:
+            self._tip(self.mechanics.finish())
+
+    def finish(self) -> tuple[np.ndarray | None, np.ndarray]:
+        self.push(None, last=True)
+        return self.cs, self.tip
+
+    def _cs(self, y):
+        self.cs[self.k_cs:self.k_cs + y.shape[-1]] = y[0, 0]
+        self.k_cs += y.shape[-1]
+
+    def _tip(self, y):
+        self.tip[self.k_tip:self.k_tip + y.size] = y
+        self.k_tip += y.size
 
 
 # ----------------------------------------------------------------------------------------
@@ -446,37 +540,72 @@ def beam_statespace(model: ActuatorModel, p: dict, stiffness_factor: float) -> S
     return StateSpace(sys.A, sys.B, np.ones((1, sys.n_outputs)) @ sys.C, np.ones((1, sys.n_outputs)) @ sys.D)
 
 
-def _mechanics(model: ActuatorModel, p: dict, loads: np.ndarray, stiffness: np.ndarray, dt: float,
-               hold: str, periodic: bool = False) -> np.ndarray:
-    """Tip deflection, in blocks over which the humidity stiffness factor is constant
-    (within 0.2 %); the mechanical state is carried across blocks."""
-    N = loads.shape[1]
-    logk = np.log(stiffness)
-    starts = [0]
-    ref = logk[0]
-    for i in range(1, N if np.ptp(logk) > 2e-3 else 0):
-        if abs(logk[i] - ref) > 2e-3:
-            starts.append(i)
-            ref = logk[i]
-    starts.append(N)
-    if len(starts) > 2 + N // 50:   # many short blocks: warn if they come from noise, not a drift
-        levels = np.array([np.mean(logk[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        steps = np.sign(np.diff(levels))
-        if np.mean(steps[1:] != steps[:-1]) > 0.3:
-            import warnings
-            warnings.warn(f"the RH record looks noisy: the stiffness jumps back and forth every "
-                          f"{N / (len(starts) - 1):.0f} samples on average and each jump restarts the mechanics; "
-                          "pass a smoothed RH (e.g. physics.compare.model_rh)", stacklevel=3)
-    tip = np.empty(N)
-    x = None
-    for b0, b1 in zip(starts[:-1], starts[1:]):
-        seg = slice(max(b0 - 1, 0), b1)                  # overlap one sample to carry the state
-        ss = beam_statespace(model, p, float(np.exp(np.mean(logk[b0:b1]))))
-        if x is None:
-            x = _steady_state_multi(ss, loads[:, 0])
-        y, x = lti.simulate(ss, loads[:, seg], dt, x0=x, hold=hold, periodic=periodic)
-        tip[b0:b1] = y[0, (1 if b0 > 0 else 0):]
-    return tip
+class _Mechanics:
+    """Stage 4: tip deflection [m] for the modal loads fed in pieces (``push`` (n_modes + 1, m)
+    → tip (k)), in blocks over which the humidity stiffness factor ``stiffness`` (N) is
+    constant (within 0.2 %); each block starts where the previous one ended (one sample of
+    overlap, its mechanical state carried over)."""
+
+    def __init__(self, model: ActuatorModel, p: dict, stiffness, dt: float, hold: str, periodic: bool):
+        self.model, self.p, self.dt, self.hold, self.periodic = model, p, dt, hold, periodic
+        logk = np.log(stiffness)
+        N = logk.size
+        starts = [0]
+        ref = logk[0]
+        for i in range(1, N if np.ptp(logk) > 2e-3 else 0):
+            if abs(logk[i] - ref) > 2e-3:
+                starts.append(i)
+                ref = logk[i]
+        starts.append(N)
+        if len(starts) > 2 + N // 50:   # many short blocks: warn if they come from noise, not a drift
+            levels = np.array([np.mean(logk[a:b]) for a, b in zip(starts[:-1], starts[1:])])
+            steps = np.sign(np.diff(levels))
+            if np.mean(steps[1:] != steps[:-1]) > 0.3:
+                warnings.warn(f"the RH record looks noisy: the stiffness jumps back and forth every "
+                              f"{N / (len(starts) - 1):.0f} samples on average and each jump restarts the mechanics; "
+                              "pass a smoothed RH (e.g. physics.compare.model_rh)", stacklevel=4)
+        self.blocks = [(b0, b1, float(np.exp(np.mean(logk[b0:b1])))) for b0, b1 in zip(starts[:-1], starts[1:])]
+        self.block, self.k, self.stage, self.last, self.drop = -1, 0, None, None, 0
+
+    def push(self, loads: np.ndarray) -> np.ndarray:
+        out, m, i = [], loads.shape[1], 0
+        while i < m:
+            if self.stage is None:
+                self._next_block()
+            b1 = self.blocks[self.block][1]
+            j = min(m, i + b1 - self.k)
+            out.append(self._emit(self.stage.push(loads[:, None, i:j])))
+            self.k += j - i
+            self.last = loads[:, j - 1]
+            i = j
+            if self.k == b1 and self.block + 1 < len(self.blocks):
+                out.append(self._emit(self.stage.finish()))
+                self.x, self.stage = self.stage.x, None
+        return np.concatenate(out) if out else np.zeros(0)
+
+    def finish(self) -> np.ndarray:
+        return self._emit(self.stage.finish())
+
+    def _next_block(self) -> None:
+        """Start the next block; after the first, it begins one sample early (the last
+        sample of the previous block, whose output is dropped) with the state there."""
+        self.block += 1
+        b0, _, stiffness = self.blocks[self.block]
+        ss = beam_statespace(self.model, self.p, stiffness)
+        if b0 == 0:
+            self.stage = _Stage(ss, self.dt, self.hold, self.periodic, lambda u0: _steady_state_multi(ss, u0[:, 0]))
+            return
+        x = self.x
+        self.stage = _Stage(ss, self.dt, self.hold, self.periodic, lambda u0: x)
+        self.drop = 1
+        self.stage.push(self.last[:, None, None])
+
+    def _emit(self, y: np.ndarray) -> np.ndarray:
+        """The tip samples of a stage output (1, 1, k), without the overlap sample."""
+        y = y[0, 0]
+        k = min(self.drop, y.size)
+        self.drop -= k
+        return y[k:]
 
 
 def _steady_state_multi(ss: StateSpace, u0: np.ndarray) -> np.ndarray:

@@ -65,9 +65,10 @@ def test_right_model_scores_well_and_wrong_model_badly(model, records, result):
 def test_metrics_follow_their_definitions(result):
     r = result.records[0]
     tm = r.summary["time_metrics"]
-    assert tm["fit_percent"] == pytest.approx(metrics.fit_percent(r.measured, r.predicted))
+    assert tm["fit_percent"] == pytest.approx(metrics.fit_percent(r.measured - r.offset, r.predicted))
     assert tm["correlation"] == pytest.approx(metrics.correlation(r.measured, r.predicted))
-    assert np.mean(r.measured - r.predicted) == pytest.approx(0.0, abs=1e-12)   # best offset removed
+    assert np.mean(r.measured - r.offset - r.predicted) == pytest.approx(0.0, abs=1e-12)   # best offset removed
+    assert tm["offset_removed_m"] == r.offset
     v = r.valid
     j = math.sqrt(np.mean((np.abs(r.H_meas[v]) - np.abs(r.H_model_closed[v])) ** 2))   # eq. 13
     assert r.summary["frf_metrics"]["j_err_m_per_V"] == pytest.approx(j)

@@ -111,12 +111,17 @@ def test_time_blocks_of_the_modal_recursion_change_nothing(monkeypatch, periodic
     assert np.max(np.abs(many.current - one.current)) < 1e-12 * np.max(np.abs(one.current))
 
 
-def test_long_records_do_not_hold_a_row_per_segment():
-    """Memory of the linear time solver grows with the record as a few rows, not as one
-    row per electrode segment (the line model has up to 128): tracemalloc's peak grows by
-    less than 30 float64 per extra sample from 200,000 to 400,000 samples (the fixed part
-    — time blocks of the recursion, realisations — cancels in the difference)."""
+def test_long_records_do_not_hold_a_row_per_segment(monkeypatch):
+    """Memory of the linear time solver grows with the record as its outputs (deflection,
+    current, solvent excess ±, RH: 5 rows), not as one row per electrode segment (the line
+    model has up to 128) nor as the stages' intermediate rows (the record runs in pieces of
+    timedomain.PIECE_SAMPLES, here 2^15 so that both records span several): tracemalloc's
+    peak grows by less than 6 float64 per extra sample from 200,000 to 400,000 samples (the
+    whole-record solver took 14; the fixed part — a piece, time blocks, realisations —
+    cancels in the difference)."""
     import tracemalloc
+    from physics import timedomain
+    monkeypatch.setattr(timedomain, "PIECE_SAMPLES", 1 << 15)
     model = ActuatorModel("ip2c_pedot_water", "linear")
     simulate(model, None, np.arange(1000) / 1e3, np.zeros(1000), rh=60)     # warm caches (realisations, modes)
     peaks = []
@@ -130,4 +135,57 @@ def test_long_records_do_not_hold_a_row_per_segment():
         assert r.deflection.size == n
     per_sample = (peaks[1] - peaks[0]) / 200_000 / 8
     assert model.stages["line"].id == "electrode_resistance"
-    assert per_sample < 30, f"{per_sample:.1f} float64 per sample"
+    assert per_sample < 6, f"{per_sample:.1f} float64 per sample"
+
+
+@pytest.mark.parametrize("effects", ["default", "default,nonlinear_charge"])
+def test_pieces_of_the_record_change_nothing(monkeypatch, effects):
+    """A record runs through the stages in pieces (states carried over); the piece length
+    is an implementation detail: pieces of 997 samples (odd, so they straddle the humidity
+    blocks of the mechanics and the time blocks of the recursion) give the whole-record
+    result to rounding, for every default effect with a varying RH and with a nonlinear one."""
+    from physics import lti, timedomain
+    n = 6000 if effects == "default" else 2500
+    t = np.arange(n) / 1000.0
+    v = np.sin(2 * np.pi * 3.1 * t) + 0.4 * np.sign(np.sin(2 * np.pi * 0.9 * t))
+    rh = 60.0 + 15.0 * np.tanh((t - t[-1] / 2) / 0.5)          # a humidity step: several mechanics blocks
+    model = ActuatorModel("ip2c_pedot_water", effects)
+    fields = ("cation", "voltage") if effects == "default" else ()
+    monkeypatch.setattr(timedomain, "PIECE_SAMPLES", 10 ** 9)
+    whole = simulate(model, None, t, v, rh=rh, hold="linear", fields=fields)
+    monkeypatch.setattr(timedomain, "PIECE_SAMPLES", 997)
+    monkeypatch.setattr(lti, "_BLOCK", 301)
+    pieces = simulate(model, None, t, v, rh=rh, hold="linear", fields=fields)
+    for name in ("deflection", "current", "cs_up"):
+        a, b = getattr(whole, name), getattr(pieces, name)
+        assert np.max(np.abs(b - a)) < 1e-12 * np.max(np.abs(a)), name
+    for name, a in whole.fields.items():
+        assert np.max(np.abs(pieces.fields[name] - a)) < 1e-12 * np.max(np.abs(a)), name
+    assert np.ptp(whole.deflection) > 0 and np.ptp(rh) > 20
+
+
+@pytest.mark.parametrize("hold", ["cubic", "linear"])
+def test_streamed_state_space_equals_the_whole_record(hold):
+    """lti.Stream fed in uneven pieces (down to one sample) gives simulate()'s outputs and
+    final state, for a diagonalisable system and for a defective one (Jordan block: the
+    matrix-exponential recursion)."""
+    from physics import lti
+    rng = np.random.default_rng(3)
+    systems = [lti.StateSpace(rng.normal(size=(4, 4)) - 3 * np.eye(4), rng.normal(size=(4, 2)),
+                              rng.normal(size=(2, 4)), rng.normal(size=(2, 2))),
+               lti.StateSpace([[-2.0, 1.0], [0.0, -2.0]], [[0.0, 1.0], [1.0, 0.5]], [[1.0, 0.3]], [[0.1, 0.0]])]
+    for ss in systems:
+        u = np.cumsum(rng.normal(size=(2, 3, 700)), axis=-1) * 0.1
+        x0 = rng.normal(size=(ss.n_states, 3))
+        y, xf = lti.simulate(ss, u, 1e-2, x0=x0, hold=hold)
+        s = lti.Stream(ss, 1e-2, x0, hold, batch=3)
+        cuts = [1, 2, 3, 50, 51, 400]
+        ys = np.concatenate([s.push(p) for p in np.split(u, cuts, axis=-1)] + [s.finish()], axis=-1)
+        assert ys.shape == y.shape
+        assert np.max(np.abs(ys - y)) < 1e-12 * np.max(np.abs(y))
+        assert np.max(np.abs(s.x - xf)) < 1e-12 * np.max(np.abs(xf))
+        for n in (1, 2, 3):                  # records too short for the hold, as simulate() treats them
+            y, xf = lti.simulate(ss, u[..., :n], 1e-2, x0=x0, hold=hold)
+            s = lti.Stream(ss, 1e-2, x0, hold, batch=3)
+            ys = np.concatenate([s.push(u[..., k:k + 1]) for k in range(n)] + [s.finish()], axis=-1)
+            assert ys.shape == y.shape and np.allclose(ys, y, rtol=1e-12, atol=0) and np.allclose(s.x, xf)

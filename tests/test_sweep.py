@@ -94,3 +94,29 @@ def test_this_process_and_the_workers_share_the_queue_in_task_order():
     mine = pids.count(os.getpid())
     assert 0 < mine < len(pids), f"this process ran {mine} of {len(pids)} tasks: the worker never joined"
     assert len(set(pids)) == 2
+
+
+def _warn_and_pid(task):
+    import os
+    import time
+    import warnings
+    time.sleep(0.1)
+    warnings.warn(f"task {task['x']} looks odd", UserWarning)
+    return os.getpid()
+
+
+def test_warnings_of_worker_processes_read_like_the_command_s_own(capsys):
+    """A warning raised in a Dask worker process comes back with its result and is given in
+    this process, so the command line shows it as one ``eap CMD: warning: …`` line (as a
+    warning of this process), not as the worker's raw UserWarning print-out."""
+    import os
+    import warnings
+    from nnmodel.cli import _notice
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = _notice("sweep")
+        pids = map_tasks(_warn_and_pid, [{"x": i} for i in range(40)], ParallelSettings(2), progress=False)
+    assert any(p != os.getpid() for p in pids), "no task ran on the worker"
+    err = capsys.readouterr().err.splitlines()
+    for i in range(40):
+        assert f"eap sweep: warning: task {i} looks odd" in err

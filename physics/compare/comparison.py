@@ -26,8 +26,9 @@ class RecordComparison:
     kind: str                          # "timeseries" or "frf"
     rh: float
     time: np.ndarray | None = None
-    measured: np.ndarray | None = None     # offset-aligned measurement [m]
+    measured: np.ndarray | None = None     # the measurement as read [m] (no copy of a long record)
     predicted: np.ndarray | None = None    # model output [m]
+    offset: float = 0.0                    # removed from measured before the time metrics [m]
     freq: np.ndarray | None = None
     H_meas: np.ndarray | None = None
     H_model_est: np.ndarray | None = None
@@ -162,11 +163,15 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     if ts.n - i0 < 3:
         raise InputError(f"{where}: skip_s={skip_s:g} s leaves fewer than 3 samples")
     c = float(np.mean(y[i0:]) - np.mean(yhat[i0:])) if offset == "mean" else 0.0   # no residual copy
-    y_al = y - c
-    tm = metrics.summary(y_al[i0:], yhat[i0:])
+    y_al = y[i0:] - c             # for the metrics only: the record keeps y and the offset
+    tm = metrics.summary(y_al, yhat[i0:])
+    del y_al
     tm["offset_removed_m"] = c
     tm["skip_s"] = skip_s
-    tm["residual_tests"] = residual_tests(y_al[i0:] - yhat[i0:], ts.voltage[i0:])
+    e = y[i0:] - yhat[i0:]
+    e -= c
+    tm["residual_tests"] = residual_tests(e, ts.voltage[i0:])
+    del e
     # frequency domain
     log(f"{Path(where).name}: residual tests done; frequency-response estimates")
     settings = opts.settings_for(ts)
@@ -185,8 +190,8 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
         pos = sel & (f > 0)
         Hc[pos] = predictor.frequency_response(f[pos], mean) * sensor_response(f[pos], bw)
     t = ts.time - ts.time[0] if ts.time[0] else ts.time     # no copy for a record that starts at 0 s
-    rec = RecordComparison(where, "timeseries", mean, time=t, measured=y_al,
-                           predicted=yhat, freq=f, H_meas=est_m.response, H_model_est=est_p.response,
+    rec = RecordComparison(where, "timeseries", mean, time=t, measured=y,
+                           predicted=yhat, offset=c, freq=f, H_meas=est_m.response, H_model_est=est_p.response,
                            H_model_closed=Hc, coherence=est_m.coherence, mag_bounds=est_m.mag_bounds,
                            valid=sel)
     fe = frf_errors(f, est_m.response, rec.H_model, sel)
@@ -235,9 +240,11 @@ def _band_errors(r: RecordComparison, bands):
     rows = []
     if r.kind == "timeseries":
         fs = r.summary["fs_Hz"]
-        e = r.measured - r.predicted
         i0 = int(math.ceil(r.summary["time_metrics"]["skip_s"] * fs))
-        tb = residual_by_band(e[i0:], r.measured[i0:], fs, bands)
+        e = r.measured[i0:] - r.predicted[i0:]
+        e -= r.offset
+        tb = residual_by_band(e, r.measured[i0:], fs, bands)
+        del e
     else:
         tb = [{} for _ in bands]
     for k, ((lo, hi), t) in enumerate(zip(bands, tb)):

@@ -9,7 +9,7 @@ from scipy import signal as sps
 
 from .. import metrics
 from ..errors import InputError
-from ..frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level
+from ..frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level, power_spectrum
 from ..timeseries import TimeSeries
 
 
@@ -215,29 +215,25 @@ def frf_errors(freq, H_meas, H_model, mask=None) -> dict:
 def residual_by_band(e: np.ndarray, y: np.ndarray, fs: float, bands) -> list[dict]:
     """RMS of the residual ``e`` [m] within each band and its ratio to the RMS of the
     (offset-free) measurement ``y`` in that band (one-sided spectra, Parseval).  Each
-    spectrum is reduced to its cumulative power at once, so a long record costs a few
-    bytes per sample."""
+    spectrum is reduced to its band sums at once, so a long record costs its spectrum."""
     n = e.size
     f = np.fft.rfftfreq(n, 1.0 / fs)
+    ranges = [(int(np.searchsorted(f, lo, "left")),
+               int(np.searchsorted(f, hi, "right" if hi == bands[-1][1] else "left"))) for lo, hi in bands]
+    del f
 
-    def cumulative_power(x, offset_free: bool = False):   # Σ w |X|² up to each frequency (w = 2 but DC, Nyquist)
-        X = np.fft.rfft(x)
-        if offset_free:   # the mean removed: only the DC line changes
-            X[0] = 0.0
-        p = X.real ** 2 + X.imag ** 2
-        del X
+    def band_power(x, offset_free: bool = False):   # Σ w |X|² per band (w = 2 but DC, Nyquist)
+        p = power_spectrum(x, zero_dc=offset_free)    # the mean removed: only the DC line changes
         p *= 2.0
         p[0] /= 2.0
         if n % 2 == 0:
             p[-1] /= 2.0
-        return np.concatenate([[0.0], np.cumsum(p)])
+        return [float(np.sum(p[a:b])) for a, b in ranges]
 
-    ce, cy = cumulative_power(e), cumulative_power(y, offset_free=True)
+    ce, cy = band_power(e), band_power(y, offset_free=True)
     out = []
-    for lo, hi in bands:
-        a = int(np.searchsorted(f, lo, "left"))
-        b = int(np.searchsorted(f, hi, "right" if hi == bands[-1][1] else "left"))
-        pe, py = (ce[b] - ce[a]) / n ** 2, (cy[b] - cy[a]) / n ** 2
+    for (lo, hi), se, sy in zip(bands, ce, cy):
+        pe, py = se / n ** 2, sy / n ** 2
         out.append({"band_Hz": [lo, hi], "residual_rms_m": math.sqrt(max(pe, 0.0)),
                     "nrmse_in_band": math.sqrt(pe / py) if py > 0 else None})
     return out

@@ -21,8 +21,8 @@ def _display(output: OutputQuantity, magnitude: float | None = None) -> tuple[fl
 def _magnitude(res: ComparisonResult) -> float | None:
     """The largest measured output of the time records: the page reads every output value
     in the unit that shows it as 0.1–1000."""
-    peaks = [float(np.max(np.abs(r.measured))) for r in res.records
-             if r.kind == "timeseries" and r.measured is not None and np.size(r.measured)]
+    peaks = [max(abs(float(np.max(r.measured)) - r.offset), abs(float(np.min(r.measured)) - r.offset))
+             for r in res.records if r.kind == "timeseries" and r.measured is not None and np.size(r.measured)]
     return max(peaks) if peaks else None
 
 
@@ -38,18 +38,22 @@ def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float 
     from ..plotting import envelope, legend_outside, save
     k, unit, name = _display(output, magnitude)
     fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
-    ax[0].plot(*envelope(r.time, k * r.measured), lw=0.7, label="measured")
-    ax[0].plot(*envelope(r.time, k * r.predicted), lw=0.7, label="model")
+
+    def line(a, t, y, shift=0.0, **kw):   # thinned, then shifted and scaled: no copy of a long record
+        tt, yy = envelope(t, y)
+        a.plot(tt, k * (yy - shift), **kw)
+    line(ax[0], r.time, r.measured, r.offset, lw=0.7, label="measured")     # aligned with the model
+    line(ax[0], r.time, r.predicted, lw=0.7, label="model")
     ax[0].set_ylabel(f"{name} [{unit}]")
     legend_outside(ax[0])
-    ax[1].plot(*envelope(r.time, k * (r.measured - r.predicted)), lw=0.6, color="k")
+    line(ax[1], r.time, r.measured - r.predicted, r.offset, lw=0.6, color="k")
     ax[1].set_ylabel(f"residual [{unit}]")
     ax[1].sharex(ax[0])
     span = float(r.time[-1] - r.time[0])
     zoom = min(2.0, 0.1 * span) if zoom_s is None else float(zoom_s)
     z = r.time >= r.time[-1] - zoom
-    ax[2].plot(*envelope(r.time[z], k * r.measured[z]), lw=0.9, label="measured")
-    ax[2].plot(*envelope(r.time[z], k * r.predicted[z]), lw=0.9, ls="--", label="model")
+    line(ax[2], r.time[z], r.measured[z], r.offset, lw=0.9, label="measured")
+    line(ax[2], r.time[z], r.predicted[z], lw=0.9, ls="--", label="model")
     ax[2].set_ylabel(f"last {zoom:.3g} s [{unit}]")
     ax[2].set_xlabel("time [s]")
     for a in ax:
