@@ -232,3 +232,23 @@ def test_to_frfdata_exports_only_excited_frequencies(tmp_path):
 def test_estimate_frf_rejects_bad_input(call, msg):
     with pytest.raises(InputError, match=msg):
         call(noise_input(4096, seed=0))
+
+
+def test_period_matches_a_direct_correlation():
+    """_period (one single-precision FFT) finds the lag a direct float64 correlation finds:
+    the first lag whose normalised correlation over the overlap reaches the threshold."""
+    from physics.frf_estimation import PERIODIC_CORRELATION, _period
+    rng = np.random.default_rng(3)
+    n = 3000
+    for L, noise in [(137, 0.05), (611, 0.1), (900, 0.2), (None, 1.0)]:
+        base = rng.standard_normal(L or n)
+        x = np.resize(base, n) + noise * rng.standard_normal(n)
+        x -= x.mean()
+        rho = np.array([x[k:] @ x[:n - k] / np.sqrt((x[k:] @ x[k:]) * (x[:n - k] @ x[:n - k]))
+                        for k in range(8, n // 2 + 1)])
+        hits = np.flatnonzero(rho >= PERIODIC_CORRELATION)
+        expected = None if hits.size == 0 else 8 + hits[0]
+        got = _period(x, 1.0)
+        assert (got is None) == (expected is None), (L, noise, got, expected)
+        if expected is not None:
+            assert got == expected == L
