@@ -341,6 +341,8 @@ PERIODIC_CORRELATION = 0.98
 #: correlation of at least this over at least SWEEP_DECADES decades.
 SWEEP_RANK = 0.9
 SWEEP_DECADES = 0.6
+#: Samples per block when scanning a long record for jumps (bounds the temporaries).
+_BLOCK = 1 << 18
 
 
 def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
@@ -357,26 +359,30 @@ def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
     n = x.size
     lo, hi = np.percentile(x, [0.5, 99.5])
     span = float(hi - lo)
-    if span <= 0 or not np.any(x - x.mean()):
+    if span <= 0 or x.max() == x.min():
         raise InputError(f"{source + ': ' if source else ''}the voltage is constant; nothing is excited")
-    X = power_spectrum(x, zero_dc=True)             # of x − mean(x)
-    f = np.fft.rfftfreq(n, 1.0 / fs)
-    cum = np.cumsum(X[1:]) / X[1:].sum()
-    band = (float(max(f[1:][np.searchsorted(cum, 0.005)], f[1])),
-            float(min(f[1:][min(np.searchsorted(cum, 0.995), cum.size - 1)], fs / 2)))
+    X = power_spectrum(x, zero_dc=True)             # of x − mean(x); line k is at k·fs/n Hz
+    df = fs / n
+    cum = np.cumsum(X[1:])
+    cum /= cum[-1]
+    band = (float(max((np.searchsorted(cum, 0.005) + 1) * df, df)),
+            float(min((min(np.searchsorted(cum, 0.995), cum.size - 1) + 1) * df, fs / 2)))
+    del cum
     # steps: a few levels and jumps between them
     counts, _ = np.histogram(x, bins=np.arange(lo - 0.01 * span, hi + 0.03 * span, 0.02 * span))
     top = np.sort(counts)[::-1][:8].sum() / n
     k = max(1, int(round(0.02 * fs)))
-    jumps = bool(np.any(np.abs(x[k:] - x[:-k]) > 0.3 * span))
+    jumps = _jumps(x, k, 0.3 * span)
     if top >= STEP_LEVEL_FRACTION and jumps:
         return Excitation("steps", (1.0 / (n / fs), min(fs / 2, 50.0)),
                           how=f"piecewise constant: {100 * top:.0f} % of the samples on a few levels")
     kmax = int(np.argmax(X[1:])) + 1
-    near = np.abs(f - f[kmax]) <= 2.5 * fs / n
-    if X[near].sum() > 0.9 * X[1:].sum():
-        return Excitation("tone", (float(f[kmax]), float(f[kmax])), tone_hz=float(f[kmax]),
-                          how=f"one line at {f[kmax]:.4g} Hz holds {100 * X[near].sum() / X[1:].sum():.0f} % of the power")
+    near = X[max(kmax - 2, 0):kmax + 3].sum()       # the lines within 2.5 fs/n of the peak
+    if near > 0.9 * X[1:].sum():
+        f_tone = kmax * df
+        return Excitation("tone", (f_tone, f_tone), tone_hz=f_tone,
+                          how=f"one line at {f_tone:.4g} Hz holds {100 * near / X[1:].sum():.0f} % of the power")
+    del X
     period = _period(x - x.mean(), fs)
     if period is not None:
         return Excitation("periodic", band, period_s=period,
@@ -388,6 +394,16 @@ def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
     if band[1] > 2 * band[0]:
         return Excitation("noise", band, how="stationary broadband (no period, no monotone sweep)")
     return Excitation("other", band, how="narrow band, neither a tone nor a sweep")
+
+
+def _jumps(x: np.ndarray, k: int, size: float) -> bool:
+    """Whether |x[j + k] − x[j]| > size anywhere, scanned in blocks (no record-long temporaries)."""
+    n = x.size
+    for i in range(0, max(n - k, 0), _BLOCK):
+        j = min(i + _BLOCK, n - k)
+        if np.any(np.abs(x[i + k:j + k] - x[i:j]) > size):
+            return True
+    return False
 
 
 def _period(x: np.ndarray, fs: float) -> float | None:

@@ -252,3 +252,17 @@ def test_period_matches_a_direct_correlation():
         assert (got is None) == (expected is None), (L, noise, got, expected)
         if expected is not None:
             assert got == expected == L
+
+
+def test_jump_scan_in_blocks_matches_the_whole_record(monkeypatch):
+    """The blockwise jump scan of detect_excitation sees a jump wherever it lies, block edges included."""
+    import physics.frf_estimation as fe
+    monkeypatch.setattr(fe, "_BLOCK", 7)
+    x = np.zeros(100)
+    for at in (3, 6, 7, 13, 14, 60, 99):
+        y = x.copy()
+        y[at:] = 1.0
+        for k in (1, 3, 5):
+            direct = bool(np.any(np.abs(y[k:] - y[:-k]) > 0.5))
+            assert fe._jumps(y, k, 0.5) == direct
+    assert not fe._jumps(x, 3, 0.5)
