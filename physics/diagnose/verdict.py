@@ -81,6 +81,8 @@ def label_of(weight: float) -> str:
 
 
 def _on_bound(prm, value: float) -> bool:
+    if not prm.lower < value < prm.upper:          # at or past a bound; the off value 0 of a log-scaled one too
+        return True
     x, (lo, hi) = float(prm.to_x(value)), prm.x_bounds
     tol = 1e-3 * max(1.0, hi - lo) if prm.scale == "linear" else 1e-3
     return x <= lo + tol or x >= hi - tol
