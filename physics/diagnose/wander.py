@@ -191,17 +191,18 @@ def shared_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wa
     generalised least squares, its τ) leaves: 1 when the records wander independently at the
     scale ``wander`` assumed by the whitening (the slow components are a random walk's, the white
     noise's share is small), so ``wander``·σ̂ is the wander the records do not share, estimated
-    on all Rd components (:func:`slow_wander` sees the broadband records only).  A shared drift that is nearly a straight line over the records
-    is told from a random walk's trend only as far as its size exceeds the walk's spread."""
-    got = "no slow wander to split"
+    on all Rd components (:func:`slow_wander` sees the broadband records only).  A shared drift
+    that is nearly a straight line over the records is told from a random walk's trend only as
+    far as its size exceeds the walk's spread."""
+    got, taus = "no slow wander to split", ()
     if math.isfinite(wander) and wander > 0:
         span = min(e.size / r.fs_d for r, e in zip(records, resid_d)) if records else 0.0
-        got = slow_components(records, resid_d, nuisance, wander, tau_grid(span) if span > 0 else ())
+        taus = tau_grid(span) if span > 0 else ()
+        got = slow_components(records, resid_d, nuisance, wander, taus)
     if isinstance(got, str):
         return WanderSplit(math.nan, math.nan, len(records), 0, got)
     u, h, d = got
     R = len(u)
-    taus = tau_grid(min(e.size / r.fs_d for r, e in zip(records, resid_d)))
     stat = float(_shared_statistic(u, h))
     null = _shared_statistic(np.random.default_rng(0).normal(size=(NULL_DRAWS, R, d)), h)
     p = float((1 + np.count_nonzero(null >= stat)) / (NULL_DRAWS + 1))
