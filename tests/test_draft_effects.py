@@ -251,16 +251,19 @@ def test_lab_like_drift_loop_from_the_command_line(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_a_drift_shared_by_lab_records_is_not_taken_for_the_sensors_wander(tmp_path, capsys):
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_drift_shared_by_lab_records_is_not_taken_for_the_sensors_wander(tmp_path, capsys, seed):
     """Lab exports (no sensor metadata: the noise floor is estimated, a random-walk sensor drift
     in every record) with a drift A(1 − e^(−t/τ)) the same in both records: the floor does not
     count the shared part, so the drift is described and drafted, and with the draft the error
-    falls by at least half its distance to the noise floor."""
+    falls by at least half its distance to the noise floor — also when the base is within
+    1.3× the floor (seed 0: 1.14×), a drift the records share being structure whatever its size;
+    the draft passed back is the verdict with confidence high (its slow trend is seen)."""
     import json
     from nnmodel.cli import main
     from physics.diagnose.demo import outside_catalog_case
     from physics.timeseries import write_timeseries
-    ms, tp = outside_catalog_case("drift", seed=1, fs=200.0, duration=60.0, lab=True)
+    ms, tp = outside_catalog_case("drift", seed=seed, fs=200.0, duration=60.0, lab=True)
     files = [str(write_timeseries(m, tmp_path / f"{m.source}.csv", units={"deflection": "mm"})) for m in ms]
     drafts = tmp_path / "drafts"
     assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx"), "--quiet",
@@ -274,6 +277,7 @@ def test_a_drift_shared_by_lab_records_is_not_taken_for_the_sensors_wander(tmp_p
     after = json.loads((tmp_path / "dx2" / "diagnosis.json").read_text())
     unregister("drafted_drift")
     assert after["verdict"]["chain"][0]["effect"] == "drafted_drift"
+    assert after["verdict"]["chain"][0]["confidence_label"] == "high"
     e0, e1, nf = before["base"]["rmse"], after["ranking"][0]["rmse_after"], before["noise_floor_m"]
     assert e1 <= e0 - 0.5 * (e0 - nf), (e0, e1, nf)
 

@@ -42,6 +42,8 @@ class Adequacy:
     descriptors: list[dict] = field(default_factory=list)
     #: the residual forms (:class:`.forms.FormFit`) behind ``descriptors``
     forms: list = field(default_factory=list, repr=False)
+    #: significant structure left within the ratio (a drift the records share), "" when none
+    structure: str = ""
 
     @property
     def ratio(self) -> float:
@@ -52,7 +54,9 @@ class Adequacy:
         if self.adequate is None:
             return f"{self.model}: noise floor unknown, adequacy not assessed"
         txt = (f"{self.model}: RMS error {1e6 * self.rmse:.3g} µm = {self.ratio:.2f}× the noise floor "
-               f"({'within' if self.adequate else 'above'} {ADEQUATE_RATIO}×)")
+               f"({'within' if self.ratio <= ADEQUATE_RATIO else 'above'} {ADEQUATE_RATIO}×)")
+        if self.structure:
+            txt += f", but {self.structure}"
         found = self.remaining()
         if found:
             txt += "; remaining: " + "; ".join(d["text"] for d in found)
@@ -68,15 +72,21 @@ class Adequacy:
     def to_dict(self) -> dict:
         return {"model": self.model, "rmse_m": self.rmse, "noise_floor_m": self.noise_floor,
                 "ratio": self.ratio, "adequate": self.adequate, "threshold_ratio": ADEQUATE_RATIO,
-                "ljung_box_p": self.ljung_box_p, "descriptors": self.descriptors, "summary": self.summary()}
+                "ljung_box_p": self.ljung_box_p, "descriptors": self.descriptors, "structure": self.structure,
+                "summary": self.summary()}
 
 
-def assess(label: str, fit, records: Sequence, noise: float, describe: bool = True) -> Adequacy:
+def assess(label: str, fit, records: Sequence, noise: float, describe: bool = True, structure: str = "") -> Adequacy:
     """Adequacy of ``fit`` (a scored :class:`.candidates.ModelFit`) on ``records``; with
-    ``describe`` the residual of an inadequate model is described (:func:`.forms.describe`)."""
-    adequate = None if not (math.isfinite(noise) and noise > 0) else bool(fit.rmse <= ADEQUATE_RATIO * noise)
+    ``describe`` the residual of an inadequate model is described (:func:`.forms.describe`).
+    ``structure``: a sentence naming significant deterministic structure the residual holds
+    whatever its size (a drift the records share, :func:`.wander.shared_wander`): the model
+    is then not adequate even within the ratio, and what remains is described."""
+    adequate = None if not (math.isfinite(noise) and noise > 0) else \
+        bool(fit.rmse <= ADEQUATE_RATIO * noise and not structure)
     lb = stats.ljung_box(np.concatenate(list(fit.resid_d)), lags=20)
-    out = Adequacy(label, float(fit.rmse), float(noise), adequate, float(lb.get("p_value", math.nan)))
+    out = Adequacy(label, float(fit.rmse), float(noise), adequate, float(lb.get("p_value", math.nan)),
+                   structure=structure if adequate is not None else "")
     if adequate is not True and describe:
         out.forms = forms.describe(fit, records)
         out.descriptors = [ff.to_dict() for ff in out.forms]

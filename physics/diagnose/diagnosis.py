@@ -48,7 +48,7 @@ from ..parallel import map_tasks, warm_up
 from ..threads import single_threaded
 from . import candidates as C
 from .adequacy import Adequacy, assess
-from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records
+from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records, stated_drift
 from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
@@ -158,6 +158,7 @@ class Data:
     wander: float = 0.0               # slow wander added to it [m] (:func:`add_wander`)
     wander_total: float = 0.0         # the whole slow wander [m], the records' shared part included
     wander_split: object = None       # what the records share of it (:class:`.wander.WanderSplit`)
+    wander_beyond: float = 0.0        # floor from sensor metadata: the wander beyond their stated drift [m]
 
     @property
     def estimated(self) -> bool:
@@ -304,24 +305,32 @@ def read_records(measurements, options: FitOptions, *, noise_floor: float | None
 
 
 def add_wander(data: Data, fits) -> None:
-    """When the noise floors were estimated from the records (white part only), add the slow
-    wander below the excited band (:func:`.wander.slow_wander`): a drift beyond the removed
-    linear trend is noise for the adequacy, not physics — but only the part the records do not
-    share (:func:`.wander.shared_wander`): a drift common to the records is deterministic, left to
-    be described (and drafted).  The least such wander any of ``fits`` leaves counts (so the
-    floor never grows when a pick is added)."""
-    if not data.estimated or not math.isfinite(data.white):
+    """Add to the noise floor the slow wander below the excited band (:func:`.wander.slow_wander`)
+    when the floors were estimated from the records (white part only): a drift beyond the
+    removed linear trend is noise for the adequacy, not physics — but only the part the
+    records do not share (:func:`.wander.shared_wander`): a drift common to the records is
+    deterministic, left to be described (and drafted).  The least such wander any of ``fits``
+    leaves counts (so the floor never grows when a pick is added).  When the floors come from
+    sensor metadata (which state the sensor's drift) the floor stays; the unshared wander
+    beyond the stated drift is kept in ``data.wander_beyond`` for the verdict
+    (:func:`build_verdict`).  A floor the user gave is taken as the whole noise."""
+    if not math.isfinite(data.white) or any(r.noise_source == "given" for r in data.records):
         return
     ws = []
     for f in fits:
-        w = slow_wander(data.records, f.resid_d, f.nuisance)
-        if math.isfinite(w):
-            split = shared_wander(data.records, f.resid_d, f.nuisance, w)
+        w, split = wander_of(data, f)
+        if split is not None:
             ws.append((w * math.sqrt(1.0 - split.fraction) if split.testable else w, w, split))
     if not ws:
         return
     counted, w, split = min(ws, key=lambda x: x[0])
-    data.wander, data.wander_total, data.wander_split = counted, w, split
+    data.wander_total, data.wander_split = w, split
+    if not data.estimated:
+        allowed = math.sqrt(sum(r.ts.n * stated_drift(r.ts) ** 2 for r in data.records) /
+                            sum(r.ts.n for r in data.records))
+        data.wander_beyond = math.sqrt(max(counted ** 2 - allowed ** 2, 0.0))
+        return
+    data.wander = counted
     data.noise = math.sqrt(data.white ** 2 + counted ** 2)
     data.noise_d = math.sqrt(data.white_d ** 2 + counted ** 2) if math.isfinite(data.white_d) else data.noise_d
     data.noise_source = (f"{_noise_source(data.records)}; plus a slow wander of {1e6 * counted:.3g} µm RMS (a drift "
@@ -329,6 +338,39 @@ def add_wander(data: Data, fits) -> None:
                          + (f"; of {1e6 * w:.3g} µm, {split.text()}" if split.testable and split.fraction > 0 else
                             f"; {split.text()}") + ")"
                          if w > 0 else _noise_source(data.records))
+
+
+def wander_of(data: Data, fit) -> tuple[float, object]:
+    """(slow wander [m], what the records share of it) in the residual of ``fit``
+    (:func:`.wander.slow_wander`, :func:`.wander.shared_wander`); (NaN, None) when no record
+    can show it."""
+    w = slow_wander(data.records, fit.resid_d, fit.nuisance)
+    if not math.isfinite(w):
+        return w, None
+    return w, shared_wander(data.records, fit.resid_d, fit.nuisance, w)
+
+
+def features_of(ra: ResidualAnalysis, data: Data, fit, run: Run) -> dict:
+    """The residual features of ``fit`` (:func:`.signatures.features`); a drift the records
+    share (:func:`.wander.shared_wander`, significant) is a ``slow_trend`` whether or not it
+    outlasts the linear trends the nuisance terms take."""
+    feats = features(ra, data.records, run.resonance)
+    _, split = wander_of(data, fit) if math.isfinite(data.white) else (math.nan, None)
+    if split is not None and split.testable and split.fraction > 0:
+        feats["slow_trend"] = {**feats.get("slow_trend", {}), "present": True, "shared_p": split.p_value}
+    return feats
+
+
+def shared_structure(data: Data, fit) -> str:
+    """A sentence when the records share a significant part of the slow residual of ``fit``
+    (a drift of the setup from each record's start: deterministic structure, however small
+    against the noise floor), else ""."""
+    if not math.isfinite(data.white) or len(data.records) < 2:
+        return ""
+    w, split = wander_of(data, fit)
+    if split is None or not (split.testable and split.fraction > 0):
+        return ""
+    return f"its slow wander ({1e6 * w:.3g} µm RMS) holds a drift the records share: {split.text()}"
 
 
 def _noise_source(records) -> str:
@@ -449,7 +491,7 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
         decision = decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
-                          C.prediction_distance, after_pick=k > 1)
+                          C.prediction_distance, after_pick=k > 1, structure=bool(shared_structure(data, step_base)))
         if decision.pick is not None and C.refine_on_time(decision.pick.fit, data.records):
             # the pick refitted on the time records (its FRF optimum is not theirs); the decision stands
             decision.pick.comparison = C.compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
@@ -468,7 +510,7 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         step_base = pick.fit
         ra = analyse(f"+{pick.effect}", data.records, pick.fit.resid_d, pick.fit.pred_d,
                      resonance_hz=_resonance(pick.fit, data.band, data.records))
-        step_feats = features(ra, data.records, run.resonance)
+        step_feats = features_of(ra, data, pick.fit, run)
         run.log(f"step {k + 1}: the remaining candidates on top of {pick.effect}")
     return steps
 
@@ -487,11 +529,12 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
                           list(p.quality), s.decision.reason))
     final = picks and steps[len(picks) - 1].decision.pick.fit or base
     label = "base" + "".join(f" + {p.effect}" for p in picks)
-    ad = assess(label, final, data.records, data.noise)
+    ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final))
     first = steps[0].decision
-    within = math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * data.noise
+    within = (math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * data.noise
+              and not (shared_structure(data, base) if final is not base else ad.structure))
     split = data.wander_split
-    unattributed = (within and split is not None and (not split.testable or split.inconclusive)
+    unattributed = (within and data.estimated and split is not None and (not split.testable or split.inconclusive)
                     and base.rmse > ADEQUATE_RATIO * data.white)
     if unattributed:        # within the noise only by counting a wander the records cannot attribute
         status = UNATTRIBUTED
@@ -510,13 +553,33 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
     elif picks and len(picks) == max_effects and ad.adequate is False:
         stopped = f"the chain reached max_effects = {max_effects}"
     reason = first.reason if not picks else picks[0].reason
+    noise, source = data.noise, data.noise_source
     if unattributed:
         reason = (f"the base leaves {1e6 * base.rmse:.4g} µm, within {ADEQUATE_RATIO}× the noise floor only because "
                   f"the floor counts a slow wander of {1e6 * data.wander:.3g} µm, and {split.why or split.text()}; if "
                   "the sensor does not drift, state its noise floor (eap diagnose --noise-floor-um, noise_floor= in "
                   "Python) and what remains is described and drafted, or record the test again (more records sharpen "
                   "the test)")
-    return Verdict(status, picks, first.weights, ad, base.rmse, data.noise, data.noise_source, reason,
+    elif status == "not explained by the catalog" and kind == "base mismatch" and data.wander_beyond > 0 \
+            and base.rmse <= ADEQUATE_RATIO * math.hypot(data.noise, data.wander_beyond):
+        # nothing the catalog or a form explains, and the base is within the noise once the records' own
+        # wander beyond the sensor's stated drift is counted: a drift of the setup that does not repeat
+        status, noise = UNATTRIBUTED, math.hypot(data.noise, data.wander_beyond)
+        w = 1e6 * data.wander_beyond
+        how = (f"it does not repeat from record to record (shared-drift test p = {split.p_value:.2g})"
+               if split.testable else split.why)
+        source = (f"{data.noise_source}; plus the records' slow wander of {w:.3g} µm RMS beyond the sensor's stated "
+                  "drift (the residual below the excited band, random-walk spectrum assumed)")
+        reason = (f"the base leaves {1e6 * base.rmse:.4g} µm = {base.rmse / data.noise:.2f}× the noise floor the sensor "
+                  f"metadata state ({1e6 * data.noise:.3g} µm), but the records wander slowly by {w:.3g} µm RMS beyond "
+                  f"their linear trends and the sensor's stated drift, independently of the input (below the excited "
+                  f"band) — {how}; counted as noise, that wander makes the floor {1e6 * noise:.3g} µm and the base is "
+                  f"within {ADEQUATE_RATIO}× it. A drift that differs from record to record is not physics and no "
+                  "effect can model it: if the setup should not drift (temperature, the clamp settling), find what "
+                  "does and record the test again")
+        ad = assess(label, final, data.records, noise, describe=False)
+        kind, forms = remaining_of(ad)
+    return Verdict(status, picks, first.weights, ad, base.rmse, noise, source, reason,
                    list(first.ambiguous), first.separating, forms, kind, stopped, first.alpha,
                    nuisance_summary(final, data.records))
 
@@ -630,7 +693,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     run.resonance = _resonance(base, data.band, data.records)
     ra_base = _timed(run, "residual_analysis", analyse, "base", data.records, base.resid_d, base.pred_d,
                      resonance_hz=run.resonance)
-    feats = features(ra_base, data.records, run.resonance)
+    feats = features_of(ra_base, data, base, run)
     steps = select(data, base, cand_ids, feats, run)
     picks = [s.decision.pick for s in steps if s.decision.pick is not None]
     add_wander(data, [base] + [p.fit for p in picks])
@@ -647,7 +710,9 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
                 "candidates": cand_ids, "force": force, "max_effects": run.max_effects, "n_starts": run.n_starts,
                 "options": opts.describe(), "noise_floor_given_m": noise_floor, "fs_max_Hz": fs_max,
                 "noise": {"white_m": data.white, "wander_m": data.wander, "wander_total_m": data.wander_total,
-                          "wander_shared": None if data.wander_split is None else data.wander_split.text(),
+                          "wander_shared": None if data.wander_split is None or not data.estimated
+                          else data.wander_split.text(),
+                          "wander_beyond_stated_drift_m": data.wander_beyond,
                           "floor_m": data.noise,
                           "source": data.noise_source}}
     return DiagnosisResult(dev, data.records, base, steps, support, verdict, ra_base, ra_after, feats, data.noise,

@@ -207,6 +207,14 @@ def sensor_noise_floor(ts: TimeSeries) -> tuple[float, str] | None:
     return None
 
 
+def stated_drift(ts: TimeSeries) -> float:
+    """The slow wander [m RMS] the record's sensor metadata allow beyond the linear trend: a
+    random-walk drift d leaves sqrt(d²/15) (:data:`WALK_AFTER_TREND`); 0 when no drift is stated."""
+    sensor = ts.meta.get("sensor") if isinstance(ts.meta.get("sensor"), dict) else {}
+    d = sensor.get("deflection_drift")
+    return math.sqrt(WALK_AFTER_TREND) * abs(float(d)) if isinstance(d, (int, float)) and math.isfinite(d) else 0.0
+
+
 def deflection_spectrum(ts: TimeSeries) -> tuple[float, float, str]:
     """(white noise level as an RMS over the full band [m], highest frequency where the
     response stands above it [Hz], how the level was found) from the deflection alone
@@ -357,5 +365,5 @@ def amplitude_groups(records: Sequence[Record]) -> dict[float, list[float]]:
 
 
 __all__ = ["Record", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
-           "upsample", "estimate_noise_floor", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
+           "upsample", "estimate_noise_floor", "stated_drift", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
            "FRFOptions"]

@@ -147,13 +147,15 @@ class Decision:
 
 
 def decide(base, ranked: Sequence, noise: float, taus_ref, records,
-           compare_fits, prediction_distance, after_pick: bool = False) -> Decision:
+           compare_fits, prediction_distance, after_pick: bool = False, structure: bool = False) -> Decision:
     """One step: flags, evidence, weights, the pick or the ambiguity (module doc).  ``ranked``
     are the step's evaluated CandidateResults with their comparison to ``base`` (``after_pick``:
-    a later step of the chain, on top of a pick)."""
+    a later step of the chain, on top of a pick; ``structure``: the base's residual holds
+    significant deterministic structure whatever its size — a drift the records share — so
+    a base within the noise floor still has something to explain)."""
     m = max(len(ranked), 1)
     alpha = ALPHA / m
-    within = math.isfinite(noise) and base.rmse <= ADEQUATE_RATIO * noise
+    within = math.isfinite(noise) and base.rmse <= ADEQUATE_RATIO * noise and not structure
     for c in ranked:
         c.quality = quality(c)
         cmp = c.comparison
@@ -365,8 +367,9 @@ class Verdict:
         if ad is None or ad.adequate is None:
             return f"not assessed — the noise floor is unknown ({self.noise_source})."
         verdict = "yes" if ad.adequate else "no"
+        but = f"; but {ad.structure}" if ad.structure else ""
         return (f"{verdict} — {model} leaves {1e6 * ad.rmse:.4g} µm RMS = {ad.ratio:.2f}× the noise floor of "
-                f"{1e6 * self.noise_floor:.3g} µm ({self.noise_source}; adequate within {ADEQUATE_RATIO}×).")
+                f"{1e6 * self.noise_floor:.3g} µm ({self.noise_source}; adequate within {ADEQUATE_RATIO}×){but}.")
 
     def _remaining_text(self) -> str:
         if self.remaining_kind == "described":
