@@ -92,6 +92,10 @@ def test_a_shared_drift_is_found_with_its_time_constant():
     assert len(found) >= 7, [s.p_value for s in splits]
     assert np.median([s.tau for s in found]) == pytest.approx(6.0, rel=0.6)
     assert np.median([s.amplitude for s in found]) == pytest.approx(12e-6, rel=0.3)
+    # its size after each record's offset and trend (what it adds to an error): the true drift's
+    t = np.arange(1200) / 20.0
+    x = drift(t) - np.polyval(np.polyfit(t, drift(t), 1), t)
+    assert np.median([s.rms for s in found]) == pytest.approx(float(np.sqrt(np.mean(x ** 2))), rel=0.3)
 
 
 def test_the_wander_left_as_noise_is_the_records_own():

@@ -48,6 +48,7 @@ from ..parallel import map_tasks, warm_up
 from ..threads import single_threaded
 from . import candidates as C
 from .adequacy import Adequacy, assess
+from .forms import MIN_GAIN
 from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records, stated_drift
 from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
@@ -364,11 +365,13 @@ def features_of(ra: ResidualAnalysis, data: Data, fit, run: Run) -> dict:
 def shared_structure(data: Data, fit) -> str:
     """A sentence when the records share a significant part of the slow residual of ``fit``
     (a drift of the setup from each record's start: deterministic structure, however small
-    against the noise floor), else ""."""
+    against the noise floor) that matters — removing it would lower the RMS error of ``fit``
+    by at least :data:`.forms.MIN_GAIN`, what a residual form must to be described — else ""."""
     if not math.isfinite(data.white) or len(data.records) < 2:
         return ""
     w, split = wander_of(data, fit)
-    if split is None or not (split.testable and split.fraction > 0):
+    if split is None or not (split.testable and split.fraction > 0) \
+            or split.rms < math.sqrt(1.0 - (1.0 - MIN_GAIN) ** 2) * fit.rmse:
         return ""
     return f"its slow wander ({1e6 * w:.3g} µm RMS) holds a drift the records share: {split.text()}"
 

@@ -17,6 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..metrics import remove_nuisance
 from .forms.drift import shape as drift_shape, tau_grid
 from .records import WALK_AFTER_TREND
 
@@ -89,6 +90,7 @@ class WanderSplit:
     why: str = ""            # why it could not be tested
     tau: float = math.nan    # time constant [s] of the shared form that fits best
     amplitude: float = math.nan   # its amplitude A [m] (when significant)
+    rms: float = math.nan    # RMS [m] of that shared form over the records, each record's offset and trend removed
 
     @property
     def testable(self) -> bool:
@@ -212,7 +214,10 @@ def shared_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, wa
     if p >= SHARED_ALPHA:
         return WanderSplit(0.0, p, R, d, tau=tau)
     left = (float(u.ravel() @ u.ravel()) - hu[best] ** 2 / hh[best]) / (R * d - 1)     # σ² of what it leaves
-    return WanderSplit(min(max(1.0 - left, 0.0), 1.0), p, R, d, tau=tau, amplitude=amp)
+    parts = [remove_nuisance(amp * drift_shape(np.arange(e.size) / r.fs_d, [tau])[:, 0]) for r, e in
+             zip(records, resid_d)]
+    rms = math.sqrt(sum(float(x @ x) for x in parts) / sum(x.size for x in parts))
+    return WanderSplit(min(max(1.0 - left, 0.0), 1.0), p, R, d, tau=tau, amplitude=amp, rms=rms)
 
 
 __all__ = ["slow_wander", "shared_wander", "slow_components", "WanderSplit", "WANDER_PER_TREND", "SHARED_ALPHA",
