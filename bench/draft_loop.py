@@ -13,9 +13,9 @@ default effects; a simulator whose base differs a little; their ``drift`` is a r
 different in every record).  The records are written as files and ``eap diagnose`` reads them
 as a user would, with ``--draft-effects``, then again with the kept drafts (``--effects-path``).
 Printed per case: the truth, the first verdict (pick or none, status, RMS error of its final
-model), the noise floor the diagnosis used, the true model's error (scored like the diagnosis:
-each record's offset and linear drift removed), the kept drafts (contract check), the second
-verdict with the drafts' fitted values, and the wall time.  The machine may be shared: the wall
+model), the noise floor its adequacy compares with, the true model's error (scored like the
+diagnosis: each record's offset and linear drift removed), the kept drafts (contract check), the
+second verdict with the drafts' fitted values, and the wall time.  The machine may be shared: the wall
 times are indicative.
 """
 from __future__ import annotations
@@ -81,7 +81,8 @@ def case(suite: str, truth: str, seed: int, tmp: Path) -> dict:
     first = json.loads((tmp / "dx" / "diagnosis.json").read_text())
     drafts = sorted((tmp / "drafts").glob("*.py")) if (tmp / "drafts").is_dir() else []
     checks = dict(re.findall(r"draft: \S*?(\w+\.py): contract check (passed|FAILED)", out))
-    row = {"truth": tp, "true_error_m": true_error, "noise_floor_m": first.get("noise_floor_m"),
+    ad = first["verdict"].get("adequacy") or {}
+    row = {"truth": tp, "true_error_m": true_error, "noise_floor_m": ad.get("noise_floor_m", first.get("noise_floor_m")),
            "base_m": first["base"]["rmse"], "first": _verdict(first), "seconds": [t1],
            "drafts": {p.name: checks.get(p.name, "?") for p in drafts},
            "not_kept": re.findall(r"draft: (\w+) not kept: .*?(lowers the RMS error only|raises the RMS error) "
