@@ -160,6 +160,7 @@ class Data:
     wander_total: float = 0.0         # the whole slow wander [m], the records' shared part included
     wander_split: object = None       # what the records share of it (:class:`.wander.WanderSplit`)
     wander_beyond: float = 0.0        # floor from sensor metadata: the wander beyond their stated drift [m]
+    wanders: dict = field(default_factory=dict)   # (id(fit), rmse) -> (fit, wander, split): :func:`wander_of`
 
     @property
     def estimated(self) -> bool:
@@ -344,11 +345,14 @@ def add_wander(data: Data, fits) -> None:
 def wander_of(data: Data, fit) -> tuple[float, object]:
     """(slow wander [m], what the records share of it) in the residual of ``fit``
     (:func:`.wander.slow_wander`, :func:`.wander.shared_wander`); (NaN, None) when no record
-    can show it."""
-    w = slow_wander(data.records, fit.resid_d, fit.nuisance)
-    if not math.isfinite(w):
-        return w, None
-    return w, shared_wander(data.records, fit.resid_d, fit.nuisance, w)
+    can show it.  Computed once per fit and score (the fit is kept with it, so its id stays its
+    own; a fit refined in place scores anew)."""
+    key = (id(fit), fit.rmse)
+    if key not in data.wanders:
+        w = slow_wander(data.records, fit.resid_d, fit.nuisance)
+        split = shared_wander(data.records, fit.resid_d, fit.nuisance, w) if math.isfinite(w) else None
+        data.wanders[key] = (fit, w, split)
+    return data.wanders[key][1:]
 
 
 def features_of(ra: ResidualAnalysis, data: Data, fit, run: Run) -> dict:
