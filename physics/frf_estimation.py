@@ -96,15 +96,77 @@ class FRFEstimate:
 
 
 def power_spectrum(x: np.ndarray, zero_dc: bool = False) -> np.ndarray:
-    """|X_k|² of the real FFT of ``x`` (k = 0..n/2), squared in the FFT's own buffer, so a
-    long record costs the spectrum and its half (not |X|, |X|² and copies); ``zero_dc``:
-    the line of the mean set to 0 (the spectrum of x − mean(x))."""
-    X = np.fft.rfft(x)
-    if zero_dc:
-        X[0] = 0.0
-    parts = X.view(np.float64).reshape(-1, 2)        # (re, im) per line
-    np.square(parts, out=parts)
-    return parts.sum(axis=1)
+    """|X_k|² of the real FFT of ``x`` (k = 0..n/2); ``zero_dc``: the line of the mean set
+    to 0 (the spectrum of x − mean(x)).  A long record's spectrum is assembled from
+    interleaved parts (:func:`power_blocks`): beside the result it costs the parts' half
+    spectra (n/2 complex values), not the whole FFT's output, work buffers and plan (~24 B
+    per sample) and a squared copy."""
+    n = x.size
+    out = np.empty(n // 2 + 1)
+    for k0, p in power_blocks(lambda r, m: x[r::m], n, zero_dc):
+        out[k0:k0 + p.size] = p
+    return out
+
+
+#: Records of at least this many samples have their spectrum taken in interleaved parts.
+SPLIT_SPECTRUM = 1 << 20
+#: Lines of the spectrum assembled at a time from the parts.
+_LINES = 1 << 16
+
+
+def _split_factor(n: int) -> int:
+    """Parts of a length-``n`` spectrum: the largest divisor of n up to 8, else the
+    smallest up to 16 (1: none, the whole FFT)."""
+    if n < SPLIT_SPECTRUM:
+        return 1
+    small = [m for m in range(2, 9) if n % m == 0]
+    return small[-1] if small else next((m for m in range(9, 17) if n % m == 0), 1)
+
+
+def power_blocks(part, n: int, zero_dc: bool = False):
+    """Yield ``(k0, P)``: P = |X_k|² of the real DFT X of a signal of ``n`` samples for the
+    lines k = k0, k0 + 1, … (all of k = 0..n/2, in order, in blocks); ``zero_dc`` sets X_0 = 0.
+
+    ``part(r, m)`` returns the samples r, r + m, r + 2m, … of the signal (``x[r::m]``), so a
+    signal computed on the fly (a residual) never exists whole.  A record shorter than
+    :data:`SPLIT_SPECTRUM` (or whose length has no factor up to 16) is one real FFT, one
+    block.  A longer one is split into m interleaved parts of L = n/m samples (one
+    decimation-in-time step): X_k = Σ_r W^{rk} S_r(k mod L), W = e^{−2πi/n}, with S_r the
+    length-L DFT of part r (only its half is stored: S_r(L − j) = conj S_r(j) for real
+    parts), evaluated by Horner's rule in blocks of lines.  Memory: the m half spectra
+    (n/2 complex values, as the whole FFT's output) and one part; the same |X_k|² to
+    rounding (~1e-14 of the largest line at 10^7 samples)."""
+    m = _split_factor(n)
+    if m == 1:
+        X = np.fft.rfft(part(0, 1))
+        if zero_dc:
+            X[0] = 0.0
+        parts = X.view(np.float64).reshape(-1, 2)        # (re, im) per line, squared in place
+        np.square(parts, out=parts)
+        yield 0, parts.sum(axis=1)
+        return
+    L = n // m
+    half = L // 2
+    S = np.empty((m, half + 1), dtype=complex)
+    for r in range(m):
+        np.fft.rfft(part(r, m), out=S[r])
+    lines = n // 2 + 1
+    for k0 in range(0, lines, _LINES):
+        k = np.arange(k0, min(lines, k0 + _LINES))
+        j = k % L
+        flip = j > half
+        j[flip] = L - j[flip]
+        w = np.exp((-2j * np.pi / n) * k)
+        acc = S[m - 1, j]
+        np.conjugate(acc, out=acc, where=flip)
+        for r in range(m - 2, -1, -1):
+            s = S[r, j]
+            np.conjugate(s, out=s, where=flip)
+            acc *= w
+            acc += s
+        if zero_dc and k0 == 0:
+            acc[0] = 0.0
+        yield k0, acc.real ** 2 + acc.imag ** 2
 
 
 def _as_signal(x, name: str) -> np.ndarray:
@@ -355,13 +417,18 @@ def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
     rank correlation ≥ :data:`SWEEP_RANK`) over ≥ :data:`SWEEP_DECADES` decades.  Noise: the rest
     of the broadband records.  ``source`` names the record in errors."""
     v = _as_signal(v, "voltage")
-    x = v - np.median(v)
+    med = np.median(v)
+    x = v - med
     n = x.size
     lo, hi = np.percentile(x, [0.5, 99.5])
     span = float(hi - lo)
     if span <= 0 or x.max() == x.min():
         raise InputError(f"{source + ': ' if source else ''}the voltage is constant; nothing is excited")
-    X = power_spectrum(x, zero_dc=True)             # of x − mean(x); line k is at k·fs/n Hz
+    del x                       # the spectrum first, from parts of x: never beside a copy of the record
+    X = np.empty(n // 2 + 1)    # |X_k|² of x − mean(x); line k is at k·fs/n Hz
+    for k0, p in power_blocks(lambda r, m: v[r::m] - med, n, zero_dc=True):
+        X[k0:k0 + p.size] = p
+    x = v - med
     df = fs / n
     cum = np.cumsum(X[1:])
     cum /= cum[-1]
@@ -383,10 +450,13 @@ def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
         return Excitation("tone", (f_tone, f_tone), tone_hz=f_tone,
                           how=f"one line at {f_tone:.4g} Hz holds {100 * near / X[1:].sum():.0f} % of the power")
     del X
-    period = _period(x - x.mean(), fs)
+    offset = med + x.mean()
+    del x                       # _period forms v less its mean in pieces, beside no copy of the record
+    period = _period(v, fs, offset)
     if period is not None:
         return Excitation("periodic", band, period_s=period,
                           how=f"repeats every {period:.6g} s ({n / fs / period:.3g} periods)")
+    x = v - med
     rank, decades = _sweep_trend(x, fs)
     if abs(rank) >= SWEEP_RANK and decades >= SWEEP_DECADES:
         return Excitation("sweep", band, how=f"a single sweep: the dominant frequency moves monotonically over "
@@ -406,31 +476,49 @@ def _jumps(x: np.ndarray, k: int, size: float) -> bool:
     return False
 
 
-def _period(x: np.ndarray, fs: float) -> float | None:
-    """The shortest lag (≤ n/2, ≥ 8 samples) at which x repeats (normalised correlation
-    over the overlap ≥ :data:`PERIODIC_CORRELATION`), in s; None when it does not.
+def _period(x: np.ndarray, fs: float, mean: float = 0.0) -> float | None:
+    """The shortest lag (≤ n/2, ≥ 8 samples) at which x − ``mean`` repeats (normalised
+    correlation over the overlap ≥ :data:`PERIODIC_CORRELATION`), in s; None when it does not.
 
-    The autocorrelation is one zero-padded FFT in single precision (its rounding, ~1e-6 of
-    the energy, is far below the 2 % the test allows), squared in place: ~32 B per sample
-    at its peak instead of ~68 B, which matters at 10^7 samples."""
+    The autocorrelation is one FFT in single precision (its rounding, ~1e-6 of the energy,
+    is far below the 2 % the test allows), zero-padded to 1.5 n (lags up to n/2 do not wrap
+    around), squared in place; x − mean is formed in pieces (no float64 copy of the record)
+    and the normalisation works on views of one cumulative energy: at 10^7 samples the
+    FFT's buffers are the peak, ~20 B per sample (was ~68, then ~32)."""
     n = x.size
     if n // 2 < 8:
         return None
-    F = sp_fft.rfft(x.astype(np.float32), 2 * n)
-    np.multiply(F, F.conj(), out=F)
-    ac = sp_fft.irfft(F, 2 * n, overwrite_x=True)[: n // 2 + 1].astype(np.float64)
-    del F
-    head = np.cumsum(np.square(x))                  # energy of x[:L+1]
-    lags = np.arange(8, n // 2 + 1)
-    tail = head[-1] - head[lags - 1]                # energy of x[L:]
-    rho = ac[lags] / np.sqrt(np.maximum(tail * head[n - 1 - lags], 1e-300))
+    size = sp_fft.next_fast_len(n + n // 2 + 1, real=True)
+    xf = np.empty(n, np.float32)
+    for a in range(0, n, _BLOCK):
+        np.subtract(x[a:a + _BLOCK], mean, out=xf[a:a + _BLOCK], casting="same_kind")
+    F = sp_fft.rfft(xf, size, overwrite_x=True)
+    del xf
+    parts = F.view(np.float32).reshape(-1, 2)       # |F|² in F itself: (re² + im², 0)
+    np.square(parts, out=parts)
+    parts[:, 0] += parts[:, 1]
+    parts[:, 1] = 0.0
+    ac = sp_fft.irfft(F, size, overwrite_x=True)[: n // 2 + 1].astype(np.float64)
+    del F, parts
+    head = np.empty(n)                              # energy of x[:L+1], cumulated in place
+    for a in range(0, n, _BLOCK):
+        np.subtract(x[a:a + _BLOCK], mean, out=head[a:a + _BLOCK])
+    np.square(head, out=head)
+    np.cumsum(head, out=head)
+    h = n // 2
+    rho = head[-1] - head[7:h]                      # energy of x[L:], L = 8..n/2
+    rho *= head[n - 1 - h:n - 8][::-1]              # energy of x[:n − L]
+    np.maximum(rho, 1e-300, out=rho)
+    np.sqrt(rho, out=rho)
+    np.divide(ac[8:], rho, out=rho)
+    del head, ac
     ok = np.flatnonzero(rho >= PERIODIC_CORRELATION)
     if ok.size == 0:
         return None
     i = ok[0]
-    while i + 1 < lags.size and rho[i + 1] > rho[i]:        # the top of that peak
+    while i + 1 < rho.size and rho[i + 1] > rho[i]:        # the top of that peak
         i += 1
-    return float(lags[i] / fs)
+    return float((i + 8) / fs)
 
 
 def _sweep_trend(x: np.ndarray, fs: float, segments: int = 24) -> tuple[float, float]:

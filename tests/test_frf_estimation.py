@@ -266,3 +266,35 @@ def test_jump_scan_in_blocks_matches_the_whole_record(monkeypatch):
             direct = bool(np.any(np.abs(y[k:] - y[:-k]) > 0.5))
             assert fe._jumps(y, k, 0.5) == direct
     assert not fe._jumps(x, 3, 0.5)
+
+
+def test_spectrum_in_parts_matches_the_whole_fft(monkeypatch):
+    """A long record's |X_k|² is assembled from m interleaved parts (one decimation-in-time
+    step, lines in blocks): the whole real FFT's values to rounding, for every split a length
+    allows (8, 7, 5, 3, a factor above 8, and none: the whole FFT), with and without the DC
+    line, and the same classification of the excitation (tone, noise, steps, periodic)."""
+    import physics.frf_estimation as fe
+    monkeypatch.setattr(fe, "SPLIT_SPECTRUM", 64)
+    monkeypatch.setattr(fe, "_LINES", 37)                  # lines in many uneven blocks
+    rng = np.random.default_rng(4)
+    for n, m in [(4000, 8), (3003, 7), (2005, 5), (2001, 3), (2431, 11), (2477, 1), (64, 8)]:
+        assert fe._split_factor(n) == m
+        x = np.cumsum(rng.standard_normal(n)) + 3.0
+        for zero_dc in (False, True):
+            X = np.fft.rfft(x)
+            if zero_dc:
+                X[0] = 0.0
+            want = X.real ** 2 + X.imag ** 2
+            got = fe.power_spectrum(x, zero_dc=zero_dc)
+            assert got.shape == want.shape
+            assert np.max(np.abs(got - want)) <= 1e-12 * want.max(), (n, zero_dc)
+    t = np.arange(4000) / 100.0
+    for v in (np.sin(2 * np.pi * 1.3 * t), rng.standard_normal(4000), np.sign(np.sin(2 * np.pi * 0.2 * t)),
+              np.tile(rng.standard_normal(400), 10) + 0.05 * rng.standard_normal(4000) + 2.0):
+        parts = fe.detect_excitation(v, 100.0)
+        monkeypatch.setattr(fe, "SPLIT_SPECTRUM", 1 << 30)
+        whole = fe.detect_excitation(v, 100.0)
+        monkeypatch.setattr(fe, "SPLIT_SPECTRUM", 64)
+        assert (parts.kind, parts.how, parts.period_s) == (whole.kind, whole.how, whole.period_s)
+        assert np.allclose(parts.band, whole.band, rtol=1e-12)
+    assert [parts.kind, parts.period_s] == ["periodic", 4.0]

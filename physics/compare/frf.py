@@ -9,7 +9,7 @@ from scipy import signal as sps
 
 from .. import metrics
 from ..errors import InputError
-from ..frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level, power_spectrum
+from ..frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level, power_blocks
 from ..timeseries import TimeSeries
 
 
@@ -212,25 +212,39 @@ def frf_errors(freq, H_meas, H_model, mask=None) -> dict:
             "phase_rms_deg": float(np.sqrt(np.mean(np.degrees(np.angle(ratio)) ** 2)))}
 
 
-def residual_by_band(e: np.ndarray, y: np.ndarray, fs: float, bands) -> list[dict]:
+def residual_by_band(e, y: np.ndarray, fs: float, bands) -> list[dict]:
     """RMS of the residual ``e`` [m] within each band and its ratio to the RMS of the
-    (offset-free) measurement ``y`` in that band (one-sided spectra, Parseval).  Each
-    spectrum is reduced to its band sums at once, so a long record costs its spectrum."""
-    n = e.size
+    (offset-free) measurement ``y`` in that band (one-sided spectra, Parseval).
+
+    ``e`` is an array like ``y``, or a function ``e(r, m)`` giving its samples r, r + m, …
+    (``e[r::m]``), so that a long residual is never formed whole.  Each spectrum is
+    reduced to its band sums as it is assembled (:func:`~physics.frf_estimation.power_blocks`):
+    a long record costs half a spectrum, not the spectrum and its squares."""
+    n = y.size
+    part = e if callable(e) else (lambda r, m: e[r::m])
+    if not callable(e) and e.size != n:
+        raise InputError(f"residual has {e.size} samples but the measurement {n}")
     f = np.fft.rfftfreq(n, 1.0 / fs)
     ranges = [(int(np.searchsorted(f, lo, "left")),
                int(np.searchsorted(f, hi, "right" if hi == bands[-1][1] else "left"))) for lo, hi in bands]
     del f
+    last = n // 2 if n % 2 == 0 else -1             # the Nyquist line, counted once like DC
 
-    def band_power(x, offset_free: bool = False):   # Σ w |X|² per band (w = 2 but DC, Nyquist)
-        p = power_spectrum(x, zero_dc=offset_free)    # the mean removed: only the DC line changes
-        p *= 2.0
-        p[0] /= 2.0
-        if n % 2 == 0:
-            p[-1] /= 2.0
-        return [float(np.sum(p[a:b])) for a, b in ranges]
+    def band_power(x_part, offset_free: bool = False):   # Σ w |X|² per band (w = 2 but DC, Nyquist)
+        sums = [0.0] * len(ranges)
+        for k0, p in power_blocks(x_part, n, zero_dc=offset_free):   # the mean removed: only DC changes
+            k1 = k0 + p.size
+            p *= 2.0
+            if k0 == 0:
+                p[0] /= 2.0
+            if k0 <= last < k1:
+                p[last - k0] /= 2.0
+            for i, (a, b) in enumerate(ranges):
+                if a < k1 and b > k0:
+                    sums[i] += float(np.sum(p[max(a, k0) - k0:min(b, k1) - k0]))
+        return sums
 
-    ce, cy = band_power(e), band_power(y, offset_free=True)
+    ce, cy = band_power(part), band_power(lambda r, m: y[r::m], offset_free=True)
     out = []
     for (lo, hi), se, sy in zip(bands, ce, cy):
         pe, py = se / n ** 2, sy / n ** 2
