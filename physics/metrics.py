@@ -27,39 +27,75 @@ def _pair(y, yhat, *, allow_complex: bool = False) -> tuple[np.ndarray, np.ndarr
     return arrays[0], arrays[1]
 
 
+#: Samples of a long record's differences formed at a time: the metrics of a record of 10^7
+#: samples cost no record-long temporary (a shorter one is one block, the whole record).
+BLOCK = 1 << 20
+
+
+def _blocks(n: int):
+    return ((a, min(n, a + BLOCK)) for a in range(0, max(n, 1), BLOCK))
+
+
+def _sum_sq_error(y: np.ndarray, yhat: np.ndarray, offset: float = 0.0) -> float:
+    """Σ (y − offset − ŷ)², formed a block at a time."""
+    total = 0.0
+    for a, b in _blocks(y.size):
+        if offset:                 # (y − offset) − ŷ, as from an aligned copy of y
+            e = y[a:b] - offset
+            e -= yhat[a:b]
+        else:
+            e = y[a:b] - yhat[a:b]
+        total += float(np.dot(e, e))
+    return total
+
+
+def _centred_dot(y: np.ndarray, x: np.ndarray) -> float:
+    """Σ (y − ȳ) x, formed a block at a time."""
+    mean = y.mean()
+    total = 0.0
+    for a, b in _blocks(y.size):
+        total += float(np.dot(y[a:b] - mean, x[a:b]))
+    return total
+
+
 def _spread(y: np.ndarray, name: str = "y") -> float:
     """‖y − ȳ‖, refusing a constant signal (for which relative metrics are undefined)."""
-    spread = float(np.linalg.norm(y - y.mean()))
+    mean = y.mean()
+    sq = 0.0
+    for a, b in _blocks(y.size):
+        c = y[a:b] - mean
+        sq += float(np.dot(c, c))
+    spread = float(np.sqrt(sq))
     if spread == 0:
         raise InputError(f"{name} is constant; a relative metric or correlation is undefined")
     return spread
 
 
-def rmse(y, yhat) -> float:
-    """Root-mean-square error sqrt(mean((y − ŷ)²)), in the unit of y."""
+def rmse(y, yhat, offset: float = 0.0) -> float:
+    """Root-mean-square error sqrt(mean((y − ŷ)²)), in the unit of y (of y − ``offset``)."""
     y, yhat = _pair(y, yhat)
-    e = y - yhat                                   # one temporary of a long record, not two
-    return float(np.sqrt(np.dot(e, e) / e.size))
+    return float(np.sqrt(_sum_sq_error(y, yhat, offset) / y.size))
 
 
-def nrmse(y, yhat) -> float:
+def nrmse(y, yhat, offset: float = 0.0) -> float:
     """RMSE / std(y) (population std), a fraction: 0 is perfect, 1 is no better than the
-    mean of y.  Equals ‖y − ŷ‖ / ‖y − ȳ‖."""
+    mean of y.  Equals ‖y − ŷ‖ / ‖y − ȳ‖ (with y − ``offset`` for y: the spread of y does
+    not depend on it)."""
     y, yhat = _pair(y, yhat)
-    return float(np.linalg.norm(y - yhat)) / _spread(y)
+    return float(np.sqrt(_sum_sq_error(y, yhat, offset))) / _spread(y)
 
 
-def fit_percent(y, yhat) -> float:
+def fit_percent(y, yhat, offset: float = 0.0) -> float:
     """Fit (%) = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖), the NRMSE fit of MATLAB ``compare``/
     ``goodnessOfFit``: 100 is perfect, 0 is the mean of y, negative is worse."""
-    return 100.0 * (1.0 - nrmse(y, yhat))
+    return 100.0 * (1.0 - nrmse(y, yhat, offset))
 
 
 def correlation(y, yhat) -> float:
     """Pearson correlation coefficient of y and ŷ (−1…1)."""
     y, yhat = _pair(y, yhat)
-    # Σ (y − ȳ)(ŷ − mean ŷ) = Σ (y − ȳ) ŷ: one centred copy of a long record, not two
-    return float(np.dot(y - y.mean(), yhat) / (_spread(y) * _spread(yhat, "yhat")))
+    # Σ (y − ȳ)(ŷ − mean ŷ) = Σ (y − ȳ) ŷ: no centred copy of ŷ, and y's a block at a time
+    return _centred_dot(y, yhat) / (_spread(y) * _spread(yhat, "yhat"))
 
 
 def j_err(mag_exp, mag_sim) -> float:
@@ -72,12 +108,13 @@ def j_err(mag_exp, mag_sim) -> float:
     return rmse(np.abs(a), np.abs(b))
 
 
-def summary(y, yhat) -> dict:
+def summary(y, yhat, offset: float = 0.0) -> dict:
     """All time-domain metrics as a JSON-ready dict: ``n``, ``rmse``, ``nrmse``,
-    ``fit_percent``, ``correlation``.  (:func:`j_err` compares FRF magnitudes, not
-    signals, and is left out.)"""
-    return {"n": int(np.size(y)), "rmse": rmse(y, yhat), "nrmse": nrmse(y, yhat),
-            "fit_percent": fit_percent(y, yhat), "correlation": correlation(y, yhat)}
+    ``fit_percent``, ``correlation``, of y − ``offset`` against ŷ (a long record is not
+    copied to remove it).  (:func:`j_err` compares FRF magnitudes, not signals, and is
+    left out.)"""
+    return {"n": int(np.size(y)), "rmse": rmse(y, yhat, offset), "nrmse": nrmse(y, yhat, offset),
+            "fit_percent": fit_percent(y, yhat, offset), "correlation": correlation(y, yhat)}
 
 
 #: Nuisance terms per record (offset and linear drift), counted as parameters in the BIC.

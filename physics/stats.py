@@ -51,19 +51,22 @@ SOKAL_C = 5.0
 def autocorrelation(e: np.ndarray, max_lag: int | None = None) -> np.ndarray:
     """Normalised sample autocorrelation ρ_0..ρ_max_lag of ``e`` (mean removed; biased
     estimator, divided by n, as in MATLAB ``resid``)."""
-    e = np.asarray(e, dtype=float) - np.mean(e)
+    e = np.asarray(e, dtype=float)
     n = e.size
     m = n - 1 if max_lag is None else min(int(max_lag), n - 1)
+    if _direct(n, m):
+        me = np.mean(e)
+        if np.any(e != me):
+            ac = _lag_products(e, me, e, me, m)
+            return ac / ac[0]
+    e = e - np.mean(e)
     if n < 2 or not np.any(e):
         out = np.zeros(m + 1)
         out[0] = 1.0
         return out
-    if _direct(n, m):
-        ac = np.array([np.dot(e[:n - k], e[k:]) for k in range(m + 1)])
-    else:
-        nfft = 1 << int(math.ceil(math.log2(2 * n)))
-        f = np.fft.rfft(e, nfft)
-        ac = np.fft.irfft(f * np.conj(f), nfft)[:m + 1]
+    nfft = 1 << int(math.ceil(math.log2(2 * n)))
+    f = np.fft.rfft(e, nfft)
+    ac = np.fft.irfft(f * np.conj(f), nfft)[:m + 1]
     return ac / ac[0]
 
 
@@ -73,20 +76,46 @@ def _direct(n: int, max_lag: int) -> bool:
     return n > 4096 and max_lag + 1 <= 8 * math.log2(n)
 
 
+#: Samples of the centred signals formed at a time by :func:`_lag_products`.
+LAG_BLOCK = 1 << 20
+
+
+def _lag_products(a: np.ndarray, ma: float, b: np.ndarray, mb: float, max_lag: int) -> np.ndarray:
+    """Σ_t (a_t − ma)(b_{t+k} − mb) for k = 0..max_lag, the centred signals formed a block of
+    :data:`LAG_BLOCK` samples at a time (a long record gets no centred copies; a shorter
+    one is one block: the products of the whole centred signals)."""
+    n = a.size
+    out = np.zeros(max_lag + 1)
+    for s in range(0, n, LAG_BLOCK):
+        t = min(n, s + LAG_BLOCK)
+        bb = b[s:min(n, t + max_lag)] - mb
+        ab = bb[:t - s] if a is b and ma == mb else a[s:t] - ma
+        for k in range(max_lag + 1):
+            m = min(t, n - k) - s
+            if m > 0:
+                out[k] += np.dot(ab[:m], bb[k:k + m])
+    return out
+
+
 def cross_correlation(u: np.ndarray, e: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
     """(lags, ρ_ue(lag)) for lag = −max_lag..max_lag: ρ_ue(k) = Σ_t u(t) e(t+k) / (n σ_u σ_e)
     (positive lags: the residual after the input, as in MATLAB ``resid``)."""
-    u = np.asarray(u, float) - np.mean(u)
-    e = np.asarray(e, float) - np.mean(e)
+    u, e = np.asarray(u, float), np.asarray(e, float)
     n = u.size
     lags = np.arange(-max_lag, max_lag + 1)
     if _direct(n, 2 * max_lag):
-        vals = np.array([np.dot(u[:n - k], e[k:]) if k >= 0 else np.dot(u[-k:], e[:n + k]) for k in lags])
+        mu, me = np.mean(u), np.mean(e)
+        ahead = _lag_products(u, mu, e, me, max_lag)             # k ≥ 0: Σ u(t) e(t+k)
+        behind = _lag_products(e, me, u, mu, max_lag)            # k ≤ 0: Σ u(t+|k|) e(t)
+        vals = np.concatenate([behind[:0:-1], ahead])
+        den = math.sqrt(float(_lag_products(u, mu, u, mu, 0)[0]) * float(_lag_products(e, me, e, me, 0)[0]))
     else:
+        u = u - np.mean(u)
+        e = e - np.mean(e)
         nfft = 1 << int(math.ceil(math.log2(2 * n)))
         c = np.fft.irfft(np.conj(np.fft.rfft(u, nfft)) * np.fft.rfft(e, nfft), nfft)
         vals = c[lags % nfft]
-    den = math.sqrt(float(np.dot(u, u)) * float(np.dot(e, e)))   # n σ_u σ_e, both already centred
+        den = math.sqrt(float(np.dot(u, u)) * float(np.dot(e, e)))   # n σ_u σ_e, both already centred
     return lags, (vals / den if den > 0 else np.zeros(lags.size))
 
 

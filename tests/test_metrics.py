@@ -72,3 +72,28 @@ def test_undefined_for_constant_signals():
             metric(const, Y)
     with pytest.raises(InputError, match="yhat is constant"):
         correlation(Y, const)
+
+
+def test_metrics_in_blocks_and_with_an_offset(monkeypatch):
+    """A long record's metrics are summed a block at a time (no record-long difference or
+    centred copy), and the offset compare removes is passed instead of an aligned copy of
+    the measurement: the values of the whole-record formulas on y − offset, to rounding (in
+    one block the RMSE is exactly that of the aligned copy)."""
+    import physics.metrics as m
+    rng = np.random.default_rng(3)
+    y = np.cumsum(rng.normal(size=5000)) * 1e-6 + 2e-5
+    yhat = 0.8 * y + 1e-7 * rng.normal(size=y.size)
+    c = float(np.mean(y) - np.mean(yhat))
+    al = y - c
+    e = al - yhat
+    want = {"n": y.size, "rmse": math.sqrt(e @ e / y.size),
+            "nrmse": math.sqrt(e @ e) / math.sqrt((al - al.mean()) @ (al - al.mean())),
+            "correlation": float((al - al.mean()) @ (yhat - yhat.mean()))
+            / math.sqrt(((al - al.mean()) @ (al - al.mean())) * ((yhat - yhat.mean()) @ (yhat - yhat.mean())))}
+    want["fit_percent"] = 100 * (1 - want["nrmse"])
+    one_block = summary(y, yhat, offset=c)
+    assert one_block["rmse"] == rmse(al, yhat) and one_block["correlation"] == correlation(y, yhat)
+    for block in (1 << 20, 1000, 999, 7):
+        monkeypatch.setattr(m, "BLOCK", block)
+        assert summary(y, yhat, offset=c) == pytest.approx(want, rel=1e-12)
+        assert summary(al, yhat) == pytest.approx(want, rel=1e-12)
