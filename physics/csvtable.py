@@ -152,29 +152,34 @@ def _count_rows(path: Path) -> int:
     return n - 1 + (last != b"\n")
 
 
-def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-    """(float values, one row per column, or None; text cells or None): the numeric values
-    of a CSV (filled chunk by chunk into columns counted beforehand, 8 bytes per value), or
-    its cells as text when one is not a number (re-read to name it).  ``rows``: at most that
-    many rows after ``opts["skiprows"]``."""
+def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[list | None, np.ndarray | None]:
+    """(float values, one array per column, or None; text cells or None): the numeric values
+    of a CSV (filled chunk by chunk into columns counted beforehand, 8 bytes per value, each
+    column its own array so that one not kept is freed), or its cells as text when one is
+    not a number (re-read to name it).  ``rows``: at most that many rows after
+    ``opts["skiprows"]``."""
     try:
         reader = pd.read_csv(path, dtype=float, chunksize=1 << 18, nrows=rows, **opts)
         total = _count_rows(path) if rows is None else rows
-        values = np.empty((len(opts["names"]), max(total, 0)))
+        values = [np.empty(max(total, 0)) for _ in opts["names"]]
         n = 0
         for chunk in reader:
             c = chunk.to_numpy()
-            if n + c.shape[0] > values.shape[1]:     # more rows than counted (odd line ends)
-                values = np.concatenate([values[:, :n], np.empty((values.shape[0], c.shape[0]))], 1)
-            values[:, n:n + c.shape[0]] = c.T
+            if n + c.shape[0] > values[0].size:     # more rows than counted (odd line ends)
+                values = [np.concatenate([col[:n], np.empty(c.shape[0])]) for col in values]
+            for col, new in zip(values, c.T):
+                col[n:n + c.shape[0]] = new
             n += c.shape[0]
-        values = values[:, :n]
-        if values.size and np.isnan(values).any():
-            nonblank = np.flatnonzero(~np.isnan(values).all(axis=0))
+        values = [col[:n] for col in values]
+        if n and any(np.isnan(col).any() for col in values):
+            blank = np.isnan(values[0])
+            for col in values[1:]:
+                blank &= np.isnan(col)
+            nonblank = np.flatnonzero(~blank)
             end = nonblank[-1] + 1 if nonblank.size else 0
-            if np.isnan(values[:, :end]).any() or end == 0:
+            if end == 0 or any(np.isnan(col[:end]).any() for col in values):
                 raise ValueError("NaN or empty cell")
-            values = values[:, :end]
+            values = [col[:end] for col in values]
         return values, None
     except ValueError as exc:
         if isinstance(exc, UnicodeDecodeError):
@@ -229,7 +234,7 @@ def _table(path: Path, names, values, raw, decimal: str, first: int = 0) -> Tabl
         raw = raw[:end]
         if decimal == ",":
             raw = np.vectorize(lambda v: str(v).replace(",", "."), otypes=[object])(raw) if raw.size else raw
-    n = values.shape[1] if raw is None else raw.shape[0]
+    n = len(values[0]) if raw is None else raw.shape[0]
     if n == 0:
         raise InputError(f"{path}: empty file; the header is not followed by any data row")
     columns: dict[str, np.ndarray] = {}

@@ -29,7 +29,8 @@ expected):
   onto the median step and records it in ``meta["resampled"]``.
 * Relative humidity comes, in this order of precedence, from an explicit ``rh=`` (always
   wins), the ``rh_pct`` column, or the key ``rh_pct`` of the sidecar; with none of them
-  the file is rejected (never a silent default).  RH must lie within 0–100 %.
+  the file is rejected (never a silent default).  RH must lie within 0–100 %.  A constant
+  RH is stored once (a read-only view of one value), not as a record-long column.
 * **The output.**  By default the output is the tip deflection (stored in m).  Another
   quantity is named with ``output=`` (:class:`~physics.record.OutputQuantity`, e.g.
   ``level:V``): its column in a standard file is ``level_V``, its values are stored in its
@@ -389,14 +390,22 @@ def _channels_of(table, p: Path, meta: dict, *, columns, fs, rh, require_deflect
     if rh is not None:
         if not np.isfinite(rh) or not 0.0 <= rh <= 100.0:
             raise InputError(f"{where}: relative humidity rh={rh!r} must lie within 0–100 %")
-        values["rh"] = np.full(n, float(rh))
+        values["rh"] = _constant(float(rh), n)
     elif "rh" not in values:
         side_rh = meta.get("rh_pct")
         if side_rh is None:
             raise InputError(f"{where}: no relative humidity: add an rh_pct column, the key "
                              f"rh_pct to the sidecar, or give the RH with {arg('rh')}")
-        values["rh"] = np.full(n, float(side_rh))
+        values["rh"] = _constant(float(side_rh), n)
+    elif values["rh"].size and values["rh"].min() == values["rh"].max():
+        values["rh"] = _constant(float(values["rh"][0]), n)
     return values, labels, quantity_out
+
+
+def _constant(value: float, n: int) -> np.ndarray:
+    """``n`` samples of ``value`` stored once: a read-only view (``np.broadcast_to``), as a
+    record's RH usually is; a long record then holds its varying channels only."""
+    return np.broadcast_to(np.float64(value), (n,))
 
 
 def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | None = None,
@@ -417,9 +426,11 @@ def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | 
     meta = read_sidecar(p)
     values, labels, quantity_out = _channels_of(table, p, meta, columns=columns, fs=fs, rh=rh, output=output,
                                                 require_deflection=require_deflection, gain=gain)
+    locate = table.locate
+    del table                        # columns not kept (a constant RH, unmapped ones) are freed here
     if values["voltage"].size < 2:
         raise InputError(f"{p}: needs at least 2 samples, got {values['voltage'].size}")
-    values, info = check_record(values, str(p), table.locate, labels, resample=resample)
+    values, info = check_record(values, str(p), locate, labels, resample=resample)
     if info is not None:
         meta["resampled"] = info
     return TimeSeries(**values, meta=meta, source=str(p), output=quantity_out)

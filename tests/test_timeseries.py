@@ -140,6 +140,32 @@ def test_explicit_rh_wins_over_column_and_sidecar(tmp_path):
     np.testing.assert_array_equal(read_timeseries(p).rh, [50, 50, 50])
 
 
+def test_a_constant_rh_is_stored_once(tmp_path):
+    """A constant RH (the column, the sidecar or rh=) is one value seen by every sample: a
+    read-only view, not a record-long column (the table's other columns are separate arrays,
+    so the RH column read is freed); a varying RH column is kept as read.  The record then
+    behaves as before: copies and slices are writable, it writes back the same file."""
+    p = write(tmp_path, GOOD)
+    for ts, value in ((read_timeseries(p), 50.0), (read_timeseries(p, rh=65), 65.0)):
+        assert ts.rh.strides == (0,) and not ts.rh.flags.writeable
+        np.testing.assert_array_equal(ts.rh, np.full(3, value))
+        owner = ts.voltage if ts.voltage.base is None else ts.voltage.base
+        assert ts.voltage.flags.writeable and owner.ndim == 1      # its own array, not a row of the table
+        part, copy = ts.slice(0, 2), ts.copy()
+        assert part.rh.flags.writeable and copy.rh.flags.writeable
+        np.testing.assert_array_equal(copy.rh, ts.rh)
+    out = write_timeseries(read_timeseries(p), tmp_path / "out.csv")
+    back = read_timeseries(out)
+    np.testing.assert_array_equal(back.rh, [50, 50, 50])
+    np.testing.assert_array_equal(back.voltage, [0.5, 1.0, 1.5])
+    varying = read_timeseries(write(tmp_path, GOOD.replace("0.002,1.5,3e-5,50", "0.002,1.5,3e-5,51"), "v.csv"))
+    assert varying.rh.flags.writeable and varying.rh.strides == (8,)
+    np.testing.assert_array_equal(varying.rh, [50, 50, 51])
+    side = write(tmp_path, "time_s,voltage_V,deflection_m\n0,1,0\n1,1,0\n", "s.csv")
+    (tmp_path / "s.yaml").write_text("rh_pct: 80\n")
+    assert read_timeseries(side).rh.strides == (0,)
+
+
 def test_resample_to_median_step_records_it(tmp_path):
     t = [0.0, 0.1, 0.2, 0.35, 0.4, 0.5]  # one long step (0.15) and one short (0.05)
     v = [2 * x + 1 for x in t]  # linear: interpolation must be exact

@@ -99,6 +99,8 @@ def model_rh(rh: np.ndarray, fs: float, tolerance: float = 2.5, window_s: float 
     median is used (robust to a sensor clipped at 100 %), otherwise the smoothed series
     rounded to ``step`` [%] (RH changes slowly compared with the mechanics)."""
     rh = np.asarray(rh, dtype=float)
+    if rh.size and rh.min() == rh.max():      # one value (a constant channel): no smoothing to do
+        return float(rh[0])
     k = max(1, int(round(window_s * fs)))
     kernel = np.ones(min(k, rh.size)) / min(k, rh.size)
     pad = kernel.size // 2
