@@ -67,10 +67,11 @@ def _as_1d(x, what: str, name: str, n: int | None = None) -> np.ndarray:
 
 def check_rh(rh, n: int, where: str) -> np.ndarray:
     """Relative humidity (%) as one finite value in 0-100 per sample (a constant is
-    broadcast to ``n`` samples), or an InputError naming ``where``."""
+    broadcast to ``n`` samples: a read-only view, not ``n`` copies), or an InputError
+    naming ``where``."""
     rh = np.asarray(rh, dtype=float)
-    if rh.ndim == 0:
-        rh = np.full(n, float(rh))
+    if rh.ndim == 0:      # one value for every sample, stored once (a read-only view)
+        rh = np.broadcast_to(float(rh), (n,))
     if rh.shape != (n,):
         raise InputError(f"{where}: rh must be a constant or have one value per voltage sample "
                          f"({n}), got shape {rh.shape}")

@@ -273,6 +273,12 @@ def test_free_run_in_chunks_equals_one_piece(kind, monkeypatch):
     monkeypatch.setattr(base, "SIM_CHUNK", 37)
     pieces = m.simulate(u, 50.0)
     assert np.max(np.abs(pieces - whole)) <= 1e-5 * np.max(np.abs(whole))
+    if m.streams:     # a record longer than base.PIECE: its pieces written into one output, y_init first
+        start = m.simulate(u, 50.0, y_init=y[:12])
+        monkeypatch.setattr(base, "PIECE", 301)
+        for y0, ref in ((None, whole), (y[:12], start)):
+            long = m.simulate(u, 50.0, y_init=y0)
+            assert long.shape == u.shape and np.max(np.abs(long - ref)) <= 1e-5 * np.max(np.abs(ref))
 
 
 def test_without_output_feedback_one_step_equals_free_run_from_any_start():

@@ -314,10 +314,14 @@ class NeuralModel:
         if m >= u.size:
             raise InputError(f"y_init has {m} samples but the input only {u.size}; y_init must be "
                              "shorter than the record it initialises")
-        if self.streams and u.size > PIECE:   # a long record: its channels one piece at a time
-            cuts = range(0, u.size, PIECE)
-            return np.concatenate(list(self.simulate_pieces(
-                ((u[a:a + PIECE], None if rh is None else rh[a:a + PIECE]) for a in cuts), y_init)))
+        if self.streams and u.size > PIECE:   # a long record: its channels one piece at a time,
+            cuts = range(0, u.size, PIECE)    # each piece's output written into the record's
+            y_hat, i = np.empty(u.size), 0
+            for piece in self.simulate_pieces(((u[a:a + PIECE], None if rh is None else rh[a:a + PIECE])
+                                               for a in cuts), y_init):
+                y_hat[i:i + piece.size] = piece
+                i += piece.size
+            return y_hat
         k = self.n_init_
         pad = max(0, k - m)
         un, rhn, yn = self._padded(u, rh, y_init if y_init is not None else np.zeros(0), pad)
