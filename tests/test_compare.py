@@ -107,6 +107,79 @@ def test_residual_by_band_is_parseval():
     assert rows[0]["residual_rms_m"] == pytest.approx(1 / math.sqrt(2), rel=1e-9)
     assert rows[1]["residual_rms_m"] == pytest.approx(0.1 / math.sqrt(2), rel=1e-9)
     assert rows[0]["nrmse_in_band"] == pytest.approx(0.1)
+    def part(r, m):            # the residual given by its interleaved samples: the same sums
+        return e[r::m].copy()
+    assert residual_by_band(part, 10 * e, fs, [(0.5, 5.0), (5.0, 50.0)]) == rows
+
+
+def test_residual_by_band_in_parts_matches_the_whole_spectrum(monkeypatch):
+    """A long residual's band powers come from its spectrum assembled in parts, the residual
+    given lazily (never formed whole): the whole-FFT values to rounding, an odd length too."""
+    import physics.frf_estimation as fe
+    rng = np.random.default_rng(7)
+    bands = [(0.05, 1.0), (1.0, 10.0), (10.0, 50.0)]
+    for n in (6000, 6003):
+        y = np.cumsum(rng.normal(size=n)) * 1e-6
+        yhat = 0.9 * y + 1e-7 * rng.normal(size=n) + 3e-6
+        e = y - yhat - 2e-6
+        whole = residual_by_band(e, y, 100.0, bands)
+        monkeypatch.setattr(fe, "SPLIT_SPECTRUM", 64)
+        monkeypatch.setattr(fe, "_LINES", 101)
+
+        def part(r, m):
+            d = y[r::m] - yhat[r::m]
+            d -= 2e-6
+            return d
+        for got in (residual_by_band(part, y, 100.0, bands), residual_by_band(e, y, 100.0, bands)):
+            for a, b in zip(got, whole):
+                assert a["band_Hz"] == b["band_Hz"]
+                assert a["residual_rms_m"] == pytest.approx(b["residual_rms_m"], rel=1e-12)
+                assert a["nrmse_in_band"] == pytest.approx(b["nrmse_in_band"], rel=1e-12)
+        monkeypatch.undo()
+
+
+def test_compare_holds_few_record_long_arrays(monkeypatch, tmp_path):
+    """Memory per sample of compare on a record read from a CSV (constant RH column, a tone
+    like bench/memory_long_records.py), with every blocked computation in blocks of 2^12 so
+    that both records span many (the fixed part cancels in the difference): tracemalloc's
+    peak during compare grows by less than 3.4 float64 per extra sample (the model output,
+    the voltage less its median and one partition copy of it; 2.8 measured, 4.0 before the
+    residual, its centred copies and the aligned measurement were dropped), and the record
+    itself keeps 3 (time, voltage, deflection: the constant RH is one value, 4 before).
+    tracemalloc does not see the FFT library's own buffers; bench/memory_long_records.py
+    measures the process (VmHWM)."""
+    import tracemalloc
+    from scipy.signal import lfilter
+    from physics import frf_estimation, stats
+    from physics.compare import FRFOptions
+    from physics.timeseries import read_timeseries
+    for mod, name in ((frf_estimation, "SPLIT_SPECTRUM"), (frf_estimation, "WELCH_BLOCK"), (frf_estimation, "_BLOCK"),
+                      (metrics, "BLOCK"), (stats, "LAG_BLOCK")):
+        monkeypatch.setattr(mod, name, 1 << 12)
+    monkeypatch.setattr(frf_estimation, "_LINES", 1 << 10)
+    predictor = CallablePredictor(lambda v, rh, fs: lfilter([1e-6], [1, -0.99], v), name="filter")
+    kept, peaks = [], []
+    for n in (100_000, 200_000):
+        t = np.arange(n) / 1000.0
+        v = np.sin(2 * np.pi * 1.3 * t)
+        path = tmp_path / f"r{n}.csv"
+        with open(path, "w") as fh:
+            fh.write("time_s,voltage_V,deflection_m,rh_pct\n")
+            np.savetxt(fh, np.column_stack([t, v, lfilter([1.1e-6], [1, -0.99], v) + 1e-5, np.full(n, 60.0)]),
+                       delimiter=",", fmt="%.9g")
+        tracemalloc.start()
+        ts = read_timeseries(path)
+        kept.append(tracemalloc.get_traced_memory()[0])
+        tracemalloc.reset_peak()
+        res = compare([ts], predictor, frf_options=FRFOptions(nperseg=1024))
+        peaks.append(tracemalloc.get_traced_memory()[1] - kept[-1])
+        tracemalloc.stop()
+        assert res.records[0].summary["time_metrics"]["n"] == n
+        del ts, res
+    per_sample = (peaks[1] - peaks[0]) / 100_000 / 8
+    record = (kept[1] - kept[0]) / 100_000 / 8
+    assert per_sample < 3.4, f"compare: {per_sample:.2f} float64 per sample"
+    assert record < 3.5, f"the record read: {record:.2f} float64 per sample"
 
 
 def test_callable_predictor_and_frf_files(model, records, tmp_path):
@@ -228,3 +301,27 @@ def test_residual_tests_tell_white_from_structured():
     assert not ar["white"]
     dep = residual_tests(lfilter([0.2], [1, -0.5], u) + rng.normal(size=20000), u)
     assert not dep["independent_of_input"] and dep["cross_correlation_outside"] >= 3
+
+
+def test_lagged_products_in_blocks_match_the_whole_record(monkeypatch):
+    """The residual tests' lagged products of a long record are summed a block at a time
+    (no centred copies): the whole-record values to rounding, a lag reaching across a
+    block edge included; a record of one block gives exactly the whole-record values."""
+    from scipy.signal import lfilter
+    from physics import stats
+    from physics.compare.comparison import residual_tests
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=9000) + 0.3
+    e = lfilter([0.2], [1, -0.9], u) + rng.normal(size=9000) + 5.0
+    uc, ec = u - u.mean(), e - e.mean()
+    n, K = u.size, 12
+    acf = np.array([ec[:n - k] @ ec[k:] for k in range(K + 1)])
+    ccf = np.array([uc[-k:] @ ec[:n + k] if k < 0 else uc[:n - k] @ ec[k:] for k in range(-K, K + 1)])
+    ccf /= math.sqrt((uc @ uc) * (ec @ ec))
+    whole = residual_tests(e, u, K)
+    np.testing.assert_array_equal(stats.autocorrelation(e, K), acf / acf[0])
+    for block in (1000, 997, 13):
+        monkeypatch.setattr(stats, "LAG_BLOCK", block)
+        np.testing.assert_allclose(stats.autocorrelation(e, K), acf / acf[0], rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(stats.cross_correlation(u, e, K)[1], ccf, rtol=1e-12, atol=1e-14)
+        assert residual_tests(e, u, K) == pytest.approx(whole, rel=1e-12)

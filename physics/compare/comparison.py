@@ -11,6 +11,7 @@ import numpy as np
 from .. import metrics
 from ..errors import InputError, arg
 from ..frfdata import FRFData
+from ..memory import release_free_memory
 from ..timeseries import TimeSeries
 from .frf import FRFOptions, default_bands, estimate_record_frf, frf_errors, residual_by_band, sensor_bandwidth_of, sensor_lowpass, sensor_response, thin_log, valid_points
 from .measurements import cluster_rh, model_rh, source_name
@@ -156,6 +157,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     rh_arg = model_rh(rh, ts.fs, rh_tolerance)
     log(f"{Path(where).name}: {predictor.name} on {ts.n:,} samples")
     yhat = _check_output(predictor(ts.voltage, rh_arg, ts.fs), ts.n, predictor.name)
+    release_free_memory()         # the heap a piecewise run leaves behind (8 B per sample, physics.memory)
     bw = sensor_bandwidth_of(ts, sb_setting)
     yhat = sensor_lowpass(yhat, ts.fs, bw)
     y = ts.deflection
@@ -163,9 +165,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     if ts.n - i0 < 3:
         raise InputError(f"{where}: skip_s={skip_s:g} s leaves fewer than 3 samples")
     c = float(np.mean(y[i0:]) - np.mean(yhat[i0:])) if offset == "mean" else 0.0   # no residual copy
-    y_al = y[i0:] - c             # for the metrics only: the record keeps y and the offset
-    tm = metrics.summary(y_al, yhat[i0:])
-    del y_al
+    tm = metrics.summary(y[i0:], yhat[i0:], offset=c)    # the record keeps y and the offset (no aligned copy)
     tm["offset_removed_m"] = c
     tm["skip_s"] = skip_s
     e = y[i0:] - yhat[i0:]
@@ -241,10 +241,13 @@ def _band_errors(r: RecordComparison, bands):
     if r.kind == "timeseries":
         fs = r.summary["fs_Hz"]
         i0 = int(math.ceil(r.summary["time_metrics"]["skip_s"] * fs))
-        e = r.measured[i0:] - r.predicted[i0:]
-        e -= r.offset
-        tb = residual_by_band(e, r.measured[i0:], fs, bands)
-        del e
+        y, yhat, c = r.measured[i0:], r.predicted[i0:], r.offset
+
+        def e(k, m):                  # the residual's samples k, k + m, …: never the whole residual
+            part = y[k::m] - yhat[k::m]
+            part -= c
+            return part
+        tb = residual_by_band(e, y, fs, bands)
     else:
         tb = [{} for _ in bands]
     for k, ((lo, hi), t) in enumerate(zip(bands, tb)):
