@@ -125,6 +125,11 @@ def build_fixtures(fx: Path, tree: Path, env: dict) -> None:
     # a lab export in mm with units in the header
     _record(fx / "tip.csv", header=("Time [s]", "Drive (V)", "Tip (mm)"), rh=None, y_scale=0.1)
     (fx / "tiny.yaml").write_text(TINY)
+    # the default preset with records ten times longer: a run still going when a signal comes
+    preset = (tree / "configs" / "datasets" / "default.yaml").read_text()
+    if "duration_s: 40.0" not in preset:
+        sys.exit("fixture: configs/datasets/default.yaml no longer says duration_s: 40.0; update slow.yaml")
+    (fx / "slow.yaml").write_text(preset.replace("duration_s: 40.0", "duration_s: 400.0"))
     shutil.copy(tree / "configs" / "devices" / "ip2c_pedot_water.yaml", fx / "mydev.yaml")
     shutil.copy(CREEP, fx / "my_creep.py")
     for name, body in EFFECT_BODIES.items():
@@ -644,8 +649,9 @@ def cases() -> list[Case]:
                 "--fs-Hz", "2000", "--out", "D"]
     add("sigterm-simulate", "signals", long_sim, expect=143, send=(signal.SIGTERM, 8.0), timeout=60)
     add("sigint-simulate", "signals", long_sim, expect=130, send=(signal.SIGINT, 8.0), timeout=60)
-    add("sigterm-generate-workers", "signals", ["generate", "--config", "default", "--workers", "2", "--quiet",
-                                                "--out", "D"], expect=143, send=(signal.SIGTERM, 12.0), timeout=60)
+    add("sigterm-generate-workers", "signals", ["generate", "--config", "slow.yaml", "--workers", "2", "--quiet",
+                                                "--out", "D"], cp("slow.yaml"), expect=143, send=(signal.SIGTERM, 12.0),
+        timeout=60)
     add("sigint-sweep-workers", "signals", ["sweep", "--device", "ip2c_pedot_water", "--rh", "60", "--grid",
                                             "Y=log:1e7:1e9:20000", "--workers", "2", "--quiet", "--out", "t.csv"],
         expect=130, send=(signal.SIGINT, 10.0), timeout=60)
