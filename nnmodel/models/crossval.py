@@ -1,0 +1,171 @@
+"""Blocked cross-validation when the validation data are few (every network, by its base class).
+
+One validation tail of a few hundred samples ranks models by chance: a tuned trial that
+validates 5 % better on it can test 10 % worse, and a network's correction can be dropped
+or kept on noise.  So when the validation data are **few** — fewer than
+:data:`MIN_WINDOWS` independent windows, a window being the measured output's correlation
+time (:func:`nnmodel.batches.correlation_time`) — a fit is scored on :data:`FOLDS` folds
+instead of one (``cv_folds: auto``; a whole number forces that many, 1 turns it off):
+
+* fold 0 is the split the model trains on (the validation records, or the last
+  ``val_fraction`` of each training record);
+* every further fold holds out an earlier contiguous block of every training record, as
+  long as that tail, and trains on what precedes it (*rolling origin*: a model never trains
+  on samples after the ones it is scored on, and the block is scored as the continuation of
+  its record, its input filters warmed by the record's own past, as fold 0's tail is);
+* a fold whose training part would be shorter than its validation block is not made.
+
+Each fold trains the model anew (same seed, same structure) and scores its free-run NRMSE
+on the fold's block; the score of the model is the mean over the folds and its **spread**
+the standard deviation of the fold scores.  A residual model (a linear start, the hybrid's
+physics) keeps its trained correction only when the correction's gain over its reference,
+fold by fold, is larger on average than its spread across the folds — that decision replaces
+the single-tail one (:func:`nnmodel.models.base.keep_if_better`).  The further folds train on
+less data (the last of three on 60 % of the training part when ``val_fraction`` is 0.2), so
+cross-validation costs about 1 + 0.8 + 0.6 = 2.4 fits where one fit was made, and is used
+only where the data are few, which is where a fit is cheap.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import warnings
+
+import numpy as np
+
+__all__ = ["FOLDS", "MIN_WINDOWS", "independent_windows", "plan", "cross_validate", "paired_win", "describe"]
+
+#: folds when the validation data are few (``cv_folds: auto``)
+FOLDS = 3
+#: fewer independent windows (samples / correlation time of the output) of validation data
+#: than this: cross-validate
+MIN_WINDOWS = 20
+#: the shortest block a fold may train or validate on (samples)
+MIN_PIECE = 32
+
+
+def independent_windows(records) -> float:
+    """Independent windows in ``records``: samples divided by the correlation time of the
+    measured output (per record, summed)."""
+    from ..batches import correlation_time
+    return float(sum(len(r) / max(1.0, correlation_time(r.y)) for r in records if len(r) > 2))
+
+
+def _standard_validation(model, train, val):
+    """The validation data of the split a model trains on (records or tails)."""
+    from ..data import split_records
+    if val:
+        return list(val)
+    return split_records(train, model.val_fraction, MIN_PIECE)[1]
+
+
+def plan(model, train, val) -> list[tuple[list, list | None, float]] | None:
+    """The extra folds of a fit, ``[(train records, validation records or None, val_fraction)]``
+    (fold 0, the model's own split, not included), or None when one split suffices: the
+    validation data hold :data:`MIN_WINDOWS` independent windows or more (``cv_folds:
+    auto``), ``cv_folds`` is 1, or no record is long enough for another fold."""
+    folds = model.cv_folds
+    if folds == 1:
+        return None
+    vdata = _standard_validation(model, train, val)
+    windows = independent_windows(vdata) if vdata else 0.0
+    if folds == "auto":
+        if not vdata or windows >= MIN_WINDOWS:
+            return None
+        folds = FOLDS
+    f = model.val_fraction if model.val_fraction > 0 else 0.2
+    out = []
+    used = 0 if val else 1     # tails already held out before the next fold's block
+    while len(out) < folds - 1:
+        keep = 1.0 - used * f            # the records are cut to this fraction ...
+        if keep - f < f:                 # ... and must train on at least as much as they validate
+            break
+        parts = [r[:int(round(len(r) * keep))] for r in train]
+        if not all(len(p) * f / keep >= MIN_PIECE for p in parts):
+            break
+        out.append((parts, None, f / keep))
+        used += 1
+    return out or None
+
+
+def _fold_model(model, val_fraction: float):
+    """A fresh copy of ``model``'s settings for one fold: the structure it chose, no nested
+    search or cross-validation, no progress bar."""
+    params = {**model.get_params(), "structures": None, "cv_folds": 1, "val_fraction": val_fraction,
+              "progress_bar": False}
+    return type(model)(**params)
+
+
+def scores(model, train, val) -> tuple[float, float | None]:
+    """(free-run validation NRMSE of the fitted ``model``, the same with its correction zeroed
+    — its reference alone — or None without one)."""
+    from .structure import validation_nrmse
+    net = validation_nrmse(model, train, val)
+    if model.__dict__.get("reference_start_") is None:
+        return net, None
+    ref = copy.deepcopy(model)
+    ref.net_.core.zero_correction()
+    return net, validation_nrmse(ref, train, val)
+
+
+def paired_win(base: list[float], new: list[float]) -> tuple[bool, float, float]:
+    """(wins, mean gain, spread): ``new`` wins over ``base`` when its fold-by-fold gain
+    ``base - new`` is positive on average and larger than its standard deviation over the
+    folds (the spread)."""
+    d = np.asarray(base, float) - np.asarray(new, float)
+    if d.size == 0 or not np.all(np.isfinite(d)):
+        return False, math.nan, math.nan
+    mean = float(d.mean())
+    spread = float(d.std(ddof=1)) if d.size > 1 else math.inf
+    return bool(mean > 0 and mean > spread), mean, spread
+
+
+def cross_validate(model, train, val, extra) -> dict:
+    """Score the fitted ``model`` (fold 0) and fresh fits on the ``extra`` folds of
+    :func:`plan`; decide its correction over its reference by :func:`paired_win` (zeroing it
+    when it does not win); returns the record stored as ``model.cross_validation_``."""
+    folds = [scores(model, train, val)]
+    for tr, va, vf in extra:
+        fm = _fold_model(model, vf)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fm.fit(tr, va)
+        folds.append(scores(fm, tr, va))
+    net = [f[0] for f in folds]
+    out = {"folds": len(folds), "protocol": describe(len(folds), bool(val)),
+           "validation_nrmse_folds": net}
+    if folds[0][1] is not None:
+        ref = [f[1] for f in folds]
+        keep, gain, spread = paired_win(ref, net)
+        out.update(reference_nrmse_folds=ref, correction_gain=gain, correction_gain_spread=spread,
+                   correction_kept=keep)
+        end = model.reference_start_["end"]
+        if keep:
+            end.pop("reason", None)
+            end["kept"] = "network"
+        else:
+            model.net_.core.zero_correction()
+            end["kept"] = model.reference_start_["reference"]
+            end["reason"] = (f"cross-validation over {len(folds)} folds: its NRMSE gain over the "
+                             f"{end['kept']} start, {_pct(gain)} on average, is not larger than its spread "
+                             f"across the folds ({_pct(spread)})")
+        end["decided_by"] = "cross-validation"
+        net = ref if not keep else net
+    finite = [v for v in net if math.isfinite(v)]
+    out["score_folds"] = net
+    out["mean"] = float(np.mean(net)) if len(finite) == len(net) else math.inf
+    out["spread"] = float(np.std(net, ddof=1)) if len(finite) == len(net) and len(net) > 1 else math.inf
+    return out
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.3g} %" if math.isfinite(x) else "undefined"
+
+
+def describe(folds: int, own_validation: bool) -> str:
+    """The protocol in one sentence (card and page)."""
+    first = "its validation records" if own_validation else "the last val_fraction of every training record"
+    return (f"blocked cross-validation, rolling origin, {folds} folds: fold 0 validates on {first}, each further "
+            "fold on an earlier block of every training record, as long as that tail (the latest first), trained "
+            "on what precedes it; score = mean free-run validation NRMSE over the folds, spread = their standard "
+            "deviation")
