@@ -228,7 +228,7 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
     for name in _fallbacks(results, trained, out, ds):
         trained[name] = trained[results[name]["falls_back_to"]]
     _compare_with_linear(results)
-    facts = data_facts(ds)
+    facts = data_facts(ds, LinearModel.from_card(results[LINEAR]["linear"]))
     for name, model in trained.items():
         results[name]["shortfalls"] = explain(name, results[name], results, model, facts, LINEAR)
     summary = {"dataset": str(final_path(ds.path)), "dataset_hash": ds.hash, "fs_Hz": ds.fs,
