@@ -498,6 +498,12 @@ GAIN_BLOCKS = 10
 GAIN_SE = 1.0
 
 
+def gain_is_real(r_net: float, r_ref: float, gain: float, se: float) -> bool:
+    """The single-split rule of :func:`keep_if_better`: a lower error, by more than
+    :data:`GAIN_SE` standard errors of the gain when that is known."""
+    return r_net < r_ref and (not math.isfinite(se) or gain > GAIN_SE * se)
+
+
 def keep_if_better(core, val, reference: str = "linear", decide: bool = True) -> dict:
     """A residual core (a linear start, the hybrid's physics) starts and ends no worse than
     its ``reference`` alone on validation: its correction (initialised by least squares, or
@@ -520,8 +526,7 @@ def keep_if_better(core, val, reference: str = "linear", decide: bool = True) ->
     gain, se, blocks = paired_gain(e_ref, e_net, GAIN_BLOCKS)
     n = max(1, sum(e.size for e in e_net))
     r_net, r_ref = (min(float(np.sqrt(sum(float(x.sum()) for x in e) / n)), 1e6) for e in (e_net, e_ref))
-    kept = "network" if not decide or (r_net < r_ref and (not math.isfinite(se) or gain > GAIN_SE * se)) \
-        else reference
+    kept = "network" if not decide or gain_is_real(r_net, r_ref, gain, se) else reference
     out = {"kept": kept, "validation_nrmse_network": r_net, "validation_nrmse_reference": r_ref,
            "validation_gain": gain, "validation_gain_se": se if math.isfinite(se) else None,
            "validation_blocks": blocks}

@@ -108,11 +108,13 @@ def scores(model, train, val) -> tuple[float, float | None]:
     return net, validation_nrmse(ref, train, val)
 
 
-def paired_win(base: list[float], new: list[float]) -> tuple[bool, float, float]:
+def paired_win(base: list, new: list) -> tuple[bool, float, float]:
     """(wins, mean gain, spread): ``new`` wins over ``base`` when its fold-by-fold gain
     ``base - new`` is positive on average and larger than its standard deviation over the
-    folds (the spread)."""
-    d = np.asarray(base, float) - np.asarray(new, float)
+    folds (the spread); folds missing on either side (None) are left out, and fewer than two
+    common folds never win."""
+    pairs = [(b, n) for b, n in zip(base, new) if b is not None and n is not None]
+    d = np.array([b - n for b, n in pairs], float)
     if d.size == 0 or not np.all(np.isfinite(d)):
         return False, math.nan, math.nan
     mean = float(d.mean())
@@ -122,39 +124,60 @@ def paired_win(base: list[float], new: list[float]) -> tuple[bool, float, float]
 
 def cross_validate(model, train, val, extra) -> dict:
     """Score the fitted ``model`` (fold 0) and fresh fits on the ``extra`` folds of
-    :func:`plan`; decide its correction over its reference by :func:`paired_win` (zeroing it
-    when it does not win); returns the record stored as ``model.cross_validation_``."""
-    folds = [scores(model, train, val)]
-    for tr, va, vf in extra:
+    :func:`plan` (a fold that cannot be trained, e.g. shorter than one training window, is
+    None); decide its correction over its reference by :func:`paired_win` (zeroing it when it
+    does not win; with no fold but the first, by the single-split rule); returns the record
+    stored as ``model.cross_validation_``."""
+    from physics.errors import InputError
+
+    from .base import gain_is_real
+    folds, skipped = [scores(model, train, val)], []
+    for k, (tr, va, vf) in enumerate(extra, start=1):
         fm = _fold_model(model, vf)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            fm.fit(tr, va)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fm.fit(tr, va)
+        except InputError as exc:
+            skipped.append(f"fold {k}: {exc}")
+            folds.append((None, None))
+            continue
         folds.append(scores(fm, tr, va))
     net = [f[0] for f in folds]
-    out = {"folds": len(folds), "protocol": describe(len(folds), bool(val)),
+    used = sum(v is not None for v in net)
+    out = {"folds": len(folds), "folds_scored": used, "protocol": describe(len(folds), bool(val)),
            "validation_nrmse_folds": net}
+    if skipped:
+        out["folds_skipped"] = skipped
     if folds[0][1] is not None:
         ref = [f[1] for f in folds]
-        keep, gain, spread = paired_win(ref, net)
-        out.update(reference_nrmse_folds=ref, correction_gain=gain, correction_gain_spread=spread,
-                   correction_kept=keep)
         end = model.reference_start_["end"]
+        if used >= 2:
+            keep, gain, spread = paired_win(ref, net)
+            out.update(reference_nrmse_folds=ref, correction_gain=gain, correction_gain_spread=spread)
+            why = (f"cross-validation over {used} folds: its NRMSE gain over the {model.reference_start_['reference']} "
+                   f"start, {_pct(gain)} on average, is not larger than its spread across the folds ({_pct(spread)})")
+            end["decided_by"] = "cross-validation"
+        else:                          # no further fold could be trained: the single-split rule
+            se = end["validation_gain_se"]
+            keep = gain_is_real(end["validation_nrmse_network"], end["validation_nrmse_reference"],
+                                end["validation_gain"], math.inf if se is None else se)
+            why = "its validation gain is within its uncertainty (no further fold could be trained)"
+            end["decided_by"] = "one split (no further fold could be trained)"
+        out["correction_kept"] = keep
         if keep:
             end.pop("reason", None)
             end["kept"] = "network"
         else:
             model.net_.core.zero_correction()
             end["kept"] = model.reference_start_["reference"]
-            end["reason"] = (f"cross-validation over {len(folds)} folds: its NRMSE gain over the "
-                             f"{end['kept']} start, {_pct(gain)} on average, is not larger than its spread "
-                             f"across the folds ({_pct(spread)})")
-        end["decided_by"] = "cross-validation"
-        net = ref if not keep else net
-    finite = [v for v in net if math.isfinite(v)]
+            end["reason"] = why
+            net = ref
+    scored = [v for v in net if v is not None]
     out["score_folds"] = net
-    out["mean"] = float(np.mean(net)) if len(finite) == len(net) else math.inf
-    out["spread"] = float(np.std(net, ddof=1)) if len(finite) == len(net) and len(net) > 1 else math.inf
+    finite = all(math.isfinite(v) for v in scored)
+    out["mean"] = float(np.mean(scored)) if finite else math.inf
+    out["spread"] = float(np.std(scored, ddof=1)) if finite and len(scored) > 1 else math.inf
     return out
 
 
