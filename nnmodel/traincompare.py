@@ -97,7 +97,8 @@ def runner(simulate, n_init: int):
 
 def network_runner(model):
     """:func:`runner` of a trained network (or any model with ``simulate`` and ``n_init_``)."""
-    return runner(lambda rec, y0: model.simulate(rec.u, rec.rh, y_init=y0), int(model.n_init_))
+    return runner(lambda rec, y0: model.simulate(rec.u, rec.rh if model.uses_rh else None, y_init=y0),
+                  int(model.n_init_))
 
 
 def _score(run, ds: Dataset, entries: list[dict], rh_tolerance: float = RH_TOLERANCE) -> dict:

@@ -7,8 +7,8 @@ the recipe's ``structures`` or ``search`` (the recipe's own search over them).  
 trial is the recipe itself (its values, clipped into the ranges), so tuning never ends
 worse than the defaults on validation.  When the validation data are few every trial is
 cross-validated (:mod:`nnmodel.models.crossval`: its score is the mean over the folds) and
-the best trial replaces the recipe only when its fold-by-fold gain over the recipe is larger
-on average than its spread (:func:`choose`).  N trials are drawn by Optuna's TPE sampler (Bergstra et al.,
+a trial replaces the recipe only when its fold-by-fold gain over the recipe is larger on
+average than its spread; of such trials the lowest-scoring is kept (:func:`choose`).  N trials are drawn by Optuna's TPE sampler (Bergstra et al.,
 NeurIPS 2011) seeded with the model's seed, asked and told in fixed batches of
 :data:`BATCH` — the trials of a batch are tasks on the execution layer
 (:mod:`physics.parallel`, ``--workers``/``--scheduler``) and are told back in trial order —
@@ -175,17 +175,23 @@ def tune(name: str, recipe: dict, base: dict, n_trials: int, dataset: str, setti
 
 def choose(rows: list[dict]) -> tuple[dict, str]:
     """The trial to keep, and the rule that chose it: the lowest score; when the trials were
-    cross-validated, the recipe (trial 0) unless that trial wins over it by more than the
-    spread of its fold-by-fold gain (:func:`nnmodel.models.crossval.paired_win`)."""
+    cross-validated, the lowest score among the trials that win over the recipe (trial 0) by
+    more than the spread of their fold-by-fold gain
+    (:func:`nnmodel.models.crossval.paired_win`), else the recipe."""
     from .models.crossval import paired_win
     ok = [r for r in rows if r["validation_nrmse"] is not None]
     best = min(ok, key=lambda r: (r["validation_nrmse"], r["trial"]))
     recipe = rows[0]
     if recipe["validation_nrmse_folds"] is None or recipe["validation_nrmse"] is None or best is recipe:
         return best, "lowest validation score"
-    wins, gain, spread = paired_win(recipe["validation_nrmse_folds"], best["validation_nrmse_folds"])
-    if wins:
-        return best, (f"trial {best['trial']} wins over the recipe by {100 * gain:.3g} % NRMSE on average over the "
+    wins = {r["trial"]: paired_win(recipe["validation_nrmse_folds"], r["validation_nrmse_folds"] or [])
+            for r in ok if r is not recipe}
+    winners = [r for r in ok if r is not recipe and wins[r["trial"]][0]]
+    if winners:
+        pick = min(winners, key=lambda r: (r["validation_nrmse"], r["trial"]))
+        _, gain, spread = wins[pick["trial"]]
+        return pick, (f"trial {pick['trial']} wins over the recipe by {100 * gain:.3g} % NRMSE on average over the "
                       f"folds, more than the spread of that gain ({100 * spread:.3g} %)")
-    return recipe, (f"the recipe is kept: the best trial ({best['trial']}) is {100 * gain:.3g} % NRMSE better on "
-                    f"average over the folds, not more than the spread of that gain ({100 * spread:.3g} %)")
+    _, gain, spread = wins[best["trial"]]
+    return recipe, (f"the recipe is kept: no trial wins over it by more than the spread of its fold-by-fold gain "
+                    f"(the best, trial {best['trial']}, by {100 * gain:.3g} % against {100 * spread:.3g} %)")
