@@ -741,16 +741,17 @@ def selection_lines(summary: dict) -> list[str]:
           if (r.get("validation") or {}).get("cross_validation")}
     if cv:
         first = next(iter(cv.values()))
-        out.append(f"Selection protocol: the validation data hold fewer than {MIN_WINDOWS} independent windows "
+        out.append(f"Selection protocol: the validation tails hold fewer than {MIN_WINDOWS} independent windows "
                    f"(samples / the output's correlation time), so structures, the keep-over-linear rule and tuning "
                    f"trials were scored by {first['protocol']} ({FOLDS} folds by default: cross-validation costs "
                    "about 2.4 fits instead of one and is used only on such small data). Each network's "
                    "cross-validated score: " + "; ".join(
                        f"{k} {100 * c['mean']:.3g} % ± {100 * c['spread']:.2g} % NRMSE" for k, c in cv.items()) + ".")
     else:
-        out.append(f"Selection protocol: one validation split (the validation records, or the last val_fraction of "
-                   f"each training record); it holds {MIN_WINDOWS} or more independent windows, so no "
-                   "cross-validation was needed.")
+        out.append(f"Selection protocol: one validation split — the dataset's validation records, which decide alone, "
+                   f"or the last val_fraction of each training record when those hold {MIN_WINDOWS} or more "
+                   "independent windows (samples / the output's correlation time; with fewer, 3 rolling-origin folds "
+                   "would have been used).")
     for k, r in (summary.get("models") or {}).items():
         if r.get("falls_back_to"):
             own = r["own"]["validation"]["nrmse"]

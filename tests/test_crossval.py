@@ -38,8 +38,10 @@ def test_cross_validation_only_where_the_validation_data_are_few():
     assert plan(model, large, None) is None
     assert plan(make_model("rbf", {"structures": None, "cv_folds": 1}), small, None) is None
     assert len(plan(make_model("rbf", {"structures": None, "cv_folds": 3}), large, None)) == 2
-    # with validation records of their own, fold 0 is that split and the further folds are tails
-    (tr, va, vf), _ = plan(model, small, [_plant(200, 5)])
+    # validation records of their own stand for the conditions the model is for: they decide
+    # alone, unless folds are asked for; then fold 0 is that split and the further folds tails
+    assert plan(model, small, [_plant(200, 5)]) is None
+    (tr, va, vf), _ = plan(make_model("rbf", {"structures": None, "cv_folds": 3}), small, [_plant(200, 5)])
     assert len(tr[0]) == 400 and vf == pytest.approx(0.2)
 
 

@@ -143,7 +143,7 @@ def bundle_predictor(path: Path) -> Predictor:
                          "nnmodel.load to read bundles; give a device name or device YAML") from None
     bundle = loader(path)
     from nnmodel.startup import start_samples
-    uses_rh = bundle.model.uses_rh
+    model = getattr(bundle, "model", None)      # a bundle of this package (others: only .predict)
 
     def run(voltage, rh, fs):
         return bundle.predict(voltage, rh=rh, fs=fs, resample=True)
@@ -151,15 +151,16 @@ def bundle_predictor(path: Path) -> Predictor:
     def run_record(ts, _rh):
         """The start-up rule (nnmodel.startup), as train-compare and predict run it: the
         record's own RH, the measured outputs of the start-up window."""
-        return bundle.predict(ts.voltage, rh=ts.rh if uses_rh else None, fs=ts.fs, resample=True,
+        return bundle.predict(ts.voltage, rh=ts.rh if model.uses_rh else None, fs=ts.fs, resample=True,
                               deflection=ts.deflection)
 
     card = getattr(bundle, "card", {}) or {}
     info = {"kind": "neural bundle", "path": str(path),
             **{k: card[k] for k in ("model", "fs_hz", "rh_range_pct", "inputs", "output") if k in card}}
+    if model is None:
+        return CallablePredictor(run, name=f"{card.get('model', 'bundle')} ({path.name})", info=info)
     return CallablePredictor(run, name=f"{card.get('model', 'bundle')} ({path.name})", info=info,
-                             record_fn=run_record, start_samples=start_samples(bundle.model.n_init_),
-                             measured_output=True)
+                             record_fn=run_record, start_samples=start_samples(model.n_init_), measured_output=True)
 
 
 def resolve_predictor(spec: str, effects: str, n_modes: int = 4, hold: str = "cubic") -> Predictor:

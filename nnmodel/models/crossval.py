@@ -2,10 +2,12 @@
 
 One validation tail of a few hundred samples ranks models by chance: a tuned trial that
 validates 5 % better on it can test 10 % worse, and a network's correction can be dropped
-or kept on noise.  So when the validation data are **few** — fewer than
-:data:`MIN_WINDOWS` independent windows, a window being the measured output's correlation
-time (:func:`nnmodel.batches.correlation_time`) — a fit is scored on :data:`FOLDS` folds
-instead of one (``cv_folds: auto``; a whole number forces that many, 1 turns it off):
+or kept on noise.  So when the validation is the last ``val_fraction`` of the training
+records and its data are **few** — fewer than :data:`MIN_WINDOWS` independent windows, a
+window being the measured output's correlation time
+(:func:`nnmodel.batches.correlation_time`) — a fit is scored on :data:`FOLDS` folds instead
+of one (``cv_folds: auto``; a whole number forces that many, also with validation records of
+their own, which otherwise decide alone; 1 turns it off):
 
 * fold 0 is the split the model trains on (the validation records, or the last
   ``val_fraction`` of each training record);
@@ -63,14 +65,16 @@ def plan(model, train, val) -> list[tuple[list, list | None, float]] | None:
     """The extra folds of a fit, ``[(train records, validation records or None, val_fraction)]``
     (fold 0, the model's own split, not included), or None when one split suffices: the
     validation data hold :data:`MIN_WINDOWS` independent windows or more (``cv_folds:
-    auto``), ``cv_folds`` is 1, or no record is long enough for another fold."""
+    auto``) or are validation records of their own (which stand for the conditions the model
+    is for, and decide alone unless ``cv_folds`` is a number), ``cv_folds`` is 1, or no record
+    is long enough for another fold."""
     folds = model.cv_folds
     if folds == 1:
         return None
     vdata = _standard_validation(model, train, val)
     windows = independent_windows(vdata) if vdata else 0.0
     if folds == "auto":
-        if not vdata or windows >= MIN_WINDOWS:
+        if val or not vdata or windows >= MIN_WINDOWS:   # validation records of their own decide alone
             return None
         folds = FOLDS
     f = model.val_fraction if model.val_fraction > 0 else 0.2
@@ -164,6 +168,8 @@ def cross_validate(model, train, val, extra) -> dict:
                                 end["validation_gain"], math.inf if se is None else se)
             why = "its validation gain is within its uncertainty (no further fold could be trained)"
             end["decided_by"] = "one split (no further fold could be trained)"
+        if keep and _is_reference(model):
+            keep, why = False, "its correction is zero (dropped at its start and not trained since)"
         out["correction_kept"] = keep
         if keep:
             end.pop("reason", None)
@@ -179,6 +185,15 @@ def cross_validate(model, train, val, extra) -> dict:
     out["mean"] = float(np.mean(scored)) if finite else math.inf
     out["spread"] = float(np.std(scored, ddof=1)) if finite and len(scored) > 1 else math.inf
     return out
+
+
+def _is_reference(model) -> bool:
+    """True when a residual core's correction is zero: the core equals its zeroed copy."""
+    import torch
+    ref = copy.deepcopy(model.net_.core)
+    ref.zero_correction()
+    mine = model.net_.core.state_dict()
+    return all(torch.equal(mine[k], v) for k, v in ref.state_dict().items())
 
 
 def _pct(x: float) -> str:
