@@ -8,7 +8,8 @@ default recipes and again with ``--tune N``.  With 200 validation samples (a few
 windows) every fit is cross-validated (nnmodel/models/crossval.py: 3 rolling-origin folds).
 Prints, per model: the recipe's cross-validated score (trial 0: mean ± spread over the folds),
 the kept trial's, the rule that kept it, and the free-run test RMSE of the default and the tuned
-bundle beside the linear row's.
+bundle beside the linear row's; and, for comparison, the test RMSE of ``--tune N`` scored on
+one validation tail (``cv_folds: 1``, the protocol before cross-validation).
 
     python bench/tune_small.py [--models ff,rbf] [--tune 8] [--gain 1.5] [--out runs/tune-small]
 """
@@ -36,7 +37,7 @@ def _dataset(root: Path, gain: float) -> Path:
         u, y = plant(n, seed, gain)
         files[split] = root / f"{split}.csv"
         write_timeseries(TimeSeries(time=np.arange(n) / FS, voltage=u, deflection=y,
-                                    output=OutputQuantity.parse("y:V")), files[split])
+                                    output=OutputQuantity.parse("y:V")), files[split], overwrite=True)
     return build_dataset(root / "ds", train=[str(files["train"])], test=[str(files["test"])], output="y:V",
                          val_fraction=0.2, overwrite=True)
 
@@ -59,11 +60,13 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     ds = _dataset(out, args.gain)
     runs = {}
-    for label, tune in (("default", None), ("tuned", args.tune)):
+    one = {m: {"cv_folds": 1} for m in models}
+    for label, tune, over in (("default", None, None), ("tuned", args.tune, None), ("one-split", args.tune, one)):
         t0 = time.perf_counter()
-        runs[label] = train_compare(ds, models, out / label, progress=False, tune=tune, overwrite=True)
+        runs[label] = train_compare(ds, models, out / label, progress=False, tune=tune, overwrite=True,
+                                    overrides=over)
         print(f"{label}: {time.perf_counter() - t0:.0f} s wall (shared, loaded 2-core machine)", flush=True)
-    d, t = runs["default"]["models"], runs["tuned"]["models"]
+    d, t, o = runs["default"]["models"], runs["tuned"]["models"], runs["one-split"]["models"]
     print(f"slow plant, tanh({args.gain:g} x), 1 000 training samples (200 validate), test 1 024 samples; "
           f"--tune {args.tune}")
     head = (f"{'model':7s} {'recipe CV (trial 0)':>20s} {'kept trial CV':>16s} {'kept':>5s} "
@@ -86,6 +89,10 @@ def main() -> None:
         print(f"        rule: {tu['rule']}; default recipe's own CV score in its row: {_cv(d[m])}")
         never_worse = kept["validation_nrmse"] <= rec["validation_nrmse"]
         print(f"        kept trial's CV mean <= the recipe's: {'yes' if never_worse else 'NO'}")
+        ob = o[m]["tuning"]["best"]
+        print(f"        --tune {args.tune} on one tail (cv_folds 1): kept trial {ob['trial']}, validation "
+              f"{100 * ob['validation_nrmse']:.2f} %, test RMSE {o[m]['free_run']['test']['rmse_m']:.4f} "
+              f"({vs_linear_text(o[m].get('vs_linear_pct'))} vs linear)")
     shutil.rmtree(out / "ds", ignore_errors=True)
 
 

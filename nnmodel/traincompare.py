@@ -406,13 +406,12 @@ def _budget(model) -> dict:
 
 
 def _training_cost(task: dict) -> float:
-    """Relative training cost, to start the dearest models first: recurrent and hybrid
-    models train by back-propagation through time, FF/RBF mostly by least squares, the
-    linear yardstick in seconds."""
+    """Relative training cost, to start the dearest models first: models trained in closed
+    loop (back-propagation through time over windows, ``horizon`` > 1) cost more than those
+    trained one step ahead or by least squares; the linear yardstick costs seconds."""
     if task["name"] == LINEAR:
         return 0.1
-    params = load_recipe(task["name"], task["overrides"])["hyper_parameters"]
-    return 1.0 if int(params.get("horizon", 1)) <= 1 else 4.0
+    return 1.0 if int(make_model(task["name"], task["overrides"]).horizon) <= 1 else 4.0
 
 
 def _echo_result(name: str, res: dict) -> None:
