@@ -219,8 +219,8 @@ def _causes(name: str, model, facts: dict, biased: bool, drop: dict | None) -> l
         what = (f"the linear model's slowest pole ({integ['pole']:.4f}) "
                 + ("does not decay" if not np.isfinite(tau) else f"decays over {tau:,.0f} samples")
                 + f", against training records of {integ['record_samples']:,.0f} samples: within a record the plant "
-                "integrates its input (such data usually come from a closed loop, whose controller kept the "
-                "integral in range)")
+                "integrates its input, or creeps on longer than a record lasts (an integrator's data usually come "
+                "from a closed loop, whose controller kept the integral in range)")
         if model is not None and model.__dict__.get("reference_start_") is None and _param(model, "na") == 0:
             action = (f"give it a state that can integrate: its linear start (`--set {name}.linear_start=true`) or "
                       f"output feedback (`--set {name}.na=10`); a free run from the input alone cannot hold the "

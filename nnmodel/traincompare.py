@@ -743,7 +743,7 @@ def selection_lines(summary: dict) -> list[str]:
         out.append(f"Selection protocol: the validation tails hold fewer than {MIN_WINDOWS} independent windows "
                    f"(samples / the output's correlation time), so structures, the keep-over-linear rule and tuning "
                    f"trials were scored by {first['protocol']} ({FOLDS} folds by default: cross-validation costs "
-                   "about 2.4 fits instead of one and is used only on such small data). Each network's "
+                   "about 2.25 fits instead of one and is used only on such small data). Each network's "
                    "cross-validated score: " + "; ".join(
                        f"{k} {100 * c['mean']:.3g} % ± {100 * c['spread']:.2g} % NRMSE" for k, c in cv.items()) + ".")
     else:

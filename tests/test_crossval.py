@@ -56,7 +56,9 @@ def test_the_protocol_and_the_spread_are_on_the_card(tmp_path):
     assert m.reference_start_["end"]["decided_by"] == "cross-validation"
     card = json.loads((save(m, tmp_path / "b") / "card.json").read_text())
     assert card["cross_validation"]["protocol"] == cv["protocol"] and card["hyper_parameters"]["cv_folds"] == "auto"
-    assert load(tmp_path / "b").model.cross_validation_["spread"] == pytest.approx(cv["spread"])
+    back = load(tmp_path / "b").model    # what train-compare's findings read from the saved bundle
+    assert back.cross_validation_["spread"] == pytest.approx(cv["spread"])
+    assert back.reference_start_["end"]["kept"] == m.reference_start_["end"]["kept"]
 
 
 def test_a_win_must_exceed_its_spread_over_the_folds():

@@ -487,6 +487,8 @@ class NeuralModel:
             self.structure_search_ = extra["structure_search"]
         if extra.get("cross_validation"):
             self.cross_validation_ = extra["cross_validation"]
+        if extra.get("reference_start"):
+            self.reference_start_ = extra["reference_start"]
         return self
 
 

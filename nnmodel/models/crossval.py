@@ -23,9 +23,10 @@ the standard deviation of the fold scores.  A residual model (a linear start, th
 physics) keeps its trained correction only when the correction's gain over its reference,
 fold by fold, is larger on average than its spread across the folds — that decision replaces
 the single-tail one (:func:`nnmodel.models.base.keep_if_better`).  The further folds train on
-less data (the last of three on 60 % of the training part when ``val_fraction`` is 0.2), so
-cross-validation costs about 1 + 0.8 + 0.6 = 2.4 fits where one fit was made, and is used
-only where the data are few, which is where a fit is cheap.
+less data (60 % and 40 % of each record when ``val_fraction`` is 0.2, against fold 0's
+80 %), so cross-validation costs about 1 + 0.75 + 0.5 = 2.25 fits where one was made (a
+structure search pays it per candidate), and is used only where the data are few, which is
+where a fit is cheap.
 """
 from __future__ import annotations
 
