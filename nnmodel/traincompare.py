@@ -436,14 +436,41 @@ def _physics_base_row(model, physics_row: dict | None, ds: Dataset, entries, rh_
     return row, run
 
 
+def beats(parent, child, train, val) -> tuple[bool, str]:
+    """Whether the fitted model ``parent`` validates better than ``child`` by more than the
+    uncertainty the keep-over-linear rule allows (:mod:`nnmodel.models.crossval`): fold by fold
+    by more than the spread when both were cross-validated, else by more than
+    :data:`~nnmodel.models.base.GAIN_SE` standard errors of the paired squared-error gain by
+    batch means over the validation data (:func:`nnmodel.batches.paired_gain`); and why."""
+    from .batches import paired_gain
+    from .models.base import GAIN_BLOCKS, GAIN_SE
+    from .models.crossval import paired_win
+    from .models.structure import validation_errors
+    cp, cc = parent.__dict__.get("cross_validation_"), child.__dict__.get("cross_validation_")
+    if cp and cc:
+        wins, gain, spread = paired_win(cc["score_folds"], cp["score_folds"])
+        return wins, f"by {100 * gain:.3g} % NRMSE over the folds, against a spread of {100 * spread:.3g} %"
+    ep, ec = validation_errors(parent, train, val), validation_errors(child, train, val)
+    if ec is None:
+        return ep is not None, "its own free run diverged on validation"
+    if ep is None:
+        return False, "the other's free run diverged on validation"
+    gain, se, blocks = paired_gain(ec[0], ep[0], GAIN_BLOCKS)
+    ok = gain > 0 and (not np.isfinite(se) or gain > GAIN_SE * se)
+    return ok, f"a squared-error gain of {gain / se:.1f} standard errors over {blocks} blocks" if np.isfinite(se) \
+        and se > 0 else f"a squared-error gain of {gain:.3g} (its uncertainty unknown)"
+
+
 def _fallbacks(results: dict, trained: dict, out: Path, ds: Dataset) -> list[str]:
     """A grey box (a network whose reference is its physics) is never worse on validation than
     its better parent: its physics part (its own keep rule sees to that) or the best pure
-    network of the run.  When a pure network validates better, the grey box's row and bundle
-    become that network's, and the row says so (``falls_back_to``); returns those rows."""
+    network of the run.  When that network validates better by more than the uncertainty
+    (:func:`beats`), the grey box's row and bundle become that network's, and the row says so
+    (``falls_back_to``); returns those rows."""
     out_rows = []
     pure = {k: m for k, m in trained.items()
             if (m.__dict__.get("reference_start_") or {}).get("reference") != "physics"}
+    train, val = ds.records("train"), ds.records("validation") or None
     for name, model in trained.items():
         if name in pure:
             continue
@@ -454,15 +481,21 @@ def _fallbacks(results: dict, trained: dict, out: Path, ds: Dataset) -> list[str
         parent = min(scores, key=scores.get)
         if not scores[parent] < own:
             continue
+        wins, how = beats(pure[parent], model, train, val)
+        if not wins:
+            results[name]["parent_not_better"] = (f"{parent} validates lower ({100 * scores[parent]:.3g} % against "
+                                                  f"{100 * own:.3g} %) but not beyond the uncertainty: {how}")
+            continue
         row = results[name]
         results[name] = {**{k: v for k, v in results[parent].items() if k not in ("tuning", "shortfalls")},
                          "kind": f"{parent} (the {name} row fell back to it)", "falls_back_to": parent,
+                         "fallback_evidence": how,
                          "own": {"kind": row["kind"], "free_run": row["free_run"], "validation": row["validation"],
                                  "n_parameters": row["n_parameters"]}}
         save_bundle(trained[parent], out / "models" / name, dataset_hash=ds.hash, overwrite=True,
                     output=(ds.output.name, ds.output.unit), metrics={"free_run": results[parent]["free_run"]},
                     notes=f"eap train-compare: {name} validated worse ({100 * own:.3g} % NRMSE) than its parent "
-                          f"{parent} ({100 * scores[parent]:.3g} %), so it falls back to {parent}",
+                          f"{parent} ({100 * scores[parent]:.3g} %; {how}), so it falls back to {parent}",
                     extra={"falls_back_from": name})
         out_rows.append(name)
     return out_rows
@@ -755,7 +788,10 @@ def selection_lines(summary: dict) -> list[str]:
         if r.get("falls_back_to"):
             own = r["own"]["validation"]["nrmse"]
             out.append(f"{k} validated worse ({100 * own:.3g} % NRMSE) than its parent {r['falls_back_to']} "
-                       f"({100 * r['validation']['nrmse']:.3g} %), so its row and bundle are {r['falls_back_to']}'s.")
+                       f"({100 * r['validation']['nrmse']:.3g} %; {r['fallback_evidence']}), so its row and bundle "
+                       f"are {r['falls_back_to']}'s.")
+        elif r.get("parent_not_better"):
+            out.append(f"{k} stays itself: {r['parent_not_better']}.")
     return out
 
 

@@ -50,7 +50,9 @@ def bundle(tmp_path_factory):
     rec = _record(800, 7)
     csv = d / "test.csv"
     write_timeseries(TimeSeries(time=np.arange(rec.u.size) / FS, voltage=rec.u, deflection=rec.y, rh=rec.rh), csv)
-    return SimpleNamespace(dir=d, path=path, model=m, rec=rec, csv=csv, train=train)
+    twin = load(path).model     # the same network again, playing a grey box that validates alike
+    twin.reference_start_ = {"reference": "physics", "end": {"kept": "physics"}}
+    return SimpleNamespace(dir=d, path=path, model=m, rec=rec, csv=csv, train=train, model_copy=twin)
 
 
 def test_predict_compare_and_train_compare_start_a_network_alike_and_score_it_alike(bundle, capsys):
@@ -209,11 +211,20 @@ def test_a_grey_box_that_validates_worse_than_a_pure_network_falls_back_to_it(bu
                       "n_parameters": 1, "train_time_s": 1.0},
                "hybrid": {"kind": "hybrid", "free_run": {"test": {"nrmse": 0.3}}, "validation": {"nrmse": 0.2},
                           "n_parameters": 2, "train_time_s": 1.0}}
-    ds = SimpleNamespace(hash="h", output=SimpleNamespace(name="deflection", unit="m"))
+    ds = SimpleNamespace(hash="h", output=SimpleNamespace(name="deflection", unit="m"),
+                         records=lambda split: bundle.train if split == "train" else [])
     assert _fallbacks(results, {"ff": bundle.model, "hybrid": grey}, tmp_path, ds) == ["hybrid"]
     assert results["hybrid"]["falls_back_to"] == "ff" and results["hybrid"]["free_run"]["test"]["nrmse"] == 0.1
     assert results["hybrid"]["own"]["validation"]["nrmse"] == 0.2
+    assert "standard errors" in results["hybrid"]["fallback_evidence"]   # beyond the keep rule's uncertainty
     assert json.loads((tmp_path / "models" / "hybrid" / "card.json").read_text())["falls_back_from"] == "hybrid"
     from nnmodel.explain import hybrid as hybrid_note
     (n,) = hybrid_note({"models": results})
     assert "falls back to ff" in n["text"]
+    # a parent that validates lower only within the uncertainty is not fallen back to
+    same = {k: {**v, "validation": {"nrmse": 0.2 if k == "hybrid" else 0.19}} for k, v in results.items()
+            if k in ("ff",)}
+    same["hybrid"] = {"kind": "hybrid", "free_run": {"test": {"nrmse": 0.3}}, "validation": {"nrmse": 0.2},
+                      "n_parameters": 2, "train_time_s": 1.0}
+    assert _fallbacks(same, {"ff": bundle.model, "hybrid": bundle.model_copy}, tmp_path / "2", ds) == []
+    assert same["hybrid"]["parent_not_better"].startswith("ff validates lower (19 % against 20 %) but not beyond")

@@ -22,7 +22,7 @@ from physics.errors import InputError
 from ..data import split_index
 from .params import Part
 
-__all__ = ["StructureSearch", "select_structure", "selection_score", "validation_nrmse"]
+__all__ = ["StructureSearch", "select_structure", "selection_score", "validation_errors", "validation_nrmse"]
 
 
 def _check(v):
@@ -99,22 +99,31 @@ def selection_score(model, train, val) -> float:
     return float(cv["mean"]) if cv else validation_nrmse(model, train, val)
 
 
-def validation_nrmse(model, train, val) -> float:
-    """Pooled free-run NRMSE of a fitted ``model`` on ``val`` records, or (without them) on
-    the last ``val_fraction`` of each training record simulated from its start; inf when
-    the simulation diverges."""
+def validation_errors(model, train, val) -> tuple[list[np.ndarray], float] | None:
+    """(squared free-run errors of a fitted ``model`` per validation part, Σ(y − ȳ)² over the
+    parts): the ``val`` records, or (without them) the last ``val_fraction`` of each training
+    record simulated from its start; None when the simulation diverges."""
     if val:
         parts = [(r, 0) for r in val]
     else:
         parts = [(r, split_index(len(r), model.val_fraction, model.n_init_ + 2) or 0) for r in train]
-    e2 = v2 = 0.0
+    errors, v2 = [], 0.0
     for r, k in parts:
         with np.errstate(all="ignore"):
-            yh = model.simulate(r.u, r.rh, y_init=r.y[:model.n_init_])
+            yh = model.simulate(r.u, r.rh if model.uses_rh else None, y_init=r.y[:model.n_init_])
         s = max(k, model.n_init_)
         y, e = r.y[s:], yh[s:] - r.y[s:]
         if not np.all(np.isfinite(e)):
-            return math.inf
-        e2 += float(np.sum(e ** 2))
+            return None
+        errors.append(e ** 2)
         v2 += float(np.sum((y - y.mean()) ** 2))
-    return math.sqrt(e2 / v2) if v2 > 0 else math.inf
+    return errors, v2
+
+
+def validation_nrmse(model, train, val) -> float:
+    """Pooled free-run NRMSE of a fitted ``model`` on its validation data
+    (:func:`validation_errors`); inf when the simulation diverges."""
+    got = validation_errors(model, train, val)
+    if got is None or not got[1] > 0:
+        return math.inf
+    return math.sqrt(sum(float(e.sum()) for e in got[0]) / got[1])
