@@ -202,9 +202,9 @@ def _causes(name: str, model, facts: dict, biased: bool, drop: dict | None) -> l
         out.append(_dropped_cause(name, drop, facts))
     sat = facts.get("saturation")
     if sat:
-        where = (f"it is clipped at its {sat['side']} ({_value(sat['level'], facts['unit'])}: "
+        where = (f"at its {sat['side']} ({_value(sat['level'], facts['unit'])}: "
                  f"{100 * sat['share']:.1f} % of the training samples sit there)" if sat["kind"] == "clipped" else
-                 f"a cubic term of the linear model's output explains {100 * sat['share']:.0f} % of its residual "
+                 f": a cubic term of the linear model's output explains {100 * sat['share']:.0f} % of its residual "
                  "and compresses it")
         if sat["kind"] == "clipped":
             action = ("record within the output's range (a lower drive, or a sensor range that holds the output): "
@@ -212,7 +212,7 @@ def _causes(name: str, model, facts: dict, biased: bool, drop: dict | None) -> l
         else:
             action = (f"the linear row cannot follow a saturation, a network's correction can, given data enough to "
                       f"fit and keep it: record more ({_more_data(facts)})")
-        out.append((f"the output {'is clipped' if sat['kind'] == 'clipped' else 'saturates'}: {where}", action))
+        out.append((f"the output {'is clipped ' if sat['kind'] == 'clipped' else 'saturates'}{where}", action))
     integ = facts.get("integrating")
     if integ:
         tau = integ["time_constant_samples"]
