@@ -539,7 +539,6 @@ def table_rows(results: dict) -> list[dict]:
         rows.append({"model": name, "parameters": r["n_parameters"], "train_time_s": r["train_time_s"],
                      "samples_per_s": r["inference_samples_per_s"],
                      "rmse_test_m": fr["test"]["rmse_m"], "nrmse_test_pct": 100 * fr["test"]["nrmse"],
-                     "rmse_heldout_rh_m": fr.get("heldout_rh", {}).get("rmse_m", nan),
                      "nrmse_heldout_rh_pct": 100 * fr.get("heldout_rh", {}).get("nrmse", nan),
                      "nrmse_varying_rh_pct": 100 * fr.get("varying_rh", {}).get("nrmse", nan),
                      "nrmse_measurement_like_pct": 100 * fr.get("measurement_like", {}).get("nrmse", nan),
