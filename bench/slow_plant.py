@@ -24,13 +24,14 @@ from scipy.signal import lfilter
 FS = 0.25
 
 
-def plant(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def plant(n: int, seed: int, gain: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` samples (input, output) of the plant; ``gain``: of the saturation tanh(gain x)."""
     rng = np.random.default_rng(seed)
     holds = rng.integers(1, 11, n)
     u = np.repeat(rng.uniform(-1.0, 1.0, n), holds)[:n]
     a1, a2 = np.exp(-1 / (120 * FS)), np.exp(-1 / (30 * FS))
     x = lfilter([1 - a2], [1, -a2], lfilter([1 - a1], [1, -a1], u))
-    y = np.tanh(1.5 * x)
+    y = np.tanh(gain * x)
     return u, y + 0.01 * np.std(y) * rng.normal(size=n)
 
 

@@ -174,7 +174,8 @@ def _training_card(model, learned: dict) -> dict:
             "epochs": summary.get("epochs_run", len([r for r in hist if r.get("epoch", 0) >= 0])),
             "max_epochs": summary.get("max_epochs"), "max_time_s": summary.get("max_time_s"),
             "time_guard_fired": bool(summary.get("time_guard_fired", False)),
-            "batch_size": summary.get("batch_size"), "training_windows": summary.get("training_windows")}
+            "batch_size": summary.get("batch_size"), "training_windows": summary.get("training_windows"),
+            "device": summary.get("device")}
 
 
 def load(path: str | os.PathLike) -> "Bundle":

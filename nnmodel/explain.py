@@ -128,6 +128,12 @@ def hybrid(summary: dict) -> list[dict]:
         h = _nrmse(row, g)
         if h is None:
             continue
+        if row.get("falls_back_to"):
+            own = (row.get("own") or {}).get("validation", {}).get("nrmse")
+            out.append(note(f"The {name} row validated worse" + (f" ({_pct(100 * own)} NRMSE)" if own else "")
+                            + f" than its parent {row['falls_back_to']} ({_pct(100 * row['validation']['nrmse'])}), "
+                            f"so it falls back to {row['falls_back_to']}: its row and bundle are that network's."))
+            continue
         part = "physics_base" if "physics_base" in models else ("physics" if "physics" in models else None)
         parents = {}
         if part is not None and _nrmse(models[part], g) is not None:
@@ -147,7 +153,7 @@ def hybrid(summary: dict) -> list[dict]:
         text = (f"The hybrid ({_pct(h)}) is behind " + " and ".join(f"{k} ({_pct(v)})" for k, v in below.items())
                 + ". Its output is the physics plus a correction fitted to what the physics misses"
                 + (" — and here the physics is the simulator that generated the data, so the best correction is "
-                   "none" if part == "physics" else "") + f". {_budget_sentence(name, row)}")
+                   "none" if part == "physics" and (summary.get("physics") or {}).get("is_generator") else "") + f". {_budget_sentence(name, row)}")
         out.append(note(text))
     return out
 
@@ -199,20 +205,31 @@ def losses(summary: dict) -> list[dict]:
 
 def dropped(summary: dict) -> list[dict]:
     """Networks whose correction was dropped because its validation gain was within its
-    uncertainty (:func:`nnmodel.models.base.keep_if_better`): they equal their start."""
+    uncertainty (:func:`nnmodel.models.base.keep_if_better`, or cross-validation): they run
+    their start.  "Equals its start" is said only where the row's test score is the start's
+    row's (the linear row) to rounding; otherwise both scores are given."""
     out = []
-    for name, row in _networks(summary.get("models") or {}).items():
+    models = summary.get("models") or {}
+    lin = next((r for k, r in models.items() if _is_linear(k, r)), None)
+    lin_score = None if lin is None else _nrmse(lin, "test")
+    for name, row in _networks(models).items():
         end = (row.get("reference_start") or {}).get("end") or {}
         ref = (row.get("reference_start") or {}).get("reference", end.get("kept"))
         if end.get("kept") in (None, "network") or "reason" not in end or ref == "physics":  # hybrid(): its own note
             continue
-        se = end.get("validation_gain_se")
-        gain = f", a gain of {end['validation_gain'] / se:.1f} standard errors" if se else ""
-        out.append(note(f"{name} equals its {ref} start: its correction lowered the validation error "
+        score = _nrmse(row, "test")
+        if ref == "linear" and score is not None and lin_score is not None \
+                and abs(score - lin_score) <= SAME * max(lin_score, 1e-300):
+            head = f"{name} equals its linear start (the linear row, {_pct(score)} test NRMSE)"
+        else:
+            head = (f"{name} runs its {ref} start" + (f" ({_pct(score)} test NRMSE" + (
+                f" against the linear row's {_pct(lin_score)})" if lin_score is not None else ")")
+                if score is not None else ""))
+        out.append(note(f"{head}: its correction lowered the validation error "
                         f"({_pct(100 * end['validation_nrmse_reference'])} → "
-                        f"{_pct(100 * end['validation_nrmse_network'])} NRMSE){gain}, too little for the "
-                        "validation data to tell from chance, so it was dropped. Longer validation records, or "
-                        "records of their own (`eap dataset --validation FILE ...`), decide it."))
+                        f"{_pct(100 * end['validation_nrmse_network'])} NRMSE) but was dropped: {end['reason']}. "
+                        "More data, and validation records of their own (`eap dataset --validation FILE ...`), "
+                        "decide it."))
     return out
 
 

@@ -29,6 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
+from physics.compare import cluster_rh
 from physics.errors import InputError
 from physics.fileio import sha256_file, write_json
 from physics.outputs import output_folder, preflight
@@ -94,8 +95,10 @@ def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), 
                   val_fraction: float = 0.2, holdout_rh: Sequence[float] = (), columns: dict | None = None,
                   fs: float | None = None, rh: float | None = None, resample: bool = False,
                   output: OutputQuantity | str | None = None, gain: str | None = None,
-                  allow_overlap: bool = False, overwrite: bool = False, command: str = "eap dataset") -> Path:
-    """Write the dataset folder ``out`` (see the module doc); returns its path."""
+                  allow_overlap: bool = False, overwrite: bool = False, command: str = "eap dataset",
+                  rh_tolerance: float = 1.0) -> Path:
+    """Write the dataset folder ``out`` (see the module doc); returns its path.  ``rh_tolerance``
+    [%]: training records whose RH differ by less form one RH level (``rh_levels``)."""
     if not train:
         raise InputError("--train: give at least one training file")
     if not (isinstance(val_fraction, (int, float)) and 0.0 <= val_fraction < 0.9):
@@ -184,7 +187,8 @@ def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), 
         for m in marks:
             for rel in m["records"]:
                 next(e for e in entries if e["path"] == rel)["overlap"] = True
-        levels = sorted({e["rh_pct"] for e in entries if e["rh_pct"] is not None and e["split"] == "train"})
+        trained = [e["rh_pct"] for e in entries if e["rh_pct"] is not None and e["split"] == "train"]
+        levels = sorted(set(cluster_rh(trained, rh_tolerance))) if trained else []   # hygrometer jitter: one level
         quantity = first["ts"].output
         meta = {"schema": SCHEMA, "name": Path(out).name, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
                 "generator": {"tool": "eap dataset", "command": command, "device": None, "effects": None},

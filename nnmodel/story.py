@@ -215,7 +215,7 @@ def write_page(d: Path, report: dict, provenance: dict) -> Path:
         if best:
             rep.lead(f"Best on held-out RH: {best['model']} at {100 * best['nrmse']:.2f} % free-run NRMSE; the "
                      f"physics simulator itself scores {rows[0]['nrmse_heldout_rh_pct']:.2f} % on the same records.")
-        rep.table(rows, caption="free-run NRMSE by test group (RMSE / std of the measurement)",
+        rep.table(rows, caption="free-run test RMSE and NRMSE by test group (NRMSE = RMSE / std of the measurement)",
                   missing="the dataset has no record of this group, or the row has nothing to count (physics rows)")
         for n in nn.get("notes", []):
             rep.why(n["text"], n["links"])

@@ -40,7 +40,8 @@ from physics.errors import InputError
 from .batches import free_run_error, pad_batch, split_batch
 from .data import window_starts
 
-__all__ = ["WindowDataModule", "SimulationTask", "fit_core", "free_run_error", "execution"]
+__all__ = ["WindowDataModule", "SimulationTask", "fit_core", "free_run_error", "execution", "resolve_accelerator",
+           "device_name"]
 
 
 # ====================================================================== data
@@ -98,6 +99,29 @@ def execution(devices: int = 1, strategy: str = "auto"):
         yield
     finally:
         EXECUTION.update(old)
+
+
+#: ``--accelerator`` choices of ``eap train-compare``
+ACCELERATORS = ("auto", "cpu", "gpu")
+
+
+def resolve_accelerator(choice: str) -> str:
+    """The Lightning accelerator of ``--accelerator CHOICE``: ``auto`` is ``gpu`` when torch
+    sees a CUDA device and ``cpu`` otherwise; ``gpu`` without one is an error."""
+    if choice not in ACCELERATORS:
+        raise InputError(f"--accelerator {choice!r}: expected one of {', '.join(ACCELERATORS)}")
+    has_gpu = bool(torch.cuda.is_available())
+    if choice == "gpu" and not has_gpu:
+        raise InputError("--accelerator gpu: torch sees no GPU (CUDA) on this machine; use --accelerator cpu, or "
+                         "auto to use a GPU only where there is one")
+    return "gpu" if choice == "gpu" or (choice == "auto" and has_gpu) else "cpu"
+
+
+def device_name(accelerator: str) -> str:
+    """What a network trained on: ``cpu``, or ``gpu (NAME)``."""
+    if accelerator in ("gpu", "cuda") and torch.cuda.is_available():
+        return f"gpu ({torch.cuda.get_device_name(0)})"
+    return "cpu" if accelerator in ("cpu", "gpu", "cuda") else str(accelerator)
 
 
 class WindowDataModule(pl.LightningDataModule):
@@ -262,6 +286,16 @@ def _fit_interruptible(trainer, task, dm) -> None:
             signal.signal(signal.SIGINT, handler)
 
 
+def batch_message(n_windows: int, asked: int, used: int) -> str:
+    """What lowering the batch size on short records does, in numbers that hold."""
+    steps = math.ceil(n_windows / used)
+    why = (f"so that an epoch has at least {MIN_STEPS_PER_EPOCH} optimizer steps ({steps})"
+           if steps >= MIN_STEPS_PER_EPOCH else
+           f"one window per optimizer step, {steps} steps per epoch ({MIN_STEPS_PER_EPOCH} would need "
+           f"{MIN_STEPS_PER_EPOCH} windows)")
+    return f"{n_windows} training window{'' if n_windows == 1 else 's'}: batch size {asked} lowered to {used}, {why}"
+
+
 def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
     """Train ``core`` in place with Lightning as ``config`` (a
     :class:`~nnmodel.models.config.TrainingConfig`) says; restores the best (validation
@@ -276,8 +310,7 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
     n_windows = len(dm.train_set)
     if n_windows < MIN_STEPS_PER_EPOCH * batch_size:   # short records: keep several optimizer steps per epoch
         dm.batch_size = max(1, n_windows // MIN_STEPS_PER_EPOCH)
-        warnings.warn(f"{n_windows} training windows: batch size {batch_size} lowered to {dm.batch_size} so that an "
-                      f"epoch has at least {MIN_STEPS_PER_EPOCH} optimizer steps", UserWarning, stacklevel=3)
+        warnings.warn(batch_message(n_windows, batch_size, dm.batch_size), UserWarning, stacklevel=3)
     task = SimulationTask(core, lr=c.lr, weight_decay=c.weight_decay, monitor=monitor,
                           lr_patience=max(2, patience // 3))
     hist = _History()
@@ -298,6 +331,7 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
             devices, strategy = EXECUTION["devices"], EXECUTION["strategy"]
             trainer = pl.Trainer(
                 accelerator=c.accelerator, devices=devices, strategy=strategy, max_epochs=max_epochs,
+                deterministic=True if c.accelerator not in ("cpu", "auto") else None,   # same seed, same weights
                 use_distributed_sampler=False, reload_dataloaders_every_n_epochs=1 if devices > 1 else 0,
                 max_time=None if max_time is None else datetime.timedelta(seconds=float(max_time)),
                 callbacks=[ckpt, stop, hist] + ([_LineProgress()] if progress_bar and not tty else []),
@@ -307,6 +341,7 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
             t_fit = time.monotonic()
             _fit_interruptible(trainer, task, dm)
             elapsed = time.monotonic() - t_fit
+        task.cpu()   # inference and the bundle are on the CPU, whatever trained it
         # with spawned processes (DDP) the callback's state stays in them: the file is the record
         best = ckpt.best_model_path or str(Path(ckdir) / "best.ckpt")
         if best and os.path.exists(best):
@@ -325,7 +360,8 @@ def fit_core(core, train_seqs, val_seqs, config) -> tuple[list[dict], dict]:
     fired = bool(max_time is not None and elapsed >= float(max_time) and not stop.stopped_epoch
                  and epochs < max_epochs)
     summary = {"epochs_run": epochs, "time_guard_fired": fired, "max_epochs": int(max_epochs),
-               "max_time_s": max_time, "batch_size": int(dm.batch_size), "training_windows": int(n_windows)}
+               "max_time_s": max_time, "batch_size": int(dm.batch_size), "training_windows": int(n_windows),
+               "device": device_name(c.accelerator)}
     if fired:
         warnings.warn(f"training stopped by the wall-clock guard max_time={max_time:g} s after {epochs} of "
                       f"{max_epochs} epochs: the result depends on this machine's speed; raise max_time or "

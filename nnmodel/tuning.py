@@ -5,7 +5,10 @@ hyper-parameter -> ``{low, high}`` (whole numbers when both bounds are; ``log: t
 log scale) or ``{choices: [...]}``; the pseudo-parameter ``structure`` picks one entry of
 the recipe's ``structures`` or ``search`` (the recipe's own search over them).  The first
 trial is the recipe itself (its values, clipped into the ranges), so tuning never ends
-worse than the defaults on validation.  N trials are drawn by Optuna's TPE sampler (Bergstra et al.,
+worse than the defaults on validation.  When the validation data are few every trial is
+cross-validated (:mod:`nnmodel.models.crossval`: its score is the mean over the folds) and
+a trial replaces the recipe only when its fold-by-fold gain over the recipe is larger on
+average than its spread; of such trials the lowest-scoring is kept (:func:`choose`).  N trials are drawn by Optuna's TPE sampler (Bergstra et al.,
 NeurIPS 2011) seeded with the model's seed, asked and told in fixed batches of
 :data:`BATCH` — the trials of a batch are tasks on the execution layer
 (:mod:`physics.parallel`, ``--workers``/``--scheduler``) and are told back in trial order —
@@ -24,7 +27,7 @@ import warnings
 
 from physics.errors import InputError
 
-__all__ = ["BATCH", "search_space", "tune"]
+__all__ = ["BATCH", "search_space", "tune", "choose"]
 
 #: trials asked (and run side by side) before the sampler is told their scores
 BATCH = 4
@@ -99,7 +102,7 @@ def _trial(task: dict) -> dict:
     from physics.effects import ensure_registered
 
     from .dataset import load_dataset
-    from .models.structure import validation_nrmse
+    from .models.structure import selection_score
     from .recipes import make_model
 
     ensure_registered(task["effect_files"])
@@ -111,12 +114,14 @@ def _trial(task: dict) -> dict:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model.fit(train, val)
-        score = validation_nrmse(model, train, val)
+        score = selection_score(model, train, val)
         error = None
     except InputError as exc:
         score, error = math.inf, str(exc)
+    cv = model.__dict__.get("cross_validation_") if error is None else None
     return {"score": score if math.isfinite(score) else None, "error": error,
-            "fit_time_s": time.perf_counter() - t0, "n_parameters": model.n_parameters if error is None else None}
+            "fit_time_s": time.perf_counter() - t0, "n_parameters": model.n_parameters if error is None else None,
+            "folds": cv["score_folds"] if cv else None, "spread": cv["spread"] if cv else None}
 
 
 def tune(name: str, recipe: dict, base: dict, n_trials: int, dataset: str, settings, effect_files,
@@ -148,7 +153,8 @@ def tune(name: str, recipe: dict, base: dict, n_trials: int, dataset: str, setti
             else:
                 study.tell(t, res["score"])
             rows.append({"trial": t.number, "params": dict(t.params), "validation_nrmse": res["score"],
-                         "fit_time_s": res["fit_time_s"], "n_parameters": res["n_parameters"], "error": res["error"]})
+                         "fit_time_s": res["fit_time_s"], "n_parameters": res["n_parameters"], "error": res["error"],
+                         "validation_nrmse_folds": res["folds"], "spread": res["spread"]})
         if echo is not None:
             done = [r["validation_nrmse"] for r in rows if r["validation_nrmse"] is not None]
             echo(f"  {name}: {len(rows)}/{n_trials} trials, best validation NRMSE "
@@ -156,9 +162,36 @@ def tune(name: str, recipe: dict, base: dict, n_trials: int, dataset: str, setti
     ok = [r for r in rows if r["validation_nrmse"] is not None]
     if not ok:
         raise InputError(f"--tune: every trial of {name!r} failed (first: {rows[0]['error']})")
-    best = min(ok, key=lambda r: (r["validation_nrmse"], r["trial"]))
+    best, rule = choose(rows)
+    cv = rows[0]["validation_nrmse_folds"] is not None
     return {"n_trials": n_trials, "sampler": f"TPE (optuna {optuna.__version__}), seed {seed}", "batch": BATCH,
-            "space": {k: repr(v) for k, v in space.items()}, "score": "free-run NRMSE on the validation data",
+            "space": {k: repr(v) for k, v in space.items()},
+            "score": ("mean free-run NRMSE over the cross-validation folds (crossval)" if cv
+                      else "free-run NRMSE on the validation data"), "rule": rule,
             "trials": rows, "best": {"trial": best["trial"], "params": best["params"],
-                                     "validation_nrmse": best["validation_nrmse"],
+                                     "validation_nrmse": best["validation_nrmse"], "spread": best["spread"],
                                      "overrides": overrides_of(best["params"], params)}}
+
+
+def choose(rows: list[dict]) -> tuple[dict, str]:
+    """The trial to keep, and the rule that chose it: the lowest score; when the trials were
+    cross-validated, the lowest score among the trials that win over the recipe (trial 0) by
+    more than the spread of their fold-by-fold gain
+    (:func:`nnmodel.models.crossval.paired_win`), else the recipe."""
+    from .models.crossval import paired_win
+    ok = [r for r in rows if r["validation_nrmse"] is not None]
+    best = min(ok, key=lambda r: (r["validation_nrmse"], r["trial"]))
+    recipe = rows[0]
+    if recipe["validation_nrmse_folds"] is None or recipe["validation_nrmse"] is None or best is recipe:
+        return best, "lowest validation score"
+    wins = {r["trial"]: paired_win(recipe["validation_nrmse_folds"], r["validation_nrmse_folds"] or [])
+            for r in ok if r is not recipe}
+    winners = [r for r in ok if r is not recipe and wins[r["trial"]][0]]
+    if winners:
+        pick = min(winners, key=lambda r: (r["validation_nrmse"], r["trial"]))
+        _, gain, spread = wins[pick["trial"]]
+        return pick, (f"trial {pick['trial']} wins over the recipe by {100 * gain:.3g} % NRMSE on average over the "
+                      f"folds, more than the spread of that gain ({100 * spread:.3g} %)")
+    _, gain, spread = wins[best["trial"]]
+    return recipe, (f"the recipe is kept: no trial wins over it by more than the spread of its fold-by-fold gain "
+                    f"(the best, trial {best['trial']}, by {100 * gain:.3g} % against {100 * spread:.3g} %)")

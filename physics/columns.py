@@ -220,11 +220,13 @@ def number(x: Any, digits: int = 3) -> str:
 
 
 def quantity(value: Any, unit: str, digits: int = 3) -> str:
-    """A stored value with its SI ``unit`` as text in its reading unit (terminal and page):
-    ``quantity(3.11e-5, "m")`` → ``"31.1 µm"``, ``quantity(0.0012, "V")`` → ``"1.20 mV"``."""
-    shown, scale = reading_unit(unit)
+    """A stored value with its SI ``unit`` as text in its reading unit (terminal and page),
+    the engineering prefix chosen for the value's size (:func:`reading_unit`):
+    ``quantity(3.11e-5, "m")`` → ``"31.1 µm"``, ``quantity(2.865e-3, "m")`` → ``"2.87 mm"``,
+    ``quantity(0.0012, "V")`` → ``"1.20 mV"``."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return f"– {shown}"
+        return f"– {reading_unit(unit)[0]}"
+    shown, scale = reading_unit(unit, abs(float(value)) or None)
     return f"{number(float(value) * scale, digits)} {shown}"
 
 

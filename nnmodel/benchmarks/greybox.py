@@ -115,7 +115,7 @@ def _curve_point(task: dict) -> dict:
     """Train one model on the first records of the subset order and score it (a task of
     :func:`physics.parallel.map_tasks`; the dataset is read from its path)."""
     from ..dataset import load_dataset
-    from ..traincompare import SKIP, _score
+    from ..traincompare import _score, network_runner
     from ..recipes import make_model
 
     ds = load_dataset(task["dataset"])
@@ -125,11 +125,9 @@ def _curve_point(task: dict) -> dict:
     t0 = time.perf_counter()
     model.fit(recs, ds.records("validation"))
     fit_s = time.perf_counter() - t0
-    skip = max(SKIP, int(model.n_init_))
     with warnings.catch_warnings():   # small subsets see few RH levels: extrapolation is the point
         warnings.filterwarnings("ignore", message=".*outside the range seen in training.*")
-        sc = _score(lambda rec: model.simulate(rec.u, rec.rh, y_init=rec.y[:model.n_init_]),
-                    ds, ds.entries("test"), skip)
+        sc = _score(network_runner(model), ds, ds.entries("test"))
     return {"model": task["model"], "n_records": len(chosen), "train_seconds_of_data": sum(len(r) for r in recs) / ds.fs,
             "rh_levels": sorted({float(e["rh_pct"]) for e in chosen if not isinstance(e["rh_pct"], dict)}),
             "drifting_rh_records": sum(isinstance(e["rh_pct"], dict) for e in chosen),

@@ -142,14 +142,25 @@ def bundle_predictor(path: Path) -> Predictor:
         raise InputError(f"--model {path}: is a folder (a neural-model bundle?) but this installation has no "
                          "nnmodel.load to read bundles; give a device name or device YAML") from None
     bundle = loader(path)
+    from nnmodel.startup import start_samples
+    model = getattr(bundle, "model", None)      # a bundle of this package (others: only .predict)
 
     def run(voltage, rh, fs):
         return bundle.predict(voltage, rh=rh, fs=fs, resample=True)
 
+    def run_record(ts, _rh):
+        """The start-up rule (nnmodel.startup), as train-compare and predict run it: the
+        record's own RH, the measured outputs of the start-up window."""
+        return bundle.predict(ts.voltage, rh=ts.rh if model.uses_rh else None, fs=ts.fs, resample=True,
+                              deflection=ts.deflection)
+
     card = getattr(bundle, "card", {}) or {}
     info = {"kind": "neural bundle", "path": str(path),
             **{k: card[k] for k in ("model", "fs_hz", "rh_range_pct", "inputs", "output") if k in card}}
-    return CallablePredictor(run, name=f"{card.get('model', 'bundle')} ({path.name})", info=info)
+    if model is None:
+        return CallablePredictor(run, name=f"{card.get('model', 'bundle')} ({path.name})", info=info)
+    return CallablePredictor(run, name=f"{card.get('model', 'bundle')} ({path.name})", info=info,
+                             record_fn=run_record, start_samples=start_samples(model.n_init_), measured_output=True)
 
 
 def resolve_predictor(spec: str, effects: str, n_modes: int = 4, hold: str = "cubic") -> Predictor:
@@ -170,8 +181,10 @@ def add_arguments(p):
     p.add_argument("--n-modes", type=int, default=4, help="retained bending modes (physics model)")
     p.add_argument("--hold", choices=["cubic", "linear"], default="cubic",
                    help="input interpolation of the physics time solver (linear for square waves/steps)")
-    p.add_argument("--offset", choices=["mean", "none"], default="mean",
-                   help="remove the best constant offset between measurement and model before the time metrics")
+    p.add_argument("--offset", choices=["auto", "start", "mean", "none"], default="auto",
+                   help="before the time metrics: start = a trained bundle's start-up rule (it starts from the "
+                        "measured outputs of the record's first samples, which are not scored), mean = remove the "
+                        "best constant offset, none = keep it; auto: start for a bundle, mean for a physics model")
     p.add_argument("--skip-s", type=float, default=0.0, help="exclude this start-up interval from time metrics [s]")
     p.add_argument("--bands", default=None, help="band edges [Hz] for errors by band, e.g. 0.1,1,10,50 "
                                                  "(default: decades)")
@@ -195,7 +208,8 @@ def run(args) -> int:
     output = OutputQuantity.from_dict(predictor.info.get("output"), f"{args.model}: output") \
         if isinstance(getattr(predictor, "info", None), dict) else DEFLECTION
     ms = read_measurements(args, output)
-    res = compare(ms, predictor, frf_options=frf_options(args), offset=args.offset, skip_s=args.skip_s,
+    offset = args.offset if args.offset != "auto" else ("start" if predictor.start_samples else "mean")
+    res = compare(ms, predictor, frf_options=frf_options(args), offset=offset, skip_s=args.skip_s,
                   min_coherence=args.min_coherence, bands=parse_bands(args.bands) if args.bands else None,
                   rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
                   log=log)

@@ -34,6 +34,9 @@ def add_arguments(p):
                    help="keep records that share samples (the same file or overlapping ranges; marked in "
                         "dataset.json) instead of refusing them")
     p.add_argument("--rh", type=float, default=None, help="relative humidity [%%] of files without one")
+    p.add_argument("--rh-tolerance", type=float, default=1.0,
+                   help="the hygrometer's tolerance [%%]: training records whose RH differ by less form one RH level "
+                        "(default 1, as eap diagnose and train-compare)")
     p.add_argument("--resample", action="store_true", help="resample non-uniform time onto the median step")
     p.add_argument("--check", default=None, metavar="DS", help="re-verify the dataset folder DS and its sources")
     add_output_options(p, "runs/dataset", "dataset folder to create")
@@ -57,12 +60,14 @@ def run(args) -> int:
         raise InputError(f"--holdout-rh {args.holdout_rh!r}: expected RH levels in %, e.g. 50,70") from None
     if not all(math.isfinite(h) and 0 <= h <= 100 for h in held):
         raise InputError(f"--holdout-rh {args.holdout_rh!r}: RH levels must lie within 0–100 %")
+    if not (math.isfinite(args.rh_tolerance) and args.rh_tolerance >= 0):
+        raise InputError(f"--rh-tolerance {args.rh_tolerance!r}: must be a non-negative number of % RH")
     output = OutputQuantity.parse(args.output) if args.output else None
     out = build_dataset(args.out, train=args.train, validation=args.validation, test=args.test,
                         val_fraction=args.val_fraction, holdout_rh=held,
                         columns=parse_column_map(args.columns, output) if args.columns else None, fs=args.fs_Hz,
                         rh=args.rh, resample=args.resample, output=output, gain=args.sensor_gain,
-                        allow_overlap=args.allow_overlap, overwrite=args.overwrite,
+                        allow_overlap=args.allow_overlap, overwrite=args.overwrite, rh_tolerance=args.rh_tolerance,
                         command="eap " + " ".join(__import__("sys").argv[1:]))
     from nnmodel.dataset import load_dataset
     ds = load_dataset(out)

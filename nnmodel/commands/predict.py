@@ -34,9 +34,9 @@ def add_arguments(p):
     p.add_argument("--resample", action="store_true",
                    help="allow a sampling rate different from the model's: resample in and out")
     p.add_argument("--init-samples", type=int, default=None,
-                   help="free run: initialise the model from the first N measured outputs of the input file "
-                        "(default: as many as the model uses when the file has a deflection column; 0: start "
-                        "from rest)")
+                   help="free run: start the model from the first N measured outputs of the input file, which "
+                        "the printed fit then skips (default, when the file has the measured output: the start-up "
+                        "window max(50, the model's n_init), as train-compare and compare do; 0: start from rest)")
     p.add_argument("--steps-ahead", type=int, default=None,
                    help="k-step-ahead prediction from the measured deflection in the input "
                         "(default: free-run simulation)")
@@ -74,12 +74,17 @@ def _pieces(args, output, uses_rh: bool, need_y: bool, stream: bool):
 
 class _Fit:
     """RMSE and fit % of a prediction against a measured output, accumulated piece by piece
-    (the values of :func:`physics.metrics.rmse` and :func:`~physics.metrics.fit_percent`)."""
+    (the values of :func:`physics.metrics.rmse` and :func:`~physics.metrics.fit_percent`)
+    after the first ``skip`` samples (the measured outputs the model was started from)."""
 
-    def __init__(self):
+    def __init__(self, skip: int = 0):
         self.n, self.sy, self.syy, self.see = 0, 0.0, 0.0, 0.0
+        self.skip = int(skip)
 
     def add(self, y, yhat) -> None:
+        cut = min(self.skip, y.size)
+        self.skip -= cut
+        y, yhat = y[cut:], yhat[cut:]
         e = y - yhat
         self.n += y.size
         self.sy += float(np.sum(y))
@@ -87,7 +92,7 @@ class _Fit:
         self.see += float(np.dot(e, e))
 
     def result(self) -> dict:
-        out = {"rmse": float(np.sqrt(self.see / self.n))}
+        out = {"rmse": float(np.sqrt(self.see / self.n)), "samples": self.n}
         spread = self.syy - self.sy ** 2 / self.n
         if spread > 1e-24 * max(self.syy, 1e-300):   # a constant measured output: relative fit undefined
             out["fit_percent"] = 100.0 * (1.0 - float(np.sqrt(self.see / spread)))
@@ -112,6 +117,7 @@ def run(args) -> int:
         raise InputError(f"--out {args.out}: the prediction is written as CSV; give a path ending in .csv")
     preflight_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model])
     from ..bundle import FS_RTOL, load
+    from ..startup import start_samples
     bundle = load(args.model)
     output = OutputQuantity.from_dict(bundle.card.get("output"), f"{args.model}: card output")
     model, uses_rh = bundle.model, bundle.model.uses_rh
@@ -129,20 +135,26 @@ def run(args) -> int:
     pieces, rh_read = _pieces(args, output, uses_rh, need_y=k is not None or bool(n_init), stream=stream)
     first = next(pieces)
     pieces = itertools.chain([first], pieces)
-    # free run: initialised from the first measured outputs when the file has them (honest start)
+    # free run: started from the first measured outputs when the file has them (nnmodel.startup)
     init = first.deflection if (k is None and n_init != 0) else None
+    used = 0 if init is None else (n_init or start_samples(model.n_init_))
+    if init is not None and used >= init.size:
+        raise InputError(f"{args.input}: {init.size} samples; the model starts from the first {used} measured outputs "
+                         "(--init-samples), so the record must be longer")
+    if n_init and init is not None:
+        init = init[:used]
     if stream:
         if abs(first.fs - bundle.fs) > FS_RTOL * bundle.fs:
             raise InputError(f"the input is sampled at {first.fs:g} Hz but the model was trained at {bundle.fs:g} Hz; "
                              "resample the input, or pass --resample")
         a, b = itertools.tee(pieces)
-        y0 = None if init is None else init[:model.n_init_]
+        y0 = None if init is None else init[:used]
         predicted = zip(a, model.simulate_pieces(((ts.voltage, ts.rh if uses_rh else None) for ts in b), y0))
     else:
         predicted = ((ts, bundle.predict(ts.voltage, rh=ts.rh if uses_rh else None, fs=ts.fs, steps_ahead=k,
                                          resample=args.resample, deflection=ts.deflection if k else init))
                      for ts in pieces)
-    fit, n, meta = _Fit(), 0, dict(first.meta)
+    fit, n, meta = _Fit(used if k is None else 0), 0, dict(first.meta)
     log(f"predicting with {bundle.card['model']} and writing {args.out}")
     with warnings.catch_warnings(record=True) as caught, \
             output_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model]) as (tmp,):
@@ -167,7 +179,7 @@ def run(args) -> int:
             "output_unit_of_model": output.unit, "fs_hz_model": bundle.fs, "fs_hz_input": first.fs,
             "resampled": bool(abs(first.fs - bundle.fs) > 1e-4 * bundle.fs),
             "mode": "free run" if k is None else f"{k}-step-ahead", "warnings": notes,
-            "initialised_from_measured_samples": (model.n_init_ if init is not None else 0) if k is None else None,
+            "initialised_from_measured_samples": used if k is None else None,
             "rh_range_trained_pct": bundle.rh_range, "in_pieces": stream, "provenance": provenance()}
         if fit.n:
             meta["prediction"]["against_measured"] = fit.result()
@@ -178,7 +190,8 @@ def run(args) -> int:
             f"({'free run' if k is None else f'{k}-step-ahead'})")
     if fit.n:
         res = fit.result()
-        line += f"; against the measured {output.name}: RMSE {quantity(res['rmse'], output.unit)}"
+        line += (f"; against the measured {output.name}" + (f" after the first {used} samples" if used else "")
+                 + f": RMSE {quantity(res['rmse'], output.unit)}")
         line += f", fit {res['fit_percent']:.1f} %" if "fit_percent" in res else ""
     print(f"{line}; wrote {args.out} ({output.column})")
     return 0

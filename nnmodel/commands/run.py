@@ -96,12 +96,12 @@ def run(args) -> int:
 def _write_report(d: Path, args, t0: float) -> dict:
     from nnmodel.explain import notes
     from nnmodel.story import DIAGNOSIS_ANCHOR, dataset_facts, loop_stage, outside_stage, write_page
-    from nnmodel.traincompare import table_rows
+    from nnmodel.traincompare import page_rows
     report = {"physics": _physics_stage(d)}
     if not args.physics_only:
         summary = _neural_stage(d, args)
         report["neural"] = {k: v for k, v in summary.items() if k != "models"}
-        report["neural"].update({"table": table_rows(summary["models"]), "report": "compare/index.html",
+        report["neural"].update({"table": page_rows(summary["models"]), "report": "compare/index.html",
                                  "dataset": dataset_facts(d / "dataset"),
                                  "notes": notes(summary, diagnosis=DIAGNOSIS_ANCHOR)})
     report["loop"] = loop_stage(d)

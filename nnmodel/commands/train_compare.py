@@ -27,6 +27,12 @@ def add_arguments(p):
                    help="search each model's settings (its recipe's tune section) with N trials scored on the "
                         "validation data (Optuna TPE, seeded; trials run on --workers/--scheduler), then train and "
                         "save the best")
+    p.add_argument("--accelerator", choices=["auto", "cpu", "gpu"], default="auto",
+                   help="where the networks train: auto = a GPU when torch sees one, else the CPU (the card records "
+                        "the device; --set MODEL.accelerator=... wins for that model)")
+    p.add_argument("--rh-tolerance", type=float, default=1.0,
+                   help="the hygrometer's tolerance [%%]: test records whose RH differ by less form one RH level "
+                        "(default 1, as eap diagnose)")
     add_parallel_options(p)
     p.add_argument("--physics", default=None, metavar="DEVICE_OR_YAML",
                    help="score this device's simulator beside the networks (default: the dataset's generator; "
@@ -71,7 +77,8 @@ def run(args) -> int:
     with execution(args.devices, strategy):
         summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
                                 max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet,
-                                physics=args.physics, settings=settings, tune=args.tune)
+                                physics=args.physics, settings=settings, tune=args.tune,
+                                rh_tolerance=args.rh_tolerance, accelerator=args.accelerator)
     print(format_table(summary))
     best = summary["best_heldout"]
     if best:

@@ -39,9 +39,11 @@ import torch
 from physics.errors import InputError
 
 from ..data import check_prediction_inputs, check_records, rh_range, split_index
+from ..startup import start_samples
 from .config import TrainingConfig
 from .core import SequenceCore
 from .features import FeatureMap, InputFeatures
+from . import crossval
 from .normalise import Normalized, Seq
 from .params import PartField, check_values
 from .runtime import seed_all, torch_threads
@@ -79,7 +81,7 @@ class NeuralModel:
     CARD_KEYS: tuple[str, ...] = ()
 
     _LEARNED = ("net_", "features_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
-                "training_summary_", "structure_search_", "init_report_", "reference_start_")
+                "training_summary_", "structure_search_", "init_report_", "reference_start_", "cross_validation_")
 
     # ------------------------------------------------------------------ hyper-parameters
     @classmethod
@@ -105,7 +107,7 @@ class NeuralModel:
     def card_keys(cls) -> tuple[str, ...]:
         """Bundle-card entries besides the standard ones that :meth:`restore` reads."""
         return ("rh_knots_pct", "memory_range_s", "linear_start", "structure_search",
-                "reference_start") + tuple(cls.CARD_KEYS)
+                "reference_start", "cross_validation") + tuple(cls.CARD_KEYS)
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in self.param_names()}
@@ -186,17 +188,22 @@ class NeuralModel:
         use_rh = self.features.uses_rh(self.kind, train[0].rh is not None)
         seed_all(self.seed)
         try:
-            if self.search.active:
+            if self.search.active:     # each candidate is fitted (and cross-validated) in full
                 select_structure(self, train, val)
             else:
-                self._fit(train, val, train[0].fs, use_rh)
+                folds = crossval.plan(self, train, val)
+                self._fit(train, val, train[0].fs, use_rh, decide=folds is None)
+                if folds is not None:
+                    self.cross_validation_ = crossval.cross_validate(self, train, val, folds)
         except BaseException:
             for attr in self._LEARNED:  # never leave a half-trained model behind
                 self.__dict__.pop(attr, None)
             raise
         return self
 
-    def _fit(self, train, val, fs, use_rh) -> None:
+    def _fit(self, train, val, fs, use_rh, decide: bool = True) -> None:
+        """Fit on one split; ``decide``: whether the validation data decide here if a residual
+        core keeps its trained correction (False: cross-validation decides, :mod:`.crossval`)."""
         from ..training import fit_core  # Lightning is imported only when training
 
         with torch_threads(self.num_threads):
@@ -237,7 +244,7 @@ class NeuralModel:
                 history, self.training_summary_ = fit_core(core, tr, va, self.training)
             if start is not None:
                 self.reference_start_ = {"reference": reference, "start": start,
-                                         "end": keep_if_better(core, va, reference)}
+                                         "end": keep_if_better(core, va, reference, decide=decide)}
             self.fit_time_ = time.perf_counter() - t0
             self.history_ = history
             core.eval()
@@ -386,8 +393,10 @@ class NeuralModel:
                 chunk: int = 4096) -> np.ndarray:
         """SysIdentPy-style prediction.
 
-        ``steps_ahead=None``: free run (initialised from the first ``n_init_`` samples of
-        ``y`` when ``y`` is given, else from rest).  ``steps_ahead=k``: each output ``y[t]``
+        ``steps_ahead=None``: free run, from rest without ``y``; with a measured ``y`` as long
+        as the input, from its start-up window (:mod:`nnmodel.startup`: its first
+        ``max(START_SAMPLES, n_init_)`` samples, returned as given); with a shorter ``y``, from
+        all of it.  ``steps_ahead=k``: each output ``y[t]``
         is simulated over ``k`` steps starting from the measured ``y`` up to ``t - k``; the
         first ``k - 1`` outputs, whose start would lie before the record, are simulated from
         the steady state of the first samples (input ``u[0]`` and output ``y[0]`` held before
@@ -397,7 +406,8 @@ class NeuralModel:
         if steps_ahead is None:
             if y is None:
                 return self.simulate(u, rh)
-            return self.simulate(u, rh, y_init=np.asarray(y, float)[: self.n_init_])
+            y = np.asarray(y, float)
+            return self.simulate(u, rh, y_init=y[:start_samples(self.n_init_)] if y.size >= np.size(u) else y)
         if isinstance(steps_ahead, bool) or not isinstance(steps_ahead, (int, np.integer)) or steps_ahead < 1:
             raise InputError(f"steps_ahead must be None or a positive integer, got {steps_ahead!r}")
         if y is None:
@@ -439,6 +449,8 @@ class NeuralModel:
             extra["structure_search"] = self.structure_search_
         if self.__dict__.get("reference_start_"):
             extra["reference_start"] = self.reference_start_
+        if self.__dict__.get("cross_validation_"):
+            extra["cross_validation"] = self.cross_validation_
         out = {"inputs": list(self.inputs_), "fs": self.fs_,
                "rh_range": None if self.rh_range_ is None else list(self.rh_range_),
                "n_init": self.n_init_, "fit_time_s": self.__dict__.get("fit_time_")}
@@ -473,6 +485,10 @@ class NeuralModel:
         self.history_ = []
         if extra.get("structure_search"):
             self.structure_search_ = extra["structure_search"]
+        if extra.get("cross_validation"):
+            self.cross_validation_ = extra["cross_validation"]
+        if extra.get("reference_start"):
+            self.reference_start_ = extra["reference_start"]
         return self
 
 
@@ -484,7 +500,13 @@ GAIN_BLOCKS = 10
 GAIN_SE = 1.0
 
 
-def keep_if_better(core, val, reference: str = "linear") -> dict:
+def gain_is_real(r_net: float, r_ref: float, gain: float, se: float) -> bool:
+    """The single-split rule of :func:`keep_if_better`: a lower error, by more than
+    :data:`GAIN_SE` standard errors of the gain when that is known."""
+    return r_net < r_ref and (not math.isfinite(se) or gain > GAIN_SE * se)
+
+
+def keep_if_better(core, val, reference: str = "linear", decide: bool = True) -> dict:
     """A residual core (a linear start, the hybrid's physics) starts and ends no worse than
     its ``reference`` alone on validation: its correction (initialised by least squares, or
     trained) is kept only when it lowers the free-run squared error of ``val`` (normalised
@@ -492,7 +514,8 @@ def keep_if_better(core, val, reference: str = "linear") -> dict:
     batch means (:func:`nnmodel.batches.paired_gain`, :data:`GAIN_BLOCKS` blocks, none shorter
     than the errors' correlation time); with fewer than 2 such blocks the uncertainty is
     unknown and a lower error suffices.  A gain within its uncertainty leaves the reference
-    (``core.zero_correction()``)."""
+    (``core.zero_correction()``).  ``decide=False`` only measures (the correction is kept and
+    the caller decides, e.g. by cross-validation)."""
     import copy
 
     from ..batches import free_run_errors, paired_gain
@@ -505,7 +528,7 @@ def keep_if_better(core, val, reference: str = "linear") -> dict:
     gain, se, blocks = paired_gain(e_ref, e_net, GAIN_BLOCKS)
     n = max(1, sum(e.size for e in e_net))
     r_net, r_ref = (min(float(np.sqrt(sum(float(x.sum()) for x in e) / n)), 1e6) for e in (e_net, e_ref))
-    kept = "network" if r_net < r_ref and (not math.isfinite(se) or gain > GAIN_SE * se) else reference
+    kept = "network" if not decide or gain_is_real(r_net, r_ref, gain, se) else reference
     out = {"kept": kept, "validation_nrmse_network": r_net, "validation_nrmse_reference": r_ref,
            "validation_gain": gain, "validation_gain_se": se if math.isfinite(se) else None,
            "validation_blocks": blocks}

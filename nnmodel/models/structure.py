@@ -22,7 +22,7 @@ from physics.errors import InputError
 from ..data import split_index
 from .params import Part
 
-__all__ = ["StructureSearch", "select_structure", "validation_nrmse"]
+__all__ = ["StructureSearch", "select_structure", "selection_score", "validation_errors", "validation_nrmse"]
 
 
 def _check(v):
@@ -31,14 +31,23 @@ def _check(v):
     return "null or a list of hyper-parameter mappings, e.g. [{}, {na: 10, nb: 10}]"
 
 
+def _check_folds(v):
+    if v == "auto" or (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 10):
+        return None
+    return "'auto' (cross-validate when the validation data are few) or a number of folds 1-10 (1: one split)"
+
+
 @dataclass
 class StructureSearch(Part):
-    """``structures``: hyper-parameter overrides tried in turn (None or one entry: no search)."""
+    """``structures``: hyper-parameter overrides tried in turn (None or one entry: no search);
+    ``cv_folds``: how many folds a fit is scored on (:mod:`.crossval`; ``auto``: 3 when the
+    validation data are few, else 1)."""
 
     ATTR = "search"
-    CHECKS = {"structures": _check}
+    CHECKS = {"structures": _check, "cv_folds": _check_folds}
 
     structures: list | None = None
+    cv_folds: int | str = "auto"
 
     @property
     def active(self) -> bool:
@@ -62,10 +71,12 @@ def select_structure(model, train, val) -> None:
             if best is not None:        # the data-fit warnings were already given once
                 warnings.simplefilter("ignore", UserWarning)
             cand.fit(train, val)
-        score = validation_nrmse(cand, train, val)
+        score = selection_score(cand, train, val)
+        cv = cand.__dict__.get("cross_validation_")
         tried.append({"structure": dict(over), "validation_free_run_nrmse": score,
                       "scored_as": "linear least-squares start" if proxy else "fitted model",
-                      "fit_time_s": cand.fit_time_})
+                      "fit_time_s": cand.fit_time_, **({"cv_folds": cv["folds"], "cv_spread": cv["spread"]}
+                                                       if cv else {})})
         if best is None or score < best[0]:
             best = (score, over, cand)
     chosen = best[2]
@@ -81,22 +92,38 @@ def select_structure(model, train, val) -> None:
     model.structure_search_ = tried
 
 
-def validation_nrmse(model, train, val) -> float:
-    """Pooled free-run NRMSE of a fitted ``model`` on ``val`` records, or (without them) on
-    the last ``val_fraction`` of each training record simulated from its start; inf when
-    the simulation diverges."""
+def selection_score(model, train, val) -> float:
+    """What a fitted model is selected by: the mean free-run NRMSE over its cross-validation
+    folds when it was cross-validated (:mod:`.crossval`), else its validation NRMSE."""
+    cv = model.__dict__.get("cross_validation_")
+    return float(cv["mean"]) if cv else validation_nrmse(model, train, val)
+
+
+def validation_errors(model, train, val) -> tuple[list[np.ndarray], float] | None:
+    """(squared free-run errors of a fitted ``model`` per validation part, Σ(y − ȳ)² over the
+    parts): the ``val`` records, or (without them) the last ``val_fraction`` of each training
+    record simulated from its start; None when the simulation diverges."""
     if val:
         parts = [(r, 0) for r in val]
     else:
         parts = [(r, split_index(len(r), model.val_fraction, model.n_init_ + 2) or 0) for r in train]
-    e2 = v2 = 0.0
+    errors, v2 = [], 0.0
     for r, k in parts:
         with np.errstate(all="ignore"):
-            yh = model.simulate(r.u, r.rh, y_init=r.y[:model.n_init_])
+            yh = model.simulate(r.u, r.rh if model.uses_rh else None, y_init=r.y[:model.n_init_])
         s = max(k, model.n_init_)
         y, e = r.y[s:], yh[s:] - r.y[s:]
         if not np.all(np.isfinite(e)):
-            return math.inf
-        e2 += float(np.sum(e ** 2))
+            return None
+        errors.append(e ** 2)
         v2 += float(np.sum((y - y.mean()) ** 2))
-    return math.sqrt(e2 / v2) if v2 > 0 else math.inf
+    return errors, v2
+
+
+def validation_nrmse(model, train, val) -> float:
+    """Pooled free-run NRMSE of a fitted ``model`` on its validation data
+    (:func:`validation_errors`); inf when the simulation diverges."""
+    got = validation_errors(model, train, val)
+    if got is None or not got[1] > 0:
+        return math.inf
+    return math.sqrt(sum(float(e.sum()) for e in got[0]) / got[1])

@@ -68,15 +68,16 @@ def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOpt
     :class:`FRFData`, see :func:`load_measurements`); see the module doc for the metrics.
 
     ``offset``: ``"mean"`` removes the best constant offset between measurement and model
-    (default), ``"none"`` keeps it; ``skip_s`` [s] excludes a start-up interval from the
+    (default), ``"start"`` the mean difference over the model's start-up window (the
+    predictor's ``start_samples``, which the time metrics then skip), ``"none"`` keeps it; ``skip_s`` [s] excludes a start-up interval from the
     time metrics; ``min_coherence`` (γ²) excludes poorly measured frequencies from the FRF
     errors; ``bands`` [(f_lo, f_hi), ...] Hz (default: decades over the compared range);
     ``log(message)`` is told each stage of each record."""
     if not isinstance(predictor, Predictor):
         raise InputError(f"compare needs a Predictor (PhysicsPredictor or CallablePredictor), "
                          f"got {type(predictor).__name__}")
-    if offset not in ("mean", "none"):
-        raise InputError(f"offset {offset!r}: expected 'mean' or 'none'")
+    if offset not in ("mean", "start", "none"):
+        raise InputError(f"offset {offset!r}: expected 'mean', 'start' or 'none'")
     if not (skip_s >= 0 and math.isfinite(skip_s)):
         raise InputError(f"skip_s={skip_s!r} must be a non-negative number of seconds")
     if not 0 <= min_coherence <= 1:
@@ -156,15 +157,18 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
         raise InputError(f"{where}: no relative humidity (rh_pct); give the RH with {arg('rh')}")
     rh_arg = model_rh(rh, ts.fs, rh_tolerance)
     log(f"{Path(where).name}: {predictor.name} on {ts.n:,} samples")
-    yhat = _check_output(predictor(ts.voltage, rh_arg, ts.fs), ts.n, predictor.name)
+    yhat = _check_output(predictor.run_record(ts, rh_arg), ts.n, predictor.name)
     release_free_memory()         # the heap a piecewise run leaves behind (8 B per sample, physics.memory)
-    bw = sensor_bandwidth_of(ts, sb_setting)
+    bw = None if predictor.measured_output and sb_setting == "auto" else sensor_bandwidth_of(ts, sb_setting)
     yhat = sensor_lowpass(yhat, ts.fs, bw)
     y = ts.deflection
-    i0 = int(math.ceil(skip_s * ts.fs))
+    w = predictor.start_samples if offset == "start" else 0
+    i0 = max(int(math.ceil(skip_s * ts.fs)), w)
     if ts.n - i0 < 3:
-        raise InputError(f"{where}: skip_s={skip_s:g} s leaves fewer than 3 samples")
-    c = float(np.mean(y[i0:]) - np.mean(yhat[i0:])) if offset == "mean" else 0.0   # no residual copy
+        raise InputError(f"{where}: skip_s={skip_s:g} s and the start-up window ({w} samples) leave fewer than "
+                         "3 samples")
+    c = float(np.mean(y[i0:]) - np.mean(yhat[i0:])) if offset == "mean" else \
+        float(np.mean(y[:w]) - np.mean(yhat[:w])) if w else 0.0   # no residual copy
     tm = metrics.summary(y[i0:], yhat[i0:], offset=c)    # the record keeps y and the offset (no aligned copy)
     tm["offset_removed_m"] = c
     tm["skip_s"] = skip_s

@@ -17,6 +17,18 @@ class Predictor:
     :meth:`describe` returns JSON-ready information (device, effects, card...)."""
 
     name: str = "model"
+    #: measured samples at a record's start the model is handed to start from (its start-up
+    #: window, ``offset="start"`` of :func:`~physics.compare.compare`); 0: it starts from rest
+    start_samples: int = 0
+    #: True for a model of the measured (sensor) output itself, e.g. a network trained on
+    #: measurements: no sensor low-pass is added to it (``sensor_bandwidth="auto"``)
+    measured_output: bool = False
+
+    def run_record(self, ts, rh) -> np.ndarray:
+        """The output for a measured record ``ts`` (``rh``: the RH a model is given, see
+        :func:`~physics.compare.model_rh`); a model that starts from the measured outputs of
+        its start-up window reads them here."""
+        return self(ts.voltage, rh, ts.fs)
 
     def __call__(self, voltage: np.ndarray, rh, fs: float) -> np.ndarray:
         """Tip deflection [m] for ``voltage`` [V] sampled at ``fs`` [Hz] from t = 0, at
@@ -74,13 +86,18 @@ class CallablePredictor(Predictor):
     model bundle's ``predict``); ``info`` is reported as is."""
 
     def __init__(self, fn: Callable[[np.ndarray, Any, float], np.ndarray], name: str = "model",
-                 info: dict | None = None):
+                 info: dict | None = None, *, record_fn: Callable | None = None, start_samples: int = 0,
+                 measured_output: bool = False):
         if not callable(fn):
             raise InputError(f"CallablePredictor needs a callable, got {type(fn).__name__}")
         self.fn, self.name, self.info = fn, str(name), dict(info or {})
+        self.record_fn, self.start_samples, self.measured_output = record_fn, int(start_samples), measured_output
 
     def __call__(self, voltage, rh, fs):
         return self.fn(voltage, rh, fs)
+
+    def run_record(self, ts, rh):
+        return self.fn(ts.voltage, rh, ts.fs) if self.record_fn is None else self.record_fn(ts, rh)
 
     def describe(self) -> dict:
         return {"name": self.name, "kind": "callable", **self.info}
