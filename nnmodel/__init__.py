@@ -18,4 +18,11 @@ def check_model(cls, params=None):
     return _check(cls, params)
 
 
+def __getattr__(name):
+    if name == "__version__":      # the package's one version (physics/_version.py), read on demand
+        from physics._version import __version__
+        return __version__
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = ["load", "check_model"]

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from physics._version import __version__
 from physics.errors import InputError
 from physics.fileio import load_json, sha256_file
 
@@ -47,14 +48,6 @@ CARD = "card.json"
 FS_RTOL = 1e-4
 
 _UNITS = {"voltage": "V", "rh": "%RH"}
-
-
-def _package_version() -> str:
-    try:
-        from importlib.metadata import version
-        return version("eap-model")
-    except Exception:  # pragma: no cover - not installed
-        return "unknown"
 
 
 
@@ -115,7 +108,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             "dataset_hash": dataset_hash,
             "metrics": _jsonable(metrics) if metrics else {},
             "notes": notes,
-            "package_version": _package_version(),
+            "package_version": __version__,
             "torch_version": torch.__version__,
             "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "weights": {"file": WEIGHTS, "sha256": sha256_file(tmp / WEIGHTS), "format": "torch state_dict"},

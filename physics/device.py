@@ -14,6 +14,7 @@ outside the admissible range are rejected with a message naming the file and key
 from __future__ import annotations
 
 import difflib
+import importlib.resources
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -31,9 +32,15 @@ _TOP_KEYS = {"schema", "name", "title", "reference", "reference_rh", "default_ef
 
 
 def config_dir() -> Path:
-    """Folder holding ``devices/`` and ``train/`` (``$EAP_CONFIG_DIR`` or the repository's ``configs``)."""
+    """Folder holding ``devices/``, ``datasets/`` and ``train/``: ``$EAP_CONFIG_DIR``, else the
+    copy an installed wheel holds (``physics/configs``, put there by ``setup.py``), else the
+    top-level ``configs/`` of the source checkout (an editable install or ``PYTHONPATH``)."""
     env = os.environ.get("EAP_CONFIG_DIR")
-    return Path(env) if env else Path(__file__).resolve().parent.parent / "configs"
+    if env:
+        return Path(env)
+    package = Path(str(importlib.resources.files("physics")))
+    inside = package / "configs"
+    return inside if inside.is_dir() else package.parent / "configs"
 
 
 def available_devices() -> list[str]:
