@@ -47,9 +47,9 @@ TANK_TRUTH = {"area_cm2": 150.0, "pump_cm3_per_s_per_V": 30.0, "outflow_cm2.5_pe
 
 
 def _sensor(y: np.ndarray, t: np.ndarray, rng: np.random.Generator, offset_m: float) -> np.ndarray:
-    """The laser's view of the tip deflection ``y`` [m]: offset, a random walk of ~4 µm over
+    """The laser's view of the tip deflection ``y`` [m]: offset, a random walk of ~1.5 µm over
     the record, white noise, quantisation."""
-    walk = np.cumsum(rng.normal(0.0, 4e-6 / math.sqrt(y.size), y.size))
+    walk = np.cumsum(rng.normal(0.0, 1.5e-6 / math.sqrt(y.size), y.size))
     m = y + offset_m + walk + rng.normal(0.0, NOISE_M, y.size)
     return np.round(m / STEP_M) * STEP_M
 
