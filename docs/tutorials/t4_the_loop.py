@@ -51,3 +51,7 @@ eap("diagnose", *creep, "--columns", LAB, "--device", "ipmc_pt_eg", "--effects",
 again = read_json(OUT / "diagnose_with_draft" / "diagnosis.json")
 check(again["verdict"]["missing_effect"] == "drafted_slow_pole" and again["verdict"]["adequacy"]["adequate"],
       "with the draft as a candidate the diagnosis picks it and the model is adequate")
+fitted = next(r for r in again["ranking"] if r["effect"] == "drafted_slow_pole")["effect_parameters"]
+print(f"drafted slow pole: r = {fitted['slow_pole_r']:.3f}, tau = {fitted['slow_pole_tau']:.2f} s")
+check(abs(fitted["slow_pole_r"] / 0.3 - 1) < 0.1 and abs(fitted["slow_pole_tau"] / 8.0 - 1) < 0.1,
+      "its fitted values are within 10 % of the creep in data/README.md (r = 0.3, tau = 8 s)")
