@@ -49,6 +49,7 @@ nitpick_ignore_regex = [
     (r"py:(class|exc)", r"(NeuralModel|ContractError|ParamSpec)"),
 ]
 
+smartquotes = False                   # "--out" stays two hyphens, quotes stay straight
 html_theme = "furo"
 html_title = f"eap-model {release}"
 html_static_path = []

@@ -41,7 +41,7 @@ def _write(path: Path, text: str) -> None:
 
 def _md(text: str) -> str:
     """Argparse help as Markdown text: literal characters that Markdown would read as markup escaped."""
-    for ch in ("\\", "*", "_", "<", "[", "]", "|", "`"):
+    for ch in ("\\", "*", "_", "<", "[", "]", "|"):
         text = text.replace(ch, "\\" + ch)
     return " ".join(text.split())
 

@@ -10,11 +10,11 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-os.chdir(ROOT)          # the commands below read as you would type them in the repository root
+os.chdir(ROOT)      # the commands read as you would type them in the repository root
 
 
 def out(name: str) -> Path:
-    """The tutorial's output folder, ``runs/tutorials/NAME`` (``runs/`` is never committed)."""
+    """The tutorial's output folder, ``runs/tutorials/NAME`` (never committed)."""
     return Path("runs") / "tutorials" / name
 
 
