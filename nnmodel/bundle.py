@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from physics._version import __version__
 from physics.errors import InputError
 from physics.fileio import load_json, sha256_file
 
@@ -47,14 +48,6 @@ CARD = "card.json"
 FS_RTOL = 1e-4
 
 _UNITS = {"voltage": "V", "rh": "%RH"}
-
-
-def _package_version() -> str:
-    try:
-        from importlib.metadata import version
-        return version("eap-model")
-    except Exception:  # pragma: no cover - not installed
-        return "unknown"
 
 
 
@@ -115,7 +108,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             "dataset_hash": dataset_hash,
             "metrics": _jsonable(metrics) if metrics else {},
             "notes": notes,
-            "package_version": _package_version(),
+            "package_version": __version__,
             "torch_version": torch.__version__,
             "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "weights": {"file": WEIGHTS, "sha256": sha256_file(tmp / WEIGHTS), "format": "torch state_dict"},
@@ -294,7 +287,25 @@ _resample_signal = resample  # the name ``resample`` is also an argument of Bund
 
 
 class Bundle:
-    """A loaded model: ``model`` (the estimator), ``card`` (the JSON card), ``path``."""
+    """A trained network loaded by :func:`nnmodel.load`.
+
+    Attributes
+    ----------
+    model : NeuralModel
+        The network.
+    card : dict
+        The bundle's card (``card.json``): model kind, hyper-parameters, inputs and units,
+        sampling rate, RH range seen in training, dataset hash, metrics, versions.
+    path : path or None
+        The folder it was loaded from.
+
+    Examples
+    --------
+    >>> import nnmodel
+    >>> model = nnmodel.load("runs/train/models/ff")
+    >>> model.card["model"], model.card["output"]["name"], model.n_parameters > 0
+    ('ff', 'deflection', True)
+    """
 
     def __init__(self, model: NeuralModel, card: dict, path: Path | None = None):
         self.model, self.card, self.path = model, card, path
@@ -305,28 +316,55 @@ class Bundle:
 
     @property
     def fs(self) -> float:
+        """The sampling rate the network was trained at [Hz]."""
         return float(self.card["fs_hz"])
 
     @property
     def rh_range(self):
+        """(lowest, highest) relative humidity seen in training [%], or None without humidity."""
         r = self.card.get("rh_range_pct")
         return None if r is None else tuple(r)
 
     @property
     def n_parameters(self) -> int:
+        """Number of trained parameters."""
         return self.model.n_parameters
 
     def predict(self, voltage, rh=None, fs: float | None = None, steps_ahead: int | None = None,
                 resample: bool = False, deflection=None) -> np.ndarray:
-        """Predict the output (tip deflection in m) for ``voltage`` (V) sampled at ``fs`` Hz.
+        """Predict the output for a voltage record.
 
-        ``voltage`` may also be a time series (with ``voltage``, ``fs``, ``rh``,
-        ``deflection`` attributes).  ``rh`` in % (constant or one value per sample) is
-        required when the model takes humidity.  ``steps_ahead=None`` is a free run (from
-        rest, or initialised from the first samples of ``deflection`` when given);
-        ``steps_ahead=k`` needs the measured ``deflection``.  A sampling rate different from
-        the training rate is refused unless ``resample=True``, which resamples the inputs
-        to the training rate and the prediction back to ``fs``.
+        Parameters
+        ----------
+        voltage : array_like or time series
+            Voltage [V], one value per sample; or a record with ``voltage``, ``fs``, ``rh``
+            and ``deflection`` attributes.
+        rh : float or array_like, optional
+            Relative humidity [%], a constant or one value per sample; required when the
+            network takes humidity.  Outside the range seen in training a warning is given.
+        fs : float
+            Sampling rate of ``voltage`` [Hz].
+        steps_ahead : int, optional
+            None (default): a free run.  k: k-step-ahead prediction from the measured
+            ``deflection``.
+        resample : bool
+            Accept a sampling rate other than the training rate: the inputs are resampled to
+            it and the prediction back to ``fs``.  Without it such a rate is refused.
+        deflection : array_like, optional
+            The measured output in the card's unit: a free run starts from its first samples
+            (else from rest); needed for ``steps_ahead``.
+
+        Returns
+        -------
+        ndarray
+            The predicted output, one value per sample, in the unit of the card's output
+            (the tip deflection in m unless the dataset named another, e.g. ``level`` in cm).
+
+        Raises
+        ------
+        InputError
+            A NaN, a wrong shape, a missing ``fs`` or ``rh``, another sampling rate without
+            ``resample``.
         """
         if hasattr(voltage, "voltage"):
             ts = voltage

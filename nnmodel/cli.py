@@ -49,6 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Models of ionic electroactive-polymer actuators (IPMC, IP2C): "
         "physics simulation, measurements, identification, diagnosis and neural models.",
     )
+    from physics._version import __version__
+    parser.add_argument("--version", action="version", version=f"eap-model {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for mod in _command_modules():
         # argparse %-formats help strings: a literal "%" (e.g. "RH 40–100 %") must be doubled

@@ -1,6 +1,6 @@
 """Synthetic datasets for the neural models: generation (``eap generate``) and loading.
 
-A dataset (``DATA_FORMAT.md``) is a folder of time-series CSV files plus ``dataset.json``
+A dataset (``docs/reference/file-formats.md``) is a folder of time-series CSV files plus ``dataset.json``
 with the generator and its configuration, the random seed, the split of every file
 (train / validation / test), which RH levels are held out, and a SHA-256 of each file.
 Records span RH 40–100 %: training RH levels, held-out RH levels (test only), records

@@ -22,12 +22,14 @@ _RECIPE_KEYS = {"model", "description", "hyper_parameters", "tune"}
 
 
 def recipe_dir() -> Path:
-    """Folder of the training recipes: ``$EAP_TRAIN_RECIPES`` or ``configs/train`` of the
-    source tree."""
+    """Folder of the training recipes: ``$EAP_TRAIN_RECIPES``, else ``train/`` of the package's
+    configuration folder (:func:`physics.device.config_dir`: the wheel's copy or the checkout's
+    ``configs/``)."""
     env = os.environ.get("EAP_TRAIN_RECIPES")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[1] / "configs" / "train"
+    from physics.device import config_dir
+    return config_dir() / "train"
 
 
 def _beside_module(name: str) -> Path | None:

@@ -66,7 +66,26 @@ class Check:
 
 @dataclass
 class ContractReport:
-    """The result of :func:`check_effect` (``str()`` gives one line per check)."""
+    """The result of :func:`~physics.effects.check_effect`: one entry per check of the effect contract.
+
+    ``str(report)`` gives a header and one line per check (``PASS``, ``FAIL`` or ``SKIP``, the
+    check's name, what was found); ``report["passive"]`` is one check.
+
+    Attributes
+    ----------
+    effect, device : str
+        The effect checked and the device it was added to.
+    checks : list
+        The checks, each with ``name``, ``status`` (``"pass"``, ``"fail"`` or ``"skip"``),
+        ``detail`` and ``seconds``.
+
+    Examples
+    --------
+    >>> from physics.effects import check_effect
+    >>> report = check_effect("solvent_diffusion", fast=True)
+    >>> report.ok, report.failures, report["passive"].status
+    (True, [], 'pass')
+    """
 
     effect: str
     device: str
@@ -74,10 +93,12 @@ class ContractReport:
 
     @property
     def ok(self) -> bool:
+        """True when no check failed."""
         return not self.failures
 
     @property
     def failures(self) -> list[Check]:
+        """The checks that failed."""
         return [c for c in self.checks if c.status == "fail"]
 
     def __getitem__(self, name: str) -> Check:
@@ -91,7 +112,7 @@ class ContractReport:
         return "\n".join([head] + [f"  {c.status.upper():4s}  {c.name:{width}s}  {c.detail}" for c in self.checks])
 
     def raise_on_failure(self, where: str = "") -> None:
-        """Raise :class:`~physics.errors.InputError` naming the first failed check."""
+        """Raise :class:`~physics.InputError` naming the first failed check (and ``where``)."""
         if self.failures:
             c = self.failures[0]
             raise InputError(f"{where + ': ' if where else ''}effect {self.effect!r} fails the contract check "

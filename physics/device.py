@@ -14,6 +14,7 @@ outside the admissible range are rejected with a message naming the file and key
 from __future__ import annotations
 
 import difflib
+import importlib.resources
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -31,12 +32,26 @@ _TOP_KEYS = {"schema", "name", "title", "reference", "reference_rh", "default_ef
 
 
 def config_dir() -> Path:
-    """Folder holding ``devices/`` and ``train/`` (``$EAP_CONFIG_DIR`` or the repository's ``configs``)."""
+    """Folder holding ``devices/``, ``datasets/`` and ``train/``: ``$EAP_CONFIG_DIR``, else the
+    copy an installed wheel holds (``physics/configs``, put there by ``setup.py``), else the
+    top-level ``configs/`` of the source checkout (an editable install or ``PYTHONPATH``)."""
     env = os.environ.get("EAP_CONFIG_DIR")
-    return Path(env) if env else Path(__file__).resolve().parent.parent / "configs"
+    if env:
+        return Path(env)
+    package = Path(str(importlib.resources.files("physics")))
+    inside = package / "configs"
+    return inside if inside.is_dir() else package.parent / "configs"
 
 
 def available_devices() -> list[str]:
+    """Names of the shipped device files (``configs/devices/NAME.yaml``), sorted.
+
+    Examples
+    --------
+    >>> import physics
+    >>> physics.available_devices()
+    ['ip2c_pedot_water', 'ipmc_pt_eg']
+    """
     d = config_dir() / "devices"
     return sorted(p.stem for p in d.glob("*.yaml")) if d.is_dir() else []
 
@@ -60,7 +75,31 @@ class HumidityMap:
 
 @dataclass(frozen=True)
 class Device:
-    """A validated parameter set in SI units.  Immutable; use :meth:`with_params`."""
+    """A device: a validated parameter set in SI units, with its tables and sources.
+
+    Immutable; :meth:`with_params` returns a changed copy.  Made by :func:`load_device`.
+
+    Attributes
+    ----------
+    name, title : str
+        The device's name and a one-line description.
+    params : dict
+        Every scalar parameter in SI units (``eap effects --device NAME`` lists them with
+        their units): geometry (``L_total``, ``L_clamp``, ``width``, ``t_polymer``, m),
+        electrical, chemical, electrode and mechanical values, and those of the effects.
+    tables : mapping
+        Tabulated data, e.g. the DMA curves of ``viscoelastic``.
+    humidity_maps : mapping
+        Parameters as functions of RH (thesis Table V for ``Y`` and ``kf``).
+    sources : dict
+        Where each value comes from (thesis table, equation, or identification).
+    reference_rh : float
+        The humidity the base values belong to [%].
+    default_effects : tuple of str
+        The effects ``"default"`` switches on.
+    path : str or None
+        The file it was read from.
+    """
 
     name: str
     title: str
@@ -82,7 +121,24 @@ class Device:
         return name in self.params or name in self.tables
 
     def with_params(self, **values: float) -> "Device":
-        """Copy with some parameters replaced (SI units; ranges are checked)."""
+        """A copy with some parameters replaced.
+
+        Parameters
+        ----------
+        **values : float
+            New values in SI units, by parameter name; each is checked against its range.
+
+        Returns
+        -------
+        Device
+
+        Examples
+        --------
+        >>> import physics
+        >>> longer = physics.load_device("ipmc_pt_eg").with_params(L_total=0.040)    # m
+        >>> longer["L_total"]
+        0.04
+        """
         specs = all_param_specs()
         new = dict(self.params)
         for k, v in values.items():
@@ -124,7 +180,33 @@ def _suggest(key: str, known) -> str:
 
 
 def load_device(name_or_path: str | os.PathLike | Device) -> Device:
-    """Load a device by name (``configs/devices/NAME.yaml``) or from a YAML path."""
+    """Load a device by name or from a device file.
+
+    Parameters
+    ----------
+    name_or_path : str, path or Device
+        A shipped device's name (see :func:`available_devices`), or the path of a device
+        YAML file (``docs/reference/file-formats.md``); a :class:`Device` is returned as is.
+
+    Returns
+    -------
+    Device
+        Every value converted to SI and checked against its admissible range.
+
+    Raises
+    ------
+    InputError
+        An unknown name, a missing file, a value without a unit or out of range.
+
+    Examples
+    --------
+    >>> import physics
+    >>> dev = physics.load_device("ipmc_pt_eg")
+    >>> print(f"L_total = {dev.params['L_total']:g} m, kf = {dev.params['kf']:g} N m/mol")
+    L_total = 0.026 m, kf = 0.0041 N m/mol
+    >>> dev.default_effects
+    ('electrode_resistance', 'solvent_diffusion', 'viscoelastic', 'humidity')
+    """
     if isinstance(name_or_path, Device):
         return name_or_path
     p = Path(name_or_path)

@@ -32,7 +32,24 @@ def arg(name: str, python: str | None = None) -> str:
 class InputError(ValueError):
     """Bad user input: a device file, a measurement file, a parameter or an option.
 
-    ``params``: the arguments the message refers to (through :func:`arg`), in order."""
+    A subclass of ``ValueError``.  The message names the file, key, column or argument and
+    says what was expected; the ``eap`` command line prints it as one line, with the
+    command-line flag in place of the Python argument.
+
+    Attributes
+    ----------
+    params : tuple of str
+        The arguments the message refers to, in order.
+
+    Examples
+    --------
+    >>> import physics
+    >>> try:
+    ...     physics.load_device("no_such_device")
+    ... except physics.InputError as exc:
+    ...     print(exc)
+    unknown device 'no_such_device': not a YAML file and not one of ip2c_pedot_water, ipmc_pt_eg
+    """
 
     def __init__(self, message: str = "", *args):
         self.template = str(message)
@@ -52,8 +69,24 @@ class InputError(ValueError):
 
 
 class ModelError(RuntimeError):
-    """A model cannot be built or solved with the given parameters (for example a
-    realisation that cannot meet its accuracy target)."""
+    """A model cannot be built or solved with the given parameters.
+
+    A subclass of ``RuntimeError``: for example a simulation that is not finite, or that bends
+    the tip beyond the strip's free length (an unstable effect or a parameter out of range).
+
+    Examples
+    --------
+    A program that runs models on user input catches both kinds of error:
+
+    >>> import physics
+    >>> def gain_at_1hz(device):
+    ...     try:
+    ...         return physics.frequency_response(device, "none", [1.0]).magnitude[0]
+    ...     except (physics.InputError, physics.ModelError) as exc:
+    ...         return f"refused: {exc}"
+    >>> gain_at_1hz("ipmc_pt_eg.yml")
+    'refused: device file ipmc_pt_eg.yml does not exist'
+    """
 
 
 class InputNotice(UserWarning):

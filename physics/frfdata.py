@@ -1,4 +1,4 @@
-"""Frequency-response files (``DATA_FORMAT.md``).
+"""Frequency-response files (``docs/reference/file-formats.md``).
 
 A CSV with one row per frequency: ``freq_Hz``, ``mag_m_per_V`` (or ``mag_mm_per_V``),
 ``phase_deg`` and optionally ``coherence`` (γ², 0–1) and ``rh_pct`` (%).  Frequencies

@@ -17,6 +17,27 @@ from .errors import InputError
 
 @dataclass
 class Signal:
+    """A sampled excitation and how it was made.
+
+    Attributes
+    ----------
+    t : ndarray
+        Sample times [s], uniform, from 0.
+    v : ndarray
+        Voltage [V].
+    kind : str
+        The generator: ``sweep``, ``tone``, ``square``, ``steps``, ``multisine`` or ``noise``.
+    params : dict
+        The generator's settings, named with their units (``f_start_Hz``, ``amplitude_V``, …).
+
+    Examples
+    --------
+    >>> from physics import signals
+    >>> sig = signals.tone(amplitude=2.0, frequency=1.0, duration=10.0, fs=1000.0)
+    >>> sig.fs, sig.describe()["amplitude_V"]
+    (1000.0, 2.0)
+    """
+
     t: np.ndarray          # s
     v: np.ndarray          # V
     kind: str
@@ -24,9 +45,11 @@ class Signal:
 
     @property
     def fs(self) -> float:
+        """Sampling rate [Hz]."""
         return 1.0 / float(self.t[1] - self.t[0])
 
     def describe(self) -> dict:
+        """``kind`` and ``params`` as plain values: the ``signal`` entry of a sidecar."""
         return {"kind": self.kind, **{k: (v.tolist() if isinstance(v, np.ndarray) else v)
                                       for k, v in self.params.items()}}
 
@@ -48,10 +71,31 @@ def _check_band(f0: float, f1: float, fs: float):
 
 
 def fade_in(sig: Signal, duration: float) -> Signal:
-    """``sig`` multiplied by a raised-cosine ramp 0 → 1 over its first ``duration`` seconds,
-    so that the record starts at 0 V, from rest, as a laboratory record does (a signal that
-    starts at a non-zero voltage would otherwise imply that the actuator had been held
-    there forever).  ``duration = 0`` returns ``sig`` unchanged."""
+    """A signal that starts from 0 V: multiplied by a raised-cosine ramp over its first seconds.
+
+    A laboratory record starts at rest; a signal that starts at a non-zero voltage would imply
+    that the strip had been held there forever.
+
+    Parameters
+    ----------
+    sig : Signal
+        The signal.
+    duration : float
+        Length of the ramp 0 → 1 [s], at least 0 and shorter than the signal; 0 returns
+        ``sig`` unchanged.
+
+    Returns
+    -------
+    Signal
+        The faded signal; its ``params`` record ``fade_in_s``.
+
+    Examples
+    --------
+    >>> from physics import signals
+    >>> sig = signals.fade_in(signals.tone(1.0, 2.0, duration=5.0, fs=100.0, phase_deg=90), 1.0)
+    >>> float(sig.v[0]), round(float(sig.v[100]), 6)
+    (0.0, 1.0)
+    """
     duration = float(duration)
     if not (0.0 <= duration < sig.t[-1]):
         raise InputError(f"fade-in duration must be at least 0 s and shorter than the signal "
@@ -64,7 +108,34 @@ def fade_in(sig: Signal, duration: float) -> Signal:
 
 def sweep(amplitude: float = 2.0, f_start: float = 0.1, f_stop: float = 50.0, duration: float = 100.0,
           fs: float = 1000.0, method: str = "logarithmic", offset: float = 0.0) -> Signal:
-    """Swept sine (chirp) from f_start to f_stop, linear or logarithmic in frequency."""
+    """A swept sine (chirp) from ``f_start`` to ``f_stop``, as in the thesis's experiments.
+
+    Parameters
+    ----------
+    amplitude : float
+        Amplitude [V] (the thesis: 2 V, i.e. 4 Vpp).
+    f_start, f_stop : float
+        Start and stop frequency [Hz], 0 < f_start < f_stop < fs/2.
+    duration : float
+        Length [s].
+    fs : float
+        Sampling rate [Hz].
+    method : {"logarithmic", "linear"}
+        How the frequency moves with time.
+    offset : float
+        Constant added [V].
+
+    Returns
+    -------
+    Signal
+
+    Examples
+    --------
+    >>> from physics import signals
+    >>> sig = signals.sweep(amplitude=1.0, f_start=0.1, f_stop=20.0, duration=30.0, fs=100.0)
+    >>> sig.t.size, sig.fs, sig.kind
+    (3000, 100.0, 'sweep')
+    """
     _check_band(f_start, f_stop, fs)
     if method not in ("linear", "logarithmic"):
         raise InputError("sweep method must be 'linear' or 'logarithmic'")
@@ -76,7 +147,34 @@ def sweep(amplitude: float = 2.0, f_start: float = 0.1, f_stop: float = 50.0, du
 
 def tone(amplitude: float = 2.0, frequency: float = 1.0, duration: float = 10.0, fs: float = 1000.0,
          phase_deg: float = 0.0, offset: float = 0.0) -> Signal:
-    """Pure sine tone."""
+    """A pure sine tone.
+
+    Parameters
+    ----------
+    amplitude : float
+        Amplitude [V].
+    frequency : float
+        Frequency [Hz], below fs/2.
+    duration : float
+        Length [s].
+    fs : float
+        Sampling rate [Hz].
+    phase_deg : float
+        Phase at t = 0 [°].
+    offset : float
+        Constant added [V].
+
+    Returns
+    -------
+    Signal
+
+    Examples
+    --------
+    >>> from physics import signals
+    >>> sig = signals.tone(amplitude=2.0, frequency=1.0, duration=10.0, fs=1000.0)
+    >>> round(float(sig.v.max()), 6)
+    2.0
+    """
     _check_band(frequency, frequency * (1 + 1e-12), fs)
     t = _time(duration, fs)
     v = offset + amplitude * np.sin(2 * np.pi * frequency * t + np.radians(phase_deg))
@@ -86,8 +184,34 @@ def tone(amplitude: float = 2.0, frequency: float = 1.0, duration: float = 10.0,
 
 def square(amplitude: float = 2.0, t_on: float = 20.0, t_off: float = 80.0, cycles: int = 1,
            fs: float = 100.0, rise_time: float | None = None, bipolar: bool = False) -> Signal:
-    """Square pulses: ``amplitude`` for t_on, 0 (or −amplitude if ``bipolar``) for t_off, repeated
-    ``cycles`` times; edges are linear ramps of ``rise_time`` (default: one sample)."""
+    """Square pulses: ``amplitude`` for ``t_on``, then 0 (or −amplitude) for ``t_off``, repeated.
+
+    Parameters
+    ----------
+    amplitude : float
+        Pulse height [V].
+    t_on, t_off : float
+        Time on and time off per cycle [s] (the thesis: 20 s and 80 s).
+    cycles : int
+        Number of cycles, at least 1.
+    fs : float
+        Sampling rate [Hz].
+    rise_time : float, optional
+        Length of the linear edges [s] (default: one sample).
+    bipolar : bool
+        Off at −amplitude instead of 0 V.
+
+    Returns
+    -------
+    Signal
+
+    Examples
+    --------
+    >>> from physics import signals
+    >>> sig = signals.square(amplitude=1.0, t_on=10.0, t_off=20.0, cycles=1, fs=100.0)
+    >>> float(sig.v[500]), float(sig.v[2500]), float(sig.t[-1])
+    (1.0, 0.0, 29.99)
+    """
     if t_on <= 0 or t_off < 0 or cycles < 1:
         raise InputError("need t_on > 0, t_off >= 0 and at least one cycle")
     period = t_on + t_off
@@ -105,7 +229,32 @@ def square(amplitude: float = 2.0, t_on: float = 20.0, t_off: float = 80.0, cycl
 
 
 def steps(times, levels, duration: float, fs: float = 1000.0, rise_time: float | None = None) -> Signal:
-    """Piecewise-constant voltage: ``levels[i]`` from ``times[i]`` (s); 0 before the first."""
+    """A piecewise-constant voltage: ``levels[i]`` from ``times[i]`` on, 0 V before the first.
+
+    Parameters
+    ----------
+    times : array_like
+        Step times [s], strictly increasing.
+    levels : array_like
+        Voltage after each step [V], one per time.
+    duration : float
+        Length [s].
+    fs : float
+        Sampling rate [Hz].
+    rise_time : float, optional
+        Length of the linear edges [s] (default: one sample).
+
+    Returns
+    -------
+    Signal
+
+    Examples
+    --------
+    >>> from physics import signals
+    >>> sig = signals.steps([1.0, 3.0], [0.5, -0.5], duration=5.0, fs=10.0)
+    >>> sig.v[[0, 20, 40]].tolist()
+    [0.0, 0.5, -0.5]
+    """
     times, levels = np.asarray(times, dtype=float), np.asarray(levels, dtype=float)
     if times.shape != levels.shape or times.ndim != 1 or np.any(np.diff(times) <= 0):
         raise InputError("steps: times must increase strictly and match levels one to one")
@@ -123,8 +272,40 @@ def steps(times, levels, duration: float, fs: float = 1000.0, rise_time: float |
 def multisine(rms: float = 0.5, f_start: float = 0.1, f_stop: float = 50.0, period: float = 20.0,
               periods: int = 1, fs: float = 1000.0, phases: str = "random", odd_only: bool = False,
               seed: int = 0) -> Signal:
-    """Multisine with equal amplitudes on the lines k/period within the band; ``phases`` is
-    ``random`` (uniform, seeded) or ``schroeder`` (low crest factor; Schroeder 1970)."""
+    """A multisine: equal amplitudes on every line k/period within the band.
+
+    Parameters
+    ----------
+    rms : float
+        RMS value [V].
+    f_start, f_stop : float
+        Band [Hz], below fs/2.
+    period : float
+        Period [s]: the lines are spaced 1/period Hz apart.
+    periods : int
+        Number of periods.
+    fs : float
+        Sampling rate [Hz].
+    phases : {"random", "schroeder"}
+        Random phases (uniform, from ``seed``) or Schroeder's (a low crest factor; Schroeder 1970).
+    odd_only : bool
+        Only odd lines (even lines then show nonlinear distortion).
+    seed : int
+        Seed of the random phases.
+
+    Returns
+    -------
+    Signal
+        Its ``params`` record the number of ``lines``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from physics import signals
+    >>> sig = signals.multisine(rms=0.5, f_start=0.1, f_stop=10.0, period=20.0, fs=100.0)
+    >>> sig.params["lines"], round(float(np.sqrt(np.mean(sig.v ** 2))), 3)
+    (199, 0.5)
+    """
     _check_band(f_start, f_stop, fs)
     k = np.arange(int(np.ceil(f_start * period)), int(np.floor(f_stop * period)) + 1)
     k = k[k > 0]
@@ -150,8 +331,33 @@ def multisine(rms: float = 0.5, f_start: float = 0.1, f_stop: float = 50.0, peri
 
 def noise(rms: float = 0.5, f_start: float = 0.1, f_stop: float = 50.0, duration: float = 100.0,
           fs: float = 1000.0, seed: int = 0) -> Signal:
-    """Band-limited Gaussian noise: white noise band-passed in the frequency domain to
-    [f_start, f_stop] (brick wall), scaled to ``rms``."""
+    """Band-limited Gaussian noise: white noise cut to the band in the frequency domain.
+
+    Parameters
+    ----------
+    rms : float
+        RMS value [V].
+    f_start, f_stop : float
+        Band [Hz] (brick-wall edges), below fs/2.
+    duration : float
+        Length [s].
+    fs : float
+        Sampling rate [Hz].
+    seed : int
+        Seed of the noise.
+
+    Returns
+    -------
+    Signal
+
+    Examples
+    --------
+    >>> from physics import signals
+    >>> a = signals.noise(rms=0.5, f_start=0.1, f_stop=20.0, duration=10.0, fs=100.0, seed=1)
+    >>> b = signals.noise(rms=0.5, f_start=0.1, f_stop=20.0, duration=10.0, fs=100.0, seed=1)
+    >>> bool((a.v == b.v).all()), round(float(a.v.std()), 6)
+    (True, 0.5)
+    """
     _check_band(f_start, f_stop, fs)
     t = _time(duration, fs)
     rng = np.random.default_rng(seed)

@@ -47,12 +47,39 @@ PIECE_SAMPLES = 1 << 18
 
 @dataclass
 class SimulationResult:
-    """Time series of a simulation (SI units).  ``fields`` hold (n_segments, N) arrays on
-    the segment centres ``z`` [m] from the clamp; ``cation_upper``/``cation_lower`` (the
-    cation excess at the faces) for the field ``cation``.  Cs_up/Cs_low: thesis eq. 8, the
-    interface solvent excess averaged over the electrode length [mol/m³], as the
-    first-moment-equivalent value that bends the strip (equal to the face value in the
-    linear regime; with ``nonlinear_charge`` the face values are in the ``cation`` field)."""
+    """The result of :func:`simulate`: time series in SI units.
+
+    Attributes
+    ----------
+    time, voltage, rh : ndarray
+        The inputs: time [s], voltage at the clamp [V], relative humidity [%].
+    deflection : ndarray
+        Tip deflection [m], positive towards the anode.
+    current : ndarray
+        Current drawn at the clamp [A].
+    cs_up, cs_low : ndarray
+        Interface solvent excess at the upper and lower faces, averaged over the electrode
+        length [mol/m³] (thesis eq. 8): the first-moment-equivalent value that bends the
+        strip (the face value in the linear regime; with ``nonlinear_charge`` the face values
+        are in the field ``cation``).
+    device : str
+        The device's name.
+    effects : tuple of str
+        The effects that were on.
+    z : ndarray
+        Segment centres along the strip from the clamp [m] (for the fields).
+    fields : dict
+        The fields asked for, each an (n_segments, n_samples) array;
+        ``cation_upper``/``cation_lower`` for the field ``cation``.
+
+    Examples
+    --------
+    >>> import numpy as np, physics
+    >>> t = np.arange(0, 2, 1e-3)
+    >>> res = physics.simulate("ipmc_pt_eg", "none", t, np.sin(2 * np.pi * t), fields=("voltage",))
+    >>> res.fs, res.deflection.shape, res.fields["voltage"].shape[1]
+    (1000.0, (2000,), 2000)
+    """
 
     time: np.ndarray
     voltage: np.ndarray
@@ -71,7 +98,8 @@ class SimulationResult:
         return 1.0 / float(self.time[1] - self.time[0])
 
     def to_timeseries(self):
-        """A :class:`physics.timeseries.TimeSeries` for writing in the common file format."""
+        """The result as a ``physics.timeseries.TimeSeries``, for writing in the common file
+        format (``docs/reference/file-formats.md``)."""
         from .timeseries import TimeSeries
         temp = self.fields.get("temperature")
         meta = {"generator": "eap-model physics.simulate", "device": self.device, "effects": list(self.effects)}
@@ -84,16 +112,69 @@ class SimulationResult:
 def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), n_modes: int = 4,
              hold: str = "cubic", n_segments: int | None = None, periodic: bool = False,
              progress: bool = False) -> SimulationResult:
-    """Simulate the tip deflection for a voltage record.
+    """Simulate the tip deflection of a strip driven by a voltage record.
 
-    ``device``: name, YAML path, Device or ActuatorModel; ``effects``: ids (see
-    :func:`physics.model.resolve_effects`); ``t`` [s] uniformly sampled; ``voltage`` [V];
-    ``rh`` [%] a constant or one value per sample (required when ``humidity`` is on);
-    ``fields``: any of :data:`FIELDS`; ``hold``: input interpolation between samples
-    (``cubic`` for smooth signals, ``linear`` for ones with jumps); ``periodic``: the record
-    is one period of a periodic excitation and the response is the periodic steady state
-    (no start-up transient; linear models at constant RH only).  Otherwise the device
-    starts at rest in equilibrium with voltage[0].
+    Parameters
+    ----------
+    device : str, path or Device
+        A device name (``"ipmc_pt_eg"``, ``"ip2c_pedot_water"``), a device YAML file, a
+        :class:`~physics.Device`, or a model already built with its effects (then ``effects``
+        may be left out).
+    effects : str or list of str, optional
+        Effect ids, comma-separated or as a list, and the groups ``default`` (the device's own
+        list, the default), ``linear``, ``all``, ``none``, with ``+id``/``-id`` to add or
+        remove one: ``"default,+creep,-thermal"``.  The double layer is always included.
+    t : array_like
+        Sample times [s], uniformly spaced, at least 3.
+    voltage : array_like
+        Voltage at the clamp [V], one value per sample.
+    rh : float or array_like, optional
+        Relative humidity [%], a constant or one value per sample; required when the
+        ``humidity`` effect is on.
+    fields : tuple of str, optional
+        Internal fields to return along the strip: any of ``"voltage"`` (across the polymer,
+        V), ``"charge"`` (electrode charge per area, C/m²), ``"cation"`` (interface cation
+        excess at both faces, mol/m³), ``"temperature"`` (K).
+    n_modes : int, optional
+        Bending modes resolved dynamically (default 4; the rest are quasi-static).
+    hold : {"cubic", "linear"}, optional
+        How the input is interpolated between samples: ``cubic`` for smooth signals,
+        ``linear`` for signals with jumps (steps, pulses).
+    n_segments : int, optional
+        Segments of the electrode line along the strip (default: chosen from the bandwidth).
+    periodic : bool, optional
+        The record is one period of a periodic excitation: return the periodic steady state
+        (no start-up transient; linear models at a constant RH only).  Otherwise the strip
+        starts at rest, in equilibrium with ``voltage[0]``.
+    progress : bool, optional
+        Print progress of the nonlinear stepper.
+
+    Returns
+    -------
+    SimulationResult
+        ``deflection`` [m] (positive towards the anode), ``current`` [A], ``cs_up`` and
+        ``cs_low`` [mol/m³], the inputs, and the requested ``fields`` on the segment
+        centres ``z`` [m].
+
+    Raises
+    ------
+    InputError
+        A bad record (non-uniform time, a NaN, a missing RH), an unknown effect or field.
+    ModelError
+        A result that is not finite or bends the tip beyond the strip's free length.
+
+    Examples
+    --------
+    A 2 V, 1 Hz tone on the thesis IPMC at 60 % RH; after the start-up transient the
+    amplitude is 2 V times the gain of :func:`frequency_response` at 1 Hz:
+
+    >>> import numpy as np, physics
+    >>> t = np.arange(0, 10, 1e-3)
+    >>> res = physics.simulate("ipmc_pt_eg", "default", t, 2 * np.sin(2 * np.pi * t), rh=60)
+    >>> amplitude = 0.5 * np.ptp(res.deflection[t >= 5])
+    >>> gain = physics.frequency_response("ipmc_pt_eg", "default", [1.0], rh=60).magnitude[0]
+    >>> round(1e6 * amplitude), round(1e6 * 2 * gain)
+    (1511, 1511)
     """
     model = as_model(device, effects, n_modes)
     t, v = _check_record(t, voltage)

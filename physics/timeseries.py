@@ -1,6 +1,6 @@
 """Time-series records: one experiment (voltage in, measured output out) per file.
 
-File format (``DATA_FORMAT.md``): a CSV with one row per sample and columns named
+File format (``docs/reference/file-formats.md``): a CSV with one row per sample and columns named
 ``quantity_unit``:
 
 ==============  ==================  ==================================
@@ -411,7 +411,7 @@ def _constant(value: float, n: int) -> np.ndarray:
 def read_timeseries(path, *, columns: dict[str, str] | None = None, fs: float | None = None,
                     rh: float | None = None, require_deflection: bool = True, resample: bool = False,
                     output: OutputQuantity | str | None = None, gain: str | None = None) -> TimeSeries:
-    """Read a time-series record (``.csv`` or ``.mat``) following ``DATA_FORMAT.md``.
+    """Read a time-series record (``.csv`` or ``.mat``) following ``docs/reference/file-formats.md``.
 
     ``columns`` maps quantities to the file's columns (with optional units, module doc);
     ``fs`` (Hz) gives the time base of a file without a time column; ``rh`` (%) is the

@@ -114,12 +114,8 @@ def check_result(deflection, model) -> None:
 
 
 def provenance(argv=None, inputs=()) -> dict:
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        ver = version("eap-model")
-    except PackageNotFoundError:
-        ver = "unknown"
-    out = {"package": "eap-model", "version": ver, "python": platform.python_version(),
+    from physics._version import __version__
+    out = {"package": "eap-model", "version": __version__, "python": platform.python_version(),
            "command": " ".join(["eap"] + (sys.argv[1:] if argv is None else list(argv)))}
     files = [p for p in map(Path, inputs) if p.is_file()]
     if files:

@@ -17,7 +17,7 @@ from ._common import (add_output_options, add_quiet_option, add_record_options, 
 
 NAME = "compare"
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
-DESCRIPTION = (HELP + ". MEASUREMENT files are time-series CSV/.mat files (DATA_FORMAT.md) or frequency-"
+DESCRIPTION = (HELP + ". MEASUREMENT files are time-series CSV/.mat files (docs/reference/file-formats.md) or frequency-"
                "response CSVs (freq_Hz, mag_m_per_V, phase_deg). Writes report.json, metrics.csv, bands.csv, "
                "by_rh.csv, PNGs and the page index.html into --out.")
 

@@ -11,7 +11,7 @@ from ._common import add_output_options, add_record_options
 
 NAME = "dataset"
 HELP = "build a dataset folder (dataset.json + standard CSVs) from your measurement files, or --check one"
-DESCRIPTION = (HELP + ". Files are read with the same rules as every command (DATA_FORMAT.md, --columns for "
+DESCRIPTION = (HELP + ". Files are read with the same rules as every command (docs/reference/file-formats.md, --columns for "
                "other files); FILE[START:STOP] takes a sample range (e.g. the standard split of one long "
                "record); records that share samples are refused unless --allow-overlap. The output is the tip "
                "deflection in m unless --output NAME:UNIT (or a unit in --columns) says otherwise; it is checked "

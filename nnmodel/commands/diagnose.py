@@ -15,7 +15,7 @@ NAME = "diagnose"
 #: API argument → flag, where the flag's destination differs (InputError.render).
 FLAGS = {"n_starts": "--starts", "noise_floor": "--noise-floor-um", "fs_max": "--fs-max-Hz"}
 HELP = "diagnose a model against measurements: where it fails, which effect is missing (ranked, with statistics)"
-DESCRIPTION = (HELP + ". MEASUREMENT files are time-series records (DATA_FORMAT.md): several records may differ "
+DESCRIPTION = (HELP + ". MEASUREMENT files are time-series records (docs/reference/file-formats.md): several records may differ "
                "in signal, amplitude and RH. Writes diagnosis.json, PNGs and the page index.html into --out; --apply also "
                "writes the extended device file (fitted values, the missing effect added to its effect list).")
 

@@ -23,7 +23,7 @@ def add_arguments(p):
     p.add_argument("--f-max-Hz", type=float, default=50.0, help="highest frequency [Hz]")
     p.add_argument("--points", type=int, default=500, help="log-spaced frequencies")
     p.add_argument("--json", default="frf.json", help="output JSON (frequency, magnitude, phase, ...)")
-    p.add_argument("--csv", default=None, help="also write the FRF CSV of DATA_FORMAT.md")
+    p.add_argument("--csv", default=None, help="also write the FRF CSV of docs/reference/file-formats.md")
     p.add_argument("--plot", default=None, help="also write a Bode plot (PNG)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace existing --json/--csv/--plot files written by eap (never other files)")

@@ -14,7 +14,7 @@ from ._common import add_quiet_option, add_record_options, provenance, stage_log
 
 NAME = "predict"
 HELP = "predict the output of a trained model bundle (tip deflection, or the quantity it was trained on) for a record"
-DESCRIPTION = (HELP + ". The input CSV follows DATA_FORMAT.md (time_s, voltage_V, optional rh_pct, optional "
+DESCRIPTION = (HELP + ". The input CSV follows docs/reference/file-formats.md (time_s, voltage_V, optional rh_pct, optional "
                "measured output, e.g. deflection_m), or any file through --columns. The prediction is written as a "
                "time-series CSV whose output column is named after the model's output (deflection_m, level_V, ...); "
                "if the input carries the measured output, the fit is printed. A sampling rate other than the "

@@ -13,7 +13,7 @@ function with that signature — the command line uses it for trained neural-mod
 A predictor without a closed-form response is compared in frequency through the same
 H1 estimate applied to its simulated output.
 
-**What :func:`compare` computes** for each time-series record (``DATA_FORMAT.md``):
+**What :func:`compare` computes** for each time-series record (``docs/reference/file-formats.md``):
 
 * the model's output for the measured voltage and RH; time metrics of
   :mod:`physics.metrics` — RMSE [m], NRMSE, fit % = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) (MATLAB

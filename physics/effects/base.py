@@ -158,21 +158,48 @@ class Effect:
 
 
 class OutputEffect(Effect):
-    """An effect acting on the tip deflection after the rest of the chain: the simplest
-    contract for effects added by users (``--effects-path FILE.py``, entry points
-    ``eap.effects``).
+    """Base class of an effect acting on the tip deflection: the simplest way to add physics.
 
-    Subclass it in one file with an ``id``, a ``summary``, the ``params`` (each with a
-    ``default``) and :meth:`output_tf`, the transfer function (numerator, denominator
-    polynomials in s, highest power first) multiplying the deflection.  Both solvers call
-    it: the frequency solver multiplies the response by it, the time solver filters the
-    simulated deflection with its Tustin discretisation (accurate for frequencies well
-    below the sampling rate).  ``diagnosis`` (a plain dict) makes it a diagnosis candidate:
+    Subclass it in one file (``--effects-path FILE.py``, or an installed package's entry point
+    ``eap.effects``) with the class attributes below and :meth:`output_tf`, the transfer
+    function multiplying the deflection.  Both solvers use it: the frequency solver multiplies
+    the response by it, the time solver filters the simulated deflection with its Tustin
+    discretisation (accurate well below the sampling rate).  ``examples/effects/creep.py`` is
+    a complete example.
 
-    ``free``: its parameters to fit; ``bounds``: {name: (lo, hi)}; ``starts``: a list of
-    {name: value} start points; ``nested``: True when some parameter value switches it off;
-    ``excitation``: the excitation that reveals it (text); all keys in :data:`DIAGNOSIS_KEYS`.
-    See ``examples/effects/creep.py``.
+    Attributes
+    ----------
+    id : str
+        The effect's stable name, used in ``--effects`` (``default,+id``).
+    summary : str
+        One line saying what it adds.
+    params : tuple of ParamSpec
+        Its parameters, ``ParamSpec(name, unit, low, high, description, optional=True,
+        default=value)`` (``physics.parameters``); a device file may override them in a
+        section named like the id.  Read them with ``self.value(p, name)``.
+    diagnosis : dict, optional
+        Makes it a candidate of ``eap diagnose``: ``free`` (parameters to fit), ``bounds``
+        ({name: (low, high)}), ``starts`` (a list of {name: value}), ``nested`` (True when
+        some values switch it off) and ``off`` (those values), ``excitation`` (text: what
+        reveals it), ``reveal`` (a rule on the records), ``signature`` (the residual features
+        it leaves).
+
+    Examples
+    --------
+    A displacement sensor slower than stated, 1/(1 + sτ), and the quick checks of the effect
+    contract:
+
+    >>> from physics.effects import OutputEffect, check_effect
+    >>> from physics.parameters import ParamSpec
+    >>> class SensorLag(OutputEffect):
+    ...     id = "sensor_lag"
+    ...     summary = "a first-order lag of the displacement sensor"
+    ...     params = (ParamSpec("lag_tau", "s", 1e-5, 1.0, "time constant of the sensor",
+    ...                         optional=True, default=2e-3),)
+    ...     def output_tf(self, p):
+    ...         return [1.0], [self.value(p, "lag_tau"), 1.0]       # 1 / (tau s + 1)
+    >>> check_effect(SensorLag, fast=True).ok
+    True
     """
 
     stage = "output"
@@ -183,17 +210,31 @@ class OutputEffect(Effect):
         return [p.name for p in cls.params if not p.optional and p.default is None] + list(cls.requires)
 
     def output_tf(self, p: dict) -> tuple[list[float], list[float]]:
-        """(numerator, denominator) in s of the factor on the deflection; parameters ``p`` in SI."""
+        """The factor on the deflection as a rational function of s.
+
+        Parameters
+        ----------
+        p : dict
+            The model's parameters in SI units (read yours with ``self.value(p, name)``).
+
+        Returns
+        -------
+        tuple of list
+            (numerator, denominator): coefficients in s [rad/s], highest power first.
+        """
         raise NotImplementedError
 
     def output_response(self, s: np.ndarray, p: dict) -> np.ndarray:
-        """The factor at complex frequencies ``s`` [rad/s]."""
+        """The factor at complex frequencies ``s`` [rad/s] (from :meth:`output_tf`; override it
+        with :meth:`filter_output` for a factor that is not rational)."""
         num, den = self.output_tf(p)
         return np.polyval(num, s) / np.polyval(den, s)
 
     def filter_output(self, y: np.ndarray, fs: float, p: dict) -> np.ndarray:
         """The deflection ``y`` [m] sampled at ``fs`` [Hz] through the factor, started in the
-        steady state of the first sample (as the rest of the chain)."""
+        steady state of the first sample (as the rest of the chain).  Override it for a
+        nonlinear output map (a play, a saturation), with :meth:`output_response` as its
+        small-signal description."""
         from scipy.signal import bilinear, lfilter, lfilter_zi
         num, den = self.output_tf(p)
         b, a = bilinear(num, den, fs)
@@ -203,25 +244,52 @@ class OutputEffect(Effect):
 
 
 class LoadEffect(Effect):
-    """An effect acting on the bending load (after kf(s) and the solvent factor), before the
-    beam: e.g. a coupling that saturates slowly, a polymer relaxation of the traction.
+    """Base class of an effect acting on the bending load, before the beam.
 
-    Subclass it in one file with an ``id``, a ``summary``, the ``params`` (each with a
-    ``default``) and :meth:`load_tf`, the transfer function (numerator, denominator in s,
-    highest power first) multiplying the load, or override :meth:`load_factor` for any causal
-    factor.  The frequency solver multiplies the load by it exactly; the time solver realises
-    kf(s)·B(s)·factor with real poles over the band (so a factor must be stable and smooth over
-    the band: :func:`physics.effects.check_effect` checks both solvers agree).  ``diagnosis``
-    as for :class:`OutputEffect`.
+    For physics between the interface traction and the bending: a coupling that saturates
+    slowly, a relaxation of the traction.  Subclass it with the class attributes of
+    :class:`OutputEffect` and :meth:`load_tf` (or :meth:`load_factor` for any causal factor).
+    The frequency solver multiplies the load by it exactly; the time solver realises
+    kf(s)·B(s)·factor with real poles over the band, so the factor must be stable and smooth
+    there (:func:`check_effect` checks that both solvers agree).
+
+    Examples
+    --------
+    A traction that relaxes by a fraction r with time constant τ, (τs + 1 − r)/(τs + 1), checked
+    quickly:
+
+    >>> from physics.effects import LoadEffect, check_effect
+    >>> from physics.parameters import ParamSpec
+    >>> class TractionRelaxation(LoadEffect):
+    ...     id = "traction_relaxation"
+    ...     summary = "the interface traction relaxes by r with time constant tau"
+    ...     params = (ParamSpec("relax_r", "1", 0.0, 0.9, "relaxed fraction", optional=True, default=0.2),
+    ...               ParamSpec("relax_tau", "s", 1e-3, 1e3, "time constant", optional=True, default=5.0))
+    ...     def load_tf(self, p):
+    ...         r, tau = self.value(p, "relax_r"), self.value(p, "relax_tau")
+    ...         return [tau, 1.0 - r], [tau, 1.0]       # (tau s + 1 - r) / (tau s + 1)
+    >>> check_effect(TractionRelaxation, fast=True).ok
+    True
     """
 
     summary = "user-defined load effect"
 
     def load_tf(self, p: dict) -> tuple[list[float], list[float]]:
-        """(numerator, denominator) in s of the factor on the load; parameters ``p`` in SI."""
+        """The factor on the load as a rational function of s.
+
+        Parameters
+        ----------
+        p : dict
+            The model's parameters in SI units.
+
+        Returns
+        -------
+        tuple of list
+            (numerator, denominator): coefficients in s [rad/s], highest power first.
+        """
         raise NotImplementedError
 
     def load_factor(self, s: np.ndarray, p: dict) -> np.ndarray:
-        """The factor at complex frequencies ``s`` [rad/s]."""
+        """The factor at complex frequencies ``s`` [rad/s] (from :meth:`load_tf`)."""
         num, den = self.load_tf(p)
         return np.polyval(num, s) / np.polyval(den, s)

@@ -4,7 +4,7 @@ Thesis eq. 1–6 with fixed anions C⁻, one mobile cation (charge z, diffusivit
 blocking electrodes at x = ±h (h = t/2) and a voltage U across the polymer.  Linearised
 about electroneutrality the charge density obeys ∂ρ/∂t = D ∂²ρ/∂x² − K ρ with
 K = D/λ², Debye length λ = sqrt(κe R T / (z² F² C⁻)), κe = ε0 εr.  With
-β(s) = sqrt((s + K)/D) the closed-form results used here are (PHYSICS.md §3):
+β(s) = sqrt((s + K)/D) the closed-form results used here are (docs/reference/physics.md):
 
 - electrode charge per area and volt  Q/U = κe β (s + K) / (2 (s β h + K tanh βh)),
   low-frequency limit κe/(2λ) (two double layers in series);

@@ -3,7 +3,7 @@
 Thesis eq. 7: ∂Cs/∂t = −∇·(n⁺ f⁺ − Ds ∇Cs).  Cations carry n⁺ solvent molecules to the
 cathode; the excess then diffuses back through the thickness (no-flux faces).  For the
 first moment of the solvent excess — the quantity that bends the strip — relative to
-its value without diffusion the exact factor is (PHYSICS.md §3)
+its value without diffusion the exact factor is (docs/reference/physics.md)
 
     B(s) = 1 − tanh(g)/g,   g = h sqrt(s/Ds),
 

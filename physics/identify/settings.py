@@ -1,5 +1,5 @@
 """Constants of the identification: the thesis procedure and the identifiability limits."""
-#: Thesis cost of one model evaluation: COMSOL, 15 min per frequency (PHYSICS.md §1).
+#: Thesis cost of one model evaluation: COMSOL, 15 min per frequency (docs/reference/physics.md).
 THESIS_SECONDS_PER_FREQUENCY = 15 * 60.0
 #: Thesis Nelder–Mead settings (ch. 1 §5).
 THESIS_MAX_ITER = 100
