@@ -58,6 +58,10 @@ def run(args) -> int:
     if not all(math.isfinite(h) and 0 <= h <= 100 for h in held):
         raise InputError(f"--holdout-rh {args.holdout_rh!r}: RH levels must lie within 0–100 %")
     output = OutputQuantity.parse(args.output) if args.output else None
+    if output is not None and args.sensor_gain is not None and output.name != "deflection":
+        raise InputError(f"--output {args.output} and --sensor-gain {args.sensor_gain} contradict each other: the "
+                         f"gain turns the output into the tip deflection in m, --output keeps it as {output.name} "
+                         f"in {output.unit}; give one of them")
     out = build_dataset(args.out, train=args.train, validation=args.validation, test=args.test,
                         val_fraction=args.val_fraction, holdout_rh=held,
                         columns=parse_column_map(args.columns, output) if args.columns else None, fs=args.fs_Hz,

@@ -9,6 +9,7 @@ import numpy as np
 
 from physics.columns import quantity
 from physics.errors import InputError, ModelError
+from physics.limits import MAX_STEPS_AHEAD, check_count
 
 from ._common import add_quiet_option, add_record_options, provenance, stage_log
 
@@ -116,8 +117,9 @@ def run(args) -> int:
     output = OutputQuantity.from_dict(bundle.card.get("output"), f"{args.model}: card output")
     model, uses_rh = bundle.model, bundle.model.uses_rh
     k = args.steps_ahead
-    if k is not None and k < 1:
-        raise InputError(f"--steps-ahead must be a positive integer, got {k}")
+    if k is not None:
+        check_count(k, 1, MAX_STEPS_AHEAD, "--steps-ahead", "samples; beyond a few hundred a prediction is a free "
+                    "run — omit the flag for one")
     n_init = args.init_samples
     if n_init is not None and n_init < 0:
         raise InputError(f"--init-samples {n_init}: must be 0 (start from rest) or a positive number of samples")
@@ -128,6 +130,9 @@ def run(args) -> int:
     log(f"reading {args.input}" + (" in pieces" if stream else ""))
     pieces, rh_read = _pieces(args, output, uses_rh, need_y=k is not None or bool(n_init), stream=stream)
     first = next(pieces)
+    if k is not None and k > first.n:
+        raise InputError(f"--steps-ahead {k}: {args.input} has {first.n} samples; give at most {first.n} (or omit "
+                         "the flag for a free run)")
     pieces = itertools.chain([first], pieces)
     # free run: initialised from the first measured outputs when the file has them (honest start)
     init = first.deflection if (k is None and n_init != 0) else None
