@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from physics.columns import quantity
-from physics.errors import InputError, ModelError
+from physics.errors import InputError, InputNotice, ModelError
 from physics.limits import MAX_STEPS_AHEAD, check_count
 
 from ._common import add_quiet_option, add_record_options, provenance, stage_log
@@ -166,7 +166,8 @@ def run(args) -> int:
                 append_rows(fh, cols, header=n == 0)
                 n += ts.n
         notes = list(dict.fromkeys(str(w.message) for w in caught
-                                   if issubclass(w.category, (RuntimeWarning, UserWarning))))
+                                   if issubclass(w.category, (RuntimeWarning, UserWarning))
+                                   and not issubclass(w.category, InputNotice)))
         meta["prediction"] = {
             "model": bundle.card["model"], "bundle": str(args.model), "input": str(args.input),
             "output_unit_of_model": output.unit, "fs_hz_model": bundle.fs, "fs_hz_input": first.fs,
@@ -177,6 +178,9 @@ def run(args) -> int:
         if fit.n:
             meta["prediction"]["against_measured"] = fit.result()
         write_sidecar(meta, tmp.with_suffix(".yaml"))
+    for w in caught:          # notes on the user's input and folders (e.g. a folder left in place): said as notes
+        if issubclass(w.category, InputNotice):
+            warnings.warn(w.message)
     for note in notes:
         print(f"eap predict: warning: {note}")
     line = (f"predicted {n} samples at {first.fs:g} Hz with {bundle.card['model']} "
