@@ -59,14 +59,15 @@ def _centred_dot(y: np.ndarray, x: np.ndarray) -> float:
 
 
 def _spread(y: np.ndarray, name: str = "y") -> float:
-    """‖y − ȳ‖, refusing a constant signal (for which relative metrics are undefined)."""
+    """‖y − ȳ‖, refusing a constant signal (for which relative metrics are undefined): one
+    whose spread is below 10⁻¹² of its norm is constant up to the rounding of its mean."""
     mean = y.mean()
     sq = 0.0
     for a, b in _blocks(y.size):
         c = y[a:b] - mean
         sq += float(np.dot(c, c))
     spread = float(np.sqrt(sq))
-    if spread == 0:
+    if spread <= 1e-12 * float(np.sqrt(y.size)) * abs(float(mean)):
         raise InputError(f"{name} is constant; a relative error (NRMSE, fit %) or a correlation is undefined")
     return spread
 

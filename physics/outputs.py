@@ -320,9 +320,17 @@ def _refuse_foreign(folder: Path, flag: str, out) -> None:
 
 # --------------------------------------------------------------------------- folders
 
+def _short_name(path: Path, flag: str, out) -> None:
+    """Refuse an output whose name leaves no room for eap's temporary and lock names beside it."""
+    if len(path.name.encode("utf-8", "surrogateescape")) > MAX_NAME_BYTES:
+        raise InputError(f"{flag} {str(out)[:60]}…: a name of {len(path.name)} characters; an output's name may have "
+                         f"at most {MAX_NAME_BYTES} bytes (a file system allows 255, and eap adds a suffix beside it)")
+
+
 def check_target(out: Path, inputs: Iterable = (), *, flag: str = _OUT) -> Path:
     """Resolve ``out`` and refuse targets that could destroy the user's files."""
     out = Path(out).expanduser()
+    _short_name(out, flag, out)
     res = out.resolve()
     forbidden = {Path("/").resolve(), Path.home().resolve()}
     cwd = Path.cwd().resolve()
@@ -505,6 +513,7 @@ def check_file_target(path, *, overwrite: bool = False, flag: str = _OUT, inputs
     """Refuse an output file that is a folder, an input (or its sidecar), lies in an input
     folder, or exists without ``overwrite`` or without eap having written it; returns it resolved."""
     p = Path(path).expanduser()
+    _short_name(p, flag, path)
     res = p.parent.resolve() / p.name if p.name not in ("", ".", "..") else p.resolve()
     if res.is_dir():
         raise InputError(f"{flag} {path} is a folder; give a file path")
