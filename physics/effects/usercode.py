@@ -30,8 +30,20 @@ from ..errors import InputError
 #: Longest time [s] importing one effect file may take (defining classes takes milliseconds).
 IMPORT_LIMIT_S = 10.0
 #: Longest time [s] one call of a user effect's hook may take (a transfer function or a
-#: factor over a frequency grid takes milliseconds, filtering a 2·10⁷-sample record ~1 s).
+#: factor over a frequency grid takes milliseconds, filtering a 2·10⁷-sample record ~1 s);
+#: a hook that legitimately needs longer (a Python loop over a long record) runs with the
+#: environment variable ``EAP_HOOK_LIMIT_S`` set to the seconds it needs.
 HOOK_LIMIT_S = 20.0
+_HOOK_ENV = "EAP_HOOK_LIMIT_S"
+
+
+def hook_limit() -> float:
+    """:data:`HOOK_LIMIT_S`, or ``$EAP_HOOK_LIMIT_S`` when set to a positive number of seconds."""
+    try:
+        value = float(os.environ.get(_HOOK_ENV, ""))
+    except ValueError:
+        return HOOK_LIMIT_S
+    return value if 0 < value < 1e6 else HOOK_LIMIT_S
 
 
 class UserCodeError(InputError):
@@ -100,7 +112,8 @@ def running_user_code(where: str, limit_s: float) -> Iterator[None]:
                 signal.setitimer(signal.ITIMER_REAL, 0.0)
     except _Timeout:
         raise UserCodeError(f"{where} ran longer than {limit_s:g} s (eap's limit on one call into user code; "
-                            "an endless loop?) and was stopped; nothing was written") from None
+                            f"an endless loop? a hook that needs longer runs with {_HOOK_ENV}=SECONDS) and was "
+                            "stopped; nothing was written") from None
     except SystemExit as exc:
         call = "os._exit" if isinstance(exc, _OsExit) else "sys.exit"
         raise UserCodeError(f"{where} called {call}({exc.code!r}); user code must not end the program — nothing "
@@ -121,7 +134,7 @@ def _contained(fn, where: str, key: str):
         if key in _FAILED:     # one overrun or exit per file, not one per call
             raise UserCodeError(_FAILED[key])
         try:
-            with running_user_code(where, HOOK_LIMIT_S):
+            with running_user_code(where, hook_limit()):
                 return fn(*args, **kwargs)
         except UserCodeError as exc:
             _FAILED.setdefault(key, str(exc))
@@ -152,5 +165,5 @@ def import_limited(exec_module, module, where: str) -> None:
         exec_module(module)
 
 
-__all__ = ["IMPORT_LIMIT_S", "HOOK_LIMIT_S", "UserCodeError", "running_user_code", "contain_class",
+__all__ = ["IMPORT_LIMIT_S", "HOOK_LIMIT_S", "UserCodeError", "hook_limit", "running_user_code", "contain_class",
            "import_limited"]
