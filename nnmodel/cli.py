@@ -224,14 +224,14 @@ def _apply_params(args, tmp: Path) -> None:
     for item in items:
         name, value = parse_quantity(item)
         if name in values:
-            raise InputError(f"--param {name} is given twice ({', '.join(i for i in items if i.split('=')[0].strip() == name)}); "
-                             "give each parameter once")
+            given = ", ".join(i for i in items if i.split("=")[0].strip() == name)
+            raise InputError(f"--param {name} is given twice ({given}); give each parameter once")
         values[name] = value
     try:
         dev = dev.with_params(**values)
     except InputError as exc:
         raise InputError(f"--param {' '.join(items)}: {exc}") from None
-    path = tmp / f"{dev.name}.yaml"
+    path = tmp / "device.yaml"        # not the device's own name: a name from a file never becomes a path
     path.write_text(yaml.safe_dump(device_to_raw(dev), sort_keys=False, allow_unicode=True), encoding="utf-8")
     setattr(args, attr, str(path))
     from physics.device import all_param_specs
