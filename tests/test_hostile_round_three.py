@@ -399,6 +399,9 @@ def test_messages_name_flags_and_records_not_internals(tmp_path, monkeypatch, ca
         metrics.summary(flat, np.arange(1000.0), names=("rec.csv: the measured deflection", "model"))
     assert final_text("/w/.D.eap-tmp-12/a.csv /w/.eap-tmp-3-ab_cd/f.yaml /w/.f.json.ab12cd_9.part") == \
         "/w/D/a.csv /w/f.yaml /w/f.json"
+    from physics.fileio import write_json        # record keys of a diagnosis read from an output being written
+    write_json(tmp_path / "d.json", {"records": {"/w/.DM.eap-tmp-77/m/r.csv": 1}})
+    assert json.loads((tmp_path / "d.json").read_text()) == {"records": {"/w/DM/m/r.csv": 1}}
 
 
 def test_a_start_on_its_bound_is_inside_it():
