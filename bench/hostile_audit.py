@@ -13,7 +13,17 @@ excepted); a refusal creates nothing.
     python bench/hostile_audit.py --only dataset --verbose
 
 Every case runs in a fresh process (``python -m nnmodel.cli …``) in its own folder, with an
-address-space cap (``--cap-GB``) and a timeout (``--timeout``, a hang counts as a failure).
+address-space cap (``--cap-GB``), a timeout (``--timeout``, a hang counts as a failure) and a
+cap on the processes it may start (:data:`MAX_PROCS`, more is unbounded work: stopped, a hang).
+A case may run on a nearly full disk (a 16 kB tmpfs in a private mount namespace, ``unshare``:
+ENOSPC), under a file-size limit (RLIMIT_FSIZE: EFBIG) or without root's power over file
+permissions (``setpriv``: EACCES as root); where the machine lacks the tool the case is skipped.
+
+A failure is counted in one class, the first that applies: **data loss** (a file that existed
+is changed or gone), **traceback**, **hang** (past the timeout or the process cap), **silent
+acceptance** (exit 0 where a refusal or a note was due), **other** (a wrong exit code or
+message).  Round-three cases (issue 38) also require exactly one error line and no path of
+eap's temporary folders (``.eap-tmp-``) in what the command prints.
 """
 from __future__ import annotations
 
@@ -60,6 +70,17 @@ def _record(path: Path, n: int = 1000, fs: float = 100.0, header=("time_s", "vol
     for row in zip(*cols):
         lines.append(sep.join(repr(float(x)).replace(".", decimal) for x in row))
     path.write_bytes(("\n".join(lines) + "\n").encode(encoding))
+    return path
+
+
+def _linear_record(path: Path, n: int = 2000, fs: float = 100.0) -> Path:
+    """A noise-free linear plant (a first-order filter of white noise): a linear model fits it exactly."""
+    from scipy.signal import lfilter
+    t = np.arange(n) / fs
+    v = np.random.default_rng(1).standard_normal(n)
+    y = lfilter([0.05], [1, -0.9], v) * 1e-4
+    path.write_text("time_s,voltage_V,deflection_m,rh_pct\n" + "".join(
+        f"{float(a)!r},{float(b)!r},{float(c)!r},60\n" for a, b, c in zip(t, v, y)))
     return path
 
 
@@ -113,6 +134,16 @@ EFFECT_BODIES = {
 }
 
 
+ROUND3_EFFECTS = {
+    "osexit_import": "import os\nos._exit(0)\n",
+    "loop_import": "while True:\n    pass\n",
+    "loop_hook": EFFECT_TEMPLATE.format(body="        while True:\n            pass"),
+    "sysexit_hook": EFFECT_TEMPLATE.format(body="        import sys\n        sys.exit(0)"),
+    "osexit_hook": EFFECT_TEMPLATE.format(body="        import os\n        os._exit(0)"),
+    "order5000": EFFECT_TEMPLATE.format(body="        return [1.0], [1.0] + [0.0] * 4999 + [1.0]"),   # s^5000 + 1
+}
+
+
 def build_fixtures(fx: Path, tree: Path, env: dict) -> None:
     """Records, a tiny generated dataset, a trained bundle, effect files and a device copy."""
     fx.mkdir(parents=True, exist_ok=True)
@@ -139,6 +170,10 @@ def build_fixtures(fx: Path, tree: Path, env: dict) -> None:
     (fx / "eff_syntax.py").write_text("def (:\n")
     (fx / "eff_import.py").write_text("import not_a_module_xyz\n")
     (fx / "eff_none.py").write_text("x = 1\n")
+    for name, body in ROUND3_EFFECTS.items():
+        (fx / f"eff_{name}.py").write_text(body)
+    _record(fx / "long20k.csv", n=20000)
+    _linear_record(fx / "lin.csv")
     run = lambda *a: subprocess.run([sys.executable, "-m", "nnmodel.cli", *a], cwd=fx, env=env,  # noqa: E731
                                     capture_output=True, text=True)
     r = run("generate", "--config", "tiny.yaml", "--out", "G", "--quiet")
@@ -151,6 +186,9 @@ def build_fixtures(fx: Path, tree: Path, env: dict) -> None:
     r = run("dataset", "--train", "rec.csv", "--test", "rec2.csv", "--out", "DS")
     if r.returncode:
         sys.exit(f"fixture: eap dataset failed: {r.stderr[-500:]}")
+    r = run("dataset", "--train", "lin.csv[0:1500]", "--test", "lin.csv[1500:2000]", "--out", "DL")
+    if r.returncode:
+        sys.exit(f"fixture: eap dataset (noise-free linear) failed: {r.stderr[-500:]}")
 
 
 # --------------------------------------------------------------------------- cases
@@ -168,6 +206,12 @@ class Case:
     env: dict = field(default_factory=dict)
     send: tuple[int, float] | None = None   # (signal, after seconds)
     check: Callable[[Path], str | None] | None = None  # extra check: returns a failure note or None
+    disk_kB: int | None = None       # run with full/ a tmpfs of this size (disk full: ENOSPC)
+    fsize: int | None = None         # RLIMIT_FSIZE in bytes (file too large: EFBIG)
+    unprivileged: bool = False       # without root's power over permissions (EACCES)
+    note: str | None = None          # regex a note/warning line must match
+    stdout: str | None = None        # regex stdout must match
+    strict: bool = False             # exactly one error line; no .eap-tmp- path printed
 
 
 def cp(*names, into: str = "."):
@@ -661,6 +705,298 @@ def cases() -> list[Case]:
     for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
         add(f"{sig.name.lower()}-train-compare-workers", "signals", train_long + ["--workers", "2"], cp("DS"),
             expect=code, send=(sig, 20.0), timeout=90)
+    return C + round_three()
+
+
+def _proof(folder: str, pid: int, pid_start=None):
+    """A setup writing eap's proof of ownership into ``folder`` (naming the folder given)."""
+    return write(f"{folder}/.eap-partial", json.dumps({"folder": Path(folder).name, "pid": pid, "pid_start": pid_start}))
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def _chmod(rel: str, mode: int):
+    def setup(d, fx):
+        os.chmod(d / rel, mode)
+    return setup
+
+
+def _gone(rel: str):
+    return lambda d: None if not (d / rel).exists() else f"{rel} was left behind"
+
+
+def round_three() -> list[Case]:
+    """Issue 38: names never escape, ownership by proof, OS errors one line, every count and size
+    bounded, nothing accepted silently, effect files are code, messages name the user's files."""
+    C: list[Case] = []
+
+    def add(name, group, argv, setup=None, **kw):
+        kw.setdefault("strict", True)
+        C.append(Case(name, group, argv, setup, **kw))
+
+    DIAG = ["diagnose", "rec.csv", "--device", "ipmc_pt_eg", "--free", "kf"]
+    # ---------------------------------------------------------------- 1. names never escape
+    add("name-absolute-identify", "names", IDN + ["--name", "@WORK@/mydevice", "--out", "runs/id"],
+        chain(cp("rec.csv"), write("mydevice.yaml", "my device\n")), match="--name")
+    add("name-dotdot-identify", "names", IDN + ["--name", "../victim", "--out", "runs/id"],
+        chain(cp("rec.csv"), write("runs/victim.yaml", "mine\n")), match="--name")
+    for label, name in (("empty", ""), ("hidden", ".eap-output"), ("slash", "a/b"), ("long", "n" * 300),
+                        ("newline", "a\nb")):
+        add(f"name-{label}-identify", "names", IDN + ["--name", name, "--out", "O"], cp("rec.csv"), match="--name")
+    add("name-dotdot-diagnose-apply", "names", DIAG + ["--apply", "--name", "../x", "--out", "O"], cp("rec.csv"),
+        match="--name")
+    add("draft-effects-is-out-overwrite", "names", DIAG + ["--out", "O", "--draft-effects", "O", "--overwrite"],
+        chain(cp("rec.csv"), run_eap(*SIM, "--out", "O")), match="--draft-effects", timeout=120)
+    add("draft-effects-is-out", "names", DIAG + ["--out", "O", "--draft-effects", "O"], cp("rec.csv"),
+        match="--draft-effects", timeout=120)
+    add("draft-effects-inside-out", "names", DIAG + ["--out", "O", "--draft-effects", "O/drafts"], cp("rec.csv"),
+        match="--draft-effects", timeout=120)
+    add("out-inside-draft-effects", "names", DIAG + ["--out", "X/O", "--draft-effects", "X"], cp("rec.csv"),
+        match="--draft-effects", timeout=120)
+    add("record-name-hidden-file", "names", ["dataset", "--train", ".hidden.csv", "--out", "D"],
+        lambda d, fx: shutil.copy(fx / "rec.csv", d / ".hidden.csv"), expect="ok", may_change=("D/**",),
+        check=lambda d: None if (d / "D" / "train" / "hidden.csv").is_file() else "no train/hidden.csv")
+    add("record-name-long", "names", ["dataset", "--train", "r" * 240 + ".csv", "--out", "D"],
+        lambda d, fx: shutil.copy(fx / "rec.csv", d / ("r" * 240 + ".csv")), expect="ok", may_change=("D/**",))
+    add("models-twice", "names", TCQ[:2] + ["--models", "ff,ff", "--out", "R"], cp("DS"), match="twice")
+
+    # ---------------------------------------------------------------- 2. ownership by proof
+    thesis = "my thesis\n"
+    for label, argv, extra in (("frf", FRF + ["--json", "f.json"], cp()),
+                               ("predict", PRED + ["--out", "p.csv"], cp("TC", "rec.csv")),
+                               ("sweep", SWEEP + ["--out", "t.csv"], cp())):
+        add(f"named-like-staging-{label}", "proof", argv,
+            chain(extra, write(".eap-tmp-999999-notes/thesis.tex", thesis)), expect="ok",
+            may_change=("f.json", "f.csv", "p.csv", "p.yaml", "t.csv", ".eap-files.json"),
+            note=r"\.eap-tmp-999999-notes", strict=False)     # the note names the user's folder
+    add("named-like-folder-tmp", "proof", SIM + ["--out", "D"],
+        chain(write(".D.eap-tmp-999999/thesis.tex", thesis), write(".D.eap-tmp-999999/.eap-partial", "eap simulate")),
+        expect="ok", may_change=("D/**",), note=r"\.D\.eap-tmp-999999", strict=False)
+    add("named-like-folder-old", "proof", SIM + ["--out", "D"],
+        chain(write(".D.eap-old-999999/thesis.tex", thesis), write(".D.eap-old-999999/.eap-output.json", "{}")),
+        expect="ok", may_change=("D/**",), note=r"\.D\.eap-old-999999")
+    add("proof-copied-from-another-folder", "proof", SIM + ["--out", "D"],
+        lambda d, fx: (write(".D.eap-tmp-999998/thesis.tex", thesis)(d, fx),
+                       write(".D.eap-tmp-999998/.eap-partial", json.dumps({"folder": ".D.eap-tmp-1", "pid": 999998}))(d, fx)),
+        expect="ok", may_change=("D/**",), note=r"eap-tmp-999998", strict=False)
+    add("proven-leftover-removed", "proof", SIM + ["--out", "D"],
+        lambda d, fx: (lambda pid: (write(f".D.eap-tmp-{pid}/simulation.csv", "half\n")(d, fx),
+                                    _proof(f".D.eap-tmp-{pid}", pid)(d, fx)))(_dead_pid()),
+        expect="ok", may_change=("D/**", ".D.eap-tmp-*", ".D.eap-tmp-*/**"),
+        check=lambda d: None if not list(d.glob(".D.eap-tmp-*")) else "the proven leftover was kept")
+    add("lock-is-a-folder", "proof", SIM + ["--out", "D"], write(".D.eap-lock/mine.txt", "x"), match=r"\.D\.eap-lock")
+    add("lock-is-a-users-file", "proof", SIM + ["--out", "D"], write(".D.eap-lock", "my notes\n"),
+        match=r"\.D\.eap-lock")
+    add("registry-is-a-folder", "proof", FRF + ["--json", "f.json"], write(".eap-files.json/mine.txt", "x"),
+        match=r"\.eap-files\.json")
+    add("registry-is-a-link", "proof", FRF + ["--json", "f.json"],
+        lambda d, fx: (d / ".eap-files.json").symlink_to(d / "elsewhere.json"), match=r"\.eap-files\.json")
+    add("json-is-also-csv-sidecar", "proof", FRF + ["--json", "f.yaml", "--csv", "f.csv"], match="sidecar")
+
+    # ---------------------------------------------------------------- 3. every OS error one line
+    full = dict(disk_kB=16, match=r"disk is full|No space")
+    add("enospc-simulate", "oserror", ["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone",
+                                       "--duration-s", "20", "--fs-Hz", "100", "--out", "full/D"], **full)
+    add("enospc-frf", "oserror", FRF[:-1] + ["500", "--json", "full/f.json"], **full)
+    add("enospc-predict", "oserror", PRED + ["--out", "full/p.csv"], cp("TC", "rec.csv"), **full)
+    add("enospc-compare", "oserror", CMP + ["--out", "full/O"], cp("rec.csv"), **full)
+    add("enospc-dataset", "oserror", ["dataset", "--train", "rec.csv", "--out", "full/D"], cp("rec.csv"), **full)
+    add("enospc-sweep", "oserror", ["sweep", "--device", "ip2c_pedot_water", "--rh", "60", "--grid",
+                                    "Y=log:1e7:1e9:400", "--out", "full/t.csv"], **full)
+    big = dict(fsize=20_000, match=r"file-size limit|too large")
+    add("efbig-simulate", "oserror", ["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone",
+                                      "--duration-s", "20", "--fs-Hz", "100", "--out", "D"], **big)
+    add("efbig-frf", "oserror", FRF[:-1] + ["500", "--json", "f.json"], **big)
+    add("efbig-predict", "oserror", PRED + ["--out", "p.csv"], cp("TC", "rec.csv"), **big)
+    add("eacces-record", "oserror", CMP + ["--out", "O"], chain(cp("rec.csv"), _chmod("rec.csv", 0)),
+        unprivileged=True, match=r"rec\.csv")
+    add("eacces-predict-input", "oserror", PRED + ["--out", "p.csv"], chain(cp("TC", "rec.csv"), _chmod("rec.csv", 0)),
+        unprivileged=True, match=r"rec\.csv")
+    add("eacces-device", "oserror", ["frf", "--device", "mydev.yaml", "--rh", "60", "--json", "f.json"],
+        chain(cp("mydev.yaml"), _chmod("mydev.yaml", 0)), unprivileged=True, match=r"mydev\.yaml")
+    add("eacces-dataset-record", "oserror", ["dataset", "--check", "DS"],
+        chain(cp("DS"), lambda d, fx: [os.chmod(q, 0) for q in (d / "DS" / "train").glob("*.csv")]),
+        unprivileged=True, match=r"\.csv")
+    add("eacces-out-folder", "oserror", SIM + ["--out", "ro/D"], chain(write("ro/x", "x"), _chmod("ro", 0o555)),
+        unprivileged=True, match="--out")
+    add("eisdir-sidecar", "oserror", CMP + ["--out", "O"], chain(cp("rec.csv"), write("rec.yaml/x", "x")),
+        match=r"rec\.yaml")
+    add("eisdir-config", "oserror", ["generate", "--config", "c.yaml", "--out", "D"], write("c.yaml/x", "x"),
+        match=r"c\.yaml")
+    for label, make in (("fifo", lambda d: os.mkfifo(d / "rec.yaml")),
+                        ("dev-zero", lambda d: (d / "rec.yaml").symlink_to("/dev/zero"))):
+        add(f"sidecar-{label}", "oserror", CMP + ["--out", "O"], chain(cp("rec.csv"), lambda d, fx, m=make: m(d)),
+            match=r"rec\.yaml")
+    add("record-fifo", "oserror", ["compare", "f.csv", "--model", "ip2c_pedot_water", "--out", "O"],
+        lambda d, fx: os.mkfifo(d / "f.csv"), match=r"f\.csv.*(pipe|FIFO)")
+    add("record-dev-zero", "oserror", ["compare", "z.csv", "--model", "ip2c_pedot_water", "--out", "O"],
+        lambda d, fx: (d / "z.csv").symlink_to("/dev/zero"), match=r"z\.csv")
+    add("device-fifo", "oserror", ["frf", "--device", "dev.yaml", "--rh", "60", "--json", "f.json"],
+        lambda d, fx: os.mkfifo(d / "dev.yaml"), match=r"dev\.yaml")
+    add("dataset-json-fifo", "oserror", ["dataset", "--check", "DS"],
+        chain(cp("DS"), lambda d, fx: ((d / "DS" / "dataset.json").unlink(), os.mkfifo(d / "DS" / "dataset.json"))),
+        match=r"dataset\.json")
+
+    def long_path(d, fx):
+        mf = d / "DS" / "dataset.json"
+        meta = json.loads(mf.read_text())
+        meta["files"][0]["path"] = "train/" + "a" * 5000 + ".csv"
+        mf.write_text(json.dumps(meta))
+    add("enametoolong-dataset-check", "oserror", ["dataset", "--check", "DS"], chain(cp("DS"), long_path),
+        match="dataset.json")
+    add("enametoolong-dataset-train", "oserror", TCQ + ["--out", "R"], chain(cp("DS"), long_path),
+        match="dataset.json")
+    add("enametoolong-out", "oserror", SIM + ["--out", "o" * 300], match="--out")
+    add("enametoolong-json", "oserror", FRF + ["--json", "j" * 300 + ".json"], match="--json|too long")
+    add("enametoolong-record", "oserror", ["compare", "m" * 5000 + ".csv", "--model", "ip2c_pedot_water", "--out",
+                                           "O"], match="too long|not found")
+    add("float-range-sidecar-1e300", "oserror", CMP + ["--out", "O"],
+        chain(cp("rec.csv"), write("rec.yaml", "sensor:\n  noise_rms_um: 1e300\n")), match="noise_rms_um")
+    add("float-range-sidecar-5000-digits", "oserror", CMP + ["--out", "O"],
+        chain(cp("rec.csv"), write("rec.yaml", "rh_pct: " + "9" * 5000 + "\n")), match="rh_pct")
+    add("float-range-device-5000-digits", "oserror", ["frf", "--device", "dev.yaml", "--rh", "60", "--json", "f.json"],
+        lambda d, fx: (d / "dev.yaml").write_text(re.sub(r"value: 26\b", "value: " + "9" * 5000,
+                                                         (fx / "mydev.yaml").read_text(), count=1)),
+        match="L_total")
+    add("float-range-dataset-1e400", "oserror", ["dataset", "--check", "DS"],
+        chain(cp("DS"), lambda d, fx: (d / "DS" / "dataset.json").write_text(
+            re.sub(r'"fs_Hz": [0-9.e+]+', '"fs_Hz": 1e400', (d / "DS" / "dataset.json").read_text()))),
+        match="fs_Hz")
+    add("float-range-card-5000-digits", "oserror", PRED + ["--out", "p.csv"],
+        chain(cp("TC", "rec.csv"), lambda d, fx: (d / B / "card.json").write_text(
+            re.sub(r'"hidden": \d+', '"hidden": ' + "9" * 5000, (d / B / "card.json").read_text()))), match="hidden")
+    add("param-length-below-clamp", "oserror", FRF + ["--param", "L_total=2mm", "--json", "f.json"],
+        match="--param.*L_clamp")
+    add("noise-free-linear-train-compare", "oserror", ["train-compare", "DL", "--models", "ff", "--set",
+                                                       "ff.max_epochs=2", "--set", "ff.structures=null", "--quiet",
+                                                       "--out", "R"], cp("DL"), expect="ok", may_change=("R/**",),
+        timeout=180)
+
+    # ---------------------------------------------------------------- 4. every count and size bounded
+    add("devices-1000", "bounds", TCQ + ["--devices", "1000", "--out", "R"], cp("DS"), match="--devices", timeout=90)
+    add("tune-1000000", "bounds", TCQ + ["--tune", "1000000", "--out", "R"], cp("DS"), match="--tune")
+    add("starts-1000000-identify", "bounds", IDN + ["--starts", "1000000", "--out", "O"], cp("rec.csv"),
+        match="--starts")
+    add("starts-1000000-diagnose", "bounds", DIAG + ["--starts", "1000000", "--out", "O"], cp("rec.csv"),
+        match="--starts")
+    add("steps-ahead-1e12", "bounds", PRED + ["--steps-ahead", str(10 ** 12), "--out", "p.csv"], cp("TC", "rec.csv"),
+        match="--steps-ahead")
+    add("steps-ahead-beyond-record", "bounds", PRED + ["--steps-ahead", "5000", "--out", "p.csv"],
+        cp("TC", "rec.csv"), match="--steps-ahead")
+    add("steps-ahead-1e12-20k-samples", "bounds", ["predict", "--model", B, "--input", "long20k.csv",
+                                                  "--steps-ahead", str(10 ** 12), "--out", "p.csv"],
+        cp("TC", "long20k.csv"), match="--steps-ahead")
+    for fs in ("1e-9", "1e-6"):
+        add(f"fs-max-{fs}", "bounds", DIAG + ["--fs-max-Hz", fs, "--out", "O"], cp("rec.csv"), match="--fs-max-Hz")
+    add("simulate-2e7-samples-1GHz", "bounds", ["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal",
+                                                "tone", "--frequency-Hz", "1e5", "--duration-s", "0.02", "--fs-Hz",
+                                                "1e9", "--out", "D"], match="--fs-Hz", timeout=120)
+    add("effect-order-5000-check-fast", "bounds", ["effects", "--check", "eff_order5000.py", "--fast"],
+        cp("eff_order5000.py"), expect="ok-or-1", stdout=r"order 5000", timeout=60)
+    add("effect-order-5000-frf", "bounds", FRF + ["--json", "f.json", "--effects", "default,+broken",
+                                                  "--effects-path", "eff_order5000.py"], cp("eff_order5000.py"),
+        match="order 5000", timeout=60)
+
+    # ---------------------------------------------------------------- 5. nothing accepted silently
+    add("output-level-V-with-sensor-gain", "silent", ["dataset", "--train", "lab.csv", "--columns",
+                                                      "time=t,voltage=u,deflection=y", "--output", "level:V",
+                                                      "--sensor-gain", "2.5mm/V", "--out", "D"], cp("lab.csv"),
+        match="--sensor-gain")
+    add("output-unknown-unit", "silent", ["dataset", "--train", "lab.csv", "--columns", "time=t,voltage=u,deflection=y",
+                                          "--output", "level:furlong", "--out", "D"], cp("lab.csv"), expect="ok",
+        may_change=("D/**",), note="furlong")
+    add("param-repeated", "silent", FRF + ["--param", "L_total=40mm", "--param", "L_total=30mm", "--json", "f.json"],
+        match="twice")
+    add("slice-clipped", "silent", ["dataset", "--train", "rec.csv[5:5000000]", "--out", "D"], cp("rec.csv"),
+        match="5000000")
+    add("set-unknown-model", "silent", TCQ + ["--set", "nosuch.x=1", "--out", "R"], cp("DS"), match="nosuch")
+    add("set-repeated", "silent", TCQ + ["--set", "ff.hidden=4", "--set", "ff.hidden=8", "--out", "R"], cp("DS"),
+        match="twice")
+    add("models-empty", "silent", ["train-compare", "DS", "--models", "", "--out", "R"], cp("DS"), match="--models")
+    add("dataset-check-samples", "silent", ["dataset", "--check", "DS"],
+        chain(cp("DS"), edit_json("DS/dataset.json", lambda m: m["files"][0].update(samples=m["files"][0]["samples"] - 7))),
+        match="samples")
+
+    def json_link(d, fx):
+        (d / "outside.json").write_text((d / "DS" / "dataset.json").read_text())
+        (d / "DS" / "dataset.json").unlink()
+        (d / "DS" / "dataset.json").symlink_to(d / "outside.json")
+    add("dataset-json-symlink-out", "silent", ["dataset", "--check", "DS"], chain(cp("DS"), json_link),
+        match="symbolic link")
+
+    def weights_link(d, fx):
+        w = d / B / "weights.pt"
+        shutil.copy(w, d / "outside.pt")
+        w.unlink()
+        w.symlink_to(d / "outside.pt")
+    add("bundle-weights-symlink-out", "silent", PRED + ["--out", "p.csv"], chain(cp("TC", "rec.csv"), weights_link),
+        match="symbolic link")
+
+    def no_hash(scale=None):
+        def setup(d, fx):
+            import torch
+            if scale is not None:
+                w = d / B / "weights.pt"
+                state = torch.load(w, weights_only=True)
+                state = {k: (v * scale if v.is_floating_point() and not k.endswith(("_mean", "_std")) else v)
+                         for k, v in state.items()}
+                torch.save(state, w)
+            edit_json(f"{B}/card.json", lambda c: c["weights"].pop("sha256"))(d, fx)
+        return setup
+    add("bundle-card-without-hash", "silent", PRED + ["--out", "p.csv"], chain(cp("TC", "rec.csv"), no_hash()),
+        match="sha256")
+    add("bundle-card-without-hash-1e30-weights", "silent", PRED + ["--out", "p.csv"],
+        chain(cp("TC", "rec.csv"), no_hash(1e30)), match="sha256")
+    add("bundle-card-normalisation-std-0", "silent", PRED + ["--out", "p.csv"],
+        chain(cp("TC", "rec.csv"), edit_json(f"{B}/card.json",
+                                             lambda c: c["normalisation"]["output"].update(std=0.0))), match="std")
+
+    def std_buffer(d, fx):
+        import torch
+        w = d / B / "weights.pt"
+        state = torch.load(w, weights_only=True)
+        state["y_std"] = -state["y_std"]
+        torch.save(state, w)
+        edit_json(f"{B}/card.json", lambda c: c["weights"].update(sha256=_sha(w)))(d, fx)
+    add("bundle-weights-std-negative", "silent", PRED + ["--out", "p.csv"], chain(cp("TC", "rec.csv"), std_buffer),
+        match="std")
+    add("sidecar-is-a-folder", "silent", ["dataset", "--train", "rec.csv", "--out", "D"],
+        chain(cp("rec.csv"), write("rec.yaml/notes.txt", "x")), match=r"rec\.yaml")
+
+    # ---------------------------------------------------------------- 6. effect files are code
+    add("effect-help-says-code", "usercode", ["frf", "--help"], expect="ok", stdout=r"CODE")
+    for name, flags in (("osexit_import", []), ("loop_import", []), ("loop_hook", ["--effects", "default,+broken"]),
+                        ("sysexit_hook", ["--effects", "default,+broken"]),
+                        ("osexit_hook", ["--effects", "default,+broken"])):
+        for cmd, argv in (("frf", FRF + ["--json", "f.json"]), ("simulate", SIM + ["--out", "D"])):
+            add(f"effect-{name}-{cmd}", "usercode", argv + flags + ["--effects-path", f"eff_{name}.py"],
+                cp(f"eff_{name}.py"), match=f"eff_{name}.py", timeout=60)
+
+    # ---------------------------------------------------------------- 7. messages name the user's files and flags
+    add("message-tone-above-nyquist", "messages", ["simulate", "--device", "ip2c_pedot_water", "--rh", "60",
+                                                   "--signal", "tone", "--frequency-Hz", "80", "--fs-Hz", "100",
+                                                   "--duration-s", "2", "--out", "D"], match="--frequency-Hz 80")
+    add("message-sweep-above-nyquist", "messages", ["simulate", "--device", "ip2c_pedot_water", "--rh", "60",
+                                                    "--signal", "sweep", "--f-stop-Hz", "80", "--fs-Hz", "100",
+                                                    "--duration-s", "2", "--out", "D"], match="--f-stop-Hz 80")
+
+    def flat_tail(d, fx):
+        _record(d / "rec.csv")
+        lines = (d / "rec.csv").read_text().splitlines()
+        out = [lines[0]] + [ln if i < 500 else ",".join(ln.split(",")[:2] + ["0.0001", "60"])
+                            for i, ln in enumerate(lines[1:])]
+        (d / "rec.csv").write_text("\n".join(out) + "\n")
+    add("message-constant-after-skip", "messages", CMP + ["--skip-s", "6", "--out", "O"], flat_tail,
+        match=r"rec\.csv.*--skip-s")
+    add("message-recipe-yaml-one-line", "messages", TCQ + ["--out", "R"],
+        chain(cp("DS"), write("recipes/ff.yaml", "model: ff\nhyper_parameters: {hidden: [1, 2\n")),
+        env={"EAP_TRAIN_RECIPES": "recipes"}, match=r"ff\.yaml")
+    add("message-param-temporary-device", "messages", FRF + ["--param", "width=0mm", "--json", "f.json"],
+        match="--param")
     return C
 
 
@@ -732,12 +1068,87 @@ class _Silent(threading.Thread):
             self.held.append(conn)
 
 
-def _limit(cap_bytes: int):
+def _limit(cap_bytes: int, fsize: int | None = None):
     def pre():
         os.setsid()
         signal.signal(signal.SIGINT, signal.SIG_DFL)   # as in a terminal (a background job ignores Ctrl-C)
         resource.setrlimit(resource.RLIMIT_AS, (cap_bytes, cap_bytes))
+        if fsize is not None:    # Python ignores SIGXFSZ: a write past the limit fails with EFBIG
+            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
     return pre
+
+
+#: Processes a case may run at once (the command, its workers, a Dask cluster); more is
+#: unbounded work (``--devices 1000``): the case is stopped and counted as a hang.
+MAX_PROCS = 32
+
+
+def _session_size(sid: int) -> int:
+    n = 0
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                n += os.getsid(int(d)) == sid
+            except OSError:
+                pass
+    return n
+
+
+def _watch(proc, stop: threading.Event, flag: list) -> None:
+    """Stop ``proc``'s session when it holds more than :data:`MAX_PROCS` processes."""
+    while not stop.wait(0.25):
+        if _session_size(proc.pid) > MAX_PROCS:
+            flag.append(True)
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            return
+
+
+_TOOLS: dict = {}
+
+
+def _tool(name: str) -> bool:
+    """Whether the wrapper ``name`` (unshare with a private mount, setpriv) works here."""
+    if name not in _TOOLS:
+        test = {"unshare": ["unshare", "-rm", "true"],
+                "setpriv": ["setpriv", "--bounding-set=-dac_override,-dac_read_search", "true"]}[name]
+        try:
+            _TOOLS[name] = subprocess.run(test, capture_output=True).returncode == 0
+        except OSError:
+            _TOOLS[name] = False
+    return _TOOLS[name]
+
+
+def _wrapped(case: Case, argv: list[str]) -> list[str] | None:
+    """The command line of ``case`` with its wrappers (None: a wrapper this machine lacks)."""
+    cmd = [sys.executable, "-m", "nnmodel.cli", *argv]
+    if case.unprivileged and os.geteuid() == 0:
+        if not _tool("setpriv"):
+            return None
+        cmd = ["setpriv", "--bounding-set=-dac_override,-dac_read_search"] + cmd
+    if case.disk_kB:
+        if not _tool("unshare"):
+            return None
+        script = (f'mount -t tmpfs -o size={case.disk_kB}k tmpfs full || exit 99; "$@"; rc=$?; '
+                  'ls -A full > full.ls; exit $rc')
+        cmd = ["unshare", "-rm", "sh", "-c", script, "sh"] + cmd
+    return cmd
+
+
+def _classify(notes: list[str], case: Case, rc) -> str:
+    """The class of a failed case (module doc)."""
+    text = "; ".join(notes)
+    if "changed/removed" in text or "CODE RAN" in text:
+        return "data loss"
+    if "traceback" in text:
+        return "traceback"
+    if "timed out" in text or "more than" in text and "processes" in text:
+        return "hang"
+    if rc == 0 and (case.expect == "error" or case.note):
+        return "silent acceptance"
+    return "other"
 
 
 def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
@@ -751,12 +1162,22 @@ def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
     except Exception as exc:  # a setup that fails on this tree (e.g. a command it lacks)
         return {"case": case.name, "group": case.group, "held": False, "traceback": False,
                 "note": f"setup failed: {str(exc)[:200]}", "s": 0.0}
-    argv = [a.replace("SILENT", f"tcp://127.0.0.1:{silent_port}") for a in case.argv]
+    argv = [a.replace("SILENT", f"tcp://127.0.0.1:{silent_port}").replace("@WORK@", str(work)) for a in case.argv]
+    cmd = _wrapped(case, argv)
+    if cmd is None:
+        shutil.rmtree(d, ignore_errors=True)
+        return {"case": case.name, "group": case.group, "held": None, "traceback": False, "class": "skipped",
+                "note": "skipped: this machine lacks unshare/setpriv", "s": 0.0}
+    if case.disk_kB:
+        (work / "full").mkdir(exist_ok=True)
     before = _snapshot(work)
     env = dict(_ENV, **case.env)
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "nnmodel.cli", *argv], cwd=work, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, preexec_fn=_limit(int(args.cap_GB * 2**30)))
+    proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_limit(int(args.cap_GB * 2**30), case.fsize))
+    stop, too_many = threading.Event(), []
+    watcher = threading.Thread(target=_watch, args=(proc, stop, too_many), daemon=True)
+    watcher.start()
     timeout = case.timeout or args.timeout
     timed_out = False
     try:
@@ -772,6 +1193,7 @@ def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
         os.killpg(proc.pid, signal.SIGKILL)
         out, err = proc.communicate()
     elapsed = time.perf_counter() - t0
+    stop.set()
     rc = proc.returncode
     orphans = False
     try:
@@ -787,6 +1209,8 @@ def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
     notes = []
     if timed_out:
         notes.append(f"timed out after {timeout:g} s")
+    if too_many:
+        notes.append(f"started more than {MAX_PROCS} processes (unbounded) and was stopped")
     if tb:
         notes.append("traceback: " + err.strip().splitlines()[-1][:160])
     if orphans:
@@ -803,6 +1227,9 @@ def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
     elif case.expect == "ok":
         if rc != 0:
             notes.append(f"exit {rc} (expected 0): {(lines[-1] if lines else '')[:200]}")
+    elif case.expect == "ok-or-1":      # a verdict command (effects --check): 0 or 1, never a crash
+        if rc not in (0, 1):
+            notes.append(f"exit {rc} (expected 0 or 1): {(lines[-1] if lines else '')[:200]}")
     else:
         if rc != case.expect:
             notes.append(f"exit {rc} (expected {case.expect}): {(lines[-1] if lines else '')[:160]}")
@@ -810,11 +1237,27 @@ def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
                 bool(re.match(r"eap [\w-]+: (warning|note): ", ln)) for ln in lines[:-1]):
             notes.append(f"{len(lines)} lines on stderr (expected the warnings said before and one "
                          f"'interrupted' line): {(lines[-1] if lines else '')[:120]}")
-    changed = [k for k in before if after.get(k) != before[k] and not _allowed(k, case.may_change)]
-    new = [k for k in after if k not in before and not _allowed(k, case.may_change)]
+    if case.strict and case.expect == "error" and rc == 2:
+        errors = [ln for ln in lines if not re.match(r"eap [\w-]+: (warning|note): ", ln)]
+        if len(errors) != 1:
+            notes.append(f"{len(errors)} lines on stderr besides notes (expected one error line)")
+    if case.strict and ".eap-tmp-" in out + err:
+        notes.append("prints a path through eap's temporary folder (.eap-tmp-)")
+    if case.note and not any(re.match(r"eap [\w-]+: (warning|note): ", ln) and re.search(case.note, ln)
+                             for ln in lines):
+        notes.append(f"no note matching /{case.note}/")
+    if case.stdout and not re.search(case.stdout, out):
+        notes.append(f"stdout lacks /{case.stdout}/")
+    may_change = case.may_change + (("full.ls",) if case.disk_kB else ())
+    if case.disk_kB:
+        left = (work / "full.ls").read_text().split() if (work / "full.ls").is_file() else ["(no listing: mount failed?)"]
+        if left:
+            notes.append(f"left on the full disk: {', '.join(left[:4])}")
+    changed = [k for k in before if after.get(k) != before[k] and not _allowed(k, may_change)]
+    new = [k for k in after if k not in before and not _allowed(k, may_change)]
     if changed:
         notes.append(f"changed/removed: {', '.join(changed[:4])}")
-    if new and case.expect != "ok":
+    if new and case.expect not in ("ok", "ok-or-1"):
         notes.append(f"created: {', '.join(new[:4])}")
     if (work / "PWNED").exists():
         notes.append("CODE RAN")
@@ -824,8 +1267,10 @@ def run_case(case: Case, root: Path, fx: Path, args, silent_port: int) -> dict:
             notes.append(note)
     if not args.keep:
         shutil.rmtree(d, ignore_errors=True)
+    errline = [ln for ln in lines if re.match(r"eap [\w-]+: (error|interrupted)", ln)]
     return {"case": case.name, "group": case.group, "held": not notes, "traceback": tb, "rc": rc,
-            "note": "; ".join(notes), "s": elapsed, "stderr": err.strip()[-300:]}
+            "class": "held" if not notes else _classify(notes, case, rc), "note": "; ".join(notes), "s": elapsed,
+            "stderr": err.strip()[-300:], "answer": (errline[-1] if errline else (lines[-1] if lines else ""))[:400]}
 
 
 def main() -> None:
@@ -864,19 +1309,24 @@ def main() -> None:
         for case in all_cases:
             r = run_case(case, root / "cases", root / "fixtures", args, silent.port)
             results.append(r)
-            mark = "held" if r["held"] else "FAIL"
+            mark = "skip" if r["held"] is None else "held" if r["held"] else "FAIL"
             print(f"{mark} {r['s']:5.1f}s {r['group']:11s} {r['case']}" + (f"  — {r['note']}" if r["note"] else ""),
                   flush=True)
             if args.verbose and not r["held"] and r.get("stderr"):
                 print("      " + r["stderr"].replace("\n", "\n      "))
+    skipped = [r for r in results if r["held"] is None]
+    results = [r for r in results if r["held"] is not None]
     held = sum(r["held"] for r in results)
     tbs = sum(r["traceback"] for r in results)
     print(f"\n{tree} ({rev}): tried {len(results)}, held {held}, failed {len(results) - held}, "
-          f"tracebacks {tbs}")
+          f"tracebacks {tbs}" + (f"; skipped {len(skipped)} (no unshare/setpriv here)" if skipped else ""))
+    classes = ("held", "data loss", "traceback", "hang", "silent acceptance", "other")
+    print("  by class: " + ", ".join(f"{c} {sum(r['class'] == c for r in results)}" for c in classes))
     groups = sorted({r["group"] for r in results})
     for g in groups:
         rs = [r for r in results if r["group"] == g]
-        print(f"  {g:12s} {sum(r['held'] for r in rs):3d} / {len(rs):3d} held")
+        print(f"  {g:12s} {sum(r['held'] for r in rs):3d} / {len(rs):3d} held   " + ", ".join(
+            f"{c} {n}" for c in classes[1:] if (n := sum(r["class"] == c for r in rs))))
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
 

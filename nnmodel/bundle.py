@@ -20,6 +20,7 @@ import datetime
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 import warnings
@@ -136,6 +137,8 @@ def _read_card(folder: Path) -> dict:
     cp = folder / CARD
     if not cp.is_file():
         raise InputError(f"{folder} is not a model bundle (no {CARD})")
+    if cp.is_symlink():
+        raise InputError(f"{cp} is a symbolic link; a bundle holds its own files (a link could lead outside it)")
     card = load_json(cp, "bundle card")
     if not isinstance(card, dict) or card.get("format") != FORMAT:
         raise InputError(f"{cp}: not an {FORMAT} card")
@@ -153,9 +156,14 @@ def _read_card(folder: Path) -> dict:
     fs = card.get("fs_hz")
     if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not math.isfinite(fs) or fs <= 0:
         raise InputError(f"{cp}: 'fs_hz' must be a positive sampling rate in Hz, got {fs!r}")
-    for key in ("weights", "training", "output"):
+    for key in ("weights", "training", "output", "normalisation"):
         if card.get(key) is not None and not isinstance(card[key], dict):
             raise InputError(f"{cp}: {key!r} must be a mapping, got {card[key]!r}")
+    for name, st in (card.get("normalisation") or {}).items():
+        std = st.get("std") if isinstance(st, dict) else None
+        if isinstance(std, bool) or not isinstance(std, (int, float)) or not (math.isfinite(std) and std > 0):
+            raise InputError(f"{cp}: normalisation.{name}.std {std!r} must be a positive number (a scale of "
+                             f"{name}); the card is damaged — re-save the model")
     return card
 
 
@@ -181,8 +189,13 @@ def load(path: str | os.PathLike) -> "Bundle":
     if not isinstance(weights.get("file", WEIGHTS), str):
         raise InputError(f"{folder / CARD}: weights.file must be a file name, got {weights.get('file')!r}")
     wfile = folder / weights.get("file", WEIGHTS)
-    if wfile.parent.resolve() != folder.resolve() or not wfile.is_file():
-        raise InputError(f"{folder}: weights file {wfile.name} missing or outside the bundle")
+    if wfile.is_symlink() or wfile.parent.resolve() != folder.resolve() or not wfile.is_file():
+        raise InputError(f"{folder}: weights file {wfile.name} missing, a symbolic link or outside the bundle; a "
+                         "bundle holds its own files")
+    expected = weights.get("sha256")
+    if not (isinstance(expected, str) and re.fullmatch(r"[0-9a-f]{64}", expected)):
+        raise InputError(f"{folder / CARD}: weights.sha256 {expected!r} is not a SHA-256; without it the weights "
+                         "cannot be checked — re-save the model with eap")
     cls = MODELS[card["model"]]
     hp = _card_hyper_parameters(card, cls, folder / CARD)
     learned = {"inputs": [i["name"] for i in card["inputs"]], "fs": card["fs_hz"],
@@ -190,8 +203,7 @@ def load(path: str | os.PathLike) -> "Bundle":
                "fit_time_s": (card.get("training") or {}).get("fit_time_s"),
                "card_extra": {k: card[k] for k in cls.card_keys() if k in card}}
     _check_size(cls, hp, learned, wfile, folder)
-    expected = weights.get("sha256")
-    if expected and sha256_file(wfile) != expected:
+    if sha256_file(wfile) != expected:
         raise InputError(f"{wfile}: content does not match the SHA-256 in {CARD} (corrupt or altered)")
     try:
         state = torch.load(wfile, map_location="cpu", weights_only=True)
@@ -205,6 +217,9 @@ def load(path: str | os.PathLike) -> "Bundle":
     bad = [k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all())]
     if bad:
         raise InputError(f"{wfile}: weights {bad[:3]} contain NaN or infinite values; the bundle is corrupt")
+    bad = [k for k, v in state.items() if k.endswith("_std") and v.is_floating_point() and not bool((v > 0).all())]
+    if bad:
+        raise InputError(f"{wfile}: normalisation {bad[:3]} holds a standard deviation ≤ 0; the bundle is corrupt")
     try:
         with torch.device("meta"), warnings.catch_warnings():  # shapes only: nothing is allocated
             warnings.simplefilter("ignore", UserWarning)  # "copying ... to a meta parameter is a no-op"

@@ -18,7 +18,8 @@ from pathlib import Path
 import yaml
 
 from physics.errors import InputError, InputNotice, ModelError
-from physics.outputs import INTERRUPTS, protecting, raise_if_interrupted
+from physics.fileio import final_text
+from physics.outputs import INTERRUPTS, os_error_line, protecting, raise_if_interrupted
 
 from . import commands
 
@@ -65,7 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
         if "--effects" in p._option_string_actions or mod.NAME == "effects":
             p.add_argument("--effects-path", action="append", default=[], metavar="FILE.py",
                            help="a Python file defining user effects (physics.effects.OutputEffect subclasses, "
-                                "see examples/effects/creep.py); repeatable")
+                                "see examples/effects/creep.py); repeatable. The file is CODE: eap imports and "
+                                "runs it with your rights (exit calls are caught and each call is time-limited, "
+                                "but it is not sandboxed) — use only files you trust (docs/security.md)")
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -93,11 +96,12 @@ def main(argv: list[str] | None = None) -> int:
             rc = int(args._run(args) or 0)
             raise_if_interrupted()      # a SIGTERM that Python dropped (raised in a gc callback) still counts
             return rc
-    except InputError as exc:
-        print(f"eap {args.command}: error: {exc.render(flag_speller(parser, args.command))}", file=sys.stderr)
+    except InputError as exc:   # every message names the user's paths, never eap's temporary ones
+        print(f"eap {args.command}: error: {final_text(exc.render(flag_speller(parser, args.command)))}",
+              file=sys.stderr)
         return 2
     except ModelError as exc:
-        print(f"eap {args.command}: error: {exc}", file=sys.stderr)
+        print(f"eap {args.command}: error: {final_text(str(exc))}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, Terminated) as exc:
         out = getattr(args, "out", None)
@@ -111,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`
         sys.stderr.close()
         return 0
+    except OSError as exc:   # disk full, file too large, permission, wrong kind of file, name too long
+        print(f"eap {args.command}: error: {os_error_line(exc, _target(args))}", file=sys.stderr)
+        return 2
     except SystemExit as exc:   # user code (an effect file) called sys.exit: nothing may look complete
         print(f"eap {args.command}: error: user code called sys.exit({exc.code!r}) during the run; nothing was "
               "written (an effect file must not exit)", file=sys.stderr)
@@ -118,6 +125,15 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         _restore_signals(previous)
         warnings.showwarning = shown
+
+
+def _target(args) -> str | None:
+    """The output the command writes, as its flag and value (``--out D``), for messages."""
+    for name in ("out", "json"):
+        value = getattr(args, name, None)
+        if value:
+            return f"--{name} {value}"
+    return None
 
 
 #: Options that name files or folders a command reads (protected from every output).
@@ -206,9 +222,18 @@ def _apply_params(args, tmp: Path) -> None:
     if attr == "model" and Path(ref).is_dir():
         raise InputError("--param changes a device; --model is a neural-model bundle here")
     dev = load_device(ref)
-    values = dict(parse_quantity(item) for item in items)
-    dev = dev.with_params(**values)
-    path = tmp / f"{dev.name}.yaml"
+    values: dict[str, float] = {}
+    for item in items:
+        name, value = parse_quantity(item)
+        if name in values:
+            given = ", ".join(i for i in items if i.split("=")[0].strip() == name)
+            raise InputError(f"--param {name} is given twice ({given}); give each parameter once")
+        values[name] = value
+    try:
+        dev = dev.with_params(**values)
+    except InputError as exc:
+        raise InputError(f"--param {' '.join(items)}: {exc}") from None
+    path = tmp / "device.yaml"        # not the device's own name: a name from a file never becomes a path
     path.write_text(yaml.safe_dump(device_to_raw(dev), sort_keys=False, allow_unicode=True), encoding="utf-8")
     setattr(args, attr, str(path))
     from physics.device import all_param_specs

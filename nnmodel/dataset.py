@@ -281,6 +281,9 @@ class Dataset:
         if abs(ts.fs - self.fs) > 1e-6 * self.fs:
             raise InputError(f"{self.path / entry['path']}: sampled at {ts.fs:g} Hz but dataset.json says fs_Hz "
                              f"{self.fs:g}; the dataset was changed — rebuild it")
+        if entry.get("samples") is not None and ts.n != entry["samples"]:
+            raise InputError(f"{self.path / entry['path']}: {ts.n} samples but dataset.json says {entry['samples']}; "
+                             "the dataset was changed — rebuild it")
         return Experiment(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
 
 
@@ -338,6 +341,9 @@ def _check_meta(meta, mf: Path) -> None:
         parts = PurePosixPath(path).parts
         if PurePosixPath(path).is_absolute() or "\\" in path or ".." in parts or not path.lower().endswith(".csv"):
             raise _fault(mf, f"{where}: a record must be a .csv path inside the dataset folder (relative, no '..')")
+        if len(parts) > 8 or any(len(q.encode("utf-8", "surrogateescape")) > 255 for q in parts):
+            raise _fault(mf, f"files[{k}].path: a path of {len(parts)} parts, {len(path)} characters; a record's "
+                             "path is a split folder and a file name of at most 255 bytes")
         if path in seen:
             raise _fault(mf, f"{where} is listed twice")
         seen.add(path)
@@ -384,11 +390,14 @@ def load_dataset(path: str | Path, verify: bool = True) -> Dataset:
     SHA-256 is checked too.  A dataset is a closed world: nothing outside its folder is read."""
     path = Path(path)
     mf = path / "dataset.json"
-    if not mf.exists():
+    if not (mf.exists() or mf.is_symlink()):
         raise InputError(f"{path} is not a dataset folder (no dataset.json)")
+    root = path.resolve()
+    if mf.is_symlink() or mf.resolve().parent != root:
+        raise InputError(f"{mf} is a symbolic link; a dataset holds its own description (a link could lead outside "
+                         "the folder) — copy the file in")
     meta = load_json(mf, "dataset description")
     _check_meta(meta, mf)
-    root = path.resolve()
     for e in meta["files"]:
         f = _inside(root, e["path"], mf)
         side = f.with_suffix(".yaml")

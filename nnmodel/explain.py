@@ -198,7 +198,8 @@ def losses(summary: dict) -> list[dict]:
     return [note(f"Training and validation losses are on different scales: train_loss is the mean square error "
                  f"of the normalised output on short training windows, val_loss the root-mean-square free-run "
                  f"error of the normalised output over whole validation records. For {name} the last epoch gives "
-                 f"train_loss {number(t)} and val_loss {number(v)} ({number(v / t)}×): compare √train_loss = "
+                 f"train_loss {number(t)} and val_loss {number(v)}" + (f" ({number(v / t)}×)" if t > 0 else "")
+                 + ": compare √train_loss = "
                  f"{number(math.sqrt(t))} with val_loss; the rest of the gap is between short windows started "
                  "from measured outputs and a free run over whole records.")]
 

@@ -32,7 +32,7 @@ import numpy as np
 from physics.compare import cluster_rh
 from physics.errors import InputError
 from physics.fileio import sha256_file, write_json
-from physics.outputs import output_folder, preflight
+from physics.outputs import component, output_folder, preflight
 from physics.record import OutputQuantity
 from physics.timeseries import TimeSeries, read_timeseries, write_timeseries
 
@@ -116,13 +116,18 @@ def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), 
             raise InputError(f"--{split} {text}: file not found")
         ts, has_rh = _read(path, opts)
         n0 = ts.n
+        beyond = [i for i in (rng.start, rng.stop) if i is not None and not -n0 <= i <= n0]
+        if beyond:
+            raise InputError(f"--{split} {text}: sample {beyond[0]} lies beyond the {n0} samples of {path}; give "
+                             f"indices within -{n0}…{n0} (a range is never clipped)")
         a, b, _ = rng.indices(n0)
         if b - a < 16:
             raise InputError(f"--{split} {text}: samples {a}:{b} of {n0} leave {max(b - a, 0)} samples; a record "
                              "needs at least 16")
         ts = ts.slice(a, b)
         _check_varies(ts, text, split)
-        name = f"{path.stem}" + ("" if (a, b) == (0, n0) else f"_{a}-{b}")
+        stem = path.stem.lstrip(".").encode("utf-8", "surrogateescape")[:120].decode("utf-8", "ignore") or "record"
+        name = component(stem + ("" if (a, b) == (0, n0) else f"_{a}-{b}"), f"--{split} {text}", "a record file")
         base, k = name, 1
         while f"{split}/{name}" in names:
             k += 1

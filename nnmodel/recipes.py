@@ -12,9 +12,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import yaml
-
 from physics.errors import InputError
+from physics.yamlio import load_yaml
 
 __all__ = ["recipe_dir", "load_recipe", "make_model"]
 
@@ -65,10 +64,7 @@ def load_recipe(name: str, overrides: dict | None = None, directory: str | os.Pa
         avail = sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
         raise InputError(f"no training recipe {name!r} ({path} not found); available: "
                          f"{', '.join(avail) or 'none'}")
-    try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except yaml.YAMLError as exc:
-        raise InputError(f"{path}: not valid YAML ({exc})") from None
+    doc = load_yaml(path, "training recipe") or {}    # one-line errors naming the file, bounded
     if not isinstance(doc, dict):
         raise InputError(f"{path}: a recipe must be a mapping with keys {sorted(_RECIPE_KEYS)}")
     bad = sorted(set(doc) - _RECIPE_KEYS)

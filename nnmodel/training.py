@@ -91,8 +91,11 @@ EXECUTION = {"devices": 1, "strategy": "auto"}
 def execution(devices: int = 1, strategy: str = "auto"):
     """Train with ``devices`` processes/devices and a Lightning ``strategy`` (e.g. ``ddp_spawn``
     on CPUs with the gloo backend, ``ddp`` on GPUs) inside the block."""
-    if isinstance(devices, bool) or not isinstance(devices, int) or devices < 1:
-        raise InputError(f"--devices {devices!r}: must be a positive whole number")
+    from physics.limits import check_count
+    from physics.parallel import cores
+    gpus = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    check_count(devices, 1, gpus or cores(), "--devices",
+                f"the {'GPUs' if gpus else 'CPU cores'} of this machine; one training process each")
     old = dict(EXECUTION)
     EXECUTION.update(devices=devices, strategy=strategy)
     try:

@@ -41,7 +41,9 @@ import numpy as np
 from . import effects, signals
 from .device import all_param_specs, load_device
 from .effects import BUILT_IN, EFFECTS, Effect, LoadEffect, OutputEffect, register, stage_of, unregister
+from .effects.base import rational
 from .effects.declaration import declaration_problems
+from .effects.usercode import UserCodeError
 from .effects.stages import STAGE_PROTOCOLS, CompiledChargeLaw, LoadFactor, OutputFactor
 from .errors import InputError
 from .frequency import frequency_response
@@ -158,6 +160,8 @@ def check_effect(cls, device=DEVICE, *, fast: bool = False, rh: float = 60.0) ->
             else:
                 try:
                     status, detail = getattr(ctx, name)()
+                except UserCodeError as exc:   # an exit or an overrun: its own sentence
+                    status, detail = "fail", str(exc)
                 except Exception as exc:   # a user's hook: report what went wrong, one line
                     status, detail = "fail", f"{type(exc).__name__}: {exc}".splitlines()[0]
             report.checks.append(Check(name, status, detail, time.perf_counter() - t0))
@@ -177,6 +181,17 @@ def _rational_poles(num, den) -> tuple[str, str]:
         return "fail", f"unstable: pole at s = {worst:.4g} rad/s (right half-plane or on the axis)"
     return "pass", (f"poles {', '.join(f'{p:.3g}' for p in poles)} rad/s in the left half-plane" if poles.size
                     else "a constant gain")
+
+
+def _outside(v: float, lo: float, hi: float) -> str | None:
+    """None when ``v`` lies in [lo, hi] up to rounding (1e-9 relative: a start clipped to its
+    bound is on it), else ``"v outside [lo, hi]"`` with as many digits as tell ``v`` from them."""
+    tol = 1e-9 * max(abs(lo), abs(hi), abs(v))
+    if lo - tol <= v <= hi + tol:
+        return None
+    digits = next((k for k in range(4, 18) if float(f"{v:.{k}g}") not in (float(f"{lo:.{k}g}"),
+                                                                         float(f"{hi:.{k}g}"))), 17)
+    return f"{v:.{digits}g} outside [{lo:.{digits}g}, {hi:.{digits}g}]"
 
 
 class _Context:
@@ -242,7 +257,7 @@ class _Context:
         e, p = self._instance(), self.model.params_at(self.rh)
         for base, name in ((OutputEffect, "output_tf"), (LoadEffect, "load_tf")):
             if isinstance(e, base) and getattr(type(e), name) is not getattr(base, name):
-                return _rational_poles(*getattr(e, name)(p))
+                return _rational_poles(*rational(e, name, p))
         return "skip", "no rational factor (output_tf/load_tf) to check; 'finite' and 'solvers' cover the rest"
 
     def passive(self):
@@ -278,9 +293,9 @@ class _Context:
                 problems.append(f"bounds of {name}: {lo:g} ≥ {hi:g}")
         for st in start_points(self.cls.id, self.dev):
             for name, v in st.items():
-                lo, hi = self._bounds(name)
-                if not lo <= v <= hi:
-                    problems.append(f"start {name} = {v:g} outside [{lo:g}, {hi:g}]")
+                outside = _outside(v, *self._bounds(name))
+                if outside:
+                    problems.append(f"start {name} = {outside}")
         for role, (name, _rank) in spec.get("roles", {}).items():
             if role not in ("gain", "stiffness") or name not in declared:
                 problems.append(f"role {role!r}: {name!r}")

@@ -22,7 +22,7 @@ import scipy.io
 import yaml
 
 from .errors import InputError, arg
-from .fileio import atomic_path
+from .fileio import atomic_path, check_regular
 from .record import Locate, check_finite
 
 
@@ -63,6 +63,7 @@ def check_input_path(path, suffixes: tuple[str, ...]) -> Path:
     if p.suffix.lower() not in suffixes:
         raise InputError(f"{p}: unsupported file type {p.suffix or '(no extension)'!r}; "
                          f"expected {' or '.join(suffixes)}")
+    check_regular(p, "the record")
     if not p.is_file():
         raise InputError(f"{p}: file not found")
     return p

@@ -145,6 +145,7 @@ class Device:
             if k not in specs:
                 raise InputError(f"unknown parameter {k!r}{_suggest(k, specs)}")
             new[k] = specs[k].check(float(v), f"device {self.name!r}")
+        _check_lengths(new, f"device {self.name!r}")
         return replace(self, params=new)
 
     def describe(self) -> str:
@@ -258,6 +259,7 @@ def parse_device(raw: Any, where: str = "<device>") -> Device:
         missing = [k for k, s in sec.items() if not s.optional and k not in params]
         if missing:
             raise InputError(f"{where}: section {sec_name!r} is missing {', '.join(missing)}")
+    _check_lengths(params, where)
     specs = all_param_specs()
     for m in maps.values():
         if m.param not in specs:
@@ -274,6 +276,14 @@ def parse_device(raw: Any, where: str = "<device>") -> Device:
     return Device(name=str(raw.get("name", Path(where).stem)), title=str(raw.get("title", "")),
                   params=params, tables=tables, humidity_maps=maps, sources=sources,
                   reference_rh=ref_rh, default_effects=tuple(dflt), path=where)
+
+
+def _check_lengths(params: Mapping[str, float], where: str) -> None:
+    """The strip must bend: its total length exceeds the length held in the clamp."""
+    L, Lc = params.get("L_total"), params.get("L_clamp")
+    if L is not None and Lc is not None and not L > Lc:
+        raise InputError(f"{where}: L_total {L:g} m is not longer than L_clamp {Lc:g} m; the free (bending) length "
+                         "L_total − L_clamp must be positive")
 
 
 def _parse_value(spec: ParamSpec, entry: Any, loc: str) -> tuple[float, str]:

@@ -11,7 +11,10 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
 import os
+import re
+import sys
 import tempfile
 from pathlib import Path
 from typing import Iterator
@@ -53,6 +56,35 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True,
             tmp_path.unlink()
 
 
+def file_kind(path: str | os.PathLike) -> str | None:
+    """What ``path`` is when it exists but is not a regular file (links followed): ``"a
+    folder"``, ``"a named pipe (FIFO)"``, ``"a device"``, ``"a socket"``; None for a regular
+    file or nothing there.  Reading a pipe or a device never ends (``/dev/zero``) or blocks."""
+    import stat
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe (FIFO)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a socket" if stat.S_ISSOCK(mode) else "not a regular file"
+
+
+def check_regular(path: str | os.PathLike, what: str) -> None:
+    """Refuse ``path`` (``what`` it should be, e.g. "the sidecar") when it exists but is not a
+    regular file (:func:`file_kind`), naming it."""
+    kind = file_kind(path)
+    if kind is not None:
+        raise InputError(f"{path}: {what} is {kind}, not a regular file; eap reads only regular files here — "
+                         "move it away or give a file")
+
+
 def sha256_file(path: str | os.PathLike) -> str:
     """Hex SHA-256 of a file's content (read in 1 MiB blocks)."""
     h = hashlib.sha256()
@@ -68,6 +100,21 @@ def _umask() -> int:
     return mask
 
 
+_TMP_NAME = re.compile(r"\.([^/\\\s'\"<>]+?)\.eap-tmp-\d+")
+_TMP_FILES = re.compile(r"\.eap-tmp-\d+-[A-Za-z0-9_]+/")
+_PART = re.compile(r"/\.([^/\\\s'\"<>]+?)\.[A-Za-z0-9_]{8}\.part\b")
+
+
+def final_text(text: str) -> str:
+    """``text`` with every path through the temporary folder of an output being written
+    (``…/.NAME.eap-tmp-PID/…``, the staging folder ``…/.eap-tmp-PID-XXXX/FILE`` of single
+    files, an atomic write's ``.FILE.XXXXXXXX.part``) written as the path it will have
+    (``…/NAME/…``, ``…/FILE``): what a page, a message, a JSON file or a suggested command
+    shows (:mod:`physics.outputs` writes outputs aside and renames them at the end)."""
+    text = _TMP_NAME.sub(r"\1", str(text))
+    return _PART.sub(r"/\1", _TMP_FILES.sub("", text))
+
+
 def write_text(path: str | os.PathLike, text: str, **kw) -> Path:
     """Atomically write ``text`` (UTF-8) to ``path``."""
     with atomic_path(path, **kw) as tmp:
@@ -76,8 +123,9 @@ def write_text(path: str | os.PathLike, text: str, **kw) -> Path:
 
 
 def write_json(path: str | os.PathLike, obj, **kw) -> Path:
-    """Atomically write ``obj`` as indented JSON (NaN/inf are refused: not valid JSON)."""
-    return write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n", **kw)
+    """Atomically write ``obj`` as indented JSON (NaN/inf are refused: not valid JSON), every
+    path through an output's temporary folder written as its final path (:func:`final_text`)."""
+    return write_text(path, final_text(json.dumps(obj, indent=2, allow_nan=False)) + "\n", **kw)
 
 
 #: Largest JSON file read (bytes): dataset descriptions and cards are a few MB at most.
@@ -100,6 +148,46 @@ def check_depth(obj, where: str, what: str) -> None:
             stack.extend((c, depth + 1) for c in children)
 
 
+_FLOAT_MAX = sys.float_info.max
+_MAX_DIGITS = 309
+
+
+class OutOfRange:
+    """A number in a JSON/YAML text that no float holds (a 5000-digit integer, 1e999), kept
+    as a marker by the parser so that :func:`check_numbers` can name its key."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+
+def check_numbers(obj, where: str) -> None:
+    """Refuse an :class:`OutOfRange` number anywhere in ``obj``, naming its key path
+    (``sensor.noise_rms_um``, ``files[0].samples``)."""
+    stack = [(obj, "")]
+    while stack:
+        node, key = stack.pop()
+        if isinstance(node, OutOfRange):
+            raise InputError(f"{where}: {key or 'the document'}: {node.text} lies outside the range of a float "
+                             f"(±{_FLOAT_MAX:.3g}); give a plausible number")
+        if isinstance(node, dict):
+            stack.extend((v, f"{key}.{k}" if key else str(k)) for k, v in node.items())
+        elif isinstance(node, list):
+            stack.extend((v, f"{key}[{i}]") for i, v in enumerate(node))
+
+
+def _json_int(text: str):
+    digits = sum(c.isdigit() for c in text)
+    if digits > _MAX_DIGITS:
+        return OutOfRange(f"a whole number of {digits} digits")
+    value = int(text)
+    return value if abs(value) <= _FLOAT_MAX else OutOfRange(f"{text[:12]}…")
+
+
+def _json_float(text: str):
+    value = float(text)
+    return OutOfRange(text[:24]) if math.isinf(value) else value
+
+
 def _no_repeats(pairs):
     out = {}
     for k, v in pairs:
@@ -117,6 +205,7 @@ def load_json(path, what: str = "JSON file"):
     """Parse the JSON file ``path``: UTF-8, at most :data:`MAX_JSON_BYTES`, nesting at most
     :data:`MAX_DEPTH`, no NaN/Infinity, no key twice in an object."""
     p = Path(path)
+    check_regular(p, f"the {what}")
     try:
         size = p.stat().st_size
         if not p.is_file():
@@ -130,10 +219,12 @@ def load_json(path, what: str = "JSON file"):
         raise InputError(f"{p}: the {what} is not UTF-8 text (byte {exc.object[exc.start]:#x} at position "
                          f"{exc.start})") from None
     try:
-        obj = json.loads(text, object_pairs_hook=_no_repeats, parse_constant=_no_constant)
+        obj = json.loads(text, object_pairs_hook=_no_repeats, parse_constant=_no_constant, parse_int=_json_int,
+                         parse_float=_json_float)
     except RecursionError:
         raise InputError(f"{p}: the {what} is nested more than {MAX_DEPTH} levels deep") from None
     except ValueError as exc:
         raise InputError(f"{p}: the {what} is not valid JSON ({exc})") from None
     check_depth(obj, str(p), what)
+    check_numbers(obj, f"{p}: the {what}")
     return obj

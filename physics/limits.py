@@ -26,6 +26,12 @@ FS_RANGE_HZ = (1e-6, 1e9)
 #: Samples of a generated excitation (simulate, generate): 2·10⁷ is 5.5 h at 1 kHz and
 #: already ~1 GB of channels in memory; split longer runs.
 MAX_SAMPLES = 20_000_000
+#: Samples × sampling rate [Hz] of one simulation (``simulate``): the time solver's
+#: realisation resolves the response up to half the rate, so its work per sample grows with
+#: the rate (measured on a loaded 2-core machine: 12 µs per sample at 1 kHz, 80 µs at
+#: 1 MHz, 125 µs at 1 GHz).  The cap lets :data:`MAX_SAMPLES` through up to 10 kHz and
+#: 2·10⁵ samples at 1 MHz; 2·10⁷ samples at 1 GHz (an hour) are refused at once.
+MAX_SAMPLES_X_RATE = 2e11
 #: Largest plausible gain of a strip's tip deflection per volt [m/V] (measured strips give
 #: µm–mm per volt; a response beyond is a unit error or an unstable model, not physics).
 MAX_GAIN_M_PER_V = 1.0
@@ -50,3 +56,16 @@ def check_count(value, lo: int, hi: int, what: str, why: str = "") -> int:
         raise InputError(f"{what} {value!r}: must be a whole number within {lo:,}–{hi:,}"
                          + (f" ({why})" if why else ""))
     return value
+#: Highest order of a rational factor an effect gives (``output_tf``, ``load_tf``): physical
+#: factors have a few poles; the roots, the Tustin discretisation and the filter's start state
+#: cost order² to order³ (a 5000-order factor takes minutes), so the order is checked first.
+MAX_TF_ORDER = 32
+#: Multi-start count of one fit (identify, diagnose ``--starts``): each start is a full
+#: least-squares fit; a few dozen already cover a parameter space.
+MAX_STARTS = 256
+#: Trials of a hyper-parameter search per model (``train-compare --tune``): each trains a
+#: network; Optuna's TPE settles within a few dozen.
+MAX_TUNE_TRIALS = 1000
+#: Horizon of a k-step-ahead prediction (``predict --steps-ahead``) [samples]: the work is
+#: samples × k model steps; a longer horizon is a free run.
+MAX_STEPS_AHEAD = 10_000

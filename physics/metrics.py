@@ -59,15 +59,16 @@ def _centred_dot(y: np.ndarray, x: np.ndarray) -> float:
 
 
 def _spread(y: np.ndarray, name: str = "y") -> float:
-    """‖y − ȳ‖, refusing a constant signal (for which relative metrics are undefined)."""
+    """‖y − ȳ‖, refusing a constant signal (for which relative metrics are undefined): one
+    whose spread is below 10⁻¹² of its norm is constant up to the rounding of its mean."""
     mean = y.mean()
     sq = 0.0
     for a, b in _blocks(y.size):
         c = y[a:b] - mean
         sq += float(np.dot(c, c))
     spread = float(np.sqrt(sq))
-    if spread == 0:
-        raise InputError(f"{name} is constant; a relative metric or correlation is undefined")
+    if spread <= 1e-12 * float(np.sqrt(y.size)) * abs(float(mean)):
+        raise InputError(f"{name} is constant; a relative error (NRMSE, fit %) or a correlation is undefined")
     return spread
 
 
@@ -77,25 +78,25 @@ def rmse(y, yhat, offset: float = 0.0) -> float:
     return float(np.sqrt(_sum_sq_error(y, yhat, offset) / y.size))
 
 
-def nrmse(y, yhat, offset: float = 0.0) -> float:
+def nrmse(y, yhat, offset: float = 0.0, names: tuple[str, str] = ("y", "yhat")) -> float:
     """RMSE / std(y) (population std), a fraction: 0 is perfect, 1 is no better than the
     mean of y.  Equals ‖y − ŷ‖ / ‖y − ȳ‖ (with y − ``offset`` for y: the spread of y does
     not depend on it)."""
     y, yhat = _pair(y, yhat)
-    return float(np.sqrt(_sum_sq_error(y, yhat, offset))) / _spread(y)
+    return float(np.sqrt(_sum_sq_error(y, yhat, offset))) / _spread(y, names[0])
 
 
-def fit_percent(y, yhat, offset: float = 0.0) -> float:
+def fit_percent(y, yhat, offset: float = 0.0, names: tuple[str, str] = ("y", "yhat")) -> float:
     """Fit (%) = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖), the NRMSE fit of MATLAB ``compare``/
     ``goodnessOfFit``: 100 is perfect, 0 is the mean of y, negative is worse."""
-    return 100.0 * (1.0 - nrmse(y, yhat, offset))
+    return 100.0 * (1.0 - nrmse(y, yhat, offset, names))
 
 
-def correlation(y, yhat) -> float:
-    """Pearson correlation coefficient of y and ŷ (−1…1)."""
+def correlation(y, yhat, names: tuple[str, str] = ("y", "yhat")) -> float:
+    """Pearson correlation coefficient of y and ŷ (−1…1); ``names``: how errors name y and ŷ."""
     y, yhat = _pair(y, yhat)
     # Σ (y − ȳ)(ŷ − mean ŷ) = Σ (y − ȳ) ŷ: no centred copy of ŷ, and y's a block at a time
-    return _centred_dot(y, yhat) / (_spread(y) * _spread(yhat, "yhat"))
+    return _centred_dot(y, yhat) / (_spread(y, names[0]) * _spread(yhat, names[1]))
 
 
 def j_err(mag_exp, mag_sim) -> float:
@@ -108,13 +109,13 @@ def j_err(mag_exp, mag_sim) -> float:
     return rmse(np.abs(a), np.abs(b))
 
 
-def summary(y, yhat, offset: float = 0.0) -> dict:
+def summary(y, yhat, offset: float = 0.0, names: tuple[str, str] = ("y", "yhat")) -> dict:
     """All time-domain metrics as a JSON-ready dict: ``n``, ``rmse``, ``nrmse``,
     ``fit_percent``, ``correlation``, of y − ``offset`` against ŷ (a long record is not
-    copied to remove it).  (:func:`j_err` compares FRF magnitudes, not signals, and is
-    left out.)"""
-    return {"n": int(np.size(y)), "rmse": rmse(y, yhat, offset), "nrmse": nrmse(y, yhat, offset),
-            "fit_percent": fit_percent(y, yhat, offset), "correlation": correlation(y, yhat)}
+    copied to remove it; ``names``: how an error names y and ŷ, e.g. the record and the
+    model).  (:func:`j_err` compares FRF magnitudes, not signals, and is left out.)"""
+    return {"n": int(np.size(y)), "rmse": rmse(y, yhat, offset), "nrmse": nrmse(y, yhat, offset, names),
+            "fit_percent": fit_percent(y, yhat, offset, names), "correlation": correlation(y, yhat, names)}
 
 
 #: Nuisance terms per record (offset and linear drift), counted as parameters in the BIC.

@@ -12,13 +12,15 @@ from __future__ import annotations
 
 import copy
 import re
+import warnings
 from dataclasses import dataclass, field, fields
 from typing import Callable, Mapping
 
 import numpy as np
 
-from .errors import InputError, arg
+from .errors import InputError, InputNotice, arg
 from .limits import FS_RANGE_HZ
+from .units import UnitError, parse_unit
 
 #: Largest accepted deviation of a time step from the median step, relative to it.
 UNIFORM_RTOL = 1e-2
@@ -58,7 +60,14 @@ class OutputQuantity:
         name, sep, unit = (s.strip() for s in str(text).partition(":"))
         if not sep or not name or not unit:
             raise InputError(f"output {text!r}: expected NAME:UNIT, e.g. level:V or deflection:mm")
-        return cls(name, unit)
+        out = cls(name, unit)
+        try:
+            parse_unit(unit)
+        except UnitError:     # any word may be a unit (counts, LSB): kept, but said aloud
+            warnings.warn(InputNotice(f"output {text}: {unit!r} is not a unit eap knows (m, mm, V, mV, N, Pa, %, 1, "
+                                      f"…): values are kept in it as they are, with no conversion — check the "
+                                      "spelling (units are case-sensitive)"))
+        return out
 
     @classmethod
     def from_dict(cls, d, where: str = "output") -> "OutputQuantity":

@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .fileio import check_regular
 from .sensor import SensorModel
 from .units import UnitError, parse_unit
 from .yamlio import load_yaml
@@ -68,6 +69,9 @@ SENSOR_ALIASES: dict[str, tuple[tuple[str, ...], str]] = {
     "deflection_drift": (("deflection_drift", "drift"), "m"),
     "noise_floor_m": (("noise_floor",), "m"),
 }
+#: Largest length [m] a sensor setting of a tip deflection may state (noise, step, range,
+#: offset, drift): a strip is centimetres long; beyond is a unit error (and squares overflow).
+MAX_SENSOR_M = 1.0
 #: Sidecar keys of the signal description that must be positive numbers.
 POSITIVE_SIGNAL_KEYS = ("period_s", "duration_s", "fs_Hz", "f_start_Hz", "f_stop_Hz", "frequency_Hz")
 _TINY = float(np.finfo(float).tiny)
@@ -78,6 +82,7 @@ def read_sidecar(path: Path) -> dict:
     """Metadata of the optional sidecar ``NAME.yaml`` next to ``path`` ({} if absent),
     normalised (sensor settings in stored names and SI) and checked (:func:`check_sidecar`)."""
     side = Path(path).with_suffix(".yaml")
+    check_regular(side, f"the sidecar of {Path(path).name}")
     if not side.is_file():
         return {}
     meta = load_yaml(side, "sidecar")
@@ -119,7 +124,11 @@ def _si(value, unit: str, si_unit: str, key: str, side):
         raise InputError(f"{side}: sensor.{key}: {exc}; expected a unit of {si_unit}") from None
     if not q.same_dimension(ref):
         raise InputError(f"{side}: sensor.{key}: unit {unit!r} is not a unit of {si_unit}")
-    return float(value) * q.factor / ref.factor
+    out = float(value) * q.factor / ref.factor
+    if si_unit == "m" and not abs(out) <= MAX_SENSOR_M:
+        raise InputError(f"{side}: sensor.{key}: {value:g} {unit} is {out:.3g} m; a sensor setting of the tip "
+                         f"deflection lies within ±{MAX_SENSOR_M:g} m (a unit error?)")
+    return out
 
 
 def _canonical(key: str) -> tuple[str, str] | None:
@@ -157,7 +166,7 @@ def normalise_sensor(sensor, side) -> dict:
         out[name] = _si(value, unit, SENSOR_ALIASES[name][1], key, side)
     if "noise_floor_m" not in out and isinstance(out.get("deflection_noise"), (int, float)):
         step = out.get("deflection_step") if isinstance(out.get("deflection_step"), (int, float)) else 0.0
-        out["noise_floor_m"] = math.sqrt(float(out["deflection_noise"]) ** 2 + float(step) ** 2 / 12)
+        out["noise_floor_m"] = math.hypot(float(out["deflection_noise"]), float(step) / math.sqrt(12))
     return out
 
 
@@ -189,10 +198,11 @@ def check_sidecar(meta: dict, side: Path) -> None:
         raise InputError(f"{side}: sensor: expected a mapping of sensor settings, got {sensor!r}")
     known = {f.name for f in fields(SensorModel)}
     for key in sorted(known & set(sensor)):
-        _number(sensor[key], f"sensor.{key}", side, allow_none=key in ("bandwidth", "adc_bits"))
+        lo, hi = (-MAX_SENSOR_M, MAX_SENSOR_M) if key.startswith("deflection_") else (-math.inf, math.inf)
+        _number(sensor[key], f"sensor.{key}", side, lo, hi, allow_none=key in ("bandwidth", "adc_bits"))
     try:
         SensorModel(**{k: sensor[k] for k in known & set(sensor)})
     except InputError as exc:
         raise InputError(f"{side}: {exc}") from None
     if "noise_floor_m" in sensor:
-        _number(sensor["noise_floor_m"], "sensor.noise_floor_m", side, 0.0)
+        _number(sensor["noise_floor_m"], "sensor.noise_floor_m", side, 0.0, MAX_SENSOR_M)

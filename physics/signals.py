@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal as sps
 
-from .errors import InputError
+from .errors import InputError, arg
 
 
 @dataclass
@@ -65,9 +65,10 @@ def _time(duration: float, fs: float) -> np.ndarray:
 
 def _check_band(f0: float, f1: float, fs: float):
     if not (0 < f0 < f1):
-        raise InputError(f"need 0 < f_start < f_stop, got {f0:g}, {f1:g} Hz")
+        raise InputError(f"need 0 < {arg('f_start')} < {arg('f_stop')}, got {f0:g}, {f1:g} Hz")
     if f1 >= fs / 2:
-        raise InputError(f"f_stop = {f1:g} Hz must be below the Nyquist frequency {fs / 2:g} Hz")
+        raise InputError(f"{arg('f_stop')} {f1:g} Hz must be below the Nyquist frequency {fs / 2:g} Hz (half of "
+                         f"{arg('fs')} {fs:g} Hz)")
 
 
 def fade_in(sig: Signal, duration: float) -> Signal:
@@ -175,7 +176,9 @@ def tone(amplitude: float = 2.0, frequency: float = 1.0, duration: float = 10.0,
     >>> round(float(sig.v.max()), 6)
     2.0
     """
-    _check_band(frequency, frequency * (1 + 1e-12), fs)
+    if not 0 < frequency < fs / 2:
+        raise InputError(f"{arg('frequency')} {frequency:g} Hz must be positive and below the Nyquist frequency "
+                         f"{fs / 2:g} Hz (half of {arg('fs')} {fs:g} Hz)")
     t = _time(duration, fs)
     v = offset + amplitude * np.sin(2 * np.pi * frequency * t + np.radians(phase_deg))
     return Signal(t, v, "tone", dict(amplitude_V=amplitude, frequency_Hz=frequency, phase_deg=phase_deg,

@@ -253,6 +253,10 @@ def _convert_output(values, label, unit, how, output, gain, where):
         unit, how = output.unit, _OUTPUT
     if gain is not None:
         metres_per, per_unit = parse_gain(gain)
+        if output is not None and output.name != "deflection":
+            raise InputError(f"{where}: {label}: {_OUTPUT} {output.name}:{output.unit} and a sensor gain to metres "
+                             f"contradict each other (the gain makes it the tip deflection in m, the declaration "
+                             f"keeps it as {output.name} in {output.unit}); give one of them")
         if unit is None:
             raise InputError(f"{where}: {label}: a sensor gain needs the column's unit; give it in the column map, "
                              f"e.g. deflection=COLUMN:{per_unit}")

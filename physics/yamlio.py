@@ -10,12 +10,13 @@ anchors, aliases or a key twice in one mapping; every problem is an
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import yaml
 
 from .errors import InputError
-from .fileio import MAX_DEPTH
+from .fileio import _FLOAT_MAX, _MAX_DIGITS, MAX_DEPTH, OutOfRange, check_numbers, check_regular
 
 #: Largest YAML file read (bytes); metadata and configs are a few kB.
 MAX_YAML_BYTES = 1 << 20
@@ -46,6 +47,19 @@ class _NoAliasLoader(yaml.SafeLoader):
                 None, None, f"anchors (&{event.anchor}) are not allowed", event.start_mark)
         return super().compose_node(parent, index)
 
+    def construct_yaml_int(self, node):
+        digits = sum(c.isdigit() for c in str(node.value))
+        if digits > _MAX_DIGITS:           # beyond any float (and Python's int-string limit)
+            return OutOfRange(f"a whole number of {digits} digits")
+        value = super().construct_yaml_int(node)
+        return value if abs(value) <= _FLOAT_MAX else OutOfRange(f"{str(node.value)[:12]}…")
+
+    def construct_yaml_float(self, node):
+        value = super().construct_yaml_float(node)
+        if math.isinf(value) and "inf" not in str(node.value).lower():   # 1e999: not the spelling .inf
+            return OutOfRange(str(node.value)[:24])
+        return value
+
     def construct_mapping(self, node, deep=False):
         seen = set()
         for key_node, _ in node.value:
@@ -57,9 +71,12 @@ class _NoAliasLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
+_NoAliasLoader.add_constructor("tag:yaml.org,2002:int", _NoAliasLoader.construct_yaml_int)
+_NoAliasLoader.add_constructor("tag:yaml.org,2002:float", _NoAliasLoader.construct_yaml_float)
 def load_yaml(path, what: str = "YAML file"):
     """Parse the YAML file ``path`` (UTF-8, at most :data:`MAX_YAML_BYTES`, no aliases)."""
     p = Path(path)
+    check_regular(p, f"the {what}")
     try:
         size = p.stat().st_size
     except OSError as exc:
@@ -78,7 +95,9 @@ def load_yaml(path, what: str = "YAML file"):
 def loads_yaml(text: str, where: str, what: str = "YAML"):
     """Parse YAML ``text`` (no aliases); errors name ``where``."""
     try:
-        return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 (a SafeLoader subclass)
+        obj = yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
         text = " ".join(str(exc).replace('in "<unicode string>", ', "at ").split())
         raise InputError(f"{where}: invalid YAML in the {what} ({text})") from None
+    check_numbers(obj, where)
+    return obj

@@ -113,7 +113,7 @@ def _output(name, num, den, **attrs):
     (_output("rhp", [1.0], [-5.0, 1.0]), "stable", "unstable: pole"),
     (_output("improper", [1.0, 0.0, 0.0], [1.0, 1.0]), "stable", "improper"),
     (_output("nan_gain", [float("nan")], [1.0]), "finite", "non-finite"),
-    (_output("bad_return", None, None), "finite", "TypeError"),
+    (_output("bad_return", None, None), "finite", "the numerator is not a list of numbers (NoneType)"),
     (_output("bad_spec", [1.0], [1.0], params=(ParamSpec("g", "1", 0, 2, "gain", default=1.0),),
              diagnosis={"free": ("g",), "nested": True, "excitation": "any", "signature": [("no_such", 1.0)]}),
      "spec", "signature"),

@@ -105,17 +105,23 @@ def test_a_second_writer_fails_at_once_naming_the_first(tmp_path):
     assert (parent / "o" / "x").is_file()
 
 
-def test_temp_folders_of_killed_runs_are_cleaned(tmp_path):
+def test_temp_folders_of_killed_runs_are_cleaned_only_with_proof(tmp_path, recwarn):
     proc = subprocess.Popen([sys.executable, "-c", "pass"])
     proc.wait()  # a pid that no longer runs
     stale = tmp_path / f".o.eap-tmp-{proc.pid}"
-    stale.mkdir()
-    (stale / ".eap-partial").write_text("eap generate")
-    foreign = tmp_path / f".o.eap-tmp-{proc.pid}1"
-    foreign.mkdir()  # not ours (no marker): kept
+    stale.mkdir()   # eap's proof: names this very folder and the pid of the run that made it
+    (stale / ".eap-partial").write_text(json.dumps({"folder": stale.name, "pid": proc.pid, "pid_start": None}))
+    named = tmp_path / f".o.eap-tmp-{proc.pid + 1}"
+    named.mkdir()   # only named like one (the old marker: a command line, no proof): kept and named
+    (named / ".eap-partial").write_text("eap generate")
+    copied = tmp_path / f".o.eap-old-{proc.pid}"
+    copied.mkdir()  # a proof copied from another folder proves nothing
+    (copied / ".eap-partial").write_text(json.dumps({"folder": stale.name, "pid": proc.pid}))
     with output_folder(tmp_path / "o") as d:
         (d / "x").write_text("1")
-    assert not stale.exists() and foreign.exists()
+    assert not stale.exists() and named.exists() and copied.exists()
+    notes = " ".join(str(w.message) for w in recwarn)
+    assert named.name in notes and copied.name in notes and "left in place" in notes
 
 
 def test_unwritable_out_fails_before_any_work(tmp_path, capsys):

@@ -63,6 +63,10 @@ def run(args) -> int:
     if not (math.isfinite(args.rh_tolerance) and args.rh_tolerance >= 0):
         raise InputError(f"--rh-tolerance {args.rh_tolerance!r}: must be a non-negative number of % RH")
     output = OutputQuantity.parse(args.output) if args.output else None
+    if output is not None and args.sensor_gain is not None and output.name != "deflection":
+        raise InputError(f"--output {args.output} and --sensor-gain {args.sensor_gain} contradict each other: the "
+                         f"gain turns the output into the tip deflection in m, --output keeps it as {output.name} "
+                         f"in {output.unit}; give one of them")
     out = build_dataset(args.out, train=args.train, validation=args.validation, test=args.test,
                         val_fraction=args.val_fraction, holdout_rh=held,
                         columns=parse_column_map(args.columns, output) if args.columns else None, fs=args.fs_Hz,

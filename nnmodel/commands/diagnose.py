@@ -7,6 +7,8 @@ from pathlib import Path
 
 from physics.diagnose import diagnose, write_diagnosis
 from physics.errors import InputError
+from physics.limits import FS_RANGE_HZ, MAX_STARTS, check_count, check_range
+from physics.outputs import component, preflight, separate
 
 from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
 from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
@@ -97,10 +99,15 @@ def run(args) -> int:
         raise InputError(f"--fs-max-Hz {args.fs_max_Hz!r}: must be a positive frequency")
     if args.max_effects < 1:
         raise InputError(f"--max-effects {args.max_effects}: must be at least 1")
+    check_count(args.starts, 1, MAX_STARTS, "--starts", "multi-start fits")
+    if args.fs_max_Hz is not None:
+        check_range(args.fs_max_Hz, *FS_RANGE_HZ, "--fs-max-Hz", "Hz")
+    if args.name is not None:
+        component(args.name, "--name", "the device file NAME.yaml")
+    separate({"--out": args.out, "--draft-effects": args.draft_effects})
     protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
     check_out(args, protect)
     if args.draft_effects is not None:
-        from physics.outputs import preflight
         preflight(args.draft_effects, inputs=protect, overwrite=args.overwrite, flag="--draft-effects")
     ms = read_measurements(args)
     log = None if args.quiet else (lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True))

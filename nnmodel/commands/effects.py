@@ -19,7 +19,8 @@ def add_arguments(p):
     p.add_argument("--explain", default=None, metavar="ID", help="print the full explanation of one effect")
     p.add_argument("--check", default=None, metavar="FILE.py",
                    help="run the effect contract on every effect defined in FILE.py (one line per check); "
-                        "exit 1 if one fails")
+                        "exit 1 if one fails. The file is CODE: it is imported and run with your rights (see "
+                        "docs/security.md)")
     p.add_argument("--fast", action="store_true",
                    help="with --check: the quick checks only (declaration, model, hooks, finite, stable, passive)")
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 from physics.errors import InputError
 from physics.identify import IdentifiabilityWarning, identify, write_identification
+from physics.limits import MAX_STARTS, check_count
+from physics.outputs import component
 
 from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
 from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
@@ -51,6 +53,10 @@ def add_arguments(p):
 def run(args) -> int:
     if not args.free.strip() and not args.per_rh.strip():
         raise InputError("name the parameters to identify with --free (and/or --per-rh), e.g. --free kf,beta_f")
+    if args.name is not None:
+        component(args.name, "--name", "the device file NAME.yaml")
+    if args.starts is not None:
+        check_count(args.starts, 1, MAX_STARTS, "--starts", "multi-start fits")
     protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
     check_out(args, protect)
     ms = read_measurements(args)

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from physics.columns import quantity
-from physics.errors import InputError, ModelError
+from physics.errors import InputError, InputNotice, ModelError
+from physics.limits import MAX_STEPS_AHEAD, check_count
 
 from ._common import add_quiet_option, add_record_options, provenance, stage_log
 
@@ -122,8 +123,9 @@ def run(args) -> int:
     output = OutputQuantity.from_dict(bundle.card.get("output"), f"{args.model}: card output")
     model, uses_rh = bundle.model, bundle.model.uses_rh
     k = args.steps_ahead
-    if k is not None and k < 1:
-        raise InputError(f"--steps-ahead must be a positive integer, got {k}")
+    if k is not None:
+        check_count(k, 1, MAX_STEPS_AHEAD, "--steps-ahead", "samples; beyond a few hundred a prediction is a free "
+                    "run — omit the flag for one")
     n_init = args.init_samples
     if n_init is not None and n_init < 0:
         raise InputError(f"--init-samples {n_init}: must be 0 (start from rest) or a positive number of samples")
@@ -134,6 +136,9 @@ def run(args) -> int:
     log(f"reading {args.input}" + (" in pieces" if stream else ""))
     pieces, rh_read = _pieces(args, output, uses_rh, need_y=k is not None or bool(n_init), stream=stream)
     first = next(pieces)
+    if k is not None and k > first.n:
+        raise InputError(f"--steps-ahead {k}: {args.input} has {first.n} samples; give at most {first.n} (or omit "
+                         "the flag for a free run)")
     pieces = itertools.chain([first], pieces)
     # free run: started from the first measured outputs when the file has them (nnmodel.startup)
     init = first.deflection if (k is None and n_init != 0) else None
@@ -173,7 +178,8 @@ def run(args) -> int:
                 append_rows(fh, cols, header=n == 0)
                 n += ts.n
         notes = list(dict.fromkeys(str(w.message) for w in caught
-                                   if issubclass(w.category, (RuntimeWarning, UserWarning))))
+                                   if issubclass(w.category, (RuntimeWarning, UserWarning))
+                                   and not issubclass(w.category, InputNotice)))
         meta["prediction"] = {
             "model": bundle.card["model"], "bundle": str(args.model), "input": str(args.input),
             "output_unit_of_model": output.unit, "fs_hz_model": bundle.fs, "fs_hz_input": first.fs,
@@ -184,6 +190,9 @@ def run(args) -> int:
         if fit.n:
             meta["prediction"]["against_measured"] = fit.result()
         write_sidecar(meta, tmp.with_suffix(".yaml"))
+    for w in caught:          # notes on the user's input and folders (e.g. a folder left in place): said as notes
+        if issubclass(w.category, InputNotice):
+            warnings.warn(w.message)
     for note in notes:
         print(f"eap predict: warning: {note}")
     line = (f"predicted {n} samples at {first.fs:g} Hz with {bundle.card['model']} "

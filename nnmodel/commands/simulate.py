@@ -12,13 +12,16 @@ from physics.fileio import atomic_path, write_json
 from physics.model import ActuatorModel
 from physics.plotting import plot_timeseries
 from physics.timedomain import FIELDS, simulate
-from physics.limits import FREQ_RANGE_HZ, FS_RANGE_HZ, MAX_DRIVE_V, MAX_SAMPLES, check_range
+from physics.limits import FREQ_RANGE_HZ, FS_RANGE_HZ, MAX_DRIVE_V, MAX_SAMPLES, MAX_SAMPLES_X_RATE, check_range
 from physics.timeseries import parse_column_map, read_timeseries, write_timeseries
 
 from ._common import (add_model_options, add_output_options, add_record_options, check_out, check_result,
                       provenance, writing)
 
 NAME = "simulate"
+#: API argument → flag, where the flag's destination differs (InputError.render).
+FLAGS = {"frequency": "--frequency-Hz", "f_start": "--f-start-Hz", "f_stop": "--f-stop-Hz", "fs": "--fs-Hz",
+         "duration": "--duration-s", "amplitude": "--amplitude-V"}
 HELP = "simulate tip deflection and current for a voltage signal; writes CSV + plots"
 
 
@@ -61,6 +64,12 @@ def make_signal(args) -> signals.Signal:
     if not 16 <= n <= MAX_SAMPLES:
         raise InputError(f"--duration-s {args.duration_s:g} × --fs-Hz {args.fs_Hz:g} = {n:.3g} samples; a record "
                          f"needs 16 to {MAX_SAMPLES:.3g} (split a longer run)")
+    if n * args.fs_Hz > MAX_SAMPLES_X_RATE:
+        raise InputError(f"--duration-s {args.duration_s:g} at --fs-Hz {args.fs_Hz:g}: {n:.3g} samples × "
+                         f"{args.fs_Hz:g} Hz = {n * args.fs_Hz:.3g} exceeds {MAX_SAMPLES_X_RATE:.3g} (the simulator's "
+                         "work per sample grows with the rate: its realisation resolves up to half the rate); "
+                         f"simulate at most {MAX_SAMPLES_X_RATE / args.fs_Hz:.3g} samples at this rate, or lower "
+                         "--fs-Hz")
     if args.f_start_Hz >= args.f_stop_Hz:
         raise InputError(f"--f-start-Hz {args.f_start_Hz:g} must be below --f-stop-Hz {args.f_stop_Hz:g}")
     k = args.signal
@@ -87,6 +96,10 @@ def run(args) -> int:
         columns = parse_column_map(args.columns) if args.columns else None
         ts = read_timeseries(args.input, rh=args.rh, require_deflection=False, columns=columns)
         t, v, rh = ts.time - ts.time[0], ts.voltage, ts.rh
+        if ts.n * ts.fs > MAX_SAMPLES_X_RATE:
+            raise InputError(f"--input {args.input}: {ts.n} samples × {ts.fs:g} Hz = {ts.n * ts.fs:.3g} exceeds "
+                             f"{MAX_SAMPLES_X_RATE:.3g} (the simulator's work per sample grows with the rate); "
+                             f"split the record into parts of at most {MAX_SAMPLES_X_RATE / ts.fs:.3g} samples")
         sig_meta = {"kind": "file", "path": str(args.input)}
         hold = args.hold or "cubic"
     else:

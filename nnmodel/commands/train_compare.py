@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 from physics.errors import InputError
+from physics.limits import MAX_TUNE_TRIALS, check_count
+from physics.outputs import component
 from physics.yamlio import loads_yaml
 
 from ._common import add_output_options, add_parallel_options, parallel_settings
@@ -45,7 +47,9 @@ def parse_overrides(items) -> dict:
         if "=" not in it or "." not in it.split("=", 1)[0]:
             raise InputError(f"--set expects MODEL.KEY=VALUE, got {it!r}")
         key, val = it.split("=", 1)
-        model, hp = key.split(".", 1)
+        model, hp = (s.strip() for s in key.split(".", 1))
+        if hp in out.get(model, {}):
+            raise InputError(f"--set {model}.{hp} is given twice; give each setting once")
         out.setdefault(model, {})[hp] = _value(val)
     return out
 
@@ -65,9 +69,25 @@ def run(args) -> int:
     from nnmodel.traincompare import format_table, train_compare
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     load_plugins()
+    if not models:
+        raise InputError(f"--models {args.models!r} names no model; give e.g. --models ff,narx "
+                         f"(known: {', '.join(sorted(MODELS))})")
     bad = [m for m in models if m not in MODELS]
     if bad:
-        raise InputError(f"unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
+        raise InputError(f"--models: unknown model(s) {bad}; known: {', '.join(sorted(MODELS))}")
+    twice = sorted({m for m in models if models.count(m) > 1})
+    if twice:
+        raise InputError(f"--models {args.models}: {', '.join(twice)} named twice; name each model once")
+    for m in models:
+        component(m, "--models", "the bundle folder models/NAME")
+    overrides = parse_overrides(args.set)
+    stray = sorted(set(overrides) - set(models))
+    if stray:
+        item = next(i for i in args.set if i.split(".", 1)[0].strip() == stray[0])
+        raise InputError(f"--set {item}: {stray[0]} is not one of the models trained (--models "
+                         f"{','.join(models)}); the setting would be ignored")
+    if args.tune is not None:
+        check_count(args.tune, 1, MAX_TUNE_TRIALS, "--tune", "trials per model; each trains a network")
     from nnmodel.training import execution
     settings = parallel_settings(args)
     if args.devices > 1 and not settings.serial:
@@ -75,7 +95,7 @@ def run(args) -> int:
                          "networks side by side; use one of them")
     strategy = args.strategy or ("ddp_spawn" if args.devices > 1 else "auto")
     with execution(args.devices, strategy):
-        summary = train_compare(args.dataset, models, args.out, overrides=parse_overrides(args.set),
+        summary = train_compare(args.dataset, models, args.out, overrides=overrides,
                                 max_time_s=args.max_time_s, overwrite=args.overwrite, progress=not args.quiet,
                                 physics=args.physics, settings=settings, tune=args.tune,
                                 rh_tolerance=args.rh_tolerance, accelerator=args.accelerator)

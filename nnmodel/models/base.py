@@ -417,6 +417,7 @@ class NeuralModel:
             raise InputError(f"y has {y.size} samples but the voltage has {u.size}")
         N, n0 = u.size, self.n_init_
         k = int(min(steps_ahead, N))
+        chunk = max(1, min(chunk, (1 << 18) // k))   # a chunk holds chunk × k steps: memory bounded for any k
         un, rhn, yn = self._padded(u, rh, y, n0)
         core = self.net_.core
         out = np.empty(N)

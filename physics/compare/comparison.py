@@ -165,11 +165,13 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     w = predictor.start_samples if offset == "start" else 0
     i0 = max(int(math.ceil(skip_s * ts.fs)), w)
     if ts.n - i0 < 3:
-        raise InputError(f"{where}: skip_s={skip_s:g} s and the start-up window ({w} samples) leave fewer than "
-                         "3 samples")
+        raise InputError(f"{where}: {arg('skip_s')} {skip_s:g} s and the start-up window ({w} samples) leave "
+                         "fewer than 3 samples")
     c = float(np.mean(y[i0:]) - np.mean(yhat[i0:])) if offset == "mean" else \
         float(np.mean(y[:w]) - np.mean(yhat[:w])) if w else 0.0   # no residual copy
-    tm = metrics.summary(y[i0:], yhat[i0:], offset=c)    # the record keeps y and the offset (no aligned copy)
+    names = (f"{where}: the measured {ts.output.name}" + (f" after sample {i0}" if i0 else ""),
+             f"{where}: the prediction of {predictor.name}")
+    tm = metrics.summary(y[i0:], yhat[i0:], offset=c, names=names)   # the record keeps y and the offset
     tm["offset_removed_m"] = c
     tm["skip_s"] = skip_s
     e = y[i0:] - yhat[i0:]

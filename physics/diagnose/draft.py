@@ -166,8 +166,10 @@ def check_draft(path: Path) -> list[str]:
 def write_drafts(items: Sequence[EffectDraft], out, *, overwrite: bool = False, inputs: Sequence = ()) -> dict:
     """Write ``items`` into the new folder ``out`` (atomic; refused over a folder eap did not
     write) with ``README.txt``; each file is checked first.  Returns {file: problems}."""
-    from ..outputs import output_folder
+    from ..outputs import component, output_folder
     out = Path(out)
+    for d in items:
+        component(d.file_name, "--draft-effects", "a drafted effect file")
     report = {}
     with output_folder(out, inputs=inputs, overwrite=overwrite, flag="--draft-effects") as tmp:
         lines = []

@@ -261,6 +261,9 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         level, f_resp, spec_how = deflection_spectrum(m)
         # decimate to keep what the sensor saw: the excited band and the response above the noise
         q = _decimation(m.fs, max(band[1], min(f_resp, m.fs / 2)), fs_max)
+        if fs_max is not None and m.n // q < 64:    # a cap below the record's own scale: refused before any array of it is made
+            raise InputError(f"{arg('fs_max')} {fs_max:g} Hz leaves {m.n // q} samples of {where} at the analysis "
+                             f"rate; a diagnosis needs at least 64 — give at least {64 * m.fs / m.n:.3g} Hz")
         v_sim, y_d = _decimate(m.voltage, q), _decimate(m.deflection, q)[PAD:]
         n_d = int(math.ceil(m.n / q))
         rm = model_rh(rh_series, m.fs, rh_tolerance)

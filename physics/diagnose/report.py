@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, arg
 from ..columns import ONE, Column, band
 from ..fileio import write_json, write_text
 from ..identify import write_device
 from ..identify.parameters import switchable
-from ..outputs import final_path
+from ..outputs import component, final_path
 from ..report import Report, header, jsonable
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
@@ -178,6 +178,8 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
     with every effect of the verdict's chain added to its ``default_effects``; nothing when
     the verdict is null).  Paths in the outputs are the final ones (the command line writes
     into a temporary folder renamed at the end).  Returns the JSON dict."""
+    if apply and name is not None:
+        component(name, arg("name"), "the device file NAME.yaml")
     d = Path(out_dir)
     if d.exists() and not d.is_dir():
         raise InputError(f"{d} exists and is not a folder")
@@ -198,7 +200,7 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
             applied = {"written": None, "reason": "no missing effect was found (null verdict): nothing to apply"}
         else:
             chain = [p.effect for p in picks]
-            dev_name = name or f"{res.device.name}_{'_'.join(chain)}"
+            dev_name = component(name or f"{res.device.name}_{'_'.join(chain)}", arg("name"), "the device file NAME.yaml")
             path = write_device(picks[-1].fit.result, d / f"{dev_name}.yaml", name=dev_name,
                                 date=_dt.date.today().isoformat(), protect=protect)
             text = path.read_text(encoding="utf-8").replace(

@@ -19,6 +19,7 @@ from pathlib import Path
 from ..errors import InputError, arg
 from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
 from .declaration import declaration_problems
+from .usercode import contain_class, import_limited
 from .catalog import BUILT_IN, BUILT_IN_EFFECTS, CHAIN, CORE, FACTOR_HOOKS, adds_factors, stage_of
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
@@ -144,7 +145,11 @@ def unregister(effect_id: str) -> None:
 
 
 def effect_classes_in_file(path) -> list[type[Effect]]:
-    """Import the Python file ``path`` and return the user effect classes it defines."""
+    """Import the Python file ``path`` and return the user effect classes it defines.
+
+    The file is code that runs with the caller's rights: its import and every call of its
+    classes' methods run contained (:mod:`physics.effects.usercode`: exit calls caught, a time
+    limit per call)."""
     p = Path(path)
     if p.suffix != ".py" or not p.is_file():
         raise InputError(f"{_PATH} {p}: expected an existing Python file (.py) defining an effect")
@@ -153,14 +158,14 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
-        spec.loader.exec_module(module)
+        import_limited(spec.loader.exec_module, module, f"{_PATH} {p}: importing it")
     except InputError:
         raise
-    except SystemExit as exc:  # the file ended the program while being imported
-        raise InputError(f"{_PATH} {p}: importing it called sys.exit({exc.code!r}); an effect file must "
-                         "define effects, not run a program") from None
     except Exception as exc:  # a user's file: report what went wrong in it, one line
         raise InputError(f"{_PATH} {p}: importing it failed: {type(exc).__name__}: {exc}") from None
+    for c in vars(module).values():
+        if inspect.isclass(c) and c.__module__ == name:
+            contain_class(c, p)
     classes = [c for c in vars(module).values() if inspect.isclass(c) and issubclass(c, Effect)
                and c.__module__ == name and isinstance(getattr(c, "id", None), str)]
     for c in classes:

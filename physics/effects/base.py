@@ -55,6 +55,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import InputError
+from ..limits import MAX_TF_ORDER
 from ..parameters import ParamSpec, TableSpec
 
 
@@ -157,6 +158,34 @@ class Effect:
         return float(spec.default)
 
 
+def rational(effect, hook: str, p: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The (numerator, denominator) that ``effect.<hook>(p)`` (``output_tf``, ``load_tf``)
+    returns, as float arrays, their order checked against :data:`~physics.limits.MAX_TF_ORDER`
+    before anything evaluates them (the roots, the discretisation and the filter's start
+    state cost order² to order³)."""
+    where = f"effect {getattr(effect, 'id', type(effect).__name__)!r}: {hook}"
+    tf = getattr(effect, hook)(p)
+    if not (isinstance(tf, (tuple, list)) and len(tf) == 2):
+        raise InputError(f"{where} must return (numerator, denominator), two lists of coefficients in s; got "
+                         f"{type(tf).__name__}")
+    out = []
+    for name, poly in zip(("numerator", "denominator"), tf):
+        if isinstance(poly, (str, bytes)) or not (hasattr(poly, "__len__") or isinstance(poly, (int, float))):
+            raise InputError(f"{where}: the {name} is not a list of numbers ({type(poly).__name__})")
+        size = len(poly) if hasattr(poly, "__len__") else 1
+        if size > MAX_TF_ORDER + 1:
+            raise InputError(f"{where} returns a {name} of order {size - 1}; at most {MAX_TF_ORDER} is accepted "
+                             "(a physical factor has a few poles and zeros)")
+        try:
+            arr = np.atleast_1d(np.asarray(poly, dtype=float))
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: the {name} is not a list of numbers ({type(poly).__name__})") from None
+        if arr.ndim != 1 or arr.size > MAX_TF_ORDER + 1:
+            raise InputError(f"{where}: the {name} must be a flat list of at most {MAX_TF_ORDER + 1} coefficients")
+        out.append(arr)
+    return out[0], out[1]
+
+
 class OutputEffect(Effect):
     """Base class of an effect acting on the tip deflection: the simplest way to add physics.
 
@@ -227,7 +256,7 @@ class OutputEffect(Effect):
     def output_response(self, s: np.ndarray, p: dict) -> np.ndarray:
         """The factor at complex frequencies ``s`` [rad/s] (from :meth:`output_tf`; override it
         with :meth:`filter_output` for a factor that is not rational)."""
-        num, den = self.output_tf(p)
+        num, den = rational(self, "output_tf", p)
         return np.polyval(num, s) / np.polyval(den, s)
 
     def filter_output(self, y: np.ndarray, fs: float, p: dict) -> np.ndarray:
@@ -236,7 +265,7 @@ class OutputEffect(Effect):
         nonlinear output map (a play, a saturation), with :meth:`output_response` as its
         small-signal description."""
         from scipy.signal import bilinear, lfilter, lfilter_zi
-        num, den = self.output_tf(p)
+        num, den = rational(self, "output_tf", p)
         b, a = bilinear(num, den, fs)
         if len(a) == 1:
             return b[0] / a[0] * np.asarray(y, float)
@@ -291,5 +320,5 @@ class LoadEffect(Effect):
 
     def load_factor(self, s: np.ndarray, p: dict) -> np.ndarray:
         """The factor at complex frequencies ``s`` [rad/s] (from :meth:`load_tf`)."""
-        num, den = self.load_tf(p)
+        num, den = rational(self, "load_tf", p)
         return np.polyval(num, s) / np.polyval(den, s)

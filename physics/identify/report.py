@@ -69,12 +69,14 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
                          provenance: dict | None = None, protect=()) -> dict:
     """Write the fitted device ``NAME.yaml``, ``report.json``, ``parameters.csv``, PNGs and
     the page ``index.html`` into ``out_dir``; returns the JSON dict (with the file names)."""
+    from ..errors import arg
     from ..fileio import write_json
+    from ..outputs import component
     from ..report import Report, header, jsonable, write_csv
+    dev_name = component(name or f"{result.problem.device.name}_identified", arg("name"), "the device file NAME.yaml")
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     date = _dt.date.today().isoformat()
-    dev_name = name or f"{result.problem.device.name}_identified"
     dev_path = write_device(result, d / f"{dev_name}.yaml", name=dev_name, date=date, protect=protect)
     files = [dev_path.name]
     pngs = []
