@@ -27,12 +27,10 @@ N_INIT = 50
 
 
 def silverbox(path):
-    import pandas as pd
-
     from nnmodel.benchmarks.silverbox import find_data
     from nnmodel.data import Experiment
-    df = pd.read_csv(find_data(path), usecols=["V1", "V2"])
-    u, y = df["V1"].to_numpy(float), df["V2"].to_numpy(float)
+    data = np.genfromtxt(find_data(path), delimiter=",", names=True, usecols=("V1", "V2"))
+    u, y = data["V1"].astype(float), data["V2"].astype(float)
     rec = {k: Experiment(u[s], y[s], None, SPLIT["fs"], k) for k, s in SPLIT.items() if isinstance(s, slice)}
     return rec["train"], rec["test"]
 

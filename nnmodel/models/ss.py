@@ -309,8 +309,8 @@ class SSModel(NeuralModel):
     CHECKS = {"nx": size(MAX_STATES, zero=True), "hidden": size(MAX_WIDTH), "layers": size(MAX_LAYERS),
               "activation": lambda v: None if v in ACTIVATIONS else f"one of {sorted(ACTIVATIONS)}",
               "n_init": size(MAX_LAGS), "encoder_hidden": size(MAX_WIDTH), "feedthrough": flag}
-    DEFAULTS = {"lr": 1e-3, "batch_size": 64, "max_epochs": 200, "max_time": 600.0, "patience": 30,
-                "grad_clip": 1.0, "horizon": 100, "stride": 10}
+    DEFAULTS = {"lr": 2e-3, "batch_size": 64, "max_epochs": 60, "max_time": 600.0, "patience": 15,
+                "grad_clip": 1.0, "horizon": 50, "stride": 5}
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "encoder_hidden": 8, "horizon": 20, "stride": 20, "n_init": 5}
     CARD_KEYS = ("state_space",)
     _LEARNED = NeuralModel._LEARNED + ("realisation_",)
