@@ -66,7 +66,7 @@ def test_the_realisation_reproduces_the_arx_free_run(a):
                       {"u_mean": 0.1, "u_std": 2.0, "y_mean": -0.3, "y_std": 0.5})
     net_scale = {"u": (0.4, 1.5), "y": (0.2, 0.7)}
     n0 = 6
-    r = realise(lin, net_scale.__getitem__, False, n0, 0, 0)
+    r = realise(lin, net_scale.__getitem__, n0, 0, 0)
     assert r["form"] == ("observer" if a.sum() >= 1.0 else "balanced")
     core = StateSpaceCore(r["n"], 0, 4, 1, "tanh", n0, 4)
     core.set_start(r["a"], r["b"], r["c"], r["d"], r["e_w"], r["e_b"])

@@ -197,7 +197,7 @@ def arx_order(lin) -> int:
     return max(lin.na, lin.nb - 1 + lin.delay)
 
 
-def _arx_in_net_units(lin, stat, use_rh: bool):
+def _arx_in_net_units(lin, stat):
     """The ARX model's coefficients for signals normalised with ``stat(name) -> (mean, std)``
     (the network's scales): (a, beta) with y[k] = sum_i a_i y[k-i] + sum_{i>=0} beta_i . w[k-i],
     w = (u, rh, 1); ``a``: (n,), ``beta``: (n + 1, 3)."""
@@ -212,13 +212,10 @@ def _arx_in_net_units(lin, stat, use_rh: bool):
     beta = np.zeros((n + 1, 3))
     beta[lin.delay:lin.delay + lin.nb, 0] = lin.b * ga / al
     const = lin.c + be * (np.sum(lin.a) - 1.0) + de * np.sum(lin.b)
-    if lin.e is not None:
-        if use_rh:
-            mr, sr = stat("rh")
-            beta[0, 1] = lin.e * sr / s["rh_std"] / al
-            const += lin.e * (mr - s["rh_mean"]) / s["rh_std"]
-        else:   # cannot happen (the linear start uses RH only when the network does)
-            raise InputError("model 'ss': the linear start uses RH but the network does not")
+    if lin.e is not None:       # the linear start takes RH exactly when the network does
+        mr, sr = stat("rh")
+        beta[0, 1] = lin.e * sr / s["rh_std"] / al
+        const += lin.e * (mr - s["rh_mean"]) / s["rh_std"]
     beta[0, 2] = const / al
     return a, beta
 
@@ -267,15 +264,16 @@ def _balance(A, Bu, C):
     return (T, Ti) if np.all(np.isfinite(T)) and np.all(np.isfinite(Ti)) else None
 
 
-def realise(lin, stat, use_rh: bool, n_init: int, n_mem: int, n_rh: int) -> dict:
+def realise(lin, stat, n_init: int, n_mem: int, n_rh: int) -> dict:
     """State-space realisation of the ARX model ``lin`` (:class:`nnmodel.linear.LinearModel`)
     for a network whose signals are normalised with ``stat`` and whose input channels are
     (voltage, ``n_mem`` memory filters, ``n_rh`` RH channels): ``{"a", "b", "c", "d", "e_w",
     "e_b", "form", "n"}``, ``b`` and ``d`` with a last column for the constant, ``e_w`` over the
-    encoder's input (``n_init`` outputs, then ``n_init`` x channels).  Balanced (well-scaled
-    states, pole locations insensitive to float32 rounding) when the model is stable, else
-    the observer form; both reproduce the ARX free run exactly."""
-    a, beta = _arx_in_net_units(lin, stat, use_rh)
+    encoder's input (``n_init`` outputs, then ``n_init`` x channels).  Balanced when the model
+    is stable (each state as controllable as observable, ordered by importance; states that
+    the input cannot move or the output cannot see, to rounding, dropped), else the observer
+    form; both reproduce the ARX free run (to float32 rounding of the weights)."""
+    a, beta = _arx_in_net_units(lin, stat)
     n = a.size
     if n > n_init:
         raise InputError(f"model 'ss': the linear start has {n} states but the encoder sees {n_init} samples")
@@ -334,7 +332,7 @@ class SSModel(NeuralModel):
         if lin is None:
             self.realisation_ = None
             return
-        r = realise(lin, self.net_.stat, self.features_.use_rh, core.n_init, core.n_mem, core.n_rh)
+        r = realise(lin, self.net_.stat, core.n_init, core.n_mem, core.n_rh)
         if r["n"] < core.n_lin:             # balanced truncation dropped invisible states: keep them unused
             pad = core.n_lin - r["n"]
             r["a"] = np.pad(r["a"], ((0, pad), (0, pad)))
