@@ -7,7 +7,7 @@ test in mV with the linear yardstick's row and the training wall time.  Targets 
 default recipes: every model at or below its linear row, the best at most 0.6 mV; tuned:
 the best at most 0.30 mV.  Nothing here is Silverbox-specific but the file and its split.
 
-    python bench/silverbox_generic.py [--models ff,rbf,narx,lstm,gru] [--tune 40] [--workers 1]
+    python bench/silverbox_generic.py [--models ff,rbf,narx,lstm,gru,ss] [--tune 40] [--workers 1]
                                       [--out runs/silverbox-generic] [--max-time-s 20000]
     python bench/silverbox_generic.py --default-run RUN1 --tuned-run RUN2    # tabulate finished runs
 
@@ -86,7 +86,7 @@ def verdict(default: dict, tuned: dict | None) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--models", default="ff,rbf,narx,lstm,gru")
+    ap.add_argument("--models", default="ff,rbf,narx,lstm,gru,ss")
     ap.add_argument("--tune", type=int, default=40)
     ap.add_argument("--tune-models", default=None, help="models to tune (default: --models)")
     ap.add_argument("--workers", type=int, default=1)

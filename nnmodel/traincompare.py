@@ -139,7 +139,7 @@ def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: f
     return k / (2 * period), Y[k] / U[k]
 
 
-def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm"), out: str | Path = "runs/train-compare",
+def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm", "ss"), out: str | Path = "runs/train-compare",
                   *, overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
                   progress: bool = True, overwrite: bool = False, physics: str | None = None,
                   settings: ParallelSettings | None = None, tune: int | None = None,

@@ -54,4 +54,5 @@ register(Suite("greybox", "nnmodel.benchmarks.greybox:run",
                default_models=("hybrid", "narx", "ff")))
 register(Suite("silverbox", "nnmodel.benchmarks.silverbox:run",
                "real measured Silverbox data (Wigren & Schoukens 2013), standard split, "
-               "free-run RMSE in mV beside published results"))
+               "free-run RMSE in mV beside published results",
+               default_models=("ff", "rbf", "narx", "lstm", "gru", "ss")))

@@ -14,7 +14,7 @@ HELP = "train neural models on a dataset and compare them (free run, held-out RH
 
 def add_arguments(p):
     p.add_argument("dataset", help="dataset folder (from `eap generate`)")
-    p.add_argument("--models", default="ff,rbf,narx,lstm", help="comma-separated: ff, rbf, narx, lstm, gru, hybrid, or a network installed under the entry-point group eap.networks")
+    p.add_argument("--models", default="ff,rbf,narx,lstm,ss", help="comma-separated: ff, rbf, narx, lstm, gru, ss, hybrid, or a network installed under the entry-point group eap.networks")
     add_output_options(p, "runs/train-compare", "run folder (models/, compare.json, the page index.html)")
     p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")

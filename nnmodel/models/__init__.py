@@ -16,9 +16,10 @@ from .hybrid import HybridModel
 from .narx import NARXModel
 from .rbf import RBFModel
 from .rnn import GRUModel, LSTMModel
+from .ss import SSModel
 
 #: The networks shipped with the package.
-BUILT_IN_MODELS: tuple[type[NeuralModel], ...] = (FFModel, RBFModel, NARXModel, LSTMModel, GRUModel, HybridModel)
+BUILT_IN_MODELS: tuple[type[NeuralModel], ...] = (FFModel, RBFModel, NARXModel, LSTMModel, GRUModel, SSModel, HybridModel)
 MODELS: dict[str, type[NeuralModel]] = {cls.kind: cls for cls in BUILT_IN_MODELS}
 #: Entry-point group under which installed packages declare networks (``kind = module:Class``).
 ENTRY_POINT_GROUP = "eap.networks"
@@ -52,4 +53,4 @@ def load_plugins() -> list[str]:
 
 
 __all__ = ["MODELS", "BUILT_IN_MODELS", "ENTRY_POINT_GROUP", "register", "load_plugins", "NeuralModel", "NotFittedError", "FFModel", "RBFModel",
-           "NARXModel", "LSTMModel", "GRUModel", "HybridModel"]
+           "NARXModel", "LSTMModel", "GRUModel", "SSModel", "HybridModel"]

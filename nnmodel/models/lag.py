@@ -268,10 +268,14 @@ class LagSimulator(SequenceCore):
             if isinstance(self.fmap, RBFMap):
                 return _rbf_free_run_numpy(self.fmap, yl, cache, b0).to(u.dtype)
         outs = []
-        for t in range(T):
-            y = self.fmap.step(yl, tuple(None if c is None else c[:, t] for c in cache))
-            if base is not None:
-                y = y + base[:, t]
+        # the input terms unbound along time once: indexing one step of the whole tensor would,
+        # in the backward pass, write a full-size gradient at every step (cost ~ T^2)
+        steps = zip(*(c.unbind(1) if c is not None else (None,) * T for c in cache))
+        bases = base.unbind(1) if base is not None else (None,) * T
+        for cache_t, base_t in zip(steps, bases):
+            y = self.fmap.step(yl, cache_t)
+            if base_t is not None:
+                y = y + base_t
             y = y.clamp(-OUTPUT_CLIP, OUTPUT_CLIP)
             outs.append(y)
             yl = torch.cat([y[:, None], yl[:, :-1]], 1)

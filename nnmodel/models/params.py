@@ -22,12 +22,13 @@ from physics.errors import InputError
 __all__ = ["pos_int", "pos_float", "flag", "size", "Part", "PartField", "check_values", "MAX_PARAMETERS"]
 
 #: Size caps, checked before anything is allocated (a bundle card is input like any file):
-#: lags, widths, depth, centres ... and the learned parameters of a whole network.
+#: lags, widths, depth, centres, states ... and the learned parameters of a whole network.
 MAX_LAGS = 1000
 MAX_WIDTH = 4096
 MAX_LAYERS = 64
 MAX_CENTRES = 20000
 MAX_FILTERS = 256
+MAX_STATES = 1000
 MAX_PARAMETERS = 50_000_000
 
 Check = Callable[[object], "str | None"]
