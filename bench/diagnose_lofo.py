@@ -418,7 +418,11 @@ def main(argv=None) -> int:
 
         def one(item):
             fam, tr, sd = item
-            m = run_case(results, fam, tr, sd, args.rerun, args.timeout)
+            try:
+                m = run_case(results, fam, tr, sd, args.rerun, args.timeout)
+            except Exception as exc:            # a case that cannot be generated is reported, not fatal
+                print(f"  FAILED {fam}/{tr}/s{sd}: {type(exc).__name__}: {exc}", flush=True)
+                return None
             print(f"  {'cached' if m.get('cached') else 'ran   '} {fam}/{tr}/s{sd}: rc {m['rc']}, "
                   f"{m.get('wall_s', 0):.0f} s", flush=True)
             return m

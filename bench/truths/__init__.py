@@ -22,7 +22,7 @@ from . import package
 from .case import Case, Record, Truth
 from .truthset import TRUTHS
 
-INDEPENDENT = ("pnp_fd",)          # circuit_lab: being written
+INDEPENDENT = ("pnp_fd", "circuit_lab")
 FAMILIES = INDEPENDENT + package.FAMILIES
 
 

@@ -20,9 +20,10 @@ import numpy as np
 
 
 def multisine(amplitude: float, fs: float, duration: float, rng, *, period: float = 20.0, f_lo: float = 0.05,
-              f_hi: float = 20.0, per_decade: int = 12) -> np.ndarray:
+              f_hi: float = 20.0, per_decade: int = 12, fade: float = 2.0) -> np.ndarray:
     """Multisine of peak ``amplitude`` [V]: harmonics k/period, log-spaced (``per_decade``
-    lines a decade, each harmonic used once) from ``f_lo`` to ``f_hi``, random phases."""
+    lines a decade, each harmonic used once) from ``f_lo`` to ``f_hi``, random phases; faded in
+    over the first ``fade`` s (raised cosine) so that the drive starts from 0 V."""
     k_lo, k_hi = max(1, round(f_lo * period)), int(f_hi * period)
     ks = np.unique(np.round(np.geomspace(k_lo, k_hi, int(per_decade * math.log10(k_hi / k_lo)) + 1)).astype(int))
     t = np.arange(int(round(duration * fs))) / fs
@@ -30,7 +31,10 @@ def multisine(amplitude: float, fs: float, duration: float, rng, *, period: floa
     v = np.zeros_like(t)
     for k, p in zip(ks, ph):
         v += np.cos(2 * np.pi * k / period * t + p)
-    return amplitude * v / np.max(np.abs(v))
+    v = amplitude * v / np.max(np.abs(v))
+    ramp = t < fade
+    v[ramp] *= 0.5 * (1 - np.cos(np.pi * t[ramp] / fade))
+    return v
 
 
 def step(amplitude: float, fs: float, duration: float, *, rest: float = 2.0, hold: float = 25.0) -> np.ndarray:

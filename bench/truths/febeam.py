@@ -5,13 +5,15 @@ Elements of length ``le`` carry their own bending stiffness EI_e and mass per le
 (a tapered strip, a thickness gradient, electrode layers).  Element matrices are the textbook
 ones (Przemieniecki 1968): stiffness EI/le³·[[12, 6le, −12, 6le], …], consistent mass
 m le/420·[[156, 22le, 54, −13le], …].  An active moment M_e, uniform over an element (the
-charge-induced eigen-moment), enters through ∫ M N'' dz = M·[0, −1, 0, +1] on (w₁, θ₁, w₂, θ₂).
+charge-induced eigen-moment of a swelling bimorph), enters through ∫ M N'' dz = M·[0, −1, 0, +1] on
+(w₁, θ₁, w₂, θ₂); a distributed couple μ per length, uniform over an element (tractions along
+the two faces, opposite on each), through ∫ μ N' dz = μ·[−1, 0, +1, 0].
 The root is clamped in deflection; its rotation is held by a spring k_θ (a real clamp is
 not rigid; ``k_theta=None``: rigid).  Damping is Rayleigh, C = α M + β K (air drag and
 Kelvin–Voigt material loss).
 
 Checks against closed forms (uniform strip, rigid clamp): static tip deflection under a uniform
-moment M L²/(2EI); natural frequencies (β_i L)² sqrt(EI/m)/(2π L²) with β_1 L = 1.87510,
+moment M L²/(2EI), under a uniform couple μ L³/(3EI); natural frequencies (β_i L)² sqrt(EI/m)/(2π L²) with β_1 L = 1.87510,
 β_2 L = 4.69409 (e.g. Meirovitch, Elements of Vibration Analysis).
 """
 from __future__ import annotations
@@ -33,11 +35,13 @@ def element_matrices(EI: float, m: float, le: float) -> tuple[np.ndarray, np.nda
 @dataclass
 class Beam:
     """Assembled strip: ``K``, ``M`` on the free DOFs (θ₀, w₁, θ₁, …, w_n, θ_n), ``G`` the load
-    of a unit active moment on each element (n_dof × n_el), ``z`` element centres [m]."""
+    of a unit active moment on each element (n_dof × n_el), ``Gc`` of a unit distributed couple,
+    ``z`` element centres [m]."""
 
     K: np.ndarray
     M: np.ndarray
     G: np.ndarray
+    Gc: np.ndarray
     z: np.ndarray
     le: float
     length: float
@@ -51,6 +55,7 @@ class Beam:
         K = np.zeros((ndof, ndof))
         M = np.zeros((ndof, ndof))
         G = np.zeros((ndof, n))
+        Gc = np.zeros((ndof, n))
         for e in range(n):
             k, mm = element_matrices(EI[e], m[e], le)
             sl = slice(2 * e, 2 * e + 4)
@@ -58,13 +63,15 @@ class Beam:
             M[sl, sl] += mm
             G[2 * e + 1, e] -= 1.0
             G[2 * e + 3, e] += 1.0
+            Gc[2 * e, e] -= 1.0
+            Gc[2 * e + 2, e] += 1.0
         if k_theta is not None:
             K[1, 1] += k_theta
             keep = np.arange(1, ndof)          # w0 = 0; θ0 on its spring
         else:
             keep = np.arange(2, ndof)          # rigid clamp
         z = (np.arange(n) + 0.5) * le
-        return cls(K[np.ix_(keep, keep)], M[np.ix_(keep, keep)], G[keep], z, le, length)
+        return cls(K[np.ix_(keep, keep)], M[np.ix_(keep, keep)], G[keep], Gc[keep], z, le, length)
 
     def point_vector(self, zp: float) -> np.ndarray:
         """Row that gives the deflection at ``zp`` [m] from the DOFs (Hermite interpolation)."""
@@ -79,9 +86,9 @@ class Beam:
         off = 2 * (n_el + 1) - self.K.shape[0]
         return full[off:]
 
-    def static(self, moments: np.ndarray) -> np.ndarray:
-        """DOFs under element moments ``moments`` [N m/m] at rest."""
-        return np.linalg.solve(self.K, self.G @ moments)
+    def static(self, loads: np.ndarray, couple: bool = False) -> np.ndarray:
+        """DOFs at rest under element active moments [N m] (``couple``: distributed couples [N m/m])."""
+        return np.linalg.solve(self.K, (self.Gc if couple else self.G) @ loads)
 
     def modes(self) -> tuple[np.ndarray, np.ndarray]:
         """(ω_i [rad/s] ascending, mass-normalised mode shapes as columns)."""

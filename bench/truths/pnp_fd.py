@@ -5,14 +5,15 @@
 * charging through the thickness: the linearised Poisson–Nernst–Planck equations by finite
   volumes (:mod:`.pnp`), thesis-like Nafion/EG values drawn ±20 % (ε_r 41.4, D⁺ 1.4e-9 m²/s,
   C⁻ 1100 mol/m³), plus the polymer's leakage σ = 2.16e-3 S/m;
-* the moved charge q [C/m²] bends the strip through an eigen-moment κ·w(z)·t(z)·q per unit
-  length (κ drawn so that the static tip gain is U(0.2, 0.5) mm/V × (L/21 mm)²);
+* the moved charge q [C/m²] loads both faces with tractions (thesis eq. 9–10): a distributed
+  couple κ·w(z)·t(z)·q per unit length (κ drawn so that the static tip gain is U(0.2, 0.5) mm/V
+  × (L/21 mm)²);
 * a **non-uniform strip** by Hermite finite elements (:mod:`.febeam`): width tapering by
-  U(10, 30) % from clamp to tip, thickness varying linearly by ±U(0, 10) %, platinum electrode
+  U(5, 25) % from clamp to tip, thickness varying linearly by ±U(0, 5) %, platinum electrode
   layers (10 µm, 19 600 kg/m³, cracked: 0.7–1.3 GPa) adding mass and stiffness, a clamp of finite
-  rotational stiffness, Rayleigh damping with a mass-proportional (air) and a stiffness-
+  rotational stiffness (U(200, 600) EI/L), Rayleigh damping with a mass-proportional (air) and a stiffness-
   proportional (material) part (first-mode damping ratio U(0.06, 0.12));
-* the laser spot U(0.5, 2) mm short of the tip; the strip is simulated at 4× the logging rate
+* the laser spot U(0.2, 0.8) mm short of the tip; the strip is simulated at 4× the logging rate
   (the drive comes from a signal generator) and the tip sampled without anti-aliasing.
 
 The user's model is the bare thesis device (``--effects none``) with the geometry the lab knows
@@ -37,6 +38,8 @@ contact          lumped contact resistance at the clamp charging the whole strip
                  lag of the drive, corner log-U(6, 20) Hz
 partial_relax    back-relaxation that stops at a fraction U(0.3, 0.6) of the bend (the charge's
                  own eigenstress stays): ρ + (1 − ρ)·(solvent factor)
+eigen_moment     the charge bends the strip as a swelling bimorph does — an eigen-moment
+                 κ·w·t·q per unit length (uniform curvature) instead of the face tractions' couple
 zener            one-relaxation polymer, E*(s) = E0 (1 + sτ_ε)/(1 + sτ_σ), τ_ε/τ_σ = 1 + Δ,
                  Δ U(0.3, 0.6), loss peak log-U(1, 8) Hz
 creep, lowpass2, drift, play, deadzone: :mod:`.forms`
@@ -44,7 +47,7 @@ creep, lowpass2, drift, play, deadzone: :mod:`.forms`
 
 Records (lab design, the same for every truth): five 60 s records at 250 Hz — a multisine
 0.05–20 Hz at RH 65 % and at 2.5× its amplitude, a 25 s step with a 33 s hold at zero, a
-log sweep 0.1–50 Hz at half the amplitude at RH 45 % and the multisine at RH 85 %.  Tip in µm with 1 µm laser noise
+log sweep 0.1–50 Hz at half the amplitude at RH 45 % and the multisine at RH 85 %.  Tip in µm with 1.5 µm laser noise
 stated in the sidecars (with the excitation), a zero offset of ±25 µm, RH column ±0.1 %.
 """
 from __future__ import annotations
@@ -69,7 +72,7 @@ PLAN = (Plan("multisine", 1.0, 65.0), Plan("multisine", 2.5, 65.0), Plan("step",
         Plan("sweep", 0.5, 45.0), Plan("multisine", 1.0, 85.0))
 RH_REF = 65.0
 N_EL, N_MODES = 24, 8
-NOISE, STEP = 1.0e-6, 1.0e-7
+NOISE, STEP = 1.5e-6, 1.0e-7
 PEAK = 2.0e-3                      # largest tip deflection the lab aims for [m]
 LEAK = 2.16e-3                     # polymer conductivity [S/m] (thesis Table III)
 
@@ -106,15 +109,15 @@ def _draw_strip(rng) -> tuple[Strip, dict]:
     L_total = round(float(rng.uniform(28, 36)) * 2) / 2 * 1e-3
     L_clamp = round(float(rng.uniform(4, 6)) * 2) / 2 * 1e-3
     w0 = float(rng.uniform(7, 10)) * 1e-3
-    taper = float(rng.uniform(0.1, 0.3))
-    grad = float(rng.uniform(-0.1, 0.1))
+    taper = float(rng.uniform(0.05, 0.25))
+    grad = float(rng.uniform(-0.05, 0.05))
     L = L_total - L_clamp
     zc = (np.arange(N_EL) + 0.5) / N_EL
     w = w0 * (1 - taper * zc)
     t = 180e-6 * (1 + grad * (zc - 0.5))
     st = Strip(L, L_clamp, w, t, 0.2e9 * float(rng.uniform(0.85, 1.15)), 1e9 * float(rng.uniform(0.7, 1.3)), 2000.0,
-               float(rng.uniform(40, 150)), float(rng.uniform(0.06, 0.12)), float(rng.uniform(0.3, 0.7)),
-               L - 1e-3 * float(rng.uniform(0.5, 2.0)), 41.4 * float(rng.uniform(0.8, 1.25)),
+               float(rng.uniform(200, 600)), float(rng.uniform(0.06, 0.12)), float(rng.uniform(0.2, 0.5)),
+               L - 1e-3 * float(rng.uniform(0.2, 0.8)), 41.4 * float(rng.uniform(0.8, 1.25)),
                1.4e-9 * float(rng.uniform(0.8, 1.25)), 1100 * float(rng.uniform(0.9, 1.1)),
                1e-3 * float(rng.uniform(0.2, 0.5)) * (L / 0.021) ** 2)
     drawn = {"L_total_mm": 1e3 * L_total, "L_clamp_mm": 1e3 * L_clamp, "width_clamp_mm": 1e3 * w0, "taper": taper,
@@ -172,6 +175,8 @@ def _draw_truth(ingredients, rng, st: Strip) -> dict:
             p["play_um"] = float(rng.uniform(30, 80))
         elif ing == "deadzone":
             p["deadzone_over_amp"] = float(rng.uniform(0.1, 0.2))
+        elif ing == "eigen_moment":
+            p["eigen_moment"] = 1.0
     return p
 
 
@@ -186,7 +191,7 @@ class _Chain:
         om, phi = beam.modes()
         self.omega = om
         self.tip = beam.point_vector(st.z_sensor) @ phi
-        self.B = phi.T @ beam.G
+        self.B = phi.T @ (beam.G if "eigen_moment" in tp else beam.Gc)
         w1 = om[0]
         z = st.zeta
         self.alpha = 2 * z * st.mass_share * w1
@@ -212,7 +217,8 @@ class _Chain:
         return q
 
     def moments(self, f: np.ndarray) -> np.ndarray:
-        """Eigen-moment per volt of each element (n_el × len(f)) [N m/m/V]."""
+        """Load per volt of each element (n_el × len(f)): the couple per length [N m/m/V], or the
+        eigen-moment [N m/V] with ``eigen_moment``."""
         st, tp = self.st, self.tp
         q = self.charge_per_volt(f)
         if "Rs_ohm_sq" in tp:
@@ -304,7 +310,7 @@ def make_case(truth: str, seed: int) -> Case:
     rng = np.random.default_rng([seed, fam, zlib.crc32(truth.encode())])
     tp = _draw_truth(tr.ingredients, rng, st)
     # the coupling κ that gives the drawn static gain on the base strip at the reference RH
-    base = _Chain(st, {}, RH_REF)
+    base = _Chain(st, {k: v for k, v in tp.items() if k == "eigen_moment"}, RH_REF)
     kappa = st.gain / base.static_gain()
     rh_true = {p.rh: p.rh + float(rng.uniform(-0.5, 0.5)) for p in PLAN}
     chains = {rh: _Chain(st, tp, rh_true[rh], kappa) for rh in rh_true}
@@ -314,21 +320,22 @@ def make_case(truth: str, seed: int) -> Case:
     # simulation grid is OVER times finer)
     volts = [p.voltage(1.0, FS * OVER, DURATION, np.random.default_rng([seed, fam, 7, k])) for k, p in enumerate(PLAN)]
     lin = {k: _Chain(st, {k2: v for k2, v in tp.items() if k2 in ("Rs_ohm_sq", "cpe_a", "cpe_gain_1Hz",
-                                                                    "contact_corner_Hz")}, rh_true[p.rh], kappa)
+                                                                    "contact_corner_Hz", "eigen_moment")},
+                     rh_true[p.rh], kappa)
            for k, p in enumerate(PLAN)}
-    peak = max(float(np.max(np.abs(fft_filter(v * p.scale, FS * OVER, lin[k].response))))
+    peak = max(float(np.max(np.abs(fft_filter(v, FS * OVER, lin[k].response))))
                for k, (p, v) in enumerate(zip(PLAN, volts)))
     amp = float(f"{min(1.0, max(0.1, PEAK / peak)):.2g}")
     offset = 1e-6 * float(rng.uniform(-25, 25))
     records = []
     for k, (p, v1) in enumerate(zip(PLAN, volts)):
         v = amp * v1
-        y = _simulate(chains[p.rh], tp, v * p.scale, amp, t, rng)
+        y = _simulate(chains[p.rh], tp, v, amp, t, rng)
         v = v[::OVER]
         m = measure(y, rng, noise=NOISE, step_m=STEP, offset=offset)
         meta = {"description": f"IPMC strip, {drawn['L_total_mm']:g} mm, tapered", "signal": p.describe(amp, FS, DURATION),
                 "sensor": {"model": "laser triangulation", "noise_rms_um": 1e6 * NOISE, "resolution_um": 1e6 * STEP}}
-        records.append(Record(p.name(k, amp), t, np.round(v * p.scale, 5), m, y,
+        records.append(Record(p.name(k, amp), t, np.round(v, 5), m, y,
                               hygrometer(rh_true[p.rh], t.size, rng, jitter=0.1), offset, meta))
     tp_all = {**drawn, **tp, "amplitude_V": amp, "kappa": kappa, "rh_true": list(rh_true.values())}
     if "sat_Us_over_amp" in tp:

@@ -19,6 +19,8 @@ lowpass2           outside  2nd-order sensor low-pass 10–20 Hz          —
 drift              outside  sensor warm-up drift, different per record  —
 play               outside  backlash between strip and sensor           —
 deadzone           outside  dead zone of the drive                      —
+eigen_moment       outside  bimorph-like eigen-moment instead of the    —
+                            face tractions' distributed couple
 twin_contact       twin     lumped contact resistance at the clamp      — (electrode_resistance)
 twin_relax         twin     partial back-relaxation                     — (solvent_diffusion)
 twin_zener         twin     one-relaxation (Zener) polymer, loss peak   — (viscoelastic)
@@ -55,7 +57,7 @@ def _pair(name: str, a: str, b: str) -> Truth:
 TRUTHS: dict[str, Truth] = {t.name: t for t in (
     Truth("none", "none"),
     *(_catalog(n) for n in ("electrode", "rough", "solvent", "modulus", "saturation", "humidity")),
-    *(Truth(n, "outside", (), (), (n,)) for n in ("creep", "lowpass2", "drift", "play", "deadzone")),
+    *(Truth(n, "outside", (), (), (n,)) for n in ("creep", "lowpass2", "drift", "play", "deadzone", "eigen_moment")),
     Truth("twin_contact", "twin", (), ("electrode_resistance",), ("contact",)),
     Truth("twin_relax", "twin", (), ("solvent_diffusion",), ("partial_relax",), slow=True),
     Truth("twin_zener", "twin", (), ("viscoelastic",), ("zener",)),
