@@ -41,6 +41,7 @@ zener            one Maxwell arm (loss peak log-U(1, 8) Hz, strength U(0.3, 0.6)
 saturation       large-signal double layer: charge ∝ U_s ln(1 + |U|/U_s), U_s U(0.5, 1.2) × the
                  low drive amplitude
 humidity         Table V ratios raised to a power (user model without humidity)
+rh_law           Table V ratios raised to a power U(1.5, 2) (the user's model keeps Table V)
 eigen_moment     the charge bends each section with an eigen-moment (a swelling bimorph's uniform
                  curvature), ∫ M φ_i'' dz, instead of the faces' couple
 creep, lowpass2, drift, play, deadzone: :mod:`.forms`
@@ -158,6 +159,8 @@ def _draw_truth(ingredients, rng) -> dict:
             p["sat_Us_over_amp"] = float(rng.uniform(0.5, 1.2))
         elif ing == "humidity":
             p["rh_power"] = float(rng.uniform(0.6, 1.4)) if rng.uniform() < 0.5 else float(rng.uniform(1.4, 2.0))
+        elif ing == "rh_law":
+            p["rh_power"] = float(rng.uniform(1.5, 2.0))
         elif ing == "creep":
             p["creep_g"] = float(rng.uniform(0.25, 0.45))
             p["creep_tau_s"] = float(np.exp(rng.uniform(np.log(10), np.log(40))))

@@ -32,8 +32,8 @@ modulus          Cole–Cole polymer: E*(s) = E0 [1 + Δ (sτ)^γ / (1 + (sτ)^�
                  Δ U(0.4, 0.8), centre log-U(1, 10) Hz
 saturation       steric-limited double layer, q ∝ U_s (sqrt(1 + 2|U|/U_s) − 1),
                  U_s U(0.5, 1.2) × the low drive amplitude
-humidity         E(RH) = E65 exp(−k_E (RH − 65)/40), k_E U(0.6, 1.0); κ(RH) = κ65 (1 + k_κ
-                 (RH − 65)/40), |k_κ| U(0.15, 0.4)
+humidity,        E(RH) = E65 exp(−k_E (RH − 65)/40), k_E U(0.6, 1.0); κ(RH) = κ65 (1 + k_κ
+rh_law           (RH − 65)/40), |k_κ| U(0.15, 0.4)
 contact          lumped contact resistance at the clamp charging the whole strip: a first-order
                  lag of the drive, corner log-U(6, 20) Hz
 partial_relax    back-relaxation that stops at a fraction U(0.3, 0.6) of the bend (the charge's
@@ -158,7 +158,7 @@ def _draw_truth(ingredients, rng, st: Strip) -> dict:
             p["zener_f_Hz"] = float(np.exp(rng.uniform(np.log(1), np.log(8))))
         elif ing == "saturation":
             p["sat_Us_over_amp"] = float(rng.uniform(0.5, 1.2))
-        elif ing == "humidity":
+        elif ing in ("humidity", "rh_law"):
             p["rh_kE"] = float(rng.uniform(0.6, 1.0))
             p["rh_kcoupling"] = float(rng.uniform(0.15, 0.4)) * float(rng.choice([-1, 1]))
         elif ing == "contact":

@@ -30,6 +30,8 @@ pair_elec_solvent  pair     electrode + solvent                         both
 pair_modulus_rh    pair     modulus + humidity                          both
 pair_elec_modulus  pair     electrode + modulus                         both
 pair_sat_solvent   pair     saturation + solvent                        both
+route_creep_rh     route    creep + an RH law the user's model lacks    (humidity); the default
+                            (its humidity maps, if any, are kept)       route's error ≤ 3× true
 =================  =======  ==========================================  ==========================
 
 A near twin's relative is *acceptable* (not wrong, not required): its physics is the same
@@ -67,4 +69,5 @@ TRUTHS: dict[str, Truth] = {t.name: t for t in (
     _pair("pair_modulus_rh", "modulus", "humidity"),
     _pair("pair_elec_modulus", "electrode", "modulus"),
     _pair("pair_sat_solvent", "saturation", "solvent"),
+    Truth("route_creep_rh", "route", (), ("humidity",), ("creep", "rh_law"), slow=True),
 )}
