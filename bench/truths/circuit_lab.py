@@ -29,8 +29,8 @@ user's model is ``--effects default``, less the catalog effect a hidden ingredie
 electrode        R_s log-U(20, 150) Ω/□ instead of ≈ 30 (user model without electrode_resistance)
 contact          equipotential electrodes behind a lumped contact resistance: a first-order lag
                  of the drive, corner log-U(6, 20) Hz (user model without electrode_resistance)
-rough            a fractional (constant-phase) double layer as circuit designers build one: nine
-                 R–C branches with time constants two a decade from 1 ms to 10 s, capacitances
+rough            a fractional (constant-phase) double layer as circuit designers build one: 13
+                 R–C branches with time constants two a decade from 1 ms to 1000 s, capacitances
                  ∝ τ^a (a U(0.25, 0.55)): charge ∝ s^(−a) in between
 solvent          back-relaxation: the first moment of the solvent in a six-cell lumped diffusion
                  line, h²/D_s log-U(8, 60) s (user model without solvent_diffusion)
@@ -240,7 +240,7 @@ class _Model:
         ell = st.L / N_SEC
         area = st.w * ell
         if "cpe_a" in tp:
-            taus = np.geomspace(1e-3, 1e1, 9)
+            taus = np.geomspace(1e-3, 1e3, 13)
             cw = taus ** tp["cpe_a"]
             cw *= st.C_dl / cw[np.searchsorted(taus, 0.1)]         # C_dl-like at ~1 Hz
             branches = [(c * area, t / (c * area)) for c, t in zip(cw, taus)]

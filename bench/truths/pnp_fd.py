@@ -24,8 +24,9 @@ The user's model is the bare thesis device (``--effects none``) with the geometr
 ===============  ===========================================================================
 electrode        sheet resistance R_s log-U(20, 150) Ω/□ on both faces: the voltage falls along
                  the strip (a finite-volume ladder, :func:`.lines.electrode_ladder`)
-rough            rough electrodes: a bounded constant-phase double layer, q/V = C_r/(1 + (sτ_r)^a),
-                 a U(0.25, 0.55), corner 0.01 Hz, |q/V| at 1 Hz U(0.7, 1.4) × the PNP value
+rough            rough electrodes: a constant-phase double layer bounded at DC, q/V ∝ (s + ω_lo)^(−a)
+                 (thesis eq. 14's form), a U(0.25, 0.55), f_lo log-U(1, 3) mHz, |q/V| at 1 Hz
+                 U(0.7, 1.4) × the PNP value
 solvent          solvent released in a cathode layer δ U(2, 8) µm thick diffusing back
                  (:func:`.lines.solvent_moment`), h²/D_s log-U(8, 60) s; the bend follows it
 modulus          Cole–Cole polymer: E*(s) = E0 [1 + Δ (sτ)^γ / (1 + (sτ)^γ)], γ U(0.15, 0.3),
@@ -144,6 +145,7 @@ def _draw_truth(ingredients, rng, st: Strip) -> dict:
         elif ing == "rough":
             p["cpe_a"] = float(rng.uniform(0.25, 0.55))
             p["cpe_gain_1Hz"] = float(rng.uniform(0.7, 1.4))
+            p["cpe_f_lo_Hz"] = float(np.exp(rng.uniform(np.log(1e-3), np.log(3e-3))))
         elif ing in ("solvent", "partial_relax"):
             p["h2_over_Ds_s"] = float(np.exp(rng.uniform(np.log(8), np.log(60))))
             p["solvent_layer_um"] = float(rng.uniform(2, 8))
@@ -206,10 +208,10 @@ class _Chain:
         q = st.charge_per_volt(f)
         if "cpe_a" in tp:
             q1 = abs(np.interp(0.0, np.log(f), q.real))               # |q/V| at 1 Hz (flat there)
-            tau_r = 1 / (2 * np.pi * 0.01)
+            w_lo = 2 * np.pi * tp["cpe_f_lo_Hz"]
 
             def shape(ff):
-                return 1.0 / (1.0 + (2j * np.pi * ff * tau_r) ** tp["cpe_a"])
+                return (w_lo / (2j * np.pi * ff + w_lo)) ** tp["cpe_a"]
 
             q = shape(f) * tp["cpe_gain_1Hz"] * q1 / abs(shape(np.array([1.0]))[0])
         if "contact_corner_Hz" in tp:
@@ -274,7 +276,8 @@ class _Chain:
 
 
 def _pad(tp: dict) -> float:
-    slow = [tp.get("creep_tau_s", 0.0), tp.get("h2_over_Ds_s", 0.0), 30.0 if "cpe_a" in tp else 0.0]
+    slow = [tp.get("creep_tau_s", 0.0), tp.get("h2_over_Ds_s", 0.0),
+            1.0 / (2 * np.pi * tp["cpe_f_lo_Hz"]) if "cpe_a" in tp else 0.0]
     return 40.0 + 10.0 * max(slow)
 
 
@@ -320,10 +323,11 @@ def make_case(truth: str, seed: int) -> Case:
     # simulation grid is OVER times finer)
     volts = [p.voltage(1.0, FS * OVER, DURATION, np.random.default_rng([seed, fam, 7, k])) for k, p in enumerate(PLAN)]
     lin = {k: _Chain(st, {k2: v for k2, v in tp.items() if k2 in ("Rs_ohm_sq", "cpe_a", "cpe_gain_1Hz",
-                                                                    "contact_corner_Hz", "eigen_moment")},
+                                                                    "cpe_f_lo_Hz", "contact_corner_Hz",
+                                                                    "eigen_moment")},
                      rh_true[p.rh], kappa)
            for k, p in enumerate(PLAN)}
-    peak = max(float(np.max(np.abs(fft_filter(v, FS * OVER, lin[k].response))))
+    peak = max(float(np.max(np.abs(fft_filter(v, FS * OVER, lin[k].response, pad_s=_pad(tp)))))
                for k, (p, v) in enumerate(zip(PLAN, volts)))
     amp = float(f"{min(1.0, max(0.1, PEAK / peak)):.2g}")
     offset = 1e-6 * float(rng.uniform(-25, 25))
