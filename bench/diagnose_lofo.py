@@ -332,7 +332,8 @@ def targets(rows: list[dict], name: str) -> list[tuple[str, bool | None, str]]:
         out.append((f"default route on creep + RH dependence: final error ≤ {ROUTE_RATIO:g}× true", len(good) == len(route),
                     "; ".join(f"{r['meta']['family']}/s{r['meta']['seed']}: "
                               f"{r['j']['ratio'] and round(r['j']['ratio'], 2)}×" for r in route)))
-    slow = [r for r in rows if r["meta"]["family"] in LAB_LIKE and r["meta"]["slow"] and r["meta"]["expected"]]
+    slow = [r for r in rows
+            if r["meta"]["family"] in LAB_LIKE and r["meta"]["slow"] and r["meta"]["kind"] == "catalog"]
     if slow:
         good = [r for r in slow if r["j"]["named"] and r["j"]["ratio"] is not None and r["j"]["ratio"] <= ERROR_RATIO
                 and r["j"]["offset_err"] is not None and r["j"]["offset_err"] <= OFFSET_TOL]
