@@ -78,6 +78,10 @@ class Record:
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))   # step indices at fs_d
     kind_how: str = ""             # how the excitation kind was decided
     rh_measured: float = math.nan  # the record's own (median) RH [%], what a model is evaluated at
+    signal_range: float = math.nan  # robust peak-to-peak of the measured deflection [m] (the nuisance bounds)
+    drift_bound: float = math.inf   # largest drift over the record a sensor's zero may take [m] (:meth:`nuisance`)
+    offset_bound: float = math.inf  # largest distance of the offset from the level at the start [m]
+    start_window: int = 1           # samples (full rate) whose residual gives the level at the start
 
     @property
     def fs(self) -> float:
@@ -111,6 +115,25 @@ class Record:
             return math.sqrt(white / self.q + WALK_AFTER_TREND * meta["deflection_drift"] ** 2)
         return self.noise_floor / math.sqrt(self.q)
 
+    def nuisance(self, e: np.ndarray, t: np.ndarray | None = None) -> "Nuisance":
+        """The record's nuisance terms in the residual ``e`` (full rate, ``t`` [s] default its
+        time axis): the least-squares offset and linear drift — a laser's zero is arbitrary and
+        drifts slowly; neither is physics — *within bounds that keep them from eating physics*
+        (:func:`bounded_nuisance`)."""
+        t = self.ts.time if t is None else t
+        return bounded_nuisance(e, t, self.drift_bound, self.offset_bound, self.start_window)
+
+    def detrend_d(self, e_d: np.ndarray) -> np.ndarray:
+        """A decimated residual with the record's bounded nuisance terms removed (:meth:`nuisance`)."""
+        t = self.t_d
+        nz = bounded_nuisance(e_d, t, self.drift_bound, self.offset_bound, max(1, self.start_window // self.q))
+        return nz.remove(e_d, t)
+
+    @property
+    def t_d(self) -> np.ndarray:
+        """Time [s] of the decimated samples over the record."""
+        return self.ts.time[0] + np.arange(self.y_d.size) / self.fs_d
+
     def describe(self) -> dict:
         return {"source": self.source, "kind": self.kind, "samples": self.ts.n, "fs_Hz": self.fs,
                 "duration_s": self.ts.duration, "amplitude_V": self.amplitude,
@@ -119,7 +142,9 @@ class Record:
                 "fs_analysis_Hz": self.fs_d, "sensor_bandwidth_Hz": self.sensor_bandwidth,
                 "noise_floor_m": self.noise_floor, "noise_floor_source": self.noise_source,
                 "excitation_from": self.kind_how,
-                "steps": int(self.steps.size)}
+                "steps": int(self.steps.size), "signal_range_m": self.signal_range,
+                "nuisance_bounds": {"drift_over_record_m": self.drift_bound, "offset_from_start_m": self.offset_bound,
+                                    "start_window_s": self.start_window / self.fs}}
 
 
 def classify(ts: TimeSeries) -> tuple[str, tuple[float, float], float | None, str]:
@@ -191,6 +216,86 @@ def _decimate(x: np.ndarray, q: int) -> np.ndarray:
 #: Mean square of a unit random walk (value 1 at the end) left after removing its
 #: least-squares offset and linear drift: 1/15 (the nuisance terms of :func:`remove_nuisance`).
 WALK_AFTER_TREND = 1.0 / 15.0
+
+#: Without a drift stated by the sensor, a record's nuisance drift may rise over the record by at
+#: most this share of its signal's robust peak-to-peak (a laser's zero drifts by micrometres over a
+#: record of millimetres; an IPMC's back-relaxation is tens of percent of its deflection).
+DRIFT_SHARE = 0.01
+#: A drift the sensor states (random walk of std d at the record's end) bounds the record's drift at
+#: this × d.
+STATED_DRIFT_FACTOR = 4.0
+#: The offset may stand at most this share of the signal's robust peak-to-peak from the level the
+#: residual has at the record's start (the device at rest, before the drive has moved it).
+OFFSET_SHARE = 0.02
+#: Duration [s] of the start window that gives that level (at least 8 samples; the whole rest
+#: before the drive when the voltage holds still longer).
+START_S = 0.1
+
+
+@dataclass
+class Nuisance:
+    """A record's nuisance terms (:func:`bounded_nuisance`)."""
+
+    offset: float            # at the record's start [m]
+    drift: float             # [m/s]
+    offset_ls: float         # the unbounded least-squares values
+    drift_ls: float
+    offset_clipped: bool
+    drift_clipped: bool
+    level: float = math.nan  # the residual's level over the start window [m] (the device at rest)
+    offset_free: float = math.nan   # the least-squares offset given the (bounded) drift [m]
+
+    def remove(self, e: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return np.asarray(e, dtype=float) - self.offset - self.drift * (np.asarray(t, dtype=float) - t[0])
+
+    def __iter__(self):
+        return iter((self.offset, self.drift))
+
+
+def bounded_nuisance(e: np.ndarray, t: np.ndarray, drift_bound: float, offset_bound: float,
+                     start: int) -> Nuisance:
+    """Offset and drift of the residual ``e`` at times ``t`` [s]: the least-squares line, its
+    rise over the record held within ±``drift_bound`` [m], then its offset (refitted with that
+    drift) held within ±``offset_bound`` [m] of the level of the first ``start`` samples, where
+    the device is at rest and no model's response can hide in the offset.  A least-squares
+    offset and drift take whatever slow error a model leaves (a wrong static gain, a
+    back-relaxation), and that error is evidence; the bounds keep them to what a sensor's zero
+    does.  Clipped terms are reported (:func:`.verdict.nuisance_summary`)."""
+    e = np.asarray(e, dtype=float)
+    t = np.asarray(t, dtype=float)
+    o_ls, b_ls = nuisance_terms(e, t)
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    b = b_ls
+    if span > 0 and math.isfinite(drift_bound) and abs(b_ls) * span > drift_bound:
+        b = math.copysign(drift_bound / span, b_ls)
+    o = o_free = float(np.mean(e - b * (t - t[0])))
+    o_clip, level = False, math.nan
+    if math.isfinite(offset_bound):
+        k = max(1, min(int(start), e.size))
+        level = float(np.mean(e[:k] - b * (t[:k] - t[0])))
+        if abs(o - level) > offset_bound:
+            o, o_clip = level + math.copysign(offset_bound, o - level), True
+    return Nuisance(o, b, o_ls, b_ls, o_clip, b != b_ls, level, o_free)
+
+
+def nuisance_bounds(ts: TimeSeries) -> tuple[float, float, float, int]:
+    """(robust peak-to-peak of the deflection [m], drift bound [m], offset bound [m], start
+    window [samples]) of a record (:data:`DRIFT_SHARE`, :data:`STATED_DRIFT_FACTOR`,
+    :data:`OFFSET_SHARE`, :data:`START_S`)."""
+    y = ts.deflection
+    rng = float(np.percentile(y, 99.5) - np.percentile(y, 0.5))
+    sensor = ts.meta.get("sensor") if isinstance(ts.meta.get("sensor"), dict) else {}
+    d = sensor.get("deflection_drift")
+    if isinstance(d, (int, float)) and math.isfinite(d) and d >= 0:
+        drift = max(STATED_DRIFT_FACTOR * float(d), 1e-12)
+    else:
+        drift = DRIFT_SHARE * rng
+    v = ts.voltage
+    tol = 0.01 * float(np.ptp(v)) if np.ptp(v) > 0 else 0.0
+    moved = np.flatnonzero(np.abs(v - v[0]) > tol)
+    rest = int(moved[0]) if moved.size else v.size
+    start = max(8, int(round(START_S * ts.fs)), rest)
+    return rng, drift, OFFSET_SHARE * rng, min(start, max(ts.n // 4, 1))
 def sensor_noise_floor(ts: TimeSeries) -> tuple[float, str] | None:
     """The noise floor [m] the record's sensor metadata state, or None: white noise,
     quantisation and the part of a random-walk drift that a linear trend does not remove,
@@ -277,6 +382,7 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
                      sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD, kind_how=how)
         rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
         rec.rh_measured = float(np.median(rh_series))
+        rec.signal_range, rec.drift_bound, rec.offset_bound, rec.start_window = nuisance_bounds(m)
         out.append(rec)
         rhs.append(float(np.median(rh_series)))
     if not out:
@@ -364,6 +470,6 @@ def amplitude_groups(records: Sequence[Record]) -> dict[float, list[float]]:
     return {k: sorted(v) for k, v in out.items()}
 
 
-__all__ = ["Record", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
+__all__ = ["Record", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
            "upsample", "estimate_noise_floor", "stated_drift", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
            "FRFOptions"]

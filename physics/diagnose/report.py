@@ -14,6 +14,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -172,12 +173,17 @@ def _plot_breakdown(res: DiagnosisResult, path) -> None:
 
 
 def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name: str | None = None,
-                    provenance: dict | None = None, protect=()) -> dict:
+                    provenance: dict | None = None, protect=(), best: dict | None = None,
+                    measurements: Sequence[str] = ()) -> dict:
     """Write ``diagnosis.json``, the PNGs and the page ``index.html`` into ``out_dir``; with
-    ``apply`` also the extended device file ``NAME.yaml`` (the fitted final model: the base
-    with every effect of the verdict's chain added to its ``default_effects``; nothing when
-    the verdict is null).  Paths in the outputs are the final ones (the command line writes
-    into a temporary folder renamed at the end).  Returns the JSON dict."""
+    ``apply`` also the device file ``NAME.yaml`` of the best model: ``best`` ({"fit": a
+    ModelFit, "effect_files": [paths], "text": ...}, e.g. the model fitted with drafted effects)
+    or the diagnosis's final model (the base with every pick of the chain and without every
+    removal; nothing when it is the base itself) — its values as fitted and refined on the time
+    records, its effects as ``default_effects``.  The usage printed runs as printed: the
+    ``measurements`` and the ``--effects-path`` of every effect file the model needs.  Paths in
+    the outputs are the final ones (the command line writes into a temporary folder renamed at
+    the end).  Returns the JSON dict."""
     d = Path(out_dir)
     if d.exists() and not d.is_dir():
         raise InputError(f"{d} exists and is not a folder")
@@ -192,29 +198,43 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
         fun(res, d / fn)
         written.append(fn)
     applied = None
-    picks = res.picks
+    fit = best["fit"] if best else res.final
+    files = list(best.get("effect_files", [])) if best else []
     if apply:
-        if not picks:
-            applied = {"written": None, "reason": "no missing effect was found (null verdict): nothing to apply"}
+        if fit is res.base:
+            applied = {"written": None, "reason": "the diagnosis kept the model as it was (nothing added, removed or "
+                                                  "drafted): nothing to apply"}
         else:
-            chain = [p.effect for p in picks]
-            dev_name = name or f"{res.device.name}_{'_'.join(chain)}"
-            path = write_device(picks[-1].fit.result, d / f"{dev_name}.yaml", name=dev_name,
+            added = [e for e in fit.effects if e not in res.base.effects]
+            gone = [e for e in res.base.effects if e not in fit.effects]
+            what = " ".join([f"+{e}" for e in added] + [f"-{e}" for e in gone]) or "refitted"
+            dev_name = name or "_".join([res.device.name] + added) if added else (name or f"{res.device.name}_refitted")
+            path = write_device(fit.result, d / f"{dev_name}.yaml", name=dev_name,
                                 date=_dt.date.today().isoformat(), protect=protect)
             text = path.read_text(encoding="utf-8").replace(
-                "written by eap identify on", f"written by eap diagnose --apply ({' + '.join(chain)} added) on", 1)
+                "written by eap identify on", f"written by eap diagnose ({what}) on", 1)
             write_text(path, text, protect=tuple(protect))
+            recs = " ".join(_quote(m) for m in measurements) or "MEASUREMENT"
+            paths = "".join(f" --effects-path {_quote(f)}" for f in files)
             applied = {"written": path.name, "path": str(final_path(path)),
-                       "effects": list(switchable(picks[-1].fit.effects)),
-                       "usage": f"eap compare MEASUREMENT --model {final_path(path)} --effects default"}
+                       "effects": list(switchable(fit.effects)), "effect_files": files,
+                       "rmse_m": fit.rmse, "parameters": dict(fit.values),
+                       "usage": f"eap compare {recs} --model {_quote(str(final_path(path)))} --effects default{paths}"}
             written.append(path.name)
     out["applied"] = applied
+    out["best_model"] = None if not best else {"effects": list(fit.effects), "rmse_m": fit.rmse,
+                                               "effect_files": files, "text": best["text"]}
     out["files"] = ["diagnosis.json", "index.html", "report.html"] + written
     if provenance:
         out["provenance"] = provenance
     write_json(d / "diagnosis.json", jsonable(out))
     _html(res, d, out, provenance)
     return out
+
+
+def _quote(text: str) -> str:
+    import shlex
+    return shlex.quote(str(text))
 
 
 def _fmt(x, unit="", scale=1.0, digits=4):

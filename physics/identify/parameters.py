@@ -91,7 +91,10 @@ class FreeParameter:
         return np.log(theta) if self.scale == "log" else np.asarray(theta, dtype=float)
 
     def from_x(self, x):
-        return np.exp(x) if self.scale == "log" else np.asarray(x, dtype=float)
+        """SI value of search coordinate ``x``, held within [lower, upper]: exp(ln b) can land an
+        ulp beyond the bound b, and a fit ending on its bound is a result, not an error."""
+        v = np.exp(x) if self.scale == "log" else np.asarray(x, dtype=float)
+        return np.clip(v, self.lower, self.upper)
 
     @property
     def x_bounds(self) -> tuple[float, float]:
