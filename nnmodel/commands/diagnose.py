@@ -8,6 +8,7 @@ from pathlib import Path
 
 from physics.diagnose import diagnose, write_diagnosis
 from physics.diagnose.draft import write_drafts
+from physics.diagnose.verdict import nuisance_summary
 from physics.errors import InputError
 
 from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
@@ -140,6 +141,8 @@ def run(args) -> int:
         if outcome is not None and outcome.kept and apply:
             _register(outcome.kept)       # the best model's device file names their sections
         best = _best(res, outcome, drafts_dir, [str(Path(f).resolve()) for f in getattr(args, 'effects_path', [])])
+        if best is not None and best["fit"] is not res.final:     # the offsets and drifts of the model written
+            res.verdict.nuisance = nuisance_summary(best["fit"], res.records)
         out = write_diagnosis(res, tmp, apply=apply, name=args.name, provenance=provenance(inputs=protect),
                               protect=protect, best=best, measurements=[str(m) for m in args.measurements])
     if outcome is not None and outcome.kept and not inside:

@@ -189,6 +189,41 @@ def find_steps(v: np.ndarray, fs: float) -> np.ndarray:
     return idx
 
 
+#: A periodic record needs at least this many periods for the model to be run into its steady state.
+MIN_PERIODS = 2
+#: The model is driven through the record's periods for up to this long [s] (at least one period)
+#: before it starts: slow dynamics (creep, back-diffusion, τ of tens of seconds) settle too.
+LEAD_S = 60.0
+
+
+def periodic_lead(ts: TimeSeries, how: str, q: int) -> int:
+    """Samples (full rate, a multiple of ``q``) of the periods that precede a periodic record
+    of at least :data:`MIN_PERIODS` periods — a multisine is recorded once its response has
+    settled, so the model is driven through the record's own periods (whole ones, up to
+    :data:`LEAD_S`) before it starts: its periodic steady state, not a start at rest; 0 for
+    other records.  The period comes
+    from the metadata (``period_s``, ``periods``) or the voltage (:func:`detect_excitation`)."""
+    sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
+    period = None
+    if isinstance(sig.get("period_s"), (int, float)) and float(sig.get("periods", 1) or 1) >= MIN_PERIODS:
+        period = float(sig["period_s"])
+    elif "periodic" in how:
+        try:
+            period = detect_excitation(ts.voltage, ts.fs).period_s
+        except InputError:
+            period = None
+        if period is not None and ts.duration < MIN_PERIODS * period * (1 - 1e-6):
+            period = None
+    if not period or period <= 0:
+        return 0
+    p = int(round(period * ts.fs))
+    p -= p % q
+    if not 0 < p <= ts.n // MIN_PERIODS:
+        return 0
+    k = max(1, min(ts.n // p, int(LEAD_S * ts.fs) // p))     # whole periods, up to LEAD_S
+    return k * p
+
+
 def _decimation(fs: float, f_hi: float, fs_max: float | None) -> int:
     target = max(OVERSAMPLING * f_hi, 1e-9)
     if fs_max is not None:
@@ -225,10 +260,10 @@ DRIFT_SHARE = 0.01
 #: this × d.
 STATED_DRIFT_FACTOR = 4.0
 #: The offset may stand at most this share of the signal's robust peak-to-peak from the level the
-#: residual has at the record's start (the device at rest, before the drive has moved it).
+#: residual has during the rest before the drive (the device at rest: no model's response there).
 OFFSET_SHARE = 0.02
-#: Duration [s] of the start window that gives that level (at least 8 samples; the whole rest
-#: before the drive when the voltage holds still longer).
+#: A record whose voltage holds still for at least this long [s] (and 8 samples) before the drive has
+#: a rest that anchors its offset; without one the offset is the least-squares one.
 START_S = 0.1
 
 
@@ -294,8 +329,9 @@ def nuisance_bounds(ts: TimeSeries) -> tuple[float, float, float, int]:
     tol = 0.01 * float(np.ptp(v)) if np.ptp(v) > 0 else 0.0
     moved = np.flatnonzero(np.abs(v - v[0]) > tol)
     rest = int(moved[0]) if moved.size else v.size
-    start = max(8, int(round(START_S * ts.fs)), rest)
-    return rng, drift, OFFSET_SHARE * rng, min(start, max(ts.n // 4, 1))
+    if rest < max(8, int(round(START_S * ts.fs))):
+        return rng, drift, math.inf, 0          # no rest before the drive: nothing anchors the offset
+    return rng, drift, OFFSET_SHARE * rng, min(rest, max(ts.n // 4, 1))
 def sensor_noise_floor(ts: TimeSeries) -> tuple[float, str] | None:
     """The noise floor [m] the record's sensor metadata state, or None: white noise,
     quantisation and the part of a random-walk drift that a linear trend does not remove,
@@ -366,11 +402,13 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         level, f_resp, spec_how = deflection_spectrum(m)
         # decimate to keep what the sensor saw: the excited band and the response above the noise
         q = _decimation(m.fs, max(band[1], min(f_resp, m.fs / 2)), fs_max)
-        v_sim, y_d = _decimate(m.voltage, q), _decimate(m.deflection, q)[PAD:]
+        lead = periodic_lead(m, how, q) if kind == "broadband" else 0
+        v_sim = _decimate(np.concatenate([m.voltage[m.n - lead:], m.voltage]) if lead else m.voltage, q)
+        y_d = _decimate(m.deflection, q)[PAD:]
         n_d = int(math.ceil(m.n / q))
         rm = model_rh(rh_series, m.fs, rh_tolerance)
         if np.ndim(rm):
-            rm = np.concatenate([np.full(PAD, rm[0]), np.asarray(rm)[::q][:n_d]])
+            rm = np.concatenate([np.full(PAD + lead // q, rm[0]), np.asarray(rm)[::q][:n_d]])
         if noise_floor is not None:
             nf, src = float(noise_floor), "given"
         else:
@@ -379,7 +417,9 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         if amp <= 0:
             raise InputError(f"{where}: the voltage is constant; nothing is excited")
         rec = Record(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
-                     sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD, kind_how=how)
+                     sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD + lead // q, kind_how=how)
+        if lead:
+            rec.kind_how += f"; periodic: the model enters the record after one period of it ({lead / m.fs:.3g} s)"
         rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
         rec.rh_measured = float(np.median(rh_series))
         rec.signal_range, rec.drift_bound, rec.offset_bound, rec.start_window = nuisance_bounds(m)
