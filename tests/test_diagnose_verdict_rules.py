@@ -145,17 +145,22 @@ def test_the_drift_cannot_absorb_a_back_relaxation():
 
 
 def test_an_implausible_offset_is_flagged_and_not_used():
-    """An offset of 0.77 mm fitted on a ±0.5 mm record whose first samples read 0 (the device
-    at rest): held within OFFSET_SHARE × the peak-to-peak of the level at the start."""
+    """An offset of 0.77 mm fitted on a ±0.5 mm record whose first second is a rest before the
+    drive (the device at rest reads 0): held within OFFSET_SHARE × the peak-to-peak of the level
+    at rest.  Without a rest nothing anchors the offset: the least-squares one stands."""
     fs = 100.0
     t = np.arange(int(30 * fs)) / fs
-    y = 0.5e-3 * np.sin(2 * np.pi * 0.2 * t)
+    drive = np.where(t >= 1.0, np.sin(2 * np.pi * 0.2 * (t - 1.0)), 0.0)
+    y = 0.5e-3 * drive
     e = np.where(t > 1.0, 0.77e-3, 0.0)                  # a model that misses a mean of 0.77 mm
-    ts = TimeSeries(t, np.sin(2 * np.pi * 0.2 * t), y, rh=np.full(t.size, 50.0))
+    ts = TimeSeries(t, drive, y, rh=np.full(t.size, 50.0))
     rng, drift, off, start = nuisance_bounds(ts)
+    assert abs(start - int(fs)) <= 3          # the rest: until the drive has moved 1 % of its range
     nz = bounded_nuisance(e, t, math.inf, off, start)
     assert nz.offset_clipped and nz.offset_free > 0.6e-3
     assert abs(nz.offset - nz.level) == pytest.approx(OFFSET_SHARE * rng)
+    ts = TimeSeries(t, np.sin(2 * np.pi * 0.2 * t), y, rh=np.full(t.size, 50.0))
+    assert nuisance_bounds(ts)[2] == math.inf
 
 
 def test_a_sensor_offset_and_drift_are_taken_whole():
@@ -225,3 +230,52 @@ def test_a_fit_ending_on_its_bound_is_a_value_not_an_error():
     v = float(p.from_x(p.to_x(5e11)))
     assert v <= 5e11
     load_device("ipmc_pt_eg").with_params(Y=v)
+
+
+# ---------------------------------------------------------------------------- the loop by default (slow)
+
+
+@pytest.mark.slow
+def test_an_effect_the_data_do_not_support_is_removed_and_tried_again():
+    """The user's model carries a solvent back-diffusion 100× too fast (the device's value is a
+    start, not the strip's): no candidate passes on top of it, the backward step removes it, it is
+    tried again with its own parameter free, and the final model reaches the noise."""
+    import warnings
+
+    from physics.diagnose import diagnose
+    from physics.diagnose.demo import hidden_effect_case
+    case = hidden_effect_case("electrode_resistance", seed=1, design="rich", duration=40.0)
+    dev = load_device("ipmc_pt_eg")
+    wrong = dev.with_params(D_solvent=dev.params["t_polymer"] ** 2 / 4 / 2.0)      # h²/Ds = 2 s
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = diagnose(case.measurements, wrong, "electrode_resistance,solvent_diffusion",
+                       candidates="solvent_diffusion,fractional_coupling", check_support=False)
+    removed = [r["effect"] for r in res.verdict.removed]
+    assert "solvent_diffusion" in removed, res.verdict.lines()
+    assert res.final.rmse < 0.5 * res.base.rmse
+    assert "Removed from the model: solvent_diffusion" in "\n".join(res.verdict.lines())
+
+
+@pytest.mark.slow
+def test_the_command_printed_runs_as_printed(tmp_path, capsys):
+    """The default route writes the best model with the values the page shows and a command
+    that runs as printed (records and every effect file it needs)."""
+    import shlex
+
+    from nnmodel.cli import main
+    from physics.diagnose.demo import hidden_effect_case
+    from physics.timeseries import write_timeseries
+    case = hidden_effect_case("solvent_diffusion", seed=2)
+    files = [str(write_timeseries(m, tmp_path / f"rec {k}.csv")) for k, m in enumerate(case.measurements)]
+    assert main(["diagnose", *files, "--device", "ipmc_pt_eg", "--effects", "none", "--out", str(tmp_path / "o"),
+                 "--quiet"]) == 0
+    text = capsys.readouterr().out
+    d = __import__("json").loads((tmp_path / "o" / "diagnosis.json").read_text())
+    usage = d["applied"]["usage"]
+    written = load_device(tmp_path / "o" / d["applied"]["written"])
+    pick = d["verdict"]["chain"][0]
+    for name, v in pick["parameters"].items():        # the refined values, as the page shows them
+        assert written.params[name] == pytest.approx(v["value"], rel=1e-4)
+    assert usage in text
+    assert main(shlex.split(usage)[1:] + ["--out", str(tmp_path / "c")]) == 0

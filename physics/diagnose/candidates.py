@@ -42,9 +42,10 @@ A nested effect starts (among its other starts) from the base's optimum with the
 its ``off`` values, and a fit that still ends worse than the base on the time records is
 replaced by that point, the model without it (:func:`no_worse_than_base`).
 The residual (measured minus model, its nuisance terms — offset and linear drift of each
-record, :func:`.records.remove_nuisance` — removed) gives the RMS error and fit %
-at the full rate (the prediction interpolated back) and, on the decimated samples, the
-likelihood with the effective sample size of :mod:`.stats`.
+record, bounded so that they cannot eat physics, :meth:`.records.Record.nuisance` — removed)
+gives the RMS error and fit % at the full rate (the prediction interpolated back) and, on the
+decimated samples, the effective sample size of :mod:`.stats`; the evidence is computed on
+that pooled error (:func:`compare_fits`).
 """
 from __future__ import annotations
 

@@ -46,6 +46,12 @@ RECORDS_HIGH = 1.0
 #: ... where "lower" allows this relative tolerance (a record the pick leaves as it was).
 RECORD_TOLERANCE = 0.02
 LABELS = ("high", "medium", "low")
+#: What each label has meant on a truth family held out of the choice of the thresholds
+#: (``bench/diagnose_lofo.py`` then ``bench/diagnose_calibration.py``): per label, the picks and
+#: how many named the hidden effect (right), a near twin's relative (acceptable) or another
+#: (wrong).  Measured, not assumed; :func:`calibration_text` says it in one sentence.
+CALIBRATION = {"held_out": None, "families": (), "cases": 0, "command": "",
+               "labels": {lab: {"n": 0, "right": 0, "acceptable": 0, "wrong": 0} for lab in ("high", "medium", "low")}}
 
 
 @dataclass
@@ -61,6 +67,15 @@ class Confidence:
     flags: int                     # quality flags
     label: str = "low"
     why: list[str] = field(default_factory=list)   # what kept it from "high"
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Confidence":
+        """The features as :meth:`to_dict` wrote them (``diagnosis.json``: a pick's ``confidence_features``)."""
+        def num(k):
+            return math.nan if d.get(k) is None else float(d[k])
+        return cls(float(d.get("weight") or 0.0), num("change_noise_floors"), num("left_noise_floors"),
+                   float(d.get("twin_share", 1.0)), d.get("closest_rival"), float(d.get("records_improved", 1.0)),
+                   int(d.get("quality_flags", 0)))
 
     def to_dict(self) -> dict:
         return {"label": self.label, "weight": self.weight, "change_noise_floors": _num(self.change),
@@ -100,32 +115,36 @@ def features(pick, base, rivals, weight: float, noise: float) -> Confidence:
     return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality))
 
 
-def label(c: Confidence) -> Confidence:
-    """Fill ``c.label`` and ``c.why`` (module doc)."""
+def label(c: Confidence, th: dict | None = None) -> Confidence:
+    """Fill ``c.label`` and ``c.why`` (module doc); ``th``: thresholds replacing those of
+    :func:`thresholds` (the calibration bench tries others on the recorded features)."""
+    t = {**thresholds(), **(th or {})}
+    ch_hi, ch_lo, left_hi = t["change_high_noise_floors"], t["change_low_noise_floors"], t["left_high_noise_floors"]
+    twin_hi, twin_lo, rec_hi, w_hi = t["twin_high_share"], t["twin_low_share"], t["records_high_share"], t["weight_high"]
     why = []
     if not math.isfinite(c.change):
         why.append("no noise floor to judge the pick's size against")
     else:
-        if c.change < CHANGE_HIGH:
+        if c.change < ch_hi:
             why.append(f"it removes only {c.change:.2g}× the noise floor of error (it barely changes the model in "
-                       f"the excited band; 'high' needs {CHANGE_HIGH:g}×)")
-        if c.left > LEFT_HIGH:
+                       f"the excited band; 'high' needs {ch_hi:g}×)")
+        if c.left > left_hi:
             why.append(f"it leaves {c.left:.3g}× the noise floor, a structured residual it does not explain: it may "
                        "stand in for physics the catalog lacks (a proxy)")
-    if c.twin < TWIN_HIGH and c.twin_of:
+    if c.twin < twin_hi and c.twin_of:
         why.append(f"{c.twin_of} fits nearly as well (the pick removes {100 * c.twin:.2g} % of the excess error "
-                   f"{c.twin_of} leaves; 'high' needs {100 * TWIN_HIGH:.0f} %)")
-    if c.records < RECORDS_HIGH:
+                   f"{c.twin_of} leaves; 'high' needs {100 * twin_hi:.0f} %)")
+    if c.records < rec_hi:
         why.append(f"it lowers the error on only {100 * c.records:.3g} % of the records (fitted on all of them, it "
                    "does not generalise from record to record)")
     if c.flags:
         why.append(f"{c.flags} quality flag(s)")
-    if c.weight < WEIGHT_HIGH:
-        why.append(f"its weight {c.weight:.3g} is below {WEIGHT_HIGH}")
+    if c.weight < w_hi:
+        why.append(f"its weight {c.weight:.3g} is below {w_hi}")
     c.why = why
     if not why:
         c.label = "high"
-    elif (math.isfinite(c.change) and c.change < CHANGE_LOW) or (c.twin < TWIN_LOW and c.twin_of):
+    elif (math.isfinite(c.change) and c.change < ch_lo) or (c.twin < twin_lo and c.twin_of):
         c.label = "low"
     else:
         c.label = "medium"
@@ -139,4 +158,23 @@ def thresholds() -> dict:
             "records_high_share": RECORDS_HIGH, "record_tolerance": RECORD_TOLERANCE}
 
 
-__all__ = ["Confidence", "features", "label", "excess_share", "thresholds", "LABELS"]
+def calibration_text() -> str:
+    """One sentence: what "high", "medium" and "low" have meant on the held-out family."""
+    c = CALIBRATION
+    if not c["held_out"]:
+        return "The confidence labels have not been calibrated on held-out physics yet."
+    parts = []
+    for lab in LABELS:
+        x = c["labels"][lab]
+        if x["n"]:
+            ok = x["right"] + x["acceptable"]
+            parts.append(f"\"{lab}\" {ok} of {x['n']} right" + (f" ({x['acceptable']} a near twin's relative)"
+                                                                if x["acceptable"] else ""))
+        else:
+            parts.append(f"\"{lab}\" never given")
+    return (f"On {c['held_out']}, a truth family held out of the choice of the thresholds ({c['cases']} cases, "
+            f"physics the diagnosis was not tuned on), picks labelled " + "; ".join(parts) + ".")
+
+
+__all__ = ["Confidence", "features", "label", "excess_share", "thresholds", "calibration_text", "CALIBRATION",
+           "LABELS"]

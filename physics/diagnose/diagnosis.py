@@ -3,10 +3,15 @@
 :func:`diagnose` runs its phases in order, each a function here:
 
 1. :func:`read_records` — classification, amplitude and RH levels, decimation, noise floor
-   (:mod:`.records`); frequency-response targets for the fits.
+   (:mod:`.records`); frequency-response targets for the fits.  What the records determine is
+   freed (:func:`_resolve_free`): with records at two or more RH levels, the parameters the
+   model's humidity law declares per RH (as ``identify --per-rh``); a parameter the device
+   holds per RH (an absolute map, as ``identify`` writes it) is fitted per RH.
 2. :func:`fit_base` — the user's model (device + effects) with its free parameters fitted on
    the FRF targets (:func:`physics.identify.fit_lsq`), then simulated on every record with
-   the per-record nuisance terms (offset, linear drift) removed (:func:`.candidates.score`).
+   the per-record nuisance terms (offset, linear drift, bounded: :func:`.records.bounded_nuisance`)
+   removed (:func:`.candidates.score`); the records' slow wander beside the floor
+   (:func:`add_wander`).
 3. Where it fails (:mod:`.residuals`): correlations with 99 % bands, residual FRF with its
    noise floor, errors by band, amplitude, RH and after steps, findings.
 4. :func:`try_candidates` — each effect the model lacks (catalog and user effects) that
@@ -15,10 +20,12 @@
    and a p-value with one effective sample size for every comparison, :mod:`physics.stats`;
    the residual signature, :mod:`.signatures`).  Effects the data cannot reveal are listed
    with the excitation that would.
-5. :func:`select` — forward selection: the step's decision (:func:`.verdict.decide`:
-   evidence, quality flags, weights, the pick or the ambiguity); after a pick the
-   remaining candidates are tried again on top of it while one passes, up to
-   ``max_effects``.
+5. :func:`select` — stepwise selection both ways: the step's decision (:func:`.verdict.decide`:
+   evidence, quality flags, weights, the pick or the ambiguity, the pick's confidence label);
+   after a pick the remaining candidates are tried again on top of it while one passes, up to
+   ``max_effects``; when none passes, an effect of the user's model that the data do not
+   support is removed (:func:`try_removal`) and tried again as a candidate with its own
+   parameters free.
 6. Adequacy of the final model and what remains (:mod:`.adequacy`, :mod:`.verdict`).
 7. :func:`assess_support` — in the final model each of its own effects is switched off and
    refitted; an effect whose removal does not cost ΔBIC ≥ 6 is "not supported by these data".
@@ -41,7 +48,7 @@ from ..effects import EFFECTS, ensure_registered, user_effect_files
 from ..errors import InputError, ModelError, arg
 from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
-from ..identify.parameters import switchable
+from ..identify.parameters import held_per_rh, switchable
 from ..identify.options import FitOptions
 from ..model import ActuatorModel, resolve_effects
 from ..parallel import map_tasks, warm_up
@@ -781,25 +788,10 @@ def _resolve_free(dev: Device, base_ids, free_l: list, per_rh_l: list | None, re
       style) — the device's humidity law is a start, not the strip's — and the parameters whose
       role they take (the coupling gain, the stiffness) leave the shared ones."""
     from .records import rh_levels
-    notes = []
     levels = rh_levels(records)
     multi = len(levels) >= 2 and ActuatorModel(dev, base_ids).needs_rh
-    per = list(per_rh_l or [])
-    absolute = [n for n, m in dev.humidity_maps.items() if m.mode == "absolute"]
-    for name in [n for n in free_l if n in absolute]:
-        free_l = [n for n in free_l if n != name]
-        if multi:
-            per.append(name)
-            notes.append(f"{name} is held per RH by the device (an absolute humidity map): fitted once per RH level")
-        else:
-            import dataclasses
-            m = dev.humidity_maps[name]
-            v = float(np.interp(records[0].rh_measured, m.rh, m.values))
-            dev = dataclasses.replace(dev.with_params(**{name: v}),
-                                      humidity_maps={k: x for k, x in dev.humidity_maps.items() if k != name})
-            free_l.append(name)
-            notes.append(f"{name} is held per RH by the device (an absolute humidity map); one RH level: its value "
-                         f"there ({v:.4g}) is fitted as a shared value")
+    dev, free_l, per, notes = held_per_rh(dev, free_l, per_rh_l or [], levels if multi else levels[:1],
+                                          records[0].rh_measured)
     if per_rh_l is None and multi and not free_given:
         declared = [n for n in _declared_per_rh(base_ids) if n not in per]
         if declared:

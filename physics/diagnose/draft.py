@@ -76,7 +76,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     import tempfile
 
     from .. import effects as E
-    from .candidates import effect_values
+    from .candidates import effect_values, map_free
     fit = res.final
     ad = res.adequacy
     if res.verdict.status == "nothing to explain" or (ad is not None and ad.adequate and not res.picks):
@@ -141,7 +141,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
                     pool.remove(key)
                 outcome.chain.append((eid, c.fit.rmse))
                 on_top.append(eid)
-                free += [n for n in values if n not in free]
+                free = map_free(free + [n for n in values if n not in free and "@" not in n], on_top, on_top)
                 device = c.fit.device
                 outcome.final = c.fit
             else:

@@ -15,12 +15,21 @@ Each time-series record is
   (a step excites the resonance whatever its "band"; scipy's polyphase FIR with zero
   phase, applied to the voltage and the deflection alike, so a linear model driven by the
   decimated voltage is compared with the equally filtered measurement);
-* given its **noise floor** [m]: the RMS of what a perfect model would leave — the
-  sensor's white noise and quantisation and the part of its drift that the nuisance
-  terms (per-record offset and linear drift, :func:`remove_nuisance`) do not absorb —
-  from the record's sensor metadata (written by :class:`physics.sensor.SensorModel`) or,
-  failing that, estimated from the deflection spectrum where the response has fallen
-  away (:func:`deflection_spectrum`: the white part only, and the source says so).
+* given its **noise floor** [m], from the measurement alone, never from a model's misfit:
+  the RMS of what a perfect model would leave — the sensor's white noise and quantisation and
+  the part of its drift that the nuisance terms do not absorb — from the record's sensor
+  metadata (written by :class:`physics.sensor.SensorModel`) or, failing that, estimated from
+  the deflection spectrum where the response has fallen away (:func:`deflection_spectrum`:
+  the white part only, and the source says so);
+* given its **nuisance terms** (:meth:`Record.nuisance`): the least-squares offset and linear
+  drift of a residual, bounded by what a sensor's zero does — the drift's rise over the record
+  by :data:`STATED_DRIFT_FACTOR` × the drift the sensor states, or :data:`DRIFT_SHARE` of the
+  signal's peak-to-peak; the offset, when the record has a rest before the drive, within
+  :data:`OFFSET_SHARE` of the peak-to-peak of the level at rest — so that a slow
+  back-relaxation or a wrong static gain stays in the error, where it is evidence;
+* when it is **periodic** (a multisine of two or more periods, recorded once settled), entered
+  in its steady state: the model is driven through the record's own periods first
+  (:func:`periodic_lead`).
 
 Frequency-response targets for the fits come from the broadband records through
 :func:`physics.identify.build_targets` (H1, thinned to log-spaced lines) and from tone
@@ -140,7 +149,7 @@ class Record:
                 "amplitude_level_V": self.amplitude_level, "rh_pct": self.rh, "rh_measured_pct": self.rh_measured,
                 "band_Hz": list(self.band), "tone_Hz": self.tone_hz, "decimation": self.q,
                 "fs_analysis_Hz": self.fs_d, "sensor_bandwidth_Hz": self.sensor_bandwidth,
-                "noise_floor_m": self.noise_floor, "noise_floor_source": self.noise_source,
+                "white_noise_m": self.noise_floor, "white_noise_source": self.noise_source,
                 "excitation_from": self.kind_how,
                 "steps": int(self.steps.size), "signal_range_m": self.signal_range,
                 "nuisance_bounds": {"drift_over_record_m": self.drift_bound, "offset_from_start_m": self.offset_bound,

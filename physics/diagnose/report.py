@@ -25,6 +25,7 @@ from ..identify import write_device
 from ..identify.parameters import switchable
 from ..outputs import final_path
 from ..report import Report, header, jsonable
+from .confidence import calibration_text
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
 
@@ -252,8 +253,12 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     rep.heading("Verdict")
     for line in v.lines():
         rep.paragraph(line)
+    rep.paragraph("What the confidence labels mean: " + calibration_text(), note=True)
+    if out.get("best_model"):
+        rep.paragraph(f"Best model: {out['best_model']['text']}.")
     if out.get("applied") and out["applied"].get("written"):
-        rep.paragraph(f"Extended device written: {out['applied']['path']} (use it: {out['applied']['usage']}).")
+        rep.paragraph(f"Device file of the best model written: {out['applied']['path']} (use it: "
+                      f"{out['applied']['usage']}).")
     rep.table({"base effects": ", ".join(b.effects), "free parameters": ", ".join(b.spec.free + b.spec.per_rh),
                "RMS error [µm]": 1e6 * b.rmse, "fit [%]": b.fit_pct, "BIC (effective n)": b.bic,
                "noise floor [µm]": 1e6 * res.noise_floor if math.isfinite(res.noise_floor) else None,
@@ -303,10 +308,12 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
             rep.warning(w_)
     rep.heading("Records")
     rep.table([{k: r.describe()[k] for k in ("kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct",
-                                               "band_Hz", "fs_analysis_Hz", "noise_floor_m", "noise_floor_source")}
+                                               "band_Hz", "fs_analysis_Hz", "white_noise_m", "white_noise_source")}
                | {"record": Path(r.source).name} for r in res.records],
               columns=["record", "kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct", "band_Hz",
-                       "fs_analysis_Hz", "noise_floor_m", "noise_floor_source"])
+                       "fs_analysis_Hz", "white_noise_m", "white_noise_source"],
+              caption=f"the records; each record's own white noise level, pooled into the one noise floor of "
+                      f"{_fmt(res.noise_floor, 'µm', 1e6, 3)} every verdict compares with")
     rep.heading("How the statistics work")
     rep.bullets([f"{k}: {t}" for k, t in out["statistics"].items()])
     rep.json_block(out["settings"], "settings")

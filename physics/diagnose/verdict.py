@@ -2,39 +2,48 @@
 
 **Which effect is missing.**  The candidates of a step (:mod:`.diagnosis`: the catalog and
 user effects the model lacks, each fitted on top of the step's base) are weighed by their
-evidence E = ΔBIC + :data:`QUALITY_BIC` × (quality flags): the Schwarz weight
-exp(−E/2), normalised over the step's base (E = 0) and every evaluated candidate, is an
-approximate posterior probability (equal priors; Schwarz 1978, Kass & Raftery 1995)
-penalised by what makes a fit suspect.  A candidate's **quality flags** (:func:`quality`):
-one of its parameters ends on a bound of its range; its relative standard error exceeds
-50 %; it is correlated with another parameter beyond |ρ| = 0.99 (only a combination is
-determined); its expected residual signature is absent.  Each flag counts as very strong
-evidence against it (ΔBIC +10).  A candidate can be picked when it passes the criteria
-of :data:`CRITERIA` (very strong ΔBIC, Bonferroni p-value, at least a third of the
-failure explained — of the excess error power over the noise floor — and a base above the
-noise: a flexible effect that trims a little off an error it does not explain is no answer;
-on a later step of the chain, no quality flag at all: there the error is mostly the base's own
-mismatch (or a pick's fit short of its optimum), which any flexible effect absorbs in part with
-a ΔBIC as large as the records are long — only a clean fit whose signature is seen in what the
-picks leave is evidence that *this* effect is missing); the pick is the one with the lowest E.
-Its confidence is its weight, labelled "high" at ≥ 0.99 (it clearly dominates the base and
-every other candidate), "medium" at ≥ 0.9, else "low" — whatever error remains, which is the
-second answer.  Two
-candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6, or
-the better leaves more than two thirds of the other's excess error power over the noise floor,
-the share a pick must explain) *and* on quality (the same number of flags); the verdict then
-names the record that would separate them (:func:`separating_record`).  After a pick the
-remaining candidates are tried again on top of it (forward selection, up to
-``max_effects``); the verdict is the chain of picks with the error after each.
+evidence E = ΔBIC + :data:`QUALITY_BIC` × (quality flags), ΔBIC computed on the pooled error the
+report prints (one noise model for all records, N_eff from the residual's correlation:
+:func:`.candidates.compare_fits`); the Schwarz weight exp(−E/2), normalised over the step's
+base (E = 0) and every evaluated candidate, is an approximate posterior probability (equal
+priors; Schwarz 1978, Kass & Raftery 1995) penalised by what makes a fit suspect.  A
+candidate's **quality flags** (:func:`quality`): one of its parameters ends on a bound of its
+range; its relative standard error exceeds 50 %; it is correlated with another parameter
+beyond |ρ| = 0.99 (only a combination is determined); its expected residual signature is
+absent.  A candidate can be picked when it passes the criteria of :data:`CRITERIA` (very
+strong ΔBIC, Bonferroni p-value, at least a third of the failure explained — of the excess
+error power over the noise floor — and a base above the noise: a flexible effect that trims a
+little off an error it does not explain is no answer; on a later step of the chain, no quality
+flag at all); the pick is the one with the lowest E.  Two candidates that pass are
+**ambiguous** when they are close on fit (their pairwise |ΔBIC| < 6, or the better leaves more
+than two thirds of the other's excess error power over the noise floor), whatever their
+quality flags: near twins are not told apart by a flag; the verdict then names the record that
+would separate them (:func:`separating_record`).
 
-**Is the final model adequate.**  Its RMS error against the noise floor: adequate within
-:data:`ADEQUATE_RATIO` × (:mod:`.adequacy`), and a plain statement of what remains —
-structured (the residual forms that describe it, :func:`.forms.describe`) or
-unstructured (a small mismatch of the base model itself).  When the base is already within
-the threshold there is **nothing to explain** — unless it is within only because the floor
-counts a slow wander the records cannot attribute (:data:`UNATTRIBUTED`: one record cannot tell
-the sensor's drift from a drift of the setup).  A null answer carries no confidence, and
-"explained" is never claimed without a noise floor.
+**How sure.**  Over tens of thousands of correlated samples every ΔBIC is in the thousands and
+every weight 1.000, so the weight is not the confidence.  The label (:mod:`.confidence`) asks
+what generalises: the error the pick removes and the error it leaves, both in noise floors (an
+effect that barely changes the model cannot be "high"; one that leaves a large structured
+residual may be a proxy and says so), the share of the closest rival's excess it removes (a near
+twin keeps it "low"), the share of records on which it lowers the error, its quality flags and
+its weight.  The thresholds are chosen on some truth families and reported on a held-out one
+(``bench/diagnose_calibration.py``).
+
+The selection runs both ways (:func:`.diagnosis.select`): after a pick the remaining
+candidates are tried again on top of it (up to ``max_effects``); when none passes, an effect
+of the user's model that the data do not support is removed and tried again as a candidate
+with its own parameters free.
+
+**Is the final model adequate.**  Its RMS error against the noise floor — the measurement's
+own, one number everywhere (:mod:`.records`) — adequate within :data:`ADEQUATE_RATIO` ×
+(:mod:`.adequacy`), with the records' own slow wander that does not repeat from record to
+record allowed beside it when the floor was estimated, and a plain statement of what remains —
+structured (the residual forms that describe it, :func:`.forms.describe`) or unstructured (a
+small mismatch of the base model itself).  When the base is already within the threshold
+there is **nothing to explain** — unless it is within only because a slow wander the records
+cannot attribute is counted (:data:`UNATTRIBUTED`).  A null answer carries no confidence, and
+"explained" is never claimed without a noise floor.  The nuisance terms of every record
+(offset, linear drift) are reported with their plausibility (:func:`nuisance_summary`).
 
 :class:`Verdict` holds both answers; :meth:`Verdict.lines` is the one text the terminal,
 the page and ``diagnosis.json`` show.
