@@ -279,3 +279,27 @@ def test_the_command_printed_runs_as_printed(tmp_path, capsys):
         assert written.params[name] == pytest.approx(v["value"], rel=1e-4)
     assert usage in text
     assert main(shlex.split(usage)[1:] + ["--out", str(tmp_path / "c")]) == 0
+
+
+def test_a_settled_multisine_is_entered_in_its_steady_state():
+    """A multisine recorded once settled (two periods, no metadata: the period read from the
+    voltage) is scored against the model driven through its periods first: the true model
+    leaves the noise and the sensor's offset, not a start-up transient."""
+    import warnings
+
+    from physics import signals
+    from physics.diagnose import candidates as C
+    from physics.diagnose.records import prepare_records
+    from physics.model import ActuatorModel
+    from physics.timedomain import simulate
+    warnings.simplefilter("ignore")
+    m = ActuatorModel(load_device("ipmc_pt_eg"), ["electrode_resistance", "viscoelastic"])
+    fs, keep = 100.0, 4000
+    sig = signals.multisine(0.3, 0.05, 20.0, 20.0, periods=4, fs=fs, seed=3)
+    y = simulate(m, None, sig.t, sig.v, rh=60.0, hold="cubic").deflection[-keep:]
+    meas = y + 40e-6 + np.random.default_rng(0).normal(0, 1e-6, keep)
+    r = prepare_records([TimeSeries(sig.t[:keep], sig.v[-keep:], meas, rh=np.full(keep, 60.0), source="ms")])[0]
+    assert r.i0 > 32 and "steady state" in r.kind_how
+    yh = C.predict(m, r)
+    nz = r.nuisance(meas - C.upsample(yh, r.q, keep))
+    assert np.std(nz.remove(r.y_d - yh, r.t_d)) < 1.3e-6 and nz.offset == pytest.approx(40e-6, abs=0.5e-6)

@@ -216,11 +216,12 @@ def periodic_lead(ts: TimeSeries, how: str, q: int) -> int:
     period = None
     if isinstance(sig.get("period_s"), (int, float)) and float(sig.get("periods", 1) or 1) >= MIN_PERIODS:
         period = float(sig["period_s"])
-    elif "periodic" in how:
+    elif how.startswith("from the voltage"):
         try:
-            period = detect_excitation(ts.voltage, ts.fs).period_s
+            ex = detect_excitation(ts.voltage, ts.fs)
         except InputError:
-            period = None
+            ex = None
+        period = ex.period_s if ex is not None and ex.kind == "periodic" else None
         if period is not None and ts.duration < MIN_PERIODS * period * (1 - 1e-6):
             period = None
     if not period or period <= 0:
@@ -428,7 +429,8 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         rec = Record(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
                      sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD + lead // q, kind_how=how)
         if lead:
-            rec.kind_how += f"; periodic: the model enters the record after one period of it ({lead / m.fs:.3g} s)"
+            rec.kind_how += (f"; periodic: the model is driven through {lead / m.fs:.3g} s of its periods before it "
+                             "starts (its steady state)")
         rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
         rec.rh_measured = float(np.median(rh_series))
         rec.signal_range, rec.drift_bound, rec.offset_bound, rec.start_window = nuisance_bounds(m)
