@@ -129,7 +129,7 @@ def run(args) -> int:
         from physics.diagnose.draft import draft_effects
         per = ",".join(res.draft_base.spec.per_rh) or "none"
         outcome = draft_effects(res, lambda dev, eff, free, cands: diagnose(
-            ms, dev, eff, free, options=dataclasses.replace(opts, per_rh=per), candidates=cands, force=True,
+            ms, dev, eff, free, options=dataclasses.replace(opts, per_rh=per, n_starts=1), candidates=cands, force=True,
             check_support=False, max_effects=1, backward=False, noise_floor=res.noise_floor, fs_max=args.fs_max_Hz))
     drafts_dir = Path(args.draft_effects) if args.draft_effects is not None else Path(args.out) / "drafts"
     inside = args.draft_effects is None
