@@ -139,6 +139,9 @@ def test_the_drift_cannot_absorb_a_back_relaxation():
     assert drift == pytest.approx(DRIFT_SHARE * rng)
     nz = bounded_nuisance(e, t, drift, off, start)
     assert abs(nz.drift_ls) * 60 > 100e-6 and nz.drift_clipped
+    # the bound follows the largest stroke of the records and the sensor's noise, not a small record's
+    assert nuisance_bounds(ts, scale=3e-3)[1] == pytest.approx(DRIFT_SHARE * 3e-3)
+    assert nuisance_bounds(ts, white=3e-6)[1] == pytest.approx(max(DRIFT_SHARE * rng, 15e-6))
     assert abs(nz.drift) * (t[-1] - t[0]) == pytest.approx(drift)
     left = nz.remove(e, t)
     assert np.sqrt(np.mean(left ** 2)) > 0.5 * np.sqrt(np.mean((e - e.mean()) ** 2))

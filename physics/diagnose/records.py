@@ -263,9 +263,12 @@ def _decimate(x: np.ndarray, q: int) -> np.ndarray:
 WALK_AFTER_TREND = 1.0 / 15.0
 
 #: Without a drift stated by the sensor, a record's nuisance drift may rise over the record by at
-#: most this share of its signal's robust peak-to-peak (a laser's zero drifts by micrometres over a
-#: record of millimetres; an IPMC's back-relaxation is tens of percent of its deflection).
+#: most this share of the largest robust peak-to-peak of the records (a laser's zero drifts by
+#: micrometres over strokes of millimetres; an IPMC's back-relaxation is tens of percent of its
+#: deflection) ...
 DRIFT_SHARE = 0.01
+#: ... and at least this × its white noise (a sensor's zero wanders by a few noise levels over a record).
+DRIFT_NOISE = 5.0
 #: A drift the sensor states (random walk of std d at the record's end) bounds the record's drift at
 #: this × d.
 STATED_DRIFT_FACTOR = 4.0
@@ -323,25 +326,33 @@ def bounded_nuisance(e: np.ndarray, t: np.ndarray, drift_bound: float, offset_bo
     return Nuisance(o, b, o_ls, b_ls, o_clip, b != b_ls, level, o_free)
 
 
-def nuisance_bounds(ts: TimeSeries) -> tuple[float, float, float, int]:
+def nuisance_bounds(ts: TimeSeries, scale: float | None = None, white: float = math.nan) -> tuple[float, float, float, int]:
     """(robust peak-to-peak of the deflection [m], drift bound [m], offset bound [m], start
-    window [samples]) of a record (:data:`DRIFT_SHARE`, :data:`STATED_DRIFT_FACTOR`,
-    :data:`OFFSET_SHARE`, :data:`START_S`)."""
+    window [samples]) of a record: the drift's rise over the record within
+    :data:`STATED_DRIFT_FACTOR` × the drift its sensor states, else within :data:`DRIFT_SHARE` ×
+    ``scale`` (the largest robust peak-to-peak of the records taken with the same sensor,
+    default this record's: a sensor's drift does not shrink with a smaller stroke) and at least
+    :data:`DRIFT_NOISE` × its ``white`` noise [m]; the offset within :data:`OFFSET_SHARE` ×
+    ``scale`` of the level at rest when the record has a rest before the drive (:data:`START_S`),
+    else unbounded."""
     y = ts.deflection
     rng = float(np.percentile(y, 99.5) - np.percentile(y, 0.5))
+    scale = rng if scale is None else max(float(scale), rng)
     sensor = ts.meta.get("sensor") if isinstance(ts.meta.get("sensor"), dict) else {}
     d = sensor.get("deflection_drift")
     if isinstance(d, (int, float)) and math.isfinite(d) and d >= 0:
         drift = max(STATED_DRIFT_FACTOR * float(d), 1e-12)
     else:
-        drift = DRIFT_SHARE * rng
+        drift = max(DRIFT_SHARE * scale, DRIFT_NOISE * white if math.isfinite(white) else 0.0)
     v = ts.voltage
     tol = 0.01 * float(np.ptp(v)) if np.ptp(v) > 0 else 0.0
     moved = np.flatnonzero(np.abs(v - v[0]) > tol)
     rest = int(moved[0]) if moved.size else v.size
     if rest < max(8, int(round(START_S * ts.fs))):
         return rng, drift, math.inf, 0          # no rest before the drive: nothing anchors the offset
-    return rng, drift, OFFSET_SHARE * rng, min(rest, max(ts.n // 4, 1))
+    return rng, drift, OFFSET_SHARE * scale, min(rest, max(ts.n // 4, 1))
+
+
 def sensor_noise_floor(ts: TimeSeries) -> tuple[float, str] | None:
     """The noise floor [m] the record's sensor metadata state, or None: white noise,
     quantisation and the part of a random-walk drift that a linear trend does not remove,
@@ -433,11 +444,13 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
                              "starts (its steady state)")
         rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
         rec.rh_measured = float(np.median(rh_series))
-        rec.signal_range, rec.drift_bound, rec.offset_bound, rec.start_window = nuisance_bounds(m)
         out.append(rec)
         rhs.append(float(np.median(rh_series)))
     if not out:
         raise InputError("no measurement given")
+    scale = max(float(np.percentile(r.ts.deflection, 99.5) - np.percentile(r.ts.deflection, 0.5)) for r in out)
+    for r in out:
+        r.signal_range, r.drift_bound, r.offset_bound, r.start_window = nuisance_bounds(r.ts, scale, r.noise_floor)
     for rec, lv in zip(out, cluster_rh(rhs, rh_tolerance)):
         rec.rh = lv
     for rec, lv in zip(out, amplitude_levels([r.amplitude for r in out])):

@@ -493,11 +493,12 @@ def nuisance_summary(fit, records) -> dict:
 
 
 def _drift_basis(r) -> str:
-    from .records import DRIFT_SHARE, STATED_DRIFT_FACTOR
+    from .records import DRIFT_NOISE, DRIFT_SHARE, STATED_DRIFT_FACTOR
     s = r.ts.meta.get("sensor") if isinstance(r.ts.meta.get("sensor"), dict) else {}
     if isinstance(s.get("deflection_drift"), (int, float)):
         return f"{STATED_DRIFT_FACTOR:g}× the drift the sensor states"
-    return f"{100 * DRIFT_SHARE:g} % of the signal's peak-to-peak {1e6 * r.signal_range:.4g} µm"
+    return (f"{100 * DRIFT_SHARE:g} % of the records' largest peak-to-peak deflection, at least {DRIFT_NOISE:g}× "
+            "the record's white noise")
 
 
 __all__ = ["Verdict", "Pick", "Decision", "decide", "quality", "separating_record", "remaining_of",
