@@ -4,9 +4,12 @@
     python bench/diagnose_default_route.py [--seed 0] [--out runs/default_route]
 
 The strip (written here, not by switching the package's effects): the thesis IPMC's base
-physics at L_total = 28 mm, its coupling and stiffness following this bench's own humidity law
-(kf × U(0.6, 0.8)…U(1.0, 1.2) and Y × 1.6…0.75 from RH 40 to 85 %, not Table V), and a creep on
-the output, tip × (1 + r/(1 + sτ)) with r = 0.30, τ = 15 s, applied by a recursive filter.
+physics at L_total = 28 mm with its electrode line and polymer modulus but no solvent
+back-diffusion (the device file's ethylene-glycol diffusion is not this strip's), its coupling and
+stiffness following this bench's own humidity law (kf × U(0.6, 0.8)…U(1.0, 1.2) and Y × 1.6…0.75
+from RH 40 to 85 %, not Table V), and a creep on the output, tip × (1 + r/(1 + sτ)) with r = 0.30,
+τ = 15 s, applied by a recursive filter.  The user's model is the device's default
+(electrode line, solvent diffusion, modulus, Table V humidity law).
 Records as a lab exports them (no metadata): at RH 40, 55, 70 and 85 % a multisine
 0.05–20 Hz of two 40 s periods recorded after three periods of settling; a square pulse (30 s on,
 30 s off, after 2 s of rest) at RH 55 %; a 60 s swept sine 0.1–20 Hz at RH 70 %; 200 Hz, the tip in
@@ -62,7 +65,7 @@ def records(folder: Path, seed: int) -> tuple[list[str], float]:
         nonlocal sq, cnt
         d = dataclasses.replace(dev.with_params(Y=dev.params["Y"] * Y_OF_RH[rh], kf=dev.params["kf"] * kf_of_rh[rh]),
                                 humidity_maps={})
-        m = ActuatorModel(d, ["electrode_resistance", "solvent_diffusion", "viscoelastic"])
+        m = ActuatorModel(d, ["electrode_resistance", "viscoelastic"])
         y = simulate(m, None, t, v, rh=rh, hold=hold).deflection
         a = math.exp(-1.0 / (CREEP_TAU * FS))
         y = (y + CREEP_R * lfilter([1 - a], [1, -a], y))[-keep:]
