@@ -95,10 +95,17 @@ def assess(label: str, fit, records: Sequence, noise: float, describe: bool = Tr
     tol = math.hypot(noise, wander) if wander > 0 else noise
     adequate = None if not (math.isfinite(noise) and noise > 0) else \
         bool(fit.rmse <= ADEQUATE_RATIO * tol and not structure)
+    excused = bool(adequate and fit.rmse > ADEQUATE_RATIO * noise)      # adequate only with the wander
+    found = forms.describe(fit, records) if (adequate is not True and describe) or excused else []
+    if excused and forms.input_driven(found):
+        # what the wander would excuse follows the input: the model's error, not a sensor's drift
+        adequate, wander = False, 0.0
+        structure = structure or ("what remains follows the input (" + "; ".join(
+            f.text for f in forms.input_driven(found)) + "): the model's error, not the records' wander")
     lb = stats.ljung_box(np.concatenate(list(fit.resid_d)), lags=20)
     out = Adequacy(label, float(fit.rmse), float(noise), adequate, float(lb.get("p_value", math.nan)),
                    structure=structure if adequate is not None else "", wander=float(wander))
-    if adequate is not True and describe:
-        out.forms = forms.describe(fit, records)
+    if adequate is not True and (describe or excused):
+        out.forms = found
         out.descriptors = [ff.to_dict() for ff in out.forms]
     return out

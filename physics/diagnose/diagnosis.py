@@ -381,6 +381,17 @@ def wander_of(data: Data, fit) -> tuple[float, object]:
     return data.wanders[key][1:]
 
 
+def wander_for(data: Data, fit) -> float:
+    """:func:`allowed_wander`, unless ``fit`` is within the floor only thanks to it and what it
+    leaves follows the input (:func:`.adequacy.assess`: an input-driven residual form describes
+    it) — then 0: a creep or a back-relaxation below the excited band is the model's error, not
+    the records' wander."""
+    w = allowed_wander(data)
+    if w <= 0 or not math.isfinite(data.noise) or fit.rmse <= ADEQUATE_RATIO * data.noise:
+        return w
+    return assess("", fit, data.records, data.noise, describe=False, wander=w).wander
+
+
 def allowed_wander(data: Data) -> float:
     """The records' slow wander [m] a model may leave beside the noise floor and still be
     adequate: the part that does not repeat from record to record, when the floor was estimated
@@ -547,7 +558,7 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         ranked = [c for c in results if c.evaluated]
         decision = decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
                           C.prediction_distance, after_pick=n_added > 0,
-                          structure=bool(shared_structure(data, step_base)), wander=allowed_wander(data))
+                          structure=bool(shared_structure(data, step_base)), wander=wander_for(data, step_base))
         if decision.pick is not None and C.refine_on_time(decision.pick.fit, data.records):
             # the pick refitted on the time records (its FRF optimum is not theirs); the decision stands
             decision.pick.comparison = C.compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
@@ -568,7 +579,7 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
             run.log(f"step {k + 1}: the remaining candidates on top of {pick.effect}")
             continue
         within = math.isfinite(data.noise) and step_base.rmse <= ADEQUATE_RATIO * math.hypot(
-            data.noise, allowed_wander(data))
+            data.noise, wander_for(data, step_base))
         if not run.backward or within:
             break
         t0 = time.perf_counter()
@@ -627,13 +638,14 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
     allowed = allowed_wander(data)
     ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final), wander=allowed)
     first = steps[0].decision
-    tol = math.hypot(data.noise, allowed)
+    tol = math.hypot(data.noise, wander_for(data, base))
     structured = bool(shared_structure(data, base) if final is not base else ad.structure)
     within = math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * tol and not structured
     split = data.wander_split
     unattributed = (not within and not structured and data.estimated and split is not None
                     and (not split.testable or split.inconclusive)
-                    and base.rmse <= ADEQUATE_RATIO * math.hypot(data.noise, data.wander))
+                    and base.rmse <= ADEQUATE_RATIO * math.hypot(data.noise, data.wander)
+                    and bool(assess("", base, data.records, data.noise, describe=False, wander=data.wander).adequate))
     if unattributed:        # within the noise only by counting a wander the records cannot attribute
         status = UNATTRIBUTED
     elif within:
