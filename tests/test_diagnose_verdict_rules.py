@@ -306,3 +306,36 @@ def test_a_settled_multisine_is_entered_in_its_steady_state():
     yh = C.predict(m, r)
     nz = r.nuisance(meas - C.upsample(yh, r.q, keep))
     assert np.std(nz.remove(r.y_d - yh, r.t_d)) < 1.3e-6 and nz.offset == pytest.approx(40e-6, abs=0.5e-6)
+
+
+def test_a_wander_never_excuses_what_follows_the_input():
+    """A residual that creeps with the drive (a slow pole of the model's output) is within 1.3×
+    the floor only if the records' slow wander is counted beside it: it is the model's error —
+    not adequate, and the creep is named — while the same level of white noise is adequate."""
+    from types import SimpleNamespace
+
+    from scipy.signal import lfilter
+
+    from physics import signals
+    from physics.diagnose.adequacy import assess
+    from physics.diagnose.records import prepare_records
+    fs = 50.0
+    sig = signals.square(1.0, t_on=20.0, t_off=30.0, cycles=1, fs=fs)
+    ts = TimeSeries(sig.t, sig.v, 1e-3 * sig.v, rh=np.full(sig.t.size, 50.0), meta={"signal": sig.describe()})
+    rec = prepare_records([ts])[0]
+    pred = 1e-3 * lfilter([1 - math.exp(-1 / (0.05 * rec.fs_d))], [1, -math.exp(-1 / (0.05 * rec.fs_d))], rec.v_d)
+    a = math.exp(-1.0 / (10.0 * rec.fs_d))
+    creep = 6e-3 * lfilter([1 - a], [1, -a], pred)
+    noise = 1e-6 * np.random.default_rng(0).standard_normal(pred.size)
+
+    def fit(e):
+        e = e - e.mean()
+        return SimpleNamespace(rmse=float(np.std(e)), resid_d=[e], pred_d=[pred], model=None)
+
+    crept = fit(creep + noise)
+    floor = crept.rmse / 1.6
+    assert assess("", crept, [rec], floor, describe=False).adequate is False          # above the floor
+    ad = assess("", crept, [rec], floor, describe=False, wander=2 * floor)            # the wander would excuse it
+    assert ad.adequate is False and "follows the input" in ad.structure and ad.wander == 0
+    white = fit(1.6 * floor * np.random.default_rng(1).standard_normal(pred.size))
+    assert assess("", white, [rec], floor, describe=False, wander=2 * floor).adequate is True
