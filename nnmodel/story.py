@@ -27,6 +27,7 @@ OUTSIDE_KIND, OUTSIDE_SEED, OUTSIDE_FS_HZ, OUTSIDE_DURATION_S = "creep", 0, 200.
 def loop_stage(d: Path) -> dict:
     """Records with a hidden effect, the diagnosis of the model without it, and the figure
     of the error before and after (``d/loop.png``); returns the figures as a dict."""
+    from physics.diagnose.confidence import calibration_text
     from physics.diagnose.demo import hidden_effect_case
     from physics.diagnose.diagnosis import diagnose
     case = hidden_effect_case(LOOP_EFFECT, LOOP_SEED, device=LOOP_DEVICE, duration=LOOP_DURATION_S)
@@ -40,6 +41,7 @@ def loop_stage(d: Path) -> dict:
             "ranking": [{"effect": c.effect, "rmse_um": 1e6 * c.fit.rmse, "delta_bic": c.comparison.delta_bic,
                          "evidence": c.evidence(b)} for c in res.ranking],
             "verdict": v.to_dict(), "adequacy": res.adequacy.to_dict() if res.adequacy else None,
+            "calibration": calibration_text(),
             "rmse_before_um": 1e6 * b.rmse, "rmse_after_um": None if after is None else 1e6 * after.rmse,
             "fit_before_pct": b.fit_pct, "fit_after_pct": None if after is None else after.fit_pct,
             "effect_parameters": {} if w is None else {k: float(x) for k, x in w.fit.values.items()}}
@@ -242,6 +244,11 @@ def write_page(d: Path, report: dict, provenance: dict) -> Path:
                  + (f"{v['missing_effect']}, confidence {v['confidence_label']}." if v["missing_effect"]
                     else "no catalog effect named.") + f" {v['reason']}")
         rep.table(loop["ranking"], caption="candidates: RMS error after adding each [µm], ΔBIC (negative: better)")
+        rep.paragraph("What the confidence means: " + loop.get("calibration", "") + " A label is not the weight: "
+                      "over thousands of correlated samples every weight is 1.000. \"high\" needs a pick that "
+                      "changes the model by several noise floors, leaves at most a couple, clearly beats its "
+                      "closest rival, lowers the error on every record and has no quality flag "
+                      "(docs/reference/diagnosis.md).", note=True)
         rep.heading("Before and after")
         if loop["rmse_after_um"] is not None:
             rep.lead(f"Adding {v['missing_effect']} lowers the RMS error from {loop['rmse_before_um']:.3g} to "

@@ -162,16 +162,21 @@ def lr_pvalue(rss_base: Sequence[float], rss_cand: Sequence[float], n_eff: Seque
 
 
 def vuong_pvalue(e_base: Sequence[np.ndarray], e_cand: Sequence[np.ndarray], taus: Sequence[float],
-                 dk: int = 0) -> float:
+                 dk: int = 0, pooled: bool = False) -> float:
     """One-sided p-value of Vuong's test that the candidate is not closer to the data than
     the base.  Pointwise Gaussian log-likelihood differences d_i (each record with its
-    own variance), on the effective scale: LR = Σ_r Σ_i d_ri / τ_r with variance
-    Σ_r n_eff,r var(d_r); Schwarz's correction ½ Δk ln N_eff for extra parameters."""
+    own variance, or with ``pooled`` one variance over all records — the likelihood whose
+    maximum is the pooled RMS error), on the effective scale: LR = Σ_r Σ_i d_ri / τ_r with
+    variance Σ_r n_eff,r var(d_r); Schwarz's correction ½ Δk ln N_eff for extra parameters."""
     lr, var, n_eff = 0.0, 0.0, 0.0
+    if pooled:
+        n_all = max(sum(np.asarray(e).size for e in e_base), 1)
+        pb = max(sum(float(np.sum(np.asarray(e, float) ** 2)) for e in e_base) / n_all, 1e-300)
+        pc = max(sum(float(np.sum(np.asarray(e, float) ** 2)) for e in e_cand) / n_all, 1e-300)
     for eb, ec, tau in zip(e_base, e_cand, taus):
         eb, ec = np.asarray(eb, float), np.asarray(ec, float)
         tau = max(float(tau), 1.0)
-        sb, sc = max(np.mean(eb ** 2), 1e-300), max(np.mean(ec ** 2), 1e-300)
+        sb, sc = (pb, pc) if pooled else (max(np.mean(eb ** 2), 1e-300), max(np.mean(ec ** 2), 1e-300))
         d = -0.5 * (np.log(sc) + ec ** 2 / sc) + 0.5 * (np.log(sb) + eb ** 2 / sb)
         lr += float(np.sum(d)) / tau
         var += eb.size / tau * float(np.var(d))

@@ -82,14 +82,19 @@ def test_base_with_effects_support_and_the_missing_one():
     assert sup["electrode_resistance"].supported and sup["viscoelastic"].supported
 
 
-def test_effect_the_data_do_not_support_is_reported():
+def test_effect_the_data_do_not_support_is_removed():
     """The model has electrode_resistance but the device truly has equipotential electrodes:
-    removing it costs nothing, so it is reported as not supported."""
+    the data do not support it, so the stepwise selection removes it (issue 34: it was only
+    reported) and the verdict says so; forward-only, it is reported as not supported."""
     case = hidden_effect_case(None, seed=2)
     res = _diagnose(case, candidates="solvent_diffusion")
     assert res.support == []                       # the base has no effect to check
-    res = _diagnose(type(case)(**{**case.__dict__, "base_effects": ("double_layer", "electrode_resistance")}),
-                    candidates="solvent_diffusion")
+    with_rs = type(case)(**{**case.__dict__, "base_effects": ("double_layer", "electrode_resistance")})
+    res = _diagnose(with_rs, candidates="solvent_diffusion")
+    removed = {r["effect"]: r for r in res.verdict.removed}
+    assert "electrode_resistance" in removed and "not supported" in removed["electrode_resistance"]["reason"]
+    assert "electrode_resistance" not in res.final.effects and res.final.rmse <= res.base.rmse
+    res = _diagnose(with_rs, candidates="solvent_diffusion", backward=False)
     sup = {s.effect: s for s in res.support}
     assert sup["electrode_resistance"].supported is False
     assert "not supported" in sup["electrode_resistance"].explanation

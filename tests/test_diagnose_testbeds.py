@@ -75,6 +75,7 @@ class Fit:
 
     def __init__(self, rmse):
         self.rmse = rmse
+        self.rmse_records = [rmse, rmse]
 
 
 class Cmp:
@@ -102,23 +103,27 @@ def test_an_effect_switched_off_reads_on_its_bound_without_a_warning():
         assert _on_bound(prm, 1e-3 * (1 + 1e-4))        # within the tolerance of ln θ
 
 
-def test_quality_flags_decide_between_close_candidates(monkeypatch):
-    """Two candidates lower the error alike; the one whose parameters are on bounds and
-    correlated loses, and the pick's confidence reflects that it dominates."""
+def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
+    """Two candidates lower the error alike: near twins, "ambiguous" with the record that
+    separates them — even when one has its parameters on bounds and correlated (issue 34: flags
+    pushed the right twin out and the other was "high").  A rival clearly worse on fit does not
+    make a pick ambiguous, and the pick is "high" only when its features say so."""
     from physics.diagnose import verdict as V
 
     base = Fit(50e-6)
     flexible = Cand("flexible", -5020.0, 2.00e-6, ["a on a bound", "a and b correlated", "signature absent"])
     user = Cand("user_creep", -5000.0, 2.01e-6, [])
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
-    dec = decide(base, [flexible, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-5.0),
-                 lambda a, b: 1e-6)
-    assert dec.pick is user and dec.ambiguous == []
-    assert dec.weights["user_creep"] > 0.99 and V.label_of(dec.weight) == "high"
-    assert "less credible" in dec.reason
-    # close on fit *and* quality: ambiguous, no pick
-    twin = Cand("twin", -5001.0, 2.0e-6, [])
     monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a square pulse held 60 s would separate them")
+    dec = decide(base, [flexible, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
+    assert dec.pick is None and set(dec.ambiguous) == {"user_creep", "flexible"} and "pulse" in dec.separating
+    # a rival far worse on fit: the clean candidate is picked, "high"
+    worse = Cand("flexible", -3000.0, 20e-6, ["a on a bound"])
+    dec = decide(base, [worse, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-3000.0), lambda a, b: 1e-6)
+    assert dec.pick is user and dec.ambiguous == []
+    assert dec.weights["user_creep"] > 0.99 and dec.confidence.label == "high"
+    # close on fit *and* quality: ambiguous too
+    twin = Cand("twin", -5001.0, 2.0e-6, [])
     dec = decide(base, [user, twin], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-1.0), lambda a, b: 1e-6)
     assert dec.pick is None and set(dec.ambiguous) == {"user_creep", "twin"} and "pulse" in dec.separating
 

@@ -90,6 +90,8 @@ def run(args) -> int:
                   f"  (start {r['initial']:.4g})")
     for w in res.warnings:
         print(f"  warning: {w}")
+    for n in res.settings.get("notes", []):
+        print(f"  note: {n}")
     print(f"total {res.wall_s:.2f} s, {res.n_evaluations} model evaluations "
           f"(thesis loop for these data: {res.thesis_equivalent_s() / 86400:.3g} days)")
     print(f"wrote {d / out['device_written']}, {d}/index.html, report.json, parameters.csv")

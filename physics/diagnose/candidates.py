@@ -42,9 +42,10 @@ A nested effect starts (among its other starts) from the base's optimum with the
 its ``off`` values, and a fit that still ends worse than the base on the time records is
 replaced by that point, the model without it (:func:`no_worse_than_base`).
 The residual (measured minus model, its nuisance terms — offset and linear drift of each
-record, :func:`.records.remove_nuisance` — removed) gives the RMS error and fit %
-at the full rate (the prediction interpolated back) and, on the decimated samples, the
-likelihood with the effective sample size of :mod:`.stats`.
+record, bounded so that they cannot eat physics, :meth:`.records.Record.nuisance` — removed)
+gives the RMS error and fit % at the full rate (the prediction interpolated back) and, on the
+decimated samples, the effective sample size of :mod:`.stats`; the evidence is computed on
+that pooled error (:func:`compare_fits`).
 """
 from __future__ import annotations
 
@@ -66,7 +67,7 @@ from ..model import ActuatorModel, resolve_effects
 from ..timedomain import simulate
 from .. import stats
 from .describing import DescribingFunction, charge_effects
-from .records import NUISANCE_TERMS, Record, nuisance_terms, remove_nuisance, sensor_filter, upsample
+from .records import NUISANCE_TERMS, Record, remove_nuisance, sensor_filter, upsample
 from .specs import (declared_default, default_candidates, effect_params, is_nested, off_values, param_bounds,
                     param_used, role_family, role_param, spec_of, start_points)
 
@@ -268,7 +269,7 @@ class ModelFit:
     score_s: float = 0.0
     error: str | None = None
     df_info: dict | None = None
-    nuisance: list = field(default_factory=list)     # (offset [m], drift [m/s]) per record
+    nuisance: list = field(default_factory=list)     # :class:`.records.Nuisance` per record
     correlation: np.ndarray | None = None            # of the free parameters, in ``values`` order
 
     @property
@@ -439,16 +440,17 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
     num, den, sq, cnt = 0.0, 0.0, 0.0, 0
     mf.nuisance = []
     for r, yh in zip(records, preds):
-        e = remove_nuisance(r.y_d - yh)
+        y = r.ts.deflection
+        yf = upsample(yh, r.q, y.size)
+        nz = r.nuisance(y - yf)          # bounded: the offset and drift cannot eat physics
+        e = nz.remove(r.y_d - yh, r.t_d)
         mf.pred_d.append(yh)
         mf.resid_d.append(e)
         mf.rss.append(float(e @ e))
         mf.n.append(int(e.size))
         mf.taus.append(stats.integrated_time(e))
-        y = r.ts.deflection
-        yf = upsample(yh, r.q, y.size)
-        mf.nuisance.append(nuisance_terms(y - yf, r.ts.time))
-        ef = remove_nuisance(y - yf)
+        mf.nuisance.append(nz)
+        ef = nz.remove(y - yf, r.ts.time)
         mf.rmse_records.append(float(np.sqrt(np.mean(ef ** 2))))
         sq += float(ef @ ef)
         cnt += ef.size
@@ -457,9 +459,9 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
     mf.rmse = math.sqrt(sq / cnt)
     mf.fit_pct = 100.0 * (1.0 - math.sqrt(num / den)) if den > 0 else math.nan
     k = mf.k + (NUISANCE_TERMS * len(records) if n_offsets is None else n_offsets)
-    n_eff = [n / t for n, t in zip(mf.n, mf.taus)]
-    mf.bic = stats.bic(mf.rss, mf.n, n_eff, k)
-    mf.aic = stats.aic(mf.rss, mf.n, n_eff, k)
+    n_eff = sum(n / t for n, t in zip(mf.n, mf.taus))
+    mf.bic = stats.bic([mf.rmse ** 2], [1], [n_eff], k)
+    mf.aic = stats.aic([mf.rmse ** 2], [1], [n_eff], k)
     mf.score_s = time.perf_counter() - t0
     return mf
 
@@ -590,6 +592,10 @@ def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
     if den <= 0 or not math.isfinite(num / den) or num / den <= 0:
         return preds
     a = num / den
+    if gain in names:       # the refined gain stays within its admissible range (a fit on a bound is reported)
+        spec = all_param_specs()[gain]
+        v = float(mf.device.params[gain])
+        a = min(max(a, spec.lo / v), spec.hi / v) if v > 0 else a
     fit = mf.result.fit
     dev = mf.device
     for i, prm in enumerate(mf.result.problem.params):
@@ -641,7 +647,7 @@ def refine_on_time(mf: ModelFit, records: Sequence[Record]) -> bool:
 
     def resid(x):
         m = model_at(x)
-        return np.concatenate([remove_nuisance(r.y_d - predict(m, r)) for r in records]) / scale
+        return np.concatenate([r.detrend_d(r.y_d - predict(m, r)) for r in records]) / scale
 
     x0 = np.clip(problem.to_x(fit.theta), lo + 1e-9 * span, hi - 1e-9 * span)
     p = x0.size
@@ -679,7 +685,7 @@ def no_worse_than_base(mf: ModelFit, base: ModelFit) -> ModelFit:
     with the effect at its off values (the model without it, so the base's scores are exact),
     said in its notes.  A nested effect can thus never make the model worse."""
     eff = mf.spec.added
-    if not mf.ok or eff is None or not is_nested(eff) or sum(mf.rss) <= sum(base.rss):
+    if not mf.ok or eff is None or not is_nested(eff) or mf.rmse <= base.rmse:
         return mf
     off = off_values(eff, base.device)
     if not off:
@@ -713,27 +719,31 @@ class Comparison:
 
 
 def compare_fits(base: ModelFit, cand: ModelFit, nested: bool, taus: Sequence[float] | None = None) -> Comparison:
-    """ΔBIC, ΔAIC and p-value of ``cand`` against ``base``, both with the same effective
-    sample sizes n_r/τ_r: ``taus`` per record (the diagnosis passes those of the residual
+    """ΔBIC, ΔAIC and p-value of ``cand`` against ``base``, computed on what the verdict
+    reports: one Gaussian noise model over all records whose variance is the pooled mean
+    square error (the squared RMS error the report prints), so the evidence and the error can
+    never disagree in sign (the parameter penalty aside).  The effective sample size
+    N_eff = Σ_r n_r/τ_r takes ``taus`` per record (the diagnosis passes those of the residual
     closest to noise, the best-fitting model's, so that every comparison uses one noise
     model), by default those of the candidate's residuals (module doc of :mod:`.stats`)."""
     taus = list(cand.taus if taus is None else taus)
-    n_eff = [n / t for n, t in zip(cand.n, taus)]
+    n_eff = float(sum(n / t for n, t in zip(cand.n, taus)))
     dk = cand.k - base.k
     kb = base.k + NUISANCE_TERMS * len(base.n)
     kc = cand.k + NUISANCE_TERMS * len(cand.n)
-    bb = stats.bic(base.rss, base.n, n_eff, kb)
-    bc = stats.bic(cand.rss, cand.n, n_eff, kc)
-    ab = stats.aic(base.rss, base.n, n_eff, kb)
-    ac = stats.aic(cand.rss, cand.n, n_eff, kc)
+    ms_b, ms_c = [base.rmse ** 2], [cand.rmse ** 2]
+    bb = stats.bic(ms_b, [1], [n_eff], kb)
+    bc = stats.bic(ms_c, [1], [n_eff], kc)
+    ab = stats.aic(ms_b, [1], [n_eff], kb)
+    ac = stats.aic(ms_c, [1], [n_eff], kc)
     if nested and dk > 0:
-        p = stats.lr_pvalue(base.rss, cand.rss, n_eff, dk)
+        p = stats.lr_pvalue(ms_b, ms_c, [n_eff], dk)
         test = f"likelihood ratio, χ²({dk})"
     else:
-        p = stats.vuong_pvalue(base.resid_d, cand.resid_d, taus, dk)
+        p = stats.vuong_pvalue(base.resid_d, cand.resid_d, taus, dk, pooled=True)
         test = "Vuong (non-nested)"
-    tau = float(sum(cand.n) / sum(n_eff))
-    return Comparison(bc - bb, ac - ab, p, test, float(sum(n_eff)), tau, dk)
+    tau = float(sum(cand.n) / n_eff)
+    return Comparison(bc - bb, ac - ab, p, test, n_eff, tau, dk)
 
 
 def effect_values(mf: ModelFit, effect: str) -> dict:

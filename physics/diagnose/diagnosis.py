@@ -3,10 +3,15 @@
 :func:`diagnose` runs its phases in order, each a function here:
 
 1. :func:`read_records` — classification, amplitude and RH levels, decimation, noise floor
-   (:mod:`.records`); frequency-response targets for the fits.
+   (:mod:`.records`); frequency-response targets for the fits.  What the records determine is
+   freed (:func:`_resolve_free`): with records at two or more RH levels, the parameters the
+   model's humidity law declares per RH (as ``identify --per-rh``); a parameter the device
+   holds per RH (an absolute map, as ``identify`` writes it) is fitted per RH.
 2. :func:`fit_base` — the user's model (device + effects) with its free parameters fitted on
    the FRF targets (:func:`physics.identify.fit_lsq`), then simulated on every record with
-   the per-record nuisance terms (offset, linear drift) removed (:func:`.candidates.score`).
+   the per-record nuisance terms (offset, linear drift, bounded: :func:`.records.bounded_nuisance`)
+   removed (:func:`.candidates.score`); the records' slow wander beside the floor
+   (:func:`add_wander`).
 3. Where it fails (:mod:`.residuals`): correlations with 99 % bands, residual FRF with its
    noise floor, errors by band, amplitude, RH and after steps, findings.
 4. :func:`try_candidates` — each effect the model lacks (catalog and user effects) that
@@ -15,10 +20,12 @@
    and a p-value with one effective sample size for every comparison, :mod:`physics.stats`;
    the residual signature, :mod:`.signatures`).  Effects the data cannot reveal are listed
    with the excitation that would.
-5. :func:`select` — forward selection: the step's decision (:func:`.verdict.decide`:
-   evidence, quality flags, weights, the pick or the ambiguity); after a pick the
-   remaining candidates are tried again on top of it while one passes, up to
-   ``max_effects``.
+5. :func:`select` — stepwise selection both ways: the step's decision (:func:`.verdict.decide`:
+   evidence, quality flags, weights, the pick or the ambiguity, the pick's confidence label);
+   after a pick the remaining candidates are tried again on top of it while one passes, up to
+   ``max_effects``; when none passes, an effect of the user's model that the data do not
+   support is removed (:func:`try_removal`) and tried again as a candidate with its own
+   parameters free.
 6. Adequacy of the final model and what remains (:mod:`.adequacy`, :mod:`.verdict`).
 7. :func:`assess_support` — in the final model each of its own effects is switched off and
    refitted; an effect whose removal does not cost ΔBIC ≥ 6 is "not supported by these data".
@@ -41,7 +48,7 @@ from ..effects import EFFECTS, ensure_registered, user_effect_files
 from ..errors import InputError, ModelError, arg
 from ..frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
-from ..identify.parameters import switchable
+from ..identify.parameters import held_per_rh, switchable
 from ..identify.options import FitOptions
 from ..model import ActuatorModel, resolve_effects
 from ..parallel import map_tasks, warm_up
@@ -53,7 +60,7 @@ from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records, 
 from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
-from .specs import declared_default, excitation, spec_of
+from .specs import declared_default, excitation, role_family, spec_of
 from .verdict import ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, nuisance_summary, remaining_of
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
@@ -130,16 +137,27 @@ class SupportResult:
 
 @dataclass
 class Step:
-    """One step of the forward selection: its base, its candidates and its decision."""
+    """One step of the stepwise selection: its base, its candidates and its decision — or,
+    a backward step, the effect of the model removed (``removal``) and the model without it
+    (``removed_fit``)."""
 
     index: int
     base: C.ModelFit
     candidates: list[CandidateResult]
     decision: Decision
+    removal: "SupportResult | None" = None
+    removed_fit: C.ModelFit | None = None
 
     @property
     def ranking(self) -> list[CandidateResult]:
         return sorted([c for c in self.candidates if c.evaluated], key=lambda c: self.decision.evidence[c.effect])
+
+    @property
+    def result(self) -> C.ModelFit:
+        """The model after this step."""
+        if self.removed_fit is not None:
+            return self.removed_fit
+        return self.decision.pick.fit if self.decision.pick is not None else self.base
 
 
 @dataclass
@@ -156,7 +174,7 @@ class Data:
     df_cache: dict = field(default_factory=dict)
     white: float = math.nan           # the records' white noise floor [m] (before any wander)
     white_d: float = math.nan
-    wander: float = 0.0               # slow wander added to it [m] (:func:`add_wander`)
+    wander: float = 0.0               # the records' own slow wander allowed beside it [m] (:func:`add_wander`)
     wander_total: float = 0.0         # the whole slow wander [m], the records' shared part included
     wander_split: object = None       # what the records share of it (:class:`.wander.WanderSplit`)
     wander_beyond: float = 0.0        # floor from sensor metadata: the wander beyond their stated drift [m]
@@ -177,6 +195,7 @@ class Run:
     n_starts: int
     force: bool = False
     max_effects: int = 2
+    backward: bool = True
     resonance: float | None = None
     timings: dict = field(default_factory=dict)
     progress: Callable[[str], None] | None = None
@@ -229,10 +248,20 @@ class DiagnosisResult:
         return [s.decision.pick for s in self.steps if s.decision.pick is not None]
 
     @property
+    def removals(self) -> list["SupportResult"]:
+        return [s.removal for s in self.steps if s.removal is not None]
+
+    @property
     def final(self) -> C.ModelFit:
-        """The final model: the base with every pick of the chain."""
-        p = self.picks
-        return p[-1].fit if p else self.base
+        """The final model: the base with every pick of the chain and without every removal."""
+        return self.steps[-1].result if self.steps else self.base
+
+    @property
+    def draft_base(self) -> C.ModelFit:
+        """Where drafted effects start from: the model after the last removal (the base without
+        the effects the data do not support), else the base."""
+        rem = [s for s in self.steps if s.removed_fit is not None]
+        return rem[-1].removed_fit if rem else self.base
 
     @property
     def best(self) -> CandidateResult | None:
@@ -254,10 +283,13 @@ class DiagnosisResult:
                      "n_samples_analysed": b.n},
             "noise_floor_m": self.noise_floor, "resonance_Hz": self.resonance_hz,
             "verdict": self.verdict.to_dict(),
-            "steps": [{"step": s.index, "base_effects": list(s.base.effects), "base_rmse": s.base.rmse,
+            "steps": [{"step": s.index, "kind": "remove" if s.removal else "add",
+                       "base_effects": list(s.base.effects), "base_rmse": s.base.rmse,
                        "ranking": [c.row(s.base, s.decision.weights.get(c.effect)) for c in s.ranking],
                        "weight_of_base": s.decision.weights.get("base"),
-                       "picked": s.decision.pick.effect if s.decision.pick else None}
+                       "picked": s.decision.pick.effect if s.decision.pick else None,
+                       "removed": s.removal.row() if s.removal else None,
+                       "rmse_after": s.result.rmse}
                       for s in self.steps],
             "ranking": [c.row(b, self.steps[0].decision.weights.get(c.effect)) for c in self.ranking],
             "not_evaluated": [c.row(b) for c in self.steps[0].candidates if not c.evaluated],
@@ -271,7 +303,8 @@ class DiagnosisResult:
             "statistics": {
                 "n_eff": "n / tau_int per record, tau_int from the autocorrelation (Sokal's window) of the residual "
                          "closest to noise (the best-fitting model's); one n_eff for every comparison of a step",
-                "bic": "sum_r n_eff,r ln(RSS_r/n_r) + k ln(sum n_eff) (Schwarz 1978); k = free parameters + "
+                "bic": "N_eff ln(MSE) + k ln(N_eff) (Schwarz 1978), MSE the pooled mean square error over all records "
+                       "(the squared RMS error reported), N_eff = sum_r n_r/tau_r; k = free parameters + "
                        f"{NUISANCE_TERMS} nuisance terms per record (offset, linear drift)",
                 "p_value": "nested: Wilks likelihood ratio on the effective scale vs chi2(dk) (conservative at the "
                            "'off' boundary); otherwise Vuong's test; compare with alpha/m (Bonferroni)",
@@ -306,26 +339,25 @@ def read_records(measurements, options: FitOptions, *, noise_floor: float | None
     return Data(records, targets, trecs, band, noise, noise_d, _noise_source(records), white=noise, white_d=noise_d)
 
 
-def add_wander(data: Data, fits) -> None:
-    """Add to the noise floor the slow wander below the excited band (:func:`.wander.slow_wander`)
-    when the floors were estimated from the records (white part only): a drift beyond the
-    removed linear trend is noise for the adequacy, not physics — but only the part the
-    records do not share (:func:`.wander.shared_wander`): a drift common to the records is
-    deterministic, left to be described (and drafted).  The least such wander any of ``fits``
-    leaves counts (so the floor never grows when a pick is added).  When the floors come from
-    sensor metadata (which state the sensor's drift) the floor stays; the unshared wander
-    beyond the stated drift is kept in ``data.wander_beyond`` for the verdict
+def add_wander(data: Data, base) -> None:
+    """The records' slow wander beside the noise floor — never *in* it.  The floor is the
+    measurement's own (the sensor metadata, or the white level of the deflection spectrum where
+    the response has fallen away: :mod:`.records`), one number in every output.  A sensor's zero
+    also wanders slowly; below the broadband records' excited band, where the input has no power,
+    the base's residual shows it (:func:`.wander.slow_wander`, its lowest lines only: a drift rate
+    fitted to a residual would take the model's slow error too).  Its part that does not repeat
+    from record to record (:func:`.wander.shared_wander`: a drift shared by the records is the
+    setup's, deterministic, left to be described and drafted) is kept in ``data.wander``: when the
+    floor was estimated (the sensor states no drift) a model within the adequacy ratio of the
+    floor *with* that wander is adequate, and the verdict says so with both numbers.  With sensor
+    metadata the wander beyond the stated drift is kept in ``data.wander_beyond`` for the verdict
     (:func:`build_verdict`).  A floor the user gave is taken as the whole noise."""
     if not math.isfinite(data.white) or any(r.noise_source == "given" for r in data.records):
         return
-    ws = []
-    for f in fits:
-        w, split = wander_of(data, f)
-        if split is not None:
-            ws.append((w * math.sqrt(1.0 - split.fraction) if split.testable else w, w, split))
-    if not ws:
+    w, split = wander_of(data, base)
+    if split is None:
         return
-    counted, w, split = min(ws, key=lambda x: x[0])
+    counted = w * math.sqrt(1.0 - split.fraction) if split.testable else w
     data.wander_total, data.wander_split = w, split
     if not data.estimated:
         allowed = math.sqrt(sum(r.ts.n * stated_drift(r.ts) ** 2 for r in data.records) /
@@ -333,26 +365,41 @@ def add_wander(data: Data, fits) -> None:
         data.wander_beyond = math.sqrt(max(counted ** 2 - allowed ** 2, 0.0))
         return
     data.wander = counted
-    data.noise = math.sqrt(data.white ** 2 + counted ** 2)
-    data.noise_d = math.sqrt(data.white_d ** 2 + counted ** 2) if math.isfinite(data.white_d) else data.noise_d
-    data.noise_source = (f"{_noise_source(data.records)}; plus a slow wander of {1e6 * counted:.3g} µm RMS (a drift "
-                         "beyond the linear trend: the residual below the excited band, random-walk spectrum assumed"
-                         + (f"; of {1e6 * w:.3g} µm, {split.text()}" if split.testable and split.fraction > 0 else
-                            f"; {split.text()}") + ")"
-                         if w > 0 else _noise_source(data.records))
 
 
 def wander_of(data: Data, fit) -> tuple[float, object]:
-    """(slow wander [m], what the records share of it) in the residual of ``fit``
-    (:func:`.wander.slow_wander`, :func:`.wander.shared_wander`); (NaN, None) when no record
-    can show it.  Computed once per fit and score (the fit is kept with it, so its id stays its
-    own; a fit refined in place scores anew)."""
+    """(slow wander [m] in the residual of ``fit`` below the excited band, what the records share
+    of it) (:func:`.wander.slow_wander` without the fitted drift rates,
+    :func:`.wander.shared_wander`); (NaN, None) when no record can show it.  Computed once per fit
+    and score (the fit is kept with it, so its id stays its own; a fit refined in place scores
+    anew)."""
     key = (id(fit), fit.rmse)
     if key not in data.wanders:
-        w = slow_wander(data.records, fit.resid_d, fit.nuisance)
+        w = slow_wander(data.records, fit.resid_d, fit.nuisance, trend=False)
         split = shared_wander(data.records, fit.resid_d, fit.nuisance, w) if math.isfinite(w) else None
         data.wanders[key] = (fit, w, split)
     return data.wanders[key][1:]
+
+
+def wander_for(data: Data, fit) -> float:
+    """:func:`allowed_wander`, unless ``fit`` is within the floor only thanks to it and what it
+    leaves follows the input (:func:`.adequacy.assess`: an input-driven residual form describes
+    it) — then 0: a creep or a back-relaxation below the excited band is the model's error, not
+    the records' wander."""
+    w = allowed_wander(data)
+    if w <= 0 or not math.isfinite(data.noise) or fit.rmse <= ADEQUATE_RATIO * data.noise:
+        return w
+    return assess("", fit, data.records, data.noise, describe=False, wander=w).wander
+
+
+def allowed_wander(data: Data) -> float:
+    """The records' slow wander [m] a model may leave beside the noise floor and still be
+    adequate: the part that does not repeat from record to record, when the floor was estimated
+    and the records could tell (testable, not inconclusive); else 0 (:func:`add_wander`)."""
+    split = data.wander_split
+    if not data.estimated or split is None or not split.testable or split.inconclusive:
+        return 0.0
+    return data.wander
 
 
 def features_of(ra: ResidualAnalysis, data: Data, fit, run: Run) -> dict:
@@ -464,12 +511,12 @@ def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Data, f
     of the residual closest to noise (the best-fitting model's), so that n_eff does not change
     from candidate to candidate.  Fills comparisons and signatures; returns τ per record."""
     fits = [base] + [c.fit for c in results if c.evaluated]
-    ref = min(fits, key=lambda f: sum(f.rss))
+    ref = min(fits, key=lambda f: f.rmse)
     taus_ref = list(ref.taus)
-    n_eff_ref = [n / t for n, t in zip(base.n, taus_ref)]
+    n_eff_ref = sum(n / t for n, t in zip(base.n, taus_ref))
     k_base = base.k + NUISANCE_TERMS * len(data.records)
-    base.bic = stats.bic(base.rss, base.n, n_eff_ref, k_base)
-    base.aic = stats.aic(base.rss, base.n, n_eff_ref, k_base)
+    base.bic = stats.bic([base.rmse ** 2], [1], [n_eff_ref], k_base)
+    base.aic = stats.aic([base.rmse ** 2], [1], [n_eff_ref], k_base)
     sigs = signatures(feats, [c.effect for c in results])
     for c in results:
         if c.evaluated:
@@ -490,9 +537,19 @@ def _nested(c: CandidateResult) -> bool:
 
 
 def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> list[Step]:
-    """Phase 5: forward selection (module doc).  Returns the steps (the first always)."""
+    """Phase 5: stepwise selection, both ways.  Forward: the candidates on top of the current
+    model, the step's decision (:func:`.verdict.decide`); after a pick the remaining candidates
+    are tried again on top of it, up to ``max_effects`` picks.  Backward, when no candidate
+    passes (``run.backward``): each effect of the user's model is switched off and the model
+    refitted (:func:`try_removal`); the one whose removal the data favour most (the model without
+    it has the lower BIC) is removed, and it becomes a candidate again with its own parameters
+    free (the device's values of an effect are a start, not the strip's), then forward again.
+    Each effect is removed at most once.  Returns the steps (the first always)."""
     steps: list[Step] = []
     step_base, left, step_feats = base, list(cand_ids), feats
+    removed: set = set()
+    own = [e for e in switchable(base.effects)]
+    n_added = 0
     while True:
         k = len(steps) + 1
         t0 = time.perf_counter()
@@ -500,7 +557,8 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
         decision = decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
-                          C.prediction_distance, after_pick=k > 1, structure=bool(shared_structure(data, step_base)))
+                          C.prediction_distance, after_pick=n_added > 0,
+                          structure=bool(shared_structure(data, step_base)), wander=wander_for(data, step_base))
         if decision.pick is not None and C.refine_on_time(decision.pick.fit, data.records):
             # the pick refitted on the time records (its FRF optimum is not theirs); the decision stands
             decision.pick.comparison = C.compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
@@ -510,46 +568,89 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
         steps.append(Step(k, step_base, results, decision))
         run.timings[f"step {k}"] = time.perf_counter() - t0
         pick = decision.pick
-        if pick is None or k >= run.max_effects:
+        if pick is not None:
+            n_added += 1
+            left = [e for e in left if e != pick.effect and e not in pick.fit.effects]
+            ad = assess("", pick.fit, data.records, data.noise, describe=False, wander=allowed_wander(data))
+            if n_added >= run.max_effects or not left or ad.adequate:
+                break
+            step_base = pick.fit
+            step_feats = _features_after(data, pick.fit, f"+{pick.effect}", run)
+            run.log(f"step {k + 1}: the remaining candidates on top of {pick.effect}")
+            continue
+        within = math.isfinite(data.noise) and step_base.rmse <= ADEQUATE_RATIO * math.hypot(
+            data.noise, wander_for(data, step_base))
+        if not run.backward or within:
             break
-        left = [e for e in left if e != pick.effect and e not in pick.fit.effects]
-        ad = assess("", pick.fit, data.records, data.noise, describe=False)
-        if not left or ad.adequate:
+        t0 = time.perf_counter()
+        got = try_removal(step_base, [e for e in own if e in step_base.effects and e not in removed], data, run)
+        run.timings[f"step {k + 1}: removal"] = time.perf_counter() - t0
+        if got is None:
             break
-        step_base = pick.fit
-        ra = analyse(f"+{pick.effect}", data.records, pick.fit.resid_d, pick.fit.pred_d,
-                     resonance_hz=_resonance(pick.fit, data.band, data.records))
-        step_feats = features_of(ra, data, pick.fit, run)
-        run.log(f"step {k + 1}: the remaining candidates on top of {pick.effect}")
+        sup, fit = got
+        removed.add(sup.effect)
+        steps.append(Step(k + 1, step_base, [], Decision(None, {}, {}, reason=sup.explanation), sup, fit))
+        run.log(f"step {k + 1}: {sup.effect} removed ({sup.explanation})")
+        step_base = fit
+        if spec_of(sup.effect) and sup.effect not in left:
+            left.append(sup.effect)
+        step_feats = _features_after(data, fit, f"-{sup.effect}", run)
     return steps
+
+
+def _features_after(data: Data, fit: C.ModelFit, label: str, run: Run) -> dict:
+    ra = analyse(label, data.records, fit.resid_d, fit.pred_d, resonance_hz=_resonance(fit, data.band, data.records))
+    return features_of(ra, data, fit, run)
+
+
+def try_removal(current: C.ModelFit, effects, data: Data, run: Run) -> "tuple[SupportResult, C.ModelFit] | None":
+    """The backward step: each of ``effects`` switched off in ``current`` and the model refitted
+    (:func:`_support_of`); (its support, the fit without it) for the effect whose removal the
+    data favour most — the model without it has the lower BIC — or None."""
+    best = None
+    for eff in effects:
+        sup, mf = _support_of(eff, current, data, run)
+        if sup.status != "assessed" or sup.delta_bic_if_removed is None or sup.delta_bic_if_removed >= 0:
+            continue
+        if best is None or sup.delta_bic_if_removed < best[0].delta_bic_if_removed:
+            best = (sup, mf)
+    return best
 
 
 def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: int) -> Verdict:
     """Phase 6: the chain of picks, the adequacy of the final model and what remains."""
-    picks = []
+    picks, removed = [], []
     for s in steps:
         p = s.decision.pick
+        if s.removal is not None:
+            removed.append({"step": s.index, "effect": s.removal.effect, "rmse_before_m": s.base.rmse,
+                            "rmse_after_m": s.removed_fit.rmse, "delta_bic": s.removal.delta_bic_if_removed,
+                            "reason": s.removal.explanation})
         if p is None:
-            break
+            continue
         own = C.effect_values(p.fit, p.effect)
         picks.append(Pick(s.index, p.effect, s.decision.weight, s.base.rmse, p.fit.rmse, p.comparison.delta_bic,
                           p.comparison.p_value,
                           {n: {"value": v, "std_error": p.fit.std_errors.get(n)} for n, v in own.items()},
-                          list(p.quality), s.decision.reason))
-    final = picks and steps[len(picks) - 1].decision.pick.fit or base
-    label = "base" + "".join(f" + {p.effect}" for p in picks)
-    ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final))
+                          list(p.quality), s.decision.reason, s.decision.confidence))
+    final = steps[-1].result
+    label = "base" + "".join(f" − {r['effect']}" for r in removed) + "".join(f" + {p.effect}" for p in picks)
+    allowed = allowed_wander(data)
+    ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final), wander=allowed)
     first = steps[0].decision
-    within = (math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * data.noise
-              and not (shared_structure(data, base) if final is not base else ad.structure))
+    tol = math.hypot(data.noise, wander_for(data, base))
+    structured = bool(shared_structure(data, base) if final is not base else ad.structure)
+    within = math.isfinite(data.noise) and base.rmse <= ADEQUATE_RATIO * tol and not structured
     split = data.wander_split
-    unattributed = (within and data.estimated and split is not None and (not split.testable or split.inconclusive)
-                    and base.rmse > ADEQUATE_RATIO * data.white)
+    unattributed = (not within and not structured and data.estimated and split is not None
+                    and (not split.testable or split.inconclusive)
+                    and base.rmse <= ADEQUATE_RATIO * math.hypot(data.noise, data.wander)
+                    and bool(assess("", base, data.records, data.noise, describe=False, wander=data.wander).adequate))
     if unattributed:        # within the noise only by counting a wander the records cannot attribute
         status = UNATTRIBUTED
     elif within:
         status = "nothing to explain"
-    elif picks:
+    elif picks or (removed and ad.adequate):
         status = {True: "explained", False: "partly explained", None: "found (adequacy not assessed)"}[ad.adequate]
     elif first.ambiguous:
         status = "ambiguous"
@@ -557,15 +658,17 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
         status = "not explained by the catalog"
     kind, forms = remaining_of(ad)
     stopped = ""
-    if picks and len(picks) < len(steps):
-        stopped = f"no further candidate passes on top of {picks[-1].effect} ({steps[len(picks)].decision.reason})"
+    last = steps[-1]
+    if (picks or removed) and last.decision.pick is None and last.removal is None and last is not steps[0]:
+        stopped = f"no further candidate passes on top of [{', '.join(last.base.effects)}] ({last.decision.reason})"
     elif picks and len(picks) == max_effects and ad.adequate is False:
         stopped = f"the chain reached max_effects = {max_effects}"
     reason = first.reason if not picks else picks[0].reason
     noise, source = data.noise, data.noise_source
     if unattributed:
-        reason = (f"the base leaves {1e6 * base.rmse:.4g} µm, within {ADEQUATE_RATIO}× the noise floor only because "
-                  f"the floor counts a slow wander of {1e6 * data.wander:.3g} µm, and {split.why or split.text()}; if "
+        reason = (f"the base leaves {1e6 * base.rmse:.4g} µm = {base.rmse / data.noise:.2f}× the noise floor of "
+                  f"{1e6 * data.noise:.3g} µm; it would be within {ADEQUATE_RATIO}× with the records' slow wander of "
+                  f"{1e6 * data.wander:.3g} µm counted as the sensor's, but {split.why or split.text()}; if "
                   "the sensor does not drift, state its noise floor (eap diagnose --noise-floor-um, noise_floor= in "
                   "Python) and what remains is described and drafted, or record the test again (more records sharpen "
                   "the test)")
@@ -573,83 +676,104 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
             and base.rmse <= ADEQUATE_RATIO * math.hypot(data.noise, data.wander_beyond):
         # nothing the catalog or a form explains, and the base is within the noise once the records' own
         # wander beyond the sensor's stated drift is counted: a drift of the setup that does not repeat
-        status, noise = UNATTRIBUTED, math.hypot(data.noise, data.wander_beyond)
+        status = UNATTRIBUTED
         w = 1e6 * data.wander_beyond
         how = (f"it does not repeat from record to record (shared-drift test p = {split.p_value:.2g})"
                if split.testable else split.why)
-        source = (f"{data.noise_source}; plus the records' slow wander of {w:.3g} µm RMS beyond the sensor's stated "
-                  "drift (the residual below the excited band, random-walk spectrum assumed)")
         reason = (f"the base leaves {1e6 * base.rmse:.4g} µm = {base.rmse / data.noise:.2f}× the noise floor the sensor "
                   f"metadata state ({1e6 * data.noise:.3g} µm), but the records wander slowly by {w:.3g} µm RMS beyond "
                   f"their linear trends and the sensor's stated drift, independently of the input (below the excited "
-                  f"band) — {how}; counted as noise, that wander makes the floor {1e6 * noise:.3g} µm and the base is "
-                  f"within {ADEQUATE_RATIO}× it. A drift that differs from record to record is not physics and no "
-                  "effect can model it: if the setup should not drift (temperature, the clamp settling), find what "
-                  "does and record the test again")
-        ad = assess(label, final, data.records, noise, describe=False)
+                  f"band) — {how}; with that wander the base is within {ADEQUATE_RATIO}× "
+                  f"{1e6 * math.hypot(data.noise, data.wander_beyond):.3g} µm. A drift that differs from record to "
+                  "record is not physics and no effect can model it: if the setup should not drift (temperature, the "
+                  "clamp settling), find what does and record the test again")
+        ad = assess(label, final, data.records, noise, describe=False, wander=data.wander_beyond)
         kind, forms = remaining_of(ad)
     return Verdict(status, picks, first.weights, ad, base.rmse, noise, source, reason,
                    list(first.ambiguous), first.separating, forms, kind, stopped, first.alpha,
-                   nuisance_summary(final, data.records))
+                   nuisance_summary(final, data.records), removed)
 
 
 def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, run: Run) -> list[SupportResult]:
     """Phase 7: switch each effect of the final model off (but the double layer and the picks)
     and refit: does the data support it?"""
     out = []
-    base_ids = final.effects
-    for eff in [e for e in base_ids if e not in picked]:
-        if eff not in switchable([eff]):
-            continue
-        ok, why = revealable(eff, data.records, run.resonance)
-        if not ok:
-            out.append(SupportResult(eff, "not_assessable",
-                                     explanation=f"cannot be assessed: the data cannot reveal {eff} ({why})"))
-            continue
-        try:
-            spec = C.removal_spec(eff, base_ids, final.spec.free, final.spec.per_rh, final.device, data.band)
-        except (InputError, KeyError) as exc:
-            out.append(SupportResult(eff, "failed", explanation=str(exc)))
-            continue
-        if not spec.free and not spec.per_rh:
-            out.append(SupportResult(eff, "failed", explanation="no free parameter left without it"))
-            continue
-        mf = C.fit_model(spec, final.device, data.targets, data.target_records, n_starts=run.n_starts,
-                         seed=run.options.seed, n_modes=run.options.n_modes, df_cache=data.df_cache)
-        if mf.ok:
-            C.score(mf, data.records)
-        if not mf.ok:
-            out.append(SupportResult(eff, "failed", explanation=f"the model without {eff} failed: {mf.error}"))
-            continue
-        cmp = C.compare_fits(mf, final, C.is_nested(eff))
-        supported = cmp.delta_bic <= -SUPPORT_BIC
-        if supported:
-            txt = (f"supported: removing {eff} raises the RMS error from {1e6 * final.rmse:.4g} to "
-                   f"{1e6 * mf.rmse:.4g} µm (ΔBIC {-cmp.delta_bic:+.4g} against removal)")
-        elif cmp.delta_bic <= -2:
-            txt = (f"weakly supported: without {eff} the RMS error is {1e6 * mf.rmse:.4g} µm instead of "
-                   f"{1e6 * final.rmse:.4g} µm (ΔBIC {-cmp.delta_bic:+.4g}); the data barely need it")
-        else:
-            txt = (f"not supported by these data: without {eff} the model fits as well ({1e6 * mf.rmse:.4g} vs "
-                   f"{1e6 * final.rmse:.4g} µm RMS, ΔBIC {-cmp.delta_bic:+.4g} for removing it)")
-        out.append(SupportResult(eff, "assessed", supported, -cmp.delta_bic, cmp.p_value, mf.rmse, txt))
-        run.log(f"  -{eff:22s} RMS {1e6 * mf.rmse:9.4g} µm  {'supported' if supported else 'not supported'}")
+    for eff in [e for e in switchable(final.effects) if e not in picked]:
+        sup, mf = _support_of(eff, final, data, run)
+        out.append(sup)
+        if mf is not None:
+            run.log(f"  -{eff:22s} RMS {1e6 * mf.rmse:9.4g} µm  {'supported' if sup.supported else 'not supported'}")
     return out
+
+
+def _support_of(eff: str, final: C.ModelFit, data: Data, run: Run) -> "tuple[SupportResult, C.ModelFit | None]":
+    """``eff`` switched off in ``final`` and the model refitted: (its support, the fit without it)."""
+    ok, why = revealable(eff, data.records, run.resonance)
+    if not ok:
+        return SupportResult(eff, "not_assessable",
+                             explanation=f"cannot be assessed: the data cannot reveal {eff} ({why})"), None
+    try:
+        spec = C.removal_spec(eff, final.effects, final.spec.free, final.spec.per_rh, final.device, data.band)
+    except (InputError, KeyError) as exc:
+        return SupportResult(eff, "failed", explanation=str(exc)), None
+    if not spec.free and not spec.per_rh:
+        return SupportResult(eff, "failed", explanation="no free parameter left without it"), None
+    mf = C.fit_model(spec, final.device, data.targets, data.target_records, n_starts=run.n_starts,
+                     seed=run.options.seed, n_modes=run.options.n_modes, df_cache=data.df_cache)
+    if mf.ok:
+        C.score(mf, data.records)
+    if not mf.ok:
+        return SupportResult(eff, "failed", explanation=f"the model without {eff} failed: {mf.error}"), None
+    cmp = C.compare_fits(mf, final, C.is_nested(eff))
+    supported = cmp.delta_bic <= -SUPPORT_BIC
+    if supported:
+        txt = (f"supported: removing {eff} raises the RMS error from {1e6 * final.rmse:.4g} to "
+               f"{1e6 * mf.rmse:.4g} µm (ΔBIC {-cmp.delta_bic:+.4g} against removal)")
+    elif cmp.delta_bic <= -2:
+        txt = (f"weakly supported: without {eff} the RMS error is {1e6 * mf.rmse:.4g} µm instead of "
+               f"{1e6 * final.rmse:.4g} µm (ΔBIC {-cmp.delta_bic:+.4g}); the data barely need it")
+    elif mf.rmse < final.rmse:
+        txt = (f"not supported by these data: without {eff} the model fits better ({1e6 * mf.rmse:.4g} vs "
+               f"{1e6 * final.rmse:.4g} µm RMS, ΔBIC {-cmp.delta_bic:+.4g} for removing it)")
+    else:
+        txt = (f"not supported by these data: without {eff} the model fits as well ({1e6 * mf.rmse:.4g} vs "
+               f"{1e6 * final.rmse:.4g} µm RMS, ΔBIC {-cmp.delta_bic:+.4g} for removing it)")
+    return SupportResult(eff, "assessed", supported, -cmp.delta_bic, cmp.p_value, mf.rmse, txt), mf
 
 
 # ============================================================================ the driver
 
 
-def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list, list, list]:
+def _declared_per_rh(base_ids) -> list[str]:
+    """Parameters an effect of the model declares fittable once per RH level (its spec's ``per_rh``)."""
+    out = []
+    for e in base_ids:
+        out += [n for n in spec_of(e).get("per_rh", ()) if n not in out]
+    return out
+
+
+def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list, list | None, list]:
+    """The free and per-RH parameter names and the candidates, checked.  ``identify``'s
+    vocabulary: a per-RH name is any parameter the model uses or one an effect of the model
+    declares per RH (a Table V humidity map of ``Y`` scales whichever modulus is active).
+    Per RH ``None``: "auto" (:func:`_resolve_free`)."""
     free_l = parse_names(free) if free not in (None, "") else C.default_free(base_ids)
-    per_rh_l = parse_names(per_rh, arg("per_rh"))
+    auto = per_rh in (None, "", (), [], "auto")
+    per_rh_l = [] if auto or per_rh == "none" else parse_names(per_rh, arg("per_rh"))
     specs = all_param_specs()
-    for name in free_l + per_rh_l:
+    declared = _declared_per_rh(base_ids)
+    for name, what in [(n, "free") for n in free_l] + [(n, "per_rh") for n in per_rh_l]:
         if name not in specs:
-            raise InputError(f"{arg('free')}: unknown parameter {name!r}")
-        if not C.param_used(name, base_ids):
-            raise InputError(f"{arg('free')}: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
-                             f"free parameters of this model by default: {', '.join(C.default_free(base_ids))}")
+            raise InputError(f"{arg(what)}: unknown parameter {name!r}")
+        if not C.param_used(name, base_ids) and not (what == "per_rh" and name in declared):
+            raise InputError(f"{arg(what)}: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
+                             f"free parameters of this model by default: {', '.join(C.default_free(base_ids))}"
+                             + (f"; per RH level: {', '.join(declared)}" if declared else ""))
+    both = sorted(set(free_l) & set(per_rh_l))
+    if both and free not in (None, ""):
+        raise InputError(f"{', '.join(both)}: a parameter is either shared ({arg('free')}) or per RH "
+                         f"({arg('per_rh')}), not both")
+    free_l = [n for n in free_l if n not in per_rh_l]
     if candidates in (None, "", "default"):
         cand_ids = [e for e in C.default_candidates() if e not in base_ids]
     else:
@@ -661,13 +785,43 @@ def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list,
         already = [e for e in cand_ids if e in base_ids]
         if already:
             raise InputError(f"{arg('candidates')}: {', '.join(already)} already in the model ({arg('effects')})")
-    return free_l, per_rh_l, cand_ids
+    return free_l, None if auto else per_rh_l, cand_ids
+
+
+def _resolve_free(dev: Device, base_ids, free_l: list, per_rh_l: list | None, records,
+                  free_given: bool) -> tuple[Device, list, list, list[str]]:
+    """(device, free, per-RH, notes): what the records can determine.
+
+    * A parameter the device holds per RH (an absolute humidity map, as ``eap identify
+      --per-rh`` writes) has no shared value to fit: with records at two or more RH levels it
+      is fitted per RH level, else its map's value at the records' RH becomes its value.
+    * Per RH "auto": with records at two or more RH levels and an effect of the model that
+      declares per-RH parameters (a humidity law), those are fitted once per level (Table V
+      style) — the device's humidity law is a start, not the strip's — and the parameters whose
+      role they take (the coupling gain, the stiffness) leave the shared ones."""
+    from .records import rh_levels
+    levels = rh_levels(records)
+    multi = len(levels) >= 2 and ActuatorModel(dev, base_ids).needs_rh
+    dev, free_l, per, notes = held_per_rh(dev, free_l, per_rh_l or [], levels if multi else levels[:1],
+                                          records[0].rh_measured)
+    if per_rh_l is None and multi and not free_given:
+        declared = [n for n in _declared_per_rh(base_ids) if n not in per]
+        if declared:
+            per += declared
+            for role in (C.ROLE_GAIN, C.ROLE_STIFF):
+                if any(n in role_family(role) for n in per):
+                    free_l = [n for n in free_l if n not in role_family(role)]
+            notes.append(f"records at {len(levels)} RH levels ({', '.join(f'{x:g}' for x in levels)} %): "
+                         f"{', '.join(declared)} fitted once per RH level (the device's humidity law is a start, "
+                         "not this strip's; --per-rh none keeps it)")
+    return dev, free_l, per, notes
 
 
 @single_threaded
 def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] | str | None = None, *,
              options: FitOptions | None = None, candidates: Sequence[str] | str | None = None, force: bool = False,
-             check_support: bool = True, max_effects: int = MAX_EFFECTS, noise_floor: float | None = None,
+             check_support: bool = True, max_effects: int = MAX_EFFECTS, backward: bool = True,
+             noise_floor: float | None = None,
              fs_max: float | None = None, progress: Callable[[str], None] | None = None,
              **shared) -> DiagnosisResult:
     """Diagnose ``device`` with ``effects`` against ``measurements`` (paths or
@@ -684,7 +838,8 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     frequency that matters); ``progress``: a callback for one-line progress messages."""
     t_all = time.perf_counter()
     opts = FitOptions.merged(options, **({"free": free} if free not in (None, "") else {}), **shared)
-    run = Run(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects), progress=progress)
+    run = Run(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects), bool(backward),
+              progress=progress)
     if run.n_starts < 1:
         raise InputError(f"{arg('n_starts')} must be at least 1")
     if run.max_effects < 1:
@@ -694,20 +849,23 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     base_ids = resolve_effects(effects, dev)
     free_l, per_rh_l, cand_ids = _check_names(dev, base_ids, opts.free, opts.per_rh, candidates)
     data = _timed(run, "records", read_records, measurements, opts, noise_floor=noise_floor, fs_max=fs_max)
+    dev, free_l, per_rh_l, notes = _resolve_free(dev, base_ids, free_l, per_rh_l, data.records,
+                                                 opts.free not in (None, "", ()))
+    for n in notes:
+        run.log(n)
     run.log(f"{len(data.records)} record(s), {sum(t.freq.size for t in data.targets)} FRF lines over "
             f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
     base = _timed(run, "base", fit_base, data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
     run.log(f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
-    add_wander(data, [base])
+    add_wander(data, base)
     run.resonance = _resonance(base, data.band, data.records)
     ra_base = _timed(run, "residual_analysis", analyse, "base", data.records, base.resid_d, base.pred_d,
                      resonance_hz=run.resonance)
     feats = features_of(ra_base, data, base, run)
     steps = select(data, base, cand_ids, feats, run)
     picks = [s.decision.pick for s in steps if s.decision.pick is not None]
-    add_wander(data, [base] + [p.fit for p in picks])
     verdict = build_verdict(data, base, steps, run.max_effects)
-    final = picks[-1].fit if picks else base
+    final = steps[-1].result
     support = _timed(run, "support", assess_support, final, [p.effect for p in picks], data, run) \
         if check_support else []
     shown = picks[-1] if picks else (steps[0].ranking[0] if steps[0].ranking else None)
@@ -716,9 +874,11 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
         shown.fit.pred_d, resonance_hz=_resonance(shown.fit, data.band, data.records))
     run.timings["total"] = time.perf_counter() - t_all
     settings = {"effects": list(base_ids), "free": base.spec.free, "per_rh": base.spec.per_rh,
-                "candidates": cand_ids, "force": force, "max_effects": run.max_effects, "n_starts": run.n_starts,
+                "candidates": cand_ids, "force": force, "max_effects": run.max_effects, "backward": run.backward,
+                "n_starts": run.n_starts, "notes": notes,
                 "options": opts.describe(), "noise_floor_given_m": noise_floor, "fs_max_Hz": fs_max,
-                "noise": {"white_m": data.white, "wander_m": data.wander, "wander_total_m": data.wander_total,
+                "noise": {"white_m": data.white, "wander_allowed_m": allowed_wander(data),
+                          "wander_unshared_m": data.wander, "wander_total_m": data.wander_total,
                           "wander_shared": None if data.wander_split is None or not data.estimated
                           else data.wander_split.text(),
                           "wander_beyond_stated_drift_m": data.wander_beyond,

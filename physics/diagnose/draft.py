@@ -47,6 +47,7 @@ class DraftOutcome:
     chain: list = field(default_factory=list)     # (effect id, RMS after [m]) per step from the base
     notes: list = field(default_factory=list)
     steps: list = field(default_factory=list)     # (effects fitted on, DiagnosisResult) per round
+    final: object = None                           # the model fitted with every kept effect (a ModelFit)
 
     @property
     def rmse_after(self) -> float:
@@ -75,7 +76,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     import tempfile
 
     from .. import effects as E
-    from .candidates import effect_values
+    from .candidates import effect_values, map_free
     fit = res.final
     ad = res.adequacy
     if res.verdict.status == "nothing to explain" or (ad is not None and ad.adequate and not res.picks):
@@ -85,9 +86,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     outcome = DraftOutcome([], [], fit.rmse)
     if not items:
         return outcome
-    base = res.base
+    base = getattr(res, "draft_base", res.base)       # the base without the effects the data do not support
     on_top, free, device = list(base.effects), list(base.spec.free), base.device
-    catalog = [p.effect for p in res.picks]
+    catalog = [p.effect for p in res.picks if p.effect not in on_top]
     with tempfile.TemporaryDirectory(prefix="eap-drafts-") as tmp:
         ids = []
         for d in items:
@@ -140,8 +141,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
                     pool.remove(key)
                 outcome.chain.append((eid, c.fit.rmse))
                 on_top.append(eid)
-                free += [n for n in values if n not in free]
+                free = map_free(free + [n for n in values if n not in free and "@" not in n], on_top, on_top)
                 device = c.fit.device
+                outcome.final = c.fit
             else:
                 outcome.rejected += [(d, "not tried: the forward selection stopped") for d in pool]
         finally:

@@ -15,12 +15,21 @@ Each time-series record is
   (a step excites the resonance whatever its "band"; scipy's polyphase FIR with zero
   phase, applied to the voltage and the deflection alike, so a linear model driven by the
   decimated voltage is compared with the equally filtered measurement);
-* given its **noise floor** [m]: the RMS of what a perfect model would leave — the
-  sensor's white noise and quantisation and the part of its drift that the nuisance
-  terms (per-record offset and linear drift, :func:`remove_nuisance`) do not absorb —
-  from the record's sensor metadata (written by :class:`physics.sensor.SensorModel`) or,
-  failing that, estimated from the deflection spectrum where the response has fallen
-  away (:func:`deflection_spectrum`: the white part only, and the source says so).
+* given its **noise floor** [m], from the measurement alone, never from a model's misfit:
+  the RMS of what a perfect model would leave — the sensor's white noise and quantisation and
+  the part of its drift that the nuisance terms do not absorb — from the record's sensor
+  metadata (written by :class:`physics.sensor.SensorModel`) or, failing that, estimated from
+  the deflection spectrum where the response has fallen away (:func:`deflection_spectrum`:
+  the white part only, and the source says so);
+* given its **nuisance terms** (:meth:`Record.nuisance`): the least-squares offset and linear
+  drift of a residual, bounded by what a sensor's zero does — the drift's rise over the record
+  by :data:`STATED_DRIFT_FACTOR` × the drift the sensor states, or :data:`DRIFT_SHARE` of the
+  signal's peak-to-peak; the offset, when the record has a rest before the drive, within
+  :data:`OFFSET_SHARE` of the peak-to-peak of the level at rest — so that a slow
+  back-relaxation or a wrong static gain stays in the error, where it is evidence;
+* when it is **periodic** (a multisine of two or more periods, recorded once settled), entered
+  in its steady state: the model is driven through the record's own periods first
+  (:func:`periodic_lead`).
 
 Frequency-response targets for the fits come from the broadband records through
 :func:`physics.identify.build_targets` (H1, thinned to log-spaced lines) and from tone
@@ -78,6 +87,10 @@ class Record:
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))   # step indices at fs_d
     kind_how: str = ""             # how the excitation kind was decided
     rh_measured: float = math.nan  # the record's own (median) RH [%], what a model is evaluated at
+    signal_range: float = math.nan  # robust peak-to-peak of the measured deflection [m] (the nuisance bounds)
+    drift_bound: float = math.inf   # largest drift over the record a sensor's zero may take [m] (:meth:`nuisance`)
+    offset_bound: float = math.inf  # largest distance of the offset from the level at the start [m]
+    start_window: int = 1           # samples (full rate) whose residual gives the level at the start
 
     @property
     def fs(self) -> float:
@@ -111,15 +124,36 @@ class Record:
             return math.sqrt(white / self.q + WALK_AFTER_TREND * meta["deflection_drift"] ** 2)
         return self.noise_floor / math.sqrt(self.q)
 
+    def nuisance(self, e: np.ndarray, t: np.ndarray | None = None) -> "Nuisance":
+        """The record's nuisance terms in the residual ``e`` (full rate, ``t`` [s] default its
+        time axis): the least-squares offset and linear drift — a laser's zero is arbitrary and
+        drifts slowly; neither is physics — *within bounds that keep them from eating physics*
+        (:func:`bounded_nuisance`)."""
+        t = self.ts.time if t is None else t
+        return bounded_nuisance(e, t, self.drift_bound, self.offset_bound, self.start_window)
+
+    def detrend_d(self, e_d: np.ndarray) -> np.ndarray:
+        """A decimated residual with the record's bounded nuisance terms removed (:meth:`nuisance`)."""
+        t = self.t_d
+        nz = bounded_nuisance(e_d, t, self.drift_bound, self.offset_bound, max(1, self.start_window // self.q))
+        return nz.remove(e_d, t)
+
+    @property
+    def t_d(self) -> np.ndarray:
+        """Time [s] of the decimated samples over the record."""
+        return self.ts.time[0] + np.arange(self.y_d.size) / self.fs_d
+
     def describe(self) -> dict:
         return {"source": self.source, "kind": self.kind, "samples": self.ts.n, "fs_Hz": self.fs,
                 "duration_s": self.ts.duration, "amplitude_V": self.amplitude,
                 "amplitude_level_V": self.amplitude_level, "rh_pct": self.rh, "rh_measured_pct": self.rh_measured,
                 "band_Hz": list(self.band), "tone_Hz": self.tone_hz, "decimation": self.q,
                 "fs_analysis_Hz": self.fs_d, "sensor_bandwidth_Hz": self.sensor_bandwidth,
-                "noise_floor_m": self.noise_floor, "noise_floor_source": self.noise_source,
+                "white_noise_m": self.noise_floor, "white_noise_source": self.noise_source,
                 "excitation_from": self.kind_how,
-                "steps": int(self.steps.size)}
+                "steps": int(self.steps.size), "signal_range_m": self.signal_range,
+                "nuisance_bounds": {"drift_over_record_m": self.drift_bound, "offset_from_start_m": self.offset_bound,
+                                    "start_window_s": self.start_window / self.fs}}
 
 
 def classify(ts: TimeSeries) -> tuple[str, tuple[float, float], float | None, str]:
@@ -164,6 +198,42 @@ def find_steps(v: np.ndarray, fs: float) -> np.ndarray:
     return idx
 
 
+#: A periodic record needs at least this many periods for the model to be run into its steady state.
+MIN_PERIODS = 2
+#: The model is driven through the record's periods for up to this long [s] (at least one period)
+#: before it starts: slow dynamics (creep, back-diffusion, τ of tens of seconds) settle too.
+LEAD_S = 60.0
+
+
+def periodic_lead(ts: TimeSeries, how: str, q: int) -> int:
+    """Samples (full rate, a multiple of ``q``) of the periods that precede a periodic record
+    of at least :data:`MIN_PERIODS` periods — a multisine is recorded once its response has
+    settled, so the model is driven through the record's own periods (whole ones, up to
+    :data:`LEAD_S`) before it starts: its periodic steady state, not a start at rest; 0 for
+    other records.  The period comes
+    from the metadata (``period_s``, ``periods``) or the voltage (:func:`detect_excitation`)."""
+    sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
+    period = None
+    if isinstance(sig.get("period_s"), (int, float)) and float(sig.get("periods", 1) or 1) >= MIN_PERIODS:
+        period = float(sig["period_s"])
+    elif how.startswith("from the voltage"):
+        try:
+            ex = detect_excitation(ts.voltage, ts.fs)
+        except InputError:
+            ex = None
+        period = ex.period_s if ex is not None and ex.kind == "periodic" else None
+        if period is not None and ts.duration < MIN_PERIODS * period * (1 - 1e-6):
+            period = None
+    if not period or period <= 0:
+        return 0
+    p = int(round(period * ts.fs))
+    p -= p % q
+    if not 0 < p <= ts.n // MIN_PERIODS:
+        return 0
+    k = max(1, min(ts.n // p, int(LEAD_S * ts.fs) // p))     # whole periods, up to LEAD_S
+    return k * p
+
+
 def _decimation(fs: float, f_hi: float, fs_max: float | None) -> int:
     target = max(OVERSAMPLING * f_hi, 1e-9)
     if fs_max is not None:
@@ -191,6 +261,98 @@ def _decimate(x: np.ndarray, q: int) -> np.ndarray:
 #: Mean square of a unit random walk (value 1 at the end) left after removing its
 #: least-squares offset and linear drift: 1/15 (the nuisance terms of :func:`remove_nuisance`).
 WALK_AFTER_TREND = 1.0 / 15.0
+
+#: Without a drift stated by the sensor, a record's nuisance drift may rise over the record by at
+#: most this share of the largest robust peak-to-peak of the records (a laser's zero drifts by
+#: micrometres over strokes of millimetres; an IPMC's back-relaxation is tens of percent of its
+#: deflection) ...
+DRIFT_SHARE = 0.01
+#: ... and at least this × its white noise (a sensor's zero wanders by a few noise levels over a record).
+DRIFT_NOISE = 5.0
+#: A drift the sensor states (random walk of std d at the record's end) bounds the record's drift at
+#: this × d.
+STATED_DRIFT_FACTOR = 4.0
+#: The offset may stand at most this share of the signal's robust peak-to-peak from the level the
+#: residual has during the rest before the drive (the device at rest: no model's response there).
+OFFSET_SHARE = 0.02
+#: A record whose voltage holds still for at least this long [s] (and 8 samples) before the drive has
+#: a rest that anchors its offset; without one the offset is the least-squares one.
+START_S = 0.1
+
+
+@dataclass
+class Nuisance:
+    """A record's nuisance terms (:func:`bounded_nuisance`)."""
+
+    offset: float            # at the record's start [m]
+    drift: float             # [m/s]
+    offset_ls: float         # the unbounded least-squares values
+    drift_ls: float
+    offset_clipped: bool
+    drift_clipped: bool
+    level: float = math.nan  # the residual's level over the start window [m] (the device at rest)
+    offset_free: float = math.nan   # the least-squares offset given the (bounded) drift [m]
+
+    def remove(self, e: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return np.asarray(e, dtype=float) - self.offset - self.drift * (np.asarray(t, dtype=float) - t[0])
+
+    def __iter__(self):
+        return iter((self.offset, self.drift))
+
+
+def bounded_nuisance(e: np.ndarray, t: np.ndarray, drift_bound: float, offset_bound: float,
+                     start: int) -> Nuisance:
+    """Offset and drift of the residual ``e`` at times ``t`` [s]: the least-squares line, its
+    rise over the record held within ±``drift_bound`` [m], then its offset (refitted with that
+    drift) held within ±``offset_bound`` [m] of the level of the first ``start`` samples, where
+    the device is at rest and no model's response can hide in the offset.  A least-squares
+    offset and drift take whatever slow error a model leaves (a wrong static gain, a
+    back-relaxation), and that error is evidence; the bounds keep them to what a sensor's zero
+    does.  Clipped terms are reported (:func:`.verdict.nuisance_summary`)."""
+    e = np.asarray(e, dtype=float)
+    t = np.asarray(t, dtype=float)
+    o_ls, b_ls = nuisance_terms(e, t)
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    b = b_ls
+    if span > 0 and math.isfinite(drift_bound) and abs(b_ls) * span > drift_bound:
+        b = math.copysign(drift_bound / span, b_ls)
+    o = o_free = float(np.mean(e - b * (t - t[0])))
+    o_clip, level = False, math.nan
+    if math.isfinite(offset_bound):
+        k = max(1, min(int(start), e.size))
+        level = float(np.mean(e[:k] - b * (t[:k] - t[0])))
+        if abs(o - level) > offset_bound:
+            o, o_clip = level + math.copysign(offset_bound, o - level), True
+    return Nuisance(o, b, o_ls, b_ls, o_clip, b != b_ls, level, o_free)
+
+
+def nuisance_bounds(ts: TimeSeries, scale: float | None = None, white: float = math.nan) -> tuple[float, float, float, int]:
+    """(robust peak-to-peak of the deflection [m], drift bound [m], offset bound [m], start
+    window [samples]) of a record: the drift's rise over the record within
+    :data:`STATED_DRIFT_FACTOR` × the drift its sensor states, else within :data:`DRIFT_SHARE` ×
+    ``scale`` (the largest robust peak-to-peak of the records taken with the same sensor,
+    default this record's: a sensor's drift does not shrink with a smaller stroke) and at least
+    :data:`DRIFT_NOISE` × its ``white`` noise [m]; the offset within :data:`OFFSET_SHARE` ×
+    ``scale`` of the level at rest when the record has a rest before the drive (:data:`START_S`),
+    else unbounded."""
+    y = ts.deflection
+    rng = float(np.percentile(y, 99.5) - np.percentile(y, 0.5))
+    scale = rng if scale is None else max(float(scale), rng)
+    sensor = ts.meta.get("sensor") if isinstance(ts.meta.get("sensor"), dict) else {}
+    d = sensor.get("deflection_drift")
+    if isinstance(d, (int, float)) and math.isfinite(d) and d >= 0:
+        drift = max(STATED_DRIFT_FACTOR * float(d), 1e-12)
+    else:
+        drift = max(DRIFT_SHARE * scale, DRIFT_NOISE * white if math.isfinite(white) else 0.0)
+    v = ts.voltage
+    tol = 0.01 * float(np.ptp(v)) if np.ptp(v) > 0 else 0.0
+    moved = np.flatnonzero(np.abs(v - v[0]) > tol)
+    rest = int(moved[0]) if moved.size else v.size
+    if rest < max(8, int(round(START_S * ts.fs))):
+        return rng, drift, math.inf, 0          # no rest before the drive: nothing anchors the offset
+    return rng, drift, OFFSET_SHARE * scale, min(rest, max(ts.n // 4, 1))
+
+
 def sensor_noise_floor(ts: TimeSeries) -> tuple[float, str] | None:
     """The noise floor [m] the record's sensor metadata state, or None: white noise,
     quantisation and the part of a random-walk drift that a linear trend does not remove,
@@ -264,11 +426,13 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         if fs_max is not None and m.n // q < 64:    # a cap below the record's own scale: refused before any array of it is made
             raise InputError(f"{arg('fs_max')} {fs_max:g} Hz leaves {m.n // q} samples of {where} at the analysis "
                              f"rate; a diagnosis needs at least 64 — give at least {64 * m.fs / m.n:.3g} Hz")
-        v_sim, y_d = _decimate(m.voltage, q), _decimate(m.deflection, q)[PAD:]
+        lead = periodic_lead(m, how, q) if kind == "broadband" else 0
+        v_sim = _decimate(np.concatenate([m.voltage[m.n - lead:], m.voltage]) if lead else m.voltage, q)
+        y_d = _decimate(m.deflection, q)[PAD:]
         n_d = int(math.ceil(m.n / q))
         rm = model_rh(rh_series, m.fs, rh_tolerance)
         if np.ndim(rm):
-            rm = np.concatenate([np.full(PAD, rm[0]), np.asarray(rm)[::q][:n_d]])
+            rm = np.concatenate([np.full(PAD + lead // q, rm[0]), np.asarray(rm)[::q][:n_d]])
         if noise_floor is not None:
             nf, src = float(noise_floor), "given"
         else:
@@ -277,13 +441,19 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         if amp <= 0:
             raise InputError(f"{where}: the voltage is constant; nothing is excited")
         rec = Record(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
-                     sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD, kind_how=how)
+                     sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD + lead // q, kind_how=how)
+        if lead:
+            rec.kind_how += (f"; periodic: the model is driven through {lead / m.fs:.3g} s of its periods before it "
+                             "starts (its steady state)")
         rec.steps = find_steps(rec.v_d, rec.fs_d) if kind == "steps" else np.zeros(0, int)
         rec.rh_measured = float(np.median(rh_series))
         out.append(rec)
         rhs.append(float(np.median(rh_series)))
     if not out:
         raise InputError("no measurement given")
+    scale = max(float(np.percentile(r.ts.deflection, 99.5) - np.percentile(r.ts.deflection, 0.5)) for r in out)
+    for r in out:
+        r.signal_range, r.drift_bound, r.offset_bound, r.start_window = nuisance_bounds(r.ts, scale, r.noise_floor)
     for rec, lv in zip(out, cluster_rh(rhs, rh_tolerance)):
         rec.rh = lv
     for rec, lv in zip(out, amplitude_levels([r.amplitude for r in out])):
@@ -367,6 +537,6 @@ def amplitude_groups(records: Sequence[Record]) -> dict[float, list[float]]:
     return {k: sorted(v) for k, v in out.items()}
 
 
-__all__ = ["Record", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
+__all__ = ["Record", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
            "upsample", "estimate_noise_floor", "stated_drift", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
            "FRFOptions"]

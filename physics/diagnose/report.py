@@ -14,6 +14,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -24,6 +25,7 @@ from ..identify import write_device
 from ..identify.parameters import switchable
 from ..outputs import component, final_path
 from ..report import Report, header, jsonable
+from .confidence import calibration_text
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
 
@@ -172,12 +174,17 @@ def _plot_breakdown(res: DiagnosisResult, path) -> None:
 
 
 def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name: str | None = None,
-                    provenance: dict | None = None, protect=()) -> dict:
+                    provenance: dict | None = None, protect=(), best: dict | None = None,
+                    measurements: Sequence[str] = ()) -> dict:
     """Write ``diagnosis.json``, the PNGs and the page ``index.html`` into ``out_dir``; with
-    ``apply`` also the extended device file ``NAME.yaml`` (the fitted final model: the base
-    with every effect of the verdict's chain added to its ``default_effects``; nothing when
-    the verdict is null).  Paths in the outputs are the final ones (the command line writes
-    into a temporary folder renamed at the end).  Returns the JSON dict."""
+    ``apply`` also the device file ``NAME.yaml`` of the best model: ``best`` ({"fit": a
+    ModelFit, "effect_files": [paths], "text": ...}, e.g. the model fitted with drafted effects)
+    or the diagnosis's final model (the base with every pick of the chain and without every
+    removal; nothing when it is the base itself) — its values as fitted and refined on the time
+    records, its effects as ``default_effects``.  The usage printed runs as printed: the
+    ``measurements`` and the ``--effects-path`` of every effect file the model needs.  Paths in
+    the outputs are the final ones (the command line writes into a temporary folder renamed at
+    the end).  Returns the JSON dict."""
     if apply and name is not None:
         component(name, arg("name"), "the device file NAME.yaml")
     d = Path(out_dir)
@@ -194,29 +201,44 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
         fun(res, d / fn)
         written.append(fn)
     applied = None
-    picks = res.picks
+    fit = best["fit"] if best else res.final
+    files = list(best.get("effect_files", [])) if best else []
     if apply:
-        if not picks:
-            applied = {"written": None, "reason": "no missing effect was found (null verdict): nothing to apply"}
+        if fit is res.base:
+            applied = {"written": None, "reason": "the diagnosis kept the model as it was (nothing added, removed or "
+                                                  "drafted): nothing to apply"}
         else:
-            chain = [p.effect for p in picks]
-            dev_name = component(name or f"{res.device.name}_{'_'.join(chain)}", arg("name"), "the device file NAME.yaml")
-            path = write_device(picks[-1].fit.result, d / f"{dev_name}.yaml", name=dev_name,
+            added = [e for e in fit.effects if e not in res.base.effects]
+            gone = [e for e in res.base.effects if e not in fit.effects]
+            what = " ".join([f"+{e}" for e in added] + [f"-{e}" for e in gone]) or "refitted"
+            dev_name = component(name or ("_".join([res.device.name] + added) if added else f"{res.device.name}_refitted"),
+                                 arg("name"), "the device file NAME.yaml")
+            path = write_device(fit.result, d / f"{dev_name}.yaml", name=dev_name,
                                 date=_dt.date.today().isoformat(), protect=protect)
             text = path.read_text(encoding="utf-8").replace(
-                "written by eap identify on", f"written by eap diagnose --apply ({' + '.join(chain)} added) on", 1)
+                "written by eap identify on", f"written by eap diagnose ({what}) on", 1)
             write_text(path, text, protect=tuple(protect))
+            recs = " ".join(_quote(m) for m in measurements) or "MEASUREMENT"
+            paths = "".join(f" --effects-path {_quote(f)}" for f in files)
             applied = {"written": path.name, "path": str(final_path(path)),
-                       "effects": list(switchable(picks[-1].fit.effects)),
-                       "usage": f"eap compare MEASUREMENT --model {final_path(path)} --effects default"}
+                       "effects": list(switchable(fit.effects)), "effect_files": files,
+                       "rmse_m": fit.rmse, "parameters": dict(fit.values),
+                       "usage": f"eap compare {recs} --model {_quote(str(final_path(path)))} --effects default{paths}"}
             written.append(path.name)
     out["applied"] = applied
+    out["best_model"] = None if not best else {"effects": list(fit.effects), "rmse_m": fit.rmse,
+                                               "effect_files": files, "text": best["text"]}
     out["files"] = ["diagnosis.json", "index.html", "report.html"] + written
     if provenance:
         out["provenance"] = provenance
     write_json(d / "diagnosis.json", jsonable(out))
     _html(res, d, out, provenance)
     return out
+
+
+def _quote(text: str) -> str:
+    import shlex
+    return shlex.quote(str(text))
 
 
 def _fmt(x, unit="", scale=1.0, digits=4):
@@ -234,8 +256,12 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     rep.heading("Verdict")
     for line in v.lines():
         rep.paragraph(line)
+    rep.paragraph("What the confidence labels mean: " + calibration_text(), note=True)
+    if out.get("best_model"):
+        rep.paragraph(f"Best model: {out['best_model']['text']}.")
     if out.get("applied") and out["applied"].get("written"):
-        rep.paragraph(f"Extended device written: {out['applied']['path']} (use it: {out['applied']['usage']}).")
+        rep.paragraph(f"Device file of the best model written: {out['applied']['path']} (use it: "
+                      f"{out['applied']['usage']}).")
     rep.table({"base effects": ", ".join(b.effects), "free parameters": ", ".join(b.spec.free + b.spec.per_rh),
                "RMS error [µm]": 1e6 * b.rmse, "fit [%]": b.fit_pct, "BIC (effective n)": b.bic,
                "noise floor [µm]": 1e6 * res.noise_floor if math.isfinite(res.noise_floor) else None,
@@ -285,10 +311,12 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
             rep.warning(w_)
     rep.heading("Records")
     rep.table([{k: r.describe()[k] for k in ("kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct",
-                                               "band_Hz", "fs_analysis_Hz", "noise_floor_m", "noise_floor_source")}
+                                               "band_Hz", "fs_analysis_Hz", "white_noise_m", "white_noise_source")}
                | {"record": Path(r.source).name} for r in res.records],
               columns=["record", "kind", "duration_s", "fs_Hz", "amplitude_level_V", "rh_pct", "band_Hz",
-                       "fs_analysis_Hz", "noise_floor_m", "noise_floor_source"])
+                       "fs_analysis_Hz", "white_noise_m", "white_noise_source"],
+              caption=f"the records; each record's own white noise level, pooled into the one noise floor of "
+                      f"{_fmt(res.noise_floor, 'µm', 1e6, 3)} every verdict compares with")
     rep.heading("How the statistics work")
     rep.bullets([f"{k}: {t}" for k, t in out["statistics"].items()])
     rep.json_block(out["settings"], "settings")

@@ -2,39 +2,48 @@
 
 **Which effect is missing.**  The candidates of a step (:mod:`.diagnosis`: the catalog and
 user effects the model lacks, each fitted on top of the step's base) are weighed by their
-evidence E = ΔBIC + :data:`QUALITY_BIC` × (quality flags): the Schwarz weight
-exp(−E/2), normalised over the step's base (E = 0) and every evaluated candidate, is an
-approximate posterior probability (equal priors; Schwarz 1978, Kass & Raftery 1995)
-penalised by what makes a fit suspect.  A candidate's **quality flags** (:func:`quality`):
-one of its parameters ends on a bound of its range; its relative standard error exceeds
-50 %; it is correlated with another parameter beyond |ρ| = 0.99 (only a combination is
-determined); its expected residual signature is absent.  Each flag counts as very strong
-evidence against it (ΔBIC +10).  A candidate can be picked when it passes the criteria
-of :data:`CRITERIA` (very strong ΔBIC, Bonferroni p-value, at least a third of the
-failure explained — of the excess error power over the noise floor — and a base above the
-noise: a flexible effect that trims a little off an error it does not explain is no answer;
-on a later step of the chain, no quality flag at all: there the error is mostly the base's own
-mismatch (or a pick's fit short of its optimum), which any flexible effect absorbs in part with
-a ΔBIC as large as the records are long — only a clean fit whose signature is seen in what the
-picks leave is evidence that *this* effect is missing); the pick is the one with the lowest E.
-Its confidence is its weight, labelled "high" at ≥ 0.99 (it clearly dominates the base and
-every other candidate), "medium" at ≥ 0.9, else "low" — whatever error remains, which is the
-second answer.  Two
-candidates are **ambiguous** only when they are close on fit (their pairwise |ΔBIC| < 6, or
-the better leaves more than two thirds of the other's excess error power over the noise floor,
-the share a pick must explain) *and* on quality (the same number of flags); the verdict then
-names the record that would separate them (:func:`separating_record`).  After a pick the
-remaining candidates are tried again on top of it (forward selection, up to
-``max_effects``); the verdict is the chain of picks with the error after each.
+evidence E = ΔBIC + :data:`QUALITY_BIC` × (quality flags), ΔBIC computed on the pooled error the
+report prints (one noise model for all records, N_eff from the residual's correlation:
+:func:`.candidates.compare_fits`); the Schwarz weight exp(−E/2), normalised over the step's
+base (E = 0) and every evaluated candidate, is an approximate posterior probability (equal
+priors; Schwarz 1978, Kass & Raftery 1995) penalised by what makes a fit suspect.  A
+candidate's **quality flags** (:func:`quality`): one of its parameters ends on a bound of its
+range; its relative standard error exceeds 50 %; it is correlated with another parameter
+beyond |ρ| = 0.99 (only a combination is determined); its expected residual signature is
+absent.  A candidate can be picked when it passes the criteria of :data:`CRITERIA` (very
+strong ΔBIC, Bonferroni p-value, at least a third of the failure explained — of the excess
+error power over the noise floor — and a base above the noise: a flexible effect that trims a
+little off an error it does not explain is no answer; on a later step of the chain, no quality
+flag at all); the pick is the one with the lowest E.  Two candidates that pass are
+**ambiguous** when they are close on fit (their pairwise |ΔBIC| < 6, or the better leaves more
+than two thirds of the other's excess error power over the noise floor), whatever their
+quality flags: near twins are not told apart by a flag; the verdict then names the record that
+would separate them (:func:`separating_record`).
 
-**Is the final model adequate.**  Its RMS error against the noise floor: adequate within
-:data:`ADEQUATE_RATIO` × (:mod:`.adequacy`), and a plain statement of what remains —
-structured (the residual forms that describe it, :func:`.forms.describe`) or
-unstructured (a small mismatch of the base model itself).  When the base is already within
-the threshold there is **nothing to explain** — unless it is within only because the floor
-counts a slow wander the records cannot attribute (:data:`UNATTRIBUTED`: one record cannot tell
-the sensor's drift from a drift of the setup).  A null answer carries no confidence, and
-"explained" is never claimed without a noise floor.
+**How sure.**  Over tens of thousands of correlated samples every ΔBIC is in the thousands and
+every weight 1.000, so the weight is not the confidence.  The label (:mod:`.confidence`) asks
+what generalises: the error the pick removes and the error it leaves, both in noise floors (an
+effect that barely changes the model cannot be "high"; one that leaves a large structured
+residual may be a proxy and says so), the share of the closest rival's excess it removes (a near
+twin keeps it "low"), the share of records on which it lowers the error, its quality flags and
+its weight.  The thresholds are chosen on some truth families and reported on a held-out one
+(``bench/diagnose_calibration.py``).
+
+The selection runs both ways (:func:`.diagnosis.select`): after a pick the remaining
+candidates are tried again on top of it (up to ``max_effects``); when none passes, an effect
+of the user's model that the data do not support is removed and tried again as a candidate
+with its own parameters free.
+
+**Is the final model adequate.**  Its RMS error against the noise floor — the measurement's
+own, one number everywhere (:mod:`.records`) — adequate within :data:`ADEQUATE_RATIO` ×
+(:mod:`.adequacy`), with the records' own slow wander that does not repeat from record to
+record allowed beside it when the floor was estimated, and a plain statement of what remains —
+structured (the residual forms that describe it, :func:`.forms.describe`) or unstructured (a
+small mismatch of the base model itself).  When the base is already within the threshold
+there is **nothing to explain** — unless it is within only because a slow wander the records
+cannot attribute is counted (:data:`UNATTRIBUTED`).  A null answer carries no confidence, and
+"explained" is never claimed without a noise floor.  The nuisance terms of every record
+(offset, linear drift) are reported with their plausibility (:func:`nuisance_summary`).
 
 :class:`Verdict` holds both answers; :meth:`Verdict.lines` is the one text the terminal,
 the page and ``diagnosis.json`` show.
@@ -50,7 +59,9 @@ import numpy as np
 from ..device import all_param_specs
 from ..metrics import remove_nuisance
 from .. import stats
+from . import confidence as conf
 from .adequacy import ADEQUATE_RATIO, Adequacy
+from .confidence import excess_share
 from .specs import effect_params, excitation
 
 #: Evidence against a candidate per quality flag, in BIC units ("very strong", Kass & Raftery).
@@ -71,10 +82,6 @@ DISTINCT_BIC = 6.0
 UNATTRIBUTED = "within the noise only if its slow wander is the sensor's"
 STATUSES = ("explained", "partly explained", "found (adequacy not assessed)", "ambiguous",
             "not explained by the catalog", "nothing to explain", UNATTRIBUTED)
-
-
-def label_of(weight: float) -> str:
-    return "high" if weight >= 0.99 else ("medium" if weight >= 0.9 else "low")
 
 
 # ============================================================================ quality
@@ -140,6 +147,7 @@ class Decision:
     separating: str = ""
     reason: str = ""
     alpha: float = ALPHA
+    confidence: conf.Confidence | None = None     # of the pick (:mod:`.confidence`)
 
     @property
     def weight(self) -> float | None:
@@ -147,15 +155,17 @@ class Decision:
 
 
 def decide(base, ranked: Sequence, noise: float, taus_ref, records,
-           compare_fits, prediction_distance, after_pick: bool = False, structure: bool = False) -> Decision:
+           compare_fits, prediction_distance, after_pick: bool = False, structure: bool = False,
+           wander: float = 0.0) -> Decision:
     """One step: flags, evidence, weights, the pick or the ambiguity (module doc).  ``ranked``
     are the step's evaluated CandidateResults with their comparison to ``base`` (``after_pick``:
     a later step of the chain, on top of a pick; ``structure``: the base's residual holds
     significant deterministic structure whatever its size — a drift the records share — so
-    a base within the noise floor still has something to explain)."""
+    a base within the noise floor still has something to explain; ``wander`` [m]: the records'
+    own slow wander that does not repeat from record to record, allowed beside the floor)."""
     m = max(len(ranked), 1)
     alpha = ALPHA / m
-    within = math.isfinite(noise) and base.rmse <= ADEQUATE_RATIO * noise and not structure
+    within = math.isfinite(noise) and base.rmse <= ADEQUATE_RATIO * math.hypot(noise, wander) and not structure
     for c in ranked:
         c.quality = quality(c)
         cmp = c.comparison
@@ -169,7 +179,7 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
     weights = {"base": float(w[0]), **{e: float(x) for e, x in zip(ev, w[1:])}}
     eligible = sorted([c for c in ranked if all(c.passes.values())], key=lambda c: ev[c.effect])
     if not eligible:
-        return Decision(None, weights, ev, reason=_no_pick_reason(base, ranked, noise, within), alpha=alpha)
+        return Decision(None, weights, ev, reason=_no_pick_reason(base, ranked, noise, within, wander), alpha=alpha)
     top = eligible[0]
     if len(eligible) > 1:
         ru = eligible[1]
@@ -178,7 +188,7 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
         # close on fit: the data do not separate them (ΔBIC), or the better one removes less than
         # MIN_SHARE of what the other leaves above the noise floor (a difference that matters)
         close_fit = pair.delta_bic > -DISTINCT_BIC or excess_share(ru.fit.rmse, top.fit.rmse, noise) < MIN_SHARE
-        if close_fit and len(top.quality) == len(ru.quality):
+        if close_fit:       # near twins: quality flags do not separate what the fit cannot
             top.indistinguishable_from.append(ru.effect)
             ru.indistinguishable_from.append(top.effect)
             sep = separating_record(top, ru, records, noise)
@@ -199,18 +209,17 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
         reason += (f"; {', '.join(c.effect for c in rivals)} lowered the error as much or more but "
                    f"{'is' if len(rivals) == 1 else 'are'} less credible (" +
                    "; ".join(f"{c.effect}: " + "; ".join(c.quality) for c in rivals) + ")")
-    return Decision(top, weights, ev, reason=reason, alpha=alpha)
+    c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise))
+    if c.label != "high":
+        reason += "; confidence " + c.label + ": " + "; ".join(c.why)
+    return Decision(top, weights, ev, reason=reason, alpha=alpha, confidence=c)
 
 
-def excess_share(before: float, after: float, noise: float) -> float:
-    """Share of the excess error power over the noise floor (rmse² − noise²) that going from
-    ``before`` to ``after`` [m RMS] removes (noise unknown: of the error power)."""
-    n2 = noise ** 2 if math.isfinite(noise) else 0.0
-    ex = before ** 2 - n2
-    return 1.0 - max(after ** 2 - n2, 0.0) / ex if ex > 0 else 0.0
-
-
-def _no_pick_reason(base, ranked, noise, within) -> str:
+def _no_pick_reason(base, ranked, noise, within, wander: float = 0.0) -> str:
+    if within and wander > 0 and base.rmse > ADEQUATE_RATIO * noise:
+        return (f"the base model fits to within {ADEQUATE_RATIO}× the noise floor once the records' own slow wander "
+                f"is counted ({1e6 * base.rmse:.3g} µm vs a floor of {1e6 * noise:.3g} µm and a wander of "
+                f"{1e6 * wander:.3g} µm that does not repeat from record to record: a sensor's drift, not physics)")
     if within:
         return (f"the base model already fits to within {ADEQUATE_RATIO}× the noise floor "
                 f"({1e6 * base.rmse:.3g} µm vs {1e6 * noise:.3g} µm)")
@@ -278,13 +287,15 @@ class Pick:
     parameters: dict
     quality: list
     reason: str
+    confidence: conf.Confidence | None = None
 
     @property
     def label(self) -> str:
-        return label_of(self.weight)
+        return self.confidence.label if self.confidence is not None else "low"
 
     def to_dict(self) -> dict:
         return {"step": self.step, "effect": self.effect, "confidence": self.weight, "confidence_label": self.label,
+                "confidence_features": self.confidence.to_dict() if self.confidence else None,
                 "rmse_before_m": self.rmse_before, "rmse_after_m": self.rmse_after, "delta_bic": self.delta_bic,
                 "p_value": self.p_value, "parameters": self.parameters, "quality_flags": self.quality,
                 "reason": self.reason}
@@ -309,6 +320,7 @@ class Verdict:
     stopped: str = ""                                        # why the chain stopped
     alpha_bonferroni: float = ALPHA
     nuisance: dict = field(default_factory=dict)
+    removed: list = field(default_factory=list)             # effects of the model the data do not support
 
     # --- the first answer, as before the chain existed ---------------------------------
     @property
@@ -330,11 +342,16 @@ class Verdict:
 
     @property
     def final_rmse(self) -> float:
-        return self.picks[-1].rmse_after if self.picks else self.base_rmse
+        return self.adequacy.rmse if self.adequacy is not None else (
+            self.picks[-1].rmse_after if self.picks else self.base_rmse)
 
     def lines(self) -> list[str]:
         """The verdict as sentences: status, which effect, adequacy, what remains, nuisance."""
         out = [f"Verdict: {self.status}."]
+        for r in self.removed:
+            out.append(f"Removed from the model: {r['effect']} — RMS error {1e6 * r['rmse_before_m']:.4g} → "
+                       f"{1e6 * r['rmse_after_m']:.4g} µm ({r['reason']}); tried again as a candidate with its own "
+                       "parameters free.")
         if self.picks:
             for k, p in enumerate(self.picks):
                 head = "Which effect: " if k == 0 else "Then, on top of it: "
@@ -359,17 +376,24 @@ class Verdict:
             out.append("What remains: " + self._remaining_text())
         if self.nuisance:
             out.append(f"Nuisance terms (estimated per record, not physics): {self.nuisance['text']}.")
+            for f in self.nuisance.get("flags", []):
+                out.append(f"  Flagged: {f}.")
         return out
 
     def _adequacy_text(self) -> str:
         ad = self.adequacy
-        model = "the base" if not self.picks else "base + " + " + ".join(self.chain)
+        model = "the base" + "".join(f" − {r['effect']}" for r in self.removed) + \
+            "".join(f" + {e}" for e in self.chain)
         if ad is None or ad.adequate is None:
             return f"not assessed — the noise floor is unknown ({self.noise_source})."
         verdict = "yes" if ad.adequate else "no"
         but = f"; but {ad.structure}" if ad.structure else ""
+        wander = (f"; with the records' own slow wander of {1e6 * ad.wander:.3g} µm counted beside it (it does not "
+                  f"repeat from record to record: a drift, not physics), {'within' if ad.adequate else 'above'} "
+                  f"{ADEQUATE_RATIO}× {1e6 * math.hypot(ad.noise_floor, ad.wander):.3g} µm") if ad.wander > 0 else ""
         return (f"{verdict} — {model} leaves {1e6 * ad.rmse:.4g} µm RMS = {ad.ratio:.2f}× the noise floor of "
-                f"{1e6 * self.noise_floor:.3g} µm ({self.noise_source}; adequate within {ADEQUATE_RATIO}×){but}.")
+                f"{1e6 * self.noise_floor:.3g} µm ({self.noise_source}; adequate within {ADEQUATE_RATIO}×){wander}"
+                f"{but}.")
 
     def _remaining_text(self) -> str:
         if self.remaining_kind == "described":
@@ -391,9 +415,11 @@ class Verdict:
                 "adequacy": self.adequacy.to_dict() if self.adequacy else None,
                 "remaining_kind": self.remaining_kind, "remaining": self.remaining, "chain_stopped": self.stopped,
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
+                "removed": self.removed, "final_rmse_m": self.final_rmse,
                 "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA, "min_excess_share": MIN_SHARE,
                              "adequate_ratio": ADEQUATE_RATIO, "distinct_delta_bic": DISTINCT_BIC,
-                             "quality_penalty_bic": QUALITY_BIC, "rel_se_flag": REL_SE_FLAG, "corr_flag": CORR_FLAG}}
+                             "quality_penalty_bic": QUALITY_BIC, "rel_se_flag": REL_SE_FLAG, "corr_flag": CORR_FLAG,
+                             "confidence": conf.thresholds()}}
 
 
 def _signed(x: float) -> str:
@@ -440,15 +466,40 @@ def remaining_of(ad: Adequacy | None) -> tuple[str, list[dict]]:
 
 
 def nuisance_summary(fit, records) -> dict:
-    """Offsets [µm] and drifts [µm/min] of the final model's residual, per record."""
-    rows = [{"record": r.source, "offset_um": 1e6 * o, "drift_um_per_min": 60e6 * d}
-            for r, (o, d) in zip(records, fit.nuisance)]
+    """Offsets [µm] and drifts [µm/min] of the final model's residual, per record, with their
+    plausibility: a least-squares term beyond what a sensor's zero does (:func:`.records.bounded_nuisance`)
+    is flagged and not used — the bound is, and the rest stays in the error as the model's."""
+    rows, flags = [], []
+    for r, nz in zip(records, fit.nuisance):
+        row = {"record": r.source, "offset_um": 1e6 * nz.offset, "drift_um_per_min": 60e6 * nz.drift,
+               "least_squares_offset_um": 1e6 * nz.offset_ls, "least_squares_drift_um_per_min": 60e6 * nz.drift_ls,
+               "offset_bounded": nz.offset_clipped, "drift_bounded": nz.drift_clipped}
+        rows.append(row)
+        if nz.drift_clipped:
+            flags.append(f"{r.source}: a least-squares drift of {60e6 * nz.drift_ls:+.3g} µm/min would rise "
+                         f"{1e6 * abs(nz.drift_ls) * r.ts.duration:.3g} µm over the record, more than a sensor's zero "
+                         f"drifts ({1e6 * r.drift_bound:.3g} µm: {_drift_basis(r)}); bounded to "
+                         f"{60e6 * nz.drift:+.3g} µm/min, the rest is the model's error")
+        if nz.offset_clipped:
+            flags.append(f"{r.source}: the offset that fits best, {1e6 * nz.offset_free:+.4g} µm, stands "
+                         f"{1e6 * abs(nz.offset_free - nz.level):.3g} µm from the level the record starts at "
+                         f"({1e6 * nz.level:+.4g} µm, the device at rest), more than a sensor's zero allows "
+                         f"({1e6 * r.offset_bound:.3g} µm); not used: the offset is held at {1e6 * nz.offset:+.4g} µm")
     if not rows:
         return {}
     text = "; ".join(f"{x['record']}: offset {x['offset_um']:+.4g} µm, drift {x['drift_um_per_min']:+.3g} µm/min"
                      for x in rows)
-    return {"records": rows, "text": text}
+    return {"records": rows, "text": text, "flags": flags}
 
 
-__all__ = ["Verdict", "Pick", "Decision", "decide", "quality", "separating_record", "remaining_of", "label_of",
+def _drift_basis(r) -> str:
+    from .records import DRIFT_NOISE, DRIFT_SHARE, STATED_DRIFT_FACTOR
+    s = r.ts.meta.get("sensor") if isinstance(r.ts.meta.get("sensor"), dict) else {}
+    if isinstance(s.get("deflection_drift"), (int, float)):
+        return f"{STATED_DRIFT_FACTOR:g}× the drift the sensor states"
+    return (f"{100 * DRIFT_SHARE:g} % of the records' largest peak-to-peak deflection, at least {DRIFT_NOISE:g}× "
+            "the record's white noise")
+
+
+__all__ = ["Verdict", "Pick", "Decision", "decide", "quality", "separating_record", "remaining_of",
            "nuisance_summary", "STATUSES", "UNATTRIBUTED", "CRITERIA", "QUALITY_BIC"]

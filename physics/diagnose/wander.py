@@ -27,7 +27,7 @@ from .records import WALK_AFTER_TREND
 WANDER_PER_TREND = WALK_AFTER_TREND / (6.0 / 5.0)
 
 
-def slow_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance) -> float:
+def slow_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance, trend: bool = True) -> float:
     """RMS [m] of a slow wander (a sensor's drift beyond the linear trend the nuisance terms
     remove) in a model's residuals, assuming a random-walk drift, from two independent
     signs of it, pooled by their degrees of freedom:
@@ -41,14 +41,16 @@ def slow_wander(records: Sequence, resid_d: Sequence[np.ndarray], nuisance) -> f
 
     Only broadband records count: their input has no power at the lowest lines, so a linear
     model's slow physics leaves nothing there, while a step record's creep or back-relaxation
-    would pass for drift.  NaN when no record can show it."""
+    would pass for drift.  With ``trend=False`` the drift rates are left out: a rate fitted to a
+    residual takes whatever slow error the model leaves, the lowest lines do not.  NaN when no
+    record can show it."""
     num = dof = 0.0
     for r, e, (_, b) in zip(records, resid_d, nuisance):
         if r.kind != "broadband":      # a step's slow physics (creep, back-relaxation) would pass for drift
             continue
-        T = r.ts.duration
-        num += WANDER_PER_TREND * (b * T) ** 2
-        dof += 1.0
+        if trend:
+            num += WANDER_PER_TREND * (b * r.ts.duration) ** 2
+            dof += 1.0
         n = e.size
         k_max = int(math.floor(0.5 * r.band[0] * n / r.fs_d))
         if k_max < 1 or not math.isfinite(r.noise_floor_d):

@@ -51,6 +51,32 @@ def switchable(ids) -> tuple[str, ...]:
     return tuple(e for e in ids if e not in CORE)
 
 
+def held_per_rh(device, free: Sequence[str], per_rh: Sequence[str], levels: Sequence[float],
+                rh: float) -> tuple:
+    """(device, free, per_rh, notes): the shared parameters of ``free`` that ``device`` holds per
+    RH — an absolute humidity map, as ``identify --per-rh`` writes it, leaves no shared value to
+    fit — fitted once per RH level when the records span two or more ``levels``, else given
+    the map's value at ``rh`` [%] as their shared value (the map dropped).  ``identify`` and
+    ``diagnose`` both read such a file this way."""
+    import dataclasses
+    free, per, notes = list(free), list(per_rh), []
+    for name in [n for n in free if n in device.humidity_maps and device.humidity_maps[n].mode == "absolute"]:
+        free.remove(name)
+        if len(levels) >= 2:
+            if name not in per:
+                per.append(name)
+            notes.append(f"{name} is held per RH by the device (an absolute humidity map): fitted once per RH level")
+        else:
+            m = device.humidity_maps[name]
+            v = float(np.interp(rh, m.rh, m.values))
+            device = dataclasses.replace(device.with_params(**{name: v}),
+                                         humidity_maps={k: x for k, x in device.humidity_maps.items() if k != name})
+            free.append(name)
+            notes.append(f"{name} is held per RH by the device (an absolute humidity map); one RH level: its value "
+                         f"there ({v:.4g}) is the start of the shared value")
+    return device, free, per, notes
+
+
 class IdentifiabilityWarning(UserWarning):
     """A parameter is not (or poorly) determined by the data."""
 
@@ -91,7 +117,10 @@ class FreeParameter:
         return np.log(theta) if self.scale == "log" else np.asarray(theta, dtype=float)
 
     def from_x(self, x):
-        return np.exp(x) if self.scale == "log" else np.asarray(x, dtype=float)
+        """SI value of search coordinate ``x``, held within [lower, upper]: exp(ln b) can land an
+        ulp beyond the bound b, and a fit ending on its bound is a result, not an error."""
+        v = np.exp(x) if self.scale == "log" else np.asarray(x, dtype=float)
+        return np.clip(v, self.lower, self.upper)
 
     @property
     def x_bounds(self) -> tuple[float, float]:

@@ -8,13 +8,13 @@ from typing import Sequence
 
 
 from ..compare import load_measurements, source_name
-from ..device import Device
+from ..device import Device, load_device
 from ..errors import InputError, arg
 from ..parallel import warm_up
 from ..threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
 from .options import FitOptions
-from .parameters import IdentifiabilityWarning, parse_assignments, parse_names
+from .parameters import IdentifiabilityWarning, held_per_rh, parse_assignments, parse_names
 from .problem import IdentificationProblem, build_targets
 from .settings import THESIS_MAX_ITER, THESIS_SECONDS_PER_FREQUENCY, THESIS_TOL
 
@@ -141,8 +141,11 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
     ms = load_measurements(measurements, rh=opts.rh)
     targets = build_targets(ms, frf_options=opts.frf, min_coherence=opts.min_coherence, weighting=opts.weighting,
                             rh_tolerance=opts.rh_tolerance, sensor_bandwidth=opts.sensor_bandwidth, default_rh=opts.rh)
-    problem = IdentificationProblem(device, effects, targets, parse_names(opts.free or ()),
-                                    parse_names(opts.per_rh, arg("per_rh")), start=parse_assignments(opts.start),
+    device = load_device(device)
+    levels = sorted({t.level for t in targets})
+    device, free_l, per_l, notes = held_per_rh(device, parse_names(opts.free or ()),
+                                               parse_names(opts.per_rh, arg("per_rh")), levels, targets[0].rh)
+    problem = IdentificationProblem(device, effects, targets, free_l, per_l, start=parse_assignments(opts.start),
                                     bounds=parse_assignments(opts.bounds, ranges=True, what=arg("bounds")),
                                     n_modes=opts.n_modes, fit_phase=fit_phase, residual=residual, skip_s=skip_s)
     seed = opts.seed
@@ -161,7 +164,7 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
                 "residual": residual, "fit_phase": fit_phase, "weighting": opts.weighting,
                 "min_coherence": opts.min_coherence, "rh_tolerance_pct": opts.rh_tolerance,
                 "sensor_bandwidth": opts.sensor_bandwidth, "n_modes": opts.n_modes, "skip_s": skip_s,
-                "frf": vars(opts.frf).copy(),
+                "frf": vars(opts.frf).copy(), "notes": notes,
                 "thesis_nelder_mead": {"max_iter": THESIS_MAX_ITER, "xatol": THESIS_TOL, "fatol": THESIS_TOL,
                                        "tolerance_on": "parameters / start values and J_err / RMS |H_meas|"}}
     res = IdentificationResult(problem, fits, primary, dev, j0, sources, settings, time.perf_counter() - t0, check)

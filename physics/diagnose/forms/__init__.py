@@ -100,6 +100,11 @@ def describe(fit, records: Sequence) -> list[FormFit]:
     return chain + rest
 
 
+def input_driven(forms: Sequence[FormFit]) -> list[FormFit]:
+    """The forward-selected forms that follow the input (structure a sensor's wander cannot make)."""
+    return [f for f in selected(forms) if form_of(f.form).input_driven]
+
+
 def selected(forms: Sequence[FormFit]) -> list[FormFit]:
     """The forward-selected forms (in order)."""
     return [f for f in forms if f.selected_step is not None]
@@ -109,5 +114,6 @@ def residual_of(fit, records: Sequence) -> Residual:
     return Residual.of(fit, records)
 
 
-__all__ = ["FORMS", "Form", "FormFit", "Residual", "Regression", "describe", "rescore", "selected", "form_of", "lowpass",
+__all__ = ["FORMS", "Form", "FormFit", "Residual", "Regression", "describe", "rescore", "selected", "input_driven",
+           "form_of", "lowpass",
            "best_on_grid", "titles", "SIGNIFICANT_BIC", "MIN_GAIN", "PURE"]

@@ -145,6 +145,9 @@ class Form:
 
     id: ClassVar[str]
     title: ClassVar[str]
+    #: The form follows the input (a slow pole, a low-pass, a play…): what it describes is the
+    #: model's error, never a sensor's wander.
+    input_driven: ClassVar[bool] = True
 
     def fit(self, res: Residual) -> FormFit | None:
         """The form fitted to ``res`` (None: the records cannot show it)."""

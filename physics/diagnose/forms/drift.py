@@ -30,6 +30,7 @@ def shape(t: np.ndarray, taus) -> np.ndarray:
 class Drift(Form):
     id = "drift"
     title = "additive drift independent of the input"
+    input_driven = False
 
     def fit(self, res: Residual) -> FormFit:
         t = [np.arange(e.size) / r.fs_d for r, e in zip(res.records, res.resid)]

@@ -1,0 +1,180 @@
+"""How sure a pick is: the confidence label, from what generalises rather than from record length.
+
+A Schwarz weight (:mod:`.verdict`) grows with the effective sample size: over tens of
+thousands of correlated samples every ΔBIC is in the thousands and every weight is 1.000,
+whether the pick is the missing physics or a flexible effect that trims a structured misfit
+a little.  The label therefore asks what a weight cannot:
+
+* **change** — the error the pick removes, sqrt(rmse_base² − rmse_pick²), in noise floors: an
+  effect that barely changes the model in the excited band (a fractional exponent of 0.01,
+  a stiffness law re-scaled by a percent) explains nothing a re-tuned base could not;
+* **left** — the error the pick leaves, in noise floors: a pick that leaves a large
+  structured residual may stand in for physics the catalog lacks (a proxy), and says so;
+* **twin** — the share of the excess error power (over the noise floor) that the closest
+  rival leaves and the pick removes: a rival that fits nearly as well is a near twin, and
+  quality flags do not separate near twins (they are "ambiguous", :func:`.verdict.decide`);
+* **records** — the share of records on which the pick lowers the error: fitted on all
+  records, a pick that makes some of them worse does not generalise from record to record
+  (a leave-one-record-out test at the cost of none);
+* **flags** — the quality flags of the fit (:func:`.verdict.quality`).
+
+"high" needs all five (and a weight ≥ :data:`WEIGHT_HIGH`), "low" is a pick that barely
+changes the model or has a near twin; everything else is "medium".  The thresholds were
+chosen on some truth families and are reported on others (leave-one-family-out,
+``bench/diagnose_calibration.py``; ``docs/reference/diagnosis.md`` states what each label has
+meant on held-out physics).  Without a noise floor no pick is "high".
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+#: Weight a "high" pick needs at least (Schwarz, among the step's base and candidates).
+WEIGHT_HIGH = 0.99
+#: "high" needs the pick to remove at least this error [noise floors] ...
+CHANGE_HIGH = 3.0
+#: ... below which the pick barely changes the model ("low").
+CHANGE_LOW = 1.5
+#: "high" needs the pick to leave at most this error [noise floors]; beyond: a possible proxy.
+LEFT_HIGH = 2.0
+#: "high" needs the pick to remove at least this share of the excess error its closest rival leaves.
+TWIN_HIGH = 0.6
+#: A rival whose excess error the pick reduces by less than this share is a near twin ("low" at best).
+TWIN_LOW = 1.0 / 3.0
+#: "high" needs the pick to lower the error on at least this share of the records ...
+RECORDS_HIGH = 1.0
+#: ... where "lower" allows this relative tolerance (a record the pick leaves as it was).
+RECORD_TOLERANCE = 0.02
+LABELS = ("high", "medium", "low")
+#: What each label has meant on a truth family held out of the choice of the thresholds
+#: (``bench/diagnose_lofo.py`` then ``bench/diagnose_calibration.py``): per label, the picks and
+#: how many named the hidden effect (right), a near twin's relative (acceptable) or another
+#: (wrong).  Measured, not assumed; :func:`calibration_text` says it in one sentence.
+CALIBRATION = {"held_out": None, "families": (), "cases": 0, "command": "",
+               "labels": {lab: {"n": 0, "right": 0, "acceptable": 0, "wrong": 0} for lab in ("high", "medium", "low")}}
+
+
+@dataclass
+class Confidence:
+    """The features of one pick (module doc) and the label they give."""
+
+    weight: float
+    change: float                  # error removed [noise floors] (NaN: no floor)
+    left: float                    # error left [noise floors] (NaN: no floor)
+    twin: float                    # share of the closest rival's excess the pick removes (1: no rival)
+    twin_of: str | None            # that rival
+    records: float                 # share of records on which the error falls
+    flags: int                     # quality flags
+    label: str = "low"
+    why: list[str] = field(default_factory=list)   # what kept it from "high"
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Confidence":
+        """The features as :meth:`to_dict` wrote them (``diagnosis.json``: a pick's ``confidence_features``)."""
+        def num(k):
+            return math.nan if d.get(k) is None else float(d[k])
+        return cls(float(d.get("weight") or 0.0), num("change_noise_floors"), num("left_noise_floors"),
+                   float(d.get("twin_share", 1.0)), d.get("closest_rival"), float(d.get("records_improved", 1.0)),
+                   int(d.get("quality_flags", 0)))
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "weight": self.weight, "change_noise_floors": _num(self.change),
+                "left_noise_floors": _num(self.left), "twin_share": self.twin, "closest_rival": self.twin_of,
+                "records_improved": self.records, "quality_flags": self.flags, "not_high_because": self.why}
+
+
+def _num(x: float):
+    return x if math.isfinite(x) else None
+
+
+def excess_share(before: float, after: float, noise: float) -> float:
+    """Share of the excess error power over the noise floor (rmse² − noise²) that going from
+    ``before`` to ``after`` [m RMS] removes (noise unknown: of the error power)."""
+    n2 = noise ** 2 if math.isfinite(noise) else 0.0
+    ex = before ** 2 - n2
+    return 1.0 - max(after ** 2 - n2, 0.0) / ex if ex > 0 else 0.0
+
+
+def features(pick, base, rivals, weight: float, noise: float) -> Confidence:
+    """The confidence features of ``pick`` (a CandidateResult) against ``base`` (the step's
+    base fit) and the step's other evaluated candidates ``rivals``."""
+    ok = math.isfinite(noise) and noise > 0
+    b, a = base.rmse, pick.fit.rmse
+    change = math.sqrt(max(b * b - a * a, 0.0)) / noise if ok else math.nan
+    left = a / noise if ok else math.nan
+    twin, twin_of = 1.0, None
+    for r in rivals:
+        if r is pick:
+            continue
+        s = excess_share(r.fit.rmse, a, noise)
+        if s < twin:
+            twin, twin_of = s, r.effect
+    rb, rc = base.rmse_records, pick.fit.rmse_records
+    better = [c <= (1.0 + RECORD_TOLERANCE) * x for x, c in zip(rb, rc)]
+    records = sum(better) / len(better) if better else 1.0
+    return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality))
+
+
+def label(c: Confidence, th: dict | None = None) -> Confidence:
+    """Fill ``c.label`` and ``c.why`` (module doc); ``th``: thresholds replacing those of
+    :func:`thresholds` (the calibration bench tries others on the recorded features)."""
+    t = {**thresholds(), **(th or {})}
+    ch_hi, ch_lo, left_hi = t["change_high_noise_floors"], t["change_low_noise_floors"], t["left_high_noise_floors"]
+    twin_hi, twin_lo, rec_hi, w_hi = t["twin_high_share"], t["twin_low_share"], t["records_high_share"], t["weight_high"]
+    why = []
+    if not math.isfinite(c.change):
+        why.append("no noise floor to judge the pick's size against")
+    else:
+        if c.change < ch_hi:
+            why.append(f"it removes only {c.change:.2g}× the noise floor of error (it barely changes the model in "
+                       f"the excited band; 'high' needs {ch_hi:g}×)")
+        if c.left > left_hi:
+            why.append(f"it leaves {c.left:.3g}× the noise floor, a structured residual it does not explain: it may "
+                       "stand in for physics the catalog lacks (a proxy)")
+    if c.twin < twin_hi and c.twin_of:
+        why.append(f"{c.twin_of} fits nearly as well (the pick removes {100 * c.twin:.2g} % of the excess error "
+                   f"{c.twin_of} leaves; 'high' needs {100 * twin_hi:.0f} %)")
+    if c.records < rec_hi:
+        why.append(f"it lowers the error on only {100 * c.records:.3g} % of the records (fitted on all of them, it "
+                   "does not generalise from record to record)")
+    if c.flags:
+        why.append(f"{c.flags} quality flag(s)")
+    if c.weight < w_hi:
+        why.append(f"its weight {c.weight:.3g} is below {w_hi}")
+    c.why = why
+    if not why:
+        c.label = "high"
+    elif (math.isfinite(c.change) and c.change < ch_lo) or (c.twin < twin_lo and c.twin_of):
+        c.label = "low"
+    else:
+        c.label = "medium"
+    return c
+
+
+def thresholds() -> dict:
+    """The label's thresholds, for the report."""
+    return {"weight_high": WEIGHT_HIGH, "change_high_noise_floors": CHANGE_HIGH, "change_low_noise_floors": CHANGE_LOW,
+            "left_high_noise_floors": LEFT_HIGH, "twin_high_share": TWIN_HIGH, "twin_low_share": TWIN_LOW,
+            "records_high_share": RECORDS_HIGH, "record_tolerance": RECORD_TOLERANCE}
+
+
+def calibration_text() -> str:
+    """One sentence: what "high", "medium" and "low" have meant on the held-out family."""
+    c = CALIBRATION
+    if not c["held_out"]:
+        return "The confidence labels have not been calibrated on held-out physics yet."
+    parts = []
+    for lab in LABELS:
+        x = c["labels"][lab]
+        if x["n"]:
+            ok = x["right"] + x["acceptable"]
+            parts.append(f"\"{lab}\" {ok} of {x['n']} right" + (f" ({x['acceptable']} a near twin's relative)"
+                                                                if x["acceptable"] else ""))
+        else:
+            parts.append(f"\"{lab}\" never given")
+    return (f"On {c['held_out']}, a truth family held out of the choice of the thresholds ({c['cases']} cases, "
+            f"physics the diagnosis was not tuned on), picks labelled " + "; ".join(parts) + ".")
+
+
+__all__ = ["Confidence", "features", "label", "excess_share", "thresholds", "calibration_text", "CALIBRATION",
+           "LABELS"]
