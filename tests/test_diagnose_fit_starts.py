@@ -79,7 +79,7 @@ def test_a_nested_effect_never_ends_worse_than_the_base(clean):
     # the off model really is the base: simulated, it gives the base's predictions
     for r, p in zip(data.records, base.pred_d):
         assert np.allclose(C.predict(kept.model, r), p, rtol=0, atol=1e-3 * np.max(np.abs(p)))
-    poorer = dataclasses.replace(base, rss=[1.01 * x for x in forced.rss])      # a base the fit beats
+    poorer = dataclasses.replace(base, rss=[1.01 * x for x in forced.rss], rmse=1.01 * forced.rmse)   # a base the fit beats
     assert C.no_worse_than_base(forced, poorer) is forced
 
 
