@@ -77,7 +77,7 @@ def main() -> None:
               f"  epochs {m.training_summary_['epochs_run']}  weights {_weights_hash(m)}", flush=True)
     from nnmodel.measured import build_dataset
     from nnmodel.traincompare import train_compare
-    from physics.timeseries import TimeSeries, write_timeseries
+    from physics.io.timeseries import TimeSeries, write_timeseries
     with tempfile.TemporaryDirectory() as d:
         from slow_plant import FS, plant
         files = []

@@ -28,8 +28,8 @@ def best_fit(case, max_nfev: int = 40) -> dict:
     from scipy.optimize import least_squares
     from physics.device import load_device
     from physics.model import ActuatorModel
-    from physics.timedomain import simulate
-    from physics.units import to_si
+    from physics.solvers.timedomain import simulate
+    from physics.io.units import to_si
     from bench.truths.case import remove_trend
     dev = load_device(case.device)
 

@@ -20,7 +20,7 @@ def main() -> None:
     from nnmodel.benchmarks import toy
     from nnmodel.models import MODELS
     from nnmodel.training import execution
-    from physics.metrics import nrmse
+    from physics.analysis.metrics import nrmse
     train = toy.records("static_cubic", 4000, seeds=(1, 2))
     val = toy.records("static_cubic", 1000, seeds=(3,))
     test = toy.records("static_cubic", 2000, seeds=(4,))[0]

@@ -50,10 +50,10 @@ def records(folder: Path, seed: int) -> tuple[list[str], float]:
 
     from physics import signals
     from physics.device import load_device
-    from physics.metrics import remove_nuisance
+    from physics.analysis.metrics import remove_nuisance
     from physics.model import ActuatorModel
-    from physics.timedomain import simulate
-    from physics.timeseries import TimeSeries, write_timeseries
+    from physics.solvers.timedomain import simulate
+    from physics.io.timeseries import TimeSeries, write_timeseries
     warnings.simplefilter("ignore")
     rng = np.random.default_rng([seed, 34])
     kf_of_rh = dict(zip(RH, np.sort(rng.uniform([0.6, 0.75, 0.9, 1.0], [0.8, 0.95, 1.05, 1.2]))))
@@ -92,7 +92,7 @@ def records(folder: Path, seed: int) -> tuple[list[str], float]:
 
 def _eap(args: list[str]) -> tuple[int, str, float]:
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "nnmodel.cli", *args], cwd=ROOT, capture_output=True, text=True,
+    p = subprocess.run([sys.executable, "-m", "nnmodel.app.cli", *args], cwd=ROOT, capture_output=True, text=True,
                        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     return p.returncode, p.stdout + p.stderr, time.perf_counter() - t0
 

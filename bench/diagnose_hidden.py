@@ -5,7 +5,7 @@ check describes.  In-catalog identification rates are printed by
 
     python bench/diagnose_hidden.py [--seeds 3]
 
-Truths (physics.diagnose.demo.outside_catalog_case): creep of the polymer, a play
+Truths (physics.testbeds.demo.outside_catalog_case): creep of the polymer, a play
 (backlash) on the output, and a viscoelastic near-twin (another polymer law than the DMA
 table); the user's model is the bare device (double_layer only) with every catalog
 candidate the records can reveal.
@@ -20,7 +20,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
     args = ap.parse_args()
-    from physics.diagnose.demo import OUTSIDE, outside_catalog_case
+    from physics.testbeds.demo import OUTSIDE, outside_catalog_case
     from physics.diagnose.diagnosis import diagnose
     high = total = 0
     print(f"{'truth':9s} {'seed':>4s}  {'status':30s} {'named':22s} {'label':6s} remaining (first descriptor)")

@@ -157,7 +157,7 @@ def prepare(results: Path, family: str, truth: str, seed: int) -> tuple[dict, li
             rec.rmdir()
         tmp.rename(rec)
     csvs = sorted(str(p) for p in rec.glob("*.csv"))
-    cmd = [sys.executable, "-m", "nnmodel.cli", "diagnose", *csvs, "--device", case.device, *case.param_args(),
+    cmd = [sys.executable, "-m", "nnmodel.app.cli", "diagnose", *csvs, "--device", case.device, *case.param_args(),
            "--effects", case.effects, "--out", str(d / "diagnose"), "--quiet"]
     meta["command"] = ["eap"] + cmd[3:]
     fresh = bool(old and old.get("records_sha256") == digest and old.get("command") == meta["command"]

@@ -19,7 +19,7 @@ FRF, multi-start) and their full time simulations on the record, statistics and 
 verdict (no report files; writing them adds ~2 s).  The diagnosis runs in one process
 on one core (BLAS limited to one thread); the second core is unused.
 
-``--rate-seeds N``: also run the hidden-effect cases of :mod:`physics.diagnose.demo`
+``--rate-seeds N``: also run the hidden-effect cases of :mod:`physics.testbeds.demo`
 (default excitation per effect, 60 s records at 500 Hz) for seeds 0..N−1 and print the
 identification rate per effect (hidden effect ranked first, error after ≤ half the base's
 or ≤ 1.2× the noise floor, verdict equal to the hidden effect; none: verdict null).
@@ -43,12 +43,12 @@ import numpy as np
 
 from physics import signals
 from physics.diagnose import diagnose
-from physics.diagnose.demo import draw_truth, hidden_effect_case, hidden_effects
+from physics.testbeds.demo import draw_truth, hidden_effect_case, hidden_effects
 from physics.device import load_device
 from physics.model import ActuatorModel
-from physics.sensor import SensorModel
-from physics.timedomain import simulate
-from physics.timeseries import TimeSeries
+from physics.io.sensor import SensorModel
+from physics.solvers.timedomain import simulate
+from physics.io.timeseries import TimeSeries
 
 TARGET_S = 60.0
 
@@ -99,8 +99,8 @@ def main(argv=None) -> int:
     import io
     import tempfile
 
-    from nnmodel.cli import main as eap
-    from physics.timeseries import write_timeseries
+    from nnmodel.app.cli import main as eap
+    from physics.io.timeseries import write_timeseries
     with tempfile.TemporaryDirectory() as tmp:
         path = write_timeseries(rec, f"{tmp}/sweep_200s_1kHz.csv")
         t0 = time.perf_counter()

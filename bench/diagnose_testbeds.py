@@ -1,4 +1,4 @@
-"""The diagnosis on the two test beds of issue 24 (physics.diagnose.testbeds): lab-like records
+"""The diagnosis on the two test beds of issue 24 (physics.testbeds.cases): lab-like records
 of our simulator and records of a perturbed simulator, over several seeds.  Prints, per case
 and seed: the truth, the verdict chain with its confidence, the error before → after each
 step, the true model's error (scored the same way) and the status; then a summary.
@@ -27,7 +27,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     from physics.diagnose import diagnose
-    from physics.diagnose.testbeds import OUTSIDE, make_case, truths
+    from physics.testbeds.cases import OUTSIDE, make_case, truths
     if args.effects_path:
         from physics.effects import load_effects_file
         load_effects_file(args.effects_path)

@@ -5,10 +5,10 @@ model's error.
     python bench/draft_loop.py [--suites outside,lab,perturbed] [--truths creep,lowpass,drift]
         [--seeds 0,1,2]
 
-Suites: ``outside`` — :func:`physics.diagnose.demo.outside_catalog_case` exported as a lab does
+Suites: ``outside`` — :func:`physics.testbeds.demo.outside_catalog_case` exported as a lab does
 (the bare device, a sweep and a pulse, 60 s at 200 Hz, tip in mm, no metadata; its ``drift`` is
 a deterministic A·(1 − e^(−t/τ)) shared by the records); ``lab`` and ``perturbed`` — the test
-beds of :mod:`physics.diagnose.testbeds` (lab-like exports of our simulator with the device's
+beds of :mod:`physics.testbeds.cases` (lab-like exports of our simulator with the device's
 default effects; a simulator whose base differs a little; their ``drift`` is a random wander,
 different in every record).  The records are written as files and ``eap diagnose`` reads them
 as a user would, with ``--draft-effects``, then again with the kept drafts (``--effects-path``).
@@ -32,7 +32,7 @@ from pathlib import Path
 
 
 def _run(argv: list[str]) -> tuple[str, float]:
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     out = io.StringIO()
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
@@ -58,15 +58,15 @@ def _verdict(d: dict) -> str:
 def _records(suite: str, truth: str, seed: int, folder: Path) -> tuple[list[str], list[str], dict, float]:
     """(files, device/effects arguments, truth parameters, true model's error [m])."""
     if suite == "outside":
-        from physics.diagnose.demo import outside_catalog_case
-        from physics.metrics import remove_nuisance
-        from physics.timeseries import write_timeseries
+        from physics.testbeds.demo import outside_catalog_case
+        from physics.analysis.metrics import remove_nuisance
+        from physics.io.timeseries import write_timeseries
         ms, tp, clean = outside_catalog_case(truth, seed, fs=200.0, duration=60.0, lab=True, clean=True)
         err = [remove_nuisance(m.deflection - y, m.time) for m, y in zip(ms, clean)]
         files = [str(write_timeseries(m, folder / f"{m.source}.csv", units={"deflection": "mm"})) for m in ms]
         return files, ["--device", "ipmc_pt_eg", "--effects", "none"], tp, \
             math.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err))
-    from physics.diagnose.testbeds import make_case
+    from physics.testbeds.cases import make_case
     case = make_case(suite, truth, seed)
     files = [str(f) for f in case.write(folder)]
     return files, ["--device", case.device_name, *case.param_args(), "--effects", case.effects], \

@@ -12,7 +12,7 @@ excepted); a refusal creates nothing.
     python bench/hostile_audit.py --tree /work/wt/base   # another checkout (e.g. the base commit)
     python bench/hostile_audit.py --only dataset --verbose
 
-Every case runs in a fresh process (``python -m nnmodel.cli …``) in its own folder, with an
+Every case runs in a fresh process (``python -m nnmodel.app.cli …``) in its own folder, with an
 address-space cap (``--cap-GB``), a timeout (``--timeout``, a hang counts as a failure) and a
 cap on the processes it may start (:data:`MAX_PROCS`, more is unbounded work: stopped, a hang).
 A case may run on a nearly full disk (a 16 kB tmpfs in a private mount namespace, ``unshare``:
@@ -174,7 +174,7 @@ def build_fixtures(fx: Path, tree: Path, env: dict) -> None:
         (fx / f"eff_{name}.py").write_text(body)
     _record(fx / "long20k.csv", n=20000)
     _linear_record(fx / "lin.csv")
-    run = lambda *a: subprocess.run([sys.executable, "-m", "nnmodel.cli", *a], cwd=fx, env=env,  # noqa: E731
+    run = lambda *a: subprocess.run([sys.executable, "-m", "nnmodel.app.cli", *a], cwd=fx, env=env,  # noqa: E731
                                     capture_output=True, text=True)
     r = run("generate", "--config", "tiny.yaml", "--out", "G", "--quiet")
     if r.returncode:
@@ -245,7 +245,7 @@ def write(rel: str, text: str | bytes):
 def run_eap(*argv):
     """A setup step that runs eap (e.g. to make a folder eap wrote)."""
     def setup(d, fx):
-        r = subprocess.run([sys.executable, "-m", "nnmodel.cli", *argv], cwd=d, env=_ENV, capture_output=True,
+        r = subprocess.run([sys.executable, "-m", "nnmodel.app.cli", *argv], cwd=d, env=_ENV, capture_output=True,
                            text=True)
         if r.returncode:
             raise RuntimeError(f"setup `eap {' '.join(argv)}` failed: {r.stderr.strip()[-300:]}")
@@ -1123,7 +1123,7 @@ def _tool(name: str) -> bool:
 
 def _wrapped(case: Case, argv: list[str]) -> list[str] | None:
     """The command line of ``case`` with its wrappers (None: a wrapper this machine lacks)."""
-    cmd = [sys.executable, "-m", "nnmodel.cli", *argv]
+    cmd = [sys.executable, "-m", "nnmodel.app.cli", *argv]
     if case.unprivileged and os.geteuid() == 0:
         if not _tool("setpriv"):
             return None

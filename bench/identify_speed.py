@@ -29,8 +29,8 @@ import warnings
 
 import numpy as np
 
-from physics.frequency import frequency_response
-from physics.frfdata import FRFData
+from physics.solvers.frequency import frequency_response
+from physics.io.frfdata import FRFData
 from physics.identify import THESIS_MAX_ITER, THESIS_SECONDS_PER_FREQUENCY, IdentifiabilityWarning, identify
 from physics.model import ActuatorModel
 

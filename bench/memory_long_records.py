@@ -25,7 +25,7 @@ RUNNER = r"""
 import json, resource, sys, time
 cap = int(float(sys.argv[1]) * 2**30)
 resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 t0 = time.perf_counter()
 rc = main(sys.argv[2:])
 hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")]

@@ -15,9 +15,9 @@ import time
 import numpy as np
 
 from physics import signals
-from physics.frequency import frequency_response
+from physics.solvers.frequency import frequency_response
 from physics.model import ActuatorModel
-from physics.timedomain import simulate
+from physics.solvers.timedomain import simulate
 
 THESIS_S_PER_POINT = 15 * 60.0
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from physics.device import load_device
 from physics.reference.strip import ReferenceStrip
-from physics.timedomain import simulate
+from physics.solvers.timedomain import simulate
 
 
 def _timed(fn, repeat=1):

@@ -1,4 +1,4 @@
-"""Scale-out figures on this machine, ratios measured in one run (physics/parallel.py):
+"""Scale-out figures on this machine, ratios measured in one run (physics/execution/parallel.py):
 
 * `eap generate --config default`: serial vs 2 local workers, and whether the dataset
   hashes are identical;
@@ -30,8 +30,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     from nnmodel.dataset import generate
-    from physics.parallel import ParallelSettings, shutdown
-    from physics.sweep import run_sweep
+    from physics.execution.parallel import ParallelSettings, shutdown
+    from physics.solvers.sweep import run_sweep
     par = ParallelSettings(args.workers)
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
@@ -58,7 +58,7 @@ def main() -> None:
     print(f"sweep of {len(s)} FRF points: serial {t1 - t0:.1f} s ({1e3 * task:.1f} ms per task), "
           f"{args.workers} workers {t2 - t1:.1f} s (×{(t1 - t0) / (t2 - t1):.2f}); engine overhead "
           f"≈ {1e3 * overhead:.2f} ms per task (cluster start included); tables identical: {s.equals(p)}")
-    from physics.diagnose.demo import hidden_effect_case
+    from physics.testbeds.demo import hidden_effect_case
     from physics.diagnose.diagnosis import diagnose
     case = hidden_effect_case("solvent_diffusion", 0, design="rich")
     runs = {}

@@ -1,6 +1,6 @@
 """False-alarm rate and power of the shared-wander test (:func:`physics.diagnose.wander.shared_wander`)
 by simulation, on the records of the *outside* suite's drift case (a sweep and a pulse, 60 s at
-200 Hz, as :func:`physics.diagnose.demo.outside_catalog_case` makes them and the diagnosis
+200 Hz, as :func:`physics.testbeds.demo.outside_catalog_case` makes them and the diagnosis
 prepares them: classified from the voltage, their noise floors estimated).
 
     python bench/shared_wander.py [--cases 200] [--seed 0]
@@ -30,7 +30,7 @@ from scipy.stats import beta
 
 
 def _records():
-    from physics.diagnose.demo import outside_catalog_case
+    from physics.testbeds.demo import outside_catalog_case
     from physics.diagnose.records import prepare_records
     ms, _ = outside_catalog_case("drift", 0, fs=200.0, duration=60.0, lab=True)
     with warnings.catch_warnings():
@@ -41,7 +41,7 @@ def _records():
 def _case(kind: str, records, rng) -> tuple[float, float]:
     """(p-value, τ [s] of the shared drift or NaN) of one simulated case."""
     from physics.diagnose.wander import shared_wander, slow_wander
-    from physics.metrics import nuisance_terms, remove_nuisance
+    from physics.analysis.metrics import nuisance_terms, remove_nuisance
     amp = rng.choice([-1.0, 1.0]) * math.exp(rng.uniform(math.log(8e-6), math.log(20e-6)))
     tau = math.exp(rng.uniform(math.log(5.0), math.log(60.0)))
     smooth = rng.uniform(3.0, 6.0) * 3e-6

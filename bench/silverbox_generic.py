@@ -28,7 +28,7 @@ SPLIT = dict(train="[40650:105712]", test="[105712:127400]", fs_Hz="610.35", val
 
 
 def _cli(argv: list[str]) -> float:
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     t0 = time.perf_counter()
     code = main(argv)
     if code:

@@ -1,4 +1,5 @@
-"""Structure of the code base (issue 26): import cycles, longest functions, widest signatures.
+"""Structure of the code base (issues 26, 37): import cycles, modules per folder, which folders
+import which, longest functions, widest signatures.
 
 Reads the sources with the standard library's :mod:`ast` (nothing is imported or run):
 
@@ -22,12 +23,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def module_files(packages) -> dict[str, Path]:
-    """{dotted module name: file} of every module under the given top-level packages."""
+def module_files(packages, root: Path = ROOT) -> dict[str, Path]:
+    """{dotted module name: file} of every module under the given top-level packages of ``root``."""
     out = {}
     for pkg in packages:
-        for f in sorted((ROOT / pkg).rglob("*.py")):
-            parts = list(f.relative_to(ROOT).with_suffix("").parts)
+        for f in sorted((root / pkg).rglob("*.py")):
+            parts = list(f.relative_to(root).with_suffix("").parts)
             if parts[-1] == "__init__":
                 parts = parts[:-1]
             out[".".join(parts)] = f
@@ -133,6 +134,31 @@ def functions(module: str, path: Path):
     return out
 
 
+def folder_of(module: str, path: Path) -> str:
+    """The folder holding a module (a package's ``__init__`` is in its own folder)."""
+    return path.parent.relative_to(ROOT).as_posix()
+
+
+def print_rooms(files: dict[str, Path], graph: dict[str, set[str]]) -> None:
+    """Modules per folder, and which folders import which (the floors and rooms)."""
+    count: dict[str, int] = {}
+    for m, f in files.items():
+        count[folder_of(m, f)] = count.get(folder_of(m, f), 0) + 1
+    print("\nmodules per folder:")
+    for d in sorted(count):
+        print(f"  {count[d]:4d}  {d}/")
+    edges: dict[str, set[str]] = {}
+    for m, targets in graph.items():
+        a = folder_of(m, files[m])
+        for t in targets:
+            b = folder_of(t, files[t])
+            if a != b:
+                edges.setdefault(a, set()).add(b)
+    print("\nfolder -> folders it imports:")
+    for a in sorted(edges):
+        print(f"  {a}/ -> {', '.join(sorted(edges[a]))}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--top", type=int, default=15, help="how many functions to list (default 15)")
@@ -149,6 +175,7 @@ def main(argv=None) -> int:
     print(f"\nimport cycles: {len(comps)} (modules in cycles: {sum(map(len, comps))})")
     for c in comps:
         print(f"  {len(c):2d} modules: {', '.join(c)}")
+    print_rooms(files, graph)
     funcs = [f for m, p in files.items() for f in functions(m, p)]
     print(f"\nlongest functions (of {len(funcs)}; lines):")
     for name, lines, _ in sorted(funcs, key=lambda f: (-f[1], f[0]))[:args.top]:

@@ -28,8 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 def _dataset(root: Path, gain: float) -> Path:
     from nnmodel.measured import build_dataset
-    from physics.record import OutputQuantity
-    from physics.timeseries import TimeSeries, write_timeseries
+    from physics.io.record import OutputQuantity
+    from physics.io.timeseries import TimeSeries, write_timeseries
     from slow_plant import FS, plant
 
     files = {}

@@ -36,7 +36,7 @@ def main() -> None:
     ap.add_argument("--tune", type=int, default=8)
     ap.add_argument("--out", default="runs/tune-workers")
     args = ap.parse_args()
-    from nnmodel.cli import main as eap
+    from nnmodel.app.cli import main as eap
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "tiny.yaml").write_text(TINY)

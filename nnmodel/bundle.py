@@ -31,7 +31,7 @@ import torch
 
 from physics._version import __version__
 from physics.errors import InputError
-from physics.fileio import load_json, sha256_file
+from physics.io.fileio import jsonable, load_json, sha256_file
 
 from .data import check_fs, check_voltage
 from .models import MODELS, load_plugins
@@ -49,23 +49,6 @@ CARD = "card.json"
 FS_RTOL = 1e-4
 
 _UNITS = {"voltage": "V", "rh": "%RH"}
-
-
-
-def _jsonable(obj):
-    """Convert numpy scalars/arrays inside metrics to plain JSON values (NaN -> None)."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if np.isfinite(v) else None
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    return obj
 
 
 def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | None = None,
@@ -107,7 +90,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
                               **({"rh": stats["rh"]} if "rh" in learned["inputs"] else {})},
             "training": _training_card(model, learned),
             "dataset_hash": dataset_hash,
-            "metrics": _jsonable(metrics) if metrics else {},
+            "metrics": jsonable(metrics) if metrics else {},
             "notes": notes,
             "package_version": __version__,
             "torch_version": torch.__version__,
@@ -118,7 +101,7 @@ def save(model: NeuralModel, path: str | os.PathLike, *, dataset_hash: str | Non
             if key in card:
                 raise InputError(f"model {model.kind!r}: card entry {key!r} would overwrite a standard field")
             card[key] = value
-        (tmp / CARD).write_text(json.dumps(_jsonable(card), indent=2, allow_nan=False) + "\n",
+        (tmp / CARD).write_text(json.dumps(jsonable(card), indent=2, allow_nan=False) + "\n",
                                 encoding="utf-8")
         if target.exists():
             old = target.with_name(f".{target.name}.old-{os.getpid()}")

@@ -17,10 +17,10 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from physics.errors import InputError
-from physics.record import check_finite, check_range
+from physics.io.record import check_finite, check_range
 # One definition of the fit metrics for the whole package (NRMSE = RMSE / std(y), fit % =
-# 100 (1 - NRMSE)): physics.metrics, re-exported here for the neural-model code.
-from physics.metrics import fit_percent, nrmse, rmse
+# 100 (1 - NRMSE)): physics.analysis.metrics, re-exported here for the neural-model code.
+from physics.analysis.metrics import fit_percent, nrmse, rmse
 
 __all__ = ["Experiment", "check_prediction_inputs", "check_records", "split_index", "split_records", "window_starts", "cut_windows",
            "rh_range", "rmse", "nrmse", "fit_percent"]
@@ -98,7 +98,7 @@ class Experiment:
     name : str
         Free label used in messages and reports.
 
-    Values are checked with the rules of the file readers (:mod:`physics.timeseries`:
+    Values are checked with the rules of the file readers (:mod:`physics.io.timeseries`:
     finite numbers, RH within 0-100 %).
     """
 
@@ -121,7 +121,7 @@ class Experiment:
     def from_timeseries(cls, ts, name: str | None = None) -> "Experiment":
         """Build a record from a time-series object with attributes ``time``, ``voltage``,
         ``deflection`` (may be ``None``), ``rh`` (scalar, array or ``None``) and ``fs``
-        (for example :class:`physics.timeseries.TimeSeries`; duck-typed)."""
+        (for example :class:`physics.io.timeseries.TimeSeries`; duck-typed)."""
         for attr in ("voltage", "fs"):
             if not hasattr(ts, attr):
                 raise InputError(f"{type(ts).__name__} has no attribute {attr!r}; expected a time "

@@ -24,19 +24,19 @@ from typing import Any
 
 import numpy as np
 
-from physics.yamlio import load_yaml
+from physics.io.yamlio import load_yaml
 from physics import signals
 from physics.device import config_dir, load_device
 from physics.errors import InputError
-from physics.fileio import load_json, sha256_file, write_json
+from physics.io.fileio import load_json, sha256_file, write_json
 from physics.limits import FS_RANGE_HZ
 from physics.model import ActuatorModel, resolve_effects
-from physics.parallel import ParallelSettings, map_tasks, warm_up
-from physics.outputs import output_folder, preflight
-from physics.sensor import SensorModel
-from physics.timedomain import simulate
-from physics.record import OutputQuantity
-from physics.timeseries import read_timeseries, write_timeseries
+from physics.execution.parallel import ParallelSettings, map_tasks, warm_up
+from physics.io.outputs import output_folder, preflight
+from physics.io.sensor import SensorModel
+from physics.solvers.timedomain import simulate
+from physics.io.record import OutputQuantity
+from physics.io.timeseries import read_timeseries, write_timeseries
 
 from .data import Experiment
 
@@ -207,8 +207,8 @@ def _record_cost(task: dict) -> float:
 def generate(out: str | Path, config: str | dict = "default", *, overwrite: bool = False,
              progress: bool = True, settings: ParallelSettings | None = None, **overrides) -> Path:
     """Generate a dataset folder (written to a temporary folder, then renamed into place; the
-    output-folder policy of :mod:`physics.outputs`: ``overwrite`` replaces only a folder eap wrote).
-    ``settings``: where the records are simulated (:mod:`physics.parallel`; identical files for
+    output-folder policy of :mod:`physics.io.outputs`: ``overwrite`` replaces only a folder eap wrote).
+    ``settings``: where the records are simulated (:mod:`physics.execution.parallel`; identical files for
     any worker count, every record has its own seed)."""
     cfg = load_config(config, overrides) if isinstance(config, str) else load_config("default", config)
     out = Path(out)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from physics.columns import number
+from physics.pages.columns import number
 
 #: A network's held-out error this much above a reference row counts as "worse" (ratio).
 WORSE = 1.1

@@ -30,7 +30,7 @@ from scipy import signal
 
 from physics.errors import InputError
 
-__all__ = ["LinearModel", "fit_linear", "as_network", "NA_GRID", "NB_GRID"]
+__all__ = ["LinearModel", "fit_linear", "NA_GRID", "NB_GRID"]
 
 #: output-lag orders tried (0 = FIR)
 NA_GRID = (0, 1, 2, 3, 4, 6, 8, 10)
@@ -397,26 +397,3 @@ def _fit(train, val, val_fraction, feedthrough, use_rh, na_grid, nb_grid, output
     report["scores"] = {k: _finite(v) for k, v in scores.items()}
     model.report = report
     return model
-
-
-def as_network(lin: LinearModel, train, val_fraction: float = 0.2):
-    """The linear model as a network that a bundle can hold and ``eap predict`` can run: an
-    ``ff`` network whose linear start is this model and whose correction is zero (no hidden
-    layer, no memory filters), so that its free run is this model's, started as every
-    network's linear start is: from the record's first ``n_init`` measured outputs.
-    ``train``: the training records (their sampling rate and RH range)."""
-    from .data import check_records, rh_range
-    from .models import MODELS
-
-    train = check_records(train, "training")
-    net = MODELS["ff"](na=0, nb=lin.n_init + 1, layers=0, arx_init=False, memory_filters=0, rh_knots=[],
-                       linear_start=True, inputs="voltage+rh" if lin.uses_rh else "voltage", max_epochs=0,
-                       structures=None, cv_folds=1, val_fraction=val_fraction, progress_bar=False)
-    net.restore({"inputs": ["voltage", "rh"] if lin.uses_rh else ["voltage"], "fs": train[0].fs,
-                 "rh_range": list(rh_range(train)) if lin.uses_rh else None, "n_init": lin.n_init,
-                 "card_extra": {"linear_start": lin.card()}}, None)
-    for name in ("u", "y") + (("rh",) if lin.uses_rh else ()):   # the linear model's scales: exact round trip
-        getattr(net.net_, f"{name}_mean").fill_(lin.scale[f"{name}_mean"])
-        getattr(net.net_, f"{name}_std").fill_(lin.scale[f"{name}_std"])
-    net.net_.core.zero_correction()
-    return net

@@ -2,7 +2,7 @@
 
 Each named file (optionally a sample range ``FILE[START:STOP]``, e.g. the standard split
 of one long benchmark record) is read with the same rules, column maps and errors as every
-other command (:func:`physics.timeseries.read_timeseries`), written into the dataset folder
+other command (:func:`physics.io.timeseries.read_timeseries`), written into the dataset folder
 as a standard time-series CSV (``time_s, voltage_V, deflection_m[, rh_pct]``, or the output
 named with ``output``, e.g. ``level_V``) with its sidecar (the source's metadata) and listed
 in ``dataset.json`` (schema ``eap-dataset/1``, the same as :func:`nnmodel.dataset.generate`)
@@ -31,10 +31,10 @@ import numpy as np
 
 from physics.compare import cluster_rh
 from physics.errors import InputError
-from physics.fileio import sha256_file, write_json
-from physics.outputs import component, output_folder, preflight
-from physics.record import OutputQuantity
-from physics.timeseries import TimeSeries, read_timeseries, write_timeseries
+from physics.io.fileio import sha256_file, write_json
+from physics.io.outputs import component, output_folder, preflight
+from physics.io.record import OutputQuantity
+from physics.io.timeseries import TimeSeries, read_timeseries, write_timeseries
 
 from .dataset import SCHEMA, load_dataset
 

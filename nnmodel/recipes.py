@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 from physics.errors import InputError
-from physics.yamlio import load_yaml
+from physics.io.yamlio import load_yaml
 
 __all__ = ["recipe_dir", "load_recipe", "make_model"]
 

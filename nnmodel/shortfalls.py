@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from physics.columns import quantity
+from physics.pages.columns import quantity
 
 from .models.crossval import independent_windows
 

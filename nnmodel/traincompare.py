@@ -30,19 +30,19 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.outputs import final_path, output_folder, preflight
+from physics.io.outputs import final_path, output_folder, preflight
 from physics.compare import PhysicsPredictor, cluster_rh, model_rh
 from physics.effects import CORE
 from physics.errors import InputError
-from physics.fileio import write_json
-from physics.frequency import frequency_response
-from physics.columns import number, reading_unit
-from physics.plotting import legend_outside, plain_log_axis, plt, rh_axis, save
-from physics.report import Report, colour, write_csv
+from physics.io.fileio import write_json
+from physics.solvers.frequency import frequency_response
+from physics.pages.columns import number, reading_unit
+from physics.pages.plotting import legend_outside, plain_log_axis, plt, rh_axis, save
+from physics.pages.report import Report, colour, write_csv
 from physics import signals
 
 from physics.effects import ensure_registered, user_effect_files
-from physics.parallel import ParallelSettings, map_tasks, warm_up
+from physics.execution.parallel import ParallelSettings, map_tasks, warm_up
 
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
@@ -146,9 +146,9 @@ def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm", "ss"
                   rh_tolerance: float = RH_TOLERANCE, accelerator: str = "auto") -> dict:
     """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
     ``compare.json``, ``metrics.csv``, plots and the page ``index.html`` in ``out`` (a folder written
-    atomically under the policy of :mod:`physics.outputs`).  ``physics``: a device (name or
+    atomically under the policy of :mod:`physics.io.outputs`).  ``physics``: a device (name or
     YAML) whose simulator is scored beside the networks — by default the dataset's generator,
-    none for measured data.  ``settings``: where the models train (:mod:`physics.parallel`:
+    none for measured data.  ``settings``: where the models train (:mod:`physics.execution.parallel`:
     one task per model, each reading the dataset from its path; default here).  ``tune``:
     trials per model of the search on validation data (:mod:`nnmodel.tuning`), the best
     trial's settings are trained and saved.  ``rh_tolerance`` [%]: records whose RH differ by
@@ -310,8 +310,8 @@ def _linear_runner(lin: LinearModel):
 
 def _train_linear(task: dict) -> dict:
     """Fit, score and save the linear yardstick (a task like :func:`_train_one`): its bundle
-    is the network that runs exactly this linear model (:func:`nnmodel.linear.as_network`)."""
-    from .linear import as_network
+    is the network that runs exactly this linear model (:func:`nnmodel.models.ff.as_network`)."""
+    from .models.ff import as_network
     from .models.structure import validation_nrmse
     ds = load_dataset(task["dataset"])
     train, val = ds.records("train"), ds.records("validation") or None
@@ -357,7 +357,7 @@ def _compare_with_linear(results: dict) -> None:
 
 
 def _train_one(task: dict) -> dict:
-    """Train, score and save one model (a task of :func:`physics.parallel.map_tasks`: in this
+    """Train, score and save one model (a task of :func:`physics.execution.parallel.map_tasks`: in this
     process or on a worker, which reads the dataset from its path); returns its result row."""
     from .models.structure import selection_score
     from .training import device_name
@@ -643,7 +643,7 @@ def group_label(group: str, with_rh: bool) -> str:
 def output_reading(ds) -> dict:
     """The dataset's output ``{name, unit}`` with ``magnitude``, the largest absolute value
     of its training records, which picks the unit every table and plot of the page reads it
-    in (:func:`physics.columns.reading_unit`)."""
+    in (:func:`physics.pages.columns.reading_unit`)."""
     output = dict(ds.meta.get("output") or {"name": "deflection", "unit": "m"})
     output["magnitude"] = float(max(np.max(np.abs(r.y)) for r in ds.records("train")))
     return output

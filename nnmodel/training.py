@@ -92,7 +92,7 @@ def execution(devices: int = 1, strategy: str = "auto"):
     """Train with ``devices`` processes/devices and a Lightning ``strategy`` (e.g. ``ddp_spawn``
     on CPUs with the gloo backend, ``ddp`` on GPUs) inside the block."""
     from physics.limits import check_count
-    from physics.parallel import cores
+    from physics.execution.parallel import cores
     gpus = torch.cuda.device_count() if torch.cuda.is_available() else 0
     check_count(devices, 1, gpus or cores(), "--devices",
                 f"the {'GPUs' if gpus else 'CPU cores'} of this machine; one training process each")

@@ -11,7 +11,7 @@ a trial replaces the recipe only when its fold-by-fold gain over the recipe is l
 average than its spread; of such trials the lowest-scoring is kept (:func:`choose`).  N trials are drawn by Optuna's TPE sampler (Bergstra et al.,
 NeurIPS 2011) seeded with the model's seed, asked and told in fixed batches of
 :data:`BATCH` — the trials of a batch are tasks on the execution layer
-(:mod:`physics.parallel`, ``--workers``/``--scheduler``) and are told back in trial order —
+(:mod:`physics.execution.parallel`, ``--workers``/``--scheduler``) and are told back in trial order —
 so the trials, and therefore the result, do not depend on the worker count or on which
 trial finishes first.  A trial trains the model with the recipe plus its parameters on the
 training records and scores its free-run NRMSE on the validation data (the validation
@@ -97,7 +97,7 @@ def recipe_trial(space: dict, params: dict) -> dict:
 
 
 def _trial(task: dict) -> dict:
-    """One trial (a task of :func:`physics.parallel.map_tasks`): train with the overrides,
+    """One trial (a task of :func:`physics.execution.parallel.map_tasks`): train with the overrides,
     return the free-run validation NRMSE (inf when training fails or diverges)."""
     from physics.effects import ensure_registered
 
@@ -131,7 +131,7 @@ def tune(name: str, recipe: dict, base: dict, n_trials: int, dataset: str, setti
     ``{"best": {...}, "trials": [...], ...}`` with the overrides of the best trial."""
     import optuna
 
-    from physics.parallel import map_tasks
+    from physics.execution.parallel import map_tasks
 
     if isinstance(n_trials, bool) or not isinstance(n_trials, int) or n_trials < 1:
         raise InputError(f"--tune {n_trials!r}: must be a positive whole number of trials")

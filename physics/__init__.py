@@ -9,13 +9,31 @@ Quick start::
     res = physics.simulate("ipmc_pt_eg", "default", t, 2 * np.sin(2 * np.pi * t), rh=60)
 """
 from ._version import __version__
-from .contract import ContractReport, check_effect     # also installs physics.effects.check_effect
-from .device import Device, available_devices, load_device
-from .effects import EFFECTS
-from .errors import InputError, ModelError
-from .frequency import FrequencyResponse, frequency_response
-from .model import ActuatorModel
-from .timedomain import SimulationResult, simulate
 
-__all__ = ["__version__", "ActuatorModel", "ContractReport", "Device", "EFFECTS", "FrequencyResponse", "InputError", "ModelError",
-           "SimulationResult", "available_devices", "check_effect", "frequency_response", "load_device", "simulate"]
+#: Public name -> module that defines it; imported on first use (PEP 562), so that
+#: ``import physics`` (or ``physics.errors``) does not pull in SciPy, the solvers and the effects.
+_LAZY = {
+    "ActuatorModel": "physics.model",
+    "ContractReport": "physics.contract", "check_effect": "physics.contract",
+    "Device": "physics.device", "available_devices": "physics.device", "load_device": "physics.device",
+    "EFFECTS": "physics.effects",
+    "InputError": "physics.errors", "ModelError": "physics.errors",
+    "FrequencyResponse": "physics.solvers.frequency", "frequency_response": "physics.solvers.frequency",
+    "SimulationResult": "physics.solvers.timedomain", "simulate": "physics.solvers.timedomain",
+}
+
+__all__ = ["__version__", *sorted(_LAZY)]
+
+
+def __getattr__(name: str):
+    """Import a public name's module on first access (PEP 562)."""
+    if name in _LAZY:
+        import importlib
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'physics' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

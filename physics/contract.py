@@ -1,7 +1,7 @@
 """The effect contract as a function: :func:`check_effect` runs it on any effect class
 (also :func:`physics.effects.check_effect`, which calls it: the checks run the model, the solvers,
 ``diagnose`` and ``identify``, layers above :mod:`physics.effects`, so they live here and this
-module installs itself there when ``physics`` is imported).
+module installs itself there when it is first imported).
 
 Checks (each passes, fails with a one-line reason, or is skipped with the reason):
 
@@ -43,12 +43,12 @@ from .device import all_param_specs, load_device
 from .effects import BUILT_IN, EFFECTS, Effect, LoadEffect, OutputEffect, register, stage_of, unregister
 from .effects.base import rational
 from .effects.declaration import declaration_problems
-from .effects.usercode import UserCodeError
+from .execution.usercode import UserCodeError
 from .effects.stages import STAGE_PROTOCOLS, CompiledChargeLaw, LoadFactor, OutputFactor
 from .errors import InputError
-from .frequency import frequency_response
+from .solvers.frequency import frequency_response
 from .model import ActuatorModel
-from .timedomain import simulate
+from .solvers.timedomain import simulate
 
 #: Checks run by :func:`check_effect`, in order; ``FAST_CHECKS`` with ``fast=True``.
 CHECKS = ("declaration", "builds", "protocol", "finite", "stable", "passive", "spec", "solvers", "off", "identify")

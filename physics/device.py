@@ -23,9 +23,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import InputError
-from .yamlio import load_yaml
+from .io.yamlio import load_yaml
 from .parameters import BASE_SECTIONS, ParamSpec, TableSpec
-from .units import UnitError, to_si
+from .io.units import UnitError, to_si
 
 SCHEMA = "eap-device/1"
 _TOP_KEYS = {"schema", "name", "title", "reference", "reference_rh", "default_effects", "notes"}

@@ -8,7 +8,7 @@ variant or by the switched-on effect that replaces it)::
         ─▶ couple along the strip ─▶ beam section (EI*(s), ρA)
         ─▶ modal cantilever + quasi-static residual ─▶ tip ─▶ added output factors
 
-Both solvers (:mod:`physics.frequency`, :mod:`physics.timedomain`) walk this chain through
+Both solvers (:mod:`physics.solvers.frequency`, :mod:`physics.solvers.timedomain`) walk this chain through
 the same effect objects, by the hooks of :mod:`physics.effects.base` (:meth:`ActuatorModel.hook`,
 :meth:`ActuatorModel.product`), so they cannot drift apart and never name an effect.  This
 module does not import the solvers (the layering is one way: effects ← model ← solvers).
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .beam import CantileverModes
+from .solvers.beam import CantileverModes
 from .device import Device, load_device
 from .effects import CHAIN, CORE, EFFECTS, Effect, stage_of
 from .effects.double_layer import DoubleLayerProps

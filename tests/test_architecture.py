@@ -56,8 +56,8 @@ def test_the_flag_rule_can_fail(tmp_path):
 
 
 def test_errors_name_the_argument_in_python_and_the_flag_on_the_command_line(tmp_path, capsys):
-    from nnmodel.cli import main
-    from physics.sweep import parse_grid
+    from nnmodel.app.cli import main
+    from physics.solvers.sweep import parse_grid
     with pytest.raises(InputError) as info:
         parse_grid(["Yy=1,2"], None)
     assert str(info.value).startswith("grid Yy: unknown parameter") and "--" not in str(info.value)
@@ -91,7 +91,7 @@ DX_ALLOWLIST: dict = {}
 DATA = {
     "nnmodel/dataset.py": ({"nonlinear_charge"}, "the default configuration's measurement-like records "
                                                  "(the same as configs/datasets/default.yaml)"),
-    "nnmodel/story.py": ({"solvent_diffusion"}, "the effect the one-page story's loop hides"),
+    "nnmodel/app/story.py": ({"solvent_diffusion"}, "the effect the one-page story's loop hides"),
 }
 
 
@@ -150,3 +150,107 @@ def test_the_effect_rule_can_fail(tmp_path):
         "    raise ValueError(f'{p} needs solvent_diffusion')\n"                       # inside a message
         "NOTE = 'relative humidity and thermal drift'\n")                              # English: not flagged
     assert effect_literals(tmp_path, ("physics",)) == {"physics/solver.py": {"thermal", "C_max", "solvent_diffusion"}}
+
+
+# ------------------------------------------------------------------ the layers (issue 37)
+
+#: Rooms of the code base, by module prefix (the longest prefix wins).  Floors, from the ground
+#: up: ``ground`` (errors, constants, limits, version) → ``io`` (files, records, units, the
+#: output policy), ``analysis`` (signal analysis of records), ``execution`` (workers, threads, progress,
+#: user code) → ``core`` (device, parameters, signals, effects, model, solvers) → ``tasks``
+#: (compare, identify, diagnose, the reference solver, the effect contract) with ``pages``
+#: (presentation) beside them → ``testbeds`` → ``library`` (``nnmodel`` networks, datasets,
+#: training) → ``app`` (``nnmodel.app``: the command line and its commands).
+ROOMS = {
+    "physics": "init", "physics._version": "ground", "physics.errors": "ground",
+    "physics.constants": "ground", "physics.limits": "ground",
+    "physics.io": "io", "physics.analysis": "analysis", "physics.execution": "execution",
+    "physics.device": "core", "physics.parameters": "core", "physics.signals": "core",
+    "physics.effects": "core", "physics.model": "core", "physics.solvers": "core",
+    "physics.compare": "tasks", "physics.identify": "tasks", "physics.diagnose": "tasks",
+    "physics.reference": "tasks", "physics.contract": "tasks",
+    "physics.pages": "pages", "physics.testbeds": "testbeds",
+    "nnmodel": "library", "nnmodel.app": "app",
+}
+_BELOW_CORE = {"ground", "io", "analysis", "execution"}
+#: Which rooms each room may import (itself included).
+ALLOWED = {
+    "init": {"init", "ground"},
+    "ground": {"ground"},
+    "io": {"ground", "io"},
+    "analysis": {"ground", "io", "analysis"},
+    "execution": {"ground", "execution"},
+    "pages": {"ground", "io", "pages"},
+    "core": _BELOW_CORE | {"core"},
+    "tasks": _BELOW_CORE | {"core", "tasks", "pages"},
+    "testbeds": _BELOW_CORE | {"core", "tasks", "pages", "testbeds"},
+    "library": _BELOW_CORE | {"init", "core", "tasks", "pages", "library"},
+    "app": set(ROOMS.values()),
+}
+#: Inside ``tasks`` only the page writers import ``pages``: the computations return results,
+#: the writers draw them.
+PAGE_WRITERS = {"report", "validate"}
+
+
+def room_of(module: str, rooms=ROOMS) -> str:
+    parts = module.split(".")
+    for i in range(len(parts), 0, -1):
+        if ".".join(parts[:i]) in rooms:
+            return rooms[".".join(parts[:i])]
+    raise KeyError(f"{module}: in no room of ROOMS (add it)")
+
+
+def layer_violations(root: Path = ROOT, packages=("physics", "nnmodel"), rooms=ROOMS, allowed=ALLOWED) -> list[str]:
+    """Every import (module level or inside a function) that goes to a room its room may not import."""
+    from bench.structure import imports_of, module_files
+    files = module_files(packages, root)
+    out = []
+    for m, f in files.items():
+        a = room_of(m, rooms)
+        for t in sorted(imports_of(m, f, set(files), False)):
+            b = room_of(t, rooms)
+            if b not in allowed[a]:
+                out.append(f"{m} ({a}) imports {t} ({b})")
+            elif a == "tasks" and b == "pages" and m.rsplit(".", 1)[-1] not in PAGE_WRITERS:
+                out.append(f"{m} (tasks, not a page writer) imports {t} (pages)")
+    return out
+
+
+def test_each_layer_imports_only_the_layers_it_may():
+    assert layer_violations() == []
+
+
+def test_the_layer_rule_can_fail(tmp_path):
+    for d in ("physics/io", "physics/solvers", "physics/compare"):
+        (tmp_path / d).mkdir(parents=True)
+        (tmp_path / d / "__init__.py").write_text("")
+    (tmp_path / "physics" / "__init__.py").write_text("")
+    (tmp_path / "physics" / "io" / "csv.py").write_text("def f():\n    from ..solvers import run\n")   # io -> core
+    (tmp_path / "physics" / "solvers" / "run.py").write_text("from ..io import csv\n")               # allowed
+    (tmp_path / "physics" / "compare" / "fit.py").write_text("import nnmodel.app\n")                 # physics -> app
+    rooms = {"physics": "init", "physics.io": "io", "physics.solvers": "core", "physics.compare": "tasks",
+             "nnmodel": "library", "nnmodel.app": "app"}
+    (tmp_path / "nnmodel" / "app").mkdir(parents=True)
+    (tmp_path / "nnmodel" / "__init__.py").write_text("")
+    (tmp_path / "nnmodel" / "app" / "__init__.py").write_text("")
+    found = layer_violations(tmp_path, rooms=rooms)
+    assert found == ["physics.compare.fit (tasks) imports nnmodel.app (app)",
+                     "physics.io.csv (io) imports physics.solvers.run (core)"]
+
+
+def test_no_import_cycle_and_a_small_physics_root():
+    from bench.structure import cycles, imports_of, module_files
+    files = module_files(("physics", "nnmodel"), ROOT)
+    graph = {m: imports_of(m, f, set(files), False) for m, f in files.items()}
+    assert cycles(graph) == []
+    root_modules = sorted(p.name for p in (ROOT / "physics").glob("*.py"))
+    assert len(root_modules) <= 10, root_modules
+
+
+def test_import_physics_and_nnmodel_pull_in_no_heavy_package():
+    import subprocess
+    import sys
+    code = ("import sys, physics, physics.errors, nnmodel, nnmodel.app.cli; "
+            "print(sorted(m for m in ('torch', 'matplotlib', 'dask', 'scipy', 'pandas') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.strip() == "[]"

@@ -8,7 +8,7 @@ import json
 import pytest
 
 from nnmodel.benchmarks import SUITES, eap, greybox
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from nnmodel.dataset import generate, load_dataset
 from physics.errors import InputError
 

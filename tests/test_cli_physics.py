@@ -4,8 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from nnmodel.cli import main
-from physics.timeseries import read_timeseries
+from nnmodel.app.cli import main
+from physics.io.timeseries import read_timeseries
 
 
 def test_simulate_writes_a_readable_time_series_and_plots(tmp_path, capsys):
@@ -44,7 +44,7 @@ def test_frf_json_csv_and_plot(tmp_path):
     data = json.loads(j.read_text())
     assert len(data["freq_Hz"]) == 50 and data["rh_pct"] == 80
     assert p.stat().st_size > 1000
-    from physics.frfdata import read_frf
+    from physics.io.frfdata import read_frf
     assert read_frf(c).freq.size == 50
 
 
@@ -105,7 +105,7 @@ def test_param_overrides_geometry_with_units(tmp_path, capsys):
 def test_long_compare_reports_its_stages_unless_quiet(tmp_path, capsys, monkeypatch):
     """Inputs above LONG_INPUT_BYTES get a line per stage on stderr; --quiet silences them;
     short inputs print none (their error messages stay the first line)."""
-    from nnmodel.commands import _common
+    from nnmodel.app.commands import _common
     assert main(["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone",
                  "--frequency-Hz", "2", "--duration-s", "3", "--fs-Hz", "200", "--out", str(tmp_path / "sim")]) == 0
     rec = tmp_path / "sim" / "simulation.csv"

@@ -10,16 +10,17 @@ import warnings
 import numpy as np
 import pytest
 
-from physics import metrics, signals, simulate
+from physics import signals, simulate
+from physics.analysis import metrics
 from physics.compare import (CallablePredictor, PhysicsPredictor, cluster_rh, compare,
                              default_bands, load_measurements, model_rh, parse_bands, residual_by_band,
                              thin_log, write_comparison_report)
 from physics.errors import InputError
-from physics.frequency import frequency_response
-from physics.frfdata import FRFData, write_frf
+from physics.solvers.frequency import frequency_response
+from physics.io.frfdata import FRFData, write_frf
 from physics.model import ActuatorModel
-from physics.sensor import SensorModel
-from physics.timeseries import TimeSeries, write_timeseries
+from physics.io.sensor import SensorModel
+from physics.io.timeseries import TimeSeries, write_timeseries
 
 
 def periodic_record(model, rh, *, seed=0, sensor=None, period=10.0, periods=3, fs=1000.0):
@@ -115,7 +116,7 @@ def test_residual_by_band_is_parseval():
 def test_residual_by_band_in_parts_matches_the_whole_spectrum(monkeypatch):
     """A long residual's band powers come from its spectrum assembled in parts, the residual
     given lazily (never formed whole): the whole-FFT values to rounding, an odd length too."""
-    import physics.frf_estimation as fe
+    import physics.analysis.frf_estimation as fe
     rng = np.random.default_rng(7)
     bands = [(0.05, 1.0), (1.0, 10.0), (10.0, 50.0)]
     for n in (6000, 6003):
@@ -150,9 +151,9 @@ def test_compare_holds_few_record_long_arrays(monkeypatch, tmp_path):
     measures the process (VmHWM)."""
     import tracemalloc
     from scipy.signal import lfilter
-    from physics import frf_estimation, stats
+    from physics.analysis import frf_estimation, stats
     from physics.compare import FRFOptions
-    from physics.timeseries import read_timeseries
+    from physics.io.timeseries import read_timeseries
     for mod, name in ((frf_estimation, "SPLIT_SPECTRUM"), (frf_estimation, "WELCH_BLOCK"), (frf_estimation, "_BLOCK"),
                       (metrics, "BLOCK"), (stats, "LAG_BLOCK")):
         monkeypatch.setattr(mod, name, 1 << 12)
@@ -258,7 +259,7 @@ def test_report_files(result, tmp_path):
 
 
 def test_cli_compare_device_and_bundle(model, records, tmp_path, capsys, monkeypatch):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     paths = [write_timeseries(r, tmp_path / f"m{i}.csv") for i, r in enumerate(records)]
     code = main(["compare", str(paths[0]), "--model", "ipmc_pt_eg", "--points", "100",
                  "--out", str(tmp_path / "dev")])
@@ -308,7 +309,7 @@ def test_lagged_products_in_blocks_match_the_whole_record(monkeypatch):
     (no centred copies): the whole-record values to rounding, a lag reaching across a
     block edge included; a record of one block gives exactly the whole-record values."""
     from scipy.signal import lfilter
-    from physics import stats
+    from physics.analysis import stats
     from physics.compare.comparison import residual_tests
     rng = np.random.default_rng(5)
     u = rng.normal(size=9000) + 0.3

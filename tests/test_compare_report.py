@@ -1,4 +1,4 @@
-"""The self-contained HTML report helper (physics.report)."""
+"""The self-contained HTML report helper (physics.pages.report)."""
 from __future__ import annotations
 
 import base64
@@ -14,7 +14,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from physics.errors import InputError  # noqa: E402
-from physics.report import Report, format_value, jsonable, png_data_uri, write_csv  # noqa: E402
+from physics.io.fileio import jsonable  # noqa: E402
+from physics.pages.report import Report, format_value, png_data_uri, write_csv  # noqa: E402
 
 
 def _png(tmp_path):
@@ -78,7 +79,7 @@ def test_tables_name_their_columns_with_units_and_explain_gaps(tmp_path):
 
 
 def test_the_reading_unit_follows_the_magnitude_of_the_data():
-    from physics.columns import reading_unit
+    from physics.pages.columns import reading_unit
     assert reading_unit("V") == ("mV", 1e3) and reading_unit("V", 0.3) == ("mV", 1e3)   # usual reading kept ...
     assert reading_unit("V", 35.0) == ("V", 1.0) and reading_unit("V", 2e4) == ("kV", 1e-3)   # ... unless off 0.1–1000
     assert reading_unit("m", 3e-5) == ("µm", 1e6) and reading_unit("m", 0.03) == ("mm", 1e3)
@@ -126,7 +127,7 @@ def test_write_csv(tmp_path):
 def test_long_lines_are_drawn_as_their_envelope():
     """Time plots of long records draw at most MAX_LINE_POINTS points per line, keeping
     every bucket's extremes (the drawn band equals the full one) in time order."""
-    from physics.plotting import envelope
+    from physics.pages.plotting import envelope
     rng = np.random.default_rng(2)
     t = np.arange(1_000_003) / 1e3
     y = np.sin(2 * np.pi * 0.3 * t) + 0.1 * rng.normal(size=t.size)

@@ -13,15 +13,16 @@ import torch
 from scipy.signal import lfilter
 
 from nnmodel.bundle import load, save
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from nnmodel.data import Experiment
-from nnmodel.linear import as_network, fit_linear
+from nnmodel.linear import fit_linear
+from nnmodel.models.ff import as_network
 from nnmodel.recipes import make_model
 from nnmodel.startup import START_SAMPLES, free_run
 from nnmodel.traincompare import (_fallbacks, _linear_runner, _physics_base_row, format_table, network_runner,
                                   page_rows, rh_levels, vs_linear_text)
 from physics.errors import InputError
-from physics.timeseries import TimeSeries, read_timeseries, write_timeseries
+from physics.io.timeseries import TimeSeries, read_timeseries, write_timeseries
 
 FS = 10.0
 
@@ -103,7 +104,7 @@ def test_the_linear_row_is_a_bundle_that_predict_runs_and_scores_the_same(bundle
 
 
 def test_engineering_units_in_predict_and_everywhere_quantity_is_used(bundle, capsys):
-    from physics.columns import quantity
+    from physics.pages.columns import quantity
     assert quantity(2.9e-3, "m") == "2.90 mm" and quantity(3.11e-5, "m") == "31.1 µm"
     assert quantity(0.0012, "V") == "1.20 mV" and quantity(35.0, "V") == "35.0 V"
     big = bundle.dir / "big.csv"   # an error of millimetres reads in mm, not thousands of µm

@@ -118,7 +118,7 @@ def test_a_crash_halfway_leaves_nothing(tmp_path, monkeypatch):
 
 
 def test_cli_generate(tmp_path, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     cfg = tmp_path / "c.yaml"
     import yaml
     cfg.write_text(yaml.safe_dump(TINY))

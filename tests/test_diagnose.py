@@ -14,15 +14,15 @@ import yaml
 from physics import signals
 from physics.device import load_device
 from physics.diagnose import diagnose, excitation, write_diagnosis
-from physics import stats
+from physics.analysis import stats
 from physics.diagnose.candidates import candidate_spec, default_free, map_free, translate_start
-from physics.diagnose.demo import hidden_effect_case, hidden_effects
+from physics.testbeds.demo import hidden_effect_case, hidden_effects
 from physics.diagnose.records import amplitude_levels, classify, find_steps, prepare_records
 from physics.diagnose.residuals import analyse
 from physics.diagnose.signatures import revealable
 from physics.errors import InputError
-from physics.frfdata import FRFData, write_frf
-from physics.timeseries import TimeSeries, write_timeseries
+from physics.io.frfdata import FRFData, write_frf
+from physics.io.timeseries import TimeSeries, write_timeseries
 
 
 def _diagnose(case, **kw):
@@ -299,7 +299,7 @@ def test_report_and_apply(tmp_path):
 
 
 def test_cli_diagnose(tmp_path, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     case = hidden_effect_case("solvent_diffusion", seed=2)
     paths = []
     for k, m in enumerate(case.measurements):
@@ -318,7 +318,7 @@ def test_cli_diagnose(tmp_path, capsys):
 
 
 def test_cli_demo(tmp_path, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     rc = main(["demo", "hidden-effect", "--effect", "viscoelastic", "--seed", "1", "--out", str(tmp_path / "demo")])
     assert rc == 0
     text = capsys.readouterr().out

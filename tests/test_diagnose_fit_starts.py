@@ -10,7 +10,7 @@ import pytest
 
 from physics.device import load_device
 from physics.diagnose import candidates as C
-from physics.diagnose.demo import hidden_effect_case
+from physics.testbeds.demo import hidden_effect_case
 from physics.diagnose.diagnosis import read_records
 from physics.identify.options import FitOptions
 

@@ -8,7 +8,7 @@ import warnings
 import pytest
 
 from physics.diagnose import diagnose
-from physics.diagnose.demo import hidden_effect_case, hidden_effects
+from physics.testbeds.demo import hidden_effect_case, hidden_effects
 
 pytestmark = pytest.mark.slow
 

@@ -1,4 +1,4 @@
-"""The diagnosis loop on the test beds of issue 24 (physics.diagnose.testbeds): lab-like records
+"""The diagnosis loop on the test beds of issue 24 (physics.testbeds.cases): lab-like records
 (mm columns, offsets, drift, hygrometer jitter, no excitation metadata) and a perturbed
 simulator.  A small fast subset runs by default; the seed survey is ``-m slow``."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from physics.diagnose import diagnose
-from physics.diagnose.testbeds import lab_case, make_case, perturbed_case, truths
+from physics.testbeds.cases import lab_case, make_case, perturbed_case, truths
 from physics.diagnose.verdict import STATUSES, UNATTRIBUTED, decide
 
 CREEP = Path(__file__).resolve().parents[1] / "examples" / "effects" / "creep.py"
@@ -32,7 +32,7 @@ def test_lab_records_on_the_command_line(tmp_path, capsys):
     """Lab exports with electrode_resistance left out: the command names it with high confidence,
     the error after the pick is within 1.5× the true model's, the page shows the terminal's
     verdict text in full and readable, and suggested commands name final paths."""
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     case = lab_case("electrode_resistance", seed=0)
     files = [str(f) for f in case.write(tmp_path / "lab")]
     out = tmp_path / "dx"
@@ -283,7 +283,7 @@ def test_a_wander_beyond_the_sensors_stated_drift_is_named_not_called_a_base_mis
     v = res.verdict
     text = " ".join(v.lines())
     assert v.status == UNATTRIBUTED and v.picks == [] and v.confidence is None
-    assert "base mismatch" not in v.remaining_kind and "beyond the sensor's stated drift" in text
+    assert "base mismatch" not in v.remaining_kind and "the sensor's stated drift" in text
     wander = res.settings["noise"]["wander_beyond_stated_drift_m"]
     drift = case.truth_params["drift_rms_m"]
     assert 0.6 * drift < wander < 1.4 * drift, (wander, drift)

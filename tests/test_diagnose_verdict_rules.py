@@ -13,7 +13,7 @@ from physics.device import load_device
 from physics.diagnose import confidence as conf
 from physics.diagnose.candidates import compare_fits
 from physics.diagnose.records import DRIFT_SHARE, OFFSET_SHARE, bounded_nuisance, nuisance_bounds
-from physics.timeseries import TimeSeries
+from physics.io.timeseries import TimeSeries
 
 UM = 1e-6
 
@@ -112,7 +112,7 @@ def test_evidence_and_error_agree_in_sign():
 def test_evidence_does_not_grow_with_the_samples_of_a_coloured_residual():
     """The same slow misfit sampled 4× more densely: n_eff (from the residual's correlation) and
     so ΔBIC stay the same (within the estimate of τ)."""
-    from physics import stats
+    from physics.analysis import stats
     rng = np.random.default_rng(1)
     out = []
     for up in (1, 4):
@@ -246,7 +246,7 @@ def test_an_effect_the_data_do_not_support_is_removed_and_tried_again():
     import warnings
 
     from physics.diagnose import diagnose
-    from physics.diagnose.demo import hidden_effect_case
+    from physics.testbeds.demo import hidden_effect_case
     case = hidden_effect_case("electrode_resistance", seed=1, design="rich", duration=40.0)
     dev = load_device("ipmc_pt_eg")
     wrong = dev.with_params(D_solvent=dev.params["t_polymer"] ** 2 / 4 / 2.0)      # h²/Ds = 2 s
@@ -266,9 +266,9 @@ def test_the_command_printed_runs_as_printed(tmp_path, capsys):
     that runs as printed (records and every effect file it needs)."""
     import shlex
 
-    from nnmodel.cli import main
-    from physics.diagnose.demo import hidden_effect_case
-    from physics.timeseries import write_timeseries
+    from nnmodel.app.cli import main
+    from physics.testbeds.demo import hidden_effect_case
+    from physics.io.timeseries import write_timeseries
     case = hidden_effect_case("solvent_diffusion", seed=2)
     files = [str(write_timeseries(m, tmp_path / f"rec {k}.csv")) for k, m in enumerate(case.measurements)]
     assert main(["diagnose", *files, "--device", "ipmc_pt_eg", "--effects", "none", "--out", str(tmp_path / "o"),
@@ -294,7 +294,7 @@ def test_a_settled_multisine_is_entered_in_its_steady_state():
     from physics.diagnose import candidates as C
     from physics.diagnose.records import prepare_records
     from physics.model import ActuatorModel
-    from physics.timedomain import simulate
+    from physics.solvers.timedomain import simulate
     warnings.simplefilter("ignore")
     m = ActuatorModel(load_device("ipmc_pt_eg"), ["electrode_resistance", "viscoelastic"])
     fs, keep = 100.0, 4000

@@ -17,7 +17,7 @@ def _generated_pages() -> set[Path]:
     """The pages the docs build generates: one per command, per API page, per device file."""
     import sys
 
-    from nnmodel.cli import build_parser
+    from nnmodel.app.cli import build_parser
     from physics.device import available_devices
     sys.path.insert(0, str(ROOT / "docs"))
     from public_api import PAGES as API

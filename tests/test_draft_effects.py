@@ -225,9 +225,9 @@ def test_lab_like_drift_loop_from_the_command_line(tmp_path, capsys):
     described, drafted, passed back; the draft becomes the verdict and the error falls by
     at least half its distance to the noise floor."""
     import json
-    from nnmodel.cli import main
-    from physics.diagnose.demo import outside_catalog_case
-    from physics.timeseries import write_timeseries
+    from nnmodel.app.cli import main
+    from physics.testbeds.demo import outside_catalog_case
+    from physics.io.timeseries import write_timeseries
     ms, tp = outside_catalog_case("drift", seed=1, fs=200.0, duration=40.0)
     files = []
     for m in ms:
@@ -260,9 +260,9 @@ def test_a_drift_shared_by_lab_records_is_not_taken_for_the_sensors_wander(tmp_p
     1.3× the floor (seed 0: 1.14×), a drift the records share being structure whatever its size;
     the draft passed back is the verdict with confidence high (its slow trend is seen)."""
     import json
-    from nnmodel.cli import main
-    from physics.diagnose.demo import outside_catalog_case
-    from physics.timeseries import write_timeseries
+    from nnmodel.app.cli import main
+    from physics.testbeds.demo import outside_catalog_case
+    from physics.io.timeseries import write_timeseries
     ms, tp = outside_catalog_case("drift", seed=seed, fs=200.0, duration=60.0, lab=True)
     files = [str(write_timeseries(m, tmp_path / f"{m.source}.csv", units={"deflection": "mm"})) for m in ms]
     drafts = tmp_path / "drafts"
@@ -308,8 +308,8 @@ def test_lab_test_bed_sensor_lowpass_is_drafted_and_becomes_the_verdict(tmp_path
     becomes the verdict with "high" confidence, its cut-off within 5 % and the error down by at
     least half its distance to the true model's."""
     import json
-    from nnmodel.cli import main
-    from physics.diagnose.testbeds import make_case
+    from nnmodel.app.cli import main
+    from physics.testbeds.cases import make_case
     case = make_case("lab", "lowpass", 0)
     files = [str(f) for f in case.write(tmp_path / "records")]
     model = ["--device", case.device_name, *case.param_args(), "--effects", case.effects]

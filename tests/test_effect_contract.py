@@ -200,7 +200,7 @@ def test_one_class_of_each_kind_passes_the_full_contract(cls):
 
 
 def test_check_command(tmp_path, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     assert main(["effects", "--check", str(CREEP), "--fast"]) == 0
     out = capsys.readouterr().out
     assert "effect creep on ipmc_pt_eg: contract passed" in out and "PASS  stable" in out
@@ -217,7 +217,7 @@ def test_check_command(tmp_path, capsys):
 
 
 def test_effects_device_lists_what_param_takes(capsys):
-    from nnmodel.cli import build_parser, main
+    from nnmodel.app.cli import build_parser, main
     assert main(["effects", "--device", "ipmc_pt_eg"]) == 0
     out = capsys.readouterr().out
     for name, unit in (("L_total", "m"), ("width", "m"), ("Y", "Pa"), ("kf", "N m/mol"), ("beta_f", "s")):

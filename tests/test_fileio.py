@@ -3,7 +3,7 @@ import json
 import pytest
 
 from physics.errors import InputError
-from physics.fileio import atomic_path, write_json, write_text
+from physics.io.fileio import atomic_path, write_json, write_text
 
 
 def test_atomic_write_replaces_only_on_success(tmp_path):

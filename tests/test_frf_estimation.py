@@ -7,8 +7,8 @@ import pytest
 from scipy import signal
 
 from physics.errors import InputError
-from physics.frf_estimation import estimate_frf, stepped_sine, welch_averages
-from physics.frfdata import read_frf, write_frf
+from physics.analysis.frf_estimation import estimate_frf, stepped_sine, welch_averages
+from physics.io.frfdata import read_frf, write_frf
 
 FS = 1000.0
 _WN, _WC = 2 * np.pi * 20.0, 2 * np.pi * 5.0
@@ -237,7 +237,7 @@ def test_estimate_frf_rejects_bad_input(call, msg):
 def test_period_matches_a_direct_correlation():
     """_period (one single-precision FFT) finds the lag a direct float64 correlation finds:
     the first lag whose normalised correlation over the overlap reaches the threshold."""
-    from physics.frf_estimation import PERIODIC_CORRELATION, _period
+    from physics.analysis.frf_estimation import PERIODIC_CORRELATION, _period
     rng = np.random.default_rng(3)
     n = 3000
     for L, noise in [(137, 0.05), (611, 0.1), (900, 0.2), (None, 1.0)]:
@@ -256,7 +256,7 @@ def test_period_matches_a_direct_correlation():
 
 def test_jump_scan_in_blocks_matches_the_whole_record(monkeypatch):
     """The blockwise jump scan of detect_excitation sees a jump wherever it lies, block edges included."""
-    import physics.frf_estimation as fe
+    import physics.analysis.frf_estimation as fe
     monkeypatch.setattr(fe, "_BLOCK", 7)
     x = np.zeros(100)
     for at in (3, 6, 7, 13, 14, 60, 99):
@@ -273,7 +273,7 @@ def test_spectrum_in_parts_matches_the_whole_fft(monkeypatch):
     step, lines in blocks): the whole real FFT's values to rounding, for every split a length
     allows (8, 7, 5, 3, a factor above 8, and none: the whole FFT), with and without the DC
     line, and the same classification of the excitation (tone, noise, steps, periodic)."""
-    import physics.frf_estimation as fe
+    import physics.analysis.frf_estimation as fe
     monkeypatch.setattr(fe, "SPLIT_SPECTRUM", 64)
     monkeypatch.setattr(fe, "_LINES", 37)                  # lines in many uneven blocks
     rng = np.random.default_rng(4)

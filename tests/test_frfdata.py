@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from physics.errors import InputError
-from physics.frfdata import FRFData, read_frf, write_frf
+from physics.io.frfdata import FRFData, read_frf, write_frf
 
 H = "freq_Hz,mag_m_per_V,phase_deg\n"
 

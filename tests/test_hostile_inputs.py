@@ -9,9 +9,9 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from physics.errors import InputError
-from physics.timeseries import read_timeseries
+from physics.io.timeseries import read_timeseries
 
 T = np.arange(300) / 100.0
 V = np.sin(2 * np.pi * 2 * T)

@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from physics.errors import InputError
-from physics.fileio import load_json
-from physics.outputs import component, final_text, output_files, output_folder, separate
-from physics.timeseries import read_timeseries
-from physics.yamlio import loads_yaml
+from physics.io.fileio import load_json
+from physics.io.outputs import component, final_text, output_files, output_folder, separate
+from physics.io.timeseries import read_timeseries
+from physics.io.yamlio import loads_yaml
 from test_hostile_round_two import EFFECT, FRF, SIM, _err, _record, bundle  # noqa: F401  (bundle: a fixture)
 
 HERE = Path(__file__).resolve().parents[1]
@@ -98,7 +98,7 @@ def test_only_proven_leftovers_are_removed_the_rest_is_named(tmp_path, recwarn):
 
 def test_a_reused_pid_does_not_keep_a_leftover(tmp_path):
     """A proof names the start time of its process: the same pid in a later process is not it."""
-    from physics.outputs import _running, process_start
+    from physics.io.outputs import _running, process_start
     me = os.getpid()
     assert _running(me, process_start(me))
     if process_start(me) is not None:                    # Linux: the start time tells them apart
@@ -128,13 +128,13 @@ def test_a_lock_or_registry_that_is_not_eaps_file_is_refused_before_anything_is_
 @pytest.mark.parametrize("code,words", [(errno.ENOSPC, "the disk is full"), (errno.EACCES, "permission denied"),
                                         (errno.EISDIR, "it is a folder"), (errno.ENAMETOOLONG, "name is too long")])
 def test_os_errors_are_one_line_and_nothing_is_put_in_place(tmp_path, monkeypatch, capsys, code, words):
-    import physics.frfdata as frfdata
+    import physics.io.frfdata as frfdata
     monkeypatch.chdir(tmp_path)
 
     def fail(data, path, **kw):   # the CSV fails while being written (beside the JSON already written)
         Path(path).write_text("half")
         raise OSError(code, os.strerror(code), str(path))
-    monkeypatch.setattr("nnmodel.commands.frf.write_frf", fail)
+    monkeypatch.setattr("nnmodel.app.commands.frf.write_frf", fail)
     assert frfdata.write_frf is not fail
     assert main(FRF + ["--json", "f.json", "--csv", "f.csv"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -146,7 +146,7 @@ def test_os_errors_are_one_line_and_nothing_is_put_in_place(tmp_path, monkeypatc
 def test_a_file_size_limit_is_one_line(tmp_path):
     """EFBIG for real: RLIMIT_FSIZE (Python ignores SIGXFSZ, so the write fails)."""
     env = dict(os.environ, PYTHONPATH=str(HERE))
-    r = subprocess.run([sys.executable, "-m", "nnmodel.cli", "frf", "--device", "ip2c_pedot_water", "--rh", "60",
+    r = subprocess.run([sys.executable, "-m", "nnmodel.app.cli", "frf", "--device", "ip2c_pedot_water", "--rh", "60",
                         "--points", "500", "--json", "f.json"], cwd=tmp_path, env=env, capture_output=True, text=True,
                        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000)))
     assert r.returncode == 2, r.stderr
@@ -157,7 +157,7 @@ def test_a_file_size_limit_is_one_line(tmp_path):
 
 
 def test_an_unreadable_input_is_one_line(tmp_path, monkeypatch, capsys):
-    import nnmodel.commands.compare as compare_cmd
+    import nnmodel.app.commands.compare as compare_cmd
     rec = _record(tmp_path / "rec.csv")
 
     def denied(*a, **k):
@@ -356,7 +356,8 @@ def test_a_bundle_is_closed_and_hashed(bundle, tmp_path, tamper, message):
     ("import sys; sys.exit(3)", r"Broken\.output_tf called sys\.exit\(3\)"),
     ("while True: pass", r"Broken\.output_tf ran longer than 0\.5 s")])
 def test_exit_calls_and_endless_hooks_are_caught(tmp_path, monkeypatch, body, message):
-    from physics.effects import EFFECTS, load_effects_file, usercode
+    from physics.effects import EFFECTS, load_effects_file
+    from physics.execution import usercode
     monkeypatch.setenv("EAP_HOOK_LIMIT_S", "0.5")          # the knob for hooks that need longer (here: shorter)
     f = tmp_path / "eff.py"
     f.write_text(EFFECT.format(body=body))
@@ -367,7 +368,7 @@ def test_exit_calls_and_endless_hooks_are_caught(tmp_path, monkeypatch, body, me
 
 
 def test_an_endless_import_and_an_exit_at_import_are_caught(tmp_path, monkeypatch, capsys):
-    from physics.effects import usercode
+    from physics.execution import usercode
     monkeypatch.setattr(usercode, "IMPORT_LIMIT_S", 0.5)
     loop, ex = tmp_path / "loop.py", tmp_path / "ex.py"
     loop.write_text("while True:\n    pass\n")
@@ -393,13 +394,13 @@ def test_messages_name_flags_and_records_not_internals(tmp_path, monkeypatch, ca
     assert main(tone + ["--frequency-Hz", "80"]) == 2
     assert "--frequency-Hz 80 Hz must be positive and below the Nyquist frequency 50 Hz (half of --fs-Hz 100 Hz)" \
         in _err(capsys)
-    from physics import metrics
+    from physics.analysis import metrics
     flat = np.full(1000, 1e-4)             # constant, its mean rounded: NRMSE was 2.7e18 %
     with pytest.raises(InputError, match="rec.csv: the measured deflection is constant"):
         metrics.summary(flat, np.arange(1000.0), names=("rec.csv: the measured deflection", "model"))
     assert final_text("/w/.D.eap-tmp-12/a.csv /w/.eap-tmp-3-ab_cd/f.yaml /w/.f.json.ab12cd_9.part") == \
         "/w/D/a.csv /w/f.yaml /w/f.json"
-    from physics.fileio import write_json        # record keys of a diagnosis read from an output being written
+    from physics.io.fileio import write_json        # record keys of a diagnosis read from an output being written
     write_json(tmp_path / "d.json", {"records": {"/w/.DM.eap-tmp-77/m/r.csv": 1}})
     assert json.loads((tmp_path / "d.json").read_text()) == {"records": {"/w/DM/m/r.csv": 1}}
 

@@ -18,12 +18,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from physics.errors import InputError, ModelError
-from physics.fileio import MAX_DEPTH, load_json
-from physics.outputs import MARKER, REGISTRY, output_files, output_folder
-from physics.timeseries import parse_column_map, read_timeseries
-from physics.yamlio import loads_yaml
+from physics.io.fileio import MAX_DEPTH, load_json
+from physics.io.outputs import MARKER, REGISTRY, output_files, output_folder
+from physics.io.timeseries import parse_column_map, read_timeseries
+from physics.io.yamlio import loads_yaml
 
 HERE = Path(__file__).resolve().parents[1]
 SIM = ["simulate", "--device", "ip2c_pedot_water", "--rh", "60", "--signal", "tone", "--duration-s", "1",
@@ -242,7 +242,7 @@ def test_a_column_mapped_twice_and_a_constant_record_are_refused(tmp_path, capsy
 
 # ------------------------------------------------------------------ 3. every resource bounded
 def test_workers_and_scheduler_addresses_are_checked_before_work(monkeypatch):
-    from physics.parallel import ParallelSettings, cores
+    from physics.execution.parallel import ParallelSettings, cores
     with pytest.raises(InputError, match=f"workers {cores() + 1}: this machine gives {cores()} core"):
         ParallelSettings(cores() + 1)
     assert ParallelSettings(1000, "tcp://10.0.0.5:8786").workers == 1000   # a cluster sizes itself
@@ -255,7 +255,7 @@ def test_workers_and_scheduler_addresses_are_checked_before_work(monkeypatch):
 
 
 def test_a_closed_scheduler_port_is_a_clear_error():
-    from physics.parallel import ParallelSettings, map_tasks
+    from physics.execution.parallel import ParallelSettings, map_tasks
     with pytest.raises(InputError, match=r"scheduler tcp://127\.0\.0\.1:1: cannot connect"):
         map_tasks(abs, [1, 2], ParallelSettings(1, "tcp://127.0.0.1:1"), progress=False)
 
@@ -332,7 +332,7 @@ def test_an_effect_file_that_exits_is_reported(tmp_path, capsys):
 
 
 def test_non_finite_and_non_physical_inputs_are_errors(tmp_path):
-    from physics.frfdata import read_frf
+    from physics.io.frfdata import read_frf
     h = tmp_path / "h.csv"
     h.write_text("freq_Hz,mag_m_per_V,phase_deg\n" + "".join(f"{f},1e297,-10\n" for f in (0.1, 1.0, 10.0)))
     with pytest.raises(InputError, match=r"h\.csv, line 2, column 'mag_m_per_V': value 1e\+297 is outside 0–1000 m/V"):
@@ -371,7 +371,7 @@ def test_the_smaller_items(tmp_path, capsys):
 
 
 def test_a_task_fails_with_the_users_message_alone():
-    from physics.parallel import ParallelSettings, _run_batch, map_tasks
+    from physics.execution.parallel import ParallelSettings, _run_batch, map_tasks
     with pytest.raises(InputError) as err:
         map_tasks(_bad_input, [{"name": "ff", "overrides": {"lr": 1}, "dataset": "/x"}], ParallelSettings(),
                   progress=False)
@@ -472,7 +472,7 @@ def test_predict_takes_a_column_map_and_names_its_output_column(tmp_path, capsys
 def test_a_long_record_is_predicted_in_pieces_with_the_same_result(tmp_path, capsys, monkeypatch):
     """Memory per sample: a long input is read, predicted and written piece by piece (the
     memory filters and the core's state carry over), giving the whole-record prediction."""
-    import nnmodel.commands.predict as predict_cmd
+    import nnmodel.app.commands.predict as predict_cmd
     from nnmodel.bundle import save
     from nnmodel.data import Experiment
     from nnmodel.models import MODELS
@@ -647,8 +647,8 @@ def test_a_signal_python_drops_in_a_gc_callback_still_stops_the_run(tmp_path, mo
     import signal
     import sys
 
-    from nnmodel import cli
-    from physics import outputs
+    from nnmodel.app import cli
+    from physics.io import outputs
     real = outputs.preflight
 
     def dropped(phase, info):

@@ -14,13 +14,13 @@ from physics import signals, simulate
 from physics.compare import FRFOptions
 from physics.device import load_device
 from physics.errors import InputError
-from physics.frequency import frequency_response
-from physics.frfdata import FRFData, write_frf
+from physics.solvers.frequency import frequency_response
+from physics.io.frfdata import FRFData, write_frf
 from physics.identify import (FreeParameter, IdentifiabilityWarning, identify, parse_assignments, uncertainty,
                               write_device, write_identification)
 from physics.model import ActuatorModel
-from physics.sensor import SensorModel
-from physics.timeseries import TimeSeries, write_timeseries
+from physics.io.sensor import SensorModel
+from physics.io.timeseries import TimeSeries, write_timeseries
 
 
 def periodic_record(model, rh, *, seed=0, sensor=None, period=10.0, periods=3, fs=1000.0, rms=0.5):
@@ -288,7 +288,7 @@ def test_written_device_file(tmp_path, ipmc):
 
 
 def test_cli_identify(tmp_path, ipmc_record, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     csv = write_timeseries(ipmc_record, tmp_path / "meas.csv")
     out = tmp_path / "out"
     code = main(["identify", str(csv), "--device", "ipmc_pt_eg", "--free", "kf,beta_f",
@@ -308,7 +308,7 @@ def test_cli_identify(tmp_path, ipmc_record, capsys):
 def test_multistarts_on_two_workers_give_the_serial_fit(ipmc, ipmc_record):
     """The least-squares starts are tasks of the execution layer: the fit, every start's
     record and the evaluation count do not depend on where they ran."""
-    from physics.parallel import ParallelSettings
+    from physics.execution.parallel import ParallelSettings
     kw = dict(start={"kf": 1.5 * ipmc.device["kf"], "beta_f": 0.6 * ipmc.device["beta_f"]}, n_starts=3)
     serial = identify([ipmc_record], "ipmc_pt_eg", "default", "kf,beta_f", **kw)
     par = identify([ipmc_record], "ipmc_pt_eg", "default", "kf,beta_f", settings=ParallelSettings(2), **kw)

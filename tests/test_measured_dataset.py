@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from nnmodel.dataset import load_dataset
 
 

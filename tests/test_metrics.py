@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from physics.errors import InputError
-from physics.metrics import correlation, fit_percent, j_err, nrmse, rmse, summary
+from physics.analysis.metrics import correlation, fit_percent, j_err, nrmse, rmse, summary
 
 Y = np.array([1.0, 2.0, 3.0, 4.0])
 
@@ -79,7 +79,7 @@ def test_metrics_in_blocks_and_with_an_offset(monkeypatch):
     centred copy), and the offset compare removes is passed instead of an aligned copy of
     the measurement: the values of the whole-record formulas on y − offset, to rounding (in
     one block the RMSE is exactly that of the aligned copy)."""
-    import physics.metrics as m
+    import physics.analysis.metrics as m
     rng = np.random.default_rng(3)
     y = np.cumsum(rng.normal(size=5000)) * 1e-6 + 2e-5
     yhat = 0.8 * y + 1e-7 * rng.normal(size=y.size)

@@ -100,7 +100,7 @@ def test_an_installed_network_is_found_by_the_eap_command(tmp_path, monkeypatch,
     import inspect
     import json
 
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     from nnmodel.dataset import generate
     site = tmp_path / "site"
     site.mkdir()

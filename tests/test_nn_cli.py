@@ -4,10 +4,10 @@ import json
 import numpy as np
 import pytest
 
-from physics.timeseries import TimeSeries, read_timeseries, write_timeseries
+from physics.io.timeseries import TimeSeries, read_timeseries, write_timeseries
 from nnmodel.benchmarks import toy
 from nnmodel.bundle import load, save
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from nnmodel.models import MODELS
 
 QUIET = dict(progress_bar=False, num_threads=1)

@@ -67,7 +67,7 @@ def test_windows_cover_records_and_hold_the_right_samples():
 
 
 def test_from_the_physics_timeseries_class():
-    from physics.timeseries import TimeSeries
+    from physics.io.timeseries import TimeSeries
 
     ts = TimeSeries(time=np.arange(50) / 200.0, voltage=np.sin(np.arange(50)),
                     deflection=np.zeros(50), rh=np.full(50, 65.0))

@@ -106,7 +106,7 @@ def test_two_process_ddp_trains_a_model_of_the_same_quality():
     """Lightning's own DDP strategy on CPU (gloo, two spawned processes), each drawing its
     shard of the windows: the model reaches the quality of the one-process run."""
     from nnmodel.training import execution
-    from physics.metrics import nrmse
+    from physics.analysis.metrics import nrmse
     train = toy.records("static_cubic", 4000, seeds=(1, 2))
     val = toy.records("static_cubic", 1000, seeds=(3,))
     test = toy.records("static_cubic", 2000, seeds=(4,))[0]

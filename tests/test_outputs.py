@@ -1,4 +1,4 @@
-"""The output-folder policy (physics.outputs): nothing a user owns is deleted or replaced."""
+"""The output-folder policy (physics.io.outputs): nothing a user owns is deleted or replaced."""
 import json
 import os
 import subprocess
@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from physics.errors import InputError
-from physics.outputs import LOCK_SUFFIX, MARKER, output_folder
+from physics.io.outputs import LOCK_SUFFIX, MARKER, output_folder
 
 
 def _record(path: Path, n: int = 400, fs: float = 200.0) -> Path:
@@ -151,7 +151,7 @@ def test_generate_never_deletes_a_users_folder(tmp_path, monkeypatch, capsys):
 
 
 def test_predict_and_train_compare_have_distinct_defaults():
-    from nnmodel.cli import build_parser
+    from nnmodel.app.cli import build_parser
     p = build_parser()
     defaults = {}
     for cmd in ("compare", "train-compare", "identify", "diagnose", "simulate", "validate", "run"):
@@ -167,7 +167,7 @@ def test_interruption_prints_one_line_and_leaves_nothing(tmp_path, sig):
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
     # Ctrl-C as from a terminal: a suite run as a background job (`pytest &`) inherits an ignored
     # SIGINT, which eap rightly keeps ignoring; the child gets the default disposition back.
-    proc = subprocess.Popen([sys.executable, "-m", "nnmodel.cli", "generate", "--config", "default", "--out",
+    proc = subprocess.Popen([sys.executable, "-m", "nnmodel.app.cli", "generate", "--config", "default", "--out",
                              str(tmp_path / "ds")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
                             text=True, preexec_fn=lambda: signal_mod.signal(signal_mod.SIGINT, signal_mod.SIG_DFL))
     deadline = time.time() + 60

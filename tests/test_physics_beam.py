@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from physics.beam import CantileverModes, clamped_free_roots
+from physics.solvers.beam import CantileverModes, clamped_free_roots
 from physics.constants import FARADAY, GAS_CONSTANT
 from physics.device import load_device
-from physics.frequency import frequency_response
+from physics.solvers.frequency import frequency_response
 
 TEXTBOOK_BETA_L = [1.8751, 4.6941, 7.8548, 10.9955]  # cos x cosh x = -1
 

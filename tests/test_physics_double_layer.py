@@ -5,7 +5,7 @@ import pytest
 from physics.constants import EPS0, FARADAY, GAS_CONSTANT
 from physics.device import load_device
 from physics.effects.double_layer import DoubleLayer
-from physics.frequency import frequency_response
+from physics.solvers.frequency import frequency_response
 
 
 def debye(p):

@@ -7,7 +7,7 @@ import physics
 from physics import signals
 from physics.device import load_device
 from physics.effects.double_layer import DoubleLayer
-from physics.frequency import frequency_response
+from physics.solvers.frequency import frequency_response
 from physics.model import ActuatorModel
 
 F = np.logspace(-1, np.log10(50), 40)

@@ -98,9 +98,9 @@ def test_large_signal_saturates_and_is_odd_symmetric():
 
 def test_thermal_steady_state_energy_balance():
     """At a constant voltage all electrical power leaves by convection: V·I = Σ h A (T − T_ext)."""
-    from physics import stepper
+    from physics.solvers import stepper
     from physics.model import ActuatorModel
-    from physics.strip import segment_edges
+    from physics.solvers.strip import segment_edges
     m = ActuatorModel("ipmc_pt_eg", "thermal,electrode_resistance")
     p = dict(m.device.params)
     edges = segment_edges(m.free_length, 16, 1.5)
@@ -140,7 +140,7 @@ def test_newton_stopping_rule_matches_newton_iterated_to_convergence(monkeypatch
     stages solved by plain Newton iterated to round-off."""
     from scipy.linalg import solve
 
-    from physics import stepper
+    from physics.solvers import stepper
     sig = signals.sweep(2.0, 0.5, 50.0, 4.0, 1000.0)
     effects = "nonlinear_charge,thermal,electrode_resistance"
     r = physics.simulate("ipmc_pt_eg", effects, sig.t, sig.v)
@@ -164,7 +164,7 @@ def test_newton_stopping_rule_matches_newton_iterated_to_convergence(monkeypatch
 def test_constant_input_at_rest_is_held_without_stepping(monkeypatch):
     """Between the edges of a pulse the stepper holds the state once it is at rest; the record
     must equal the one stepped through every sample, and far fewer evaluations are made."""
-    from physics import stepper
+    from physics.solvers import stepper
     sig = signals.square(2.0, 2.0, 6.0, 1, 1000.0)
     effects = "nonlinear_charge,electrode_resistance"
     calls = {"n": 0}

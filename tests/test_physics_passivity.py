@@ -8,8 +8,8 @@ import physics
 from physics import signals
 from physics.effects import BUILT_IN
 from physics.model import ActuatorModel
-from physics.frequency import frequency_response
-from physics.timedomain import _load_filters, beam_statespace
+from physics.solvers.frequency import frequency_response
+from physics.solvers.timedomain import _load_filters, beam_statespace
 
 OPTIONAL = [e for e in BUILT_IN if e != "double_layer"]   # each effect alone: test_effect_contract
 COMBOS = [c for r in range(len(OPTIONAL) + 1) for c in itertools.combinations(OPTIONAL, r)]

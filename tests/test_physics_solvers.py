@@ -6,8 +6,8 @@ import physics
 from physics import signals
 from physics.errors import InputError
 from physics.model import ActuatorModel
-from physics.frequency import frequency_response
-from physics.timedomain import _load_filters, simulate
+from physics.solvers.frequency import frequency_response
+from physics.solvers.timedomain import _load_filters, simulate
 
 
 def _time_domain_frf(model, rh, fs=1000.0, period=20.0, amp=0.02):
@@ -99,7 +99,7 @@ def test_model_reads_back_its_effects():
 def test_time_blocks_of_the_modal_recursion_change_nothing(monkeypatch, periodic):
     """The recursion runs in time blocks (bounded memory); the block length is an
     implementation detail: many tiny blocks must give the one-block result to rounding."""
-    from physics import lti
+    from physics.solvers import lti
     model = ActuatorModel("ip2c_pedot_water", "linear")
     t = np.arange(5000) / 1000.0
     v = np.sin(2 * np.pi * 1.3 * t) + (0.0 if periodic else 0.3 * np.sign(np.sin(2 * np.pi * 0.7 * t)))
@@ -120,7 +120,7 @@ def test_long_records_do_not_hold_a_row_per_segment(monkeypatch):
     whole-record solver took 14; the fixed part — a piece, time blocks, realisations —
     cancels in the difference)."""
     import tracemalloc
-    from physics import timedomain
+    from physics.solvers import timedomain
     monkeypatch.setattr(timedomain, "PIECE_SAMPLES", 1 << 15)
     model = ActuatorModel("ip2c_pedot_water", "linear")
     simulate(model, None, np.arange(1000) / 1e3, np.zeros(1000), rh=60)     # warm caches (realisations, modes)
@@ -144,7 +144,7 @@ def test_pieces_of_the_record_change_nothing(monkeypatch, effects):
     is an implementation detail: pieces of 997 samples (odd, so they straddle the humidity
     blocks of the mechanics and the time blocks of the recursion) give the whole-record
     result to rounding, for every default effect with a varying RH and with a nonlinear one."""
-    from physics import lti, timedomain
+    from physics.solvers import lti, timedomain
     n = 6000 if effects == "default" else 2500
     t = np.arange(n) / 1000.0
     v = np.sin(2 * np.pi * 3.1 * t) + 0.4 * np.sign(np.sin(2 * np.pi * 0.9 * t))
@@ -169,7 +169,7 @@ def test_streamed_state_space_equals_the_whole_record(hold):
     """lti.Stream fed in uneven pieces (down to one sample) gives simulate()'s outputs and
     final state, for a diagonalisable system and for a defective one (Jordan block: the
     matrix-exponential recursion)."""
-    from physics import lti
+    from physics.solvers import lti
     rng = np.random.default_rng(3)
     systems = [lti.StateSpace(rng.normal(size=(4, 4)) - 3 * np.eye(4), rng.normal(size=(4, 2)),
                               rng.normal(size=(2, 4)), rng.normal(size=(2, 2))),

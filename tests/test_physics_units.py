@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from physics.units import UnitError, parse_unit, to_si
+from physics.io.units import UnitError, parse_unit, to_si
 
 
 @pytest.mark.parametrize("unit,si", [

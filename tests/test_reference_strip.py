@@ -6,9 +6,9 @@ from scipy.optimize import brentq
 
 from physics.constants import GAS_CONSTANT
 from physics.errors import InputError
-from physics.frequency import frequency_response
+from physics.solvers.frequency import frequency_response
 from physics.reference.strip import ReferenceStrip
-from physics.timedomain import simulate, tip_from_interface_excess
+from physics.solvers.timedomain import simulate, tip_from_interface_excess
 
 
 def _nrmse(a, b):
@@ -72,7 +72,7 @@ def test_tip_helper_reproduces_simulate():
     v = 0.5 * np.sin(2 * np.pi * 3 * t)
     res = simulate("ipmc_pt_eg", "default", t, v, rh=100, fields=("cation",))
     from physics.model import ActuatorModel
-    from physics.timedomain import _line_grid
+    from physics.solvers.timedomain import _line_grid
     m = ActuatorModel("ipmc_pt_eg", "default")
     edges = _line_grid(m, m.params_at(100), np.pi / 1e-3, None)
     ell = 0.5 * (res.fields["cation_upper"] - res.fields["cation_lower"])
@@ -98,7 +98,7 @@ def test_electrode_line_in_time_domain():
 
 @pytest.mark.slow
 def test_eap_validate_writes_the_report(tmp_path):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     assert main(["validate", "--quick", "--device", "ip2c_pedot_water", "--amplitudes-V", "0.05", "0.5", "2",
                  "--out", str(tmp_path)]) == 0
     import json
@@ -135,7 +135,7 @@ def test_reference_path_keeps_added_output_and_load_effects(cls):
     skipped the output effects that simulate applies; the reference FRF skipped both kinds."""
     from physics.effects import register, unregister
     from physics.model import ActuatorModel
-    from physics.timedomain import _line_grid
+    from physics.solvers.timedomain import _line_grid
     register(cls)
     try:
         t = np.arange(0, 2.0 + 1e-9, 1e-3)

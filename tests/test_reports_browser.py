@@ -11,8 +11,8 @@ import pytest
 import yaml
 
 from browser_check import assert_clean, needs_browser, render
-from nnmodel.cli import main
-from physics.timeseries import write_timeseries
+from nnmodel.app.cli import main
+from physics.io.timeseries import write_timeseries
 
 pytestmark = needs_browser
 
@@ -26,7 +26,7 @@ TINY_RUN = dict(device="ip2c_pedot_water", effects="default", fs_Hz=100.0, f_max
 
 @pytest.fixture(scope="module")
 def records(tmp_path_factory):
-    from physics.diagnose.demo import hidden_effect_case
+    from physics.testbeds.demo import hidden_effect_case
     d = tmp_path_factory.mktemp("recs")
     case = hidden_effect_case("electrode_resistance", 0, duration=30.0)
     return [write_timeseries(m, d / f"r{k}.csv") for k, m in enumerate(case.measurements)]

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from physics.errors import InputError
-from physics.sensor import SensorModel
-from physics.timeseries import TimeSeries
+from physics.io.sensor import SensorModel
+from physics.io.timeseries import TimeSeries
 
 FS = 1000.0
 OFF = SensorModel.ideal()

@@ -144,7 +144,7 @@ def test_no_state_is_refused_with_a_clear_message():
 def test_silverbox_benchmark_runs_ss_on_a_slice_of_the_real_file(tmp_path, capsys):
     """`eap benchmark --suite silverbox` trains ss by default and saves a bundle that loads."""
     from nnmodel.benchmarks import SUITES, silverbox
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     assert "ss" in SUITES["silverbox"].default_models
     try:
         silverbox.find_data()

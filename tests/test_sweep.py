@@ -3,10 +3,10 @@ any worker count, clear errors."""
 import pandas as pd
 import pytest
 
-from nnmodel.cli import main
+from nnmodel.app.cli import main
 from physics.errors import InputError, ModelError
-from physics.parallel import ParallelSettings, map_tasks
-from physics.sweep import parse_grid, run_sweep
+from physics.execution.parallel import ParallelSettings, map_tasks
+from physics.solvers.sweep import parse_grid, run_sweep
 
 
 def test_first_resonance_follows_euler_bernoulli_scaling():
@@ -111,7 +111,7 @@ def test_warnings_of_worker_processes_read_like_the_command_s_own(capsys):
     warning of this process), not as the worker's raw UserWarning print-out."""
     import os
     import warnings
-    from nnmodel.cli import _notice
+    from nnmodel.app.cli import _notice
     with warnings.catch_warnings():
         warnings.simplefilter("always")
         warnings.showwarning = _notice("sweep")

@@ -1,4 +1,4 @@
-"""The test beds of the diagnosis (physics.diagnose.testbeds) and what lab-like records need:
+"""The test beds of the diagnosis (physics.testbeds.cases) and what lab-like records need:
 the excitation read from the voltage, the noise floor from the deflection, the coherence of a
 one-average FRF estimate from the output noise, the per-record nuisance terms."""
 from __future__ import annotations
@@ -10,10 +10,10 @@ import pytest
 
 from physics import signals
 from physics.diagnose.records import prepare_records
-from physics.metrics import nuisance_terms, remove_nuisance
-from physics.diagnose.testbeds import OUTSIDE, lab_case, perturbed_case, truths
-from physics.frf_estimation import detect_excitation, estimate_frf, noise_level
-from physics.timeseries import read_timeseries
+from physics.analysis.metrics import nuisance_terms, remove_nuisance
+from physics.testbeds.cases import OUTSIDE, lab_case, perturbed_case, truths
+from physics.analysis.frf_estimation import detect_excitation, estimate_frf, noise_level
+from physics.io.timeseries import read_timeseries
 
 
 def _daq(v, seed=0):
@@ -89,12 +89,12 @@ def test_perturbed_simulator_differs_a_little():
     case = perturbed_case("none", seed=0)
     assert case.effects == "none" and "mode2_shift" in case.truth_params
     from physics.model import ActuatorModel
-    from physics.timedomain import simulate
+    from physics.solvers.timedomain import simulate
     m = case.measurements[0]
     dev = case.device.with_params(**{k: case.truth_params[k] for k in ("kf", "beta_f", "Y")})
     ours = case.measurements[0].deflection * 0 + simulate(ActuatorModel(dev, "none"), None, m.time, m.voltage,
                                                           rh=float(np.median(m.rh))).deflection
-    from physics.sensor import SensorModel
+    from physics.io.sensor import SensorModel
     diff = remove_nuisance(case.clean[0] - SensorModel()._lowpass(ours, m.fs))
     rms = float(np.sqrt(np.mean(diff ** 2)))
     assert 0.2e-6 < rms < 0.01 * np.std(case.clean[0])

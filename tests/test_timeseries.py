@@ -6,7 +6,7 @@ import scipy.io
 import yaml
 
 from physics.errors import InputError
-from physics.timeseries import (TimeSeries, parse_column_map, read_timeseries,
+from physics.io.timeseries import (TimeSeries, parse_column_map, read_timeseries,
                                 write_timeseries)
 
 SILVERBOX = Path(__file__).resolve().parents[2] / "shared" / "benchmarks" / "silverbox" / "SNLS80mV.csv"

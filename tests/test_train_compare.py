@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from nnmodel.commands.train_compare import parse_overrides
+from nnmodel.app.commands.train_compare import parse_overrides
 from nnmodel.dataset import generate
 from nnmodel.traincompare import format_table, train_compare
 from physics.errors import InputError
@@ -88,7 +88,7 @@ def test_override_parsing():
 
 def test_models_trained_on_two_workers_match_the_serial_run(run, tmp_path):
     """One task per model on the execution layer: same scores, same weights as in one process."""
-    from physics.parallel import ParallelSettings
+    from physics.execution.parallel import ParallelSettings
     out, summary = run
     data = json.loads((out / "compare.json").read_text())["dataset"]
     par = train_compare(data, ["rbf", "ff"], tmp_path / "par", progress=False, settings=ParallelSettings(2),
@@ -101,7 +101,7 @@ def test_models_trained_on_two_workers_match_the_serial_run(run, tmp_path):
 
 
 def test_devices_and_workers_are_exclusive(run, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     out, _ = run
     data = json.loads((out / "compare.json").read_text())["dataset"]
     assert main(["train-compare", data, "--devices", "2", "--workers", "2", "--out", str(out.parent / "x")]) == 2
@@ -112,7 +112,7 @@ def test_tuning_gives_the_same_trials_and_bundle_on_one_and_two_workers(run, tmp
     """--tune: seeded TPE asked and told in fixed batches, trials on the execution layer; the
     trials, scores and the saved bundle are the same for one and two workers, every trial is
     in the card and on the page, and the bundle holds the best trial's settings."""
-    from physics.parallel import ParallelSettings
+    from physics.execution.parallel import ParallelSettings
     out, _ = run
     data = json.loads((out / "compare.json").read_text())["dataset"]
     kw = dict(progress=False, tune=6, overrides={"rbf": {"n_centres": 20}})
@@ -148,7 +148,7 @@ def test_ctrl_c_during_network_training_exits_130_and_leaves_nothing(run, tmp_pa
     import signal
 
     from nnmodel import training
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
 
     def interrupted(self, batch, batch_idx):
         raise KeyboardInterrupt

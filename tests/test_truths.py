@@ -196,7 +196,7 @@ def test_hidden_ingredient_changes_the_response_and_user_model_leaves_it_out(cas
 
 @pytest.mark.parametrize("fam", INDEPENDENT)
 def test_records_read_back_through_the_package_reader(cases, fam, tmp_path):
-    from physics.timeseries import read_timeseries
+    from physics.io.timeseries import read_timeseries
     c = cases[fam]
     files = c.write(tmp_path)
     assert len(files) == 5

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from physics import signals
-from physics.diagnose.demo import outside_catalog_case
+from physics.testbeds.demo import outside_catalog_case
 from physics.diagnose.diagnosis import diagnose
 from physics.effects import BUILT_IN, EFFECTS, OutputEffect, effect_classes_in_file, register, unregister
 from physics.errors import InputError
-from physics.frequency import frequency_response
+from physics.solvers.frequency import frequency_response
 from physics.model import ActuatorModel, resolve_effects
-from physics.timedomain import simulate
+from physics.solvers.timedomain import simulate
 
 CREEP = Path(__file__).resolve().parents[1] / "examples" / "effects" / "creep.py"
 
@@ -99,7 +99,7 @@ def test_bad_effect_files_are_clear_errors(tmp_path):
 
 
 def test_command_line(tmp_path, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     assert main(["simulate", "--effects", "default,+creep", "--rh", "50", "--out", str(tmp_path / "a")]) == 2
     assert "--effects-path" in capsys.readouterr().err
     assert main(["frf", "--effects", "default,+creep", "--rh", "50", "--effects-path", str(CREEP),
@@ -146,7 +146,7 @@ def test_output_backlash_gets_no_confident_catalog_name():
 
 def test_diagnosis_on_two_workers_gives_the_same_ranking(creep):
     """Candidate fits run as tasks; workers register the user effect from its file."""
-    from physics.parallel import ParallelSettings
+    from physics.execution.parallel import ParallelSettings
     ms, _ = outside_catalog_case("creep", seed=1)
     serial = diagnose(ms, "ipmc_pt_eg", "none", candidates="creep,fractional_coupling,electrode_resistance")
     parallel = diagnose(ms, "ipmc_pt_eg", "none", candidates="creep,fractional_coupling,electrode_resistance",
@@ -169,7 +169,7 @@ def test_near_twins_are_ambiguous_or_right():
 
 @pytest.mark.slow
 def test_demo_missing_physics_runs_the_loop(tmp_path, capsys):
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     assert main(["demo", "missing-physics", "--out", str(tmp_path / "mp"), "--duration-s", "60"]) == 0
     out = capsys.readouterr().out
     assert "loop: before not explained by the catalog" in out and "after adding drafted_slow_pole: explained" in out

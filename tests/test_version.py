@@ -21,7 +21,7 @@ def test_the_version_has_one_source():
 
 
 def test_eap_version_prints_it():
-    out = subprocess.run([sys.executable, "-m", "nnmodel.cli", "--version"], capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-m", "nnmodel.app.cli", "--version"], capture_output=True, text=True,
                          cwd=ROOT, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == f"eap-model {physics.__version__}"
 

@@ -2,7 +2,7 @@
 
 * Writes the generated reference pages before the sources are read (never committed):
   ``reference/commands/NAME.md`` for every ``eap`` command, from its argparse parser
-  (:func:`nnmodel.cli.build_parser`), and ``reference/api/PAGE.md`` for every entry of
+  (:func:`nnmodel.app.cli.build_parser`), and ``reference/api/PAGE.md`` for every entry of
   ``docs/public_api.py`` (autodoc of the names users import).
 * ``{tutorial-output} SCRIPT.py``: runs a tutorial script once per build (a fresh process,
   in the repository root) and shows what it printed; a script that fails — a command that
@@ -61,7 +61,7 @@ def _option_entry(action: argparse.Action, parser: argparse.ArgumentParser) -> s
 
 def command_pages(out: Path) -> list[str]:
     """One Markdown page per ``eap`` command under ``out``; returns the command names."""
-    from nnmodel.cli import build_parser
+    from nnmodel.app.cli import build_parser
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     names = sorted(sub.choices)
@@ -78,7 +78,7 @@ def command_pages(out: Path) -> list[str]:
             if entries:
                 parts.append(f"## {title}\n\n" + "\n".join(entries))
         _write(out / f"{name}.md", "\n".join(parts))
-    index = ["# Commands\n", "<!-- generated from nnmodel/cli.py's parser by docs/_ext/eap_docs.py -->\n",
+    index = ["# Commands\n", "<!-- generated from nnmodel/app/cli.py's parser by docs/_ext/eap_docs.py -->\n",
              "Every page below is generated from the command's own argument parser, so it says what "
              "`eap COMMAND --help` says.  Options that take a device also take `--param NAME=VALUE`; "
              "those that take `--effects` also take `--effects-path FILE.py`.\n",

@@ -20,7 +20,7 @@ def out(name: str) -> Path:
 
 def eap(*args) -> None:
     """Run ``eap ARGS`` (what typing it in a shell does) and stop if it fails."""
-    from nnmodel.cli import main
+    from nnmodel.app.cli import main
     argv = [str(a) for a in args]
     print("\n$ eap " + shlex.join(argv), flush=True)
     rc = main(argv)

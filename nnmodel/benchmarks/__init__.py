@@ -2,7 +2,7 @@
 
 A suite is a function ``run(models, out, *, quick=False, overrides=None, progress=True,
 settings=None, **options) -> dict`` in a module of this package (``settings``: where its
-models train, :mod:`physics.parallel`); :data:`SUITES` maps the name used by
+models train, :mod:`physics.execution.parallel`); :data:`SUITES` maps the name used by
 ``eap benchmark --suite NAME`` to a :class:`Suite` entry.  Entries name the function by
 import path, so listing the suites (for the command line's choices) imports no torch.
 Add a suite by writing its module and one ``register(Suite(...))`` line below.

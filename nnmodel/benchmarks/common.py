@@ -106,12 +106,12 @@ def text_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
 
 
 def page(title: str, blocks: Sequence[tuple[str, object]]):
-    """A suite's page through the one report builder (a :class:`physics.report.Report`;
+    """A suite's page through the one report builder (a :class:`physics.pages.report.Report`;
     write it with ``.write_index(out, old_name="SUITE.html")``).  ``blocks`` are (kind,
     content): ``("h2", text)``, ``("p", text or (text, links))``, ``("html", raw)``, ``("table", (header, rows))``
-    (headers read through :func:`physics.columns.column`), ``("img", (path, caption))``,
+    (headers read through :func:`physics.pages.columns.column`), ``("img", (path, caption))``,
     ``("pre", text)``."""
-    from physics.report import Report
+    from physics.pages.report import Report
     rep = Report(title)
     for kind, content in blocks:
         if kind in ("h2", "h3"):

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from physics.errors import InputError
-from physics.fileio import atomic_path, write_json, write_text
-from physics.plotting import legend_outside
+from physics.io.fileio import atomic_path, write_json, write_text
+from physics.pages.plotting import legend_outside
 
 from . import common
 

@@ -26,8 +26,8 @@ import warnings
 from pathlib import Path
 
 from physics.errors import InputError
-from physics.parallel import map_tasks
-from physics.fileio import atomic_path, write_json, write_text
+from physics.execution.parallel import map_tasks
+from physics.io.fileio import atomic_path, write_json, write_text
 
 from . import common
 
@@ -113,7 +113,7 @@ def run(models=None, out: str | os.PathLike = "greybox-study", *, quick: bool = 
 
 def _curve_point(task: dict) -> dict:
     """Train one model on the first records of the subset order and score it (a task of
-    :func:`physics.parallel.map_tasks`; the dataset is read from its path)."""
+    :func:`physics.execution.parallel.map_tasks`; the dataset is read from its path)."""
     from ..dataset import load_dataset
     from ..traincompare import _score, network_runner
     from ..recipes import make_model
@@ -218,7 +218,7 @@ def _write_outputs(out: Path, report: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from physics.plotting import legend_outside
+    from physics.pages.plotting import legend_outside
 
     write_json(out / "greybox.json", report)
     h, r = _curve_rows(report)

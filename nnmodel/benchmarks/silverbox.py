@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from physics.errors import InputError
-from physics.parallel import ParallelSettings, map_tasks
-from physics.fileio import atomic_path, sha256_file, write_json, write_text
+from physics.execution.parallel import ParallelSettings, map_tasks
+from physics.io.fileio import atomic_path, sha256_file, write_json, write_text
 
 from ..data import Experiment
 from . import common
@@ -171,7 +171,7 @@ def load(path=None, limit: int | None = None, verify: bool = True) -> dict:
 
 
 def _train_one(task: dict):
-    """Train and score one model of the suite (a task of :func:`physics.parallel.map_tasks`;
+    """Train and score one model of the suite (a task of :func:`physics.execution.parallel.map_tasks`;
     the data are read from their path): (result row, free-run predictions)."""
     from ..bundle import save as save_bundle
 
@@ -222,7 +222,7 @@ def run(models=None, out: str | os.PathLike = "silverbox-benchmark", *, quick: b
     to ``out``: ``silverbox.json``, ``silverbox.csv``, ``index.html`` (``silverbox.html``
     redirects to it), two PNGs and (with ``save_models``) one bundle per model in
     ``out/models/``.  Returns the JSON content.
-    ``settings``: where the models train (:mod:`physics.parallel`, one task per model)."""
+    ``settings``: where the models train (:mod:`physics.execution.parallel`, one task per model)."""
 
     names, overrides, out = common.start(models, DEFAULT_MODELS, overrides, out)
     ds = load(data, limit=limit)

@@ -48,7 +48,7 @@ def load_plugins() -> list[str]:
     entry ``NAME = module:Class``); returns their kinds.  A network's recipe ``KIND.yaml``
     is read from the recipe folder, else from beside its module
     (:func:`nnmodel.recipes.load_recipe`)."""
-    from physics.plugins import load_entry_points
+    from physics.execution.plugins import load_entry_points
     return [cls.kind for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
 
 

@@ -38,6 +38,7 @@ import torch
 
 from physics.errors import InputError
 
+from ..batches import GAIN_SE, gain_is_real
 from ..data import check_prediction_inputs, check_records, rh_range, split_index
 from ..startup import start_samples
 from .config import TrainingConfig
@@ -495,16 +496,6 @@ class NeuralModel:
 
 #: blocks the validation data are cut into to judge a correction's gain (:func:`keep_if_better`)
 GAIN_BLOCKS = 10
-#: standard errors by which a correction's validation gain must exceed zero: the gain must exceed
-#: its own uncertainty (a stricter test dropped networks 35 % better than linear on 500
-#: validation samples, bench/slow_plant.py)
-GAIN_SE = 1.0
-
-
-def gain_is_real(r_net: float, r_ref: float, gain: float, se: float) -> bool:
-    """The single-split rule of :func:`keep_if_better`: a lower error, by more than
-    :data:`GAIN_SE` standard errors of the gain when that is known."""
-    return r_net < r_ref and (not math.isfinite(se) or gain > GAIN_SE * se)
 
 
 def keep_if_better(core, val, reference: str = "linear", decide: bool = True) -> dict:

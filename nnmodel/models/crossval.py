@@ -135,7 +135,7 @@ def cross_validate(model, train, val, extra) -> dict:
     stored as ``model.cross_validation_``."""
     from physics.errors import InputError
 
-    from .base import gain_is_real
+    from ..batches import gain_is_real
     folds, skipped = [scores(model, train, val)], []
     for k, (tr, va, vf) in enumerate(extra, start=1):
         fm = _fold_model(model, vf)

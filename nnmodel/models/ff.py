@@ -78,3 +78,25 @@ class FFModel(LagModel):
     kind = "ff"
     SELECTION_PROXY = {"layers": 0, "max_epochs": 0}    # structures are scored as linear least squares
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8}
+
+
+def as_network(lin, train, val_fraction: float = 0.2) -> "FFModel":
+    """The linear model ``lin`` (:class:`nnmodel.linear.LinearModel`) as a network that a bundle can hold and ``eap predict`` can run: an
+    ``ff`` network whose linear start is this model and whose correction is zero (no hidden
+    layer, no memory filters), so that its free run is this model's, started as every
+    network's linear start is: from the record's first ``n_init`` measured outputs.
+    ``train``: the training records (their sampling rate and RH range)."""
+    from ..data import check_records, rh_range
+
+    train = check_records(train, "training")
+    net = FFModel(na=0, nb=lin.n_init + 1, layers=0, arx_init=False, memory_filters=0, rh_knots=[],
+                       linear_start=True, inputs="voltage+rh" if lin.uses_rh else "voltage", max_epochs=0,
+                       structures=None, cv_folds=1, val_fraction=val_fraction, progress_bar=False)
+    net.restore({"inputs": ["voltage", "rh"] if lin.uses_rh else ["voltage"], "fs": train[0].fs,
+                 "rh_range": list(rh_range(train)) if lin.uses_rh else None, "n_init": lin.n_init,
+                 "card_extra": {"linear_start": lin.card()}}, None)
+    for name in ("u", "y") + (("rh",) if lin.uses_rh else ()):   # the linear model's scales: exact round trip
+        getattr(net.net_, f"{name}_mean").fill_(lin.scale[f"{name}_mean"])
+        getattr(net.net_, f"{name}_std").fill_(lin.scale[f"{name}_std"])
+    net.net_.core.zero_correction()
+    return net

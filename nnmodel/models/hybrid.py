@@ -2,7 +2,7 @@
 
     y[k] = y_phys[k] + f(y[k-1..k-na], u[k..k-nb+1], y_phys[k..k-nb+1], s[k], m[k], rh[k])
 
-``y_phys`` is the tip deflection (m) that :func:`physics.timedomain.simulate` computes for
+``y_phys`` is the tip deflection (m) that :func:`physics.solvers.timedomain.simulate` computes for
 the voltage record (device ``device`` with effects ``effects``, input interpolation
 ``hold`` between samples, RH smoothed by
 :func:`physics.compare.model_rh` as for any physics prediction of a measured record);
@@ -148,7 +148,7 @@ class HybridModel(NeuralModel):
         ``u`` [V] and RH ``rh`` [%] (constant, per sample or None): the states in SI units,
         then the deflection [m] for each of ``physics_inputs`` as the drive."""
         from physics.compare import model_rh
-        from physics.timedomain import simulate
+        from physics.solvers.timedomain import simulate
 
         model = self._physics_model()
         fs = float(fs or self.fs_)

@@ -16,12 +16,12 @@ H1 estimate applied to its simulated output.
 **What :func:`compare` computes** for each time-series record (``docs/reference/file-formats.md``):
 
 * the model's output for the measured voltage and RH; time metrics of
-  :mod:`physics.metrics` — RMSE [m], NRMSE, fit % = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) (MATLAB
+  :mod:`physics.analysis.metrics` — RMSE [m], NRMSE, fit % = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) (MATLAB
   ``compare``), Pearson correlation (the thesis reports 98 % for the IP2C at 0.2 Hz) —
   after removing the best constant offset (a laser sensor's zero is arbitrary;
   ``offset="none"`` keeps it) and an optional start-up interval ``skip_s``;
 * the H1 frequency-response estimate of the measurement and, with the same estimator,
-  of the model output (:func:`physics.frf_estimation.estimate_frf`; settings chosen from
+  of the model output (:func:`physics.analysis.frf_estimation.estimate_frf`; settings chosen from
   the record's excitation, see :class:`FRFOptions`), plus the model's closed form;
 * the thesis identification cost J_err of eq. 13 (De Luca 2014),
   sqrt(Σ_i (|δ_exp(f_i)| − |δ_sim(f_i)|)²/N) [m/V], on the excited frequencies whose
@@ -41,7 +41,7 @@ otherwise a 10-s moving mean rounded to 0.5 % (:func:`model_rh`).
 
 Known sensor dynamics are part of the measurement, not of the actuator: with
 ``sensor_bandwidth="auto"`` a first-order sensor low-pass recorded in a record's
-metadata (``meta["sensor"]["bandwidth"]``, written by :class:`physics.sensor.SensorModel`)
+metadata (``meta["sensor"]["bandwidth"]``, written by :class:`physics.io.sensor.SensorModel`)
 is applied to the model output before comparing; give a number [Hz] or ``None``.
 """
 

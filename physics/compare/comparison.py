@@ -8,11 +8,11 @@ from typing import Sequence
 
 import numpy as np
 
-from .. import metrics
+from ..analysis import metrics
 from ..errors import InputError, arg
-from ..frfdata import FRFData
-from ..memory import release_free_memory
-from ..timeseries import TimeSeries
+from ..io.frfdata import FRFData
+from ..execution.memory import release_free_memory
+from ..io.timeseries import TimeSeries
 from .frf import FRFOptions, default_bands, estimate_record_frf, frf_errors, residual_by_band, sensor_bandwidth_of, sensor_lowpass, sensor_response, thin_log, valid_points
 from .measurements import cluster_rh, model_rh, source_name
 from .predictors import Predictor, _check_output
@@ -134,7 +134,7 @@ def residual_tests(e: np.ndarray, u: np.ndarray, lags: int = RESIDUAL_LAGS) -> d
     autocorrelations ρ_ee(1..lags) and of input–residual cross-correlations ρ_ue(−lags..lags)
     outside the 99 % band ±2.576/√n of white noise; a model passes when at most 1 % + one
     lag falls outside (what chance alone gives)."""
-    from ..stats import autocorrelation, cross_correlation
+    from ..analysis.stats import autocorrelation, cross_correlation
     n = e.size
     m = int(min(lags, max(1, n // 4)))
     band = 2.576 / math.sqrt(n)
@@ -158,7 +158,7 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
     rh_arg = model_rh(rh, ts.fs, rh_tolerance)
     log(f"{Path(where).name}: {predictor.name} on {ts.n:,} samples")
     yhat = _check_output(predictor.run_record(ts, rh_arg), ts.n, predictor.name)
-    release_free_memory()         # the heap a piecewise run leaves behind (8 B per sample, physics.memory)
+    release_free_memory()         # the heap a piecewise run leaves behind (8 B per sample, physics.execution.memory)
     bw = None if predictor.measured_output and sb_setting == "auto" else sensor_bandwidth_of(ts, sb_setting)
     yhat = sensor_lowpass(yhat, ts.fs, bw)
     y = ts.deflection

@@ -7,10 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal as sps
 
-from .. import metrics
+from ..analysis import metrics
 from ..errors import InputError
-from ..frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level, power_blocks
-from ..timeseries import TimeSeries
+from ..analysis.frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level, power_blocks
+from ..io.timeseries import TimeSeries
 
 
 #: Excitation kinds of a record's metadata that :meth:`FRFOptions.settings_for` understands.
@@ -30,7 +30,7 @@ class FRFOptions:
     construction and carries no information); square pulses and steps → the whole record
     too (a transient from rest); noise and tones → Welch with Hann windows of ``nperseg``
     samples (default n/8), 50 % overlap.  Without metadata (a lab's export) the excitation
-    is read from the voltage (:func:`physics.frf_estimation.detect_excitation`).  ``nperseg``,
+    is read from the voltage (:func:`physics.analysis.frf_estimation.detect_excitation`).  ``nperseg``,
     ``window``, ``overlap`` override the choice.  ``band`` [Hz] keeps (f_lo, f_hi); by
     default the excitation's band from the metadata, if any.  ``max_points`` thins the
     estimate to about that many log-spaced frequencies (nearest lines; 0 keeps all): a
@@ -47,7 +47,7 @@ class FRFOptions:
     def settings_for(self, ts: TimeSeries) -> dict:
         """Keyword arguments for :func:`estimate_frf` for record ``ts``.  With ``method="auto"``
         and no excitation in the record's metadata (a lab's export) the excitation is read
-        from the voltage itself (:func:`physics.frf_estimation.detect_excitation`) and the
+        from the voltage itself (:func:`physics.analysis.frf_estimation.detect_excitation`) and the
         choice says so (key ``_how``)."""
         n = ts.n
         sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
@@ -167,7 +167,7 @@ def sensor_response(freq, bandwidth: float | None) -> np.ndarray:
 
 def sensor_lowpass(y: np.ndarray, fs: float, bandwidth: float | None) -> np.ndarray:
     """The same first-order low-pass in time (bilinear, started in steady state), as
-    :class:`physics.sensor.SensorModel` applies it."""
+    :class:`physics.io.sensor.SensorModel` applies it."""
     if bandwidth is None:
         return y
     b, a = sps.bilinear([1.0], [1.0 / (2 * np.pi * bandwidth), 1.0], fs)
@@ -218,7 +218,7 @@ def residual_by_band(e, y: np.ndarray, fs: float, bands) -> list[dict]:
 
     ``e`` is an array like ``y``, or a function ``e(r, m)`` giving its samples r, r + m, …
     (``e[r::m]``), so that a long residual is never formed whole.  Each spectrum is
-    reduced to its band sums as it is assembled (:func:`~physics.frf_estimation.power_blocks`):
+    reduced to its band sums as it is assembled (:func:`~physics.analysis.frf_estimation.power_blocks`):
     a long record costs half a spectrum, not the spectrum and its squares."""
     n = y.size
     part = e if callable(e) else (lambda r, m: e[r::m])

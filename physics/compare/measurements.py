@@ -8,9 +8,9 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..errors import InputError, arg
-from ..frfdata import FRFData, read_frf
-from ..csvtable import csv_header
-from ..timeseries import TimeSeries, read_timeseries
+from ..io.frfdata import FRFData, read_frf
+from ..io.csvtable import csv_header
+from ..io.timeseries import TimeSeries, read_timeseries
 
 
 def is_frf_file(path) -> bool:
@@ -28,7 +28,7 @@ def load_measurements(items: Iterable, *, rh: float | None = None, columns: dict
     the ``freq_Hz`` column) or ready :class:`TimeSeries`/:class:`FRFData` objects.
 
     ``rh`` [%] for records without RH; ``columns``/``fs``/``output``/``gain`` as in
-    :func:`physics.timeseries.read_timeseries` (time series only)."""
+    :func:`physics.io.timeseries.read_timeseries` (time series only)."""
     out: list[TimeSeries | FRFData] = []
     for item in items:
         if isinstance(item, (TimeSeries, FRFData)):

@@ -48,9 +48,9 @@ class Predictor:
 
 
 class PhysicsPredictor(Predictor):
-    """A physics model (device + effects): :func:`physics.timedomain.simulate` in time
+    """A physics model (device + effects): :func:`physics.solvers.timedomain.simulate` in time
     (``hold``: input interpolation, ``cubic`` for smooth records, ``linear`` for steps),
-    :func:`physics.frequency.frequency_response` in frequency."""
+    :func:`physics.solvers.frequency.frequency_response` in frequency."""
 
     def __init__(self, model: ActuatorModel, hold: str = "cubic"):
         if not isinstance(model, ActuatorModel):
@@ -66,13 +66,13 @@ class PhysicsPredictor(Predictor):
         return cls(ActuatorModel(device, effects, n_modes=n_modes), hold=hold)
 
     def __call__(self, voltage, rh, fs):
-        from ..timedomain import simulate
+        from ..solvers.timedomain import simulate
         v = np.asarray(voltage, dtype=float)
         t = np.arange(v.size) / float(fs)
         return simulate(self.model, None, t, v, rh=rh, hold=self.hold).deflection
 
     def frequency_response(self, freq, rh):
-        from ..frequency import frequency_response
+        from ..solvers.frequency import frequency_response
         return frequency_response(self.model, None, np.asarray(freq, dtype=float), rh=rh).deflection
 
     def describe(self) -> dict:

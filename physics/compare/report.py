@@ -6,14 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..columns import reading_unit
-from ..record import DEFLECTION, OutputQuantity
+from ..pages.columns import reading_unit
+from ..io.record import DEFLECTION, OutputQuantity
 from .comparison import ComparisonResult, RecordComparison
 
 
 def _display(output: OutputQuantity, magnitude: float | None = None) -> tuple[float, str, str]:
     """(scale, unit, name) the output is plotted in: its reading unit (a tip deflection in µm),
-    or the one that shows ``magnitude`` as 0.1–1000 (:func:`~physics.columns.reading_unit`)."""
+    or the one that shows ``magnitude`` as 0.1–1000 (:func:`~physics.pages.columns.reading_unit`)."""
     unit, scale = reading_unit(output.unit, magnitude)
     return scale, unit, output.name
 
@@ -35,7 +35,7 @@ def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float 
     """Measured and model output (a deflection in µm), the residual below, and a zoom on the
     last ``zoom_s`` seconds (default: 2 s or a tenth of the record, the shorter)."""
     import matplotlib.pyplot as plt
-    from ..plotting import envelope, legend_outside, save
+    from ..pages.plotting import envelope, legend_outside, save
     k, unit, name = _display(output, magnitude)
     fig, ax = plt.subplots(3, 1, figsize=(8, 6.4), gridspec_kw={"height_ratios": [2, 1, 1.6]})
 
@@ -66,7 +66,7 @@ def plot_time_overlay(r: RecordComparison, path, title: str = "", zoom_s: float 
 
 
 def _plot_bode_record(r: RecordComparison, path, output: OutputQuantity = DEFLECTION):
-    from ..plotting import plot_bode_curves
+    from ..pages.plotting import plot_bode_curves
     v = r.valid
     curves = {"measured (H1)" if r.kind == "timeseries" else "measured": (r.freq[v], r.H_meas[v], {"lw": 1.2})}
     if r.H_model_est is not None:
@@ -85,8 +85,8 @@ def _plot_bode_record(r: RecordComparison, path, output: OutputQuantity = DEFLEC
 
 def _plot_bands(res: ComparisonResult, path):
     import matplotlib.pyplot as plt
-    from ..columns import band
-    from ..plotting import legend_outside, save
+    from ..pages.columns import band
+    from ..pages.plotting import legend_outside, save
     bands = res.settings["bands_Hz"]
     if not bands:
         return False
@@ -116,7 +116,7 @@ def _plot_bands(res: ComparisonResult, path):
 
 def _plot_rh(res: ComparisonResult, path):
     import matplotlib.pyplot as plt
-    from ..plotting import rh_axis, save
+    from ..pages.plotting import rh_axis, save
     rows = res.by_rh
     rh = [r["rh_pct"] for r in rows]
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
@@ -139,8 +139,8 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     """Write ``report.json``, ``metrics.csv``, ``bands.csv``, PNGs and the page ``index.html``
     into ``out_dir`` (all atomically); returns the JSON dict.  ``output``: what the compared
     output is (axis labels and units; default the tip deflection)."""
-    from ..fileio import write_json
-    from ..report import Report, format_value, header, jsonable, write_csv
+    from ..io.fileio import jsonable, write_json
+    from ..pages.report import Report, format_value, header, write_csv
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     plots: dict[str, list[str]] = {}

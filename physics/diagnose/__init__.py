@@ -11,10 +11,11 @@ watch the error fall — with statistics that do not cry wolf.
 
 Modules: :mod:`.records` (records, decimation, noise floor), :mod:`.candidates` (specs,
 fits, time-domain scores), :mod:`.describing` (describing function of the large-signal
-double layer), :mod:`.stats` (effective sample size, BIC, p-values), :mod:`.residuals`
+double layer), :mod:`physics.analysis.stats` (effective sample size, BIC, p-values), :mod:`.residuals`
 (where it fails), :mod:`.signatures` (what each effect leaves behind, what data reveal it),
 :mod:`.diagnosis` (the driver and the verdict), :mod:`.report` (JSON, PNG, HTML, device
-file), :mod:`.demo` (synthetic measurements with a hidden effect).
+file).  Synthetic measurements with a hidden effect are outside the core, in
+:mod:`physics.testbeds`.
 """
 from .diagnosis import DiagnosisResult, Verdict, diagnose
 from .report import write_diagnosis

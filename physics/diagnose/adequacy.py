@@ -23,7 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .. import stats
+from ..analysis import stats
 from . import forms
 
 #: The final model explains the data when its RMS error is within this × the noise floor.

@@ -64,8 +64,8 @@ from ..errors import InputError, ModelError
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
 from ..effects import EFFECTS
 from ..model import ActuatorModel, resolve_effects
-from ..timedomain import simulate
-from .. import stats
+from ..solvers.timedomain import simulate
+from ..analysis import stats
 from .describing import DescribingFunction, charge_effects
 from .records import NUISANCE_TERMS, Record, remove_nuisance, sensor_filter, upsample
 from .specs import (declared_default, default_candidates, effect_params, is_nested, off_values, param_bounds,

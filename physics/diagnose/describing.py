@@ -7,13 +7,13 @@ functions and nonlinear system design*, McGraw-Hill 1968, ch. 2)
 
     H_A(f) ≈ N(A, f) · H_ss(f),
 
-H_ss the model's small-signal response (closed form, :func:`physics.frequency.response_per_volt`)
+H_ss the model's small-signal response (closed form, :func:`physics.solvers.frequency.response_per_volt`)
 and N(A, f) = X_A(f)/A ÷ X_ε(f)/ε the ratio of the fundamental phasors of the response to
 tones of amplitude A and ε = 1 mV, from short time simulations.
 
 Only the electrochemistry is nonlinear, and everything after it (solvent factor, kf(s),
 beam) is linear, so N is computed on the interface solvent excess averaged over the strip
-(``cs_up`` of :func:`physics.timedomain.simulate`) of a reduced model holding only the
+(``cs_up`` of :func:`physics.solvers.timedomain.simulate`) of a reduced model holding only the
 effects that shape the charge (those filling the electrochemical stages, e.g.
 ``nonlinear_charge``, ``electrode_resistance``): it
 settles within a few periods (double layer ~µs, electrode line ~ms) and does not depend
@@ -38,7 +38,7 @@ import numpy as np
 from ..effects import EFFECTS, stage_of
 from ..errors import ModelError
 from ..model import ActuatorModel
-from ..timedomain import simulate
+from ..solvers.timedomain import simulate
 from .specs import spec_of
 
 EPS_V = 1e-3

@@ -17,7 +17,7 @@
 4. :func:`try_candidates` — each effect the model lacks (catalog and user effects) that
    the data can reveal (:func:`.signatures.revealable`) is switched on, refitted with the
    base's free parameters and scored against the base (:func:`compare_step`: ΔBIC, ΔAIC
-   and a p-value with one effective sample size for every comparison, :mod:`physics.stats`;
+   and a p-value with one effective sample size for every comparison, :mod:`physics.analysis.stats`;
    the residual signature, :mod:`.signatures`).  Effects the data cannot reveal are listed
    with the excitation that would.
 5. :func:`select` — stepwise selection both ways: the step's decision (:func:`.verdict.decide`:
@@ -42,17 +42,17 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .. import stats
+from ..analysis import stats
 from ..device import Device, all_param_specs, load_device
 from ..effects import EFFECTS, ensure_registered, user_effect_files
 from ..errors import InputError, ModelError, arg
-from ..frequency import frequency_response
+from ..solvers.frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
 from ..identify.parameters import held_per_rh, switchable
 from ..identify.options import FitOptions
 from ..model import ActuatorModel, resolve_effects
-from ..parallel import map_tasks, warm_up
-from ..threads import single_threaded
+from ..execution.parallel import map_tasks, warm_up
+from ..execution.threads import single_threaded
 from . import candidates as C
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN
@@ -270,7 +270,7 @@ class DiagnosisResult:
         return r[0] if r else None
 
     def to_dict(self) -> dict:
-        from ..report import jsonable
+        from ..io.fileio import jsonable
         b = self.base
         return jsonable({
             "device": self.device.name, "device_file": self.device.path,
@@ -467,7 +467,7 @@ def fit_base(data: Data, dev: Device, base_ids, options: FitOptions, free_l, per
 
 def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, run: Run) -> list[CandidateResult]:
     """Phase 4: each candidate switched on in ``base``, fitted and scored (independent tasks,
-    in this process or on workers: :func:`physics.parallel.map_tasks`)."""
+    in this process or on workers: :func:`physics.execution.parallel.map_tasks`)."""
     n_levels = len({t.level for t in data.targets})
     results: list[CandidateResult] = []
     tasks, slots = [], []
@@ -825,7 +825,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
              fs_max: float | None = None, progress: Callable[[str], None] | None = None,
              **shared) -> DiagnosisResult:
     """Diagnose ``device`` with ``effects`` against ``measurements`` (paths or
-    :class:`~physics.timeseries.TimeSeries`); see the module doc.
+    :class:`~physics.io.timeseries.TimeSeries`); see the module doc.
 
     ``free``: the base's free parameters (default: gain, stiffness, ``beta_f``);
     ``options``: measurement and fit options shared with ``identify``
@@ -905,7 +905,7 @@ def _candidate_cost(task: dict) -> float:
 
 
 def _fit_candidate(task: dict):
-    """Fit and score one candidate (a task of :func:`physics.parallel.map_tasks`)."""
+    """Fit and score one candidate (a task of :func:`physics.execution.parallel.map_tasks`)."""
     ensure_registered(task["effect_files"])
     t0 = time.perf_counter()
     mf = C.fit_model(task["spec"], task["device"], task["targets"], task["trecs"], n_starts=task["n_starts"],

@@ -6,7 +6,7 @@ the drafts are fitted jointly with the model and forward-selected (:func:`draft_
 Passed back with ``--effects-path`` a file is a diagnosis candidate like any other.
 
 :func:`write_drafts` writes the files into a new folder through the package's output
-policy (:func:`physics.outputs.output_folder`: atomic, never over a user's files) and
+policy (:func:`physics.io.outputs.output_folder`: atomic, never over a user's files) and
 checks each one against the contract (:func:`check_draft`) before the folder appears.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
-from ..threads import single_threaded
+from ..execution.threads import single_threaded
 from . import forms as F
 from .effect_draft import EffectDraft
 
@@ -168,7 +168,7 @@ def check_draft(path: Path) -> list[str]:
 def write_drafts(items: Sequence[EffectDraft], out, *, overwrite: bool = False, inputs: Sequence = ()) -> dict:
     """Write ``items`` into the new folder ``out`` (atomic; refused over a folder eap did not
     write) with ``README.txt``; each file is checked first.  Returns {file: problems}."""
-    from ..outputs import component, output_folder
+    from ..io.outputs import component, output_folder
     out = Path(out)
     for d in items:
         component(d.file_name, "--draft-effects", "a drafted effect file")

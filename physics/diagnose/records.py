@@ -6,7 +6,7 @@ Each time-series record is
   frequency response over a band), ``tone`` (one sine: a stepped-sine point), ``steps``
   (square pulses, steps: time only) — from the metadata written by ``eap simulate`` /
   :mod:`physics.signals` when present, otherwise from the voltage itself
-  (:func:`physics.frf_estimation.detect_excitation`);
+  (:func:`physics.analysis.frf_estimation.detect_excitation`);
 * given an **amplitude level** [V] (robust peak of |v − median v|; records whose
   amplitudes differ by less than a factor :data:`AMPLITUDE_RATIO` share a level) and an
   **RH level** [%] (:func:`physics.compare.cluster_rh`);
@@ -18,7 +18,7 @@ Each time-series record is
 * given its **noise floor** [m], from the measurement alone, never from a model's misfit:
   the RMS of what a perfect model would leave — the sensor's white noise and quantisation and
   the part of its drift that the nuisance terms do not absorb — from the record's sensor
-  metadata (written by :class:`physics.sensor.SensorModel`) or, failing that, estimated from
+  metadata (written by :class:`physics.io.sensor.SensorModel`) or, failing that, estimated from
   the deflection spectrum where the response has fallen away (:func:`deflection_spectrum`:
   the white part only, and the source says so);
 * given its **nuisance terms** (:meth:`Record.nuisance`): the least-squares offset and linear
@@ -33,7 +33,7 @@ Each time-series record is
 
 Frequency-response targets for the fits come from the broadband records through
 :func:`physics.identify.build_targets` (H1, thinned to log-spaced lines) and from tone
-records through :func:`physics.frf_estimation.stepped_sine`.
+records through :func:`physics.analysis.frf_estimation.stepped_sine`.
 """
 from __future__ import annotations
 
@@ -48,10 +48,10 @@ from scipy import signal as sps
 from ..compare import (FRFOptions, cluster_rh, load_measurements, model_rh, sensor_bandwidth_of,
                        sensor_response, source_name)
 from ..errors import InputError, arg
-from ..frf_estimation import detect_excitation, noise_level, stepped_sine
-from ..frfdata import FRFData
-from ..metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
-from ..timeseries import TimeSeries
+from ..analysis.frf_estimation import detect_excitation, noise_level, stepped_sine
+from ..io.frfdata import FRFData
+from ..analysis.metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
+from ..io.timeseries import TimeSeries
 
 #: fs_d / highest excited frequency after decimation.
 OVERSAMPLING = 5.0
@@ -159,7 +159,7 @@ class Record:
 def classify(ts: TimeSeries) -> tuple[str, tuple[float, float], float | None, str]:
     """(kind, excited band [Hz], tone frequency [Hz] or None, how it was decided) of a
     record's excitation: from its metadata when they say, otherwise from the voltage
-    (:func:`physics.frf_estimation.detect_excitation`)."""
+    (:func:`physics.analysis.frf_estimation.detect_excitation`)."""
     sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
     kind = str(sig.get("kind", ""))
     if kind in _BROADBAND and "f_start_Hz" in sig and "f_stop_Hz" in sig:
@@ -380,7 +380,7 @@ def stated_drift(ts: TimeSeries) -> float:
 def deflection_spectrum(ts: TimeSeries) -> tuple[float, float, str]:
     """(white noise level as an RMS over the full band [m], highest frequency where the
     response stands above it [Hz], how the level was found) from the deflection alone
-    (:func:`physics.frf_estimation.noise_level`)."""
+    (:func:`physics.analysis.frf_estimation.noise_level`)."""
     level, f_resp, (a, b) = noise_level(ts.deflection, ts.fs)
     if not math.isfinite(level):
         return math.nan, ts.fs / 2, "unknown (the record is too short or too slowly sampled to estimate it)"

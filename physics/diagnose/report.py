@@ -7,7 +7,7 @@ bands — before and after the winner), ``ranking.png`` (ΔBIC and RMS error per
 candidate), ``overlay.png`` (measured, base and winner in time, zoomed where the base
 fails, and the errors over whole records), ``error_breakdown.png`` (error by frequency
 band, amplitude and RH, before and after).  All files are written atomically
-(:mod:`physics.fileio`); inputs are never overwritten.
+(:mod:`physics.io.fileio`); inputs are never overwritten.
 """
 from __future__ import annotations
 
@@ -19,12 +19,12 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import InputError, arg
-from ..columns import ONE, Column, band
-from ..fileio import write_json, write_text
+from ..pages.columns import ONE, Column, band
+from ..io.fileio import jsonable, write_json, write_text
 from ..identify import write_device
 from ..identify.parameters import switchable
-from ..outputs import component, final_path
-from ..report import Report, header, jsonable
+from ..io.outputs import component, final_path
+from ..pages.report import Report, header
 from .confidence import calibration_text
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
@@ -32,7 +32,7 @@ from .signatures import excitation
 
 def _plot_where(res: DiagnosisResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..pages.plotting import save
     fig, ax = plt.subplots(2, 2, figsize=(11, 7))
     sets = [("base", res.analysis_base, "C3")]
     if res.analysis_after is not None:
@@ -73,7 +73,7 @@ def _plot_where(res: DiagnosisResult, path) -> None:
 
 def _plot_ranking(res: DiagnosisResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import legend_outside, save
+    from ..pages.plotting import legend_outside, save
     rk = res.ranking
     fig, ax = plt.subplots(1, 2, figsize=(11, 0.6 + 0.45 * max(len(rk), 1)), sharey=True)
     names = [c.effect for c in rk]
@@ -102,7 +102,7 @@ def _plot_ranking(res: DiagnosisResult, path) -> None:
 
 def _plot_overlay(res: DiagnosisResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..pages.plotting import save
     recs = res.records[:4]
     shown = res.picks[-1] if res.picks else res.best
     fig, axes = plt.subplots(len(recs), 2, figsize=(12, 2.6 * len(recs)), squeeze=False)
@@ -143,7 +143,7 @@ def _label(res: DiagnosisResult, shown) -> str:
 
 def _plot_breakdown(res: DiagnosisResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..pages.plotting import save
     sets = [("base", res.analysis_base, "C3")]
     if res.analysis_after is not None:
         sets.append((res.analysis_after.label, res.analysis_after, "C2"))

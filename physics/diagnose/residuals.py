@@ -37,7 +37,7 @@ import numpy as np
 from scipy import stats as sstats
 
 from ..compare import default_bands, residual_by_band
-from .. import stats
+from ..analysis import stats
 from .records import Record
 
 Z99 = float(sstats.norm.ppf(0.995))

@@ -57,8 +57,8 @@ from typing import Sequence
 import numpy as np
 
 from ..device import all_param_specs
-from ..metrics import remove_nuisance
-from .. import stats
+from ..analysis.metrics import remove_nuisance
+from ..analysis import stats
 from . import confidence as conf
 from .adequacy import ADEQUATE_RATIO, Adequacy
 from .confidence import excess_share
@@ -240,7 +240,7 @@ def separating_record(a, b, records, noise: float) -> str:
     ``a`` and ``b`` differ most, relative to the noise floor: a long pulse, a slow sweep, a
     sweep beyond the measured band, another RH, another amplitude."""
     from .. import signals
-    from ..timedomain import simulate
+    from ..solvers.timedomain import simulate
     amp = float(np.median([r.amplitude for r in records]))
     rh = float(np.median([r.rh for r in records]))
     f_hi = max(r.band[1] for r in records)

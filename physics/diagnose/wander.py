@@ -1,7 +1,7 @@
 """The slow wander of the records: how much of it is noise, and how much the records share.
 
 A model's residual keeps, below the excited band, what the per-record nuisance terms (offset
-and linear drift, :func:`physics.metrics.remove_nuisance`) leave of a slow drift.  When the
+and linear drift, :func:`physics.analysis.metrics.remove_nuisance`) leave of a slow drift.  When the
 noise floor is estimated from the records (no sensor metadata), :func:`slow_wander` measures
 it and the diagnosis counts it as noise — *unless the records share it*.  A sensor's drift
 wanders independently from one record to the next; a drift of the setup the same in every
@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..metrics import remove_nuisance
+from ..analysis.metrics import remove_nuisance
 from .forms.drift import shape as drift_shape, tau_grid
 from .records import WALK_AFTER_TREND
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from ..errors import InputError, arg
 from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
 from .declaration import declaration_problems
-from .usercode import contain_class, import_limited
+from ..execution.usercode import contain_class, import_limited
 from .catalog import BUILT_IN, BUILT_IN_EFFECTS, CHAIN, CORE, FACTOR_HOOKS, adds_factors, stage_of
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
@@ -47,7 +47,7 @@ ENTRY_POINT_GROUP = "eap.effects"
 _PATH = arg("effects_path", "path")    # how a caller names an effect file
 
 
-#: The contract's runner, installed by :mod:`physics.contract` when ``physics`` is imported: its
+#: The contract's runner, installed by :mod:`physics.contract` when it is imported (on first use): its
 #: checks run the model and the solvers, layers above this package, which must not import them.
 _CONTRACT: list = []
 
@@ -85,6 +85,9 @@ def check_effect(cls, device="ipmc_pt_eg", *, fast: bool = False, rh: float = 60
     >>> report.ok, [c.status for c in report.checks][:2]
     (True, ['pass', 'pass'])
     """
+    if not _CONTRACT:                # the runner lives a floor above (it runs the model): imported by name,
+        import importlib             # on first use, so that this package never imports the solvers
+        importlib.import_module("physics.contract")
     return _CONTRACT[-1](cls, device, fast=fast, rh=rh)
 
 
@@ -148,7 +151,7 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
     """Import the Python file ``path`` and return the user effect classes it defines.
 
     The file is code that runs with the caller's rights: its import and every call of its
-    classes' methods run contained (:mod:`physics.effects.usercode`: exit calls caught, a time
+    classes' methods run contained (:mod:`physics.execution.usercode`: exit calls caught, a time
     limit per call)."""
     p = Path(path)
     if p.suffix != ".py" or not p.is_file():
@@ -236,7 +239,7 @@ def ensure_registered(files) -> None:
 
 def load_plugins() -> list[str]:
     """Register the effects of installed packages (entry-point group ``eap.effects``)."""
-    from ..plugins import load_entry_points
+    from ..execution.plugins import load_entry_points
     return [cls.id for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
 
 

@@ -5,7 +5,7 @@ module, everything the rest of the package needs:
 
 * its parameters (``params``, ``tables``, ``requires``; validated by the device loader);
 * its contribution to the solvers, through the hooks below.  Both solvers
-  (:mod:`physics.frequency`, :mod:`physics.timedomain`) call the hooks through the model
+  (:mod:`physics.solvers.frequency`, :mod:`physics.solvers.timedomain`) call the hooks through the model
   (:meth:`physics.model.ActuatorModel.hook`, :meth:`~physics.model.ActuatorModel.product`)
   and never name an effect;
 * a plain-data ``diagnosis`` spec (:data:`DIAGNOSIS_KEYS`), read by ``identify``/``diagnose``;

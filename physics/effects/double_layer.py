@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import EPS0, FARADAY, GAS_CONSTANT
-from ..lti import StateSpace
-from ..realize import fit_pole_residue
+from ..solvers.lti import StateSpace
+from ..solvers.realize import fit_pole_residue
 from .base import Effect
 
 

@@ -23,7 +23,7 @@ class DoubleLayerStage(Protocol):
         """Derived double-layer quantities at temperature ``T`` [K] (None: T_ext)."""
 
     def realize(self, d, w_hi: float):
-        """The branch as a :class:`physics.lti.StateSpace`: input U [V]; outputs current density
+        """The branch as a :class:`physics.solvers.lti.StateSpace`: input U [V]; outputs current density
         [A/m²], interface excess [mol/m³], charge [C/m²]; accurate up to ``w_hi`` [rad/s]."""
 
 

@@ -11,7 +11,7 @@ import yaml
 
 from ..device import Device, HumidityMap, all_param_specs, parse_device
 from ..errors import InputError, ModelError
-from ..units import to_si
+from ..io.units import to_si
 from .parameters import _section_of, switchable
 from .result import IdentificationResult
 
@@ -198,7 +198,7 @@ _DeviceDumper.add_representer(list, _repr_seq)
 def write_device(result: IdentificationResult, path, *, name: str | None = None, date: str | None = None,
                  protect=()) -> Path:
     """Write the fitted device file atomically (never over an input in ``protect``)."""
-    from ..fileio import write_text
+    from ..io.fileio import write_text
     raw = identified_device_raw(result, name=name, date=date)
     warn = f"# WARNING: {result.check['message']}\n" if result.kept_start else ""
     header = (warn + f"# {raw['name']}: written by eap identify on {date or _dt.date.today().isoformat()}.\n"

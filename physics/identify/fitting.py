@@ -11,7 +11,7 @@ from scipy import optimize, stats
 
 from ..effects import ensure_registered, user_effect_files
 from ..errors import InputError, ModelError
-from ..parallel import ParallelSettings, map_tasks
+from ..execution.parallel import ParallelSettings, map_tasks
 from .problem import IdentificationProblem
 from .settings import COND_LIMIT, CORR_LIMIT, REL_SE_LIMIT, THESIS_MAX_ITER, THESIS_TOL
 
@@ -180,7 +180,7 @@ def _interior(x, lo, hi):
 
 
 def _fit_start(task: dict):
-    """One start of :func:`fit_lsq` (a task of :func:`physics.parallel.map_tasks`): (record
+    """One start of :func:`fit_lsq` (a task of :func:`physics.execution.parallel.map_tasks`): (record
     for the card, the optimiser's result or None, model evaluations spent)."""
     ensure_registered(task["effect_files"])
     problem, xs = task["problem"], task["x"]
@@ -201,7 +201,7 @@ def fit_lsq(problem: IdentificationProblem, *, n_starts: int = 5, seed: int = 0,
     """Bounded multi-start least squares (see the module doc).  ``extra_starts``: further
     start points θ (SI, one value per free parameter, in ``problem.labels`` order) tried
     after the usual ones (e.g. a grid over a parameter whose scale is unknown).  The starts
-    are independent tasks of :func:`physics.parallel.map_tasks` (``settings``: workers or a
+    are independent tasks of :func:`physics.execution.parallel.map_tasks` (``settings``: workers or a
     Dask scheduler); the result does not depend on where they ran."""
     t0 = time.perf_counter()
     n0 = problem.n_eval

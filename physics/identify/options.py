@@ -8,7 +8,7 @@ from typing import Mapping, Sequence
 
 from ..compare import FRFOptions
 from ..errors import InputError
-from ..parallel import ParallelSettings
+from ..execution.parallel import ParallelSettings
 
 #: Default RH tolerance [%]: a hygrometer's (records within it are one humidity level).
 RH_TOLERANCE = 1.0
@@ -26,7 +26,7 @@ class FitOptions:
     lines.  Fit: ``free`` and ``per_rh`` parameters (names or "a,b"), ``start`` {name: SI} or
     "kf=0.004,Y=0.2 GPa", ``bounds`` {name: (lo, hi)} or "kf=1e-4:1e-1", ``n_starts`` (None:
     the caller's default), ``seed``, ``n_modes``, ``settings`` (where the fits run,
-    :mod:`physics.parallel`)."""
+    :mod:`physics.execution.parallel`)."""
 
     rh: float | None = None
     rh_tolerance: float = RH_TOLERANCE

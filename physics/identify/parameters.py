@@ -11,7 +11,7 @@ import numpy as np
 from ..device import all_param_specs
 from ..errors import InputError, arg
 from ..parameters import BASE_SECTIONS
-from ..units import to_si
+from ..io.units import to_si
 from .settings import DEFAULT_DECADES
 
 

@@ -14,11 +14,11 @@ from ..compare import (FRFOptions, cluster_rh, estimate_record_frf, model_rh,
                       valid_points)
 from ..device import Device, HumidityMap, all_param_specs, load_device
 from ..errors import InputError, arg
-from ..frequency import response_per_volt
-from ..frf_estimation import detect_excitation
-from ..frfdata import FRFData
+from ..solvers.frequency import response_per_volt
+from ..analysis.frf_estimation import detect_excitation
+from ..io.frfdata import FRFData
 from ..model import ActuatorModel, resolve_effects
-from ..timeseries import TimeSeries
+from ..io.timeseries import TimeSeries
 from .parameters import FreeParameter, _make_param, _suggest, hint as _hint
 from .settings import EPS_FLOOR
 
@@ -308,9 +308,9 @@ class IdentificationProblem:
 
     def time_errors(self, theta) -> list[np.ndarray]:
         """Simulated minus measured deflection [m] of each time record after ``skip_s``, its
-        offset and linear drift removed (:func:`physics.metrics.remove_nuisance`)."""
-        from ..metrics import remove_nuisance
-        from ..timedomain import simulate
+        offset and linear drift removed (:func:`physics.analysis.metrics.remove_nuisance`)."""
+        from ..analysis.metrics import remove_nuisance
+        from ..solvers.timedomain import simulate
         model = self.model_for(theta)
         self.n_eval += 1
         parts = []

@@ -13,7 +13,7 @@ from .result import IdentificationResult
 
 
 def _plot_target(result: IdentificationResult, k: int, path) -> None:
-    from ..plotting import plot_bode_curves
+    from ..pages.plotting import plot_bode_curves
     prob = result.problem
     t = prob.targets[k]
     H0 = prob.responses(prob.theta0)[k]
@@ -28,7 +28,7 @@ def _plot_target(result: IdentificationResult, k: int, path) -> None:
 
 def _plot_corr(labels, corr, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import save
+    from ..pages.plotting import save
     p = len(labels)
     fig, ax = plt.subplots(figsize=(1.0 + 0.7 * p, 0.8 + 0.6 * p))
     im = ax.imshow(np.nan_to_num(corr), vmin=-1, vmax=1, cmap="RdBu_r")
@@ -48,7 +48,7 @@ def _plot_corr(labels, corr, path) -> None:
 
 def _plot_rh_maps(result: IdentificationResult, path) -> None:
     import matplotlib.pyplot as plt
-    from ..plotting import legend_outside, rh_axis, save
+    from ..pages.plotting import legend_outside, rh_axis, save
     prob, fit = result.problem, result.fit
     names = prob.per_rh
     fig, axes = plt.subplots(1, len(names), figsize=(4 * len(names), 3.2), squeeze=False)
@@ -70,9 +70,9 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
     """Write the fitted device ``NAME.yaml``, ``report.json``, ``parameters.csv``, PNGs and
     the page ``index.html`` into ``out_dir``; returns the JSON dict (with the file names)."""
     from ..errors import arg
-    from ..fileio import write_json
-    from ..outputs import component
-    from ..report import Report, header, jsonable, write_csv
+    from ..io.fileio import jsonable, write_json
+    from ..io.outputs import component
+    from ..pages.report import Report, header, write_csv
     dev_name = component(name or f"{result.problem.device.name}_identified", arg("name"), "the device file NAME.yaml")
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)

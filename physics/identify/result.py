@@ -10,8 +10,8 @@ from typing import Sequence
 from ..compare import load_measurements, source_name
 from ..device import Device, load_device
 from ..errors import InputError, arg
-from ..parallel import warm_up
-from ..threads import single_threaded
+from ..execution.parallel import warm_up
+from ..execution.threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
 from .options import FitOptions
 from .parameters import IdentifiabilityWarning, held_per_rh, parse_assignments, parse_names
@@ -81,7 +81,7 @@ class IdentificationResult:
         return rows
 
     def to_dict(self) -> dict:
-        from ..report import jsonable
+        from ..io.fileio import jsonable
         fits = {}
         for name, f in self.fits.items():
             fits[name] = {"method": f.method, "residual": f.residual_kind, "parameters": self.param_rows(f),

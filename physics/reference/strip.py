@@ -22,7 +22,7 @@ interface excess.  In the small-signal limit m_s = n⁺ B(s) ∫ x ΔC⁺ dx up 
 ℓ_ref = ℓ·B(s) of the reduced model; at large signal ℓ_ref follows the solvent actually
 moved (∝ the charge), not the interface concentration.  ℓ_ref is pushed through the reduced
 model's kf(s), humidity factors, modes and Prony modulus by
-:func:`physics.timedomain.tip_from_interface_excess` (without the solvent factor, which the
+:func:`physics.solvers.timedomain.tip_from_interface_excess` (without the solvent factor, which the
 reference contains).  Cs_up/Cs_low are reported as first-moment-equivalent interface values,
 2∫₀ʰ x ΔCs dx/Λ and 2∫₋ₕ⁰ |x| ΔCs dx/Λ averaged over L_total (clamp included), as the
 reduced model does.
@@ -36,8 +36,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import ActuatorModel, as_model
-from ..strip import projection, segment_edges
-from ..timedomain import _check_record, beam_statespace, tip_from_interface_excess
+from ..solvers.strip import projection, segment_edges
+from ..solvers.timedomain import _check_record, beam_statespace, tip_from_interface_excess
 from .pnp import Integrator, Ladder, Slab, SlabParams, Tolerances, graded_mesh
 
 

@@ -29,10 +29,10 @@ import numpy as np
 from ..device import load_device
 from ..effects import EFFECTS, stage_of
 from ..effects.double_layer import DoubleLayer
-from ..fileio import write_json
-from ..frequency import frequency_response
+from ..io.fileio import write_json
+from ..solvers.frequency import frequency_response
 from ..model import ActuatorModel
-from ..timedomain import simulate, tip_from_interface_excess
+from ..solvers.timedomain import simulate, tip_from_interface_excess
 from .strip import ReferenceStrip
 
 DEVICES = ("ipmc_pt_eg", "ip2c_pedot_water")
@@ -415,7 +415,7 @@ def _clean(o):
 
 
 def _plots(figs, out: Path) -> list[Path]:
-    from ..plotting import plt, save
+    from ..pages.plotting import plt, save
     paths = []
     for dev in figs["devices"]:
         F = figs[dev]
@@ -538,7 +538,7 @@ def _device(stem: str) -> str:
 
 
 def _page(figs, pngs):
-    """The page of ``eap validate`` (a :class:`physics.report.Report`)."""
+    """The page of ``eap validate`` (a :class:`physics.pages.report.Report`)."""
     rows = []
     for dev in figs["devices"]:
         F = figs[dev]
@@ -592,7 +592,7 @@ def _page(figs, pngs):
                          for a, c, e, d in zip(sq["residual_after_s"], sq["cs_up_residual_fraction"],
                                                sq["cation_excess_residual_fraction"], sq["deflection_residual_fraction"]))
             rows.append(f"<h3>Square pulse 2 V, Ton 20 s / Toff 80 s</h3><ul>{li}</ul>")
-    from ..report import Report
+    from ..pages.report import Report
     rep = Report("Reduced model vs reference PNP + solvent solver", "eap validate")
     rep.paragraph(f"{__doc__.strip().splitlines()[0]} See physics/reference/strip.py for how the load is "
                   "compared: ℓ_ref = ∫x(Cs − Cs0)dx / (n⁺Λ), which equals the reduced model's ℓ·B(s) in the "

@@ -11,8 +11,8 @@ from typing import Callable, ClassVar, Sequence
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
 
-from ... import stats
-from ...metrics import remove_nuisance
+from ...analysis import stats
+from ...analysis.metrics import remove_nuisance
 
 #: A form is significant at ΔBIC ≤ −this (very strong evidence, Kass & Raftery) ...
 SIGNIFICANT_BIC = 10.0
@@ -79,7 +79,7 @@ class Residual:
     def regress(self, columns: list[list[np.ndarray]], k_grid: int = 1) -> "Regression":
         """Least squares e_r ≈ Σ_j c_j x_rj with gains shared by the records; ``columns[r]`` the
         regressors of record r (their nuisance terms removed here, as the fit removes each
-        record's offset and linear drift, :func:`physics.metrics.remove_nuisance`);
+        record's offset and linear drift, :func:`physics.analysis.metrics.remove_nuisance`);
         ``k_grid`` nonlinear parameters scanned outside (counted in ΔBIC with the gains)."""
         X = [np.column_stack([remove_nuisance(x) for x in cols]) for cols in columns]
         A = sum(x.T @ x for x in X)
@@ -184,7 +184,7 @@ def linear_response(model, records: Sequence) -> Callable:
     (400 log-spaced frequencies up to fs_d/2, interpolated) applied in the frequency domain,
     zero-padded to twice the length.  Each record's response is computed once, when first used."""
     from ...compare.frf import sensor_response
-    from ...frequency import frequency_response
+    from ...solvers.frequency import frequency_response
     cache: dict = {}
 
     def respond(k: int, u: np.ndarray) -> np.ndarray:
