@@ -3,8 +3,8 @@
 Data: ``SNLS80mV.csv`` (columns ``V1`` input, ``V2`` output, 610.35 Hz) from the nonlinear
 system-identification benchmark collection (T. Wigren and J. Schoukens, "Three free data sets
 for development and benchmarking in nonlinear system identification", ECC 2013).  The file
-is read where it lies (``--data``, ``$EAP_SILVERBOX`` or ``../shared/benchmarks/silverbox/``
-next to the source tree) and checked against its SHA-256; it is never copied.
+is read where it lies (``--data`` or ``$EAP_SILVERBOX``: the file or the folder holding it)
+and checked against its SHA-256; it is never copied and never downloaded.
 
 Standard split (0-based Python slices): multisine record ``[40650:127400]``, first 75 %
 (65 062 samples) for training + validation, last 25 % (21 688) = *multisine test*; *arrow
@@ -12,8 +12,8 @@ test (full)* ``[100:40575]``; *arrow without extrapolation* = its first 32 000 s
 free-run simulation RMSE in mV, the first 50 samples of each test used only to initialise
 the state and excluded from the score.
 
-Published figures (Champneys et al. 2024, arXiv:2405.10779, as quoted in
-``shared/benchmarks/README.md``; not re-checked against the paper here): LSTM baseline
+Published figures (Champneys et al. 2024, arXiv:2405.10779; as quoted by the benchmark
+collection's notes, not re-checked against the paper here): LSTM baseline
 1.50 / 2.68 / 0.96 mV, linear ARX about 6.95 / 14.2 / 6.59 mV, best results about 0.26-0.36 mV.
 """
 from __future__ import annotations
@@ -49,8 +49,8 @@ TEST_LABELS = {"multisine": "multisine", "arrow_full": "arrow (full)",
 CITATION_DATA = ("T. Wigren and J. Schoukens, \"Three free data sets for development and "
                  "benchmarking in nonlinear system identification\", European Control Conference "
                  "2013, pp. 2933-2938.")
-CITATION_RESULTS = ("Champneys et al. 2024, arXiv:2405.10779 (figures as quoted in "
-                    "shared/benchmarks/README.md; not re-checked against the paper)")
+CITATION_RESULTS = ("Champneys et al. 2024, arXiv:2405.10779 (figures as quoted by the benchmark "
+                    "collection's notes; not re-checked against the paper)")
 
 #: published free-run RMSE in mV (multisine, arrow full, arrow without extrapolation)
 PUBLISHED = [
@@ -114,17 +114,15 @@ REFERENCES = {
 
 # ---------------------------------------------------------------------- data
 def find_data(path: str | os.PathLike | None = None) -> Path:
-    """Locate ``SNLS80mV.csv``: ``path``, ``$EAP_SILVERBOX``, or
-    ``../shared/benchmarks/silverbox/`` beside the source tree or the working directory."""
+    """Locate ``SNLS80mV.csv``: ``path`` or ``$EAP_SILVERBOX`` (the file, or the folder holding it)."""
     cands = []
     if path:
         cands.append(Path(path))
     elif os.environ.get("EAP_SILVERBOX"):
         cands.append(Path(os.environ["EAP_SILVERBOX"]))
-    else:
-        rel = Path("shared") / "benchmarks" / "silverbox" / FILE_NAME
-        repo = Path(__file__).resolve().parents[2]
-        cands += [repo.parent / rel, Path.cwd().parent / rel, Path.cwd() / rel]
+    if not cands:
+        raise InputError("the Silverbox data file SNLS80mV.csv is not shipped: pass --data PATH "
+                         "(the file or its folder) or set EAP_SILVERBOX")
     for c in cands:
         if c.is_dir():
             c = c / FILE_NAME

@@ -26,8 +26,8 @@ def add_arguments(p):
     p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
                    help="override one hyper-parameter, e.g. --set narx.poly_degree=1 (repeatable)")
     p.add_argument("--data", default=None,
-                   help="suite data: silverbox: the SNLS80mV.csv file (default: the shared benchmark "
-                        "folder); eap: a dataset folder (default: generate the default dataset into OUT)")
+                   help="suite data: silverbox: the SNLS80mV.csv file or its folder (default: $EAP_SILVERBOX; "
+                        "the file is not shipped); eap: a dataset folder (default: generate the default dataset into OUT)")
     p.add_argument("--limit", type=int, default=None,
                    help="truncate every data part to this many samples (smoke tests only: "
                         "the figures are then not comparable)")
