@@ -123,7 +123,9 @@ def hybrid(summary: dict) -> list[dict]:
     g = _group(models)
     out = []
     for name, row in models.items():
-        if str(row.get("kind", "")) != "hybrid" and name != "hybrid":
+        grey = (row.get("reference_start") or {}).get("reference") == "physics" \
+            or (row.get("own") or {}).get("reference") == "physics"
+        if not grey:
             continue
         h = _nrmse(row, g)
         if h is None:

@@ -47,6 +47,7 @@ from physics.execution.parallel import ParallelSettings, map_tasks, warm_up
 from .bundle import load as load_bundle, save as save_bundle
 from .dataset import Dataset, load_dataset
 from .linear import LinearModel, fit_linear
+from .models import MODELS
 from .explain import group_facts, notes
 from .recipes import load_recipe, make_model
 from .shortfalls import data_facts, explain, sentences
@@ -196,10 +197,11 @@ def _train_compare(ds, dataset, models, out: Path, overrides, max_time_s, progre
         if max_time_s is not None:
             ov["max_time"] = float(max_time_s)
         ov.setdefault("accelerator", accelerator)
-        if name == "hybrid":
+        if getattr(MODELS.get(name), "NEEDS_PHYSICS", False):
             if device is None and "device" not in ov:
-                raise InputError("the hybrid needs a physics model: give --physics DEVICE (or --set hybrid.device=...)")
-            ov.setdefault("device", device)   # the hybrid's physics: the dataset's (or --physics) device
+                raise InputError(f"the {name} model needs a physics model: give --physics DEVICE "
+                                 f"(or --set {name}.device=...)")
+            ov.setdefault("device", device)   # its physics: the dataset's (or --physics) device
         make_model(name, ov)                  # a bad recipe or --set fails here, before any training
         tasks.append({"name": name, "overrides": ov, "dataset": str(ds.path), "bundle": str(out / "models" / name),
                       "echo": progress and local, "effect_files": user_effect_files(), "rh_tolerance": rh_tolerance})
@@ -491,7 +493,7 @@ def _fallbacks(results: dict, trained: dict, out: Path, ds: Dataset) -> list[str
                          "kind": f"{parent} (the {name} row fell back to it)", "falls_back_to": parent,
                          "fallback_evidence": how,
                          "own": {"kind": row["kind"], "free_run": row["free_run"], "validation": row["validation"],
-                                 "n_parameters": row["n_parameters"]}}
+                                 "n_parameters": row["n_parameters"], "reference": "physics"}}
         save_bundle(trained[parent], out / "models" / name, dataset_hash=ds.hash, overwrite=True,
                     output=(ds.output.name, ds.output.unit), metrics={"free_run": results[parent]["free_run"]},
                     notes=f"eap train-compare: {name} validated worse ({100 * own:.3g} % NRMSE) than its parent "

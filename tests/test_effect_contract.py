@@ -42,6 +42,16 @@ def _passed(effect, check):
     assert c.status == "pass", f"{effect}: {check} {c.status}: {c.detail}"
 
 
+@pytest.mark.parametrize("effect, check", [(e, c) for e in EFFECT_IDS for c in CHECKS])
+def test_each_contract_check(effect, check):
+    """One test item per check of the contract and effect (as scikit-learn's checks give):
+    none fails; a skipped check says why."""
+    c = _report(effect)[check]
+    if c.status == "skip":
+        pytest.skip(f"{effect}: {check} skipped: {c.detail}")
+    assert c.status == "pass", f"{effect}: {check} {c.status}: {c.detail}"
+
+
 @pytest.mark.parametrize("effect", EFFECT_IDS)
 def test_declaration_builds_protocol_finite_and_stable(effect):
     r = _report(effect)

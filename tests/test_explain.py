@@ -7,7 +7,10 @@ def _row(kind, held, ml=None, corr=0.96, n=None, history=None, training=None):
     fr = {"heldout_rh": {"nrmse": held / 100}, "test": {"nrmse": held / 100}}
     if ml is not None:
         fr["measurement_like"] = {"nrmse": ml / 100, "correlation": corr}
-    return {"kind": kind, "n_parameters": n, "free_run": fr, "history": history or [], "training": training or {}}
+    row = {"kind": kind, "n_parameters": n, "free_run": fr, "history": history or [], "training": training or {}}
+    if kind == "hybrid":      # a grey box's row, as train-compare writes it: its reference is its physics
+        row["reference_start"] = {"reference": "physics", "kept": "network"}
+    return row
 
 
 def _summary(**models):

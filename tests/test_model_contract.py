@@ -7,14 +7,23 @@ import pytest
 
 import nnmodel
 from nnmodel.models import MODELS, register
-from nnmodel.models.check import CHECKS, ContractError
+from nnmodel.models.check import CHECKS, ContractError, model_checks
 from nnmodel.models.ff import FFModel
 from physics.errors import InputError
 
 
-@pytest.mark.parametrize("kind", sorted(MODELS))
-def test_registered_model_honours_the_contract(kind):
-    assert nnmodel.check_model(MODELS[kind]) == [c.__name__ for c in CHECKS]
+#: one shared fit per registered network, one test item per check of the contract
+_CHECKS = {kind: dict(model_checks(MODELS[kind])) for kind in sorted(MODELS)}
+
+
+@pytest.mark.parametrize("kind, check", [(k, c) for k, checks in _CHECKS.items() for c in checks])
+def test_registered_model_honours_the_contract(kind, check):
+    _CHECKS[kind][check]()
+
+
+def test_check_model_runs_every_check_and_names_each_failure():
+    assert nnmodel.check_model(MODELS["ff"]) == [c.__name__ for c in CHECKS]
+    assert [name for name, _ in model_checks(FFModel)] == [c.__name__.removeprefix("check_") for c in CHECKS]
 
 
 def test_training_settings_live_in_one_config():

@@ -69,6 +69,9 @@ class NeuralModel:
 
     #: registry name ("ff", "rbf", ...), set by subclasses
     kind = "base"
+    #: True for a grey box that starts from a physics model: ``train-compare`` hands it the
+    #: dataset's device (or ``--physics``) as its ``device`` setting
+    NEEDS_PHYSICS: bool = False
     #: value checks of the model's own parameters: name -> check(value) -> error text or None
     CHECKS: dict = {}
     #: where this model's settings defaults differ from the parts' (e.g. {"lr": 2e-3})

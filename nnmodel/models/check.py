@@ -21,7 +21,7 @@ import numpy as np
 
 from physics.errors import InputError
 
-__all__ = ["check_model", "ContractError", "CHECKS"]
+__all__ = ["check_model", "model_checks", "ContractError", "CHECKS"]
 
 FS = 50.0
 
@@ -188,15 +188,41 @@ def check_seeded(cls, params=None, ctx=None) -> None:
 CHECKS = (check_class, check_params, check_fit_predict, check_inputs_refused, check_bundle, check_chunks, check_seeded)
 
 
+#: checks that read the model fitted by :func:`check_fit_predict`
+_NEEDS_FIT = ("check_inputs_refused", "check_bundle", "check_chunks", "check_seeded")
+
+
+def model_checks(cls, params: dict | None = None) -> list[tuple[str, object]]:
+    """``[(name, run), ...]``: every check of the network contract as its own callable, in
+    order, sharing one fitted model — one test item per check, as scikit-learn's
+    ``parametrize_with_checks`` gives.  ``run()`` raises :class:`ContractError` when its check
+    fails; a check that needs the fitted model fits it first when no earlier check did."""
+    ctx: dict = {}
+
+    def runner(check):
+        def run():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                if check.__name__ in _NEEDS_FIT and "free" not in ctx:
+                    check_fit_predict(cls, params, ctx)
+                check(cls, params, ctx)
+        return run
+
+    return [(check.__name__.removeprefix("check_"), runner(check)) for check in CHECKS]
+
+
 def check_model(cls, params: dict | None = None) -> list[str]:
     """Run every check of the network contract on ``cls`` (with its ``CHECK_PARAMS``,
-    updated by ``params``); returns the names of the checks passed, raises
-    :class:`ContractError` at the first failure."""
-    ctx: dict = {}
-    done = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        for check in CHECKS:
-            check(cls, params, ctx)
-            done.append(check.__name__)
+    updated by ``params``); returns the names of the checks passed, or raises
+    :class:`ContractError` naming every check that failed (each message starts with its check)."""
+    done, failed = [], []
+    for name, run in model_checks(cls, params):
+        try:
+            run()
+        except ContractError as err:
+            failed.append(str(err))
+        else:
+            done.append(f"check_{name}")
+    if failed:
+        raise ContractError("; ".join(failed))
     return done

@@ -109,6 +109,7 @@ class HybridModel(NeuralModel):
     """Physics simulator + neural correction of its output (grey box)."""
 
     kind = "hybrid"
+    NEEDS_PHYSICS = True
     DEFAULTS = {"max_time": 600.0, "grad_clip": 1.0}
     CHECKS = {**LAG_CHECKS,
               "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
