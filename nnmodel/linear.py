@@ -21,6 +21,7 @@ the start of the networks (:mod:`nnmodel.models.features`, ``linear_start``).
 """
 from __future__ import annotations
 
+import collections
 import hashlib
 import math
 from dataclasses import dataclass, field
@@ -312,7 +313,10 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-_CACHE: dict[str, LinearModel] = {}
+#: fitted models of this process, by a hash of their data and options (the same data give the
+#: same model); the oldest is dropped beyond :data:`_CACHE_SIZE`
+_CACHE: "collections.OrderedDict[str, LinearModel]" = collections.OrderedDict()
+_CACHE_SIZE = 16
 
 
 def _key(train, val, *options) -> str:
@@ -334,13 +338,16 @@ def fit_linear(train, val=None, val_fraction: float = 0.2, feedthrough: bool = T
     validation records the last ``val_fraction`` of every training record validates (as the
     networks do); ``use_rh``: RH as a linear input (None: when the records carry it);
     ``na_grid``, ``nb_grid``: the orders tried; ``output_error``: try the refinement.
-    Results are cached per process (the same data give the same model)."""
+    Results are cached per process (the same data give the same model; the last 16 kept)."""
     options = (val_fraction, feedthrough, use_rh, tuple(na_grid), tuple(nb_grid), output_error)
     key = _key(train, val, *options)
     if key not in _CACHE:
         from threadpoolctl import threadpool_limits
         with threadpool_limits(limits=1, user_api="blas"):   # small matrices: one thread is fastest
             _CACHE[key] = _fit(train, val, *options)
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    _CACHE.move_to_end(key)
     return _CACHE[key]
 
 

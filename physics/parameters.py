@@ -84,10 +84,3 @@ BASE_SECTIONS: dict[str, dict[str, ParamSpec]] = {
         ParamSpec("beta_f", "s", 0.0, 1.0, "Rayleigh stiffness-damping factor beta_f (alpha_f = 0)"),
     ]),
 }
-
-
-def all_base_specs() -> dict[str, ParamSpec]:
-    out: dict[str, ParamSpec] = {}
-    for sec in BASE_SECTIONS.values():
-        out.update(sec)
-    return out

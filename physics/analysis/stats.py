@@ -133,12 +133,6 @@ def integrated_time(e: np.ndarray, max_lag: int | None = None) -> float:
     return float(min(max(t, 1.0), n / 2.0))
 
 
-def effective_size(e: np.ndarray) -> tuple[float, float]:
-    """(n_eff, τ_int) of a residual series."""
-    tau = integrated_time(e)
-    return e.size / tau, tau
-
-
 def loglik_term(rss: float, n: int, n_eff: float) -> float:
     """n_eff ln(RSS/n) — minus twice the profiled Gaussian log-likelihood up to a constant."""
     return n_eff * math.log(max(rss, 1e-300) / n)

@@ -120,10 +120,6 @@ class ModelSpec:
     removed: str | None = None
     notes: list[str] = field(default_factory=list)
 
-    @property
-    def n_params_hint(self) -> int:
-        return len(self.free) + len(self.per_rh)
-
 
 def _ref_omega(band) -> float:
     return 2 * math.pi * math.sqrt(band[0] * band[1])

@@ -334,20 +334,6 @@ def trend(records, resid) -> list[dict]:
     return out
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    out, i = [], 0
-    while i < mask.size:
-        if mask[i]:
-            j = i
-            while j + 1 < mask.size and mask[j + 1]:
-                j += 1
-            out.append((i, j))
-            i = j + 1
-        else:
-            i += 1
-    return out
-
-
 def _classified_runs(frf: ResidualFRF) -> list[tuple[int, int, tuple[str, str], float]]:
     """Runs of consecutive significant bands with the same kind of error: gain over/under
     (beyond 2 %) or right, phase lead/lag (beyond 1°) or right; (first, last, class, size)."""

@@ -71,10 +71,6 @@ class CantileverModes:
         """phi_i(L) (= 2, −2, 2, …)."""
         return self.phi([self.L])[:, 0]
 
-    def modal_mass(self, rhoA: float) -> np.ndarray:
-        """m_i = rhoA ∫ phi_i² dz = rhoA L [kg]."""
-        return np.full(self.n_modes, rhoA * self.L)
-
     def modal_stiffness(self, EI: float) -> np.ndarray:
         """k_i = EI ∫ phi_i''² dz = EI beta_i⁴ L [N/m]."""
         return EI * self.beta ** 4 * self.L
