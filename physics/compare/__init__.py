@@ -48,9 +48,9 @@ is applied to the model output before comparing; give a number [Hz] or ``None``.
 from __future__ import annotations
 
 from .predictors import CallablePredictor, PhysicsPredictor, Predictor
-from .measurements import cluster_rh, is_frf_file, load_measurements, mean_rh, model_rh, source_name
+from .measurements import check_measurements, cluster_rh, is_frf_file, load_measurements, mean_rh, model_rh, source_name
 from .frf import FRFOptions, default_bands, estimate_record_frf, frf_errors, parse_bands, residual_by_band, sensor_bandwidth_of, sensor_lowpass, sensor_response, thin_log, valid_points
 from .comparison import ComparisonResult, RecordComparison, compare
 from .report import plot_time_overlay, write_comparison_report
 
-__all__ = ["CallablePredictor", "ComparisonResult", "FRFOptions", "PhysicsPredictor", "Predictor", "RecordComparison", "cluster_rh", "compare", "default_bands", "estimate_record_frf", "frf_errors", "is_frf_file", "load_measurements", "mean_rh", "model_rh", "parse_bands", "plot_time_overlay", "residual_by_band", "sensor_bandwidth_of", "sensor_lowpass", "sensor_response", "source_name", "thin_log", "valid_points", "write_comparison_report"]
+__all__ = ["CallablePredictor", "ComparisonResult", "FRFOptions", "PhysicsPredictor", "Predictor", "RecordComparison", "check_measurements", "cluster_rh", "compare", "default_bands", "estimate_record_frf", "frf_errors", "is_frf_file", "load_measurements", "mean_rh", "model_rh", "parse_bands", "plot_time_overlay", "residual_by_band", "sensor_bandwidth_of", "sensor_lowpass", "sensor_response", "source_name", "thin_log", "valid_points", "write_comparison_report"]

@@ -14,7 +14,7 @@ from ..io.frfdata import FRFData
 from ..execution.memory import release_free_memory
 from ..io.timeseries import TimeSeries
 from .frf import FRFOptions, default_bands, estimate_record_frf, frf_errors, residual_by_band, sensor_bandwidth_of, sensor_lowpass, sensor_response, thin_log, valid_points
-from .measurements import cluster_rh, model_rh, source_name
+from .measurements import check_measurements, cluster_rh, model_rh, source_name
 from .predictors import Predictor, _check_output
 
 
@@ -86,6 +86,7 @@ def compare(measurements: Sequence, predictor: Predictor, *, frf_options: FRFOpt
     ms = list(measurements)
     if not ms:
         raise InputError("no measurement to compare with")
+    check_measurements(ms)
     warnings_: list[str] = []
     recs: list[RecordComparison] = []
     log = log or (lambda message: None)

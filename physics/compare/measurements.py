@@ -10,7 +10,12 @@ import numpy as np
 from ..errors import InputError, arg
 from ..io.frfdata import FRFData, read_frf
 from ..io.csvtable import csv_header
+from ..io.record import DEFLECTION
 from ..io.timeseries import TimeSeries, read_timeseries
+
+#: the shortest time record a model is compared with [samples]: an FRF estimate and time
+#: metrics over a few periods
+MIN_SAMPLES = 32
 
 
 def is_frf_file(path) -> bool:
@@ -25,10 +30,14 @@ def load_measurements(items: Iterable, *, rh: float | None = None, columns: dict
                       fs: float | None = None, resample: bool = False, output=None,
                       gain: str | None = None) -> list[TimeSeries | FRFData]:
     """Measurements from paths (time-series ``.csv``/``.mat`` or FRF ``.csv``, told apart by
-    the ``freq_Hz`` column) or ready :class:`TimeSeries`/:class:`FRFData` objects.
+    the ``freq_Hz`` column) or ready :class:`TimeSeries`/:class:`FRFData` objects, checked by
+    :func:`check_measurements` against the output a model predicts.
 
     ``rh`` [%] for records without RH; ``columns``/``fs``/``output``/``gain`` as in
-    :func:`physics.io.timeseries.read_timeseries` (time series only)."""
+    :func:`physics.io.timeseries.read_timeseries` (time series only); ``output``: what the
+    model predicts (an :class:`~physics.io.record.OutputQuantity`; default the tip deflection in m)."""
+    if fs is not None and not fs > 0:
+        raise InputError(f"{arg('fs_Hz', 'fs')} {fs!r}: the sampling rate must be a positive number of Hz")
     out: list[TimeSeries | FRFData] = []
     for item in items:
         if isinstance(item, (TimeSeries, FRFData)):
@@ -36,17 +45,46 @@ def load_measurements(items: Iterable, *, rh: float | None = None, columns: dict
             continue
         if not isinstance(item, (str, Path)):
             raise InputError(f"measurement {item!r}: expected a file path, a TimeSeries or an FRFData")
+        if not Path(item).exists():
+            raise InputError(f"measurement file {item} not found")
         if is_frf_file(item):
             frf = read_frf(item)
             if frf.rh is None and rh is not None:
                 frf = replace(frf, rh=float(rh))
             out.append(frf)
         else:
-            out.append(read_timeseries(item, columns=columns, fs=fs, rh=rh, resample=resample, output=output,
-                                       gain=gain))
+            out.append(read_timeseries(item, columns=columns, fs=fs, rh=rh, resample=resample,
+                                       output=None if output is None or output.is_deflection else output, gain=gain))
     if not out:
         raise InputError("no measurement given: pass at least one time-series or FRF file")
+    check_measurements(out, output or DEFLECTION)
     return out
+
+
+def check_measurements(ms: Sequence, output=None) -> None:
+    """Refuse time records a model cannot be compared with: fewer than :data:`MIN_SAMPLES`
+    samples, a constant output, an output other than ``output`` (what the model predicts;
+    ``None``: not checked), a sidecar geometry (it would be silently ignored).  Run by
+    :func:`load_measurements` and by :func:`~physics.compare.compare` on what it is given."""
+    for k, m in enumerate(ms):
+        if not isinstance(m, TimeSeries):
+            continue
+        where = source_name(m, k)
+        if m.n < MIN_SAMPLES:
+            raise InputError(f"{where}: {m.n} samples; comparing a model with a record needs at least "
+                             f"{MIN_SAMPLES} (an FRF estimate and time metrics over a few periods)")
+        if output is not None and m.output != output:
+            raise InputError(f"{where}: the measured output is {m.output.label()} but the model predicts "
+                             f"{output.label()}" + (f" — give {arg('sensor_gain', 'gain')} (e.g. 2.5mm/V) to "
+                                                    "convert it to metres" if output.is_deflection else ""))
+        if m.deflection is not None and np.ptp(m.deflection) == 0:
+            raise InputError(f"{where}: the measured {m.output.name} is constant ({float(m.deflection[0]):g}); "
+                             f"there is nothing to compare — check the column ({arg('columns')}) or the record")
+        if isinstance(m.meta, dict) and "geometry" in m.meta:
+            raise InputError(f"{Path(where).with_suffix('.yaml')}: geometry: the sidecar's geometry is not "
+                             "applied to the model (it would be silently ignored); put it in a device YAML (copy "
+                             "configs/devices/*.yaml, edit geometry:) and give that file as the model's device, "
+                             "then remove the geometry block from the sidecar")
 
 
 def source_name(m, k: int) -> str:

@@ -4,13 +4,11 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import numpy as np
-
 from physics.compare import (CallablePredictor, FRFOptions, PhysicsPredictor, Predictor, compare,
                              load_measurements, parse_bands, write_comparison_report)
 from physics.errors import InputError
 from physics.io.record import DEFLECTION, OutputQuantity
-from physics.io.timeseries import TimeSeries, parse_column_map
+from physics.io.timeseries import parse_column_map
 
 from ._common import (add_output_options, add_quiet_option, add_record_options, check_out, provenance, stage_log,
                       writing)
@@ -95,41 +93,13 @@ def sensor_setting(text: str):
         raise InputError(f"--sensor-bandwidth-Hz {text!r}: expected auto, none or a frequency in Hz") from None
 
 
-#: Fewest samples of a time-series record that compare / identify / diagnose accept.
-MIN_SAMPLES = 32
-
-
 def read_measurements(args, output: OutputQuantity | None = None) -> list:
-    """The measurements of ``args``; ``output``: what the model predicts (default: the tip
-    deflection in m), which every time-series record's output must be."""
-    for m in args.measurements:
-        if not Path(m).exists():
-            raise InputError(f"measurement file {m} not found")
+    """The measurements of ``args`` (:func:`physics.compare.load_measurements`, which checks
+    them); ``output``: what the model predicts (default: the tip deflection in m)."""
     want = output or DEFLECTION
     columns = parse_column_map(args.columns, want) if args.columns else None
-    if args.fs_Hz is not None and not args.fs_Hz > 0:
-        raise InputError(f"--fs-Hz {args.fs_Hz!r}: the sampling rate must be a positive number of Hz")
-    ms = load_measurements(args.measurements, rh=args.rh, columns=columns, fs=args.fs_Hz,
-                           resample=args.resample, output=None if want.is_deflection else want,
-                           gain=getattr(args, "sensor_gain", None))
-    for m in ms:
-        n = getattr(m, "n", None)
-        if isinstance(m, TimeSeries) and n < MIN_SAMPLES:
-            raise InputError(f"{m.source}: {n} samples; comparing a model with a record needs at least "
-                             f"{MIN_SAMPLES} (an FRF estimate and time metrics over a few periods)")
-        if isinstance(m, TimeSeries) and m.output != want:
-            raise InputError(f"{m.source}: the measured output is {m.output.label()} but the model predicts "
-                             f"{want.label()}" + (" — give --sensor-gain (e.g. 2.5mm/V) to convert it to metres"
-                                                  if want.is_deflection else ""))
-        if isinstance(m, TimeSeries) and np.ptp(m.deflection) == 0:
-            raise InputError(f"{m.source}: the measured {m.output.name} is constant ({float(m.deflection[0]):g}); "
-                             "there is nothing to compare — check the column (--columns) or the record")
-        if isinstance(getattr(m, "meta", None), dict) and "geometry" in m.meta:
-            raise InputError(f"{Path(str(m.source)).with_suffix('.yaml')}: geometry: the sidecar's geometry is not "
-                             "applied to the model (it would be silently ignored); put it in a device YAML (copy "
-                             "configs/devices/*.yaml, edit geometry:) and pass that file with --device/--model, "
-                             "then remove the geometry block from the sidecar")
-    return ms
+    return load_measurements(args.measurements, rh=args.rh, columns=columns, fs=args.fs_Hz,
+                             resample=args.resample, output=want, gain=getattr(args, "sensor_gain", None))
 
 
 # ------------------------------------------------------------------ model resolution
