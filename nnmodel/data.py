@@ -81,7 +81,10 @@ def check_rh(rh, n: int, where: str) -> np.ndarray:
 
 
 class Experiment:
-    """One uniformly sampled experiment in physical units.
+    """The networks' view of one uniformly sampled record, in physical units: input ``u``,
+    output ``y``, humidity ``rh``, rate ``fs`` (the record itself is a
+    :class:`physics.io.record.TimeSeries`; :meth:`from_timeseries` and :meth:`to_timeseries`
+    go between the two without copying the arrays).
 
     Parameters
     ----------
@@ -157,6 +160,12 @@ class Experiment:
     @property
     def duration(self) -> float:
         return len(self) / self.fs
+
+    def to_timeseries(self):
+        """The record as a :class:`physics.io.record.TimeSeries` (the package's record type),
+        sharing this view's arrays; ``y`` becomes its ``deflection`` (its output)."""
+        from physics.io.record import TimeSeries
+        return TimeSeries(time=self.time, voltage=self.u, deflection=self.y, rh=self.rh, source=self.name or None)
 
     def split(self, fraction: float) -> tuple["Experiment", "Experiment"]:
         """Split at ``fraction`` of the length: ``(first part, last part)``."""

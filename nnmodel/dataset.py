@@ -240,6 +240,7 @@ class Dataset:
 
     path: Path
     meta: dict
+    _read: dict = field(default_factory=dict, repr=False, compare=False)   # entry path -> TimeSeries read
 
     @property
     def fs(self) -> float:
@@ -277,6 +278,14 @@ class Dataset:
         return self.meta.get("rh_levels") is not None
 
     def record(self, entry: dict) -> Experiment:
+        """The record of ``entry`` as the networks' view of it; each file is read once (the
+        dataset keeps what it has read, its arrays read-only)."""
+        ts = self._read.get(entry["path"])
+        if ts is None:
+            ts = self._read[entry["path"]] = self._read_record(entry)
+        return Experiment.from_timeseries(ts if self.has_rh else _without_rh(ts), name=entry["path"])
+
+    def _read_record(self, entry: dict):
         ts = read_timeseries(self.path / entry["path"], rh=None if self.has_rh else 0.0, output=self.output)
         if abs(ts.fs - self.fs) > 1e-6 * self.fs:
             raise InputError(f"{self.path / entry['path']}: sampled at {ts.fs:g} Hz but dataset.json says fs_Hz "
@@ -284,7 +293,17 @@ class Dataset:
         if entry.get("samples") is not None and ts.n != entry["samples"]:
             raise InputError(f"{self.path / entry['path']}: {ts.n} samples but dataset.json says {entry['samples']}; "
                              "the dataset was changed — rebuild it")
-        return Experiment(ts.voltage, ts.deflection, ts.rh if self.has_rh else None, ts.fs, name=entry["path"])
+        for name in ("time", "voltage", "deflection", "rh"):
+            a = getattr(ts, name)
+            if isinstance(a, np.ndarray):
+                a.setflags(write=False)
+        return ts
+
+
+def _without_rh(ts):
+    """``ts`` without its humidity channel (a dataset without RH), sharing the other arrays."""
+    import dataclasses
+    return dataclasses.replace(ts, rh=None)
 
 
 # --------------------------------------------------------------------------- a closed world

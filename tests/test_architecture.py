@@ -254,3 +254,17 @@ def test_import_physics_and_nnmodel_pull_in_no_heavy_package():
             "print(sorted(m for m in ('torch', 'matplotlib', 'dask', 'scipy', 'pandas') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_a_command_is_one_module_declaring_its_inputs():
+    """Every command module declares the options naming files it reads (``INPUTS``): each is an
+    option of its parser, and the command line protects exactly those (no list to edit elsewhere)."""
+    from nnmodel.app import cli
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, __import__("argparse")._SubParsersAction))
+    for mod in cli._command_modules():
+        p = sub.choices[mod.NAME]
+        dests = {a.dest for a in p._actions}
+        assert set(mod.INPUTS) <= dests, (mod.NAME, set(mod.INPUTS) - dests)
+        declared = p.get_default("_inputs")
+        assert set(declared) == set(mod.INPUTS) | ({"effects_path"} & dests), mod.NAME

@@ -59,17 +59,19 @@ def build_parser() -> argparse.ArgumentParser:
                            description=getattr(mod, "DESCRIPTION", mod.HELP),
                            formatter_class=_HelpFormatter)
         mod.add_arguments(p)
-        if "--device" in p._option_string_actions or mod.NAME == "compare":
+        inputs = tuple(getattr(mod, "INPUTS", ()))
+        if "--device" in p._option_string_actions or getattr(mod, "TAKES_PARAMS", False):
             p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                            help="override a device parameter, with its unit, e.g. --param L_total=40mm "
                                 "--param width=10mm (repeatable; `eap effects --device D` lists the names, units and values)")
-        if "--effects" in p._option_string_actions or mod.NAME == "effects":
+        if "--effects" in p._option_string_actions or getattr(mod, "TAKES_EFFECT_FILES", False):
+            inputs += ("effects_path",)
             p.add_argument("--effects-path", action="append", default=[], metavar="FILE.py",
                            help="a Python file defining user effects (physics.effects.OutputEffect subclasses, "
                                 "see examples/effects/creep.py); repeatable. The file is CODE: eap imports and "
                                 "runs it with your rights (exit calls are caught and each call is time-limited, "
                                 "but it is not sandboxed) — use only files you trust (docs/security.md)")
-        p.set_defaults(_run=mod.run)
+        p.set_defaults(_run=mod.run, _inputs=inputs)
     return parser
 
 
@@ -136,16 +138,12 @@ def _target(args) -> str | None:
     return None
 
 
-#: Options that name files or folders a command reads (protected from every output).
-_INPUT_OPTIONS = ("device", "model", "input", "config", "dataset", "measurements", "effects_path", "template",
-                  "train", "validation", "test", "check", "physics")
-
-
 def _inputs_of(args) -> list[Path]:
-    """Existing files and folders named by the input options of ``args`` (a dataset part
+    """Existing files and folders named by the options the command declares as its inputs
+    (``INPUTS`` of its module; protected from every output; a dataset part
     ``FILE[START:STOP]`` counts as FILE)."""
     out = []
-    for name in _INPUT_OPTIONS:
+    for name in getattr(args, "_inputs", ()):
         value = getattr(args, name, None)
         for item in value if isinstance(value, list) else [value]:
             if isinstance(item, str) and item:

@@ -42,7 +42,7 @@ A nested effect starts (among its other starts) from the base's optimum with the
 its ``off`` values, and a fit that still ends worse than the base on the time records is
 replaced by that point, the model without it (:func:`no_worse_than_base`).
 The residual (measured minus model, its nuisance terms — offset and linear drift of each
-record, bounded so that they cannot eat physics, :meth:`.records.Record.nuisance` — removed)
+record, bounded so that they cannot eat physics, :meth:`.records.PreparedRecord.nuisance` — removed)
 gives the RMS error and fit % at the full rate (the prediction interpolated back) and, on the
 decimated samples, the effective sample size of :mod:`.stats`; the evidence is computed on
 that pooled error (:func:`compare_fits`).
@@ -67,7 +67,7 @@ from ..model import ActuatorModel, resolve_effects
 from ..solvers.timedomain import simulate
 from ..analysis import stats
 from .describing import DescribingFunction, charge_effects
-from .records import NUISANCE_TERMS, Record, remove_nuisance, sensor_filter, upsample
+from .records import NUISANCE_TERMS, PreparedRecord, remove_nuisance, sensor_filter, upsample
 from .specs import (declared_default, default_candidates, effect_params, is_nested, off_values, param_bounds,
                     param_used, role_family, role_param, spec_of, start_points)
 
@@ -277,7 +277,7 @@ class ModelFit:
         return self.spec.effects
 
 
-def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence[Record], *, n_starts: int = 4,
+def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence[PreparedRecord], *, n_starts: int = 4,
               seed: int = 0, n_modes: int = 4, df_cache: dict | None = None) -> ModelFit:
     """Fit ``spec`` on the FRF ``targets`` (one record each in ``target_records``)."""
     t0 = time.perf_counter()
@@ -412,13 +412,13 @@ def _df_problem(spec, device, targets, target_records, kw, df_cache):
 # ============================================================================ scoring
 
 
-def predict(model: ActuatorModel, rec: Record) -> np.ndarray:
+def predict(model: ActuatorModel, rec: PreparedRecord) -> np.ndarray:
     """Model deflection [m] at the record's analysis rate, sensor response applied."""
     res = simulate(model, None, rec.t_sim, rec.v_sim, rh=rec.rh_model, hold=rec.hold)
     return sensor_filter(res.deflection, rec.fs_d, rec.sensor_bandwidth)[rec.i0:]
 
 
-def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None) -> ModelFit:
+def score(mf: ModelFit, records: Sequence[PreparedRecord], n_offsets: int | None = None) -> ModelFit:
     """Simulate ``mf`` on every record and fill in its residuals and metrics (in place)."""
     if not mf.ok:
         return mf
@@ -462,7 +462,7 @@ def score(mf: ModelFit, records: Sequence[Record], n_offsets: int | None = None)
     return mf
 
 
-def _refine_output_effects(mf: ModelFit, records: Sequence[Record]) -> None:
+def _refine_output_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> None:
     """Refit the free parameters of user output effects on the time records (in place).
 
     An output effect (:class:`physics.effects.OutputEffect`) filters the deflection of the
@@ -567,7 +567,7 @@ def _time_uncertainty(mf: ModelFit, names: list[str], sol, resid, lo, hi) -> Non
     mf.correlation = corr
 
 
-def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
+def _refine_gain(mf: ModelFit, records: Sequence[PreparedRecord], preds: list) -> list:
     """Refine the free coupling gain (kf, kf0 or the per-RH kf) on the time records.
 
     The deflection is exactly proportional to the coupling gain (everything upstream of
@@ -614,7 +614,7 @@ def _refine_gain(mf: ModelFit, records: Sequence[Record], preds: list) -> list:
     return [a * p for p in preds]
 
 
-def refine_on_time(mf: ModelFit, records: Sequence[Record]) -> bool:
+def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     """Refit the FRF-fitted free parameters of ``mf`` on the time records, from the FRF
     optimum (in place; True when the error fell).  The FRF fit weighs the frequencies by
     their coherence on a log scale; the verdict's error is the time records' RMS, dominated

@@ -56,7 +56,7 @@ from ..execution.threads import single_threaded
 from . import candidates as C
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN
-from .records import NUISANCE_TERMS, Record, frf_measurements, prepare_records, stated_drift
+from .records import NUISANCE_TERMS, PreparedRecord, frf_measurements, prepare_records, stated_drift
 from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
@@ -161,12 +161,12 @@ class Step:
 
 
 @dataclass
-class Data:
+class PreparedRecords:
     """The records of a diagnosis and what the fits are made on (:func:`read_records`)."""
 
-    records: list[Record]
+    records: list[PreparedRecord]
     targets: list
-    target_records: list[Record]
+    target_records: list[PreparedRecord]
     band: tuple[float, float]
     noise: float
     noise_d: float
@@ -187,7 +187,7 @@ class Data:
 
 
 @dataclass
-class Run:
+class DiagnosisRun:
     """How this diagnosis runs: the shared options and its own settings, the resonance of the
     base (for the reveal rules), where timings go, the progress callback."""
 
@@ -210,7 +210,7 @@ class DiagnosisResult:
     """Everything :func:`diagnose` found (see the module doc); JSON via :meth:`to_dict`."""
 
     device: Device
-    records: list[Record]
+    records: list[PreparedRecord]
     base: C.ModelFit
     steps: list[Step]
     support: list[SupportResult]
@@ -317,7 +317,7 @@ class DiagnosisResult:
 
 
 def read_records(measurements, options: FitOptions, *, noise_floor: float | None = None,
-                 fs_max: float | None = None) -> Data:
+                 fs_max: float | None = None) -> PreparedRecords:
     """Phase 1: the records (:func:`.records.prepare_records`) and the FRF targets of the fits."""
     records = prepare_records(measurements, rh=options.rh, sensor_bandwidth=options.sensor_bandwidth,
                               fs_max=fs_max, noise_floor=noise_floor, rh_tolerance=options.rh_tolerance)
@@ -336,10 +336,10 @@ def read_records(measurements, options: FitOptions, *, noise_floor: float | None
     noise = math.sqrt(sum(n * x * x for n, x in zip(n_all, nf)) / sum(n_all)) if all(map(math.isfinite, nf)) \
         else math.nan
     noise_d = _pooled_noise_d(records)
-    return Data(records, targets, trecs, band, noise, noise_d, _noise_source(records), white=noise, white_d=noise_d)
+    return PreparedRecords(records, targets, trecs, band, noise, noise_d, _noise_source(records), white=noise, white_d=noise_d)
 
 
-def add_wander(data: Data, base) -> None:
+def add_wander(data: PreparedRecords, base) -> None:
     """The records' slow wander beside the noise floor — never *in* it.  The floor is the
     measurement's own (the sensor metadata, or the white level of the deflection spectrum where
     the response has fallen away: :mod:`.records`), one number in every output.  A sensor's zero
@@ -367,7 +367,7 @@ def add_wander(data: Data, base) -> None:
     data.wander = counted
 
 
-def wander_of(data: Data, fit) -> tuple[float, object]:
+def wander_of(data: PreparedRecords, fit) -> tuple[float, object]:
     """(slow wander [m] in the residual of ``fit`` below the excited band, what the records share
     of it) (:func:`.wander.slow_wander` without the fitted drift rates,
     :func:`.wander.shared_wander`); (NaN, None) when no record can show it.  Computed once per fit
@@ -381,7 +381,7 @@ def wander_of(data: Data, fit) -> tuple[float, object]:
     return data.wanders[key][1:]
 
 
-def wander_for(data: Data, fit) -> float:
+def wander_for(data: PreparedRecords, fit) -> float:
     """:func:`allowed_wander`, unless ``fit`` is within the floor only thanks to it and what it
     leaves follows the input (:func:`.adequacy.assess`: an input-driven residual form describes
     it) — then 0: a creep or a back-relaxation below the excited band is the model's error, not
@@ -392,7 +392,7 @@ def wander_for(data: Data, fit) -> float:
     return assess("", fit, data.records, data.noise, describe=False, wander=w).wander
 
 
-def allowed_wander(data: Data) -> float:
+def allowed_wander(data: PreparedRecords) -> float:
     """The records' slow wander [m] a model may leave beside the noise floor and still be
     adequate: the part that does not repeat from record to record, when the floor was estimated
     and the records could tell (testable, not inconclusive); else 0 (:func:`add_wander`)."""
@@ -402,7 +402,7 @@ def allowed_wander(data: Data) -> float:
     return data.wander
 
 
-def features_of(ra: ResidualAnalysis, data: Data, fit, run: Run) -> dict:
+def features_of(ra: ResidualAnalysis, data: PreparedRecords, fit, run: DiagnosisRun) -> dict:
     """The residual features of ``fit`` (:func:`.signatures.features`); a drift the records
     share (:func:`.wander.shared_wander`, significant) is a ``slow_trend`` whether or not it
     outlasts the linear trends the nuisance terms take."""
@@ -413,7 +413,7 @@ def features_of(ra: ResidualAnalysis, data: Data, fit, run: Run) -> dict:
     return feats
 
 
-def shared_structure(data: Data, fit) -> str:
+def shared_structure(data: PreparedRecords, fit) -> str:
     """A sentence when the records share a significant part of the slow residual of ``fit``
     (a drift of the setup from each record's start: deterministic structure, however small
     against the noise floor) that matters — removing it would lower the RMS error of ``fit``
@@ -441,7 +441,7 @@ def _noise_source(records) -> str:
     return "; ".join(kinds)
 
 
-def fit_base(data: Data, dev: Device, base_ids, options: FitOptions, free_l, per_rh_l, n_starts: int) -> C.ModelFit:
+def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, free_l, per_rh_l, n_starts: int) -> C.ModelFit:
     """Phase 2: the user's model with its free parameters fitted and scored."""
     spec = C.ModelSpec("base", base_ids, list(free_l), list(per_rh_l), parse_assignments(options.start),
                        parse_assignments(options.bounds, ranges=True, what=arg("bounds")))
@@ -465,7 +465,7 @@ def fit_base(data: Data, dev: Device, base_ids, options: FitOptions, free_l, per
     return base
 
 
-def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, run: Run) -> list[CandidateResult]:
+def try_candidates(step: int, base: C.ModelFit, cand_ids, data: PreparedRecords, run: DiagnosisRun) -> list[CandidateResult]:
     """Phase 4: each candidate switched on in ``base``, fitted and scored (independent tasks,
     in this process or on workers: :func:`physics.execution.parallel.map_tasks`)."""
     n_levels = len({t.level for t in data.targets})
@@ -506,7 +506,7 @@ def try_candidates(step: int, base: C.ModelFit, cand_ids, data: Data, run: Run) 
     return results
 
 
-def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Data, feats: dict) -> list:
+def compare_step(base: C.ModelFit, results: list[CandidateResult], data: PreparedRecords, feats: dict) -> list:
     """Every evaluated candidate against ``base`` with one noise model: the autocorrelation
     of the residual closest to noise (the best-fitting model's), so that n_eff does not change
     from candidate to candidate.  Fills comparisons and signatures; returns τ per record."""
@@ -536,7 +536,7 @@ def _nested(c: CandidateResult) -> bool:
     return C.is_nested(c.effect) and (not spec_of(c.effect).get("per_rh") or bool(c.fit.spec.per_rh))
 
 
-def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> list[Step]:
+def select(data: PreparedRecords, base: C.ModelFit, cand_ids, feats: dict, run: DiagnosisRun) -> list[Step]:
     """Phase 5: stepwise selection, both ways.  Forward: the candidates on top of the current
     model, the step's decision (:func:`.verdict.decide`); after a pick the remaining candidates
     are tried again on top of it, up to ``max_effects`` picks.  Backward, when no candidate
@@ -598,12 +598,12 @@ def select(data: Data, base: C.ModelFit, cand_ids, feats: dict, run: Run) -> lis
     return steps
 
 
-def _features_after(data: Data, fit: C.ModelFit, label: str, run: Run) -> dict:
+def _features_after(data: PreparedRecords, fit: C.ModelFit, label: str, run: DiagnosisRun) -> dict:
     ra = analyse(label, data.records, fit.resid_d, fit.pred_d, resonance_hz=_resonance(fit, data.band, data.records))
     return features_of(ra, data, fit, run)
 
 
-def try_removal(current: C.ModelFit, effects, data: Data, run: Run) -> "tuple[SupportResult, C.ModelFit] | None":
+def try_removal(current: C.ModelFit, effects, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, C.ModelFit] | None":
     """The backward step: each of ``effects`` switched off in ``current`` and the model refitted
     (:func:`_support_of`); (its support, the fit without it) for the effect whose removal the
     data favour most — the model without it has the lower BIC — or None."""
@@ -617,7 +617,7 @@ def try_removal(current: C.ModelFit, effects, data: Data, run: Run) -> "tuple[Su
     return best
 
 
-def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: int) -> Verdict:
+def build_verdict(data: PreparedRecords, base: C.ModelFit, steps: list[Step], max_effects: int) -> Verdict:
     """Phase 6: the chain of picks, the adequacy of the final model and what remains."""
     picks, removed = [], []
     for s in steps:
@@ -694,7 +694,7 @@ def build_verdict(data: Data, base: C.ModelFit, steps: list[Step], max_effects: 
                    nuisance_summary(final, data.records), removed)
 
 
-def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, run: Run) -> list[SupportResult]:
+def assess_support(final: C.ModelFit, picked: Sequence[str], data: PreparedRecords, run: DiagnosisRun) -> list[SupportResult]:
     """Phase 7: switch each effect of the final model off (but the double layer and the picks)
     and refit: does the data support it?"""
     out = []
@@ -706,7 +706,7 @@ def assess_support(final: C.ModelFit, picked: Sequence[str], data: Data, run: Ru
     return out
 
 
-def _support_of(eff: str, final: C.ModelFit, data: Data, run: Run) -> "tuple[SupportResult, C.ModelFit | None]":
+def _support_of(eff: str, final: C.ModelFit, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, C.ModelFit | None]":
     """``eff`` switched off in ``final`` and the model refitted: (its support, the fit without it)."""
     ok, why = revealable(eff, data.records, run.resonance)
     if not ok:
@@ -838,7 +838,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     frequency that matters); ``progress``: a callback for one-line progress messages."""
     t_all = time.perf_counter()
     opts = FitOptions.merged(options, **({"free": free} if free not in (None, "") else {}), **shared)
-    run = Run(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects), bool(backward),
+    run = DiagnosisRun(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects), bool(backward),
               progress=progress)
     if run.n_starts < 1:
         raise InputError(f"{arg('n_starts')} must be at least 1")
@@ -888,7 +888,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
                            run.resonance, settings, run.timings, list(base.warnings))
 
 
-def _timed(run: Run, label: str, fn, *args, **kw):
+def _timed(run: DiagnosisRun, label: str, fn, *args, **kw):
     """``fn(*args, **kw)``, its wall time recorded in ``run.timings[label]``."""
     t0 = time.perf_counter()
     out = fn(*args, **kw)
@@ -973,5 +973,5 @@ def _explain(c: CandidateResult, base: C.ModelFit) -> str:
     return txt
 
 
-__all__ = ["diagnose", "DiagnosisResult", "CandidateResult", "SupportResult", "Step", "Data", "read_records",
-           "fit_base", "try_candidates", "compare_step", "select", "build_verdict", "assess_support", "Run", "MAX_EFFECTS"]
+__all__ = ["diagnose", "DiagnosisResult", "CandidateResult", "SupportResult", "Step", "PreparedRecords", "read_records",
+           "fit_base", "try_candidates", "compare_step", "select", "build_verdict", "assess_support", "DiagnosisRun", "MAX_EFFECTS"]

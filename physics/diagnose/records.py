@@ -21,7 +21,7 @@ Each time-series record is
   metadata (written by :class:`physics.io.sensor.SensorModel`) or, failing that, estimated from
   the deflection spectrum where the response has fallen away (:func:`deflection_spectrum`:
   the white part only, and the source says so);
-* given its **nuisance terms** (:meth:`Record.nuisance`): the least-squares offset and linear
+* given its **nuisance terms** (:meth:`PreparedRecord.nuisance`): the least-squares offset and linear
   drift of a residual, bounded by what a sensor's zero does — the drift's rise over the record
   by :data:`STATED_DRIFT_FACTOR` × the drift the sensor states, or :data:`DRIFT_SHARE` of the
   signal's peak-to-peak; the offset, when the record has a rest before the drive, within
@@ -65,8 +65,11 @@ _STEPS = ("square", "steps")
 
 
 @dataclass
-class Record:
-    """One time-series measurement prepared for diagnosis (SI units)."""
+class PreparedRecord:
+    """A view of one measured record for the diagnosis: the record itself
+    (:class:`~physics.io.record.TimeSeries`, ``ts``, the one record type) with what the
+    diagnosis derives from it — excitation kind, band, decimated drive and response, noise
+    floor, nuisance bounds (SI units)."""
 
     source: str
     ts: TimeSeries                 # as read (full rate)
@@ -401,11 +404,11 @@ def estimate_noise_floor(ts: TimeSeries, f_hi: float | None = None) -> tuple[flo
 
 def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_bandwidth="auto",
                     fs_max: float | None = None, noise_floor: float | None = None,
-                    rh_tolerance: float = 1.0) -> list[Record]:
+                    rh_tolerance: float = 1.0) -> list[PreparedRecord]:
     """Prepare loaded time series (see the module doc).  FRF files are refused: the
     diagnosis needs time records (residuals in time, steps, amplitudes)."""
     ms = load_measurements(measurements, rh=rh)
-    out: list[Record] = []
+    out: list[PreparedRecord] = []
     rhs = []
     for k, m in enumerate(ms):
         where = source_name(m, k)
@@ -440,7 +443,7 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         amp = float(np.percentile(np.abs(m.voltage - np.median(m.voltage)), 99.5))
         if amp <= 0:
             raise InputError(f"{where}: the voltage is constant; nothing is excited")
-        rec = Record(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
+        rec = PreparedRecord(where, m, kind, amp, 0.0, rm, band, tone_hz, q, v_sim, y_d,
                      sensor_bandwidth_of(m, sensor_bandwidth), nf, src, i0=PAD + lead // q, kind_how=how)
         if lead:
             rec.kind_how += (f"; periodic: the model is driven through {lead / m.fs:.3g} s of its periods before it "
@@ -478,7 +481,7 @@ def amplitude_levels(amps: Sequence[float]) -> list[float]:
     return lv.tolist()
 
 
-def frf_measurements(records: Sequence[Record]) -> tuple[list, list[Record]]:
+def frf_measurements(records: Sequence[PreparedRecord]) -> tuple[list, list[PreparedRecord]]:
     """Measurements for FRF targets (broadband TimeSeries, stepped-sine FRFData per tone
     record) and the records they come from, in the same order."""
     ms, src = [], []
@@ -524,11 +527,11 @@ def upsample(y_d: np.ndarray, q: int, n: int) -> np.ndarray:
     return y[:n]
 
 
-def rh_levels(records: Sequence[Record]) -> list[float]:
+def rh_levels(records: Sequence[PreparedRecord]) -> list[float]:
     return sorted({r.rh for r in records})
 
 
-def amplitude_groups(records: Sequence[Record]) -> dict[float, list[float]]:
+def amplitude_groups(records: Sequence[PreparedRecord]) -> dict[float, list[float]]:
     """{RH level: sorted amplitude levels} over records that give frequency information."""
     out: dict[float, set] = {}
     for r in records:
@@ -537,6 +540,6 @@ def amplitude_groups(records: Sequence[Record]) -> dict[float, list[float]]:
     return {k: sorted(v) for k, v in out.items()}
 
 
-__all__ = ["Record", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
+__all__ = ["PreparedRecord", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
            "upsample", "estimate_noise_floor", "stated_drift", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
            "FRFOptions"]

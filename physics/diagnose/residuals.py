@@ -38,7 +38,7 @@ from scipy import stats as sstats
 
 from ..compare import default_bands, residual_by_band
 from ..analysis import stats
-from .records import Record
+from .records import PreparedRecord
 
 Z99 = float(sstats.norm.ppf(0.995))
 BANDS_PER_DECADE = 10
@@ -121,7 +121,7 @@ class ResidualAnalysis:
 # ============================================================================ pieces
 
 
-def correlations(records: Sequence[Record], resid: Sequence[np.ndarray], max_lag_s: float = 2.0):
+def correlations(records: Sequence[PreparedRecord], resid: Sequence[np.ndarray], max_lag_s: float = 2.0):
     """Pooled ρ_ee and ρ_ue with their 99 % bands (module doc)."""
     fs = min(r.fs_d for r in records)
     m = max(5, int(round(max_lag_s * fs)))
@@ -154,7 +154,7 @@ def _band_edges(f_lo: float, f_hi: float) -> np.ndarray:
     return np.geomspace(f_lo, f_hi, n + 1)
 
 
-def residual_frf(records: Sequence[Record], resid: Sequence[np.ndarray], preds: Sequence[np.ndarray],
+def residual_frf(records: Sequence[PreparedRecord], resid: Sequence[np.ndarray], preds: Sequence[np.ndarray],
                  band: tuple[float, float] | None = None) -> ResidualFRF | None:
     """Band-smoothed residual FRF with its coherence-based noise floor (module doc),
     pooled over the broadband and step records."""
@@ -201,7 +201,7 @@ def residual_frf(records: Sequence[Record], resid: Sequence[np.ndarray], preds: 
     return ResidualFRF(fc, Sue / Suu, Suy / Suu, Sum / Suu, coh, thr, floor, n_lines)
 
 
-def by_band(records: Sequence[Record], resid: Sequence[np.ndarray], f_lo: float, f_hi: float) -> list[dict]:
+def by_band(records: Sequence[PreparedRecord], resid: Sequence[np.ndarray], f_lo: float, f_hi: float) -> list[dict]:
     """RMS residual within decade bands, pooled over records (power-weighted)."""
     bands = default_bands(f_lo, f_hi)
     acc = [{"band_Hz": list(b), "pe": 0.0, "py": 0.0, "n": 0} for b in bands]
@@ -234,7 +234,7 @@ def _gain_phase(records, resid, preds, idx) -> tuple[float | None, float | None]
     return float(np.median(np.abs(frf.ratio[ok]))), float(np.median(np.degrees(np.angle(frf.ratio[ok]))))
 
 
-def _distortion_share(r: Record, e: np.ndarray) -> float | None:
+def _distortion_share(r: PreparedRecord, e: np.ndarray) -> float | None:
     """Share of the residual power at frequencies where the input has (almost) no power
     and which are not the excitation band: harmonics and other nonlinear products."""
     if r.kind not in ("tone", "broadband"):
@@ -303,7 +303,7 @@ def after_steps(records, resid, noise: float) -> list[dict]:
 # ============================================================================ driver
 
 
-def analyse(label: str, records: Sequence[Record], resid: Sequence[np.ndarray], preds: Sequence[np.ndarray],
+def analyse(label: str, records: Sequence[PreparedRecord], resid: Sequence[np.ndarray], preds: Sequence[np.ndarray],
             *, resonance_hz: float | None = None) -> ResidualAnalysis:
     """The residual analysis of one fitted model (module doc)."""
     lag_s, acf, ab, ccf_lag, ccf, cb = correlations(records, resid)
@@ -362,7 +362,7 @@ def _fmt_f(f: float) -> str:
     return f"{f:.2g}" if f < 10 else f"{f:.0f}"
 
 
-def findings(ra: ResidualAnalysis, records: Sequence[Record], *, resonance_hz: float | None = None) -> list[str]:
+def findings(ra: ResidualAnalysis, records: Sequence[PreparedRecord], *, resonance_hz: float | None = None) -> list[str]:
     """Sentences for a person (module doc)."""
     out: list[str] = []
     frf = ra.frf

@@ -59,7 +59,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .records import RH_SPAN, Record, amplitude_groups, rh_levels
+from .records import RH_SPAN, PreparedRecord, amplitude_groups, rh_levels
 from .residuals import ResidualAnalysis
 from .specs import excitation, signature, spec_of
 
@@ -79,11 +79,11 @@ FEATURE_TEXT = {
 }
 
 
-def _broadband(records) -> list[Record]:
+def _broadband(records) -> list[PreparedRecord]:
     return [r for r in records if r.kind == "broadband"]
 
 
-def revealable(effect: str, records: Sequence[Record], resonance_hz: float | None = None) -> tuple[bool, str]:
+def revealable(effect: str, records: Sequence[PreparedRecord], resonance_hz: float | None = None) -> tuple[bool, str]:
     """(can the records reveal ``effect``?, why / why not): the ``reveal`` rule of its spec
     (:data:`physics.effects.base.REVEAL_RULES`); an effect without a rule is tried on every record."""
     rule = spec_of(effect).get("reveal")
@@ -133,7 +133,7 @@ def revealable(effect: str, records: Sequence[Record], resonance_hz: float | Non
     return True, ""
 
 
-def features(ra: ResidualAnalysis, records: Sequence[Record], resonance_hz: float | None) -> dict:
+def features(ra: ResidualAnalysis, records: Sequence[PreparedRecord], resonance_hz: float | None) -> dict:
     """{feature: {"present": bool | None, "value": ...}} (None: the data cannot show it)."""
     out: dict = {}
     frf = ra.frf

@@ -7,6 +7,8 @@ from ...benchmarks import SUITES, get_suite
 from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, writing
 
 NAME = "benchmark"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("data",)
 HELP = "compare FF / RBF / NARX / LSTM / GRU / hybrid on a benchmark suite (JSON + HTML + PNG report)"
 DESCRIPTION = (HELP + ". Suites: " + "; ".join(f"{s.name}: {s.help}" for s in SUITES.values())
                + "; all: every suite, each into OUT/SUITE. Each model is trained with its recipe "

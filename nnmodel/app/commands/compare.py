@@ -14,6 +14,10 @@ from ._common import (add_output_options, add_quiet_option, add_record_options, 
                       writing)
 
 NAME = "compare"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("model", "measurements")
+#: takes --param (device parameters) although it has no --device option
+TAKES_PARAMS = True
 HELP = "compare a model (device or neural bundle) with measurements: metrics, Bode, overlays, HTML report"
 DESCRIPTION = (HELP + ". MEASUREMENT files are time-series CSV/.mat files (docs/reference/file-formats.md) or frequency-"
                "response CSVs (freq_Hz, mag_m_per_V, phase_deg). Writes report.json, metrics.csv, bands.csv, "

@@ -10,6 +10,8 @@ from physics.io.timeseries import parse_column_map
 from ._common import add_output_options, add_record_options
 
 NAME = "dataset"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("train", "validation", "test", "check")
 HELP = "build a dataset folder (dataset.json + standard CSVs) from your measurement files, or --check one"
 DESCRIPTION = (HELP + ". Files are read with the same rules as every command (docs/reference/file-formats.md, --columns for "
                "other files); FILE[START:STOP] takes a sample range (e.g. the standard split of one long "

@@ -12,6 +12,8 @@ from ._common import add_output_options, check_out, provenance, writing
 from .diagnose import print_summary
 
 NAME = "demo"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device",)
 HELP = ("demonstrations: `eap demo hidden-effect` hides a physical effect in synthetic measurements and diagnoses "
         "it; `eap demo missing-physics` shows the loop with an effect outside the catalog")
 SCENARIOS = ("hidden-effect", "missing-physics")

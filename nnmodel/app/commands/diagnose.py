@@ -17,6 +17,8 @@ from ._common import add_output_options, add_parallel_options, check_out, parall
 from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "diagnose"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device", "measurements")
 #: API argument → flag, where the flag's destination differs (InputError.render).
 FLAGS = {"n_starts": "--starts", "noise_floor": "--noise-floor-um", "fs_max": "--fs-max-Hz"}
 HELP = "diagnose a model against measurements: where it fails, which effect is missing (ranked, with statistics)"

@@ -8,6 +8,10 @@ from physics.effects import BUILT_IN, EFFECTS, check_effect, effect_classes_in_f
 from physics.parameters import BASE_SECTIONS
 
 NAME = "effects"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device", "check")
+#: takes --effects-path although it has no --effects option
+TAKES_EFFECT_FILES = True
 HELP = "list the physical effects with one-line explanations and their parameters"
 DESCRIPTION = (HELP + ". With --device, also the device's geometry and material parameters that --param takes. "
                "--check FILE.py runs the effect contract (physics.effects.check_effect) on the effects of a file.")

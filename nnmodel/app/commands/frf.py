@@ -14,6 +14,8 @@ from physics.pages.plotting import plot_bode
 from ._common import add_model_options, provenance
 
 NAME = "frf"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device",)
 HELP = "frequency response (deflection/voltage, impedance, Cs_up) as JSON, CSV and a Bode plot"
 
 

@@ -7,6 +7,8 @@ from nnmodel.dataset import generate, load_dataset
 from ._common import add_output_options, add_parallel_options, parallel_settings
 
 NAME = "generate"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device", "config")
 HELP = "generate a dataset (RH 40–100 %, sweeps, multisines, noise, pulses, realistic sensor)"
 
 

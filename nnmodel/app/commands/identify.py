@@ -13,6 +13,8 @@ from ._common import add_output_options, add_parallel_options, check_out, parall
 from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "identify"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device", "measurements")
 #: API argument → flag, where the flag's destination differs (InputError.render).
 FLAGS = {"n_starts": "--starts"}
 HELP = "identify device parameters from measurements (least squares or the thesis Nelder-Mead); writes a device YAML"

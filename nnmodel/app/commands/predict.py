@@ -14,6 +14,8 @@ from physics.limits import MAX_STEPS_AHEAD, check_count
 from ._common import add_quiet_option, add_record_options, provenance, stage_log
 
 NAME = "predict"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("model", "input")
 HELP = "predict the output of a trained model bundle (tip deflection, or the quantity it was trained on) for a record"
 DESCRIPTION = (HELP + ". The input CSV follows docs/reference/file-formats.md (time_s, voltage_V, optional rh_pct, optional "
                "measured output, e.g. deflection_m), or any file through --columns. The prediction is written as a "

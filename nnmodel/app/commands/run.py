@@ -19,6 +19,8 @@ from ._common import add_output_options, provenance, writing
 #: Epoch budgets of the main job (reproducible on any machine, unlike a time budget).
 RUN_SETS = ("narx.max_epochs=20", "hybrid.max_epochs=10", "lstm.structures=null")
 NAME = "run"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ()
 HELP = "run the end-to-end job on built-in defaults and write a report folder"
 
 

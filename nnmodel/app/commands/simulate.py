@@ -19,6 +19,8 @@ from ._common import (add_model_options, add_output_options, add_record_options,
                       provenance, writing)
 
 NAME = "simulate"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device", "input")
 #: API argument → flag, where the flag's destination differs (InputError.render).
 FLAGS = {"frequency": "--frequency-Hz", "f_start": "--f-start-Hz", "f_stop": "--f-stop-Hz", "fs": "--fs-Hz",
          "duration": "--duration-s", "amplitude": "--amplitude-V"}

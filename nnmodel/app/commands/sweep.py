@@ -10,6 +10,8 @@ from physics.io.outputs import output_files, preflight_files
 from ._common import add_model_options, add_parallel_options, parallel_settings
 
 NAME = "sweep"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device",)
 HELP = "frequency response or simulation over a grid of device parameters, RH and amplitudes (CSV table)"
 DESCRIPTION = (HELP + ". --grid NAME=VALUES (repeatable) with VALUES a,b,c or lin:a:b:n / log:a:b:n in the "
                "parameter's SI unit (see `eap effects`), rh in %, amplitude in V. Runs on --workers local "

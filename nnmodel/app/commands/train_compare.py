@@ -9,6 +9,8 @@ from physics.io.yamlio import loads_yaml
 from ._common import add_output_options, add_parallel_options, parallel_settings
 
 NAME = "train-compare"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("dataset", "physics")
 HELP = "train neural models on a dataset and compare them (free run, held-out RH, physics reference)"
 
 

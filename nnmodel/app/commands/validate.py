@@ -9,6 +9,8 @@ from physics.reference.validate import AMPLITUDES, DEVICES, run_validation
 from ._common import add_output_options, check_out, provenance, writing
 
 NAME = "validate"
+#: argument destinations that name files or folders this command reads (never replaced by its outputs)
+INPUTS = ("device",)
 HELP = "validation report: reduced model vs the full nonlinear PNP + solvent reference (plots, JSON, HTML)"
 DESCRIPTION = (HELP + ". Small-signal FRF (criterion 1 % / 1° over 0.1–50 Hz), amplitude sweep 0.05–2 V with "
                "the amplitudes where the linear model's error passes 5 % and 20 % and the effect of the large-signal "
