@@ -40,6 +40,9 @@ def _check_found(case, res):
     assert res.verdict.missing_effect == case.hidden, res.verdict.reason
     assert res.verdict.confidence > 0.99
     assert top.comparison.delta_bic < -10 and top.comparison.p_value < 0.01 / len(res.ranking)
+    # the label is computed on the error the verdict reports (after the refinement on the time records)
+    c = res.steps[0].decision.confidence
+    assert c.left == pytest.approx(top.fit.rmse / res.noise_floor, rel=1e-9), (c.left, top.fit.rmse)
 
 
 # ---------------------------------------------------------------------------- hidden effects (one seed each)

@@ -556,13 +556,19 @@ def select(data: PreparedRecords, base: C.ModelFit, cand_ids, feats: dict, run: 
         results = try_candidates(k, step_base, left, data, run)
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
-        decision = decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
+        def decided():
+            return decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
                           C.prediction_distance, after_pick=n_added > 0,
                           structure=bool(shared_structure(data, step_base)), wander=wander_for(data, step_base))
+        decision = decided()
         if decision.pick is not None and C.refine_on_time(decision.pick.fit, data.records):
-            # the pick refitted on the time records (its FRF optimum is not theirs); the decision stands
+            # the pick refitted on the time records (its FRF optimum is not theirs): the pick stands,
+            # and its evidence, reason and confidence are those of the error the verdict reports
             decision.pick.comparison = C.compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
             run.log(f"  {decision.pick.effect} refined on the time records: RMS {1e6 * decision.pick.fit.rmse:.4g} µm")
+            again = decided()
+            if again.pick is not None and again.pick.effect == decision.pick.effect:
+                decision = again
         for c in ranked:
             c.explanation = _explain(c, step_base)
         steps.append(Step(k, step_base, results, decision))
