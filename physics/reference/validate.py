@@ -427,9 +427,16 @@ def _plots(figs, out: Path) -> list[Path]:
     return paths
 
 
+def _saved(fig, path: Path) -> Path:
+    """``fig`` saved as the PNG ``path`` (atomically, then closed); returns ``path``."""
+    from ..pages.plotting import save
+    save(fig, path)
+    return path
+
+
 def _plot_frf(dev: str, ss: dict, out: Path) -> Path:
     """Small-signal FRF, reduced vs reference, and their differences: ``frf_DEV.png``."""
-    from ..pages.plotting import plt, save
+    from ..pages.plotting import plt
     fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
     f = ss["freq_Hz"]
     ax[0].loglog(f, 1e3 * np.asarray(ss["reduced_mag_m_per_V"]), label="reduced (closed form)")
@@ -445,14 +452,12 @@ def _plot_frf(dev: str, ss: dict, out: Path) -> Path:
     ax[2].set_xlabel("frequency [Hz]")
     ax[2].legend()
     ax[0].set_title(f"{dev}: small-signal FRF ({', '.join(ss['effects'])})")
-    path = out / f"frf_{dev}.png"
-    save(fig, path)
-    return path
+    return _saved(fig, out / f"frf_{dev}.png")
 
 
 def _plot_amplitude(dev: str, sw: dict, out: Path) -> Path:
     """Deflection and current errors and THD over the amplitude sweep: ``amplitude_DEV.png``."""
-    from ..pages.plotting import plt, save
+    from ..pages.plotting import plt
     a = sw["amplitudes_V"]
     fig, ax = plt.subplots(1, 3, figsize=(14, 4))
     for name, m in sw["models"].items():
@@ -478,14 +483,12 @@ def _plot_amplitude(dev: str, sw: dict, out: Path) -> Path:
     ax[2].set_xlabel("amplitude [V]")
     ax[2].legend(fontsize=7)
     fig.suptitle(f"{dev}: sine {sw['f0_Hz']:g} Hz, amplitude sweep")
-    path = out / f"amplitude_{dev}.png"
-    save(fig, path)
-    return path
+    return _saved(fig, out / f"amplitude_{dev}.png")
 
 
 def _plot_profiles(dev: str, pr: dict, out: Path) -> Path:
     """Cation and solvent profiles near both faces: ``profiles_DEV.png``."""
-    from ..pages.plotting import plt, save
+    from ..pages.plotting import plt
     fig, ax = plt.subplots(2, 2, figsize=(12, 7))
     for ts, P in pr["profiles"].items():
         x = np.array(P["x_m"])
@@ -501,14 +504,12 @@ def _plot_profiles(dev: str, pr: dict, out: Path) -> Path:
     ax[1, 0].set_ylabel("Cs [mol/m³]")
     ax[0, 0].legend(fontsize=7)
     fig.suptitle(f"{dev}: 4 Vpp, 1 Hz — cation and solvent profiles (thesis Fig. 13/15/30)")
-    path = out / f"profiles_{dev}.png"
-    save(fig, path)
-    return path
+    return _saved(fig, out / f"profiles_{dev}.png")
 
 
 def _plot_square(dev: str, sq: dict, out: Path) -> Path:
     """Square pulse: reference Cs_up, tip deflection and solvent profiles: ``square_DEV.png``."""
-    from ..pages.plotting import plt, save
+    from ..pages.plotting import plt
     fig, ax = plt.subplots(1, 3, figsize=(16, 4))
     ax[0].plot(sq["t_s"], sq["reference_cs_up"])
     ax[0].set_ylabel("reference Cs_up (first-moment equivalent) [mol/m³]")
@@ -527,9 +528,7 @@ def _plot_square(dev: str, sq: dict, out: Path) -> Path:
     ax[2].set_ylabel("Cs − Cs0 [mol/m³]")
     ax[2].legend(fontsize=7)
     fig.suptitle(f"{dev}: square pulse 2 V, Ton 20 s / Toff 80 s (thesis Fig. 17)")
-    path = out / f"square_{dev}.png"
-    save(fig, path)
-    return path
+    return _saved(fig, out / f"square_{dev}.png")
 
 
 _NOTES = """<h2>How to read it</h2><ul>
