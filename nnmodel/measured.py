@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -91,13 +92,26 @@ def _sensor_summary(records) -> tuple[dict | None, float | None]:
     return common, floor
 
 
+@dataclass(frozen=True)
+class ReadOptions:
+    """How :func:`build_dataset` reads every source file (as
+    :func:`physics.io.timeseries.read_timeseries` does): the ``columns`` map, the sampling
+    rate ``fs`` [Hz] of files without a time column, the ``rh`` [%] of files without one,
+    ``resample`` non-uniform time onto the median step, and the sensor ``gain``."""
+
+    columns: dict | None = None
+    fs: float | None = None
+    rh: float | None = None
+    resample: bool = False
+    gain: str | None = None
+
+
 def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), test: Sequence[str] = (),
-                  val_fraction: float = 0.2, holdout_rh: Sequence[float] = (), columns: dict | None = None,
-                  fs: float | None = None, rh: float | None = None, resample: bool = False,
-                  output: OutputQuantity | str | None = None, gain: str | None = None,
-                  allow_overlap: bool = False, overwrite: bool = False, command: str = "eap dataset",
-                  rh_tolerance: float = 1.0) -> Path:
-    """Write the dataset folder ``out`` (see the module doc); returns its path.  ``rh_tolerance``
+                  val_fraction: float = 0.2, holdout_rh: Sequence[float] = (), read: ReadOptions | None = None,
+                  output: OutputQuantity | str | None = None, allow_overlap: bool = False, overwrite: bool = False,
+                  command: str = "eap dataset", rh_tolerance: float = 1.0) -> Path:
+    """Write the dataset folder ``out`` (see the module doc); returns its path.  ``read``: how
+    the files are read (:class:`ReadOptions`; default: as they are).  ``rh_tolerance``
     [%]: training records whose RH differ by less form one RH level (``rh_levels``)."""
     if not train:
         raise InputError("--train: give at least one training file")
@@ -105,10 +119,41 @@ def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), 
         raise InputError(f"--val-fraction {val_fraction!r}: must lie in [0, 0.9)")
     if isinstance(output, str):
         output = OutputQuantity.parse(output)
+    read = read if read is not None else ReadOptions()
     parts = [(s, t) for s, items in (("train", train), ("validation", validation), ("test", test)) for t in items]
     inputs = [parse_part(t)[0] for _, t in parts]
     preflight(out, inputs=inputs, overwrite=overwrite)
-    opts = dict(columns=columns, fs=fs, rh=rh, resample=resample, output=output, gain=gain)
+    records = _read_records(parts, dict(columns=read.columns, fs=read.fs, rh=read.rh, resample=read.resample,
+                                        output=output, gain=read.gain))
+    shared, has_rh, held = _check_records(records, allow_overlap, holdout_rh)
+    sensor, floor = _sensor_summary(records)
+    t0 = time.perf_counter()
+    with output_folder(out, inputs=inputs, overwrite=overwrite) as tmp:
+        entries = [_write_record(tmp, r, held, read.columns) for r in records]
+        marks = [{"records": [entries[i]["path"], entries[j]["path"]], "samples": [int(lo), int(hi)]}
+                 for i, j, lo, hi in shared]
+        for m in marks:
+            for rel in m["records"]:
+                next(e for e in entries if e["path"] == rel)["overlap"] = True
+        trained = [e["rh_pct"] for e in entries if e["rh_pct"] is not None and e["split"] == "train"]
+        levels = sorted(set(cluster_rh(trained, rh_tolerance))) if trained else []   # hygrometer jitter: one level
+        quantity = records[0]["ts"].output
+        meta = {"schema": SCHEMA, "name": Path(out).name, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                "generator": {"tool": "eap dataset", "command": command, "device": None, "effects": None},
+                "seed": None, "fs_Hz": records[0]["ts"].fs, "val_fraction": val_fraction,
+                "rh_levels": {"train": levels, "held_out": held} if has_rh else None,
+                "output": quantity.to_dict(), "sensor": sensor,
+                "noise_floor_m": floor if quantity.is_deflection else None,
+                "generation_time_s": time.perf_counter() - t0, "files": entries}
+        if marks:
+            meta["overlap"] = marks
+        write_json(tmp / "dataset.json", meta)
+    return Path(out)
+
+
+def _read_records(parts, opts: dict) -> list[dict]:
+    """Read every (split, ``FILE[START:STOP]``) of ``parts`` with the reader options ``opts``:
+    one dict per record (its sample range, a unique name within its split, the source's SHA-256)."""
     records, names, source_hash = [], set(), {}
     for split, text in parts:
         path, rng = parse_part(text)
@@ -137,6 +182,13 @@ def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), 
             source_hash[path] = sha256_file(path)
         records.append({"split": split, "text": text, "path": path, "range": (a, b), "ts": ts, "has_rh": has_rh,
                         "name": name, "source_sha": source_hash[path]})
+    return records
+
+
+def _check_records(records, allow_overlap: bool, holdout_rh) -> tuple[list, bool, list[float]]:
+    """Refuse records that do not form one dataset (another output, sampling rate or RH
+    presence; shared samples unless ``allow_overlap``): (the shared samples, whether the
+    records carry an RH, the held-out RH levels sorted)."""
     first = records[0]
     for r in records[1:]:
         if r["ts"].output != first["ts"].output:
@@ -163,49 +215,30 @@ def build_dataset(out, *, train: Sequence[str], validation: Sequence[str] = (), 
     held = sorted(float(x) for x in holdout_rh)
     if held and not has_rh:
         raise InputError("--holdout-rh needs records with a relative humidity (rh_pct column, sidecar or --rh)")
-    sensor, floor = _sensor_summary(records)
-    entries = []
-    t0 = time.perf_counter()
-    with output_folder(out, inputs=inputs, overwrite=overwrite) as tmp:
-        for r in records:
-            ts = r["ts"]
-            level = float(np.mean(ts.rh)) if r["has_rh"] else None
-            is_held = bool(level is not None and any(abs(level - h) <= 2.5 for h in held))
-            if is_held and r["split"] == "train":
-                raise InputError(f"--train {r['text']}: its RH {level:.3g} % is listed in --holdout-rh {held}; "
-                                 "held-out RH levels must not be trained on")
-            meta = {k: v for k, v in ts.meta.items() if k not in ("split",)}
-            meta["source"] = str(r["path"].resolve())
-            keep = TimeSeries(time=ts.time - ts.time[0], voltage=ts.voltage, deflection=ts.deflection,
-                              rh=ts.rh if r["has_rh"] else None, meta=meta, output=ts.output)
-            rel = f"{r['split']}/{r['name']}.csv"
-            write_timeseries(keep, tmp / rel)
-            a, b = r["range"]
-            entry = {"path": rel, "split": r["split"], "heldout_rh": is_held, "extra_effects": [],
-                     "rh_pct": level, "samples": int(keep.n), "sha256": sha256_file(tmp / rel),
-                     "sidecar_sha256": sha256_file((tmp / rel).with_suffix(".yaml")),
-                     "source": {"path": str(r["path"].resolve()), "sha256": r["source_sha"],
-                                "samples": [int(a), int(b)], "columns": columns}}
-            entries.append(entry)
-        marks = [{"records": [entries[i]["path"], entries[j]["path"]], "samples": [int(lo), int(hi)]}
-                 for i, j, lo, hi in shared]
-        for m in marks:
-            for rel in m["records"]:
-                next(e for e in entries if e["path"] == rel)["overlap"] = True
-        trained = [e["rh_pct"] for e in entries if e["rh_pct"] is not None and e["split"] == "train"]
-        levels = sorted(set(cluster_rh(trained, rh_tolerance))) if trained else []   # hygrometer jitter: one level
-        quantity = first["ts"].output
-        meta = {"schema": SCHEMA, "name": Path(out).name, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-                "generator": {"tool": "eap dataset", "command": command, "device": None, "effects": None},
-                "seed": None, "fs_Hz": first["ts"].fs, "val_fraction": val_fraction,
-                "rh_levels": {"train": levels, "held_out": held} if has_rh else None,
-                "output": quantity.to_dict(), "sensor": sensor,
-                "noise_floor_m": floor if quantity.is_deflection else None,
-                "generation_time_s": time.perf_counter() - t0, "files": entries}
-        if marks:
-            meta["overlap"] = marks
-        write_json(tmp / "dataset.json", meta)
-    return Path(out)
+    return shared, has_rh, held
+
+
+def _write_record(tmp: Path, r: dict, held: list[float], columns) -> dict:
+    """Write record ``r`` into the dataset folder ``tmp`` (time from 0, the source in its
+    sidecar): its ``dataset.json`` entry.  A training record at a held-out RH is refused."""
+    ts = r["ts"]
+    level = float(np.mean(ts.rh)) if r["has_rh"] else None
+    is_held = bool(level is not None and any(abs(level - h) <= 2.5 for h in held))
+    if is_held and r["split"] == "train":
+        raise InputError(f"--train {r['text']}: its RH {level:.3g} % is listed in --holdout-rh {held}; "
+                         "held-out RH levels must not be trained on")
+    meta = {k: v for k, v in ts.meta.items() if k not in ("split",)}
+    meta["source"] = str(r["path"].resolve())
+    keep = TimeSeries(time=ts.time - ts.time[0], voltage=ts.voltage, deflection=ts.deflection,
+                      rh=ts.rh if r["has_rh"] else None, meta=meta, output=ts.output)
+    rel = f"{r['split']}/{r['name']}.csv"
+    write_timeseries(keep, tmp / rel)
+    a, b = r["range"]
+    return {"path": rel, "split": r["split"], "heldout_rh": is_held, "extra_effects": [],
+            "rh_pct": level, "samples": int(keep.n), "sha256": sha256_file(tmp / rel),
+            "sidecar_sha256": sha256_file((tmp / rel).with_suffix(".yaml")),
+            "source": {"path": str(r["path"].resolve()), "sha256": r["source_sha"],
+                       "samples": [int(a), int(b)], "columns": columns}}
 
 
 def check_dataset(path) -> list[str]:

@@ -13,7 +13,7 @@ import yaml
 
 from physics import signals
 from physics.device import load_device
-from physics.diagnose import diagnose, excitation, write_diagnosis
+from physics.diagnose import SelectionOptions, diagnose, excitation, write_diagnosis
 from physics.analysis import stats
 from physics.diagnose.candidates import candidate_spec, default_free, map_free, translate_start
 from physics.testbeds.demo import hidden_effect_case, hidden_effects
@@ -97,7 +97,7 @@ def test_effect_the_data_do_not_support_is_removed():
     removed = {r["effect"]: r for r in res.verdict.removed}
     assert "electrode_resistance" in removed and "not supported" in removed["electrode_resistance"]["reason"]
     assert "electrode_resistance" not in res.final.effects and res.final.rmse <= res.base.rmse
-    res = _diagnose(with_rs, candidates="solvent_diffusion", backward=False)
+    res = _diagnose(with_rs, candidates="solvent_diffusion", selection=SelectionOptions(backward=False))
     sup = {s.effect: s for s in res.support}
     assert sup["electrode_resistance"].supported is False
     assert "not supported" in sup["electrode_resistance"].explanation

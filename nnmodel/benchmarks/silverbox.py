@@ -334,17 +334,23 @@ def format_table(report: dict) -> str:
 
 
 def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """Write ``silverbox.json``, ``silverbox.csv``, the two figures and the page into ``out``."""
     write_json(out / "silverbox.json", report)
     csv_lines = [",".join(h.replace(" ", "_") for h in HEADER)]
     for r in _table_rows(report):
         csv_lines.append(",".join(f'"{c}"' if isinstance(c, str) else common.fmt(c, 4) for c in r))
     write_text(out / "silverbox.csv", "\n".join(csv_lines) + "\n")
+    _plot_rmse(out / "silverbox_rmse.png", rows)
+    _plot_errors(out / "silverbox_errors.png", rows, preds, tests)
+    _write_page(out, report, rows)
 
-    # bars: ours and references vs the published figures (log scale)
+
+def _plot_rmse(path: Path, rows) -> None:
+    """Bars: ours and references vs the published figures (log scale)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     labels = [r["model"] for r in rows] + [p["model"] for p in PUBLISHED]
     vals = [[(r["rmse_mv"].get(t) or np.nan) for t in TESTS] for r in rows] + \
            [[p["rmse_mv"][t] for t in TESTS] for p in PUBLISHED]
@@ -364,11 +370,17 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
     ax.grid(axis="y", which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))
     fig.tight_layout()
-    with atomic_path(out / "silverbox_rmse.png") as tmp:
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
 
-    # error traces on each test (errors on the left axis, the measured output faintly on the right)
+
+def _plot_errors(path: Path, rows, preds, tests) -> None:
+    """Error traces on each test (errors on the left axis, the measured output faintly on the right)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     fig, axes = plt.subplots(len(TESTS), 1, figsize=(10, 8.5))
     ours = [r["model"] for r in rows if r["role"] == "ours"] or [r["model"] for r in rows]
     for ax, t in zip(axes, TESTS):
@@ -393,10 +405,13 @@ def _write_outputs(out: Path, report: dict, rows, preds, tests) -> None:
         ax.legend(fontsize=6, ncol=3, loc="upper left")
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
-    with atomic_path(out / "silverbox_errors.png") as tmp:
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
 
+
+def _write_page(out: Path, report: dict, rows) -> None:
+    """The page ``index.html``: data, score, the result table, the figures and the settings."""
     hrows = []
     for r in _table_rows(report):
         pub = "published" in str(r[0])

@@ -19,7 +19,8 @@ with a ``kind``, a constructor that takes its own model parameters and ``**setti
 calls ``self._set_params_from(locals())``, value checks of those parameters (``CHECKS``),
 ``_build_core(features)`` returning a :class:`~.core.SequenceCore` for a fitted
 :class:`~.features.FeatureMap`, and optionally ``_initialise(core, train)`` (least squares,
-k-means ...) and ``DEFAULTS`` (where its settings' defaults differ).  Everything else is
+k-means ...), ``DEFAULTS`` (where its settings' defaults differ) and ``MODEL_PARTS`` (settings
+parts of its own, flat keys like the shared ones: the hybrid's physics).  Everything else is
 composed from small parts: :mod:`.params` (hyper-parameter API), :mod:`.config`
 (training settings), :mod:`.features` (memory filters, RH knots), :mod:`.normalise`,
 :mod:`.structure` (structure search), :mod:`.runtime` (threads, seeds), the Lightning
@@ -83,6 +84,9 @@ class NeuralModel:
     CHECK_PARAMS: dict = {}
     #: extra bundle-card entries this model writes (:meth:`_card_extra`) and reads back
     CARD_KEYS: tuple[str, ...] = ()
+    #: settings parts of this model alone (each a :class:`~.params.Part` of flat
+    #: hyper-parameters, listed before the constructor's own: e.g. the hybrid's physics)
+    MODEL_PARTS: tuple = ()
 
     _LEARNED = ("net_", "features_", "inputs_", "fs_", "rh_range_", "n_init_", "fit_time_", "history_",
                 "training_summary_", "structure_search_", "init_report_", "reference_start_", "cross_validation_")
@@ -95,14 +99,30 @@ class NeuralModel:
         return {k: p.default for k, p in sig.parameters.items()
                 if k != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD}
 
+    def __init_subclass__(cls, **kw):
+        super().__init_subclass__(**kw)
+        for part in cls.__dict__.get("MODEL_PARTS", ()):    # model.device -> model.<part ATTR>.device
+            for name in part.names():
+                setattr(cls, name, PartField(part.ATTR, name))
+
+    @classmethod
+    def _parts(cls) -> tuple:
+        """The settings parts this model composes: its own, then the shared :data:`PARTS`."""
+        return tuple(cls.MODEL_PARTS) + PARTS
+
     @classmethod
     def param_names(cls) -> list[str]:
-        """Every hyper-parameter: the model's own, then the settings parts' fields."""
-        return list(cls._model_params()) + [n for part in PARTS for n in part.names()]
+        """Every hyper-parameter: the model's own parts' fields, its constructor's, then the
+        shared settings parts' fields."""
+        return ([n for part in cls.MODEL_PARTS for n in part.names()] + list(cls._model_params())
+                + [n for part in PARTS for n in part.names()])
 
     @classmethod
     def default_params(cls) -> dict:
-        out = dict(cls._model_params())
+        out = {}
+        for part in cls.MODEL_PARTS:
+            out.update(part.build(cls.kind, cls.DEFAULTS, {}).values())
+        out.update(cls._model_params())
         for part in PARTS:
             out.update(part.build(cls.kind, cls.DEFAULTS, {}).values())
         return out
@@ -121,10 +141,10 @@ class NeuralModel:
         given as ``**settings`` in their parts — and validate them (subclasses call
         ``self._set_params_from(locals())`` at the end of ``__init__``)."""
         given = dict(local_vars.get("settings") or {})
-        unknown = sorted(set(given) - {n for part in PARTS for n in part.names()})
+        unknown = sorted(set(given) - {n for part in self._parts() for n in part.names()})
         if unknown:
             raise InputError(f"unknown hyper-parameter(s) {unknown} for model {self.kind!r}")
-        for part in PARTS:
+        for part in self._parts():
             self.__dict__[part.ATTR] = part.build(self.kind, self.DEFAULTS, given)
         for k in self._model_params():
             setattr(self, k, local_vars[k])
@@ -144,6 +164,8 @@ class NeuralModel:
         checks = {}
         for klass in reversed(type(self).__mro__):
             checks.update(klass.__dict__.get("CHECKS", {}))
+        for part in self.MODEL_PARTS:
+            self.__dict__[part.ATTR].validate(self.kind)
         check_values(self.kind, {k: getattr(self, k) for k in self._model_params()}, checks)
         for part in PARTS:
             self.__dict__[part.ATTR].validate(self.kind)

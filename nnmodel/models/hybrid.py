@@ -32,6 +32,8 @@ rebuilds the simulator from the card, not from whatever device file is installed
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 from torch import nn
@@ -42,7 +44,7 @@ from .base import NeuralModel
 from .features import memory_filters
 from .ff import LAG_CHECKS, lag_core
 from .lag import LagSimulator, arx_init
-from .params import MAX_WIDTH, size
+from .params import MAX_WIDTH, Part, size
 
 #: internal physics signals the correction may see: name -> (SimulationResult attribute, unit)
 PHYSICS_STATES = {"cs_up": ("cs_up", "mol/m^3"), "current": ("current", "A")}
@@ -105,26 +107,40 @@ class HybridCore(LagSimulator):
         return base + (base + self.y_offset.to(base.dtype)) * self.gain(x)[..., 0]
 
 
+@dataclass
+class HybridPhysics(Part):
+    """The hybrid's physics (flat hyper-parameters, first in its recipe and card): the
+    simulator's ``device`` and ``effects``, the internal ``physics_states`` and extra
+    ``physics_inputs`` the correction sees, the input interpolation ``hold`` (module doc)."""
+
+    ATTR = "physics_settings"
+    CHECKS = {"device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
+              "effects": _check_effects,
+              "physics_states": _distinct_names(PHYSICS_STATES),
+              "physics_inputs": _distinct_names(PHYSICS_INPUTS),
+              "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'"}
+
+    device: str = "ip2c_pedot_water"
+    effects: object = "default"
+    physics_states: list | None = None
+    physics_inputs: list | None = None
+    hold: str = "cubic"
+
+
 class HybridModel(NeuralModel):
-    """Physics simulator + neural correction of its output (grey box)."""
+    """Physics simulator + neural correction of its output (grey box); the physics settings
+    (:class:`HybridPhysics`: ``device``, ``effects`` ...) are given like any setting."""
 
     kind = "hybrid"
     NEEDS_PHYSICS = True
     DEFAULTS = {"max_time": 600.0, "grad_clip": 1.0}
-    CHECKS = {**LAG_CHECKS,
-              "device": lambda v: None if isinstance(v, str) and v else "a device name or YAML path",
-              "effects": _check_effects,
-              "physics_states": _distinct_names(PHYSICS_STATES),
-              "physics_inputs": _distinct_names(PHYSICS_INPUTS),
-              "hold": lambda v: None if v in ("cubic", "linear") else "'cubic' or 'linear'",
-              "gain_hidden": size(MAX_WIDTH, zero=True)}
+    MODEL_PARTS = (HybridPhysics,)
+    CHECKS = {**LAG_CHECKS, "gain_hidden": size(MAX_WIDTH, zero=True)}
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "device": "ipmc_pt_eg", "effects": "none"}
     CARD_KEYS = ("physics",)
     _LEARNED = NeuralModel._LEARNED + ("physics_", "physics_card_")
 
-    def __init__(self, device: str = "ip2c_pedot_water", effects="default", physics_states: list | None = None,
-                 physics_inputs: list | None = None, hold: str = "cubic",
-                 na: int = 0, nb: int = 20, hidden: int = 32, layers: int = 2, activation: str = "tanh",
+    def __init__(self, na: int = 0, nb: int = 20, hidden: int = 32, layers: int = 2, activation: str = "tanh",
                  poly_degree: int = 1, feedthrough: bool = True, arx_init: bool = True, gain_hidden: int = 0,
                  **settings):
         self._set_params_from(locals())

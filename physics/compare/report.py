@@ -140,11 +140,29 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     into ``out_dir`` (all atomically); returns the JSON dict.  ``output``: what the compared
     output is (axis labels and units; default the tip deflection)."""
     from ..io.fileio import jsonable, write_json
-    from ..pages.report import Report, format_value, header, write_csv
+    from ..pages.report import write_csv
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
-    plots: dict[str, list[str]] = {}
     magnitude = _magnitude(res)
+    extra = _write_plots(res, d, output, magnitude)
+    out = jsonable(res.to_dict())
+    out["plots"] = extra
+    out["output"] = output.to_dict()
+    if provenance:
+        out["provenance"] = provenance
+    write_json(d / "report.json", out)
+    rows, brows = _metric_rows(res), _band_rows(res)
+    write_csv(rows, d / "metrics.csv")
+    if brows:
+        write_csv(brows, d / "bands.csv")
+    write_csv(res.by_rh, d / "by_rh.csv")
+    _write_page(res, d, rows, brows, extra, provenance, title, output, magnitude)
+    return out
+
+
+def _write_plots(res: ComparisonResult, d: Path, output: OutputQuantity, magnitude) -> list[str]:
+    """Each record's figures (their names in its ``summary["plots"]``), then the bands and RH
+    figures: the names of the latter."""
     for k, r in enumerate(res.records):
         slug = f"{k:02d}_{_slug(r.source)}"
         files = []
@@ -155,20 +173,17 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
             _plot_bode_record(r, d / f"bode_{slug}.png", output)
             files.append(f"bode_{slug}.png")
         r.summary["plots"] = files
-        plots[r.source] = files
     extra = []
     if _plot_bands(res, d / "bands.png"):
         extra.append("bands.png")
     if len(res.by_rh) >= 2:
         _plot_rh(res, d / "rh.png")
         extra.append("rh.png")
-    out = jsonable(res.to_dict())
-    out["plots"] = extra
-    out["output"] = output.to_dict()
-    if provenance:
-        out["provenance"] = provenance
-    write_json(d / "report.json", out)
-    # tables
+    return extra
+
+
+def _metric_rows(res: ComparisonResult) -> list[dict]:
+    """One row of time and FRF metrics per record (``metrics.csv``)."""
     rows = []
     for r in res.records:
         tm = r.summary.get("time_metrics", {})
@@ -177,7 +192,11 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
                      "nrmse": tm.get("nrmse"), "rmse_m": tm.get("rmse"), "correlation": tm.get("correlation"),
                      "j_err_m_per_V": fe.get("j_err_m_per_V"), "log_mag_rms_dB": fe.get("log_mag_rms_dB"),
                      "phase_rms_deg": fe.get("phase_rms_deg"), "frf_points": fe.get("n_points")})
-    write_csv(rows, d / "metrics.csv")
+    return rows
+
+
+def _band_rows(res: ComparisonResult) -> list[dict]:
+    """One row per record and frequency band (``bands.csv``)."""
     brows = []
     for r in res.records:
         for b in r.summary["bands"]:
@@ -185,10 +204,13 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
                           "residual_rms_m": b.get("residual_rms_m"), "nrmse_in_band": b.get("nrmse_in_band"),
                           "j_err_m_per_V": b.get("j_err_m_per_V"), "log_mag_rms_dB": b.get("log_mag_rms_dB"),
                           "phase_rms_deg": b.get("phase_rms_deg"), "frf_points": b.get("n_points")})
-    if brows:
-        write_csv(brows, d / "bands.csv")
-    write_csv(res.by_rh, d / "by_rh.csv")
-    # HTML
+    return brows
+
+
+def _write_page(res: ComparisonResult, d: Path, rows, brows, extra, provenance, title, output, magnitude) -> None:
+    """The page ``index.html``: summary, errors by RH and by band, each record's figures, settings."""
+    from ..io.fileio import jsonable
+    from ..pages.report import Report, format_value, header
     rep = Report(title, subtitle=f"model: {res.predictor.get('name')}; {len(res.records)} measurement(s)",
                  provenance=header(provenance), output={**output.to_dict(), "magnitude": magnitude})
     for w in res.warnings:
@@ -228,7 +250,6 @@ def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict 
     if provenance:
         rep.json_block(provenance, "provenance")
     rep.write_index(d)
-    return out
 
 
 def _caption(png: str, record: str) -> str:

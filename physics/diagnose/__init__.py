@@ -17,8 +17,9 @@ double layer), :mod:`physics.analysis.stats` (effective sample size, BIC, p-valu
 file).  Synthetic measurements with a hidden effect are outside the core, in
 :mod:`physics.testbeds`.
 """
-from .diagnosis import DiagnosisResult, Verdict, diagnose
+from .diagnosis import AnalysisOptions, DiagnosisResult, SelectionOptions, Verdict, diagnose
 from .report import write_diagnosis
 from .specs import excitation
 
-__all__ = ["diagnose", "DiagnosisResult", "Verdict", "write_diagnosis", "excitation"]
+__all__ = ["diagnose", "AnalysisOptions", "DiagnosisResult", "SelectionOptions", "Verdict", "write_diagnosis",
+           "excitation"]

@@ -69,6 +69,26 @@ SUPPORT_BIC = 6.0
 MAX_EFFECTS = 2
 
 
+@dataclass(frozen=True)
+class SelectionOptions:
+    """The stepwise selection of :func:`diagnose` (:func:`select`): at most ``max_effects``
+    picks forward; ``backward``: when no candidate passes, an effect of the user's model that
+    the data do not support is removed and tried again as a candidate."""
+
+    max_effects: int = MAX_EFFECTS
+    backward: bool = True
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """How :func:`diagnose` analyses the records (:func:`read_records`): ``noise_floor`` [m]
+    overrides the records' own; ``fs_max`` [Hz] caps the analysis sampling rate (default ≥ 5×
+    the highest frequency that matters)."""
+
+    noise_floor: float | None = None
+    fs_max: float | None = None
+
+
 @dataclass
 class CandidateResult:
     """One effect tried (or not) as a missing one, at step ``step`` of the selection."""
@@ -826,9 +846,8 @@ def _resolve_free(dev: Device, base_ids, free_l: list, per_rh_l: list | None, re
 @single_threaded
 def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] | str | None = None, *,
              options: FitOptions | None = None, candidates: Sequence[str] | str | None = None, force: bool = False,
-             check_support: bool = True, max_effects: int = MAX_EFFECTS, backward: bool = True,
-             noise_floor: float | None = None,
-             fs_max: float | None = None, progress: Callable[[str], None] | None = None,
+             check_support: bool = True, selection: SelectionOptions | None = None,
+             analysis: AnalysisOptions | None = None, progress: Callable[[str], None] | None = None,
              **shared) -> DiagnosisResult:
     """Diagnose ``device`` with ``effects`` against ``measurements`` (paths or
     :class:`~physics.io.timeseries.TimeSeries`); see the module doc.
@@ -838,14 +857,18 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     (:class:`~physics.identify.options.FitOptions`; its fields may also be given as keywords,
     e.g. ``rh_tolerance=1.0``, ``n_starts=4``, ``settings=...``); ``candidates``: effects to try
     (default: every effect with a diagnosis spec that the model lacks, except those tried only
-    on request); ``force``: also try effects the data cannot reveal; ``max_effects``: the
-    longest chain of picks (forward selection); ``noise_floor`` [m]: overrides the records'
-    own; ``fs_max`` [Hz]: cap on the analysis sampling rate (default ≥ 5× the highest
-    frequency that matters); ``progress``: a callback for one-line progress messages."""
+    on request); ``force``: also try effects the data cannot reveal; ``check_support``: test
+    each effect of the final model (:func:`assess_support`); ``selection``: the longest chain
+    of picks and the backward step (:class:`SelectionOptions`); ``analysis``: the noise floor
+    and the analysis sampling rate (:class:`AnalysisOptions`); ``progress``: a callback for
+    one-line progress messages."""
     t_all = time.perf_counter()
     opts = FitOptions.merged(options, **({"free": free} if free not in (None, "") else {}), **shared)
-    run = DiagnosisRun(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects), bool(backward),
-              progress=progress)
+    selection = selection if selection is not None else SelectionOptions()
+    analysis = analysis if analysis is not None else AnalysisOptions()
+    max_effects, noise_floor, fs_max = selection.max_effects, analysis.noise_floor, analysis.fs_max
+    run = DiagnosisRun(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects),
+                       bool(selection.backward), progress=progress)
     if run.n_starts < 1:
         raise InputError(f"{arg('n_starts')} must be at least 1")
     if run.max_effects < 1:

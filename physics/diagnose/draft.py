@@ -100,35 +100,14 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
             while pool and len(outcome.kept) < max_effects:
                 again = rediagnose(device, on_top, free, [d.effect_id for d in pool] + catalog)
                 outcome.steps.append((list(on_top), again))
-                by_id = {c.effect: c for c in again.candidates}
-                scored, why = [], {}
-                for key in pool + catalog:
-                    eid = key if isinstance(key, str) else key.effect_id
-                    c = by_id.get(eid)
-                    if c is None or not c.evaluated:
-                        why[eid] = c.reason if c is not None else "not evaluated"
-                        continue
-                    gain = 1.0 - c.fit.rmse / again.base.rmse if again.base.rmse > 0 else 0.0
-                    dbic = c.comparison.delta_bic
-                    if dbic <= -F.SIGNIFICANT_BIC and gain >= F.MIN_GAIN:
-                        scored.append((dbic, key, c))
-                    else:
-                        how = "lowers the RMS error only" if c.fit.rmse <= again.base.rmse else "raises the RMS error"
-                        why[eid] = (f"fitted with [{', '.join(on_top)}] it {how} from {1e6 * again.base.rmse:.4g} "
-                                    f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.3g})")
+                scored, why = _scored(pool + catalog, again, on_top)
                 if not scored:
                     outcome.rejected += [(d, why.get(d.effect_id, "")) for d in pool]
                     break
-                scored.sort(key=lambda x: x[0])
                 dbic, key, c = scored[0]
                 eid = key if isinstance(key, str) else key.effect_id
                 values = effect_values(c.fit, eid)
-                text = (f"fitted with [{', '.join(on_top)}] it lowers the RMS error from {1e6 * again.base.rmse:.4g} "
-                        f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.4g})")
-                rivals = [(b, k) for b, k, _ in scored[1:] if b - dbic < F.SIGNIFICANT_BIC]
-                if rivals:
-                    text += "; " + ", ".join(f"{k if isinstance(k, str) else k.effect_id} (ΔBIC {b:.4g})"
-                                             for b, k in rivals) + " fits almost as well: these records hardly tell them apart"
+                text = _pick_text(scored, again, on_top)
                 if isinstance(key, str):            # the catalog's pick: on the chain, then the drafts on top
                     outcome.notes.append(f"{eid} (the diagnosis's pick) {text}; the drafts are tried on top of it")
                     catalog.remove(key)
@@ -150,6 +129,42 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
             for i in ids:
                 E.unregister(i)
     return outcome
+
+
+def _scored(keys, again, on_top) -> tuple[list, dict]:
+    """The candidates ``keys`` (drafts, or catalog effect ids) of the diagnosis ``again`` that
+    pass ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
+    as (ΔBIC, key, candidate) sorted by ΔBIC, and {effect id: why not} for the others."""
+    by_id = {c.effect: c for c in again.candidates}
+    scored, why = [], {}
+    for key in keys:
+        eid = key if isinstance(key, str) else key.effect_id
+        c = by_id.get(eid)
+        if c is None or not c.evaluated:
+            why[eid] = c.reason if c is not None else "not evaluated"
+            continue
+        gain = 1.0 - c.fit.rmse / again.base.rmse if again.base.rmse > 0 else 0.0
+        dbic = c.comparison.delta_bic
+        if dbic <= -F.SIGNIFICANT_BIC and gain >= F.MIN_GAIN:
+            scored.append((dbic, key, c))
+        else:
+            how = "lowers the RMS error only" if c.fit.rmse <= again.base.rmse else "raises the RMS error"
+            why[eid] = (f"fitted with [{', '.join(on_top)}] it {how} from {1e6 * again.base.rmse:.4g} "
+                        f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.3g})")
+    scored.sort(key=lambda x: x[0])
+    return scored, why
+
+
+def _pick_text(scored, again, on_top) -> str:
+    """What the best of ``scored`` does, and the rivals that fit almost as well."""
+    dbic, _, c = scored[0]
+    text = (f"fitted with [{', '.join(on_top)}] it lowers the RMS error from {1e6 * again.base.rmse:.4g} "
+            f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.4g})")
+    rivals = [(b, k) for b, k, _ in scored[1:] if b - dbic < F.SIGNIFICANT_BIC]
+    if rivals:
+        text += "; " + ", ".join(f"{k if isinstance(k, str) else k.effect_id} (ΔBIC {b:.4g})"
+                                 for b, k in rivals) + " fits almost as well: these records hardly tell them apart"
+    return text
 
 
 @single_threaded

@@ -367,36 +367,7 @@ def findings(ra: ResidualAnalysis, records: Sequence[PreparedRecord], *, resonan
     out: list[str] = []
     frf = ra.frf
     if frf is not None:
-        sig = frf.significant
-        if not sig.any():
-            out.append("The residual's frequency response stays below its 1 % noise floor in every band: "
-                       "no systematic input-to-error dynamics are visible.")
-        runs = _classified_runs(frf)
-        if sig.any() and not runs:
-            out.append(f"The residual frequency response exceeds its noise floor in {int(sig.sum())} band(s), but "
-                       "there the model is within 2 % in gain and 1° in phase: small systematic differences, "
-                       "nothing a physical effect needs to explain.")
-        runs = sorted(sorted(runs, key=lambda r: -r[3])[:4], key=lambda r: r[0])
-        for i, j, cls, _ in runs:
-            sl = slice(i, j + 1)
-            g = float(np.median(np.abs(frf.ratio[sl])))
-            ph = float(np.median(np.degrees(np.angle(frf.ratio[sl]))))
-            pe = float(np.degrees(np.angle(np.sum(frf.H_e[sl] * frf.n_lines[sl]))))
-            lo, hi = frf.freq[i] / 10 ** (0.5 / BANDS_PER_DECADE), frf.freq[j] * 10 ** (0.5 / BANDS_PER_DECADE)
-            if cls[0] == "ok":
-                gtxt = "the model gets the gain right (within 2 %)"
-            elif g < 1:
-                gtxt = f"the model overestimates the gain by {100 * (1 / g - 1):.2g} %"
-            else:
-                gtxt = f"the model underestimates the gain by {100 * (1 - 1 / g):.2g} %"
-            ptxt = ("" if cls[1] == "0" else
-                    f" and the measurement {'leads' if ph > 0 else 'lags'} the model by {abs(ph):.2g}°")
-            near = ""
-            if resonance_hz and lo <= resonance_hz <= hi:
-                near = f" (around the first resonance, {resonance_hz:.3g} Hz)"
-            rel = "leads" if pe > 0 else "lags"
-            out.append(f"Between {_fmt_f(lo)} and {_fmt_f(hi)} Hz{near} {gtxt}{ptxt}; "
-                       f"the residual {rel} the input by ~{abs(pe):.0f}°.")
+        out += _frf_findings(frf, resonance_hz)
     if ra.ccf_outside > 0.05:
         pos = ra.ccf[ra.ccf_lag_s > 0]
         out.append(f"The residual is correlated with the input ({100 * ra.ccf_outside:.0f} % of lags outside the "
@@ -445,4 +416,41 @@ def findings(ra: ResidualAnalysis, records: Sequence[PreparedRecord], *, resonan
     if worst is not None and len(ra.by_band) > 1:
         out.append(f"The largest error is in the {worst['band_Hz'][0]:.3g}–{worst['band_Hz'][1]:.3g} Hz band "
                    f"({1e6 * worst['residual_rms_m']:.3g} µm RMS).")
+    return out
+
+
+def _frf_findings(frf, resonance_hz: float | None) -> list[str]:
+    """Sentences on the residual's frequency response ``frf``: nothing above the noise floor,
+    or the gain and phase error in each of the (at most four) largest classified runs of bands."""
+    out: list[str] = []
+    sig = frf.significant
+    if not sig.any():
+        out.append("The residual's frequency response stays below its 1 % noise floor in every band: "
+                   "no systematic input-to-error dynamics are visible.")
+    runs = _classified_runs(frf)
+    if sig.any() and not runs:
+        out.append(f"The residual frequency response exceeds its noise floor in {int(sig.sum())} band(s), but "
+                   "there the model is within 2 % in gain and 1° in phase: small systematic differences, "
+                   "nothing a physical effect needs to explain.")
+    runs = sorted(sorted(runs, key=lambda r: -r[3])[:4], key=lambda r: r[0])
+    for i, j, cls, _ in runs:
+        sl = slice(i, j + 1)
+        g = float(np.median(np.abs(frf.ratio[sl])))
+        ph = float(np.median(np.degrees(np.angle(frf.ratio[sl]))))
+        pe = float(np.degrees(np.angle(np.sum(frf.H_e[sl] * frf.n_lines[sl]))))
+        lo, hi = frf.freq[i] / 10 ** (0.5 / BANDS_PER_DECADE), frf.freq[j] * 10 ** (0.5 / BANDS_PER_DECADE)
+        if cls[0] == "ok":
+            gtxt = "the model gets the gain right (within 2 %)"
+        elif g < 1:
+            gtxt = f"the model overestimates the gain by {100 * (1 / g - 1):.2g} %"
+        else:
+            gtxt = f"the model underestimates the gain by {100 * (1 - 1 / g):.2g} %"
+        ptxt = ("" if cls[1] == "0" else
+                f" and the measurement {'leads' if ph > 0 else 'lags'} the model by {abs(ph):.2g}°")
+        near = ""
+        if resonance_hz and lo <= resonance_hz <= hi:
+            near = f" (around the first resonance, {resonance_hz:.3g} Hz)"
+        rel = "leads" if pe > 0 else "lags"
+        out.append(f"Between {_fmt_f(lo)} and {_fmt_f(hi)} Hz{near} {gtxt}{ptxt}; "
+                   f"the residual {rel} the input by ~{abs(pe):.0f}°.")
     return out

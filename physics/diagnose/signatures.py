@@ -138,59 +138,7 @@ def features(ra: ResidualAnalysis, records: Sequence[PreparedRecord], resonance_
     out: dict = {}
     frf = ra.frf
     if frf is not None and frf.freq.size >= 3:
-        R = frf.ratio
-        sig = frf.significant & np.isfinite(R)
-        f = frf.freq
-        lg, ph = np.log10(np.abs(R)), np.degrees(np.angle(R))
-        lo_edge = f[0] * 10 ** 0.7
-        lf = sig & (f <= lo_edge)
-        if resonance_hz:
-            lf &= f < 0.5 * resonance_hz
-        if lf.sum() >= 1:
-            g, p = float(np.median(np.abs(R[lf]))), float(np.median(ph[lf]))
-            out["lf_droop_lead"] = {"present": bool(g < 0.97 and p > 0.5), "gain": g, "phase_deg": p}
-            out["lf_excess_lag"] = {"present": bool(g > 1.03 and p < -0.5), "gain": g, "phase_deg": p}
-        else:
-            avail = f[0] <= 1.0
-            out["lf_droop_lead"] = {"present": False if avail else None}
-            out["lf_excess_lag"] = {"present": False if avail else None}
-        away = sig.copy()
-        if resonance_hz:
-            away &= (f < 0.6 * resonance_hz) | (f > 1.6 * resonance_hz)
-            away &= f < 2.0 * resonance_hz
-        if away.sum() >= 4 and np.ptp(np.log10(f[away])) >= 0.7:
-            x = np.log10(f[away])
-            slope, icpt = np.polyfit(x, lg[away], 1)
-            lin = np.std(lg[away] - (slope * x + icpt))
-            pm, ps = float(np.mean(ph[away])), float(np.std(ph[away]))
-            match = abs(slope) > 0.02 and np.sign(pm) == np.sign(slope) and \
-                abs(pm - 90.0 * slope) < 0.5 * abs(90.0 * slope) + 2.0 and lin < 0.3 * abs(slope) + 0.01 and \
-                ps < 0.5 * abs(pm) + 2.0
-            out["constant_slope_phase"] = {"present": bool(match), "slope_dec_per_dec": float(slope),
-                                           "phase_deg": pm}
-        else:
-            out["constant_slope_phase"] = {"present": False if f[-1] / f[0] >= 10 else None}
-        hi = sig & (f >= f[-1] / 10 ** 0.7)
-        if f[-1] >= 10 and hi.sum() >= 3:
-            s_ph = float(np.polyfit(np.log10(f[hi]), np.unwrap(np.radians(ph[hi])), 1)[0] * 180 / np.pi)
-            out["hf_phase_lag"] = {"present": bool(s_ph < -2.0 and ph[hi][-1] < -1.0), "phase_slope_deg_per_dec": s_ph,
-                                   "phase_top_deg": float(ph[hi][-1])}
-        else:
-            out["hf_phase_lag"] = {"present": False if f[-1] >= 10 else None}
-        if resonance_hz and f[0] < 0.7 * resonance_hz and f[-1] > 1.3 * resonance_hz:
-            err = np.abs(np.log(np.where(np.isfinite(R), R, 1.0)))
-            near = (f > 0.7 * resonance_hz) & (f < 1.4 * resonance_hz)
-            present = bool((sig & near).any() and err[near].max() >= 0.99 * err[np.isfinite(err)].max())
-            out["resonance_error"] = {"present": present, "max_log_error_near": float(err[near].max()) if near.any() else None}
-            below = sig & (f < 0.5 * resonance_hz)
-            if below.sum() >= 2:
-                p = float(np.median(ph[below]))
-                out["lf_small_lag"] = {"present": bool(-10.0 < p < -0.5 and np.std(ph[below]) < 3.0), "phase_deg": p}
-            else:
-                out["lf_small_lag"] = {"present": False}
-        else:
-            out["resonance_error"] = {"present": None}
-            out["lf_small_lag"] = {"present": None}
+        out.update(_frf_features(frf, resonance_hz))
     if len(ra.by_amplitude) >= 2 and len({r.rh for r in records}) >= 1:
         g = [a.get("gain_ratio_meas_over_model") for a in ra.by_amplitude]
         g = [x for x in g if x]
@@ -221,6 +169,67 @@ def features(ra: ResidualAnalysis, records: Sequence[PreparedRecord], resonance_
     same_sign = len({np.sign(t["change_m"]) for t in tr}) == 1
     out["slow_trend"] = {"present": bool(tr and same_sign and all(t["significant"] for t in tr)) if tr else None,
                          "change_m": [t["change_m"] for t in tr]}
+    return out
+
+
+def _frf_features(frf, resonance_hz: float | None) -> dict:
+    """The features read from the residual's frequency response ``frf`` (ratio measured/model
+    by band): low-frequency droop or lag, constant-slope phase, high-frequency phase lag, the
+    error near the resonance ``resonance_hz`` [Hz] and a small lag below it."""
+    out: dict = {}
+    R = frf.ratio
+    sig = frf.significant & np.isfinite(R)
+    f = frf.freq
+    lg, ph = np.log10(np.abs(R)), np.degrees(np.angle(R))
+    lo_edge = f[0] * 10 ** 0.7
+    lf = sig & (f <= lo_edge)
+    if resonance_hz:
+        lf &= f < 0.5 * resonance_hz
+    if lf.sum() >= 1:
+        g, p = float(np.median(np.abs(R[lf]))), float(np.median(ph[lf]))
+        out["lf_droop_lead"] = {"present": bool(g < 0.97 and p > 0.5), "gain": g, "phase_deg": p}
+        out["lf_excess_lag"] = {"present": bool(g > 1.03 and p < -0.5), "gain": g, "phase_deg": p}
+    else:
+        avail = f[0] <= 1.0
+        out["lf_droop_lead"] = {"present": False if avail else None}
+        out["lf_excess_lag"] = {"present": False if avail else None}
+    away = sig.copy()
+    if resonance_hz:
+        away &= (f < 0.6 * resonance_hz) | (f > 1.6 * resonance_hz)
+        away &= f < 2.0 * resonance_hz
+    if away.sum() >= 4 and np.ptp(np.log10(f[away])) >= 0.7:
+        x = np.log10(f[away])
+        slope, icpt = np.polyfit(x, lg[away], 1)
+        lin = np.std(lg[away] - (slope * x + icpt))
+        pm, ps = float(np.mean(ph[away])), float(np.std(ph[away]))
+        match = abs(slope) > 0.02 and np.sign(pm) == np.sign(slope) and \
+            abs(pm - 90.0 * slope) < 0.5 * abs(90.0 * slope) + 2.0 and lin < 0.3 * abs(slope) + 0.01 and \
+            ps < 0.5 * abs(pm) + 2.0
+        out["constant_slope_phase"] = {"present": bool(match), "slope_dec_per_dec": float(slope),
+                                       "phase_deg": pm}
+    else:
+        out["constant_slope_phase"] = {"present": False if f[-1] / f[0] >= 10 else None}
+    hi = sig & (f >= f[-1] / 10 ** 0.7)
+    if f[-1] >= 10 and hi.sum() >= 3:
+        s_ph = float(np.polyfit(np.log10(f[hi]), np.unwrap(np.radians(ph[hi])), 1)[0] * 180 / np.pi)
+        out["hf_phase_lag"] = {"present": bool(s_ph < -2.0 and ph[hi][-1] < -1.0), "phase_slope_deg_per_dec": s_ph,
+                               "phase_top_deg": float(ph[hi][-1])}
+    else:
+        out["hf_phase_lag"] = {"present": False if f[-1] >= 10 else None}
+    if resonance_hz and f[0] < 0.7 * resonance_hz and f[-1] > 1.3 * resonance_hz:
+        err = np.abs(np.log(np.where(np.isfinite(R), R, 1.0)))
+        near = (f > 0.7 * resonance_hz) & (f < 1.4 * resonance_hz)
+        present = bool((sig & near).any() and err[near].max() >= 0.99 * err[np.isfinite(err)].max())
+        out["resonance_error"] = {"present": present, "max_log_error_near": float(err[near].max()) if near.any() else None}
+        below = sig & (f < 0.5 * resonance_hz)
+        if below.sum() >= 2:
+            p = float(np.median(ph[below]))
+            out["lf_small_lag"] = {"present": bool(-10.0 < p < -0.5 and np.std(ph[below]) < 3.0), "phase_deg": p}
+        else:
+            out["lf_small_lag"] = {"present": False}
+    else:
+        out["resonance_error"] = {"present": None}
+        out["lf_small_lag"] = {"present": None}
     return out
 
 

@@ -84,7 +84,7 @@ from __future__ import annotations
 
 from .devicefile import identified_device_raw, write_device
 from .fitting import Fit, fit_lsq, fit_nelder_mead, jacobian, uncertainty
-from .options import FitOptions
+from .options import FitOptions, LsqOptions
 from .parameters import FreeParameter, IdentifiabilityWarning, parse_assignments, parse_names
 from .problem import FRFTarget, IdentificationProblem, build_targets
 from .report import write_identification
@@ -93,7 +93,7 @@ from .settings import (CORR_LIMIT, COND_LIMIT, REL_SE_LIMIT, THESIS_MAX_ITER, TH
                        THESIS_TOL)
 
 __all__ = ["CORR_LIMIT", "COND_LIMIT", "Fit", "FitOptions", "FRFTarget", "FreeParameter", "IdentifiabilityWarning",
-           "IdentificationProblem", "IdentificationResult", "REL_SE_LIMIT", "THESIS_MAX_ITER",
+           "IdentificationProblem", "IdentificationResult", "LsqOptions", "REL_SE_LIMIT", "THESIS_MAX_ITER",
            "THESIS_SECONDS_PER_FREQUENCY", "THESIS_TOL", "build_targets", "fit_lsq", "fit_nelder_mead",
            "identified_device_raw", "identify", "jacobian", "parse_assignments", "parse_names", "uncertainty",
            "write_device", "write_identification"]

@@ -1,5 +1,6 @@
 """What :func:`~physics.identify.identify` and :func:`~physics.diagnose.diagnose` share: how
-the measurements are read and how a model is fitted to them, in one options object."""
+the measurements are read and how a model is fitted to them, in one options object; and the
+least-squares search settings of ``identify`` alone (:class:`LsqOptions`)."""
 from __future__ import annotations
 
 import dataclasses
@@ -69,3 +70,13 @@ class FitOptions:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("settings", "frf")}
         d["frf"] = vars(self.frf).copy()
         return d
+
+
+@dataclass(frozen=True)
+class LsqOptions:
+    """The multi-start least-squares search of ``identify`` (:func:`~physics.identify.fitting.fit_lsq`):
+    the Latin-hypercube starts lie within ``start_spread`` decades of the start; ``max_nfev``
+    caps the model evaluations of each start (None: SciPy's default)."""
+
+    start_spread: float = 1.0
+    max_nfev: int | None = None

@@ -72,13 +72,29 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
     from ..errors import arg
     from ..io.fileio import jsonable, write_json
     from ..io.outputs import component
-    from ..pages.report import Report, header, write_csv
+    from ..pages.report import write_csv
     dev_name = component(name or f"{result.problem.device.name}_identified", arg("name"), "the device file NAME.yaml")
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     date = _dt.date.today().isoformat()
     dev_path = write_device(result, d / f"{dev_name}.yaml", name=dev_name, date=date, protect=protect)
     files = [dev_path.name]
+    pngs = _write_plots(result, d)
+    rows = result.param_rows()
+    write_csv(rows, d / "parameters.csv")
+    files += ["parameters.csv", "report.json", "index.html", "report.html"] + pngs
+    out = result.to_dict()
+    out["files"] = files
+    out["device_written"] = dev_path.name
+    if provenance:
+        out["provenance"] = provenance
+    write_json(d / "report.json", jsonable(out))
+    _write_page(result, d, dev_path, rows, pngs, provenance)
+    return out
+
+
+def _write_plots(result: IdentificationResult, d: Path) -> list[str]:
+    """A Bode figure per target, the correlation matrix and the per-RH maps: their names."""
     pngs = []
     for k, t in enumerate(result.problem.targets):
         fn = f"bode_{k:02d}_{Path(t.source).stem[:40]}.png".replace(" ", "_")
@@ -90,16 +106,14 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
     if result.problem.per_rh:
         _plot_rh_maps(result, d / "rh_maps.png")
         pngs.append("rh_maps.png")
-    rows = result.param_rows()
-    write_csv(rows, d / "parameters.csv")
-    files += ["parameters.csv", "report.json", "index.html", "report.html"] + pngs
-    out = result.to_dict()
-    out["files"] = files
-    out["device_written"] = dev_path.name
-    if provenance:
-        out["provenance"] = provenance
-    write_json(d / "report.json", jsonable(out))
-    # HTML
+    return pngs
+
+
+def _write_page(result: IdentificationResult, d: Path, dev_path: Path, rows, pngs, provenance) -> None:
+    """The page ``index.html``: the result, the parameters, per-RH values, other fits,
+    the multi-start, the fitted responses and the settings."""
+    from ..io.fileio import jsonable
+    from ..pages.report import Report, header
     fit = result.fit
     rep = Report("Parameter identification",
                  subtitle=f"{result.problem.device.name} [{', '.join(result.problem.effects)}] from "
@@ -121,20 +135,41 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
               caption="identified parameters, each in its row's unit (SI); 1σ: Bates & Watts linear "
                       "approximation scaled by s²; 95 % interval")
     if result.problem.per_rh:
-        table_v = []
-        for lv in result.problem.levels:
-            row = {"rh_pct": lv}
-            for i, p in enumerate(result.problem.params):
-                if p.rh == lv:
-                    row[f"{p.name} [{p.unit}]"] = float(fit.theta[i])
-                    row[f"{p.name} 1σ [{p.unit}]"] = float(fit.std_error[i])
-            table_v.append(row)
         rep.heading("Per-RH values (Table V style)")
-        rep.table(table_v, digits=4)
+        rep.table(_per_rh_rows(result), digits=4)
         rep.image(d / "rh_maps.png", caption="identified per-RH values with 95 % intervals, and their starts, "
                                              "by nominal RH level")
     if "correlation.png" in pngs:
         rep.image(d / "correlation.png", caption="correlation matrix of the estimates (−1 … 1)")
+    _other_fits(rep, result)
+    rep.heading("Measured and fitted frequency responses")
+    for fn, t in zip([f for f in pngs if f.startswith("bode_")], result.problem.targets):
+        rep.image(d / fn, caption=f"{Path(t.source).name} (RH {t.rh:.3g} %): measured, start and fitted |H| "
+                                  "[mm/V], phase [°] and coherence")
+    rep.heading("Settings")
+    rep.json_block(jsonable(result.settings), "settings")
+    if provenance:
+        rep.json_block(provenance, "provenance")
+    rep.write_index(d)
+
+
+def _per_rh_rows(result: IdentificationResult) -> list[dict]:
+    """One row per RH level with the values and 1σ of the per-RH parameters (thesis Table V)."""
+    fit = result.fit
+    table_v = []
+    for lv in result.problem.levels:
+        row = {"rh_pct": lv}
+        for i, p in enumerate(result.problem.params):
+            if p.rh == lv:
+                row[f"{p.name} [{p.unit}]"] = float(fit.theta[i])
+                row[f"{p.name} 1σ [{p.unit}]"] = float(fit.std_error[i])
+        table_v.append(row)
+    return table_v
+
+
+def _other_fits(rep, result: IdentificationResult) -> None:
+    """The page's sections on the fits not written (another method) and on the multi-start."""
+    fit = result.fit
     for name_, f in result.fits.items():
         if name_ != result.primary:
             rep.heading(f"Also fitted: {name_}")
@@ -150,16 +185,6 @@ def write_identification(result: IdentificationResult, out_dir, *, name: str | N
         rep.table([{"start": s["start"], "cost": s.get("cost"), "evaluations": s.get("nfev"),
                     **{f"{lab} [{u}]": v for lab, u, v in zip(result.problem.labels, units, s.get("theta", []))}}
                    for s in fit.starts], digits=4)
-    rep.heading("Measured and fitted frequency responses")
-    for fn, t in zip([f for f in pngs if f.startswith("bode_")], result.problem.targets):
-        rep.image(d / fn, caption=f"{Path(t.source).name} (RH {t.rh:.3g} %): measured, start and fitted |H| "
-                                  "[mm/V], phase [°] and coherence")
-    rep.heading("Settings")
-    rep.json_block(jsonable(result.settings), "settings")
-    if provenance:
-        rep.json_block(provenance, "provenance")
-    rep.write_index(d)
-    return out
 
 
 def _shown(row: dict) -> dict:

@@ -13,7 +13,7 @@ from ..errors import InputError, arg
 from ..execution.parallel import warm_up
 from ..execution.threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
-from .options import FitOptions
+from .options import FitOptions, LsqOptions
 from .parameters import IdentifiabilityWarning, held_per_rh, parse_assignments, parse_names
 from .problem import IdentificationProblem, build_targets
 from .settings import THESIS_MAX_ITER, THESIS_SECONDS_PER_FREQUENCY, THESIS_TOL
@@ -114,7 +114,7 @@ class IdentificationResult:
 @single_threaded
 def identify(measurements: Sequence, device, effects=None, free: Sequence[str] | str = (), *,
              options: FitOptions | None = None, method: str = "lsq", residual: str = "frf", fit_phase: bool = True,
-             start_spread: float = 1.0, skip_s: float = 0.0, max_nfev: int | None = None, warn: bool = True,
+             skip_s: float = 0.0, lsq: LsqOptions | None = None, warn: bool = True,
              **shared) -> IdentificationResult:
     """Identify ``free`` (shared) and ``per_rh`` parameters of ``device`` with ``effects``
     from ``measurements`` (paths, :class:`TimeSeries` or :class:`FRFData`).
@@ -126,11 +126,14 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
     ``rh``, ``rh_tolerance``, ``sensor_bandwidth``, ``min_coherence``, ``weighting``,
     ``n_modes``, ``settings``: where the least-squares starts run); its fields may also be
     given as keywords.  ``method``: ``"lsq"`` (default), ``"nelder-mead"`` (thesis) or
-    ``"both"`` (the device uses the least-squares fit).  Identifiability problems are listed
-    in the result and, with ``warn``, issued as :class:`IdentifiabilityWarning`.  A fit worse
-    than its start is not written (:func:`_check_against_start`).  See the module doc."""
+    ``"both"`` (the device uses the least-squares fit); ``lsq``: the least-squares search
+    (:class:`~physics.identify.options.LsqOptions`: ``start_spread``, ``max_nfev``).
+    Identifiability problems are listed in the result and, with ``warn``, issued as
+    :class:`IdentifiabilityWarning`.  A fit worse than its start is not written
+    (:func:`_check_against_start`).  See the module doc."""
     t0 = time.perf_counter()
     opts = FitOptions.merged(options, **({"free": free} if free not in (None, "", ()) else {}), **shared)
+    lsq = lsq if lsq is not None else LsqOptions()
     if method not in ("lsq", "nelder-mead", "both"):
         raise InputError(f"method {method!r}: expected lsq, nelder-mead or both")
     n_starts = opts.n_starts if opts.n_starts is not None else (5 if residual == "frf" else 1)
@@ -154,13 +157,13 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
     if method in ("nelder-mead", "both"):
         fits["nelder-mead"] = fit_nelder_mead(problem)
     if method in ("lsq", "both"):
-        fits["lsq"] = fit_lsq(problem, n_starts=int(n_starts), seed=seed, start_spread=start_spread,
-                              max_nfev=max_nfev, settings=settings)
+        fits["lsq"] = fit_lsq(problem, n_starts=int(n_starts), seed=seed, start_spread=lsq.start_spread,
+                              max_nfev=lsq.max_nfev, settings=settings)
     primary = "lsq" if "lsq" in fits else "nelder-mead"
     check = _check_against_start(problem, fits[primary])
     dev = problem.device_for(problem.theta0 if check.get("kept_start") else fits[primary].theta)
     sources = [source_name(m, k) for k, m in enumerate(ms)]
-    settings = {"method": method, "n_starts": n_starts, "seed": seed, "start_spread_decades": start_spread,
+    settings = {"method": method, "n_starts": n_starts, "seed": seed, "start_spread_decades": lsq.start_spread,
                 "residual": residual, "fit_phase": fit_phase, "weighting": opts.weighting,
                 "min_coherence": opts.min_coherence, "rh_tolerance_pct": opts.rh_tolerance,
                 "sensor_bandwidth": opts.sensor_bandwidth, "n_modes": opts.n_modes, "skip_s": skip_s,

@@ -47,6 +47,8 @@ _GAMMA = 2.0 - np.sqrt(2.0)      # TR-BDF2 stage fraction
 _D = _GAMMA / 2.0                # implicit weight of both stages
 _W = np.sqrt(2.0) / 4.0          # TR-BDF2 weights of f_n and f_γ
 _E = ((1.0 - _W) / 3.0 - _W, (3.0 * _W + 1.0) / 3.0 - _W, _D / 3.0 - _D)  # embedded 3rd order − TR-BDF2
+#: the outputs of :meth:`Integrator.run` at the sample times (see :meth:`Slab.outputs`)
+_OUTPUTS = ("Q", "j", "c_up", "c_low", "m_up", "m_low", "m_cat", "U")
 
 
 @dataclass(frozen=True)
@@ -500,30 +502,16 @@ class Integrator:
         samples), from ``y0`` = (state, node voltages) or the equilibrium at ``v_in[0]``.
         Returns (outputs at ``t_in``: dict of (S, N) arrays, plus ``current`` [A] when a ladder
         is given; snapshots: list of (t, state, node voltages); final (state, node voltages))."""
-        t_in = np.asarray(t_in, dtype=float)
-        v_in = np.asarray(v_in, dtype=float)
-        slab, S, tol = self.slab, self.S, self.tol
-        if y0 is None:
-            y, U = self.equilibrium(float(v_in[0]))
-        else:
-            y, U = np.array(y0[0], dtype=float), np.array(y0[1], dtype=float)
-        kinks = _kinks(t_in, v_in)
-        stops = np.unique(np.concatenate([kinks, np.asarray(snapshots, dtype=float), t_in[-1:]]))
-        snaps = set(np.asarray(snapshots, dtype=float).tolist())
-        keys = ("Q", "j", "c_up", "c_low", "m_up", "m_low", "m_cat", "U")
-        out = {k: np.empty((S, t_in.size)) for k in keys}
-        o0 = slab.outputs(y, U)
-        for k in keys:
-            out[k][:, 0] = o0[k]
+        t_in, v_in = np.asarray(t_in, dtype=float), np.asarray(v_in, dtype=float)
+        slab, S, tol, keys = self.slab, self.S, self.tol, _OUTPUTS
+        y, U, out = self._start(t_in, v_in, y0)
+        kinks, stops, snaps = _stops(t_in, v_in, snapshots)
         shots = []
         vin = lambda tt: float(np.interp(tt, t_in, v_in))  # noqa: E731
-        self._tc, self._ts = y[:, 1::3] @ slab.V, y[:, 2::3] @ slab.V
         t = float(t_in[0])
         v_scale = max(float(np.max(np.abs(v_in))), 1e-12)
         f, Jn = slab.rates(y)
-        h = tol.h_restart
-        i_out = 1
-        y_prev, h_last = None, None
+        h, i_out, y_prev, h_last = tol.h_restart, 1, None, None
         while t < t_in[-1] - 1e-12 * max(1.0, abs(t_in[-1])):
             stop = stops[np.searchsorted(stops, t + 1e-12 * max(1.0, abs(t)), side="right")]
             h = min(h, tol.h_max, stop - t)
@@ -586,9 +574,31 @@ class Integrator:
                 h = min(h, tol.h_restart)
                 y_prev = None
         if self.ladder is not None:
-            g0 = self.ladder.g[0]
-            out["current"] = self.ladder.area[0] * out["j"][0] + g0 * (v_in - out["U"][1])
+            out["current"] = self.ladder.area[0] * out["j"][0] + self.ladder.g[0] * (v_in - out["U"][1])
         return out, shots, (y, U)
+
+    def _start(self, t_in, v_in, y0):
+        """(state, node voltages) at ``t_in[0]`` (``y0`` or the equilibrium at ``v_in[0]``),
+        and the output arrays, (S, N) each, their first column filled; sets the totals that
+        :meth:`_conservative` keeps."""
+        if y0 is None:
+            y, U = self.equilibrium(float(v_in[0]))
+        else:
+            y, U = np.array(y0[0], dtype=float), np.array(y0[1], dtype=float)
+        out = {k: np.empty((self.S, t_in.size)) for k in _OUTPUTS}
+        o0 = self.slab.outputs(y, U)
+        for k in _OUTPUTS:
+            out[k][:, 0] = o0[k]
+        self._tc, self._ts = y[:, 1::3] @ self.slab.V, y[:, 2::3] @ self.slab.V
+        return y, U, out
+
+
+def _stops(t_in, v_in, snapshots):
+    """(kinks of the input, times a step must end at: kinks, snapshots and the end of the
+    record, the snapshot times as a set)."""
+    kinks = _kinks(t_in, v_in)
+    stops = np.unique(np.concatenate([kinks, np.asarray(snapshots, dtype=float), t_in[-1:]]))
+    return kinks, stops, set(np.asarray(snapshots, dtype=float).tolist())
 
 
 def _kinks(t, v, rel: float = 1e-3) -> np.ndarray:

@@ -415,100 +415,120 @@ def _clean(o):
 
 
 def _plots(figs, out: Path) -> list[Path]:
-    from ..pages.plotting import plt, save
+    """The page's figures for every device (frequency response, amplitude sweep, profiles and,
+    when run, the square pulse): their paths."""
     paths = []
     for dev in figs["devices"]:
         F = figs[dev]
-        ss = F["small_signal"]
-        fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
-        f = ss["freq_Hz"]
-        ax[0].loglog(f, 1e3 * np.asarray(ss["reduced_mag_m_per_V"]), label="reduced (closed form)")
-        ax[0].loglog(f, 1e3 * np.asarray(ss["reference_mag_m_per_V"]), "--", label="reference (linearised PNP)")
-        ax[0].set_ylabel("|δ/V| [mm/V]")
-        ax[0].legend()
-        ax[1].semilogx(f, ss["reduced_phase_deg"])
-        ax[1].semilogx(f, ss["reference_phase_deg"], "--")
-        ax[1].set_ylabel("phase [°]")
-        ax[2].semilogx(f, ss["mag_err_pct"], label="magnitude [%]")
-        ax[2].semilogx(f, ss["phase_err_deg"], label="phase [°]")
-        ax[2].set_ylabel("reference/reduced − 1")
-        ax[2].set_xlabel("frequency [Hz]")
-        ax[2].legend()
-        ax[0].set_title(f"{dev}: small-signal FRF ({', '.join(ss['effects'])})")
-        paths.append(out / f"frf_{dev}.png")
-        save(fig, paths[-1])
-
-        sw = F["amplitude_sweep"]
-        a = sw["amplitudes_V"]
-        fig, ax = plt.subplots(1, 3, figsize=(14, 4))
-        for name, m in sw["models"].items():
-            ax[0].loglog(a, 100 * np.array(m["err_deflection"]), "o-", label=name)
-            ax[1].loglog(a, 100 * np.array(m["err_current"]), "o-", label=name)
-        for k in (0, 1):
-            ax[k].axhline(5, color="k", lw=0.6, ls=":")
-            ax[k].axhline(20, color="k", lw=0.6, ls=":")
-            ax[k].set_xlabel("amplitude [V]")
-        ax[0].set_ylabel("deflection error vs reference [%]")
-        ax[1].set_ylabel("current error vs reference [%]")
-        ax[0].legend(fontsize=7)
-        R = sw["reference"]
-        ax[2].loglog(a, 100 * np.maximum(R["thd_current"], 1e-9), "o-", label="reference current")
-        ax[2].loglog(a, 100 * np.maximum(R["thd_deflection"], 1e-9), "s-", label="reference deflection")
-        law, limit = large_signal_law()
-        nl = sw["models"][_label(law, limit)]
-        ax[2].loglog(a, 100 * np.maximum(nl["thd_current"], 1e-9), "o--", label=f"{law} current")
-        ax[2].loglog(a, 100 * np.maximum(nl["thd_deflection"], 1e-9), "s--", label=f"{law} deflection")
-        cb = sw["models"][f"{_label(law, limit)}, charge-based load"]
-        ax[2].loglog(a, 100 * np.maximum(cb["thd_deflection"], 1e-9), "^:", label="charge-based load deflection")
-        ax[2].set_ylabel("THD (harmonics 2–5) [%]")
-        ax[2].set_xlabel("amplitude [V]")
-        ax[2].legend(fontsize=7)
-        fig.suptitle(f"{dev}: sine {sw['f0_Hz']:g} Hz, amplitude sweep")
-        paths.append(out / f"amplitude_{dev}.png")
-        save(fig, paths[-1])
-
-        pr = F["profiles"]
-        fig, ax = plt.subplots(2, 2, figsize=(12, 7))
-        for ts, P in pr["profiles"].items():
-            x = np.array(P["x_m"])
-            h = x[-1]
-            for col, sel, sgn in ((0, x < 0, -1), (1, x > 0, 1)):
-                d = h - np.abs(x[sel])
-                ax[0, col].loglog(np.maximum(d, 1e-12), np.array(P["C+_mol_m3"])[sel], label=f"t = {ts} s")
-                ax[1, col].semilogx(np.maximum(d, 1e-12), np.array(P["Cs_mol_m3"])[sel], label=f"t = {ts} s")
-            for col, name in ((0, "lower face (x = −h)"), (1, "upper face (x = +h)")):
-                ax[0, col].set_title(name)
-                ax[1, col].set_xlabel("distance from the face [m]")
-        ax[0, 0].set_ylabel("C+ [mol/m³]")
-        ax[1, 0].set_ylabel("Cs [mol/m³]")
-        ax[0, 0].legend(fontsize=7)
-        fig.suptitle(f"{dev}: 4 Vpp, 1 Hz — cation and solvent profiles (thesis Fig. 13/15/30)")
-        paths.append(out / f"profiles_{dev}.png")
-        save(fig, paths[-1])
-
+        paths += [_plot_frf(dev, F["small_signal"], out), _plot_amplitude(dev, F["amplitude_sweep"], out),
+                  _plot_profiles(dev, F["profiles"], out)]
         if "square_pulse" in F:
-            sq = F["square_pulse"]
-            fig, ax = plt.subplots(1, 3, figsize=(16, 4))
-            ax[0].plot(sq["t_s"], sq["reference_cs_up"])
-            ax[0].set_ylabel("reference Cs_up (first-moment equivalent) [mol/m³]")
-            ax[0].set_xlabel("time [s]")
-            ax[1].plot(sq["t_s"], 1e6 * np.array(sq["reference_deflection_m"]), label="reference")
-            ax[1].plot(sq["t_s"], 1e6 * np.array(sq["reduced_linear_deflection_m"]), "--", label="reduced, linear")
-            ax[1].set_ylabel("tip deflection [µm]")
-            ax[1].set_xlabel("time [s]")
-            ax[1].legend(fontsize=7)
-            for ts, P in sq["profiles"].items():
-                x = np.array(P["x_m"])
-                sel = x > 0
-                ax[2].semilogx(np.maximum(x[-1] - x[sel], 1e-12), np.array(P["Cs_minus_Cs0_mol_m3"])[sel],
-                               label=f"t = {ts} s")
-            ax[2].set_xlabel("distance from the upper face [m]")
-            ax[2].set_ylabel("Cs − Cs0 [mol/m³]")
-            ax[2].legend(fontsize=7)
-            fig.suptitle(f"{dev}: square pulse 2 V, Ton 20 s / Toff 80 s (thesis Fig. 17)")
-            paths.append(out / f"square_{dev}.png")
-            save(fig, paths[-1])
+            paths.append(_plot_square(dev, F["square_pulse"], out))
     return paths
+
+
+def _saved(fig, path: Path) -> Path:
+    """``fig`` saved as the PNG ``path`` (atomically, then closed); returns ``path``."""
+    from ..pages.plotting import save
+    save(fig, path)
+    return path
+
+
+def _plot_frf(dev: str, ss: dict, out: Path) -> Path:
+    """Small-signal FRF, reduced vs reference, and their differences: ``frf_DEV.png``."""
+    from ..pages.plotting import plt
+    fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    f = ss["freq_Hz"]
+    ax[0].loglog(f, 1e3 * np.asarray(ss["reduced_mag_m_per_V"]), label="reduced (closed form)")
+    ax[0].loglog(f, 1e3 * np.asarray(ss["reference_mag_m_per_V"]), "--", label="reference (linearised PNP)")
+    ax[0].set_ylabel("|δ/V| [mm/V]")
+    ax[0].legend()
+    ax[1].semilogx(f, ss["reduced_phase_deg"])
+    ax[1].semilogx(f, ss["reference_phase_deg"], "--")
+    ax[1].set_ylabel("phase [°]")
+    ax[2].semilogx(f, ss["mag_err_pct"], label="magnitude [%]")
+    ax[2].semilogx(f, ss["phase_err_deg"], label="phase [°]")
+    ax[2].set_ylabel("reference/reduced − 1")
+    ax[2].set_xlabel("frequency [Hz]")
+    ax[2].legend()
+    ax[0].set_title(f"{dev}: small-signal FRF ({', '.join(ss['effects'])})")
+    return _saved(fig, out / f"frf_{dev}.png")
+
+
+def _plot_amplitude(dev: str, sw: dict, out: Path) -> Path:
+    """Deflection and current errors and THD over the amplitude sweep: ``amplitude_DEV.png``."""
+    from ..pages.plotting import plt
+    a = sw["amplitudes_V"]
+    fig, ax = plt.subplots(1, 3, figsize=(14, 4))
+    for name, m in sw["models"].items():
+        ax[0].loglog(a, 100 * np.array(m["err_deflection"]), "o-", label=name)
+        ax[1].loglog(a, 100 * np.array(m["err_current"]), "o-", label=name)
+    for k in (0, 1):
+        ax[k].axhline(5, color="k", lw=0.6, ls=":")
+        ax[k].axhline(20, color="k", lw=0.6, ls=":")
+        ax[k].set_xlabel("amplitude [V]")
+    ax[0].set_ylabel("deflection error vs reference [%]")
+    ax[1].set_ylabel("current error vs reference [%]")
+    ax[0].legend(fontsize=7)
+    R = sw["reference"]
+    ax[2].loglog(a, 100 * np.maximum(R["thd_current"], 1e-9), "o-", label="reference current")
+    ax[2].loglog(a, 100 * np.maximum(R["thd_deflection"], 1e-9), "s-", label="reference deflection")
+    law, limit = large_signal_law()
+    nl = sw["models"][_label(law, limit)]
+    ax[2].loglog(a, 100 * np.maximum(nl["thd_current"], 1e-9), "o--", label=f"{law} current")
+    ax[2].loglog(a, 100 * np.maximum(nl["thd_deflection"], 1e-9), "s--", label=f"{law} deflection")
+    cb = sw["models"][f"{_label(law, limit)}, charge-based load"]
+    ax[2].loglog(a, 100 * np.maximum(cb["thd_deflection"], 1e-9), "^:", label="charge-based load deflection")
+    ax[2].set_ylabel("THD (harmonics 2–5) [%]")
+    ax[2].set_xlabel("amplitude [V]")
+    ax[2].legend(fontsize=7)
+    fig.suptitle(f"{dev}: sine {sw['f0_Hz']:g} Hz, amplitude sweep")
+    return _saved(fig, out / f"amplitude_{dev}.png")
+
+
+def _plot_profiles(dev: str, pr: dict, out: Path) -> Path:
+    """Cation and solvent profiles near both faces: ``profiles_DEV.png``."""
+    from ..pages.plotting import plt
+    fig, ax = plt.subplots(2, 2, figsize=(12, 7))
+    for ts, P in pr["profiles"].items():
+        x = np.array(P["x_m"])
+        h = x[-1]
+        for col, sel, sgn in ((0, x < 0, -1), (1, x > 0, 1)):
+            d = h - np.abs(x[sel])
+            ax[0, col].loglog(np.maximum(d, 1e-12), np.array(P["C+_mol_m3"])[sel], label=f"t = {ts} s")
+            ax[1, col].semilogx(np.maximum(d, 1e-12), np.array(P["Cs_mol_m3"])[sel], label=f"t = {ts} s")
+        for col, name in ((0, "lower face (x = −h)"), (1, "upper face (x = +h)")):
+            ax[0, col].set_title(name)
+            ax[1, col].set_xlabel("distance from the face [m]")
+    ax[0, 0].set_ylabel("C+ [mol/m³]")
+    ax[1, 0].set_ylabel("Cs [mol/m³]")
+    ax[0, 0].legend(fontsize=7)
+    fig.suptitle(f"{dev}: 4 Vpp, 1 Hz — cation and solvent profiles (thesis Fig. 13/15/30)")
+    return _saved(fig, out / f"profiles_{dev}.png")
+
+
+def _plot_square(dev: str, sq: dict, out: Path) -> Path:
+    """Square pulse: reference Cs_up, tip deflection and solvent profiles: ``square_DEV.png``."""
+    from ..pages.plotting import plt
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4))
+    ax[0].plot(sq["t_s"], sq["reference_cs_up"])
+    ax[0].set_ylabel("reference Cs_up (first-moment equivalent) [mol/m³]")
+    ax[0].set_xlabel("time [s]")
+    ax[1].plot(sq["t_s"], 1e6 * np.array(sq["reference_deflection_m"]), label="reference")
+    ax[1].plot(sq["t_s"], 1e6 * np.array(sq["reduced_linear_deflection_m"]), "--", label="reduced, linear")
+    ax[1].set_ylabel("tip deflection [µm]")
+    ax[1].set_xlabel("time [s]")
+    ax[1].legend(fontsize=7)
+    for ts, P in sq["profiles"].items():
+        x = np.array(P["x_m"])
+        sel = x > 0
+        ax[2].semilogx(np.maximum(x[-1] - x[sel], 1e-12), np.array(P["Cs_minus_Cs0_mol_m3"])[sel],
+                       label=f"t = {ts} s")
+    ax[2].set_xlabel("distance from the upper face [m]")
+    ax[2].set_ylabel("Cs − Cs0 [mol/m³]")
+    ax[2].legend(fontsize=7)
+    fig.suptitle(f"{dev}: square pulse 2 V, Ton 20 s / Toff 80 s (thesis Fig. 17)")
+    return _saved(fig, out / f"square_{dev}.png")
 
 
 _NOTES = """<h2>How to read it</h2><ul>

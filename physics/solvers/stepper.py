@@ -167,14 +167,7 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
     Us = np.empty((N, nb)) if "U" in want else None
     Ts = np.full((N, nb), net.p["T_ext"]) if "T" in want else None
     if thermal:
-        Kt = np.diag(tn.convection)
-        i = np.arange(nb - 1)
-        Kt[i, i] += tn.links
-        Kt[i + 1, i + 1] += tn.links
-        Kt[i, i + 1] -= tn.links
-        Kt[i + 1, i] -= tn.links
-        heat_inv = linalg.inv(np.diag(tn.capacity / dt) + Kt)   # constant: one inverse, then matvecs
-        heat_hold, heat_ext = tn.capacity / dt, tn.convection * tn.T_ext
+        heat_inv, heat_hold, heat_ext = _heat_step(tn, nb, dt)
         T = np.full(nb, tn.T_ext)
         T_props = T.copy()
     v_stage = _vin_stage(vin)
@@ -226,6 +219,26 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
                     epochs.append((n + 1, net.law, net.load_ratio))
             n += 1
         bar.update(n - reported)
+    return _outputs(want, current, Qs, Us, Ts, epochs, edges, lumped)
+
+
+def _heat_step(tn, nb: int, dt: float):
+    """(inverse, hold, source) of the implicit heat step T' = inverse @ (hold·T + Joule +
+    source) of the heat network ``tn`` on ``nb`` branches (constant: one inverse, then matvecs)."""
+    Kt = np.diag(tn.convection)
+    i = np.arange(nb - 1)
+    Kt[i, i] += tn.links
+    Kt[i + 1, i + 1] += tn.links
+    Kt[i, i + 1] -= tn.links
+    Kt[i + 1, i] -= tn.links
+    heat_inv = linalg.inv(np.diag(tn.capacity / dt) + Kt)
+    return heat_inv, tn.capacity / dt, tn.convection * tn.T_ext
+
+
+def _outputs(want, current, Qs, Us, Ts, epochs, edges, lumped) -> dict[str, np.ndarray]:
+    """The arrays :func:`run` returns, (branch, sample) from the per-sample charges ``Qs``
+    (and ``Us``, ``Ts``), the load and face excess by the law of each epoch."""
+    N = current.size
     out = {"current": current, "load": np.empty_like(Qs)}
     if "c" in want:
         out["c_up"], out["c_low"] = np.empty_like(Qs), np.empty_like(Qs)

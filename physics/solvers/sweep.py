@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -115,11 +116,23 @@ def sweep_task(task: dict) -> dict:
     return row
 
 
+@dataclass(frozen=True)
+class SweepTone:
+    """The sine of a ``simulate`` sweep: ``amplitude`` [V] (unless the grid varies it) at
+    ``frequency`` [Hz], ``periods`` periods sampled at ``fs`` [Hz]."""
+
+    frequency: float = 1.0
+    amplitude: float = 1.0
+    fs: float = 200.0
+    periods: int = 5
+
+
 def run_sweep(device, effects, grid: dict[str, list[float]], *, kind: str = "frf", rh: float | None = None,
-              freqs=(0.1, 1.0, 10.0), f_range=(0.1, 100.0), frequency: float = 1.0, amplitude: float = 1.0,
-              fs: float = 200.0, periods: int = 5, n_modes: int = 4, settings: ParallelSettings | None = None,
-              progress: bool = True):
-    """The sweep as a pandas DataFrame (grid columns first, in grid order)."""
+              freqs=(0.1, 1.0, 10.0), f_range=(0.1, 100.0), tone: SweepTone = SweepTone(), n_modes: int = 4,
+              settings: ParallelSettings | None = None, progress: bool = True):
+    """The sweep as a pandas DataFrame (grid columns first, in grid order).  ``freqs`` [Hz]: where
+    ``frf`` reports gain and phase, ``f_range`` [Hz]: where it looks for the resonance;
+    ``tone``: the sine of ``simulate`` (:class:`SweepTone`)."""
     import pandas as pd
     if kind not in ("frf", "simulate"):
         raise InputError(f"{arg('kind')} {kind!r}: expected frf or simulate")
@@ -128,8 +141,8 @@ def run_sweep(device, effects, grid: dict[str, list[float]], *, kind: str = "frf
     dev_ref = str(device) if isinstance(device, (str, Path)) else device
     names = list(grid)
     tasks = [{"point": dict(zip(names, combo)), "device": dev_ref, "effects": effects, "rh": rh, "kind": kind,
-              "freqs": list(freqs), "f_min": f_range[0], "f_max": f_range[1], "frequency": frequency,
-              "amplitude": amplitude, "fs": fs, "periods": periods, "n_modes": n_modes}
+              "freqs": list(freqs), "f_min": f_range[0], "f_max": f_range[1], "frequency": tone.frequency,
+              "amplitude": tone.amplitude, "fs": tone.fs, "periods": tone.periods, "n_modes": n_modes}
              for combo in itertools.product(*(grid[n] for n in names))]
     rows = map_tasks(sweep_task, tasks, settings, desc="sweep", progress=progress)
     return pd.DataFrame(rows)

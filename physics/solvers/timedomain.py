@@ -177,6 +177,34 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     (1511, 1511)
     """
     model = as_model(device, effects, n_modes)
+    rec = _prepare(model, t, voltage, rh, fields, n_segments, periodic)
+    reduce, chain = _stages(model, rec, hold, periodic)
+    if rec.stepper_needed:
+        current, flds = _stage1_stepper(model, rec, fields, reduce, chain, progress)
+    else:
+        current, flds = _stage1_linear(model, rec, fields, reduce, chain, hold, periodic)
+    cs, tip = chain.finish()
+    tip = _output_effects(model, tip, rec.rh, rec.dt)
+    return SimulationResult(time=rec.t, voltage=rec.v, rh=rec.rh, deflection=tip, current=current, cs_up=cs,
+                            cs_low=-cs, device=model.device.name, effects=model.effect_ids,
+                            z=0.5 * (rec.edges[1:] + rec.edges[:-1]), fields=flds)
+
+
+@dataclass(frozen=True)
+class _Record:
+    """A checked record of :func:`simulate`: time ``t`` [s], voltage ``v`` [V], RH ``rh`` [%]
+    per sample, step ``dt`` [s], segment ``edges`` [m], and whether the stepper runs."""
+
+    t: np.ndarray
+    v: np.ndarray
+    rh: np.ndarray
+    dt: float
+    edges: np.ndarray
+    stepper_needed: bool
+
+
+def _prepare(model, t, voltage, rh, fields, n_segments, periodic) -> _Record:
+    """Check the record, the RH and the fields; choose the solver and the segment grid."""
     t, v = _check_record(t, voltage)
     rh_t = model.check_rh(rh)
     rh_t = np.full(t.size, float(rh_t)) if np.ndim(rh_t) == 0 else np.asarray(rh_t, dtype=float)
@@ -197,54 +225,63 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
     distributed = _distributed(model, p_mid)
     edges = _line_grid(model, p_mid, w_hi, n_segments, distributed) if (distributed or fields) \
         else segment_edges(model.free_length, 1)
-    base = dict(model.device.params)
+    return _Record(t, v, rh_t, dt, edges, bool(stepper_needed))
 
-    # 1. electrochemistry, reduced at once to what stages 2–4 need: the solvent excess and
-    # the modal loads (rows of `reduce`, acting on the clamp branch and the segments), so a
-    # long record never holds one row per segment unless a per-segment field is asked for
-    lengths = np.concatenate([[base["L_clamp"]], np.diff(edges)])
-    modal = _beam_projection(model, base, edges)
+
+def _stages(model, rec: _Record, hold, periodic):
+    """(``reduce``, stages 2–4 as a :class:`_Chain`).  ``reduce`` is stage 1's output map:
+    the electrochemistry reduced at once to what stages 2–4 need (the solvent excess and the
+    modal loads: rows acting on the clamp branch and the segments), so a long record never
+    holds one row per segment unless a per-segment field is asked for."""
+    base = dict(model.device.params)
+    lengths = np.concatenate([[base["L_clamp"]], np.diff(rec.edges)])
+    modal = _beam_projection(model, base, rec.edges)
     reduce = np.vstack([base["n_solvation"] * lengths / base["L_total"],
                         np.hstack([np.zeros((modal.shape[0], 1)), modal])])
-    flds = {}
-    load_filter, cs_filter = _load_filters(model, base, w_hi)
-    chain = _Chain(model, base, load_filter, cs_filter, rh_t, dt, hold, periodic)      # stages 2–4
-    if stepper_needed:
-        from . import stepper
-        want = {"voltage": "U", "charge": "Q", "temperature": "T", "cation": "c"}
-        out = stepper.run(model, model.params_at, t, v, rh_t, edges,
-                          {want[f] for f in fields if f in want}, progress=progress)
-        load, current = out["load"], out["current"]
-        c_up, c_low = out.get("c_up"), out.get("c_low")
-        if "voltage" in fields:
-            flds["voltage"] = out["U"][1:]
-        if "charge" in fields:
-            flds["charge"] = out["Q"][1:]
-        if "temperature" in fields:
-            flds["temperature"] = out["T"][1:]
-        del out
-        for a in range(0, t.size, PIECE_SAMPLES):
-            chain.push(reduce @ load[:, a:a + PIECE_SAMPLES])
-    else:
-        p = model.params_at(float(rh_t[0]))
-        per_segment = "cation" in fields
-        stage1 = _Electrochemistry(model, p, edges, v.size, dt, hold, fields, periodic, reduce, per_segment)
-        for a in range(0, v.size, PIECE_SAMPLES):
-            chain.push(stage1.push(v[a:a + PIECE_SAMPLES]))
-        chain.push(stage1.finish())
-        current, flds = stage1.current, stage1.fields
-        if per_segment:
-            c_up = load = stage1.excess
-            c_low = -load
-        if "temperature" in fields:
-            flds["temperature"] = np.full((edges.size - 1, t.size), p["T_ext"])
+    load_filter, cs_filter = _load_filters(model, base, np.pi / rec.dt)
+    return reduce, _Chain(model, base, load_filter, cs_filter, rec.rh, rec.dt, hold, periodic)
+
+
+def _stage1_stepper(model, rec: _Record, fields, reduce, chain, progress):
+    """Stage 1 by the implicit stepper, its loads pushed through ``chain``: (current, fields)."""
+    from . import stepper
+    t, rh_t, flds = rec.t, rec.rh, {}
+    want = {"voltage": "U", "charge": "Q", "temperature": "T", "cation": "c"}
+    out = stepper.run(model, model.params_at, t, rec.v, rh_t, rec.edges,
+                      {want[f] for f in fields if f in want}, progress=progress)
+    load, current = out["load"], out["current"]
+    c_up, c_low = out.get("c_up"), out.get("c_low")
+    if "voltage" in fields:
+        flds["voltage"] = out["U"][1:]
+    if "charge" in fields:
+        flds["charge"] = out["Q"][1:]
+    if "temperature" in fields:
+        flds["temperature"] = out["T"][1:]
+    del out
+    for a in range(0, t.size, PIECE_SAMPLES):
+        chain.push(reduce @ load[:, a:a + PIECE_SAMPLES])
     if "cation" in fields:
         flds["cation_upper"], flds["cation_lower"] = c_up[1:], c_low[1:]
-    cs, tip = chain.finish()
-    tip = _output_effects(model, tip, rh_t, dt)
-    return SimulationResult(time=t, voltage=v, rh=rh_t, deflection=tip, current=current, cs_up=cs,
-                            cs_low=-cs, device=model.device.name, effects=model.effect_ids,
-                            z=0.5 * (edges[1:] + edges[:-1]), fields=flds)
+    return current, flds
+
+
+def _stage1_linear(model, rec: _Record, fields, reduce, chain, hold, periodic):
+    """Stage 1 as one LTI system (:class:`_Electrochemistry`), fed through ``chain`` in
+    pieces: (current, fields)."""
+    v, edges = rec.v, rec.edges
+    p = model.params_at(float(rec.rh[0]))
+    per_segment = "cation" in fields
+    stage1 = _Electrochemistry(model, p, edges, v.size, rec.dt, hold, fields, periodic, reduce, per_segment)
+    for a in range(0, v.size, PIECE_SAMPLES):
+        chain.push(stage1.push(v[a:a + PIECE_SAMPLES]))
+    chain.push(stage1.finish())
+    current, flds = stage1.current, stage1.fields
+    if "temperature" in fields:
+        flds["temperature"] = np.full((edges.size - 1, rec.t.size), p["T_ext"])
+    if per_segment:
+        excess = stage1.excess
+        flds["cation_upper"], flds["cation_lower"] = excess[1:], -excess[1:]
+    return current, flds
 
 
 @single_threaded

@@ -283,7 +283,7 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     from ..effects import load_effects_file, unregister
     from ..analysis.metrics import remove_nuisance
     from ..io.timeseries import write_timeseries
-    from ..diagnose.diagnosis import diagnose
+    from ..diagnose.diagnosis import AnalysisOptions, SelectionOptions, diagnose
     from ..diagnose.draft import draft_effects, write_drafts
     folder = Path(folder)
     ms, truth, clean = outside_catalog_case(kind, seed, device=device, fs=fs, duration=duration, lab=lab, clean=True)
@@ -294,8 +294,8 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     true_error = float(np.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err)))
     before = diagnose(files, device, "none")
     outcome = draft_effects(before, lambda dev, eff, free, cands: diagnose(
-        files, dev, eff, free, candidates=cands, force=True, check_support=False, max_effects=1,
-        noise_floor=before.noise_floor))
+        files, dev, eff, free, candidates=cands, force=True, check_support=False,
+        selection=SelectionOptions(max_effects=1), analysis=AnalysisOptions(noise_floor=before.noise_floor)))
     checks = write_drafts(outcome.kept, folder / "drafts") if outcome.kept else {}
     ids = [i for d in outcome.kept for i in load_effects_file(folder / "drafts" / d.file_name)]
     try:

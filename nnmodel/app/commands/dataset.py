@@ -45,7 +45,7 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from nnmodel.measured import build_dataset, check_dataset
+    from nnmodel.measured import ReadOptions, build_dataset, check_dataset
     if args.check:
         notes = check_dataset(args.check)
         for n in notes:
@@ -69,10 +69,10 @@ def run(args) -> int:
         raise InputError(f"--output {args.output} and --sensor-gain {args.sensor_gain} contradict each other: the "
                          f"gain turns the output into the tip deflection in m, --output keeps it as {output.name} "
                          f"in {output.unit}; give one of them")
+    read = ReadOptions(columns=parse_column_map(args.columns, output) if args.columns else None, fs=args.fs_Hz,
+                       rh=args.rh, resample=args.resample, gain=args.sensor_gain)
     out = build_dataset(args.out, train=args.train, validation=args.validation, test=args.test,
-                        val_fraction=args.val_fraction, holdout_rh=held,
-                        columns=parse_column_map(args.columns, output) if args.columns else None, fs=args.fs_Hz,
-                        rh=args.rh, resample=args.resample, output=output, gain=args.sensor_gain,
+                        val_fraction=args.val_fraction, holdout_rh=held, read=read, output=output,
                         allow_overlap=args.allow_overlap, overwrite=args.overwrite, rh_tolerance=args.rh_tolerance,
                         command="eap " + " ".join(__import__("sys").argv[1:]))
     from nnmodel.dataset import load_dataset

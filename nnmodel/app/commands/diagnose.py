@@ -6,7 +6,7 @@ import math
 import sys
 from pathlib import Path
 
-from physics.diagnose import diagnose, write_diagnosis
+from physics.diagnose import AnalysisOptions, SelectionOptions, diagnose, write_diagnosis
 from physics.diagnose.draft import write_drafts
 from physics.diagnose.verdict import nuisance_summary
 from physics.errors import InputError
@@ -130,16 +130,19 @@ def run(args) -> int:
     opts = fit_options(args, free=args.free or None, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
                        n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, settings=parallel_settings(args))
     res = diagnose(ms, args.device, args.effects, options=opts, candidates=args.candidates, force=args.force,
-                   check_support=not args.no_support, max_effects=args.max_effects, backward=not args.forward_only,
-                   noise_floor=None if args.noise_floor_um is None else 1e-6 * args.noise_floor_um,
-                   fs_max=args.fs_max_Hz, progress=log)
+                   check_support=not args.no_support,
+                   selection=SelectionOptions(max_effects=args.max_effects, backward=not args.forward_only),
+                   analysis=AnalysisOptions(noise_floor=None if args.noise_floor_um is None
+                                            else 1e-6 * args.noise_floor_um, fs_max=args.fs_max_Hz),
+                   progress=log)
     outcome = None
     if not args.no_draft:
         from physics.diagnose.draft import draft_effects
         per = ",".join(res.draft_base.spec.per_rh) or "none"
         outcome = draft_effects(res, lambda dev, eff, free, cands: diagnose(
             ms, dev, eff, free, options=dataclasses.replace(opts, per_rh=per, n_starts=1), candidates=cands, force=True,
-            check_support=False, max_effects=1, backward=False, noise_floor=res.noise_floor, fs_max=args.fs_max_Hz))
+            check_support=False, selection=SelectionOptions(max_effects=1, backward=False),
+            analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=args.fs_max_Hz)))
     drafts_dir = Path(args.draft_effects) if args.draft_effects is not None else Path(args.out) / "drafts"
     inside = args.draft_effects is None
     apply = not args.no_apply

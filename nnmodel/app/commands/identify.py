@@ -5,7 +5,7 @@ import warnings
 from pathlib import Path
 
 from physics.errors import InputError
-from physics.identify import IdentifiabilityWarning, identify, write_identification
+from physics.identify import IdentifiabilityWarning, LsqOptions, identify, write_identification
 from physics.limits import MAX_STARTS, check_count
 from physics.io.outputs import component
 
@@ -68,7 +68,7 @@ def run(args) -> int:
                            n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, weighting=args.weighting,
                            settings=parallel_settings(args))
         res = identify(ms, args.device, args.effects, options=opts, method=args.method, residual=args.residual,
-                       fit_phase=not args.no_phase, start_spread=args.start_spread, skip_s=args.skip_s)
+                       fit_phase=not args.no_phase, skip_s=args.skip_s, lsq=LsqOptions(start_spread=args.start_spread))
     with writing(args, inputs=protect) as tmp:
         out = write_identification(res, tmp, name=args.name, provenance=provenance(inputs=protect), protect=protect)
     d = Path(args.out)

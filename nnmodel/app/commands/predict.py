@@ -110,20 +110,45 @@ def _streams(args, bundle, k, size: int) -> bool:
 
 
 def run(args) -> int:
-    from physics.io.csvtable import append_rows, write_sidecar
-    from physics.io.outputs import output_files, preflight_files
+    from physics.io.outputs import preflight_files
     from physics.io.record import OutputQuantity
-    from physics.io.timeseries import columns_of
 
     log = stage_log(args, [args.input])
     if Path(args.out).suffix.lower() != ".csv":
         raise InputError(f"--out {args.out}: the prediction is written as CSV; give a path ending in .csv")
     preflight_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model])
-    from ...bundle import FS_RTOL, load
-    from ...startup import start_samples
+    from ...bundle import load
     bundle = load(args.model)
     output = OutputQuantity.from_dict(bundle.card.get("output"), f"{args.model}: card output")
     model, uses_rh = bundle.model, bundle.model.uses_rh
+    k, n_init = _check_counts(args, model)
+    stream = Path(args.input).is_file() and _streams(args, bundle, k, Path(args.input).stat().st_size)
+    log(f"reading {args.input}" + (" in pieces" if stream else ""))
+    pieces, rh_read = _pieces(args, output, uses_rh, need_y=k is not None or bool(n_init), stream=stream)
+    first = next(pieces)
+    if k is not None and k > first.n:
+        raise InputError(f"--steps-ahead {k}: {args.input} has {first.n} samples; give at most {first.n} (or omit "
+                         "the flag for a free run)")
+    pieces = itertools.chain([first], pieces)
+    init, used = _initial_outputs(args, first, k, n_init, model)
+    predicted = _predictions(args, bundle, pieces, first, k, init, used, stream)
+    log(f"predicting with {bundle.card['model']} and writing {args.out}")
+    n, fit, notes = _write(args, bundle, output, predicted, first, k, used, stream, rh_read)
+    for note in notes:
+        print(f"eap predict: warning: {note}")
+    line = (f"predicted {n} samples at {first.fs:g} Hz with {bundle.card['model']} "
+            f"({'free run' if k is None else f'{k}-step-ahead'})")
+    if fit.n:
+        res = fit.result()
+        line += (f"; against the measured {output.name}" + (f" after the first {used} samples" if used else "")
+                 + f": RMSE {quantity(res['rmse'], output.unit)}")
+        line += f", fit {res['fit_percent']:.1f} %" if "fit_percent" in res else ""
+    print(f"{line}; wrote {args.out} ({output.column})")
+    return 0
+
+
+def _check_counts(args, model) -> tuple[int | None, int | None]:
+    """``--steps-ahead`` and ``--init-samples``, checked against the model."""
     k = args.steps_ahead
     if k is not None:
         check_count(k, 1, MAX_STEPS_AHEAD, "--steps-ahead", "samples; beyond a few hundred a prediction is a free "
@@ -134,15 +159,13 @@ def run(args) -> int:
     if n_init and n_init < model.n_init_:
         raise InputError(f"--init-samples {n_init}: this model starts from its last {model.n_init_} "
                          "outputs; give at least that many, or 0 to start from rest")
-    stream = Path(args.input).is_file() and _streams(args, bundle, k, Path(args.input).stat().st_size)
-    log(f"reading {args.input}" + (" in pieces" if stream else ""))
-    pieces, rh_read = _pieces(args, output, uses_rh, need_y=k is not None or bool(n_init), stream=stream)
-    first = next(pieces)
-    if k is not None and k > first.n:
-        raise InputError(f"--steps-ahead {k}: {args.input} has {first.n} samples; give at most {first.n} (or omit "
-                         "the flag for a free run)")
-    pieces = itertools.chain([first], pieces)
-    # free run: started from the first measured outputs when the file has them (nnmodel.startup)
+    return k, n_init
+
+
+def _initial_outputs(args, first, k, n_init, model):
+    """(the measured outputs a free run starts from, or None; how many samples the fit skips).
+    A free run starts from the first measured outputs when the file has them (nnmodel.startup)."""
+    from ...startup import start_samples
     init = first.deflection if (k is None and n_init != 0) else None
     used = 0 if init is None else (n_init or start_samples(model.n_init_))
     if init is not None and used >= init.size:
@@ -150,19 +173,33 @@ def run(args) -> int:
                          "(--init-samples), so the record must be longer")
     if n_init and init is not None:
         init = init[:used]
+    return init, used
+
+
+def _predictions(args, bundle, pieces, first, k, init, used, stream):
+    """(piece, prediction) pairs: a long record in pieces through the model's state, else whole."""
+    from ...bundle import FS_RTOL
+    model, uses_rh = bundle.model, bundle.model.uses_rh
     if stream:
         if abs(first.fs - bundle.fs) > FS_RTOL * bundle.fs:
             raise InputError(f"the input is sampled at {first.fs:g} Hz but the model was trained at {bundle.fs:g} Hz; "
                              "resample the input, or pass --resample")
         a, b = itertools.tee(pieces)
         y0 = None if init is None else init[:used]
-        predicted = zip(a, model.simulate_pieces(((ts.voltage, ts.rh if uses_rh else None) for ts in b), y0))
-    else:
-        predicted = ((ts, bundle.predict(ts.voltage, rh=ts.rh if uses_rh else None, fs=ts.fs, steps_ahead=k,
-                                         resample=args.resample, deflection=ts.deflection if k else init))
-                     for ts in pieces)
+        return zip(a, model.simulate_pieces(((ts.voltage, ts.rh if uses_rh else None) for ts in b), y0))
+    return ((ts, bundle.predict(ts.voltage, rh=ts.rh if uses_rh else None, fs=ts.fs, steps_ahead=k,
+                                resample=args.resample, deflection=ts.deflection if k else init))
+            for ts in pieces)
+
+
+def _write(args, bundle, output, predicted, first, k, used, stream, rh_read):
+    """Write the prediction and its sidecar (atomically, piece by piece); re-issue the notes on
+    the user's input.  Returns (samples written, the fit against the measured output, warnings)."""
+    from physics.io.csvtable import append_rows, write_sidecar
+    from physics.io.outputs import output_files
+    from physics.io.timeseries import columns_of
+    uses_rh = bundle.model.uses_rh
     fit, n, meta = _Fit(used if k is None else 0), 0, dict(first.meta)
-    log(f"predicting with {bundle.card['model']} and writing {args.out}")
     with warnings.catch_warnings(record=True) as caught, \
             output_files([args.out], overwrite=args.overwrite, inputs=[args.input, args.model]) as (tmp,):
         warnings.simplefilter("always")
@@ -195,14 +232,4 @@ def run(args) -> int:
     for w in caught:          # notes on the user's input and folders (e.g. a folder left in place): said as notes
         if issubclass(w.category, InputNotice):
             warnings.warn(w.message)
-    for note in notes:
-        print(f"eap predict: warning: {note}")
-    line = (f"predicted {n} samples at {first.fs:g} Hz with {bundle.card['model']} "
-            f"({'free run' if k is None else f'{k}-step-ahead'})")
-    if fit.n:
-        res = fit.result()
-        line += (f"; against the measured {output.name}" + (f" after the first {used} samples" if used else "")
-                 + f": RMSE {quantity(res['rmse'], output.unit)}")
-        line += f", fit {res['fit_percent']:.1f} %" if "fit_percent" in res else ""
-    print(f"{line}; wrote {args.out} ({output.column})")
-    return 0
+    return n, fit, notes

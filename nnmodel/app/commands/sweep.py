@@ -33,7 +33,7 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from physics.solvers.sweep import parse_grid, run_sweep
+    from physics.solvers.sweep import SweepTone, parse_grid, run_sweep
     from physics.device import load_device
     out = Path(args.out)
     if out.suffix.lower() != ".csv":
@@ -48,7 +48,7 @@ def run(args) -> int:
     grid = parse_grid(args.grid, load_device(args.device))
     t0 = time.perf_counter()
     table = run_sweep(args.device, args.effects, grid, kind=args.kind, rh=args.rh, freqs=freqs,
-                      frequency=args.frequency_Hz, amplitude=args.amplitude_V, n_modes=args.n_modes,
+                      tone=SweepTone(frequency=args.frequency_Hz, amplitude=args.amplitude_V), n_modes=args.n_modes,
                       settings=parallel_settings(args), progress=not args.quiet)
     with output_files([out], overwrite=args.overwrite) as (tmp,):
         table.to_csv(tmp, index=False, lineterminator="\n")
