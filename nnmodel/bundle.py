@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from physics._version import __version__
-from physics.errors import InputError
+from physics.errors import InputError, arg
 from physics.io.fileio import jsonable, load_json, sha256_file
 
 from .data import check_fs, check_voltage
@@ -350,7 +350,8 @@ class Bundle:
             it and the prediction back to ``fs``.  Without it such a rate is refused.
         deflection : array_like, optional
             The measured output in the card's unit: a free run starts from its first samples
-            (else from rest); needed for ``steps_ahead``.
+            (else from rest; at the training rate, only those first samples may be given);
+            needed, whole, for ``steps_ahead``.
 
         Returns
         -------
@@ -377,15 +378,18 @@ class Bundle:
         fs = check_fs(fs)
         u = check_voltage(voltage)
         y = None if deflection is None else np.asarray(deflection, dtype=float)
-        if y is not None and y.shape != u.shape:
-            raise InputError(f"deflection must have the same shape as the voltage {u.shape}, got {y.shape}")
         same = abs(fs - self.fs) <= FS_RTOL * self.fs
+        first_outputs = steps_ahead is None and same and y is not None and y.ndim == 1 and y.size < u.size
+        if y is not None and y.shape != u.shape and not first_outputs:   # a free run may start from a few
+            raise InputError(f"deflection must have the same shape as the voltage {u.shape}, got {y.shape}"
+                             + ("" if steps_ahead is not None or same else
+                                " (a free run from the first measured outputs needs the training rate)"))
         if same:
             return self.model.predict(u, rh=rh, y=y, steps_ahead=steps_ahead)
         if not resample:
             raise InputError(f"the input is sampled at {fs:g} Hz but the model was trained at "
-                             f"{self.fs:g} Hz; resample the input, or pass resample=True "
-                             "(eap predict --resample) to resample in and out automatically")
+                             f"{self.fs:g} Hz; resample the input, or give {arg('resample')} to resample in "
+                             "and out automatically")
         m = self.model
         u_m = self._resample(u, fs, self.fs)
         rh_m = rh

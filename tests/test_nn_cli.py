@@ -46,6 +46,12 @@ def test_predict_writes_a_readable_prediction(bundle_dir, tmp_path, capsys):
     np.testing.assert_allclose(read_timeseries(rest).deflection, b.predict(u, rh=55.0, fs=toy.FS))
     assert main(["predict", "--model", str(bundle_dir), "--input", str(inp), "--out", str(tmp_path / "p1.csv"),
                  "--init-samples", "1"]) == (0 if b.model.n_init_ <= 1 else 2)
+    # a free run from the first measured outputs only (a short record, not streamed)
+    k0 = b.model.n_init_ + 2
+    assert main(["predict", "--model", str(bundle_dir), "--input", str(inp), "--out", str(tmp_path / "pk.csv"),
+                 "--init-samples", str(k0)]) == 0, capsys.readouterr().err
+    np.testing.assert_allclose(read_timeseries(tmp_path / "pk.csv").deflection,
+                               b.predict(u, rh=55.0, fs=toy.FS, deflection=y[:k0]))
     # k-step-ahead uses the measured deflection of the input
     out3 = tmp_path / "pred3.csv"
     assert main(["predict", "--model", str(bundle_dir), "--input", str(inp), "--out", str(out3),
