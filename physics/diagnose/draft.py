@@ -75,7 +75,6 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     draft takes the values fitted with the model as its defaults (bounds and starts follow)."""
     import tempfile
 
-    from .. import effects as E
     from .candidates import effect_values, map_free
     fit = res.final
     ad = res.adequacy
@@ -83,6 +82,10 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
         items = []
     else:       # an adequate catalog pick may still be a mimic: the drafts compete with it
         items = drafts(ad.forms if ad is not None and ad.forms else F.describe(fit, res.records), fit, res.records)
+    from .. import effects as E
+    # a form whose effect is already registered (the user's own file of an earlier draft) is on offer
+    # already: drafting it again would name one effect twice
+    items = [d for d in items if d.effect_id not in E.EFFECTS]
     outcome = DraftOutcome([], [], fit.rmse)
     if not items:
         return outcome
