@@ -175,3 +175,26 @@ def remove_trend(e: np.ndarray, t: np.ndarray) -> np.ndarray:
     e = np.asarray(e, dtype=float)
     tc = t - t.mean()
     return e - e.mean() - (float(tc @ e) / float(tc @ tc)) * tc
+
+
+def shared_draw(ing: str, rng) -> dict:
+    """Parameters of an ingredient both families draw alike (a near twin's Zener arm, an output
+    saturation, and the forms outside the catalog: creep, a second-order sensor low-pass, drift,
+    play, dead zone, an eigen-moment load); {} for another."""
+    if ing == "zener":
+        return {"zener_delta": float(rng.uniform(0.3, 0.6)), "zener_f_Hz": float(np.exp(rng.uniform(np.log(1), np.log(8))))}
+    if ing == "saturation":
+        return {"sat_Us_over_amp": float(rng.uniform(0.5, 1.2))}
+    if ing == "creep":
+        return {"creep_g": float(rng.uniform(0.25, 0.45)), "creep_tau_s": float(np.exp(rng.uniform(np.log(10), np.log(40))))}
+    if ing == "lowpass2":
+        return {"lowpass_Hz": float(rng.uniform(10, 20)), "lowpass_zeta": float(rng.uniform(0.5, 0.8))}
+    if ing == "drift":
+        return {"drift_over_noise": float(rng.uniform(5, 10))}
+    if ing == "play":
+        return {"play_um": float(rng.uniform(30, 80))}
+    if ing == "deadzone":
+        return {"deadzone_over_amp": float(rng.uniform(0.1, 0.2))}
+    if ing == "eigen_moment":
+        return {"eigen_moment": 1.0}
+    return {}

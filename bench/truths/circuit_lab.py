@@ -65,7 +65,7 @@ from scipy.linalg import expm
 from scipy.signal import lfilter
 
 from . import forms
-from .case import Case, Record
+from .case import Case, Record, shared_draw
 from .design import Plan, hygrometer, measure
 from .truthset import CATALOG_OF, TRUTHS
 
@@ -152,29 +152,12 @@ def _draw_truth(ingredients, rng) -> dict:
                 p["relax_keep"] = float(rng.uniform(0.3, 0.6))
         elif ing == "modulus":
             p["arm_factor"] = float(rng.uniform(2.0, 4.0))
-        elif ing == "zener":
-            p["zener_delta"] = float(rng.uniform(0.3, 0.6))
-            p["zener_f_Hz"] = float(np.exp(rng.uniform(np.log(1), np.log(8))))
-        elif ing == "saturation":
-            p["sat_Us_over_amp"] = float(rng.uniform(0.5, 1.2))
         elif ing == "humidity":
             p["rh_power"] = float(rng.uniform(0.6, 1.4)) if rng.uniform() < 0.5 else float(rng.uniform(1.4, 2.0))
         elif ing == "rh_law":
             p["rh_power"] = float(rng.uniform(1.5, 2.0))
-        elif ing == "creep":
-            p["creep_g"] = float(rng.uniform(0.25, 0.45))
-            p["creep_tau_s"] = float(np.exp(rng.uniform(np.log(10), np.log(40))))
-        elif ing == "lowpass2":
-            p["lowpass_Hz"] = float(rng.uniform(10, 20))
-            p["lowpass_zeta"] = float(rng.uniform(0.5, 0.8))
-        elif ing == "drift":
-            p["drift_over_noise"] = float(rng.uniform(5, 10))
-        elif ing == "play":
-            p["play_um"] = float(rng.uniform(30, 80))
-        elif ing == "deadzone":
-            p["deadzone_over_amp"] = float(rng.uniform(0.1, 0.2))
-        elif ing == "eigen_moment":
-            p["eigen_moment"] = 1.0
+        else:
+            p.update(shared_draw(ing, rng))
     return p
 
 

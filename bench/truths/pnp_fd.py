@@ -60,7 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import forms
-from .case import Case, Record
+from .case import Case, Record, shared_draw
 from .design import Plan, fft_filter, hygrometer, measure
 from .febeam import Beam, modal_tip
 from .lines import electrode_ladder, solvent_moment
@@ -155,30 +155,13 @@ def _draw_truth(ingredients, rng, st: Strip) -> dict:
             p["cc_gamma"] = float(rng.uniform(0.15, 0.3))
             p["cc_delta"] = float(rng.uniform(0.4, 0.8))
             p["cc_f_Hz"] = float(np.exp(rng.uniform(np.log(1), np.log(10))))
-        elif ing == "zener":
-            p["zener_delta"] = float(rng.uniform(0.3, 0.6))
-            p["zener_f_Hz"] = float(np.exp(rng.uniform(np.log(1), np.log(8))))
-        elif ing == "saturation":
-            p["sat_Us_over_amp"] = float(rng.uniform(0.5, 1.2))
         elif ing in ("humidity", "rh_law"):
             p["rh_kE"] = float(rng.uniform(0.6, 1.0))
             p["rh_kcoupling"] = float(rng.uniform(0.15, 0.4)) * float(rng.choice([-1, 1]))
         elif ing == "contact":
             p["contact_corner_Hz"] = float(np.exp(rng.uniform(np.log(6), np.log(20))))
-        elif ing == "creep":
-            p["creep_g"] = float(rng.uniform(0.25, 0.45))
-            p["creep_tau_s"] = float(np.exp(rng.uniform(np.log(10), np.log(40))))
-        elif ing == "lowpass2":
-            p["lowpass_Hz"] = float(rng.uniform(10, 20))
-            p["lowpass_zeta"] = float(rng.uniform(0.5, 0.8))
-        elif ing == "drift":
-            p["drift_over_noise"] = float(rng.uniform(5, 10))
-        elif ing == "play":
-            p["play_um"] = float(rng.uniform(30, 80))
-        elif ing == "deadzone":
-            p["deadzone_over_amp"] = float(rng.uniform(0.1, 0.2))
-        elif ing == "eigen_moment":
-            p["eigen_moment"] = 1.0
+        else:
+            p.update(shared_draw(ing, rng))
     return p
 
 
