@@ -27,11 +27,17 @@ __all__ = ["__version__", *sorted(_LAZY)]
 
 def __getattr__(name: str):
     """Import a public name's module on first access (PEP 562)."""
+    import importlib
     if name in _LAZY:
-        import importlib
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value
+    if not name.startswith("_"):          # a subpackage or module, e.g. physics.device
+        try:
+            return importlib.import_module(f"physics.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"physics.{name}":
+                raise
     raise AttributeError(f"module 'physics' has no attribute {name!r}")
 
 
