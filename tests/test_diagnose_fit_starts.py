@@ -106,3 +106,24 @@ def test_a_pick_stopped_short_is_refined_on_the_time_records(clean):
     assert short.values["beta_f"] == pytest.approx(best.values["beta_f"], rel=0.05)
     assert "refined on the time records" in short.spec.notes[-1]
     assert all(np.isfinite(short.rel_std_errors[k]) for k in labels)
+
+
+def test_a_free_parameter_without_effect_is_held_not_an_error(clean):
+    """With the damping factor at ~0 beside a viscoelastic loss, beta_f leaves the FRF unchanged:
+    the identification refuses it by name (InertParameterError, which survives pickling), the
+    diagnosis's fit holds it at its value, says so, and fits the rest (a twin_zener truth of the
+    circuit_lab family exited with 'beta_f has no effect' before)."""
+    import pickle
+
+    from physics.identify import IdentificationProblem
+    from physics.identify.problem import InertParameterError
+    case, data = clean
+    dev = load_device(case.device).with_params(beta_f=1e-12)
+    ids = tuple(C.resolve_effects(("double_layer", "viscoelastic"), dev))
+    with pytest.raises(InertParameterError) as info:
+        IdentificationProblem(dev, ids, data.targets, ["kf", "beta_f"], [])
+    assert info.value.name == "beta_f" and pickle.loads(pickle.dumps(info.value)).name == "beta_f"
+    spec = C.ModelSpec("base", ids, ["kf", "beta_f"])
+    fit = C.fit_model(spec, dev, data.targets, data.target_records, n_starts=1)
+    assert fit.ok and "beta_f" not in fit.values and "kf" in fit.values
+    assert any("beta_f has no effect" in n for n in fit.spec.notes)

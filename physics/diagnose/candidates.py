@@ -59,6 +59,7 @@ from typing import Sequence
 import numpy as np
 
 from ..device import Device, all_param_specs
+from ..identify.problem import InertParameterError
 from ..identify.settings import DEFAULT_DECADES
 from ..errors import InputError, ModelError
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
@@ -291,11 +292,22 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
             kw = {**kw, "start": {k: v for k, v in kw["start"].items() if k in frf_free},
                   "bounds": {k: v for k, v in kw["bounds"].items() if k in frf_free}}
 
-        def build(start):
+        def build(start, drop_inert=True):
             k = {**kw, "start": start}
             if df:
                 return _df_problem(spec, device, targets, target_records, k, df_cache)
-            return IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **k), None
+            while True:
+                try:
+                    return IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **k), None
+                except InertParameterError as exc:   # e.g. a damping another effect's loss replaces: held
+                    if not drop_inert or exc.name not in frf_free or (len(frf_free) == 1 and not spec.per_rh):
+                        raise
+                    frf_free.remove(exc.name)
+                    spec.free = [n for n in spec.free if n != exc.name]
+                    k = {**k, "start": {a: v for a, v in k["start"].items() if a != exc.name},
+                         "bounds": {a: v for a, v in k["bounds"].items() if a != exc.name}}
+                    spec.notes.append(f"{exc.name} has no effect on the frequency response of this model: held at "
+                                      "its value, not fitted")
 
         problem, df_info = build(kw["start"])
         extra = []
@@ -316,7 +328,10 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
                     break
                 start = {**kw["start"], **{prm.name: float(v) for prm, v in zip(problem.params, fit.theta)
                                            if prm.rh is None}}
-                moved, info = build(start)
+                try:
+                    moved, info = build(start, drop_inert=False)
+                except InertParameterError:       # a parameter gone inert where the fit ended: keep that fit
+                    break
                 again = fit_lsq(moved, n_starts=1, seed=seed, extra_starts=[fit.theta])
                 if again.cost >= (1.0 - RECENTRE_GAIN) * fit.cost:      # a flat valley is not worth following
                     break

@@ -23,6 +23,14 @@ from .parameters import FreeParameter, _make_param, _suggest, hint as _hint
 from .settings import EPS_FLOOR
 
 
+class InertParameterError(InputError):
+    """A free parameter that leaves the frequency response unchanged (``name``): it cannot be
+    fitted.  The command line reports it; the diagnosis, which chooses free parameters itself,
+    holds such a parameter at its value instead."""
+
+    def __init__(self, message: str = "", *args, name: str = ""):
+        super().__init__(message, *args)
+        self.name = name
 
 
 @dataclass
@@ -379,9 +387,10 @@ class IdentificationProblem:
             H = np.concatenate(self.responses(self.from_x(x)))
             if np.max(np.abs(H - base)) <= 1e-10 * scale:
                 hint = _hint(p.name, self.effects)
-                raise InputError(f"parameter {p.label} has no effect on the frequency response of "
-                                 f"{self.device.name!r} with effects [{', '.join(self.effects)}]"
-                                 + (f": {hint}" if hint else "") + "; choose other free parameters or effects")
+                raise InertParameterError(f"parameter {p.label} has no effect on the frequency response of "
+                                          f"{self.device.name!r} with effects [{', '.join(self.effects)}]"
+                                          + (f": {hint}" if hint else "") + "; choose other free parameters or effects",
+                                          name=p.name)
 
 
 # ============================================================================ fitting
