@@ -170,7 +170,9 @@ def _compare_record(ts: TimeSeries, where, predictor, opts, offset, skip_s, min_
                          "fewer than 3 samples")
     c = float(np.mean(y[i0:]) - np.mean(yhat[i0:])) if offset == "mean" else \
         float(np.mean(y[:w]) - np.mean(yhat[:w])) if w else 0.0   # no residual copy
-    names = (f"{where}: the measured {ts.output.name}" + (f" after sample {i0}" if i0 else ""),
+    after = (f" after {arg('skip_s')} {skip_s:g} s" if skip_s * ts.fs >= w and skip_s > 0 else
+             f" after sample {i0} (the model's start-up window)" if i0 else "")
+    names = (f"{where}: the measured {ts.output.name}" + after,
              f"{where}: the prediction of {predictor.name}")
     tm = metrics.summary(y[i0:], yhat[i0:], offset=c, names=names)   # the record keeps y and the offset
     tm["offset_removed_m"] = c
