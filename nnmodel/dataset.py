@@ -281,9 +281,10 @@ class Dataset:
         """The record of ``entry`` as the networks' view of it; each file is read once (the
         dataset keeps what it has read, its arrays read-only)."""
         ts = self._read.get(entry["path"])
-        if ts is None:
-            ts = self._read[entry["path"]] = self._read_record(entry)
-        return Experiment.from_timeseries(ts if self.has_rh else _without_rh(ts), name=entry["path"])
+        if ts is None:        # kept as the networks see it: without the RH channel when the dataset has none
+            ts = self._read_record(entry)
+            ts = self._read[entry["path"]] = ts if self.has_rh else _without_rh(ts)
+        return Experiment.from_timeseries(ts, name=entry["path"])
 
     def _read_record(self, entry: dict):
         ts = read_timeseries(self.path / entry["path"], rh=None if self.has_rh else 0.0, output=self.output)
