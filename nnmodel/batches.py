@@ -85,8 +85,14 @@ def paired_gain(err_ref, err_new, blocks: int) -> tuple[float, float, int]:
     means — each record cut into contiguous blocks, about ``blocks`` in all but none shorter
     than the difference's correlation time (:func:`correlation_time`), so that block means
     vary nearly as independent draws (Law & Kelton, *Simulation Modeling and Analysis*,
-    §9.5.3).  The standard error is inf with fewer than 2 blocks."""
-    d = [np.asarray(a, float) - np.asarray(b, float) for a, b in zip(err_ref, err_new)]
+    §9.5.3).  The standard error is inf with fewer than 2 blocks.  Two models that start their
+    free runs after different numbers of samples (``n_init``) are paired on the samples both
+    score: each record's errors end at the record's end, so they are aligned there."""
+    d = []
+    for a, b in zip(err_ref, err_new):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        m = min(a.size, b.size)
+        d.append(a[a.size - m:] - b[b.size - m:])
     d = [x for x in d if x.size]
     n = sum(x.size for x in d)
     if n == 0:

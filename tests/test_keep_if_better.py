@@ -4,6 +4,9 @@ import numpy as np
 import torch
 from torch import nn
 
+import pytest
+
+from nnmodel.batches import paired_gain
 from nnmodel.models.base import GAIN_BLOCKS, GAIN_SE, keep_if_better
 from nnmodel.models.core import SequenceCore
 from nnmodel.models.normalise import Seq
@@ -79,3 +82,15 @@ def test_blocks_are_no_shorter_than_the_correlation_time():
     d = 0.05 + lfilter([1.0], [1.0, -0.99], np.random.default_rng(2).normal(size=1000)) * 0.01
     gain, se, blocks = paired_gain([d + 1.0], [np.ones(1000)], 10)
     assert 2 <= blocks <= 7 and abs(gain - d.mean()) < 1e-12
+
+
+def test_models_with_different_start_up_windows_are_paired_on_the_samples_both_score():
+    """A grey box and a network start their free runs after different numbers of samples: their
+    per-record errors (which end at the record's end) are compared on the common tail — the
+    default `eap run` stopped with a broadcast error in the hybrid's fallback check before."""
+    rng = np.random.default_rng(3)
+    tail = rng.normal(size=400) ** 2
+    ref = [np.concatenate([np.full(9, 50.0), tail + 1.0])]     # starts 9 samples earlier
+    new = [tail]
+    gain, se, blocks = paired_gain(ref, new, 10)
+    assert gain == pytest.approx(1.0) and blocks >= 2
