@@ -162,6 +162,13 @@ class ActuatorModel:
         rh = self.check_rh(rh)
         return self.hook("params_at")(dict(self.device.params), float(np.mean(rh)))
 
+    def chain_params(self, rh=None) -> dict:
+        """Parameters (SI) of the load filters and the beam of a time record at ``rh`` [%] (its
+        median): humidity maps applied except the stiffness's and the coupling's, which the
+        time solver follows sample by sample."""
+        rh = self.check_rh(rh)
+        return self.hook("chain_params")(dict(self.device.params), float(np.median(rh)))
+
     def double_layer_props(self, p: dict, T=None) -> DoubleLayerProps:
         return self.hook("props")(p, T)
 

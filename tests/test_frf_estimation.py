@@ -7,7 +7,7 @@ import pytest
 from scipy import signal
 
 from physics.errors import InputError
-from physics.analysis.frf_estimation import estimate_frf, stepped_sine, welch_averages
+from physics.analysis.frf_estimation import estimate_frf, leading_transient, stepped_sine, welch_averages
 from physics.io.frfdata import read_frf, write_frf
 
 FS = 1000.0
@@ -84,6 +84,28 @@ def test_multisine_noise_free_and_unexcited_lines_flagged():
     assert mag_err < 1e-6 and phase_err < 1e-4  # periodic steady state: leakage-free
     assert est.coherence[lines].min() > 1 - 1e-9
     assert est.n_averages[0] == 4
+
+
+@pytest.mark.parametrize("fade", [True, False])
+def test_a_multisine_started_inside_the_record_skips_its_transient_period(fade):
+    """A lab starts the drive inside the record (from rest, perhaps faded in): the first period
+    is a transient, found from the voltage (a fade-in does not repeat) or the deflection (its
+    first period changes more than the later ones), and the estimate from the periods after it
+    is leakage-free again; a record begun in its steady state loses nothing."""
+    p = 4096
+    lines = np.arange(1, int(50 * p / FS), 2)
+    u = np.tile(multisine_period(p, lines, seed=1), 4)
+    if fade:
+        u[:p // 4] *= 0.5 * (1 - np.cos(np.pi * np.arange(p // 4) / (p // 4)))
+    y = simulate(u) + 1e-3 * np.random.default_rng(0).normal(size=u.size)
+    skip = leading_transient(u, y, FS, p / FS)
+    assert skip == p
+    whole = estimate_frf(u, y, FS, nperseg=p, window="boxcar", overlap=0.0)
+    settled = estimate_frf(u[skip:], y[skip:], FS, nperseg=p, window="boxcar", overlap=0.0)
+    assert errors(whole, 1.0, 50.0)[0] > 0.02 > errors(settled, 1.0, 50.0)[0]
+    steady = np.tile(multisine_period(p, lines, seed=1), 5)
+    ys = simulate(steady)[p:] + 1e-3 * np.random.default_rng(1).normal(size=4 * p)
+    assert leading_transient(steady[p:], ys, FS, p / FS) == 0
 
 
 def test_band_limited_noise_noise_free():

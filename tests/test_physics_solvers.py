@@ -66,6 +66,24 @@ def test_rh_series_switches_the_mechanics():
     np.testing.assert_array_equal(const.deflection, r40.deflection)
 
 
+@pytest.mark.parametrize("param,values", [("beta_f", [5e-4, 1e-3, 3e-3]), ("D_solvent", [2.4e-12, 2.4e-12, 1e-9])])
+def test_time_domain_follows_humidity_maps_of_the_beam_and_load_parameters(param, values):
+    """A per-RH damping or solvent diffusivity (an absolute map, as ``identify --per-rh`` writes
+    it) reaches the time solver's beam and load filters as it reaches the frequency solver
+    (the time solver used the device's shared value: 20 % off at a resonance)."""
+    import dataclasses
+    from physics.device import HumidityMap, load_device
+    dev = load_device("ipmc_pt_eg")
+    maps = {**dev.humidity_maps, param: HumidityMap(param, np.array([40.0, 60.0, 80.0]), np.array(values),
+                                                     "absolute")}
+    model = ActuatorModel(dataclasses.replace(dev, humidity_maps=maps), "linear,humidity")
+    f, H = _time_domain_frf(model, rh=80)
+    ref = frequency_response(model, None, f, rh=80).deflection
+    assert np.max(np.abs(H / ref - 1)) < 0.01
+    plain = frequency_response(ActuatorModel(dev, "linear,humidity"), None, f, rh=80).deflection
+    assert np.max(np.abs(plain / ref - 1)) > 0.05       # the map matters at this RH
+
+
 @pytest.mark.parametrize("t,v,message", [
     (np.array([0.0, 0.1, 0.3, 0.4]), np.zeros(4), "uniformly sampled"),
     (np.arange(4.0), np.array([0, np.nan, 0, 0]), "finite"),

@@ -407,6 +407,49 @@ SWEEP_DECADES = 0.6
 _BLOCK = 1 << 18
 
 
+#: A period whose voltage differs from the next one by more than this share of the drive's RMS
+#: does not repeat: a lead-in (a fade-in, the start of the drive).
+REPEAT_TOLERANCE = 0.02
+#: A period whose deflection changes to the next one by more than this factor times the change
+#: between the two periods that follow is still settling (the response of a start from rest).
+SETTLING_RATIO = 2.0
+
+
+def _rms_change(x: np.ndarray, a: int, p: int) -> float:
+    """RMS of x over period ``a + 1`` less x over period ``a`` (``p`` samples each)."""
+    d = np.asarray(x[(a + 1) * p:(a + 2) * p], dtype=float) - np.asarray(x[a * p:(a + 1) * p], dtype=float)
+    return float(np.sqrt(np.mean(d * d)))
+
+
+def leading_transient(v, y, fs: float, period_s: float) -> int:
+    """Samples at the start of a periodic record that are not yet its periodic steady state.
+
+    A lab often starts the drive inside the record (from rest, perhaps faded in) instead of
+    recording once the response has settled; that first period is a transient, and an
+    estimate that treats it as one period of the steady state (or a model started in its
+    steady state) is biased near lightly damped lines.  Counted here, in whole periods: those
+    whose voltage differs from the next period's by more than :data:`REPEAT_TOLERANCE` of the
+    drive's RMS, then — when two more periods follow — one whose deflection ``y`` changes to
+    the next by more than :data:`SETTLING_RATIO` × the change between the two after it (noise
+    and a steady drift change every period alike).  At least one period is always kept; 0 for
+    a record of fewer than two periods or one recorded once settled (Pintelon & Schoukens,
+    *System Identification*, 2012, §2.4: discard the transient periods)."""
+    v = np.asarray(v)
+    p = int(round(float(period_s) * fs))
+    k = v.size // p if p > 0 else 0
+    if k < 2:
+        return 0
+    ref = float(np.std(v[:k * p]))
+    if ref <= 0:
+        return 0
+    j = 0
+    while j + 1 < k and _rms_change(v, j, p) > REPEAT_TOLERANCE * ref:
+        j += 1
+    if y is not None and j + 2 < k and _rms_change(y, j, p) > SETTLING_RATIO * _rms_change(y, j + 1, p):
+        j += 1
+    return min(j, k - 1) * p
+
+
 def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
     """Classify the voltage record ``v`` sampled at ``fs`` [Hz] (see :class:`Excitation`).
 

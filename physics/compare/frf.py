@@ -9,7 +9,8 @@ from scipy import signal as sps
 
 from ..analysis import metrics
 from ..errors import InputError
-from ..analysis.frf_estimation import FRFEstimate, detect_excitation, estimate_frf, noise_level, power_blocks
+from ..analysis.frf_estimation import (FRFEstimate, detect_excitation, estimate_frf, leading_transient, noise_level,
+                                       power_blocks)
 from ..io.timeseries import TimeSeries
 
 
@@ -72,6 +73,11 @@ class FRFOptions:
             nper = self.nperseg or int(round(float(period) * ts.fs))
             kw = dict(nperseg=nper, window="boxcar", overlap=0.0)
             chosen = "periodic"
+            skip = leading_transient(ts.voltage, ts.deflection, ts.fs, nper / ts.fs)
+            if skip:
+                kw["_skip"] = skip
+                how += (f"; the first {skip / ts.fs:.3g} s are not yet periodic (a lead-in or the response settling "
+                        "from rest): estimated from the periods after them")
         elif self.method == "whole" or kind in _TRANSIENT_KINDS:
             kw = dict(nperseg=n, window="boxcar", overlap=0.0)
             chosen = "whole"
@@ -102,15 +108,19 @@ def estimate_record_frf(ts: TimeSeries, y: np.ndarray, options: FRFOptions, *,
     kw = dict(settings or options.settings_for(ts))
     method = kw.pop("_method", "custom")
     how = kw.pop("_how", "")
-    if kw["nperseg"] >= ts.n:       # one average: the coherence from the output's noise level
+    skip = int(kw.pop("_skip", 0))
+    u, y = ts.voltage[skip:], np.asarray(y)[skip:]
+    kw["nperseg"] = min(int(kw["nperseg"]), u.size)
+    if kw["nperseg"] >= u.size:     # one average: the coherence from the output's noise level
         level = noise_level(y, ts.fs)[0]
         if np.isfinite(level):
             kw["noise_psd"] = level
     try:
-        est = estimate_frf(ts.voltage, y, ts.fs, **kw)
+        est = estimate_frf(u, y, ts.fs, **kw)
     except InputError as exc:
         raise InputError(f"{ts.source or 'record'}: FRF estimation failed: {exc}") from None
     return est, {"method": method, "chosen": how, "coherence": est.meta.get("coherence"),
+                 **({"skipped_s": skip / ts.fs} if skip else {}),
                  **{k: v for k, v in kw.items() if k not in ("min_input_power", "noise_psd")}}
 
 

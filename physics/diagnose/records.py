@@ -27,9 +27,9 @@ Each time-series record is
   signal's peak-to-peak; the offset, when the record has a rest before the drive, within
   :data:`OFFSET_SHARE` of the peak-to-peak of the level at rest — so that a slow
   back-relaxation or a wrong static gain stays in the error, where it is evidence;
-* when it is **periodic** (a multisine of two or more periods, recorded once settled), entered
-  in its steady state: the model is driven through the record's own periods first
-  (:func:`periodic_lead`).
+* when it is **periodic** (a multisine of two or more periods) and recorded once settled,
+  entered in its steady state: the model is driven through the record's own periods first
+  (:func:`periodic_lead`); one whose drive starts inside the record is entered at rest.
 
 Frequency-response targets for the fits come from the broadband records through
 :func:`physics.identify.build_targets` (H1, thinned to log-spaced lines) and from tone
@@ -48,7 +48,7 @@ from scipy import signal as sps
 from ..compare import (FRFOptions, cluster_rh, load_measurements, model_rh, sensor_bandwidth_of,
                        sensor_response, source_name)
 from ..errors import InputError, arg
-from ..analysis.frf_estimation import detect_excitation, noise_level, stepped_sine
+from ..analysis.frf_estimation import detect_excitation, leading_transient, noise_level, stepped_sine
 from ..io.frfdata import FRFData
 from ..analysis.metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
 from ..io.timeseries import TimeSeries
@@ -210,10 +210,12 @@ LEAD_S = 60.0
 
 def periodic_lead(ts: TimeSeries, how: str, q: int) -> int:
     """Samples (full rate, a multiple of ``q``) of the periods that precede a periodic record
-    of at least :data:`MIN_PERIODS` periods — a multisine is recorded once its response has
-    settled, so the model is driven through the record's own periods (whole ones, up to
-    :data:`LEAD_S`) before it starts: its periodic steady state, not a start at rest; 0 for
-    other records.  The period comes
+    of at least :data:`MIN_PERIODS` periods — a multisine recorded once its response has
+    settled is entered in its steady state: the model is driven through the record's own
+    periods (whole ones, up to :data:`LEAD_S`) before it starts; 0 for other records and for
+    one whose first period is not yet periodic (a fade-in, the response settling from rest:
+    :func:`~physics.analysis.frf_estimation.leading_transient`), which the model enters at rest
+    as the strip did.  The period comes
     from the metadata (``period_s``, ``periods``) or the voltage (:func:`detect_excitation`)."""
     sig = ts.meta.get("signal") if isinstance(ts.meta.get("signal"), dict) else {}
     period = None
@@ -229,6 +231,8 @@ def periodic_lead(ts: TimeSeries, how: str, q: int) -> int:
             period = None
     if not period or period <= 0:
         return 0
+    if leading_transient(ts.voltage, ts.deflection, ts.fs, period):
+        return 0                    # the drive starts inside the record: the model starts at rest, as the strip did
     p = int(round(period * ts.fs))
     p -= p % q
     if not 0 < p <= ts.n // MIN_PERIODS:

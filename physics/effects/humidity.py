@@ -50,6 +50,17 @@ class HumidityInvariant(Effect):
                 p["kf0"] = p["kf0"] * float(f)
         return p
 
+    def chain_params(self, base: dict, rh: float) -> dict:
+        """Parameters at ``rh`` for the stages after the electrochemistry (load filters, beam)
+        of a time record: every map but the stiffness's and the coupling's, whose factors the
+        time solver applies sample by sample (a per-RH damping ``beta_f`` or solvent ``D_solvent``,
+        as the frequency solver has them at that RH)."""
+        p = dict(base)
+        for name, f in self.factors(rh).items():
+            if name not in MECHANICAL_MAPS and name in p:
+                p[name] = p[name] * float(f)
+        return p
+
     def electrochemistry_varies(self) -> bool:
         """True when RH changes parameters upstream of the mechanics (needs a re-solve)."""
         return any(n not in MECHANICAL_MAPS for n in self.factors(50.0))

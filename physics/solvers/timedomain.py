@@ -233,7 +233,7 @@ def _stages(model, rec: _Record, hold, periodic):
     the electrochemistry reduced at once to what stages 2–4 need (the solvent excess and the
     modal loads: rows acting on the clamp branch and the segments), so a long record never
     holds one row per segment unless a per-segment field is asked for."""
-    base = dict(model.device.params)
+    base = model.chain_params(rec.rh)
     lengths = np.concatenate([[base["L_clamp"]], np.diff(rec.edges)])
     modal = _beam_projection(model, base, rec.edges)
     reduce = np.vstack([base["n_solvation"] * lengths / base["L_total"],
@@ -303,7 +303,7 @@ def tip_from_interface_excess(model, t, ell, edges, rh=None, *, apply_solvent_fa
         raise InputError(f"ell must have shape (segments, samples) = ({edges.size - 1}, {t.size}), got {ell.shape}")
     rh_t = model.check_rh(rh)
     rh_t = np.full(t.size, float(rh_t)) if np.ndim(rh_t) == 0 else np.asarray(rh_t, dtype=float)
-    base = dict(model.device.params)
+    base = model.chain_params(rh_t)
     dt = float(t[1] - t[0])
     load_filter, _ = _load_filters(model, base, np.pi / dt, solvent=apply_solvent_factor)
     return _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic)
