@@ -11,7 +11,8 @@ built-in effects:
 effect                      extra free parameters (bounds)                         nested?
 ==========================  =====================================================  ==========
 ``electrode_resistance``    ``Rs`` (0.1–10⁴ Ω/□)                                    yes (Rs→0)
-``fractional_coupling``     ``frac_a`` (0–0.95); ``kf0`` replaces ``kf``            yes (a→0)
+``fractional_coupling``     ``frac_a`` (0–0.95), its DC corner ``frac_f_lo``         yes (a→0)
+                            (shape: 10⁻⁵–0.05 Hz); ``kf0`` replaces ``kf``
 ``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→0)
 ``viscoelastic``            none: ``dma_scale`` replaces ``Y`` (the DMA table's      no
                             shape is prior knowledge)
@@ -70,7 +71,7 @@ from ..analysis import stats
 from .describing import DescribingFunction, charge_effects
 from .records import NUISANCE_TERMS, PreparedRecord, remove_nuisance, sensor_filter, upsample
 from .specs import (declared_default, default_candidates, effect_params, is_nested, off_values, param_bounds,
-                    param_used, role_family, role_param, spec_of, start_points)
+                    param_used, role_family, role_param, shape_params, spec_of, start_points)
 
 ROLE_GAIN, ROLE_STIFF = "gain", "stiffness"
 #: The large-signal parameter is fitted when it changes the large-signal gain by more than this (relative).
@@ -172,7 +173,7 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
     notes = []
     spec = spec_of(effect)
     if not spec.get("describing_function"):    # else decided after the describing-function probe
-        free += [name for name in effect_params(effect) if name not in free]
+        free += [name for name in effect_params(effect) + shape_params(effect) if name not in free]
     per = list(spec.get("per_rh", ()))
     if per:
         if n_rh_levels >= 2:
@@ -763,7 +764,7 @@ def effect_values(mf: ModelFit, effect: str) -> dict:
     spec = spec_of(effect)
     if spec.get("per_rh"):
         return {k: v for k, v in mf.values.items() if "@RH" in k}
-    names = set(effect_params(effect)) | {r[0] for r in spec.get("roles", {}).values()}
+    names = set(effect_params(effect) + shape_params(effect)) | {r[0] for r in spec.get("roles", {}).values()}
     return {k: v for k, v in mf.values.items() if k in names}
 
 

@@ -34,6 +34,12 @@ def effect_params(effect: str) -> tuple[str, ...]:
     return tuple(spec_of(effect).get("free", ()))
 
 
+def shape_params(effect: str) -> tuple[str, ...]:
+    """Parameters fitted with the effect that shape its law without deciding whether it is there
+    (its spec's ``shape``: never a quality flag when the records leave them undetermined)."""
+    return tuple(spec_of(effect).get("shape", ()))
+
+
 def is_nested(effect: str) -> bool:
     """True when some value of the effect's parameters gives the model without it."""
     return bool(spec_of(effect).get("nested", False))
@@ -60,7 +66,8 @@ def owners(name: str) -> list[str]:
     out = []
     for e, cls in EFFECTS.items():
         sp = spec_of(e)
-        if any(p.name == name for p in cls.params) or name in sp.get("free", ()) or name in sp.get("bounds", {}):
+        if any(p.name == name for p in cls.params) or name in sp.get("free", ()) or name in sp.get("shape", ()) \
+                or name in sp.get("bounds", {}):
             out.append(e)
     return out
 

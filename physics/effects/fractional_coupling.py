@@ -7,7 +7,9 @@ the signature of the dendritic electrode/polymer interface (Caponetto et al. 201
 The thesis law has an unbounded gain at DC, which no real device shows; here the first
 factor is (j2πf + 2π f_lo)^a with a corner f_lo (default 1e-4 Hz, 0.03° from the thesis
 law at 0.1 Hz; p is raised to at least 2π f_lo likewise), so that both solvers share one bounded, causal response.  The time
-solver realises it with real poles (error < 0.1 % over the band).
+solver realises it with real poles (error < 0.1 % over the band).  Where a device's law flattens is
+its own (a corner of a few mHz is common, a 25 s step shows it), so the diagnosis fits f_lo with the
+effect as a shape parameter (10⁻⁵–0.05 Hz; held where the records cannot tell).
 Off: constant kf.  A humidity map on ``kf`` scales kf0 alike.
 """
 from __future__ import annotations
@@ -51,7 +53,8 @@ class FractionalCoupling(ConstantCoupling):
                   default=1e-4),
     )
     diagnosis = {
-        "free": ("frac_a",), "bounds": {"frac_a": (0.0, 0.95)},
+        "free": ("frac_a",), "shape": ("frac_f_lo",),       # where a real device's law flattens (steps, holds)
+        "bounds": {"frac_a": (0.0, 0.95), "frac_f_lo": (1e-5, 0.05)},
         "starts": [{"frac_a": 0.1}, {"frac_a": 0.5}, {"frac_a": 0.8}],
         "nested": True, "off": {"frac_a": 0.0, "frac_b": 0.0, "kf0": (1.0, "kf")},   # kf(s) = kf0 = kf
         "roles": {"gain": ("kf0", 1)},                       # kf0 takes over the base's kf
