@@ -161,3 +161,18 @@ def test_the_dc_corner_of_a_fractional_law_is_fitted_with_it():
         C.refine_on_time(fit_held, data.records)
     assert fit.values["frac_f_lo"] == pytest.approx(3e-3, rel=0.3)
     assert fit.rmse < 1.5e-6 < 3 * fit.rmse < fit_held.rmse
+
+
+def test_a_shape_parameter_keeps_its_range_in_the_base_fit(clean):
+    """A drafted refit starts from a pick's model with its shape parameter free: the base fit
+    keeps the spec's range (10⁻⁴–0.05 Hz for the fractional corner), not the device check's
+    wider one, below which the time solver cannot realise the law (an error exit before)."""
+    from physics.diagnose.diagnosis import fit_base
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects("fractional_coupling", dev))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        base = fit_base(data, dev, ids, FitOptions(), ["kf0", "frac_a", "frac_f_lo"], [], 1)
+    assert base.spec.bounds["frac_f_lo"] == (1e-4, 0.05)
+    assert 1e-4 <= base.values["frac_f_lo"] <= 0.05 and base.ok

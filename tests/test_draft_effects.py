@@ -219,6 +219,20 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     assert not draft_effects(adequate, _rediagnose(table, calls)).kept and not calls
 
 
+def test_a_model_that_cannot_be_refitted_with_the_drafts_leaves_the_diagnosis_standing():
+    """The refit the drafts would join fails (a fitted model the time solver cannot realise):
+    the drafts are rejected with the reason, the diagnosis's own result stands, no error exit."""
+    from physics.diagnose.draft import draft_effects
+    from physics.errors import ModelError
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+
+    def failing(device, effects, free, candidates):
+        raise ModelError("the base model could not be simulated: could not realise the load filter")
+    out = draft_effects(_diagnosis_stub("electrode_resistance", res, 5e-6), failing)
+    assert not out.kept and out.rejected
+    assert all("could not be refitted" in why and "realise" in why for _, why in out.rejected)
+
+
 @pytest.mark.slow
 def test_lab_like_drift_loop_from_the_command_line(tmp_path, capsys):
     """A drifting reading (outside the catalog) in mm columns without excitation metadata:

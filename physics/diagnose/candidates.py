@@ -12,7 +12,7 @@ effect                      extra free parameters (bounds)                      
 ==========================  =====================================================  ==========
 ``electrode_resistance``    ``Rs`` (0.1–10⁴ Ω/□)                                    yes (Rs→0)
 ``fractional_coupling``     ``frac_a`` (0–0.95), its DC corner ``frac_f_lo``         yes (a→0)
-                            (shape: 10⁻⁵–0.05 Hz); ``kf0`` replaces ``kf``
+                            (shape: 10⁻⁴–0.05 Hz); ``kf0`` replaces ``kf``
 ``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→0)
 ``viscoelastic``            none: ``dma_scale`` replaces ``Y`` (the DMA table's      no
                             shape is prior knowledge)

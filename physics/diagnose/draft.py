@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
+from ..errors import InputError, ModelError
 from ..execution.threads import single_threaded
 from . import forms as F
 from .effect_draft import EffectDraft
@@ -101,7 +102,12 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
         try:
             pool = list(items)
             while pool and len(outcome.kept) < max_effects:
-                again = rediagnose(device, on_top, free, [d.effect_id for d in pool] + catalog)
+                try:
+                    again = rediagnose(device, on_top, free, [d.effect_id for d in pool] + catalog)
+                except (InputError, ModelError) as exc:     # the diagnosis stands; the drafts are not tried
+                    outcome.rejected += [(d, f"not tried: the model they would join could not be refitted ({exc})")
+                                         for d in pool]
+                    break
                 outcome.steps.append((list(on_top), again))
                 scored, why = _scored(pool + catalog, again, on_top)
                 if not scored:

@@ -40,6 +40,12 @@ def shape_params(effect: str) -> tuple[str, ...]:
     return tuple(spec_of(effect).get("shape", ()))
 
 
+def is_shape(name: str) -> bool:
+    """True when ``name`` is a shape parameter of some effect (:func:`shape_params`): it keeps its
+    spec's range in every fit of the diagnosis, the base's included."""
+    return any(name in shape_params(e) for e in owners(name))
+
+
 def is_nested(effect: str) -> bool:
     """True when some value of the effect's parameters gives the model without it."""
     return bool(spec_of(effect).get("nested", False))

@@ -9,7 +9,8 @@ factor is (j2πf + 2π f_lo)^a with a corner f_lo (default 1e-4 Hz, 0.03° from 
 law at 0.1 Hz; p is raised to at least 2π f_lo likewise), so that both solvers share one bounded, causal response.  The time
 solver realises it with real poles (error < 0.1 % over the band).  Where a device's law flattens is
 its own (a corner of a few mHz is common, a 25 s step shows it), so the diagnosis fits f_lo with the
-effect as a shape parameter (10⁻⁵–0.05 Hz; held where the records cannot tell).
+effect as a shape parameter (10⁻⁴–0.05 Hz: a corner below the device default is beyond what
+minutes of record resolve).
 Off: constant kf.  A humidity map on ``kf`` scales kf0 alike.
 """
 from __future__ import annotations
@@ -49,12 +50,12 @@ class FractionalCoupling(ConstantCoupling):
         ParamSpec("frac_a", "1", 0.0, 1.0, "fractional order a of eq. 14"),
         ParamSpec("frac_b", "1", 0.0, 1.0, "fractional order b of eq. 14"),
         ParamSpec("frac_p", "1/s", 0.0, 1e6, "pole p of the second factor of eq. 14 [rad/s]"),
-        ParamSpec("frac_f_lo", "Hz", 1e-7, 1.0, "low-frequency corner below which the law flattens", optional=True,
+        ParamSpec("frac_f_lo", "Hz", 1e-5, 1.0, "low-frequency corner below which the law flattens", optional=True,
                   default=1e-4),
     )
     diagnosis = {
         "free": ("frac_a",), "shape": ("frac_f_lo",),       # where a real device's law flattens (steps, holds)
-        "bounds": {"frac_a": (0.0, 0.95), "frac_f_lo": (1e-5, 0.05)},
+        "bounds": {"frac_a": (0.0, 0.95), "frac_f_lo": (1e-4, 0.05)},
         "starts": [{"frac_a": 0.1}, {"frac_a": 0.5}, {"frac_a": 0.8}],
         "nested": True, "off": {"frac_a": 0.0, "frac_b": 0.0, "kf0": (1.0, "kf")},   # kf(s) = kf0 = kf
         "roles": {"gain": ("kf0", 1)},                       # kf0 takes over the base's kf
