@@ -40,25 +40,26 @@ class HumidityInvariant(Effect):
 
     def params_at(self, base: dict, rh: float) -> dict:
         """Parameters at ``rh`` (the Y factor is applied by the beam section, not here)."""
-        p = dict(base)
-        for name, f in self.factors(rh).items():
-            if name == "Y":
-                continue
-            if name in p:
-                p[name] = p[name] * float(f)
-            if name == "kf" and "kf0" in p:
-                p["kf0"] = p["kf0"] * float(f)
-        return p
+        return self._mapped(base, rh, ("Y",))
 
     def chain_params(self, base: dict, rh: float) -> dict:
         """Parameters at ``rh`` for the stages after the electrochemistry (load filters, beam)
         of a time record: every map but the stiffness's and the coupling's, whose factors the
         time solver applies sample by sample (a per-RH damping ``beta_f`` or solvent ``D_solvent``,
         as the frequency solver has them at that RH)."""
+        return self._mapped(base, rh, MECHANICAL_MAPS)
+
+    def _mapped(self, base: dict, rh: float, skip) -> dict:
+        """``base`` with the humidity factors at ``rh`` applied, except to the names in ``skip``
+        (a map on ``kf`` scales ``kf0`` alike)."""
         p = dict(base)
         for name, f in self.factors(rh).items():
-            if name not in MECHANICAL_MAPS and name in p:
+            if name in skip:
+                continue
+            if name in p:
                 p[name] = p[name] * float(f)
+            if name == "kf" and "kf0" in p:
+                p["kf0"] = p["kf0"] * float(f)
         return p
 
     def electrochemistry_varies(self) -> bool:
