@@ -945,6 +945,7 @@ def _fit_candidate(task: dict):
                      is not None else {})
     if mf.ok:
         C.score(mf, task["records"])
+        C.start_on_time(mf, task["records"])
     return mf, time.perf_counter() - t0
 
 

@@ -16,7 +16,9 @@ error power over the noise floor — and a base above the noise: a flexible effe
 little off an error it does not explain is no answer; on a later step of the chain, no quality
 flag at all); the pick is the one with the lowest E.  Two candidates that pass are
 **ambiguous** when they are close on fit (their pairwise |ΔBIC| < 6, or the better leaves more
-than two thirds of the other's excess error power over the noise floor), whatever their
+than two thirds of the other's excess error power over the noise floor while their predictions
+differ by less than the RMS error the better one leaves — two models that differ by more than
+their misfit explain different parts of the records and are not twins), whatever their
 quality flags: near twins are not told apart by a flag; the verdict then names the record that
 would separate them (:func:`separating_record`).
 
@@ -186,8 +188,12 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
         pair = compare_fits(ru.fit, top.fit, nested=False, taus=taus_ref)
         dist = prediction_distance(top.fit, ru.fit)
         # close on fit: the data do not separate them (ΔBIC), or the better one removes less than
-        # MIN_SHARE of what the other leaves above the noise floor (a difference that matters)
-        close_fit = pair.delta_bic > -DISTINCT_BIC or excess_share(ru.fit.rmse, top.fit.rmse, noise) < MIN_SHARE
+        # MIN_SHARE of what the other leaves above the noise floor (a difference that matters) while
+        # their predictions differ by less than the error the better one leaves (near twins say nearly
+        # the same thing; two models that differ by more than their misfit explain different parts of
+        # the records, and the chain tries the other on top of the better)
+        close_fit = pair.delta_bic > -DISTINCT_BIC or (
+            excess_share(ru.fit.rmse, top.fit.rmse, noise) < MIN_SHARE and dist <= top.fit.rmse)
         if close_fit:       # near twins: quality flags do not separate what the fit cannot
             top.indistinguishable_from.append(ru.effect)
             ru.indistinguishable_from.append(top.effect)
