@@ -176,3 +176,33 @@ def test_a_shape_parameter_keeps_its_range_in_the_base_fit(clean):
         base = fit_base(data, dev, ids, FitOptions(), ["kf0", "frac_a", "frac_f_lo"], [], 1)
     assert base.spec.bounds["frac_f_lo"] == (1e-4, 0.05)
     assert 1e-4 <= base.values["frac_f_lo"] <= 0.05 and base.ok
+
+
+def test_a_slow_effect_held_at_its_off_bound_starts_again_on_the_time_records():
+    """An FRF optimum that holds the added effect where it vanishes (solvent diffusion at its
+    lowest D_solvent, as a misfit elsewhere in the band does when a second effect is hidden:
+    circuit_lab's electrode + solvent pair) is not the time records' optimum: the spec's start
+    points are tried on the time records and the best is refined there, recovering the truth's
+    D_solvent; a fit already at the time optimum is left alone."""
+    case = hidden_effect_case("solvent_diffusion", seed=0, duration=30.0)
+    dev = load_device(case.device)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_records(case.measurements, FitOptions())
+        ids = tuple(C.resolve_effects(case.base_effects, dev))
+        spec = C.candidate_spec("solvent_diffusion", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
+        good = C.score(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=2), data.records)
+        assert not C.start_on_time(good, data.records)          # no start point beats a good optimum
+        held = C.fit_model(dataclasses.replace(spec, notes=[]), dev, data.targets, data.target_records, n_starts=2)
+        problem = held.result.problem
+        i = problem.labels.index("D_solvent")
+        held.result.fit.theta[i] = problem.params[i].lower       # where the effect vanishes
+        held.device = problem.device_for(held.result.fit.theta)
+        held.model = C.ActuatorModel(held.device, held.effects)
+        C.score(held, data.records)
+        assert held.rmse > 2 * good.rmse
+        assert C.start_on_time(held, data.records)
+    truth = case.truth_params["D_solvent"]
+    assert held.values["D_solvent"] == pytest.approx(truth, rel=0.3)
+    assert held.rmse <= 1.1 * good.rmse
+    assert held.time_refined and any("is not the time records'" in n for n in held.spec.notes)
