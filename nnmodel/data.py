@@ -149,6 +149,7 @@ class Experiment:
 
     @classmethod
     def _of(cls, ts) -> "Experiment":
+        """The view of ``ts`` as it is (no check, no copy)."""
         view = object.__new__(cls)
         view.ts = ts
         return view
