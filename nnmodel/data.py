@@ -1,10 +1,12 @@
 """Experiments (input voltage, humidity, output) and training windows.
 
-An :class:`Experiment` holds one uniformly sampled experiment in physical units: input voltage
-``u`` (V), measured output ``y`` (tip deflection, m; ``None`` for an input-only record),
-relative humidity ``rh`` (% per sample, or ``None`` when the model does not use humidity)
-and the sampling rate ``fs`` (Hz).  Records slice like arrays (``rec[100:200]``) as in
-deepSI, so splitting data never loses the sampling rate or the humidity.
+An :class:`Experiment` is the networks' view of one uniformly sampled record (a
+:class:`physics.io.record.TimeSeries`, which it holds) in physical units: input voltage
+``u`` (V), measured output ``y`` (tip deflection, m, or the dataset's output; ``None`` for an
+input-only record), relative humidity ``rh`` (% per sample, or ``None`` when the model does
+not use humidity) and the sampling rate ``fs`` (Hz).  Records slice like arrays
+(``rec[100:200]``) as in deepSI, so splitting data never loses the sampling rate or the
+humidity.
 
 The window helpers cut records into the short sequences the models are trained on: each
 window is ``n_init`` samples of measured history (used only to initialise the model state)
@@ -12,12 +14,13 @@ followed by ``horizon`` samples over which the model is simulated and scored.
 """
 from __future__ import annotations
 
+import copy
 from typing import Iterable, Sequence
 
 import numpy as np
 
 from physics.errors import InputError
-from physics.io.record import check_finite, check_range
+from physics.io.record import CHANNELS, TimeSeries, check_finite, check_range
 # One definition of the fit metrics for the whole package (NRMSE = RMSE / std(y), fit % =
 # 100 (1 - NRMSE)): physics.analysis.metrics, re-exported here for the neural-model code.
 from physics.analysis.metrics import fit_percent, nrmse, rmse
@@ -82,49 +85,59 @@ def check_rh(rh, n: int, where: str) -> np.ndarray:
 
 class Experiment:
     """The networks' view of one uniformly sampled record, in physical units: input ``u``,
-    output ``y``, humidity ``rh``, rate ``fs`` (the record itself is a
-    :class:`physics.io.record.TimeSeries`; :meth:`from_timeseries` and :meth:`to_timeseries`
-    go between the two without copying the arrays).
+    output ``y``, humidity ``rh``, rate ``fs``, label ``name``.  The record itself is a
+    :class:`physics.io.record.TimeSeries`, held as :attr:`ts`; the view stores nothing else
+    (``u`` is its ``voltage``, ``y`` its ``deflection`` — the output, whatever its quantity —
+    ``name`` its ``source``).
 
     Parameters
     ----------
     u : array (n,)
         Input voltage in V.
     y : array (n,) or None
-        Measured output (tip deflection in m, or the dataset's output quantity); ``None``
-        for an input-only record.
+        Measured output (tip deflection in m, or the dataset's output quantity: no
+        plausibility rule of a deflection applies); ``None`` for an input-only record.
     rh : float, array (n,) or None
         Relative humidity in %: a constant is broadcast to every sample.  ``None`` means the
         record carries no humidity (a model trained on such records ignores humidity).
     fs : float
-        Sampling rate in Hz (required).
+        Sampling rate in Hz (required; kept exactly).
     name : str
         Free label used in messages and reports.
 
     Values are checked with the rules of the file readers (:mod:`physics.io.timeseries`:
-    finite numbers, RH within 0-100 %).
+    finite numbers, RH within 0-100 %); the arrays are held without copying (time
+    ``i / fs``).  :meth:`from_timeseries` makes the view of a record that exists already.
     """
 
-    __slots__ = ("u", "y", "rh", "fs", "name")
+    __slots__ = ("ts",)
 
     def __init__(self, u, y=None, rh=None, fs: float | None = None, name: str = ""):
-        self.name = str(name)
+        name = str(name)
         if fs is None:
-            raise InputError(f"record {self.name!r}: the sampling rate fs (Hz) is required")
-        self.fs = check_fs(fs, f"record {self.name!r}")
-        self.u = _as_1d(u, "voltage u", self.name)
-        n = self.u.shape[0]
+            raise InputError(f"record {name!r}: the sampling rate fs (Hz) is required")
+        fs = check_fs(fs, f"record {name!r}")
+        u = _as_1d(u, "voltage u", name)
+        n = u.shape[0]
         if n == 0:
-            raise InputError(f"record {self.name!r}: empty record (no samples)")
-        self.y = None if y is None else _as_1d(y, "output y", self.name, n)
-        self.rh = None if rh is None else check_rh(rh, n, _where(self.name))
+            raise InputError(f"record {name!r}: empty record (no samples)")
+        y = None if y is None else _as_1d(y, "output y", name, n)
+        rh = None if rh is None else check_rh(rh, n, _where(name))
+        self.ts = TimeSeries.prechecked(u, fs, deflection=y, rh=rh, source=name or None)
 
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_timeseries(cls, ts, name: str | None = None) -> "Experiment":
-        """Build a record from a time-series object with attributes ``time``, ``voltage``,
-        ``deflection`` (may be ``None``), ``rh`` (scalar, array or ``None``) and ``fs``
-        (for example :class:`physics.io.timeseries.TimeSeries`; duck-typed)."""
+        """The view of a record: a :class:`physics.io.record.TimeSeries` is held as it is (not
+        copied; given a ``name`` other than its ``source``, a shallow copy labelled so, which
+        shares its arrays).  Any other object with attributes ``voltage``, ``deflection`` (may
+        be ``None``), ``rh`` (scalar, array or ``None``) and ``fs`` (duck-typed) is checked
+        and held as a new record."""
+        if isinstance(ts, TimeSeries):
+            if name is not None and str(name) != (ts.source or ""):
+                ts = copy.copy(ts)
+                ts.source = str(name) or None
+            return cls._of(ts)
         for attr in ("voltage", "fs"):
             if not hasattr(ts, attr):
                 raise InputError(f"{type(ts).__name__} has no attribute {attr!r}; expected a time "
@@ -134,9 +147,42 @@ class Experiment:
         return cls(ts.voltage, getattr(ts, "deflection", None), getattr(ts, "rh", None),
                    ts.fs, name)
 
+    @classmethod
+    def _of(cls, ts) -> "Experiment":
+        """The view of ``ts`` as it is (no check, no copy)."""
+        view = object.__new__(cls)
+        view.ts = ts
+        return view
+
+    # ------------------------------------------------------------------ the record's channels
+    @property
+    def u(self) -> np.ndarray:
+        """Input voltage (V), shape (n,)."""
+        return self.ts.voltage
+
+    @property
+    def y(self) -> np.ndarray | None:
+        """Measured output, shape (n,), or None for an input-only record."""
+        return self.ts.deflection
+
+    @property
+    def rh(self) -> np.ndarray | None:
+        """Relative humidity (%) per sample, or None."""
+        return self.ts.rh
+
+    @property
+    def fs(self) -> float:
+        """Sampling rate (Hz)."""
+        return self.ts.fs
+
+    @property
+    def name(self) -> str:
+        """Label used in messages and reports."""
+        return self.ts.source or ""
+
     # ------------------------------------------------------------------ array-like behaviour
     def __len__(self) -> int:
-        return int(self.u.shape[0])
+        return int(self.ts.voltage.shape[0])
 
     def __getitem__(self, item) -> "Experiment":
         if not isinstance(item, slice):
@@ -144,8 +190,12 @@ class Experiment:
         if item.step not in (None, 1):
             raise InputError("slicing a record with a step would change its sampling rate; "
                              "resample explicitly instead")
-        return Experiment(self.u[item], None if self.y is None else self.y[item],
-                      None if self.rh is None else self.rh[item], self.fs, self.name)
+        ts = self.ts
+        cut = {c: a[item] for c in ("time",) + CHANNELS if (a := getattr(ts, c)) is not None}
+        if cut["voltage"].shape[0] == 0:
+            raise InputError(f"record {self.name!r}: empty record (no samples)")
+        return Experiment._of(TimeSeries.prechecked(cut.pop("voltage"), self.fs, **cut, meta=ts.meta,
+                                                    source=ts.source, output=ts.output))
 
     def __repr__(self) -> str:
         rh = "no RH" if self.rh is None else f"RH {self.rh.min():g}-{self.rh.max():g} %"
@@ -162,16 +212,14 @@ class Experiment:
         return len(self) / self.fs
 
     def to_timeseries(self):
-        """The record as a :class:`physics.io.record.TimeSeries` (the package's record type),
-        sharing this view's arrays; ``y`` becomes its ``deflection`` (its output)."""
-        from physics.io.record import TimeSeries
-        return TimeSeries(time=self.time, voltage=self.u, deflection=self.y, rh=self.rh, source=self.name or None)
+        """The record this view holds (:attr:`ts`, a :class:`physics.io.record.TimeSeries`;
+        ``y`` is its ``deflection``, its output)."""
+        return self.ts
 
     def split(self, fraction: float) -> tuple["Experiment", "Experiment"]:
         """Split at ``fraction`` of the length: ``(first part, last part)``."""
         k = int(round(len(self) * float(fraction)))
         return self[:k], self[k:]
-
 
 
 def check_prediction_inputs(u, rh, y, y_name: str, rh_trained: tuple | None):
@@ -207,13 +255,14 @@ def check_prediction_inputs(u, rh, y, y_name: str, rh_trained: tuple | None):
     return u, rh, y
 
 # ---------------------------------------------------------------------- record lists
-def check_records(records: Sequence[Experiment] | Experiment, what: str = "training",
-                  need_y: bool = True) -> list[Experiment]:
+def check_records(records: Sequence[Experiment | TimeSeries] | Experiment | TimeSeries,
+                  what: str = "training", need_y: bool = True) -> list[Experiment]:
     """Validate a list of records for fitting: same sampling rate, outputs present and
-    humidity either on every record or on none.  Returns the list."""
-    if isinstance(records, Experiment):
+    humidity either on every record or on none.  Returns the list as views (a
+    :class:`~physics.io.record.TimeSeries` given becomes :meth:`Experiment.from_timeseries`)."""
+    if isinstance(records, (Experiment, TimeSeries)):
         records = [records]
-    records = list(records or [])
+    records = [Experiment.from_timeseries(r) if isinstance(r, TimeSeries) else r for r in records or []]
     if not records:
         raise InputError(f"no {what} records given")
     for r in records:

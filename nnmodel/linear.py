@@ -339,6 +339,9 @@ def fit_linear(train, val=None, val_fraction: float = 0.2, feedthrough: bool = T
     networks do); ``use_rh``: RH as a linear input (None: when the records carry it);
     ``na_grid``, ``nb_grid``: the orders tried; ``output_error``: try the refinement.
     Results are cached per process (the same data give the same model; the last 16 kept)."""
+    from .data import check_records
+    train = check_records(train, "training")
+    val = check_records(val, "validation") if val else None
     options = (val_fraction, feedthrough, use_rh, tuple(na_grid), tuple(nb_grid), output_error)
     key = _key(train, val, *options)
     if key not in _CACHE:
@@ -352,11 +355,8 @@ def fit_linear(train, val=None, val_fraction: float = 0.2, feedthrough: bool = T
 
 
 def _fit(train, val, val_fraction, feedthrough, use_rh, na_grid, nb_grid, output_error) -> LinearModel:
-    from .data import check_records, split_records
-    train = check_records(train, "training")
-    if val:
-        val = check_records(val, "validation")
-    else:
+    from .data import split_records
+    if not val:
         k = max(max(na_grid), max(nb_grid))
         train, val = split_records(train, val_fraction, min_len=k + 2)
         if not val:

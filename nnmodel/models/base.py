@@ -6,7 +6,8 @@
   state lives in attributes ending in ``_`` and exists only after :meth:`fit`.
 * Callers use physical units: the normalisation of every channel (voltage, humidity,
   output) is learned in :meth:`fit` and stored inside the model (:class:`~.normalise.Normalized`).
-* ``fit(train, val=None)`` takes lists of :class:`nnmodel.data.Experiment`; without ``val``
+* ``fit(train, val=None)`` takes lists of :class:`nnmodel.data.Experiment` (or of
+  :class:`physics.io.record.TimeSeries`, viewed as such); without ``val``
   the last ``val_fraction`` of every training record is held out for early stopping.
 * ``simulate(u, rh=None, y_init=None)`` is a free-run simulation: no measured output is fed
   back; ``y_init`` (the first measured outputs) may only initialise the state.

@@ -13,7 +13,7 @@ from __future__ import annotations
 import copy
 import re
 import warnings
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from typing import Callable, Mapping
 
 import numpy as np
@@ -125,8 +125,10 @@ class TimeSeries:
     Units: ``time`` s (uniform, strictly increasing), ``voltage`` V, ``deflection`` the
     measured output in ``output.unit`` (by default the tip deflection in m), ``rh`` % per
     sample, ``current`` A, ``temperature`` °C.  Optional channels are ``None``.  ``meta``
-    holds the sidecar metadata, ``source`` the file read from.  Construction validates
-    lengths and values (same rules as the file reader).
+    holds the sidecar metadata, ``source`` the file read from (or the record's label),
+    ``rate_hz`` the sampling rate the time base was made from, kept exactly (``None``: the
+    rate follows from ``time``).  Construction validates lengths and values (same rules as
+    the file reader); :meth:`prechecked` holds channels a caller has already checked.
     """
     time: np.ndarray
     voltage: np.ndarray
@@ -137,6 +139,7 @@ class TimeSeries:
     meta: dict = field(default_factory=dict)
     source: str | None = None
     output: OutputQuantity = DEFLECTION
+    rate_hz: float | None = None
 
     def __post_init__(self):
         where = self.source or "time series"
@@ -158,6 +161,38 @@ class TimeSeries:
         check_record(arrays, where, lambda i: f"sample {i}")
         for name, arr in arrays.items():
             setattr(self, name, arr)
+        if self.rate_hz is not None:
+            from_time = (self.n - 1) / float(self.time[-1] - self.time[0])
+            if not abs(float(self.rate_hz) - from_time) <= UNIFORM_RTOL * from_time:
+                raise InputError(f"{where}: rate_hz {self.rate_hz!r} Hz does not match its time column "
+                                 f"({from_time:.6g} Hz)")
+            self.rate_hz = float(self.rate_hz)
+
+    @classmethod
+    def prechecked(cls, voltage: np.ndarray, fs: float, *, time: np.ndarray | None = None,
+                   **values) -> "TimeSeries":
+        """A record at the rate ``fs`` (Hz, kept exactly as :attr:`rate_hz`) holding channels
+        its caller has already checked — 1-D float arrays of one length (one sample or more),
+        finite, RH within 0–100 %, ``fs`` positive — as they are: nothing is copied or
+        checked again.  ``time`` defaults to ``i / fs``; ``values`` are other fields
+        (``deflection``, ``rh``, ``source``, ``meta``, ``output``, …).
+
+        For views that check their inputs with messages of their own
+        (:class:`nnmodel.data.Experiment`); a record from anything else goes through the
+        constructor, which checks it.  The plausibility of the output (a tip deflection
+        within ±1 m) is a rule of the file readers and applies to neither."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - names)
+        if unknown:
+            raise TypeError(f"TimeSeries has no field {', '.join(unknown)}")
+        ts = object.__new__(cls)
+        for f in fields(cls):
+            setattr(ts, f.name, f.default_factory() if f.default_factory is not MISSING else f.default)
+        for name, value in values.items():
+            setattr(ts, name, value)
+        ts.voltage, ts.rate_hz = voltage, float(fs)
+        ts.time = np.arange(voltage.shape[0]) / ts.rate_hz if time is None else time
+        return ts
 
     @property
     def n(self) -> int:
@@ -166,7 +201,10 @@ class TimeSeries:
 
     @property
     def fs(self) -> float:
-        """Sampling frequency (Hz) from the mean step."""
+        """Sampling frequency (Hz): :attr:`rate_hz` when the record was made at a given rate,
+        else from the mean step."""
+        if self.rate_hz is not None:
+            return self.rate_hz
         return (self.n - 1) / float(self.time[-1] - self.time[0])
 
     @property
