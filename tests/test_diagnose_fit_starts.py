@@ -178,6 +178,25 @@ def test_a_shape_parameter_keeps_its_range_in_the_base_fit(clean):
     assert 1e-4 <= base.values["frac_f_lo"] <= 0.05 and base.ok
 
 
+def test_an_effects_own_parameter_keeps_its_range_in_the_base_fit(clean):
+    """So does an effect's own parameter (a drafted refit after a solvent pick frees D_solvent):
+    diffusion times of 0.2 s–10⁵ s, not the device check's 10⁻¹⁸ m²/s (10⁹ s, beyond what the time
+    solver realises: the drafts were rejected with 'could not realise the solvent factor')."""
+    from physics.diagnose.diagnosis import fit_base
+    from physics.diagnose.specs import param_bounds
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects("solvent_diffusion", dev))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        base = fit_base(data, dev, ids, FitOptions(), ["kf", "D_solvent"], [], 1)
+    lo, hi = base.spec.bounds["D_solvent"]
+    assert (lo, hi) == param_bounds("D_solvent", dev)
+    h2 = dev.params["t_polymer"] ** 2
+    assert 0.25 * h2 / hi == pytest.approx(0.2) and 0.25 * h2 / lo == pytest.approx(1e5)
+    assert "Y" not in base.spec.bounds          # the base's own parameters keep identify's ranges
+
+
 def test_a_slow_effect_held_at_its_off_bound_starts_again_on_the_time_records():
     """An FRF optimum that holds the added effect where it vanishes (solvent diffusion at its
     lowest D_solvent, as a misfit elsewhere in the band does when a second effect is hidden:

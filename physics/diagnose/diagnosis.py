@@ -60,7 +60,7 @@ from .records import NUISANCE_TERMS, PreparedRecord, frf_measurements, prepare_r
 from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
-from .specs import declared_default, excitation, is_shape, param_bounds, role_family, spec_of
+from .specs import declared_default, excitation, keeps_spec_range, param_bounds, role_family, spec_of
 from .verdict import ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, nuisance_summary, remaining_of
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
@@ -465,8 +465,8 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
     """Phase 2: the user's model with its free parameters fitted and scored."""
     spec = C.ModelSpec("base", base_ids, list(free_l), list(per_rh_l), parse_assignments(options.start),
                        parse_assignments(options.bounds, ranges=True, what=arg("bounds")))
-    for name in free_l:                 # a shape parameter keeps its range (a drafted refit starts from a pick's)
-        if name not in spec.bounds and is_shape(name) and (b := param_bounds(name, dev)) is not None:
+    for name in free_l:         # an effect's own parameter keeps its range (a drafted refit starts from a pick's)
+        if name not in spec.bounds and keeps_spec_range(name) and (b := param_bounds(name, dev)) is not None:
             spec.bounds[name] = b
     for name in spec.start:
         if name not in free_l + per_rh_l:

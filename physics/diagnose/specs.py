@@ -40,10 +40,13 @@ def shape_params(effect: str) -> tuple[str, ...]:
     return tuple(spec_of(effect).get("shape", ()))
 
 
-def is_shape(name: str) -> bool:
-    """True when ``name`` is a shape parameter of some effect (:func:`shape_params`): it keeps its
-    spec's range in every fit of the diagnosis, the base's included."""
-    return any(name in shape_params(e) for e in owners(name))
+def keeps_spec_range(name: str) -> bool:
+    """True when ``name`` is an effect's own parameter in the diagnosis (:func:`effect_params`,
+    :func:`shape_params`): it keeps its spec's range in every fit of the diagnosis, the base's
+    included — a drafted refit starts from a pick's model with its parameters free, and the
+    device check's wider range reaches values the time solver cannot realise (D_solvent of
+    1e-18 m²/s, a diffusion time of 10⁹ s)."""
+    return any(name in shape_params(e) or name in effect_params(e) for e in owners(name))
 
 
 def is_nested(effect: str) -> bool:
