@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -135,14 +136,24 @@ def _plot_rh(res: ComparisonResult, path):
 
 
 def write_comparison_report(res: ComparisonResult, out_dir, *, provenance: dict | None = None,
-                            title: str = "Model vs measurement", output: OutputQuantity = DEFLECTION) -> dict:
+                            title: str = "Model vs measurement", output: OutputQuantity = DEFLECTION,
+                            overwrite: bool = False, inputs: Sequence = ()) -> dict:
     """Write ``report.json``, ``metrics.csv``, ``bands.csv``, PNGs and the page ``index.html``
-    into ``out_dir`` (all atomically); returns the JSON dict.  ``output``: what the compared
-    output is (axis labels and units; default the tip deflection)."""
+    into the new folder ``out_dir``; returns the JSON dict.  ``output``: what the compared
+    output is (axis labels and units; default the tip deflection).
+
+    The folder is written under the output policy (:func:`physics.io.outputs.output_folder`):
+    atomically, ``overwrite`` replaces only a folder eap wrote, and neither ``inputs`` (the
+    files the comparison read) nor the records' source files are replaced."""
+    from ..io.outputs import OUT_DIR, output_folder, with_sources
+    inputs = with_sources(inputs, (r.source for r in res.records))
+    with output_folder(out_dir, inputs=inputs, overwrite=overwrite, flag=OUT_DIR) as d:
+        return _write_report(res, d, provenance, title, output)
+
+
+def _write_report(res: ComparisonResult, d: Path, provenance, title, output) -> dict:
     from ..io.fileio import jsonable, write_json
     from ..pages.report import write_csv
-    d = Path(out_dir)
-    d.mkdir(parents=True, exist_ok=True)
     magnitude = _magnitude(res)
     extra = _write_plots(res, d, output, magnitude)
     out = jsonable(res.to_dict())

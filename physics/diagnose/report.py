@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..errors import InputError, arg
+from ..errors import arg
 from ..pages.columns import ONE, Column, band
 from ..io.fileio import jsonable, write_json, write_text
 from ..identify import write_device
@@ -174,23 +174,41 @@ def _plot_breakdown(res: DiagnosisResult, path) -> None:
 
 
 def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name: str | None = None,
-                    provenance: dict | None = None, protect=(), best: dict | None = None,
-                    measurements: Sequence[str] = ()) -> dict:
-    """Write ``diagnosis.json``, the PNGs and the page ``index.html`` into ``out_dir``; with
-    ``apply`` also the device file ``NAME.yaml`` of the best model: ``best`` ({"fit": a
-    ModelFit, "effect_files": [paths], "text": ...}, e.g. the model fitted with drafted effects)
-    or the diagnosis's final model (the base with every pick of the chain and without every
-    removal; nothing when it is the base itself) — its values as fitted and refined on the time
-    records, its effects as ``default_effects``.  The usage printed runs as printed: the
-    ``measurements`` and the ``--effects-path`` of every effect file the model needs.  Paths in
-    the outputs are the final ones (the command line writes into a temporary folder renamed at
-    the end).  Returns the JSON dict."""
+                    provenance: dict | None = None, best: dict | None = None, measurements: Sequence[str] = (),
+                    drafts: Sequence = (), overwrite: bool = False, inputs: Sequence = ()) -> dict:
+    """Write ``diagnosis.json``, the PNGs and the page ``index.html`` into the new folder
+    ``out_dir``; with ``apply`` also the device file ``NAME.yaml`` of the best model: ``best``
+    ({"fit": a ModelFit, "effect_files": [paths], "text": ...}, e.g. the model fitted with drafted
+    effects) or the diagnosis's final model (the base with every pick of the chain and without
+    every removal; nothing when it is the base itself) — its values as fitted and refined on the
+    time records, its effects as ``default_effects``.  The usage printed runs as printed: the
+    ``measurements`` and the ``--effects-path`` of every effect file the model needs.
+    ``drafts``: drafted effects (:class:`~physics.diagnose.effect_draft.EffectDraft`) written
+    into ``drafts/`` (:func:`~physics.diagnose.draft.write_drafts`; their contract checks in the
+    JSON's ``drafts``).  Returns the JSON dict.
+
+    The folder is written under the output policy (:func:`physics.io.outputs.output_folder`):
+    atomically, ``overwrite`` replaces only a folder eap wrote, and neither ``inputs`` (the
+    device file and measurements read) nor the records' source files are replaced; paths in
+    the outputs are the final ones."""
+    from ..io.outputs import OUT_DIR, output_folder, with_sources
     if apply and name is not None:
         component(name, arg("name"), "the device file NAME.yaml")
-    d = Path(out_dir)
-    if d.exists() and not d.is_dir():
-        raise InputError(f"{d} exists and is not a folder")
-    d.mkdir(parents=True, exist_ok=True)
+    inputs = with_sources(inputs, [r.source for r in res.records] + [res.device.path])
+    with output_folder(out_dir, inputs=inputs, overwrite=overwrite, flag=OUT_DIR) as d:
+        checks = {}
+        if drafts:
+            from .draft import write_drafts
+            checks = write_drafts(drafts, d / "drafts", inputs=inputs)
+        out = _write_folder(res, d, apply, name, provenance, best, measurements)
+        out["drafts"] = checks
+        write_json(d / "diagnosis.json", jsonable(out))
+        _html(res, d, out, provenance)
+    return out
+
+
+def _write_folder(res: DiagnosisResult, d: Path, apply: bool, name, provenance, best, measurements) -> dict:
+    """The figures and, with ``apply``, the device file written into ``d``: the JSON dict."""
     out = res.to_dict()
     pngs = {"where_it_fails.png": _plot_where, "ranking.png": _plot_ranking, "overlay.png": _plot_overlay,
             "error_breakdown.png": _plot_breakdown}
@@ -214,10 +232,10 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
             dev_name = component(name or ("_".join([res.device.name] + added) if added else f"{res.device.name}_refitted"),
                                  arg("name"), "the device file NAME.yaml")
             path = write_device(fit.result, d / f"{dev_name}.yaml", name=dev_name,
-                                date=_dt.date.today().isoformat(), protect=protect)
+                                date=_dt.date.today().isoformat())
             text = path.read_text(encoding="utf-8").replace(
                 "written by eap identify on", f"written by eap diagnose ({what}) on", 1)
-            write_text(path, text, protect=tuple(protect))
+            write_text(path, text)
             recs = " ".join(_quote(m) for m in measurements) or "MEASUREMENT"
             paths = "".join(f" --effects-path {_quote(f)}" for f in files)
             applied = {"written": path.name, "path": str(final_path(path)),
@@ -231,8 +249,6 @@ def write_diagnosis(res: DiagnosisResult, out_dir, *, apply: bool = False, name:
     out["files"] = ["diagnosis.json", "index.html", "report.html"] + written
     if provenance:
         out["provenance"] = provenance
-    write_json(d / "diagnosis.json", jsonable(out))
-    _html(res, d, out, provenance)
     return out
 
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import datetime as _dt
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -66,18 +67,27 @@ def _plot_rh_maps(result: IdentificationResult, path) -> None:
 
 
 def write_identification(result: IdentificationResult, out_dir, *, name: str | None = None,
-                         provenance: dict | None = None, protect=()) -> dict:
+                         provenance: dict | None = None, overwrite: bool = False, inputs: Sequence = ()) -> dict:
     """Write the fitted device ``NAME.yaml``, ``report.json``, ``parameters.csv``, PNGs and
-    the page ``index.html`` into ``out_dir``; returns the JSON dict (with the file names)."""
+    the page ``index.html`` into the new folder ``out_dir``; returns the JSON dict (with the
+    file names).
+
+    The folder is written under the output policy (:func:`physics.io.outputs.output_folder`):
+    atomically, ``overwrite`` replaces only a folder eap wrote, and neither ``inputs`` (the
+    device file and measurements read) nor the measurement files of ``result`` are replaced."""
     from ..errors import arg
-    from ..io.fileio import jsonable, write_json
-    from ..io.outputs import component
-    from ..pages.report import write_csv
+    from ..io.outputs import OUT_DIR, component, output_folder, with_sources
     dev_name = component(name or f"{result.problem.device.name}_identified", arg("name"), "the device file NAME.yaml")
-    d = Path(out_dir)
-    d.mkdir(parents=True, exist_ok=True)
+    inputs = with_sources(inputs, list(result.sources) + [result.problem.device.path])
+    with output_folder(out_dir, inputs=inputs, overwrite=overwrite, flag=OUT_DIR) as d:
+        return _write_folder(result, d, dev_name, provenance)
+
+
+def _write_folder(result: IdentificationResult, d: Path, dev_name: str, provenance) -> dict:
+    from ..io.fileio import jsonable, write_json
+    from ..pages.report import write_csv
     date = _dt.date.today().isoformat()
-    dev_path = write_device(result, d / f"{dev_name}.yaml", name=dev_name, date=date, protect=protect)
+    dev_path = write_device(result, d / f"{dev_name}.yaml", name=dev_name, date=date)
     files = [dev_path.name]
     pngs = _write_plots(result, d)
     rows = result.param_rows()

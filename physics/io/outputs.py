@@ -63,6 +63,9 @@ PROOF = ".eap-partial"
 #: adds suffixes (``.yaml``, ``_3``, ``.eap-tmp-PID``).
 MAX_NAME_BYTES = 200
 _OUT = arg("out")   # how messages name an output path by default (the CLI: --out)
+#: How messages name the output folder of a library writer (``write_diagnosis(res, out_dir)``):
+#: ``out_dir`` in Python, ``--out`` on the command line.
+OUT_DIR = arg("out", "out_dir")
 _PROTECTED: set[Path] = set()
 #: Interrupts raised by the command line's signal handlers (SIGTERM). Python drops an exception
 #: raised inside a gc callback or a finaliser (it prints it and carries on): no output is put in
@@ -98,6 +101,20 @@ def _inputs_with_sidecars(inputs: Iterable) -> list[Path]:
         if q.suffix.lower() in (".csv", ".mat"):
             out.add(q.with_suffix(".yaml"))
     return sorted(out)
+
+
+def with_sources(inputs: Iterable, sources: Iterable) -> list:
+    """``inputs`` with those of ``sources`` that are existing files: the records a result was
+    computed from (``source``: a file's path, or a name for a record made in memory), inputs a
+    library writer protects without its caller listing them."""
+    out = [p for p in inputs if p is not None]
+    for s in sources:
+        try:
+            if isinstance(s, (str, os.PathLike)) and str(s) and Path(s).is_file():
+                out.append(s)
+        except (OSError, ValueError):     # a name no file system holds (a NUL, too long)
+            continue
+    return out
 
 
 def final_path(path) -> Path:
@@ -403,6 +420,17 @@ def _lock(parent: Path, name: str, flag: str) -> Iterator[None]:
     try:
         yield
     finally:
+        _unlock(lock)
+
+
+def _unlock(lock: Path) -> None:
+    """Remove ``lock`` when it is this process's (a writer nested in :func:`reserve` took it
+    over and removed it already; another run may hold it since)."""
+    try:
+        mine = json.loads(lock.read_text(encoding="utf-8")).get("pid") == os.getpid()
+    except (OSError, ValueError, AttributeError):
+        mine = False
+    if mine:
         lock.unlink(missing_ok=True)
 
 
@@ -433,6 +461,16 @@ def preflight(out, *, inputs: Iterable = (), overwrite: bool = False, flag: str 
         raise InputError(_busy(res, other, flag))
     _writable_parent(res.parent, flag, out)
     return res
+
+
+@contextlib.contextmanager
+def reserve(out, *, inputs: Iterable = (), overwrite: bool = False, flag: str = _OUT) -> Iterator[Path]:
+    """:func:`preflight`, then hold the lock of ``out`` for the block (a second run into ``out``
+    fails at once while this one works); the writer called inside the block with the same
+    arguments (:func:`output_folder`) takes the lock over and checks everything again."""
+    res = preflight(out, inputs=inputs, overwrite=overwrite, flag=flag)
+    with _lock(res.parent, res.name, flag):
+        yield res
 
 
 @contextlib.contextmanager

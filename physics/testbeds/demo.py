@@ -151,10 +151,12 @@ def hidden_effect_case(effect: str | None = None, seed: int = 0, *, device: str 
     return HiddenEffectCase(effect, dev.name, base_ids, truth.effect_ids, tp, out, parts, sensor.noise_floor())
 
 
-def run_hidden_effect(effect: str | None = None, seed: int = 0, *, out=None, device: str = "ipmc_pt_eg",
-                      design: str = "auto", fs: float = 500.0, duration: float = 60.0, progress=None, **kw):
+def run_hidden_effect(effect: str | None = None, seed: int = 0, *, out=None, overwrite: bool = False,
+                      device: str = "ipmc_pt_eg", design: str = "auto", fs: float = 500.0, duration: float = 60.0,
+                      progress=None, **kw):
     """Generate a case (random effect unless given), diagnose it with the base model and
-    (with ``out``) write the report.  Returns (case, result)."""
+    (with ``out``) write the report folder (:func:`~physics.diagnose.report.write_diagnosis`:
+    ``overwrite`` replaces only a folder eap wrote).  Returns (case, result)."""
     from ..diagnose.diagnosis import diagnose
     from ..diagnose.report import write_diagnosis
     if effect == "random":
@@ -162,7 +164,7 @@ def run_hidden_effect(effect: str | None = None, seed: int = 0, *, out=None, dev
     case = hidden_effect_case(effect, seed, device=device, design=design, fs=fs, duration=duration)
     res = diagnose(case.measurements, device, case.base_effects, progress=progress, seed=seed, **kw)
     if out is not None:
-        write_diagnosis(res, out, provenance={"demo": case.describe()})
+        write_diagnosis(res, out, provenance={"demo": case.describe()}, overwrite=overwrite)
     return case, res
 
 

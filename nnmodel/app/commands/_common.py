@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from physics.io.outputs import output_folder, preflight
+from physics.io.outputs import OUT_DIR, output_folder, preflight, reserve
 
 
 def add_model_options(p: argparse.ArgumentParser, rh_required: bool = False) -> None:
@@ -87,9 +87,18 @@ def check_out(args, inputs=()) -> None:
     preflight(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False))
 
 
+def reserving(args, inputs=()):
+    """``with reserving(args, inputs):`` around a command whose ``--out`` is written by a library
+    writer (``write_identification(res, args.out, overwrite=args.overwrite, inputs=inputs)``):
+    a bad ``--out`` is refused before any work, with the writer's own checks and words, and a
+    second run into it fails at once (:func:`physics.io.outputs.reserve`)."""
+    return reserve(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False), flag=OUT_DIR)
+
+
 def writing(args, inputs=()):
-    """The output-folder context of a command: ``with writing(args, inputs) as d:`` writes into a
-    temporary folder ``d`` that replaces ``args.out`` when the block succeeds."""
+    """The output-folder context of a command that assembles its ``--out`` itself (no library
+    writer owns that folder): ``with writing(args, inputs) as d:`` writes into a temporary
+    folder ``d`` that replaces ``args.out`` when the block succeeds."""
     return output_folder(args.out, inputs=inputs, overwrite=getattr(args, "overwrite", False))
 
 

@@ -10,8 +10,7 @@ from physics.errors import InputError
 from physics.io.record import DEFLECTION, OutputQuantity
 from physics.io.timeseries import parse_column_map
 
-from ._common import (add_output_options, add_quiet_option, add_record_options, check_out, provenance, stage_log,
-                      writing)
+from ._common import add_output_options, add_quiet_option, add_record_options, provenance, reserving, stage_log
 
 NAME = "compare"
 #: argument destinations that name files or folders this command reads (never replaced by its outputs)
@@ -176,21 +175,21 @@ def _inputs(args) -> list:
 def run(args) -> int:
     t0 = time.perf_counter()
     log = stage_log(args, args.measurements)
-    check_out(args, _inputs(args))
-    log(f"reading {len(args.measurements)} measurement file(s)")
-    predictor = resolve_predictor(args.model, args.effects, args.n_modes, args.hold)
-    output = OutputQuantity.from_dict(predictor.info.get("output"), f"{args.model}: output") \
-        if isinstance(getattr(predictor, "info", None), dict) else DEFLECTION
-    ms = read_measurements(args, output)
-    offset = args.offset if args.offset != "auto" else ("start" if predictor.start_samples else "mean")
-    res = compare(ms, predictor, frf_options=frf_options(args), offset=offset, skip_s=args.skip_s,
-                  min_coherence=args.min_coherence, bands=parse_bands(args.bands) if args.bands else None,
-                  rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
-                  log=log)
-    log("writing the report")
-    with writing(args, inputs=_inputs(args)) as tmp:
-        write_comparison_report(res, tmp, provenance=provenance(inputs=args.measurements),
-                                title=f"eap compare: {predictor.name}", output=output)
+    with reserving(args, _inputs(args)):
+        log(f"reading {len(args.measurements)} measurement file(s)")
+        predictor = resolve_predictor(args.model, args.effects, args.n_modes, args.hold)
+        output = OutputQuantity.from_dict(predictor.info.get("output"), f"{args.model}: output") \
+            if isinstance(getattr(predictor, "info", None), dict) else DEFLECTION
+        ms = read_measurements(args, output)
+        offset = args.offset if args.offset != "auto" else ("start" if predictor.start_samples else "mean")
+        res = compare(ms, predictor, frf_options=frf_options(args), offset=offset, skip_s=args.skip_s,
+                      min_coherence=args.min_coherence, bands=parse_bands(args.bands) if args.bands else None,
+                      rh_tolerance=args.rh_tolerance, sensor_bandwidth=sensor_setting(args.sensor_bandwidth_Hz),
+                      log=log)
+        log("writing the report")
+        write_comparison_report(res, args.out, provenance=provenance(inputs=args.measurements),
+                                title=f"eap compare: {predictor.name}", output=output, overwrite=args.overwrite,
+                                inputs=_inputs(args))
     from physics.pages.columns import quantity
     d = Path(args.out)
     print(f"model: {predictor.name}")

@@ -8,7 +8,7 @@ import sys
 from physics.testbeds.demo import OUTSIDE, hidden_effects, run_hidden_effect
 from physics.errors import InputError
 
-from ._common import add_output_options, check_out, provenance, writing
+from ._common import add_output_options, check_out, provenance, reserving, writing
 from .diagnose import print_summary
 
 NAME = "demo"
@@ -46,10 +46,10 @@ def run(args) -> int:
     if eff not in (None, "random") and eff not in hidden_effects():
         raise InputError(f"--effect {args.effect!r}: choose one of {', '.join(hidden_effects())}, none or random")
     log = lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True)  # noqa: E731
-    check_out(args)
-    with writing(args) as tmp:
-        case, res = run_hidden_effect(eff, args.seed, out=tmp, device=args.device, design=args.design,
-                                      fs=args.fs_Hz or 500.0, duration=args.duration_s, progress=log)
+    with reserving(args):
+        case, res = run_hidden_effect(eff, args.seed, out=args.out, overwrite=args.overwrite, device=args.device,
+                                      design=args.design, fs=args.fs_Hz or 500.0, duration=args.duration_s,
+                                      progress=log)
     hidden = case.hidden
     tp = ", ".join(f"{k}={v:.4g}" for k, v in case.truth_params.items())
     print(f"hidden effect: {hidden or 'none'} (seed {args.seed}); truth parameters: {tp}")

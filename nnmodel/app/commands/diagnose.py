@@ -13,7 +13,7 @@ from physics.errors import InputError
 from physics.limits import FS_RANGE_HZ, MAX_STARTS, check_count, check_range
 from physics.io.outputs import component, preflight, separate
 
-from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
+from ._common import add_output_options, add_parallel_options, parallel_settings, provenance, reserving
 from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "diagnose"
@@ -122,43 +122,25 @@ def run(args) -> int:
     if args.apply and args.no_apply:
         raise InputError("--apply and --no-apply contradict each other; give one")
     protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
-    check_out(args, protect)
-    if args.draft_effects is not None:
-        preflight(args.draft_effects, inputs=protect, overwrite=args.overwrite, flag="--draft-effects")
-    ms = read_measurements(args)
-    log = None if args.quiet else (lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True))
-    opts = fit_options(args, free=args.free or None, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
-                       n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, settings=parallel_settings(args))
-    res = diagnose(ms, args.device, args.effects, options=opts, candidates=args.candidates, force=args.force,
-                   check_support=not args.no_support,
-                   selection=SelectionOptions(max_effects=args.max_effects, backward=not args.forward_only),
-                   analysis=AnalysisOptions(noise_floor=None if args.noise_floor_um is None
-                                            else 1e-6 * args.noise_floor_um, fs_max=args.fs_max_Hz),
-                   progress=log)
-    outcome = None
-    if not args.no_draft:
-        from physics.diagnose.draft import draft_effects
-        per = ",".join(res.draft_base.spec.per_rh) or "none"
-        outcome = draft_effects(res, lambda dev, eff, free, cands: diagnose(
-            ms, dev, eff, free, options=dataclasses.replace(opts, per_rh=per, n_starts=1), candidates=cands, force=True,
-            check_support=False, selection=SelectionOptions(max_effects=1, backward=False),
-            analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=args.fs_max_Hz)))
     drafts_dir = Path(args.draft_effects) if args.draft_effects is not None else Path(args.out) / "drafts"
     inside = args.draft_effects is None
     apply = not args.no_apply
-    with writing(args, inputs=protect) as tmp:
-        checks = {}
-        if outcome is not None and outcome.kept and inside:
-            checks = write_drafts(outcome.kept, tmp / "drafts", inputs=protect)
-        if outcome is not None and outcome.kept and apply:
-            _register(outcome.kept)       # the best model's device file names their sections
+    with reserving(args, protect):
+        if not inside:
+            preflight(args.draft_effects, inputs=protect, overwrite=args.overwrite, flag="--draft-effects")
+        res, outcome = _diagnose(args)
+        kept = outcome.kept if outcome is not None else []
+        if kept and apply:
+            _register(kept)       # the best model's device file names their sections
         best = _best(res, outcome, drafts_dir, [str(Path(f).resolve()) for f in getattr(args, 'effects_path', [])])
         if best is not None and best["fit"] is not res.final:     # the offsets and drifts of the model written
             res.verdict.nuisance = nuisance_summary(best["fit"], res.records)
-        out = write_diagnosis(res, tmp, apply=apply, name=args.name, provenance=provenance(inputs=protect),
-                              protect=protect, best=best, measurements=[str(m) for m in args.measurements])
-    if outcome is not None and outcome.kept and not inside:
-        checks = write_drafts(outcome.kept, drafts_dir, overwrite=args.overwrite, inputs=protect)
+        out = write_diagnosis(res, args.out, apply=apply, name=args.name, provenance=provenance(inputs=protect),
+                              best=best, measurements=[str(m) for m in args.measurements],
+                              drafts=kept if inside else (), overwrite=args.overwrite, inputs=protect)
+    checks = out["drafts"]
+    if kept and not inside:
+        checks = write_drafts(kept, drafts_dir, overwrite=args.overwrite, inputs=protect)
     d = Path(args.out)
     print_summary(res)
     if outcome is not None:
@@ -171,6 +153,29 @@ def run(args) -> int:
     print(f"wrote {d}/diagnosis.json, {d}/index.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
           f"in {res.timings['total']:.1f} s")
     return 0
+
+
+def _diagnose(args):
+    """The diagnosis of ``args`` and, unless ``--no-draft``, its drafted effects (a
+    :class:`~physics.diagnose.draft.DraftOutcome`, else None)."""
+    ms = read_measurements(args)
+    log = None if args.quiet else (lambda m: print(f"[diagnose] {m}", file=sys.stderr, flush=True))
+    opts = fit_options(args, free=args.free or None, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
+                       n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, settings=parallel_settings(args))
+    res = diagnose(ms, args.device, args.effects, options=opts, candidates=args.candidates, force=args.force,
+                   check_support=not args.no_support,
+                   selection=SelectionOptions(max_effects=args.max_effects, backward=not args.forward_only),
+                   analysis=AnalysisOptions(noise_floor=None if args.noise_floor_um is None
+                                            else 1e-6 * args.noise_floor_um, fs_max=args.fs_max_Hz),
+                   progress=log)
+    if args.no_draft:
+        return res, None
+    from physics.diagnose.draft import draft_effects
+    per = ",".join(res.draft_base.spec.per_rh) or "none"
+    return res, draft_effects(res, lambda dev, eff, free, cands: diagnose(
+        ms, dev, eff, free, options=dataclasses.replace(opts, per_rh=per, n_starts=1), candidates=cands, force=True,
+        check_support=False, selection=SelectionOptions(max_effects=1, backward=False),
+        analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=args.fs_max_Hz)))
 
 
 def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:

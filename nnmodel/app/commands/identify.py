@@ -9,7 +9,7 @@ from physics.identify import IdentifiabilityWarning, LsqOptions, identify, write
 from physics.limits import MAX_STARTS, check_count
 from physics.io.outputs import component
 
-from ._common import add_output_options, add_parallel_options, check_out, parallel_settings, provenance, writing
+from ._common import add_output_options, add_parallel_options, parallel_settings, provenance, reserving
 from .compare import add_frf_arguments, add_measurement_arguments, fit_options, read_measurements
 
 NAME = "identify"
@@ -60,17 +60,18 @@ def run(args) -> int:
     if args.starts is not None:
         check_count(args.starts, 1, MAX_STARTS, "--starts", "multi-start fits")
     protect = list(args.measurements) + ([args.device] if Path(args.device).suffix in (".yaml", ".yml") else [])
-    check_out(args, protect)
-    ms = read_measurements(args)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", IdentifiabilityWarning)  # printed below from the result
-        opts = fit_options(args, free=args.free, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
-                           n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, weighting=args.weighting,
-                           settings=parallel_settings(args))
-        res = identify(ms, args.device, args.effects, options=opts, method=args.method, residual=args.residual,
-                       fit_phase=not args.no_phase, skip_s=args.skip_s, lsq=LsqOptions(start_spread=args.start_spread))
-    with writing(args, inputs=protect) as tmp:
-        out = write_identification(res, tmp, name=args.name, provenance=provenance(inputs=protect), protect=protect)
+    with reserving(args, protect):
+        ms = read_measurements(args)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IdentifiabilityWarning)  # printed below from the result
+            opts = fit_options(args, free=args.free, per_rh=args.per_rh, start=args.start, bounds=args.bounds,
+                               n_starts=args.starts, seed=args.seed, n_modes=args.n_modes, weighting=args.weighting,
+                               settings=parallel_settings(args))
+            res = identify(ms, args.device, args.effects, options=opts, method=args.method, residual=args.residual,
+                           fit_phase=not args.no_phase, skip_s=args.skip_s,
+                           lsq=LsqOptions(start_spread=args.start_spread))
+        out = write_identification(res, args.out, name=args.name, provenance=provenance(inputs=protect),
+                                   overwrite=args.overwrite, inputs=protect)
     d = Path(args.out)
     prob = res.problem
     print(f"{prob.device.name} [{', '.join(prob.effects)}] from {len(res.sources)} measurement(s), "

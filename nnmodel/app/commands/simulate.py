@@ -116,8 +116,7 @@ def run(args) -> int:
     ts = res.to_timeseries()
     ts.meta.update({"signal": sig_meta, "provenance": provenance()})
     with writing(args, inputs=[args.input] if args.input else []) as d:
-        csv = write_timeseries(ts, d / "simulation.csv", overwrite=True,
-                               protect=(args.input,) if args.input else ())
+        csv = write_timeseries(ts, d / "simulation.csv")   # into the new folder d: nothing there to protect
         plot_timeseries(res.time, {"voltage": (res.voltage, "V"), "deflection": (res.deflection * 1e3, "mm"),
                                    "current": (res.current * 1e3, "mA")}, d / "simulation.png",
                         title=f"{model.device.name}: {', '.join(model.effect_ids)}")
