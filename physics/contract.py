@@ -54,6 +54,10 @@ from .solvers.timedomain import simulate
 CHECKS = ("declaration", "builds", "protocol", "finite", "stable", "passive", "spec", "solvers", "off", "identify")
 FAST_CHECKS = CHECKS[:6]
 DEVICE = "ipmc_pt_eg"
+#: The solvers check repeats its 20 s multisine period until the last two periods of an added output
+#: filter's response agree to this share of its peak (a slow pole settles over several of its time
+#: constants), at most :data:`MAX_PERIODS` periods (~43 min).
+SETTLED, MAX_PERIODS = 1e-4, 128
 
 
 @dataclass
@@ -307,11 +311,18 @@ class _Context:
         fs, period = 200.0, 20.0
         sig = signals.multisine(rms=0.02, f_start=0.1, f_stop=20.0, period=period, fs=fs, seed=3)
         n = sig.t.size
-        if model.outputs:             # added output filters start from rest: repeat periods, keep the last;
-            v = np.tile(sig.v, 8)     # minus the response to no input (an additive drift is no response)
-            t = np.arange(v.size) / fs
-            y = (simulate(model, None, t, v, rh=self.rh).deflection
-                 - simulate(model, None, t, np.zeros_like(v), rh=self.rh).deflection)[-n:]
+        if model.outputs:             # added output filters start from rest: repeat periods until the last
+            periods = 8               # two agree (a slow pole settles over several of its time constants),
+            while True:               # keep the last; minus the response to no input (a drift is no response)
+                v = np.tile(sig.v, periods)
+                t = np.arange(v.size) / fs
+                y = (simulate(model, None, t, v, rh=self.rh).deflection
+                     - simulate(model, None, t, np.zeros_like(v), rh=self.rh).deflection)
+                settled = np.max(np.abs(y[-n:] - y[-2 * n:-n])) <= SETTLED * np.max(np.abs(y[-n:]))
+                if settled or periods >= MAX_PERIODS:
+                    break
+                periods *= 2
+            y = y[-n:]
         else:
             y = simulate(model, None, sig.t, sig.v, rh=self.rh, periodic=True).deflection
         k = np.arange(int(np.ceil(0.1 * period)), int(20.0 * period) + 1)
