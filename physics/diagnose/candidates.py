@@ -696,9 +696,20 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     return True
 
 
+def on_bound(prm, value: float) -> bool:
+    """True when ``value`` of the problem parameter ``prm`` is at (or past) a bound of its range
+    (within 10⁻³ of the search coordinate's span; the off value 0 of a log-scaled one too)."""
+    if not prm.lower < value < prm.upper:
+        return True
+    x, (lo, hi) = float(prm.to_x(value)), prm.x_bounds
+    tol = 1e-3 * max(1.0, hi - lo) if prm.scale == "linear" else 1e-3
+    return x <= lo + tol or x >= hi - tol
+
+
 def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
-    """Start the added effect's own parameters from the spec's start points when one of them
-    fits the time records better than the FRF optimum (in place; True when it did).
+    """Start the added effect's own parameters from the spec's start points when the FRF
+    optimum left one of them on a bound of its range and a start point fits the time records
+    better (in place; True when it did).
 
     The FRF fit weighs every line of the band on a log scale; when the base misses physics
     elsewhere in the band (a second hidden effect), that misfit can hold the added effect at its
@@ -714,6 +725,8 @@ def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
         return False
     problem, fit = mf.result.problem, mf.result.fit
     own = {prm.name: i for i, prm in enumerate(problem.params) if prm.rh is None and prm.name in effect_params(eff)}
+    if not any(on_bound(problem.params[i], float(fit.theta[i])) for i in own.values()):
+        return False
     extra = {n: mf.device.params[n] for n in mf.spec.free if n not in {p.name for p in problem.params}
              and n in mf.device.params}
 

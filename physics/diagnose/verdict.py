@@ -64,6 +64,7 @@ from ..analysis import stats
 from . import confidence as conf
 from .adequacy import ADEQUATE_RATIO, Adequacy
 from .confidence import excess_share
+from .candidates import on_bound
 from .specs import effect_params, excitation
 
 #: Evidence against a candidate per quality flag, in BIC units ("very strong", Kass & Raftery).
@@ -89,14 +90,6 @@ STATUSES = ("explained", "partly explained", "found (adequacy not assessed)", "a
 # ============================================================================ quality
 
 
-def _on_bound(prm, value: float) -> bool:
-    if not prm.lower < value < prm.upper:          # at or past a bound; the off value 0 of a log-scaled one too
-        return True
-    x, (lo, hi) = float(prm.to_x(value)), prm.x_bounds
-    tol = 1e-3 * max(1.0, hi - lo) if prm.scale == "linear" else 1e-3
-    return x <= lo + tol or x >= hi - tol
-
-
 def quality(c) -> list[str]:
     """The quality flags of a fitted candidate (module doc), as sentences."""
     f = c.fit
@@ -108,7 +101,7 @@ def quality(c) -> list[str]:
     for i in mine:
         prm, lab = problem.params[i], labels[i]
         v = f.values.get(lab, float(f.result.fit.theta[i]))
-        if _on_bound(prm, v):
+        if on_bound(prm, v):
             flags.append(f"{lab} = {v:.4g} {prm.unit} is on a bound of its range [{prm.lower:.3g}, {prm.upper:.3g}]")
         rel = f.rel_std_errors.get(lab)
         if rel is not None and (not math.isfinite(rel) or rel > REL_SE_FLAG):
