@@ -93,14 +93,14 @@ class Cand:
 def test_an_effect_switched_off_reads_on_its_bound_without_a_warning():
     """A candidate replaced by the base with its effect off carries the off value (0) of a
     log-scaled parameter: that is on the bound, and no 'divide by zero in log' reaches the user."""
-    from physics.diagnose.verdict import _on_bound
+    from physics.diagnose.candidates import on_bound
     from physics.identify.parameters import FreeParameter
     prm = FreeParameter("tau", 1.0, 1e-3, 1e3, "log", "s")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert _on_bound(prm, 0.0) and _on_bound(prm, 1e-3) and _on_bound(prm, 2e3)
-        assert not _on_bound(prm, 1.0)
-        assert _on_bound(prm, 1e-3 * (1 + 1e-4))        # within the tolerance of ln θ
+        assert on_bound(prm, 0.0) and on_bound(prm, 1e-3) and on_bound(prm, 2e3)
+        assert not on_bound(prm, 1.0)
+        assert on_bound(prm, 1e-3 * (1 + 1e-4))        # within the tolerance of ln θ
 
 
 def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
