@@ -127,8 +127,11 @@ class ContractReport:
 
 @contextlib.contextmanager
 def _registered(cls):
-    """``cls`` registered for the duration (unless it already is)."""
-    if EFFECTS.get(cls.id) is cls:
+    """``cls`` registered for the duration (unless it already is); a class registered under
+    the same id before (the same effect loaded from another copy of its file, e.g. a kept
+    draft checked where it is written) is registered again afterwards."""
+    before = EFFECTS.get(cls.id)
+    if before is cls:
         yield
         return
     register(cls)
@@ -136,6 +139,8 @@ def _registered(cls):
         yield
     finally:
         unregister(cls.id)
+        if before is not None:
+            EFFECTS[cls.id] = before
 
 
 def check_effect(cls, device=DEVICE, *, fast: bool = False, rh: float = 60.0) -> ContractReport:

@@ -121,6 +121,17 @@ def test_a_draft_is_a_valid_effect_file_written_atomically(tmp_path):
     finally:
         for i in ids:
             unregister(i)
+    # a draft registered for this process (the best model's device file names its section) stays
+    # registered when its written copy is checked (the check loaded a second copy and unregistered
+    # the id: `eap diagnose` then failed writing the device file with KeyError 'slow_pole_r')
+    ids = load_effects_file(out / "drafted_slow_pole.py")
+    try:
+        held = EFFECTS["drafted_slow_pole"]
+        write_drafts(items, tmp_path / "again")
+        assert EFFECTS.get("drafted_slow_pole") is held
+    finally:
+        for i in ids:
+            unregister(i)
     # never over a folder eap did not write
     mine = tmp_path / "mine"
     mine.mkdir()
