@@ -14,6 +14,8 @@ shortfall the cause is looked for in the data and in how the network was kept:
   at the output's extremes);
 * an **integrating plant** (the linear model's slowest pole does not decay within a record;
   such data usually come from a closed loop around the plant);
+* a **closed loop** (:func:`feedback`: past outputs predict the input beyond the input's own
+  past — a controller produced the input from the measured output);
 * **too few independent windows** of training data (samples divided by the output's
   correlation time) for the network's map;
 * an output offset that differs between records, too few RH levels, validation data unlike
@@ -26,13 +28,15 @@ No network kind is named here: advice reads the model's own hyper-parameters.
 from __future__ import annotations
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.stats import f as f_distribution
 
 from physics.pages.columns import quantity
 
 from .models.crossval import independent_windows
 
-__all__ = ["data_facts", "facts", "explain", "sentences", "saturation", "integrating", "BIAS_RATIO",
-           "MIN_RH_LEVELS", "MIN_TRAIN_WINDOWS"]
+__all__ = ["data_facts", "facts", "explain", "sentences", "saturation", "integrating", "feedback", "feedback_statistic",
+           "BIAS_RATIO", "MIN_RH_LEVELS", "MIN_TRAIN_WINDOWS"]
 
 #: a one-step residual whose mean exceeds this fraction of its RMS is biased
 BIAS_RATIO = 0.5
@@ -55,6 +59,16 @@ INTEGRATOR_FRACTION = 0.5
 #: static gain of the linear model (output standard deviations per input standard deviation)
 #: above which a slow mode integrates (a spurious near-cancelled slow pole has a modest gain)
 INTEGRATOR_GAIN = 10.0
+#: the feedback test (:func:`feedback`): lags of the input's own past and of the linear model's
+#: free run (the restricted regression) and of the measured output (added), in samples
+FEEDBACK_INPUT_LAGS = 20
+FEEDBACK_OUTPUT_LAGS = 10
+#: past outputs that explain at least this share of the input's unpredictable variance and
+#: :data:`FEEDBACK_INPUT_SHARE` of its variance (both beyond chance), with an F-test p-value
+#: below :data:`FEEDBACK_P`, are a closed loop
+FEEDBACK_SHARE = 0.01
+FEEDBACK_INPUT_SHARE = 1e-3
+FEEDBACK_P = 1e-3
 #: errors within this relative difference are the same (float32 rounding of a network that is
 #: its linear start)
 SAME = 1e-3
@@ -63,6 +77,11 @@ MORE_VALIDATION_FRACTION = 0.4
 
 
 # ---------------------------------------------------------------------- evidence in the data
+def _free_runs(linear, records) -> list[np.ndarray]:
+    """The linear model's free run over each record, started on its measured outputs."""
+    return [linear.simulate(r.u, r.rh if linear.uses_rh else None, y_init=r.y[:linear.n_init]) for r in records]
+
+
 def saturation(records, linear) -> dict | None:
     """Evidence that the output saturates or is clipped, or None: ``{"kind": "clipped"|
     "saturates", ...}``.  Clipped: more than :data:`CLIP_SHARE` of the samples sit within 1 %
@@ -85,8 +104,7 @@ def saturation(records, linear) -> dict | None:
             return {"kind": "clipped", "side": side, "level": edge, "share": float(np.mean(at)), "visits": visits}
     if linear is None:
         return None
-    yh = np.concatenate([linear.simulate(r.u, r.rh if linear.uses_rh else None, y_init=r.y[:linear.n_init])
-                         for r in records])
+    yh = np.concatenate(_free_runs(linear, records))
     z = (yh - np.mean(y)) / (np.std(y) or 1.0)
     t = (y - np.mean(y)) / (np.std(y) or 1.0)
     ok = np.isfinite(z)
@@ -123,6 +141,75 @@ def integrating(linear, records) -> dict | None:
     return {"pole": p, "time_constant_samples": float(tau), "record_samples": n, "static_gain": gain}
 
 
+def _lagged(x: np.ndarray, start: int, k: int) -> np.ndarray:
+    """Rows ``x[t-k], …, x[t-1]`` for t = ``start`` … len(x) − 1."""
+    return sliding_window_view(x[:-1], k)[start - k:]
+
+
+def feedback_statistic(records, linear) -> dict | None:
+    """The test statistic of :func:`feedback` — ``{"share", "F", "p", "input_lags",
+    "output_lags", "samples"}`` — whether or not it finds a loop; None without a linear
+    model or records long enough for the regressions."""
+    if linear is None:
+        return None
+    na, k = FEEDBACK_INPUT_LAGS, FEEDBACK_OUTPUT_LAGS
+    start, n_r, n_f = max(na, k), 1 + na + k, 1 + na + 2 * k
+    u_all, y_all = np.concatenate([r.u for r in records]), np.concatenate([r.y for r in records])
+    su, my, sy = float(np.std(u_all)) or 1.0, float(np.mean(y_all)), float(np.std(y_all)) or 1.0
+    tss = rss_r = rss_f = 0.0
+    n = used = 0
+    res = []
+    for r, yh in zip(records, _free_runs(linear, records)):
+        if len(r) - start < 2 * n_f:
+            continue
+        u = r.u / su
+        A = np.hstack([np.ones((len(r) - start, 1)), _lagged(u, start, na), _lagged((yh - my) / sy, start, k)])
+        B = np.hstack([A, _lagged((r.y - my) / sy, start, k)])
+        t = u[start:]
+        e_r = t - A @ np.linalg.lstsq(A, t, rcond=None)[0]
+        e_f = t - B @ np.linalg.lstsq(B, t, rcond=None)[0]
+        if not (np.all(np.isfinite(e_r)) and np.all(np.isfinite(e_f))):
+            continue
+        tss += float(np.sum((t - np.mean(t)) ** 2))
+        rss_r, rss_f, n, used = rss_r + float(e_r @ e_r), rss_f + float(e_f @ e_f), n + t.size, used + 1
+        res.append(e_f)
+    df_r, df_f = n - used * n_r, n - used * n_f
+    if not used or not rss_r > 0 or df_f <= 0:
+        return None
+    rho = abs(sum(float(e[1:] @ e[:-1]) for e in res) / max(rss_f, 1e-300))
+    df_eff = n * (1 - rho) / (1 + rho) - used * n_f
+    if df_eff <= 0:
+        return None
+    share = 1.0 - (rss_f / df_f) / (rss_r / df_r)
+    q = used * k
+    F = ((rss_r - rss_f) / q) / max(rss_f / df_eff, 1e-300)
+    return {"share": float(share), "input_share": float((rss_r / df_r - rss_f / df_f) / (tss / (n - used))), "F": float(F), "p": float(f_distribution.sf(F, q, df_eff)), "input_lags": na,
+            "output_lags": k, "samples": int(n)}
+
+
+def feedback(records, linear) -> dict | None:
+    """Evidence that the input was produced by a loop reacting to the measured output (a
+    controller), or None: a Granger-causality test (C. W. J. Granger, Econometrica 37 (1969)
+    424–438; L. Ljung, *System Identification*, 2nd ed., 1999, §13.4, testing for feedback).
+
+    In each record the input u(t) is regressed on its own past u(t−1 … t−na) and on the
+    ``linear`` model's free run ŷ(t−1 … t−k) — the part of the output the input explains —
+    then also on the measured output y(t−1 … t−k) (na = :data:`FEEDBACK_INPUT_LAGS`, k =
+    :data:`FEEDBACK_OUTPUT_LAGS`; each record has coefficients of its own, so a pulse and a
+    sweep are not forced into one predictor).  In open loop what remains of the output (noise,
+    disturbances) is independent of the input and predicts nothing; in a closed loop u = C(r − y)
+    it was fed back into the input.  Pooled over the records: ``share``, the drop of the
+    residual variance adjusted for the added regressors (≈ 0 by chance); ``F`` and its ``p``
+    value, the denominator's degrees of freedom reduced for the residual's lag-one correlation
+    ρ (n (1 − |ρ|)/(1 + |ρ|), Bartlett's effective sample size).  A closed loop: ``share`` ≥
+    :data:`FEEDBACK_SHARE` and ``p`` < :data:`FEEDBACK_P`.  Returns ``{"share", "F", "p",
+    "input_lags", "output_lags", "samples"}`` or None (no loop, or no linear model)."""
+    stat = feedback_statistic(records, linear)
+    found = stat is not None and stat["share"] >= FEEDBACK_SHARE and stat["input_share"] >= FEEDBACK_INPUT_SHARE \
+        and stat["p"] < FEEDBACK_P
+    return stat if found else None
+
+
 def data_facts(ds, linear=None) -> dict:
     """What the causes are judged from, for a dataset (:func:`facts`); RH levels grouped
     within the hygrometer's tolerance (:func:`physics.compare.cluster_rh`)."""
@@ -137,8 +224,8 @@ def data_facts(ds, linear=None) -> dict:
 def facts(train, test, rh_levels, output: dict, validation_records: int = 0, linear=None) -> dict:
     """What the causes are judged from: training samples and record lengths, RH levels, the
     mean and spread of the output in the training and ``test`` records, independent windows,
-    and (with the ``linear`` yardstick) the evidence of :func:`saturation` and
-    :func:`integrating`."""
+    and (with the ``linear`` yardstick) the evidence of :func:`saturation`,
+    :func:`integrating` and :func:`feedback`."""
     y_tr = np.concatenate([r.y for r in train])
     y_te = np.concatenate([r.y for r in test]) if test else y_tr
     return {"train_samples": int(y_tr.size), "record_s": float(np.median([r.duration for r in train])),
@@ -147,7 +234,8 @@ def facts(train, test, rh_levels, output: dict, validation_records: int = 0, lin
             "output_std": float(np.std(y_tr)) or 1.0, "unit": str(output.get("unit", "m")),
             "validation_records": int(validation_records), "quantity": str(output.get("name", "deflection")),
             "train_windows": independent_windows(train),
-            "saturation": saturation(train, linear), "integrating": integrating(linear, train)}
+            "saturation": saturation(train, linear), "integrating": integrating(linear, train),
+            "feedback": feedback(train, linear)}
 
 
 # ---------------------------------------------------------------------- causes
@@ -213,22 +301,41 @@ def _causes(name: str, model, facts: dict, biased: bool, drop: dict | None) -> l
             action = (f"the linear row cannot follow a saturation, a network's correction can, given data enough to "
                       f"fit and keep it: record more ({_more_data(facts)})")
         out.append((f"the output {'is clipped ' if sat['kind'] == 'clipped' else 'saturates'}{where}", action))
-    integ = facts.get("integrating")
+    integ, loop = facts.get("integrating"), facts.get("feedback")
+    k_step = "judge it also by k-step-ahead prediction (`eap predict --steps-ahead K`)"
+    k_step_said = False
     if integ:
         tau = integ["time_constant_samples"]
         what = (f"the linear model's slowest pole ({integ['pole']:.4f}) "
                 + ("does not decay" if not np.isfinite(tau) else f"decays over {tau:,.0f} samples")
                 + f", against training records of {integ['record_samples']:,.0f} samples: within a record the plant "
-                "integrates its input, or creeps on longer than a record lasts (an integrator's data usually come "
-                "from a closed loop, whose controller kept the integral in range)")
+                "integrates its input, or creeps on longer than a record lasts"
+                + (" (its data come from a closed loop, below)" if loop else
+                   " (an integrator's data usually come from a closed loop, whose controller kept the integral in "
+                   "range)"))
         if model is not None and model.__dict__.get("reference_start_") is None and _param(model, "na") == 0:
             action = (f"give it a state that can integrate: its linear start (`--set {name}.linear_start=true`) or "
                       f"output feedback (`--set {name}.na=10`); a free run from the input alone cannot hold the "
                       "integral")
         else:
             action = ("a free run of an integrator accumulates every small error that the loop corrected in the "
-                      "measurement: judge it also by k-step-ahead prediction (`eap predict --steps-ahead K`)")
+                      f"measurement: {k_step}")
+            k_step_said = True
         out.append((f"an integrating plant: {what}", action))
+    if loop:
+        out.append((f"a closed loop: the input was produced by a controller reacting to the measured output — the "
+                    f"past {loop['output_lags']} outputs predict {100 * loop['share']:.0f} % of the input's "
+                    f"unpredictable variation beyond its own past (Granger test, F = {loop['F']:.3g}, "
+                    + (f"p = {loop['p']:.0e}" if loop["p"] > 0 else "p < 1e-300") + "); the output's noise was fed back into the input, so a model trained on the "
+                    "measured input as if it were free is biased towards the inverse of the controller (Ljung, "
+                    "System Identification, §13.4; Forssell and Ljung, Automatica 1999)",
+                    "if the plant is stable without its controller, record it in open loop, driven by a signal of "
+                    "the same range and bandwidth that is not computed from the output: a model trained on those "
+                    "records learns the plant, and its error on drives that do not react to the output falls; to "
+                    "predict the loop as it runs, make its reference (set-point) the input (`eap dataset ... "
+                    "--columns voltage=REFERENCE,...` with the reference's column, the other columns as before): "
+                    "reference → output is an open-loop system, identified consistently"
+                    + ("" if k_step_said else f"; with neither, {k_step}")))
     shift = abs(facts["test_mean"] - facts["train_mean"]) / facts["output_std"]
     if shift > OFFSET_SHIFT:
         out.append((f"offset not removed: the test records' mean {facts['quantity']} differs from the training "

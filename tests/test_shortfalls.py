@@ -114,3 +114,65 @@ def test_a_correction_dropped_within_its_uncertainty_is_said_on_the_page():
     (n,) = dropped(summary(0.3108))
     assert n["text"].startswith("narx runs its linear start (31.1 % test NRMSE against the linear row's 30.9 %)")
     assert "equals" not in n["text"]
+
+
+def test_an_integrator_in_a_closed_loop_is_said_once_with_its_loop():
+    """Both findings: the integrator refers to the closed loop instead of guessing one, and the
+    k-step-ahead advice is given once."""
+    loop = {"share": 0.12, "input_share": 0.02, "F": 27.0, "p": 1e-40, "input_lags": 20, "output_lags": 10,
+            "samples": 2000}
+    integ = {"pole": 1.0, "time_constant_samples": float("inf"), "record_samples": 1000.0, "static_gain": float("inf")}
+    m = _model()
+    m.get_params = lambda: {"na": 10}
+    (f,) = explain("ff", _row(0.2), RESULTS, m, {**FACTS, "integrating": integ, "feedback": loop})
+    (i, cause_i), (c, cause_c) = [(k, x) for k, x in enumerate(f["causes"])
+                                  if x["cause"].startswith(("an integrating plant", "a closed loop"))]
+    assert "its data come from a closed loop, below" in cause_i["cause"] and "usually" not in cause_i["cause"]
+    assert cause_c["cause"].startswith("a closed loop: the input was produced by a controller reacting to the "
+                                       "measured output — the past 10 outputs predict 12 %")
+    assert "--steps-ahead" in cause_i["action"] and "--steps-ahead" not in cause_c["action"]
+    (alone,) = explain("ff", _row(0.2), RESULTS, m, {**FACTS, "feedback": loop})
+    assert "with neither, judge it also by k-step-ahead prediction" in alone["causes"][0]["action"]
+
+
+def _feedback_of(records):
+    from nnmodel.linear import fit_linear
+    from nnmodel.shortfalls import feedback, feedback_statistic
+    lin = fit_linear(records, None, 0.2)
+    return feedback(records, lin), feedback_statistic(records, lin)
+
+
+def test_a_controller_in_the_loop_is_detected_and_an_exogenous_drive_is_not():
+    """A positioner under a P controller (tests/test_shortfalls_followed.py) is a closed loop; the
+    same plant driven by a signal of the same spectrum, and the loop's reference → output, are not."""
+    from nnmodel.data import Experiment
+    from test_shortfalls_followed import open_loop_twin, positioner
+    closed, stat = _feedback_of([Experiment(*positioner(2000, 1), None, 1.0)])
+    assert closed is not None and closed["share"] > 0.05 and closed["p"] < 1e-10
+    for data in (open_loop_twin(positioner, 2000, 1), positioner(2000, 1, reference=True)):
+        found, stat = _feedback_of([Experiment(*data, None, 1.0)])
+        assert found is None and stat["share"] < 0.01
+
+
+def test_the_example_records_and_a_generated_dataset_are_open_loop(tmp_path):
+    """data/tank and data/ipmc_creep (read as `eap dataset` reads them) and an `eap generate`
+    dataset: no closed loop."""
+    from pathlib import Path
+
+    from nnmodel.dataset import generate, load_dataset
+    from nnmodel.measured import ReadOptions, build_dataset
+    from physics.io.record import OutputQuantity
+    from physics.io.timeseries import parse_column_map
+    from test_dataset import TINY
+    data = Path(__file__).resolve().parents[1] / "data"
+    sets = {"tank": dict(read=ReadOptions(columns=parse_column_map(
+                             "time=t [s],voltage=pump [V],level=level [cm]", OutputQuantity.parse("level:cm"))),
+                         output="level:cm"),
+            "ipmc_creep": dict(read=ReadOptions(columns=parse_column_map(
+                "time=Time (s),voltage=Drive (V),deflection=Tip (mm):mm")))}
+    folders = [build_dataset(tmp_path / name, train=sorted(str(f) for f in (data / name).glob("*.csv")), **kw)
+               for name, kw in sets.items()]
+    folders.append(generate(tmp_path / "generated", dict(TINY), progress=False))
+    for folder in folders:
+        found, stat = _feedback_of(load_dataset(folder).records("train"))
+        assert found is None and stat["share"] < 0.01, folder
