@@ -283,24 +283,10 @@ def _dropped_cause(name: str, drop: dict, facts: dict) -> tuple[str, str]:
             "(the chosen trial never validates worse than the recipe)")
 
 
-def _causes(name: str, model, facts: dict, biased: bool, drop: dict | None) -> list[tuple[str, str]]:
-    """(cause, what to do) pairs the data and the model's card support."""
+def _loop_causes(name: str, model, facts: dict) -> list[tuple[str, str]]:
+    """The integrator and closed-loop findings (cause, what to do), said once together: an
+    integrator's data usually come from a loop, and the k-step-ahead advice is given once."""
     out = []
-    if drop is not None:
-        out.append(_dropped_cause(name, drop, facts))
-    sat = facts.get("saturation")
-    if sat:
-        where = (f"at its {sat['side']} ({_value(sat['level'], facts['unit'])}: "
-                 f"{100 * sat['share']:.1f} % of the training samples sit there)" if sat["kind"] == "clipped" else
-                 f": a cubic term of the linear model's output explains {100 * sat['share']:.0f} % of its residual "
-                 "and compresses it")
-        if sat["kind"] == "clipped":
-            action = ("record within the output's range (a lower drive, or a sensor range that holds the output): "
-                      "the clipped samples show the limit, not the plant, and a linear model then follows the records")
-        else:
-            action = (f"the linear row cannot follow a saturation, a network's correction can, given data enough to "
-                      f"fit and keep it: record more ({_more_data(facts)})")
-        out.append((f"the output {'is clipped ' if sat['kind'] == 'clipped' else 'saturates'}{where}", action))
     integ, loop = facts.get("integrating"), facts.get("feedback")
     k_step = "judge it also by k-step-ahead prediction (`eap predict --steps-ahead K`)"
     k_step_said = False
@@ -336,6 +322,28 @@ def _causes(name: str, model, facts: dict, biased: bool, drop: dict | None) -> l
                     "--columns voltage=REFERENCE,...` with the reference's column, the other columns as before): "
                     "reference → output is an open-loop system, identified consistently"
                     + ("" if k_step_said else f"; with neither, {k_step}")))
+    return out
+
+
+def _causes(name: str, model, facts: dict, biased: bool, drop: dict | None) -> list[tuple[str, str]]:
+    """(cause, what to do) pairs the data and the model's card support."""
+    out = []
+    if drop is not None:
+        out.append(_dropped_cause(name, drop, facts))
+    sat = facts.get("saturation")
+    if sat:
+        where = (f"at its {sat['side']} ({_value(sat['level'], facts['unit'])}: "
+                 f"{100 * sat['share']:.1f} % of the training samples sit there)" if sat["kind"] == "clipped" else
+                 f": a cubic term of the linear model's output explains {100 * sat['share']:.0f} % of its residual "
+                 "and compresses it")
+        if sat["kind"] == "clipped":
+            action = ("record within the output's range (a lower drive, or a sensor range that holds the output): "
+                      "the clipped samples show the limit, not the plant, and a linear model then follows the records")
+        else:
+            action = (f"the linear row cannot follow a saturation, a network's correction can, given data enough to "
+                      f"fit and keep it: record more ({_more_data(facts)})")
+        out.append((f"the output {'is clipped ' if sat['kind'] == 'clipped' else 'saturates'}{where}", action))
+    out += _loop_causes(name, model, facts)
     shift = abs(facts["test_mean"] - facts["train_mean"]) / facts["output_std"]
     if shift > OFFSET_SHIFT:
         out.append((f"offset not removed: the test records' mean {facts['quantity']} differs from the training "
