@@ -355,3 +355,25 @@ def test_lab_test_bed_sensor_lowpass_is_drafted_and_becomes_the_verdict(tmp_path
     assert e1 <= e0 - 0.5 * (e0 - true), (e0, e1, true)
     tau = after["ranking"][0]["effect_parameters"]["lowpass_tau"]
     assert 1 / (2 * math.pi * tau) == pytest.approx(case.truth_params["lowpass_Hz"], rel=0.05)
+
+
+@pytest.mark.slow
+def test_the_default_route_writes_its_drafts_and_the_best_model_that_needs_them(tmp_path, capsys):
+    """`eap diagnose` with its defaults on a creeping tip: the kept slow pole is written into
+    OUT/drafts/, checked, and the best model's device file (which names its section) is written
+    too — the check of the written copy once unregistered the draft and the command failed."""
+    import yaml
+    from nnmodel.app.cli import main
+    from physics.testbeds.demo import outside_catalog_case
+    from physics.io.timeseries import write_timeseries
+    ms, tp = outside_catalog_case("creep", seed=0, fs=200.0, duration=40.0)
+    files = [str(write_timeseries(m, tmp_path / f"{m.source}.csv")) for m in ms]
+    try:
+        assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx"), "--quiet"]) == 0
+    finally:
+        unregister("drafted_slow_pole")
+    out = capsys.readouterr().out
+    assert "drafted_slow_pole.py: contract check passed" in out
+    assert (tmp_path / "dx" / "drafts" / "drafted_slow_pole.py").is_file()
+    (dev,) = [p for p in (tmp_path / "dx").glob("*.yaml")]
+    assert "slow_pole_r" in yaml.safe_load(dev.read_text()).get("drafted_slow_pole", {})
