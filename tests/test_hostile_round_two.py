@@ -655,13 +655,22 @@ def test_a_signal_python_drops_in_a_gc_callback_still_stops_the_run(tmp_path, mo
         gc.callbacks.remove(dropped)
         cli._on_signal(getattr(signal, signame), None)
 
-    def preflight(*a, **k):            # the signal lands in a gc callback once the run has begun
-        gc.callbacks.append(dropped)
-        gc.collect()
+    armed = [True]
+
+    def preflight(*a, **k):            # the signal lands in a gc callback once the run has begun (once:
+        if armed:                      # a command may check its --out more than once)
+            armed.clear()
+            gc.callbacks.append(dropped)
+            gc.collect()
         return real(*a, **k)
     monkeypatch.setattr(outputs, "preflight", preflight)
     monkeypatch.setattr(sys, "unraisablehook", lambda u: None)
     monkeypatch.chdir(tmp_path)
-    assert main(SIM + ["--out", "S"]) == code
+    try:
+        assert main(SIM + ["--out", "S"]) == code
+    finally:                           # nothing of the fake signal outlives the test
+        if dropped in gc.callbacks:
+            gc.callbacks.remove(dropped)
+        outputs.INTERRUPTS.clear()
     assert _err(capsys) == "eap simulate: interrupted; nothing written to S"
     assert not [p for p in tmp_path.iterdir()], os.listdir(tmp_path)
