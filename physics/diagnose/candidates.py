@@ -634,6 +634,16 @@ def _refine_gain(mf: ModelFit, records: Sequence[PreparedRecord], preds: list) -
     return [a * p for p in preds]
 
 
+def model_at(mf: ModelFit, theta) -> ActuatorModel:
+    """The model of ``mf`` with its FRF-fitted parameters at ``theta`` (problem coordinates) and
+    the parameters the FRF fit does not hold (set on the time records) at their current values."""
+    problem = mf.result.problem
+    held = {p.name for p in problem.params}
+    extra = {n: mf.device.params[n] for n in mf.spec.free if n not in held and n in mf.device.params}
+    dev = problem.device_for(theta)
+    return ActuatorModel(dev.with_params(**extra) if extra else dev, mf.effects, n_modes=mf.model.n_modes)
+
+
 def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     """Refit the FRF-fitted free parameters of ``mf`` on the time records, from the FRF
     optimum (in place; True when the error fell).  The FRF fit weighs the frequencies by
@@ -652,17 +662,13 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
         return False
     problem, fit = mf.result.problem, mf.result.fit
     own = {p.name for p in problem.params}
-    extra = {n: mf.device.params[n] for n in mf.spec.free if n not in own and n in mf.device.params}
+    extra = [n for n in mf.spec.free if n not in own and n in mf.device.params]
     lo, hi = problem.x_bounds
     span = hi - lo
     scale = math.sqrt(sum(mf.rss) / sum(mf.n)) or 1.0
 
-    def model_at(x):
-        dev = problem.device_for(problem.from_x(x))
-        return ActuatorModel(dev.with_params(**extra) if extra else dev, mf.effects, n_modes=mf.model.n_modes)
-
     def resid(x):
-        m = model_at(x)
+        m = model_at(mf, problem.from_x(x))
         return np.concatenate([r.detrend_d(r.y_d - predict(m, r)) for r in records]) / scale
 
     x0 = np.clip(problem.to_x(fit.theta), lo + 1e-9 * span, hi - 1e-9 * span)
@@ -682,7 +688,7 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     fit.theta[:], fit.x[:] = theta, sol.x
     fit.std_error[:], fit.rel_std_error[:], fit.ci95[:] = unc["std_error"], unc["rel_std_error"], unc["ci95"]
     labels = problem.labels
-    mf.model = model_at(sol.x)
+    mf.model = model_at(mf, theta)
     mf.device = mf.result.device = mf.model.device
     mf.values.update(zip(labels, theta.tolist()))
     mf.std_errors.update(zip(labels, unc["std_error"].tolist()))
@@ -727,12 +733,9 @@ def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     own = {prm.name: i for i, prm in enumerate(problem.params) if prm.rh is None and prm.name in effect_params(eff)}
     if not any(on_bound(problem.params[i], float(fit.theta[i])) for i in own.values()):
         return False
-    extra = {n: mf.device.params[n] for n in mf.spec.free if n not in {p.name for p in problem.params}
-             and n in mf.device.params}
 
     def cost(theta) -> float:
-        dev = problem.device_for(theta)
-        model = ActuatorModel(dev.with_params(**extra) if extra else dev, mf.effects, n_modes=mf.model.n_modes)
+        model = model_at(mf, theta)
         preds = [predict(model, r) for r in records]
         num = sum(float(remove_nuisance(p) @ remove_nuisance(r.y_d)) for p, r in zip(preds, records))
         den = sum(float(remove_nuisance(p) @ remove_nuisance(p)) for p in preds)
@@ -763,9 +766,8 @@ def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     before = mf.rmse
     fit.theta[:] = trials[k]
     fit.x[:] = problem.to_x(trials[k])
-    dev = problem.device_for(trials[k])
-    mf.device = mf.result.device = dev.with_params(**extra) if extra else dev
-    mf.model = ActuatorModel(mf.device, mf.effects, n_modes=mf.model.n_modes)
+    mf.model = model_at(mf, trials[k])
+    mf.device = mf.result.device = mf.model.device
     mf.values.update(zip(problem.labels, fit.theta.tolist()))
     score(mf, records)
     start = ", ".join(f"{n} = {fit.theta[i]:.4g}" for n, i in own.items())
