@@ -108,6 +108,29 @@ def test_prony_fit_reproduces_the_dma_table_and_is_passive(device, table):
     assert np.all(Ew.imag >= 0) and np.all(Ew.real > 0)
 
 
+def test_the_free_shape_holds_a_power_law_from_ve_f_lo_and_a_plateau_below():
+    """A power-law modulus E* ∝ (jω)^α is causal with tan δ = tan(απ/2) and a storage rise of
+    10^α − 1 per decade (Kramers–Kronig): the free shape given those reproduces it from ve_f_lo
+    to the table's top, and below ve_f_lo the relaxation has ended (a plateau)."""
+    from physics.effects.viscoelastic import Viscoelastic
+    dev = load_device("ipmc_pt_eg")
+    alpha, f_lo = 0.05, 0.01
+    shape = {"ve_slope": 10 ** alpha - 1, "ve_tan_delta": np.tan(alpha * np.pi / 2)}
+    ve = Viscoelastic(dev)
+    pr = ve.polymer_modulus({**dev.params, **shape, "ve_f_lo": f_lo}, False)
+    f = np.geomspace(3 * f_lo, 20.0, 30)
+    E = pr(2j * np.pi * f)
+    E1 = np.interp(0.0, np.log10(dev.tables["dma"]["freq"]), dev.tables["dma"]["storage"])
+    np.testing.assert_allclose(E.real, E1 * f ** alpha, rtol=0.03)
+    np.testing.assert_allclose(E.imag / E.real, shape["ve_tan_delta"], rtol=0.15)
+    slow = pr(2j * np.pi * np.array([f_lo / 300, f_lo / 3000]))
+    assert abs(slow[0] / slow[1] - 1) < 0.01 and slow[0].real < 0.97 * E1 * f_lo ** alpha
+    # without ve_f_lo the shape starts at the table's lowest frequency, as before
+    a = ve.polymer_modulus({**dev.params, **shape}, False)
+    b = ve.polymer_modulus({**dev.params, **shape, "ve_f_lo": float(dev.tables["dma"]["freq"].min())}, False)
+    assert a == b
+
+
 # --- humidity ---------------------------------------------------------------------------
 def test_resonance_moves_with_rh_as_sqrt_of_table_V_modulus():
     table_v = {40: 0.49, 60: 0.39, 80: 0.225, 100: 0.18}  # GPa, thesis Table V

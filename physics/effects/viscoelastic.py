@@ -13,8 +13,12 @@ optional ``dma_scale`` (default 1) multiplies the tabulated modulus, so a sample
 softer than the one measured by DMA can be identified.  A *free shape* for a material other
 than the one measured: with ``ve_slope`` and ``ve_tan_delta`` given (device file or a fit),
 the table is replaced by E'(f) = E'(1 Hz)·(1 + ve_slope)^log10(f/1 Hz), E'' = ve_tan_delta·E'
-over the table's band (E'(1 Hz) from the table, times ``dma_scale``), fitted by the same
-Prony series — so the diagnosis can fit the slope and the loss of another polymer.  Off: an elastic modulus (``Y``,
+from ``ve_f_lo`` (default: the table's lowest frequency) to the table's highest (E'(1 Hz) from
+the table, times ``dma_scale``), fitted by the same Prony series — so the diagnosis can fit the
+slope and the loss of another polymer.  Below ``ve_f_lo`` the relaxation has ended (the
+rubbery plateau, E → E∞): a polymer that keeps creeping over minutes has a low ``ve_f_lo``,
+one with a plateau below its loss peak a higher one; a DMA table rarely reaches below 1 Hz
+while step records with long holds do (Ferry, *Viscoelastic Properties of Polymers*, ch. 3).  Off: an elastic modulus (``Y``,
 or ``Y_polymer`` with ``layered_beam``), no loss besides Rayleigh damping.
 """
 from __future__ import annotations
@@ -77,10 +81,13 @@ class Viscoelastic(ElasticModulus):
                         default=1.0),
               ParamSpec("ve_slope", "1", 0.0, 1.0, "free shape: storage modulus rise per decade (fraction)",
                         optional=True),
-              ParamSpec("ve_tan_delta", "1", 0.0, 1.0, "free shape: loss tangent E''/E'", optional=True))
+              ParamSpec("ve_tan_delta", "1", 0.0, 1.0, "free shape: loss tangent E''/E'", optional=True),
+              ParamSpec("ve_f_lo", "Hz", 1e-6, 1e3, "free shape: frequency below which the modulus stops "
+                        "relaxing (default: the DMA table's lowest)", optional=True))
     diagnosis = {
-        "free": ("ve_slope", "ve_tan_delta"),               # the free shape (starts: the DMA table's own)
-        "bounds": {"ve_slope": (0.0, 0.6), "ve_tan_delta": (0.005, 0.6), "dma_scale": (0.05, 20.0)},
+        "free": ("ve_slope", "ve_tan_delta", "ve_f_lo"),    # the free shape (starts: the DMA table's own)
+        "bounds": {"ve_slope": (0.0, 0.6), "ve_tan_delta": (0.005, 0.6), "ve_f_lo": (1e-3, 20.0),
+                   "dma_scale": (0.05, 20.0)},
         "nested": False,
         "roles": {"stiffness": ("dma_scale", 2)},            # dma_scale takes over Y (and Y_polymer)
         "excitation": "a broadband record spanning the first bending resonance (peak shape, frequency-dependent "
@@ -117,10 +124,12 @@ class Viscoelastic(ElasticModulus):
 
     @classmethod
     def diagnosis_start(cls, device) -> dict:
-        """Start of the free shape: the shape of the device's DMA table (:func:`dma_shape`)."""
+        """Start of the free shape: the shape of the device's DMA table (:func:`dma_shape`) over
+        its band."""
         if "dma" not in device.tables:
             return {}
-        return dict(zip(("ve_slope", "ve_tan_delta"), dma_shape(device.tables["dma"])))
+        t = device.tables["dma"]
+        return {**dict(zip(("ve_slope", "ve_tan_delta"), dma_shape(t))), "ve_f_lo": float(np.min(t["freq"]))}
 
     def _storage(self, f: float, layered: bool) -> float | None:
         t = self.device.tables.get("dma_membrane" if layered else "dma")
@@ -143,7 +152,9 @@ class Viscoelastic(ElasticModulus):
                              f"'viscoelastic' of device {self.device.name!r}")
         t = self.device.tables[name]
         if "ve_slope" in p and "ve_tan_delta" in p:
-            f = np.geomspace(float(np.min(t["freq"])), float(np.max(t["freq"])), 16)
+            f_hi = float(np.max(t["freq"]))
+            f_lo = min(float(p.get("ve_f_lo", np.min(t["freq"]))), f_hi / 2.0)
+            f = np.geomspace(f_lo, f_hi, max(16, int(np.ceil(4 * np.log10(f_hi / f_lo))) + 1))
             E1 = float(np.exp(np.interp(0.0, np.log10(t["freq"]), np.log(t["storage"]))))
             Es = E1 * (1.0 + float(p["ve_slope"])) ** np.log10(f)
             return fit_prony(tuple(f), tuple(Es), tuple(float(p["ve_tan_delta"]) * Es)).scaled(p.get("dma_scale", 1.0))
