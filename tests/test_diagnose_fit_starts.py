@@ -225,3 +225,34 @@ def test_a_slow_effect_held_at_its_off_bound_starts_again_on_the_time_records():
     assert held.values["D_solvent"] == pytest.approx(truth, rel=0.3)
     assert held.rmse <= 1.1 * good.rmse
     assert held.time_refined and any("is not the time records'" in n for n in held.spec.notes)
+
+
+def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
+    """Records of a strip whose charge saturates at volts (compact layers, C_stern 0.5 F/m²)
+    under multisines of 0.5 and 1.5 V peak: each multisine stands for a tone with its drive's
+    power (√2·RMS, about half its peak), so the describing-function fit of ``nonlinear_charge``
+    recovers C_stern; read at the multisines' peaks it would see more compression than there is."""
+    from physics import signals
+    from physics.diagnose.records import prepare_records
+    from physics.io.record import TimeSeries
+    from physics.model import ActuatorModel
+    from physics.solvers.timedomain import simulate
+    dev = load_device("ipmc_pt_eg")
+    truth = ActuatorModel(dev.with_params(C_stern=0.5), ["nonlinear_charge"])
+    rng = np.random.default_rng(1)
+    records = []
+    for k, amp in enumerate((0.5, 1.5)):
+        sig = signals.multisine(amp, 0.1, 20.0, 20.0, periods=2, fs=100.0, seed=k)
+        y = simulate(truth, None, sig.t, sig.v, rh=60.0, hold="cubic").deflection
+        records.append(TimeSeries(sig.t, sig.v, y + rng.normal(0, 0.3e-6, y.size), rh=np.full(y.size, 60.0),
+                                  source=f"ms{k}"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_records(records, FitOptions())
+        recs = prepare_records(records)
+        assert all(r.tone_amplitude < 0.6 * r.amplitude for r in recs)        # multisines: crest factor > 1.7
+        ids = tuple(C.resolve_effects(["double_layer"], dev))
+        spec = C.candidate_spec("nonlinear_charge", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
+        fit = C.score(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=2), data.records)
+    assert fit.ok, fit.error
+    assert fit.values["C_stern"] == pytest.approx(0.5, rel=0.3)

@@ -39,11 +39,12 @@ def test_equilibrium_law_matches_an_independent_poisson_boltzmann_root_solve():
     assert Q[-1] ** 2 / (2 * d.kappa * 96485.33212 * p["C_anion"] * U[-1]) == pytest.approx(1.0, abs=0.15)
 
 
-@pytest.mark.parametrize("c_max", [np.inf, 5000.0])
-def test_stepper_law_matches_a_root_solve_on_every_branch(c_max):
+@pytest.mark.parametrize("c_max,c_stern", [(np.inf, np.inf), (5000.0, np.inf), (5000.0, 0.4)])
+def test_stepper_law_matches_a_root_solve_on_every_branch(c_max, c_stern):
     """The time stepper's compiled law (one interpolation in a ±q̂ table) against an
-    independent Poisson–Boltzmann root solve, each branch at its own temperature."""
-    dev = load_device("ipmc_pt_eg").with_params(C_max=c_max)
+    independent Poisson–Boltzmann root solve, each branch at its own temperature; compact
+    (Stern) layers add their series drop 2Q/C_S (Bazant, Thornton & Ajdari 2004)."""
+    dev = load_device("ipmc_pt_eg").with_params(C_max=c_max, C_stern=c_stern)
     p = dict(dev.params)
     T = p["T_ext"] + np.array([0.0, 5.0, 20.0, 40.0])
     d = DoubleLayer.props(p, T)
@@ -63,21 +64,45 @@ def test_stepper_law_matches_a_root_solve_on_every_branch(c_max):
     for k, q in enumerate(Q):
         x_up, x_low = solve(q, k)
         V_T = 8.314462618 * T[k] / 96485.33212
-        assert U[k] == pytest.approx(V_T * (x_low - x_up), rel=1e-5)
+        assert U[k] == pytest.approx(V_T * (x_low - x_up) + 2 * q / c_stern, rel=1e-5)
         dq = 1e-6 * abs(q)
-        slope = V_T * (np.subtract(*solve(q - dq, k)) - np.subtract(*solve(q + dq, k))) / (2 * dq)
+        slope = V_T * (np.subtract(*solve(q - dq, k)) - np.subtract(*solve(q + dq, k))) / (2 * dq) + 2 / c_stern
         assert dU[k] == pytest.approx(slope, rel=1e-3)
         assert c_up[1, k] == pytest.approx(excess(x_up), rel=1e-4)
         assert c_low[1, k] == pytest.approx(excess(x_low), rel=1e-4)
 
 
-def test_small_signal_limit_matches_its_frequency_response():
+@pytest.mark.parametrize("c_stern", [np.inf, 0.3])
+def test_small_signal_limit_matches_its_frequency_response(c_stern):
+    dev = load_device("ipmc_pt_eg").with_params(C_stern=c_stern)
     sig = signals.tone(1e-3, 2.0, 6.0, 500.0)
-    r = physics.simulate("ipmc_pt_eg", "nonlinear_charge", sig.t, sig.v)
-    fr = physics.frequency_response("ipmc_pt_eg", "nonlinear_charge", [2.0])
+    r = physics.simulate(dev, "nonlinear_charge", sig.t, sig.v)
+    fr = physics.frequency_response(dev, "nonlinear_charge", [2.0])
     last = sig.t > 2.0
     H = _tone_fit(sig.t[last], r.deflection[last], 2.0) / _tone_fit(sig.t[last], sig.v[last], 2.0)
     assert abs(H / fr.deflection[0] - 1) < 0.01
+
+
+def test_compact_layers_move_the_saturation_to_volts():
+    """Bare diffuse layers compress at a few tenths of a volt: at 0.3 V their charge is well
+    below its small-signal line.  Behind compact layers with C_S = 0.3 F/m² (in series, the
+    small-signal capacitance 1/(1/C0 + 2/C_S)) most of the voltage drops across the compact
+    layers: the charge stays on its line at 0.3 V and has begun to saturate at 1 V, as a
+    strip driven at volts does."""
+    from scipy.optimize import brentq
+    dev = load_device("ipmc_pt_eg")
+    p = dict(dev.params)
+    d = DoubleLayer.props(p)
+    law = NonlinearCharge(dev)
+    share = {}
+    for cs in (np.inf, 0.3):
+        q_ = {**p, "C_stern": cs}
+        c_small = 1.0 / (1.0 / (d.C0 * np.sqrt(1 - law.nu(q_))) + 2.0 / cs)
+        for u in (0.3, 1.0, 3.0):
+            Q = brentq(lambda q: float(law.potential(np.array([q]), d, q_)[0][0]) - u, 0.0, 10.0 * c_small * u)
+            share[cs, u] = Q / (c_small * u)
+    assert share[np.inf, 0.3] < 0.8 and share[np.inf, 1.0] < 0.5
+    assert share[0.3, 0.3] > 0.98 and 0.85 < share[0.3, 1.0] < 0.97 and share[0.3, 3.0] < 0.8
 
 
 def test_large_signal_saturates_and_is_odd_symmetric():

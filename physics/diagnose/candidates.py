@@ -19,7 +19,7 @@ effect                      extra free parameters (bounds)                      
 ``layered_beam``            ``Y_electrode``; ``Y_polymer`` replaces ``Y``           no
 ``humidity``                ``kf`` and ``Y`` once per RH level (Table V style)      yes
                             instead of shared values (needs ≥ 2 RH levels)
-``nonlinear_charge``        ``C_max`` when the data can determine it (see below)    no
+``nonlinear_charge``        ``C_stern`` when the data can determine it (below)      no
 ==========================  =====================================================  ==========
 
 A parameter that moves between roles (``kf`` ↔ ``kf0``, ``Y`` ↔ ``dma_scale`` ↔
@@ -30,10 +30,12 @@ grid of starts over the effect's own parameter, whose scale is unknown); a param
 ends on the edge of its default search window (3 decades around a start that may itself be
 far off) is searched again around that edge (:func:`_on_search_window_edge`); linear models
 cost milliseconds per evaluation.  ``nonlinear_charge`` uses the describing function of
-:mod:`.describing` in the FRF fit.  Its ``C_max`` is fitted only when it changes the
-large-signal gain by more than 10 % across its range; otherwise (the Poisson–Boltzmann
-layers alone set the compression, C_max only scales the small-signal gain like kf) it is
-held at the device value and the report says so.
+:mod:`.describing` in the FRF fit, each record standing for a tone with its drive's power
+(:attr:`.records.PreparedRecord.tone_amplitude`).  Its large-signal parameter (the compact
+layer's capacitance, which sets the voltage at which the charge saturates) is fitted only
+when records at two or more amplitude levels exist and it changes the large-signal gain by
+more than 10 % across its range; otherwise it is held at the device value and the report
+says so.
 
 **Scoring.**  Every fitted model is simulated on every record (decimated, see
 :mod:`.records`; the sensor's low-pass applied; the model starts at rest at the record's
@@ -389,7 +391,7 @@ def time_only_params(spec: ModelSpec, device: Device) -> list[str]:
 
 
 def _df_problem(spec, device, targets, target_records, kw, df_cache):
-    amps = [r.amplitude for r in target_records]
+    amps = [float(f"{r.tone_amplitude:.3g}") for r in target_records]     # one table row per drive level
     lo = min(float(t.freq.min()) for t in targets)
     hi = max(float(t.freq.max()) for t in targets)
     rh = target_records[0].rh_measured
@@ -412,11 +414,18 @@ def _df_problem(spec, device, targets, target_records, kw, df_cache):
     name = df.param
     free = list(spec.free)
     note = None
-    if sens > DF_MIN_SENSITIVITY and name not in free and len({round(a, 9) for a in amps}) >= 2:
+    if sens > DF_MIN_SENSITIVITY and name not in free and len({r.amplitude_level for r in target_records}) >= 2:
         free.append(name)
-        kw["bounds"] = {**kw.get("bounds", {}), name: param_bounds(name, device)}
+        large = [e for e in spec.effects if spec_of(e).get("describing_function")]
+        spec.extra_starts = list(spec.extra_starts) + [{name: pt[name]} for e in large
+                                                       for pt in start_points(e, device) if name in pt]
     elif name in free and sens <= DF_MIN_SENSITIVITY:
         free.remove(name)
+    if name in free:                        # its diagnosis range, a start inside it
+        lo, hi = param_bounds(name, device)
+        now = float(kw.get("start", {}).get(name, device.params.get(name, declared_default(name))))
+        kw["bounds"] = {**kw.get("bounds", {}), name: (lo, hi)}
+        kw["start"] = {**kw.get("start", {}), name: now if lo <= now <= hi else math.sqrt(lo * hi)}
     if name not in free:
         now = device.params.get(name, declared_default(name))
         note = (f"{name} held at {now:.4g}: across its range it changes the large-signal gain by only "

@@ -100,6 +100,16 @@ class PreparedRecord:
         return self.ts.fs
 
     @property
+    def tone_amplitude(self) -> float:
+        """Amplitude [V] of the sine with this drive's power, sqrt(2)·RMS(v − mean): a sweep's
+        peak, about half a multisine's (crest factor ≈ 3).  A describing function computed for
+        tones stands in for a multisine at this amplitude, not at its peak, whose rare
+        excursions hardly load the nonlinearity (Gelb & Vander Velde 1968, ch. 3: the Gaussian
+        input's gain is set by its RMS)."""
+        u = np.asarray(self.ts.voltage, dtype=float)
+        return float(math.sqrt(2.0) * np.std(u)) if u.size else self.amplitude
+
+    @property
     def fs_d(self) -> float:
         return self.ts.fs / self.q
 

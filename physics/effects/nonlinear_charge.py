@@ -23,10 +23,20 @@ stays exactly linear in U (checked against the full PNP reference: deflection wi
 (equal to ``double_layer`` when C_max → ∞).  The default
 C_max ≈ 5000 mol/m³ corresponds to a ≈ 0.7 nm solvated cation (Kilic, Bazant & Ajdari,
 Phys. Rev. E 75, 021502, 2007), the scale of the thesis's Fig. 13/30 cation peaks.
+
+**Stern layer.**  Bare Poisson–Boltzmann layers compress at the thermal voltage V_T ≈ 26 mV,
+while strips saturate at volts: between the electrode and each diffuse layer sits a compact
+(Stern) layer, a charge-free capacitor C_S [F/m²] in series (Bazant, Thornton & Ajdari,
+Phys. Rev. E 70, 021506, 2004, §II C), so U = 2 Q/C_S + U_PB(Q).  With C_S ≪ κe/λ most of
+the voltage drops across the compact layers and the diffuse layers stay nearly linear up to
+volts (for C_S ≪ κe/λ the onset scales as 2 κe F C⁻/C_S²); the small-signal capacitance
+becomes 1/(1/C0 + 2/C_S).  ``C_stern`` = ∞
+(the default) is the plain law above.
 Off: the linear law Q = C0 U (time domain) and the exact linear PNP (frequency domain).
 """
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -79,15 +89,20 @@ class NonlinearCharge(LinearCharge):
     linear = False
     reference = "unsupported"
     reference_note = "the reference solver is the full nonlinear PNP itself"
-    reference_limit = {"C_max": np.inf}       # plain Poisson–Boltzmann layers, as in the reference
+    reference_limit = {"C_max": np.inf, "C_stern": np.inf}     # plain Poisson–Boltzmann layers, as in the reference
     summary = "large-signal double layer: voltage-dependent capacitance, asymmetric/saturating charge"
     explanation = __doc__
     params = (ParamSpec("C_max", "mol/m^3", 1.0, np.inf,
                         "steric maximum cation concentration (.inf: plain Poisson–Boltzmann)", optional=True,
-                        default=5000.0),)
-    # C_anion/C_max from 0.005 to 0.96; C_max is fitted only where the describing function shows it matters
+                        default=5000.0),
+              ParamSpec("C_stern", "F/m^2", 1e-3, np.inf,
+                        "compact (Stern) layer capacitance per face (.inf: no compact layer)", optional=True,
+                        default=np.inf))
+    # the saturation voltage through the compact layer: C_stern from 0.05 to 50 F/m² (fitted where
+    # the describing function shows it matters); C_max held at the device value
     diagnosis = {
-        "free": ("C_max",), "bounds": {"C_max": (1 / 0.96, 1 / 0.005, "C_anion")},
+        "free": ("C_stern",), "bounds": {"C_stern": (0.05, 50.0)},
+        "starts": [{"C_stern": 0.15}, {"C_stern": 0.6}, {"C_stern": 3.0}, {"C_stern": 20.0}],
         "nested": False, "describing_function": True,
         "excitation": "the same excitation at two or more amplitudes (ratio at least 1.25) at one RH level",
         "reveal": {"amplitude_levels": 2},
@@ -102,22 +117,31 @@ class NonlinearCharge(LinearCharge):
 
     #: Identification hints: why a parameter may have no effect ({name: sentence}).
     hints = {"C_max": "C_max acts only in the large-signal (time-domain) response of nonlinear_charge"}
-    #: Grid of the steric ratio ν = C⁻/C_max on which the describing function is tabulated.
-    NU_GRID = (0.0, 0.02, 0.06, 0.12, 0.2, 0.3, 0.42, 0.55, 0.68, 0.8, 0.9, 0.96)
+    #: Grid of the compact-layer ratio c = C0/C_stern (C0: the diffuse layers' small-signal
+    #: capacitance) on which the describing function is tabulated: from 0 (no compact layer, the
+    #: diffuse layers compress at V_T) to 8 (the compact layers carry nearly all the voltage).
+    STERN_GRID = (0.0, 0.01, 0.03, 0.06, 0.1, 0.16, 0.25, 0.4, 0.6, 0.9, 1.3, 2.0, 3.0, 5.0, 8.0)
 
     @classmethod
     def describing_grid(cls, device) -> tuple[str, tuple[float, ...], float]:
         """The describing-function hook (:mod:`physics.diagnose.describing`): (the large-signal
-        parameter, its grid of coordinates c, scale) with c = scale/parameter: ν = C⁻/C_max
-        from 0 (plain Poisson–Boltzmann layers) to 0.96."""
-        return "C_max", cls.NU_GRID, float(device.params["C_anion"])
+        parameter, its grid of coordinates c, scale) with c = scale/parameter: C0/C_stern from 0
+        (plain Poisson–Boltzmann layers) to 8, C0 the diffuse layers' small-signal capacitance."""
+        p = dict(device.params)
+        d = DoubleLayer.props(p)
+        return "C_stern", cls.STERN_GRID, float(np.mean(d.C0)) * math.sqrt(1.0 - cls(device).nu(p))
 
     def nu(self, p) -> float:
         return float(p["C_anion"] / p.get("C_max", np.inf))
 
+    @staticmethod
+    def stern(p) -> float:
+        """2/C_S [V m²/C]: the two compact layers' share of dU/dQ (0 without them)."""
+        return 2.0 / float(p.get("C_stern", np.inf))
+
     def small_signal(self, s, d: DoubleLayerProps, p):
         nu = self.nu(p)
-        C0 = d.C0 * np.sqrt(1.0 - nu)
+        C0 = 1.0 / (1.0 / (d.C0 * np.sqrt(1.0 - nu)) + self.stern(p))
         tau = d.R_bulk * C0
         q = C0 / (1.0 + np.asarray(s, dtype=complex) * tau)
         return q, q * d.c0 / d.C0
@@ -132,14 +156,14 @@ class NonlinearCharge(LinearCharge):
         qh = np.asarray(Q, dtype=float) / self._scale(d)
         x = np.interp(np.concatenate([-qh, qh]), tab.q, tab.x)
         x_up, x_low = x[:qh.size].reshape(qh.shape), x[qh.size:].reshape(qh.shape)
-        return d.V_T * (x_low - x_up), (x_up, x_low)
+        return d.V_T * (x_low - x_up) + self.stern(p) * np.asarray(Q, dtype=float), (x_up, x_low)
 
     def slope(self, Q, d: DoubleLayerProps, p, state=None):
         tab = _pb_table(round(self.nu(p), 12))
         scale = self._scale(d)
         qh = np.asarray(Q, dtype=float) / scale
         g = np.interp(np.concatenate([-qh, qh]), tab.q, tab.dxdq)
-        return d.V_T / scale * (g[:qh.size] + g[qh.size:]).reshape(qh.shape)
+        return d.V_T / scale * (g[:qh.size] + g[qh.size:]).reshape(qh.shape) + self.stern(p)
 
     def excess(self, Q, d: DoubleLayerProps, p, state=None):
         x_up, x_low = self.potential(Q, d, p)[1] if state is None else state
@@ -147,7 +171,7 @@ class NonlinearCharge(LinearCharge):
         return d.C_anion * _excess_ratio(x_up, nu), d.C_anion * _excess_ratio(x_low, nu)
 
     def compiled(self, d: DoubleLayerProps, p) -> "_PBLaw":
-        return _PBLaw(round(self.nu(p), 12), d.V_T, self._scale(d), d.C_anion)
+        return _PBLaw(round(self.nu(p), 12), d.V_T, self._scale(d), d.C_anion, self.stern(p))
 
 
 class _LinearLaw:
@@ -169,16 +193,18 @@ class _LinearLaw:
 class _PBLaw:
     """Poisson–Boltzmann law with the table and scales bound (arrays per branch allowed)."""
 
-    def __init__(self, nu, V_T, scale, C_anion):
+    def __init__(self, nu, V_T, scale, C_anion, stern=0.0):
         self.nu, self.V_T, self.inv_scale, self.C = nu, V_T, 1.0 / scale, C_anion
         self.slope_scale = V_T / scale
+        self.stern = stern                       # 2/C_S of the compact layers [V m²/C]
         branch = _pb_branch_table(nu)
         self.tq, self.tug = branch.q, branch.ug
 
     def evaluate(self, Q):
-        """(U_eq [V], dU_eq/dQ [V m²/C]): one complex interpolation in the branch table."""
+        """(U_eq [V], dU_eq/dQ [V m²/C]): one complex interpolation in the branch table, plus
+        the compact layers' linear drop."""
         ug = np.interp(Q * self.inv_scale, self.tq, self.tug)
-        return self.V_T * ug.real, self.slope_scale * ug.imag
+        return self.V_T * ug.real + self.stern * Q, self.slope_scale * ug.imag + self.stern
 
     def excess(self, Q):
         """Cation excess at the upper (cathode for Q > 0) and lower faces [mol/m³]; Q is
