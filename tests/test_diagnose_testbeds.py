@@ -94,7 +94,7 @@ def test_an_effect_switched_off_reads_on_its_bound_without_a_warning():
     """A candidate replaced by the base with its effect off carries the off value (0) of a
     log-scaled parameter: that is on the bound, and no 'divide by zero in log' reaches the user."""
     from physics.diagnose.candidates import on_bound
-    from physics.identify.parameters import FreeParameter
+    from physics.identify.free_parameters import FreeParameter
     prm = FreeParameter("tau", 1.0, 1e-3, 1e3, "log", "s")
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -228,7 +228,7 @@ def test_auto_per_rh_frees_the_humidity_law_when_the_records_span_rh():
 
 def test_a_fit_ending_on_its_bound_is_a_value_not_an_error():
     """exp(ln 5e11) lands an ulp above 5e11: the value stays on the bound (the device accepts it)."""
-    from physics.identify.parameters import FreeParameter
+    from physics.identify.free_parameters import FreeParameter
     p = FreeParameter("Y", 1e9, 1e5, 5e11, "log", "Pa")
     v = float(p.from_x(p.to_x(5e11)))
     assert v <= 5e11

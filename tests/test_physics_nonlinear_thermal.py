@@ -125,7 +125,7 @@ def test_thermal_steady_state_energy_balance():
     """At a constant voltage all electrical power leaves by convection: V·I = Σ h A (T − T_ext)."""
     from physics.solvers import stepper
     from physics.model import ActuatorModel
-    from physics.solvers.strip import segment_edges
+    from physics.solvers.discretisation import segment_edges
     m = ActuatorModel("ipmc_pt_eg", "thermal,electrode_resistance")
     p = dict(m.device.params)
     edges = segment_edges(m.free_length, 16, 1.5)

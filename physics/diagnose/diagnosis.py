@@ -48,7 +48,7 @@ from ..effects import EFFECTS, ensure_registered, user_effect_files
 from ..errors import InputError, ModelError, arg
 from ..solvers.frequency import frequency_response
 from ..identify import build_targets, parse_assignments, parse_names
-from ..identify.parameters import held_per_rh, switchable
+from ..identify.free_parameters import held_per_rh, switchable
 from ..identify.options import FitOptions
 from ..model import ActuatorModel, resolve_effects
 from ..execution.parallel import map_tasks, warm_up

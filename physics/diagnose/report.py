@@ -22,7 +22,7 @@ from ..errors import arg
 from ..pages.columns import ONE, Column, band
 from ..io.fileio import jsonable, write_json, write_text
 from ..identify import write_device
-from ..identify.parameters import switchable
+from ..identify.free_parameters import switchable
 from ..io.outputs import component, final_path
 from ..pages.report import Report, header
 from .confidence import calibration_text

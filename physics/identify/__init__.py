@@ -85,7 +85,7 @@ from __future__ import annotations
 from .devicefile import identified_device_raw, write_device
 from .fitting import Fit, fit_lsq, fit_nelder_mead, jacobian, uncertainty
 from .options import FitOptions, LsqOptions
-from .parameters import FreeParameter, IdentifiabilityWarning, parse_assignments, parse_names
+from .free_parameters import FreeParameter, IdentifiabilityWarning, parse_assignments, parse_names
 from .problem import FRFTarget, IdentificationProblem, build_targets
 from .report import write_identification
 from .result import IdentificationResult, identify

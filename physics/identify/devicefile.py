@@ -12,7 +12,7 @@ import yaml
 from ..device import Device, HumidityMap, all_param_specs, parse_device
 from ..errors import InputError, ModelError
 from ..io.units import to_si
-from .parameters import _section_of, switchable
+from .free_parameters import _section_of, switchable
 from .result import IdentificationResult
 
 

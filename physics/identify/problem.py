@@ -19,7 +19,7 @@ from ..analysis.frf_estimation import detect_excitation
 from ..io.frfdata import FRFData
 from ..model import ActuatorModel, resolve_effects
 from ..io.timeseries import TimeSeries
-from .parameters import FreeParameter, _make_param, _suggest, hint as _hint
+from .free_parameters import FreeParameter, _make_param, _suggest, hint as _hint
 from .settings import EPS_FLOOR
 
 

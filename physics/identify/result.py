@@ -14,7 +14,7 @@ from ..execution.parallel import warm_up
 from ..execution.threads import single_threaded
 from .fitting import Fit, fit_lsq, fit_nelder_mead
 from .options import FitOptions, LsqOptions
-from .parameters import IdentifiabilityWarning, held_per_rh, parse_assignments, parse_names
+from .free_parameters import IdentifiabilityWarning, held_per_rh, parse_assignments, parse_names
 from .problem import IdentificationProblem, build_targets
 from .settings import THESIS_MAX_ITER, THESIS_SECONDS_PER_FREQUENCY, THESIS_TOL
 

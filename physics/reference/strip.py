@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import ActuatorModel, as_model
-from ..solvers.strip import projection, segment_edges
+from ..solvers.discretisation import projection, segment_edges
 from ..solvers.timedomain import _check_record, beam_statespace, tip_from_interface_excess
 from .pnp import Integrator, Ladder, Slab, SlabParams, Tolerances, graded_mesh
 

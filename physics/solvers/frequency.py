@@ -14,7 +14,7 @@ import numpy as np
 from ..execution.threads import single_threaded
 from ..errors import InputError
 from ..model import ActuatorModel, as_model
-from .strip import quadrature
+from .discretisation import quadrature
 
 
 @dataclass

@@ -29,7 +29,7 @@ from ..errors import InputError, ModelError
 from .lti import StateSpace
 from ..model import ActuatorModel, as_model
 from .realize import fit_pole_residue
-from .strip import projection, quadrature, segment_edges
+from .discretisation import projection, quadrature, segment_edges
 
 FIELDS = {
     "voltage": "voltage across the polymer along the strip [V]",

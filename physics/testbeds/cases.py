@@ -55,7 +55,7 @@ from .. import signals
 from ..device import Device, load_device
 from ..errors import InputError
 from ..solvers.frequency import response_per_volt
-from ..identify.parameters import switchable
+from ..identify.free_parameters import switchable
 from ..model import ActuatorModel
 from ..io.sensor import SensorModel
 from ..solvers.timedomain import simulate

@@ -37,7 +37,7 @@ from .. import signals
 from ..device import Device, load_device
 from ..errors import InputError
 from ..solvers.frequency import frequency_response
-from ..identify.parameters import switchable
+from ..identify.free_parameters import switchable
 from ..model import ActuatorModel
 from ..io.sensor import SensorModel
 from ..solvers.timedomain import simulate
