@@ -228,17 +228,17 @@ def test_a_slow_effect_held_at_its_off_bound_starts_again_on_the_time_records():
 
 
 def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
-    """Records of a strip whose charge saturates at volts (compact layers, C_stern 0.5 F/m²)
+    """Records of a strip whose charge saturates at volts (compact layers, diffuse_share 0.25)
     under multisines of 0.5 and 1.5 V peak: each multisine stands for a tone with its drive's
     power (√2·RMS, about half its peak), so the describing-function fit of ``nonlinear_charge``
-    recovers C_stern; read at the multisines' peaks it would see more compression than there is."""
+    recovers the share; read at the multisines' peaks it would see more compression than there is."""
     from physics import signals
     from physics.diagnose.records import prepare_records
     from physics.io.record import TimeSeries
     from physics.model import ActuatorModel
     from physics.solvers.timedomain import simulate
     dev = load_device("ipmc_pt_eg")
-    truth = ActuatorModel(dev.with_params(C_stern=0.5), ["nonlinear_charge"])
+    truth = ActuatorModel(dev.with_params(diffuse_share=0.25), ["nonlinear_charge"])
     rng = np.random.default_rng(1)
     records = []
     for k, amp in enumerate((0.5, 1.5)):
@@ -255,4 +255,4 @@ def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
         spec = C.candidate_spec("nonlinear_charge", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
         fit = C.score(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=2), data.records)
     assert fit.ok, fit.error
-    assert fit.values["C_stern"] == pytest.approx(0.5, rel=0.3)
+    assert fit.values["diffuse_share"] == pytest.approx(0.25, rel=0.2)

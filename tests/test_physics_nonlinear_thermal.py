@@ -39,12 +39,14 @@ def test_equilibrium_law_matches_an_independent_poisson_boltzmann_root_solve():
     assert Q[-1] ** 2 / (2 * d.kappa * 96485.33212 * p["C_anion"] * U[-1]) == pytest.approx(1.0, abs=0.15)
 
 
-@pytest.mark.parametrize("c_max,c_stern", [(np.inf, np.inf), (5000.0, np.inf), (5000.0, 0.4)])
-def test_stepper_law_matches_a_root_solve_on_every_branch(c_max, c_stern):
+@pytest.mark.parametrize("c_max,share", [(np.inf, 1.0), (5000.0, 1.0), (5000.0, 0.2)])
+def test_stepper_law_matches_a_root_solve_on_every_branch(c_max, share):
     """The time stepper's compiled law (one interpolation in a ±q̂ table) against an
-    independent Poisson–Boltzmann root solve, each branch at its own temperature; compact
-    (Stern) layers add their series drop 2Q/C_S (Bazant, Thornton & Ajdari 2004)."""
-    dev = load_device("ipmc_pt_eg").with_params(C_max=c_max, C_stern=c_stern)
+    independent Poisson–Boltzmann root solve, each branch at its own temperature.  Behind
+    compact layers taking 1 − d of the small-signal voltage, the diffuse layers are those of
+    charge d·Q and the compact layers add (1 − d)·Q/C0, C0 the pair's small-signal capacitance
+    (here from the root solve itself)."""
+    dev = load_device("ipmc_pt_eg").with_params(C_max=c_max, diffuse_share=share)
     p = dict(dev.params)
     T = p["T_ext"] + np.array([0.0, 5.0, 20.0, 40.0])
     d = DoubleLayer.props(p, T)
@@ -62,47 +64,50 @@ def test_stepper_law_matches_a_root_solve_on_every_branch(c_max, c_stern):
         return (x_neg, x_pos) if q > 0 else (x_pos, x_neg)   # (upper, lower): Q > 0 depletes the lower face
 
     for k, q in enumerate(Q):
-        x_up, x_low = solve(q, k)
         V_T = 8.314462618 * T[k] / 96485.33212
-        assert U[k] == pytest.approx(V_T * (x_low - x_up) + 2 * q / c_stern, rel=1e-5)
+        inv_c0 = V_T * -np.subtract(*solve(1e-7, k)) / 1e-7           # small-signal 1/C0 of the bare pair
+        x_up, x_low = solve(share * q, k)
+        assert U[k] == pytest.approx(V_T * (x_low - x_up) + (1 - share) * q * inv_c0, rel=1e-4)
         dq = 1e-6 * abs(q)
-        slope = V_T * (np.subtract(*solve(q - dq, k)) - np.subtract(*solve(q + dq, k))) / (2 * dq) + 2 / c_stern
+        slope = share * V_T * (np.subtract(*solve(share * (q - dq), k)) - np.subtract(*solve(share * (q + dq), k))) \
+            / (2 * share * dq) + (1 - share) * inv_c0
         assert dU[k] == pytest.approx(slope, rel=1e-3)
         assert c_up[1, k] == pytest.approx(excess(x_up), rel=1e-4)
         assert c_low[1, k] == pytest.approx(excess(x_low), rel=1e-4)
 
 
-@pytest.mark.parametrize("c_stern", [np.inf, 0.3])
-def test_small_signal_limit_matches_its_frequency_response(c_stern):
-    dev = load_device("ipmc_pt_eg").with_params(C_stern=c_stern)
+@pytest.mark.parametrize("share", [1.0, 0.2])
+def test_small_signal_limit_matches_its_frequency_response(share):
+    dev = load_device("ipmc_pt_eg").with_params(diffuse_share=share)
     sig = signals.tone(1e-3, 2.0, 6.0, 500.0)
     r = physics.simulate(dev, "nonlinear_charge", sig.t, sig.v)
     fr = physics.frequency_response(dev, "nonlinear_charge", [2.0])
     last = sig.t > 2.0
     H = _tone_fit(sig.t[last], r.deflection[last], 2.0) / _tone_fit(sig.t[last], sig.v[last], 2.0)
     assert abs(H / fr.deflection[0] - 1) < 0.01
+    plain = physics.frequency_response("ipmc_pt_eg", "nonlinear_charge", [2.0])
+    assert fr.deflection[0] == pytest.approx(plain.deflection[0], rel=1e-12)    # the same small-signal law
 
 
 def test_compact_layers_move_the_saturation_to_volts():
     """Bare diffuse layers compress at a few tenths of a volt: at 0.3 V their charge is well
-    below its small-signal line.  Behind compact layers with C_S = 0.3 F/m² (in series, the
-    small-signal capacitance 1/(1/C0 + 2/C_S)) most of the voltage drops across the compact
-    layers: the charge stays on its line at 0.3 V and has begun to saturate at 1 V, as a
-    strip driven at volts does."""
+    below its small-signal line.  With compact layers taking 90 % of the small-signal voltage
+    (diffuse_share 0.1, the same small-signal capacitance) the charge stays on its line at 1 V
+    and has begun to saturate at 3 V, as a strip driven at volts does."""
     from scipy.optimize import brentq
     dev = load_device("ipmc_pt_eg")
     p = dict(dev.params)
     d = DoubleLayer.props(p)
     law = NonlinearCharge(dev)
+    c_small = d.C0 * np.sqrt(1 - law.nu(p))
     share = {}
-    for cs in (np.inf, 0.3):
-        q_ = {**p, "C_stern": cs}
-        c_small = 1.0 / (1.0 / (d.C0 * np.sqrt(1 - law.nu(q_))) + 2.0 / cs)
+    for ds in (1.0, 0.1):
+        q_ = {**p, "diffuse_share": ds}
         for u in (0.3, 1.0, 3.0):
             Q = brentq(lambda q: float(law.potential(np.array([q]), d, q_)[0][0]) - u, 0.0, 10.0 * c_small * u)
-            share[cs, u] = Q / (c_small * u)
-    assert share[np.inf, 0.3] < 0.8 and share[np.inf, 1.0] < 0.5
-    assert share[0.3, 0.3] > 0.98 and 0.85 < share[0.3, 1.0] < 0.97 and share[0.3, 3.0] < 0.8
+            share[ds, u] = Q / (c_small * u)
+    assert share[1.0, 0.3] < 0.8 and share[1.0, 1.0] < 0.5
+    assert share[0.1, 1.0] > 0.98 and 0.85 < share[0.1, 3.0] < 0.97
 
 
 def test_large_signal_saturates_and_is_odd_symmetric():

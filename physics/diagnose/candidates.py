@@ -14,12 +14,13 @@ effect                      extra free parameters (bounds)                      
 ``fractional_coupling``     ``frac_a`` (0–0.95), its DC corner ``frac_f_lo``         yes (a→0)
                             (shape: 10⁻⁴–0.05 Hz); ``kf0`` replaces ``kf``
 ``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→0)
-``viscoelastic``            none: ``dma_scale`` replaces ``Y`` (the DMA table's      no
-                            shape is prior knowledge)
+``viscoelastic``            the free shape ``ve_slope``, ``ve_tan_delta`` and its    no
+                            low end ``ve_f_lo`` (10⁻³–20 Hz); ``dma_scale``
+                            replaces ``Y``
 ``layered_beam``            ``Y_electrode``; ``Y_polymer`` replaces ``Y``           no
 ``humidity``                ``kf`` and ``Y`` once per RH level (Table V style)      yes
                             instead of shared values (needs ≥ 2 RH levels)
-``nonlinear_charge``        ``C_stern`` when the data can determine it (below)      no
+``nonlinear_charge``        ``diffuse_share`` when the data determine it (below)   no
 ==========================  =====================================================  ==========
 
 A parameter that moves between roles (``kf`` ↔ ``kf0``, ``Y`` ↔ ``dma_scale`` ↔

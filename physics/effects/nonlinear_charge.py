@@ -24,19 +24,24 @@ stays exactly linear in U (checked against the full PNP reference: deflection wi
 C_max ≈ 5000 mol/m³ corresponds to a ≈ 0.7 nm solvated cation (Kilic, Bazant & Ajdari,
 Phys. Rev. E 75, 021502, 2007), the scale of the thesis's Fig. 13/30 cation peaks.
 
-**Stern layer.**  Bare Poisson–Boltzmann layers compress at the thermal voltage V_T ≈ 26 mV,
-while strips saturate at volts: between the electrode and each diffuse layer sits a compact
-(Stern) layer, a charge-free capacitor C_S [F/m²] in series (Bazant, Thornton & Ajdari,
-Phys. Rev. E 70, 021506, 2004, §II C), so U = 2 Q/C_S + U_PB(Q).  With C_S ≪ κe/λ most of
-the voltage drops across the compact layers and the diffuse layers stay nearly linear up to
-volts (for C_S ≪ κe/λ the onset scales as 2 κe F C⁻/C_S²); the small-signal capacitance
-becomes 1/(1/C0 + 2/C_S).  ``C_stern`` = ∞
-(the default) is the plain law above.
+**Compact (Stern) layers.**  Bare Poisson–Boltzmann layers compress at a few tenths of a
+volt, while strips saturate at volts: between the electrode and each diffuse layer sits a
+charge-free compact layer in series (Bazant, Thornton & Ajdari, Phys. Rev. E 70, 021506,
+2004, §II C), which takes part of the voltage.  The device's double-layer capacitance is
+taken as the measured total: ``diffuse_share`` d is the share of the small-signal voltage
+across the diffuse layers, the compact layers take 1 − d, and the diffuse layers behind them
+are correspondingly denser (capacitance C0/d), so
+
+    U(Q) = (1 − d) Q/C0 + U_PB(d Q),
+
+with the same small-signal capacitance C0 for every d (the electrode line, the RC corner and
+every linear fit unchanged) and the onset of saturation moved from U_PB's to about 1/d² times
+it (on the depleted side U_PB grows as the square of the charge).  d = 1 (the default) is the
+plain law above; d → 0 the linear law.
 Off: the linear law Q = C0 U (time domain) and the exact linear PNP (frequency domain).
 """
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
@@ -89,20 +94,20 @@ class NonlinearCharge(LinearCharge):
     linear = False
     reference = "unsupported"
     reference_note = "the reference solver is the full nonlinear PNP itself"
-    reference_limit = {"C_max": np.inf, "C_stern": np.inf}     # plain Poisson–Boltzmann layers, as in the reference
+    reference_limit = {"C_max": np.inf, "diffuse_share": 1.0}   # plain Poisson–Boltzmann layers, as in the reference
     summary = "large-signal double layer: voltage-dependent capacitance, asymmetric/saturating charge"
     explanation = __doc__
     params = (ParamSpec("C_max", "mol/m^3", 1.0, np.inf,
                         "steric maximum cation concentration (.inf: plain Poisson–Boltzmann)", optional=True,
                         default=5000.0),
-              ParamSpec("C_stern", "F/m^2", 1e-3, np.inf,
-                        "compact (Stern) layer capacitance per face (.inf: no compact layer)", optional=True,
-                        default=np.inf))
-    # the saturation voltage through the compact layer: C_stern from 0.05 to 50 F/m² (fitted where
+              ParamSpec("diffuse_share", "1", 1e-3, 1.0,
+                        "share of the small-signal voltage across the diffuse layers (1: no compact layer)",
+                        optional=True, default=1.0))
+    # the saturation voltage through the compact layers: diffuse_share from 1/30 to 1 (fitted where
     # the describing function shows it matters); C_max held at the device value
     diagnosis = {
-        "free": ("C_stern",), "bounds": {"C_stern": (0.05, 50.0)},
-        "starts": [{"C_stern": 0.15}, {"C_stern": 0.6}, {"C_stern": 3.0}, {"C_stern": 20.0}],
+        "free": ("diffuse_share",), "bounds": {"diffuse_share": (1 / 30, 1.0)},
+        "starts": [{"diffuse_share": 0.6}, {"diffuse_share": 0.25}, {"diffuse_share": 0.08}],
         "nested": False, "describing_function": True,
         "excitation": "the same excitation at two or more amplitudes (ratio at least 1.25) at one RH level",
         "reveal": {"amplitude_levels": 2},
@@ -117,31 +122,31 @@ class NonlinearCharge(LinearCharge):
 
     #: Identification hints: why a parameter may have no effect ({name: sentence}).
     hints = {"C_max": "C_max acts only in the large-signal (time-domain) response of nonlinear_charge"}
-    #: Grid of the compact-layer ratio c = C0/C_stern (C0: the diffuse layers' small-signal
-    #: capacitance) on which the describing function is tabulated: from 0 (no compact layer, the
-    #: diffuse layers compress at V_T) to 8 (the compact layers carry nearly all the voltage).
-    STERN_GRID = (0.0, 0.01, 0.03, 0.06, 0.1, 0.16, 0.25, 0.4, 0.6, 0.9, 1.3, 2.0, 3.0, 5.0, 8.0)
+    #: Grid of 1/diffuse_share on which the describing function is tabulated: from 1 (no compact
+    #: layer, the diffuse layers compress at a few tenths of a volt) to 30 (onset ~10³× later).
+    SHARE_GRID = (1.0, 1.3, 1.7, 2.2, 3.0, 4.0, 5.5, 7.5, 10.0, 14.0, 20.0, 30.0)
 
     @classmethod
     def describing_grid(cls, device) -> tuple[str, tuple[float, ...], float]:
         """The describing-function hook (:mod:`physics.diagnose.describing`): (the large-signal
-        parameter, its grid of coordinates c, scale) with c = scale/parameter: C0/C_stern from 0
-        (plain Poisson–Boltzmann layers) to 8, C0 the diffuse layers' small-signal capacitance."""
-        p = dict(device.params)
-        d = DoubleLayer.props(p)
-        return "C_stern", cls.STERN_GRID, float(np.mean(d.C0)) * math.sqrt(1.0 - cls(device).nu(p))
+        parameter, its grid of coordinates c, scale) with c = scale/parameter = 1/diffuse_share."""
+        return "diffuse_share", cls.SHARE_GRID, 1.0
 
     def nu(self, p) -> float:
         return float(p["C_anion"] / p.get("C_max", np.inf))
 
     @staticmethod
-    def stern(p) -> float:
-        """2/C_S [V m²/C]: the two compact layers' share of dU/dQ (0 without them)."""
-        return 2.0 / float(p.get("C_stern", np.inf))
+    def share(p) -> float:
+        """d, the diffuse layers' share of the small-signal voltage (module doc)."""
+        return float(p.get("diffuse_share", 1.0))
+
+    def _compact(self, d: DoubleLayerProps, p):
+        """(1 − d)/C0 [V m²/C]: the compact layers' part of dU/dQ, C0 the small-signal capacitance."""
+        return (1.0 - self.share(p)) / (d.C0 * np.sqrt(1.0 - self.nu(p)))
 
     def small_signal(self, s, d: DoubleLayerProps, p):
         nu = self.nu(p)
-        C0 = 1.0 / (1.0 / (d.C0 * np.sqrt(1.0 - nu)) + self.stern(p))
+        C0 = d.C0 * np.sqrt(1.0 - nu)
         tau = d.R_bulk * C0
         q = C0 / (1.0 + np.asarray(s, dtype=complex) * tau)
         return q, q * d.c0 / d.C0
@@ -153,17 +158,17 @@ class NonlinearCharge(LinearCharge):
         """U_eq(Q) and the dimensionless interface potentials (x_up, x_low): the upper face is
         the cathode for Q > 0 (accumulation, x < 0), the lower face the anode (x > 0)."""
         tab = _pb_table(round(self.nu(p), 12))
-        qh = np.asarray(Q, dtype=float) / self._scale(d)
+        qh = self.share(p) * np.asarray(Q, dtype=float) / self._scale(d)
         x = np.interp(np.concatenate([-qh, qh]), tab.q, tab.x)
         x_up, x_low = x[:qh.size].reshape(qh.shape), x[qh.size:].reshape(qh.shape)
-        return d.V_T * (x_low - x_up) + self.stern(p) * np.asarray(Q, dtype=float), (x_up, x_low)
+        return d.V_T * (x_low - x_up) + self._compact(d, p) * np.asarray(Q, dtype=float), (x_up, x_low)
 
     def slope(self, Q, d: DoubleLayerProps, p, state=None):
         tab = _pb_table(round(self.nu(p), 12))
-        scale = self._scale(d)
+        scale = self._scale(d) / self.share(p)
         qh = np.asarray(Q, dtype=float) / scale
         g = np.interp(np.concatenate([-qh, qh]), tab.q, tab.dxdq)
-        return d.V_T / scale * (g[:qh.size] + g[qh.size:]).reshape(qh.shape) + self.stern(p)
+        return d.V_T / scale * (g[:qh.size] + g[qh.size:]).reshape(qh.shape) + self._compact(d, p)
 
     def excess(self, Q, d: DoubleLayerProps, p, state=None):
         x_up, x_low = self.potential(Q, d, p)[1] if state is None else state
@@ -171,7 +176,7 @@ class NonlinearCharge(LinearCharge):
         return d.C_anion * _excess_ratio(x_up, nu), d.C_anion * _excess_ratio(x_low, nu)
 
     def compiled(self, d: DoubleLayerProps, p) -> "_PBLaw":
-        return _PBLaw(round(self.nu(p), 12), d.V_T, self._scale(d), d.C_anion, self.stern(p))
+        return _PBLaw(round(self.nu(p), 12), d.V_T, self._scale(d) / self.share(p), d.C_anion, self._compact(d, p))
 
 
 class _LinearLaw:
@@ -193,10 +198,10 @@ class _LinearLaw:
 class _PBLaw:
     """Poisson–Boltzmann law with the table and scales bound (arrays per branch allowed)."""
 
-    def __init__(self, nu, V_T, scale, C_anion, stern=0.0):
+    def __init__(self, nu, V_T, scale, C_anion, compact=0.0):
         self.nu, self.V_T, self.inv_scale, self.C = nu, V_T, 1.0 / scale, C_anion
         self.slope_scale = V_T / scale
-        self.stern = stern                       # 2/C_S of the compact layers [V m²/C]
+        self.compact = compact                   # the compact layers' part of dU/dQ [V m²/C]
         branch = _pb_branch_table(nu)
         self.tq, self.tug = branch.q, branch.ug
 
@@ -204,7 +209,7 @@ class _PBLaw:
         """(U_eq [V], dU_eq/dQ [V m²/C]): one complex interpolation in the branch table, plus
         the compact layers' linear drop."""
         ug = np.interp(Q * self.inv_scale, self.tq, self.tug)
-        return self.V_T * ug.real + self.stern * Q, self.slope_scale * ug.imag + self.stern
+        return self.V_T * ug.real + self.compact * Q, self.slope_scale * ug.imag + self.compact
 
     def excess(self, Q):
         """Cation excess at the upper (cathode for Q > 0) and lower faces [mol/m³]; Q is
