@@ -33,7 +33,7 @@ far off) is searched again around that edge (:func:`_on_search_window_edge`); li
 cost milliseconds per evaluation.  ``nonlinear_charge`` uses the describing function of
 :mod:`.describing` in the FRF fit, each record standing for a tone with its drive's power
 (:attr:`.records.PreparedRecord.tone_amplitude`).  Its large-signal parameter (the compact
-layer's capacitance, which sets the voltage at which the charge saturates) is fitted only
+layers' share of the voltage, which sets the voltage at which the charge saturates) is fitted only
 when records at two or more amplitude levels exist and it changes the large-signal gain by
 more than 10 % across its range; otherwise it is held at the device value and the report
 says so.

@@ -21,9 +21,9 @@ on kf, βf or the modulus.  (With the electrode line the tip weights the strip's
 part more than a plain average does; the difference is second order and the final score
 of the fitted model uses the full time simulation.)  N is tabulated on a grid of
 the large-signal effect's own coordinate (its ``describing_grid`` hook: for
-``nonlinear_charge`` ν = C⁻/C_max, the steric parameter) and, when an effect replacing the
-line stage makes it frequency dependent, on a few frequencies, and interpolated linearly in
-the coordinate and log f.
+``nonlinear_charge`` 1/diffuse_share, how much of the voltage its compact layers hold) and,
+when an effect replacing the line stage makes it frequency dependent, on a few frequencies,
+and interpolated linearly in the coordinate and log f.
 
 Cost: (grid points) × (amplitude levels + 1) × (frequencies) tone simulations of
 ≈ 100 samples each — about 1–3 s once per diagnosis.
