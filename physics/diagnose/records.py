@@ -106,8 +106,7 @@ class PreparedRecord:
         tones stands in for a multisine at this amplitude, not at its peak, whose rare
         excursions hardly load the nonlinearity (Gelb & Vander Velde 1968, ch. 3: the Gaussian
         input's gain is set by its RMS)."""
-        u = np.asarray(self.ts.voltage, dtype=float)
-        return float(math.sqrt(2.0) * np.std(u)) if u.size else self.amplitude
+        return float(math.sqrt(2.0) * np.std(self.ts.voltage))
 
     @property
     def fs_d(self) -> float:

@@ -35,9 +35,10 @@ are correspondingly denser (capacitance C0/d), so
     U(Q) = (1 − d) Q/C0 + U_PB(d Q),
 
 with the same small-signal capacitance C0 for every d (the electrode line, the RC corner and
-every linear fit unchanged) and the onset of saturation moved from U_PB's to about 1/d² times
-it (on the depleted side U_PB grows as the square of the charge).  d = 1 (the default) is the
-plain law above; d → 0 the linear law.
+every linear fit unchanged) and the onset of saturation moved from U_PB's to d^(−3/2) times
+it (the pair's law is odd in Q, so its first departure from the line is cubic,
+U_PB(q) ≈ q/C0 + a q³, and a d³Q³ reaches a given share of Q/C0 at Q ∝ d^(−3/2)).  d = 1 (the
+default) is the plain law above; d → 0 the linear law.
 Off: the linear law Q = C0 U (time domain) and the exact linear PNP (frequency domain).
 """
 from __future__ import annotations
@@ -123,7 +124,7 @@ class NonlinearCharge(LinearCharge):
     #: Identification hints: why a parameter may have no effect ({name: sentence}).
     hints = {"C_max": "C_max acts only in the large-signal (time-domain) response of nonlinear_charge"}
     #: Grid of 1/diffuse_share on which the describing function is tabulated: from 1 (no compact
-    #: layer, the diffuse layers compress at a few tenths of a volt) to 30 (onset ~10³× later).
+    #: layer, the diffuse layers compress at a few tenths of a volt) to 30 (onset ~160× later).
     SHARE_GRID = (1.0, 1.3, 1.7, 2.2, 3.0, 4.0, 5.5, 7.5, 10.0, 14.0, 20.0, 30.0)
 
     @classmethod
