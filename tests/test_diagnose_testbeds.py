@@ -116,7 +116,9 @@ def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
     monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a square pulse held 60 s would separate them")
     dec = decide(base, [flexible, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
-    assert dec.pick is None and set(dec.ambiguous) == {"user_creep", "flexible"} and "pulse" in dec.separating
+    assert set(dec.ambiguous) == {"user_creep", "flexible"} and "pulse" in dec.separating
+    # the chain carries on with the twin of stronger evidence (flags count against it), never "high"
+    assert dec.pick is user and dec.confidence.label == "low" and "near twin" in dec.confidence.why[0]
     # a rival far worse on fit: the clean candidate is picked, "high"
     worse = Cand("flexible", -3000.0, 20e-6, ["a on a bound"])
     dec = decide(base, [worse, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-3000.0), lambda a, b: 1e-6)
@@ -125,7 +127,8 @@ def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
     # close on fit *and* quality: ambiguous too
     twin = Cand("twin", -5001.0, 2.0e-6, [])
     dec = decide(base, [user, twin], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-1.0), lambda a, b: 1e-6)
-    assert dec.pick is None and set(dec.ambiguous) == {"user_creep", "twin"} and "pulse" in dec.separating
+    assert dec.pick is twin and set(dec.ambiguous) == {"user_creep", "twin"} and "pulse" in dec.separating
+    assert dec.confidence.label == "low"
 
 
 def test_a_clearly_better_fit_is_not_ambiguous_though_within_the_noise(monkeypatch):
@@ -143,7 +146,7 @@ def test_a_clearly_better_fit_is_not_ambiguous_though_within_the_noise(monkeypat
     assert dec.pick is draft and dec.ambiguous == []
     a, b = Cand("a", -9000.0, 3.30e-6, []), Cand("b", -8990.0, 3.35e-6, [])
     dec = decide(base, [a, b], floor, [1.0], [], lambda *a, **k: Cmp(-40.0), near)
-    assert dec.pick is None and set(dec.ambiguous) == {"a", "b"} and "% of the error" in dec.reason
+    assert dec.pick is a and set(dec.ambiguous) == {"a", "b"} and "% of the error" in dec.reason
 
 
 def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):

@@ -661,7 +661,8 @@ def build_verdict(data: PreparedRecords, base: C.ModelFit, steps: list[Step], ma
         picks.append(Pick(s.index, p.effect, s.decision.weight, s.base.rmse, p.fit.rmse, p.comparison.delta_bic,
                           p.comparison.p_value,
                           {n: {"value": v, "std_error": p.fit.std_errors.get(n)} for n, v in own.items()},
-                          list(p.quality), s.decision.reason, s.decision.confidence))
+                          list(p.quality), s.decision.reason, s.decision.confidence,
+                          next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating))
     final = steps[-1].result
     label = "base" + "".join(f" − {r['effect']}" for r in removed) + "".join(f" + {p.effect}" for p in picks)
     allowed = allowed_wander(data)
@@ -681,8 +682,6 @@ def build_verdict(data: PreparedRecords, base: C.ModelFit, steps: list[Step], ma
         status = "nothing to explain"
     elif picks or (removed and ad.adequate):
         status = {True: "explained", False: "partly explained", None: "found (adequacy not assessed)"}[ad.adequate]
-    elif first.ambiguous:
-        status = "ambiguous"
     else:
         status = "not explained by the catalog"
     kind, forms = remaining_of(ad)

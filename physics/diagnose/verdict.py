@@ -20,7 +20,9 @@ than two thirds of the other's excess error power over the noise floor while the
 differ by less than the RMS error the better one leaves — two models that differ by more than
 their misfit explain different parts of the records and are not twins), whatever their
 quality flags: near twins are not told apart by a flag; the verdict then names the record that
-would separate them (:func:`separating_record`).
+would separate them (:func:`separating_record`) and the chain does not stop there: it carries on
+with the twin of stronger evidence, labelled "low", and tries the other on top of it (a hidden
+pair's second effect is found, and the model written is the better one).
 
 **How sure.**  Over tens of thousands of correlated samples every ΔBIC is in the thousands and
 every weight 1.000, so the weight is not the confidence.  The label (:mod:`.confidence`) asks
@@ -83,7 +85,7 @@ DISTINCT_BIC = 6.0
 #: records cannot attribute (one record, or records that hint at sharing it without confirming:
 #: the sensor's own drift, or a drift of the setup?).
 UNATTRIBUTED = "within the noise only if its slow wander is the sensor's"
-STATUSES = ("explained", "partly explained", "found (adequacy not assessed)", "ambiguous",
+STATUSES = ("explained", "partly explained", "found (adequacy not assessed)",
             "not explained by the catalog", "nothing to explain", UNATTRIBUTED)
 
 
@@ -152,7 +154,8 @@ class Decision:
 def decide(base, ranked: Sequence, noise: float, taus_ref, records,
            compare_fits, prediction_distance, after_pick: bool = False, structure: bool = False,
            wander: float = 0.0) -> Decision:
-    """One step: flags, evidence, weights, the pick or the ambiguity (module doc).  ``ranked``
+    """One step: flags, evidence, weights, the pick — for near twins the one of stronger evidence,
+    "low", with ``ambiguous`` naming both (module doc).  ``ranked``
     are the step's evaluated CandidateResults with their comparison to ``base`` (``after_pick``:
     a later step of the chain, on top of a pick; ``structure``: the base's residual holds
     significant deterministic structure whatever its size — a drift the records share — so
@@ -195,8 +198,15 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
                       f"ΔBIC between them {pair.delta_bic:.3g}, predictions differ by {1e6 * dist:.3g} µm RMS, "
                       f"{top.effect} removes {100 * excess_share(ru.fit.rmse, top.fit.rmse, noise):.3g} % of the "
                       f"error {ru.effect} leaves above the noise floor, "
-                      f"{len(top.quality)} quality flag(s) each")
-            return Decision(None, weights, ev, [top.effect, ru.effect], sep, reason, alpha)
+                      f"{len(top.quality)} and {len(ru.quality)} quality flag(s); the chain carries on with "
+                      f"{top.effect}, the stronger evidence, and tries {ru.effect} again on top of it")
+            # the chain does not stop at a pair it cannot separate: it carries on with the twin of
+            # stronger evidence (a hidden pair's second effect is found on top of it, and the model
+            # written is the better one), labelled "low" — the data do not say which twin it is
+            c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise))
+            c.label = "low"
+            c.why.insert(0, f"a near twin, {ru.effect}, fits as well: these data cannot tell them apart")
+            return Decision(top, weights, ev, [top.effect, ru.effect], sep, reason, alpha, c)
     cmp = top.comparison
     reason = (f"ΔBIC {cmp.delta_bic:.4g} ({stats.evidence_label(cmp.delta_bic)}), p = {cmp.p_value:.2g} "
               f"(< {alpha:.2g}), RMS error {1e6 * base.rmse:.4g} → {1e6 * top.fit.rmse:.4g} µm")
@@ -287,6 +297,8 @@ class Pick:
     quality: list
     reason: str
     confidence: conf.Confidence | None = None
+    twin: str = ""                   # a near twin the data could not tell from it (the chain carried on)
+    separating: str = ""             # the record that would separate them
 
     @property
     def label(self) -> str:
@@ -297,7 +309,7 @@ class Pick:
                 "confidence_features": self.confidence.to_dict() if self.confidence else None,
                 "rmse_before_m": self.rmse_before, "rmse_after_m": self.rmse_after, "delta_bic": self.delta_bic,
                 "p_value": self.p_value, "parameters": self.parameters, "quality_flags": self.quality,
-                "reason": self.reason}
+                "reason": self.reason, "near_twin": self.twin or None, "separating_record": self.separating or None}
 
 
 @dataclass
@@ -355,6 +367,10 @@ class Verdict:
             for k, p in enumerate(self.picks):
                 head = "Which effect: " if k == 0 else "Then, on top of it: "
                 params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
+                if p.twin:
+                    out.append(f"{head}ambiguous between {p.effect} and {p.twin} — these data cannot tell them apart"
+                               + (f"; {p.separating}" if p.separating else "") + ".")
+                    head = "  The chain carries on with the one of stronger evidence: "
                 out.append(f"{head}{p.effect} (confidence {p.label}, weight {_w(p.weight)}) — RMS error "
                            f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {_signed(p.delta_bic)}"
                            + (f"; {params}" if params else "") + ".")
@@ -362,10 +378,6 @@ class Verdict:
                     out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
             if self.stopped:
                 out.append(f"The chain stops: {self.stopped}.")
-        elif self.ambiguous:
-            out.append(f"Which effect: ambiguous between {' and '.join(self.ambiguous)} — {self.reason}. "
-                       f"{_cap(self.separating)}." if self.separating else
-                       f"Which effect: ambiguous between {' and '.join(self.ambiguous)} — {self.reason}.")
         elif self.status == "nothing to explain":
             out.append(f"Which effect: none is needed — {self.reason}.")
         else:
@@ -427,10 +439,6 @@ def _signed(x: float) -> str:
 
 def _w(w: float) -> str:
     return f"{w:.3f}" if w >= 1e-3 else f"{w:.2g}"
-
-
-def _cap(s: str) -> str:
-    return s[:1].upper() + s[1:] if s else s
 
 
 #: Units as a reader writes them.
