@@ -140,12 +140,12 @@ def _small_signal_frf(simulate, fs: float, rh: float, rms: float = 0.3, f_max: f
     return k / (2 * period), Y[k] / U[k]
 
 
-def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm", "ss"), out: str | Path = "runs/train-compare",
+def train_compare(dataset: str | Path, models=None, out: str | Path = "runs/train-compare",
                   *, overrides: dict[str, dict] | None = None, max_time_s: float | None = None,
                   progress: bool = True, overwrite: bool = False, physics: str | None = None,
                   settings: ParallelSettings | None = None, tune: int | None = None,
                   rh_tolerance: float = RH_TOLERANCE, accelerator: str = "auto") -> dict:
-    """Train ``models`` on ``dataset``, save bundles under ``out/models``, and write
+    """Train ``models`` (kinds; default :func:`nnmodel.models.default_kinds`) on ``dataset``, save bundles under ``out/models``, and write
     ``compare.json``, ``metrics.csv``, plots and the page ``index.html`` in ``out`` (a folder written
     atomically under the policy of :mod:`physics.io.outputs`).  ``physics``: a device (name or
     YAML) whose simulator is scored beside the networks — by default the dataset's generator,
@@ -157,6 +157,9 @@ def train_compare(dataset: str | Path, models=("ff", "rbf", "narx", "lstm", "ss"
     or ``gpu`` (:func:`nnmodel.training.resolve_accelerator`; a ``--set MODEL.accelerator``
     wins)."""
     from .training import resolve_accelerator
+    if models is None:
+        from .models import default_kinds
+        models = default_kinds()
     if not (isinstance(rh_tolerance, (int, float)) and rh_tolerance >= 0):
         raise InputError(f"--rh-tolerance {rh_tolerance!r}: must be a non-negative number of % RH")
     device = resolve_accelerator(accelerator)

@@ -128,3 +128,22 @@ def test_an_installed_network_is_found_by_the_eap_command(tmp_path, monkeypatch,
         MODELS.pop("polenet", None)
         import sys
         sys.modules.pop("eap_polenet", None)
+
+
+def test_the_default_set_is_what_the_networks_declare():
+    """No network kind is named by the core: the set trained when none are named is the networks'
+    own ``IN_DEFAULT_SET``, a plug-in joins it by declaring it, and the command's help (written
+    without importing torch) says the same set."""
+    from nnmodel.app.commands.train_compare import DEFAULT_SET
+    from nnmodel.models import default_kinds
+    assert ", ".join(default_kinds()) == DEFAULT_SET
+    assert "gru" not in default_kinds() and "hybrid" not in default_kinds()
+
+    class Joins(PoleNet):
+        kind = "joins"
+        IN_DEFAULT_SET = True
+    register(Joins)
+    try:
+        assert default_kinds()[-1] == "joins" and len(default_kinds()) == len(DEFAULT_SET.split(", ")) + 1
+    finally:
+        MODELS.pop("joins")

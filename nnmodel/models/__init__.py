@@ -43,6 +43,12 @@ def register(cls: type[NeuralModel]) -> type[NeuralModel]:
     return cls
 
 
+def default_kinds() -> tuple[str, ...]:
+    """The kinds trained when no models are named: every registered network that declares
+    ``IN_DEFAULT_SET`` (built-ins first, then plug-ins in the order they were registered)."""
+    return tuple(kind for kind, cls in MODELS.items() if cls.IN_DEFAULT_SET)
+
+
 def load_plugins() -> list[str]:
     """Register the networks of installed packages (entry-point group ``eap.networks``, each
     entry ``NAME = module:Class``); returns their kinds.  A network's recipe ``KIND.yaml``
@@ -52,5 +58,5 @@ def load_plugins() -> list[str]:
     return [cls.kind for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
 
 
-__all__ = ["MODELS", "BUILT_IN_MODELS", "ENTRY_POINT_GROUP", "register", "load_plugins", "NeuralModel", "NotFittedError", "FFModel", "RBFModel",
+__all__ = ["MODELS", "BUILT_IN_MODELS", "ENTRY_POINT_GROUP", "register", "load_plugins", "default_kinds", "NeuralModel", "NotFittedError", "FFModel", "RBFModel",
            "NARXModel", "LSTMModel", "GRUModel", "SSModel", "HybridModel"]

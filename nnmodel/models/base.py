@@ -71,6 +71,9 @@ class NeuralModel:
 
     #: registry name ("ff", "rbf", ...), set by subclasses
     kind = "base"
+    #: trained by ``train_compare`` / ``eap train-compare`` when no models are named
+    #: (:func:`nnmodel.models.default_kinds`)
+    IN_DEFAULT_SET: bool = False
     #: True for a grey box that starts from a physics model: ``train-compare`` hands it the
     #: dataset's device (or ``--physics``) as its ``device`` setting
     NEEDS_PHYSICS: bool = False

@@ -76,6 +76,7 @@ class FFModel(LagModel):
     """
 
     kind = "ff"
+    IN_DEFAULT_SET = True
     SELECTION_PROXY = {"layers": 0, "max_epochs": 0}    # structures are scored as linear least squares
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8}
 

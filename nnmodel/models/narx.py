@@ -16,6 +16,7 @@ class NARXModel(LagModel):
     """Closed-loop-trained NARX network (simulation-error / multiple-shooting training)."""
 
     kind = "narx"
+    IN_DEFAULT_SET = True
     DEFAULTS = {"lr": 2e-3, "batch_size": 64, "max_epochs": 200, "max_time": 600.0, "patience": 20,
                 "grad_clip": 1.0, "horizon": 100, "stride": 20}
     CHECK_PARAMS = {"max_epochs": 1, "hidden": 8, "horizon": 20, "stride": 20}

@@ -25,6 +25,7 @@ class RBFModel(NeuralModel):
     """Gaussian RBF network: k-means centres, spacing-based widths, ridge output layer."""
 
     kind = "rbf"
+    IN_DEFAULT_SET = True
     DEFAULTS = {"max_epochs": 0, "grad_clip": 1.0}
     CHECKS = {"na": LAG_CHECKS["na"], "nb": LAG_CHECKS["nb"], "feedthrough": flag,
               "n_centres": size(MAX_CENTRES),

@@ -159,6 +159,7 @@ class LSTMModel(_RNNModel):
 
     kind = "lstm"
     cell = "lstm"
+    IN_DEFAULT_SET = True
 
 
 class GRUModel(_RNNModel):

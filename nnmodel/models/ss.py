@@ -304,6 +304,7 @@ class SSModel(NeuralModel):
     """Neural state-space model with an encoder, trained on truncated simulation windows."""
 
     kind = "ss"
+    IN_DEFAULT_SET = True
     CHECKS = {"nx": size(MAX_STATES, zero=True), "hidden": size(MAX_WIDTH), "layers": size(MAX_LAYERS),
               "activation": lambda v: None if v in ACTIVATIONS else f"one of {sorted(ACTIVATIONS)}",
               "n_init": size(MAX_LAGS), "encoder_hidden": size(MAX_WIDTH), "feedthrough": flag}

@@ -53,7 +53,9 @@ from ..identify.options import FitOptions
 from ..model import ActuatorModel, resolve_effects
 from ..execution.parallel import map_tasks, warm_up
 from ..execution.threads import single_threaded
-from . import candidates as C
+from .candidates import (Comparison, ModelFit, ModelSpec, ROLE_GAIN, ROLE_STIFF, candidate_spec, compare_fits,
+                         default_candidates, default_free, effect_values, fit_model, is_nested, no_worse_than_base,
+                         param_used, prediction_distance, refine_on_time, removal_spec, score, start_on_time)
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN
 from .records import NUISANCE_TERMS, PreparedRecord, frf_measurements, prepare_records, stated_drift
@@ -96,8 +98,8 @@ class CandidateResult:
     effect: str
     status: str                                  # evaluated | not_revealable | failed
     reason: str = ""
-    fit: C.ModelFit | None = None
-    comparison: C.Comparison | None = None
+    fit: ModelFit | None = None
+    comparison: Comparison | None = None
     signature: dict | None = None
     indistinguishable_from: list[str] = field(default_factory=list)
     explanation: str = ""
@@ -109,7 +111,7 @@ class CandidateResult:
     def evaluated(self) -> bool:
         return self.status == "evaluated"
 
-    def evidence(self, base: C.ModelFit) -> str:
+    def evidence(self, base: ModelFit) -> str:
         """Kass–Raftery grade of ΔBIC — unless the error falls by less than 10 %: with
         records far above their noise floor a tiny, irrelevant improvement can be
         statistically detectable, and is then called what it is."""
@@ -119,7 +121,7 @@ class CandidateResult:
             return f"detectable but negligible ({100 * gain:.2g} % lower error)"
         return stats.evidence_label(d)
 
-    def row(self, base: C.ModelFit, weight: float | None = None) -> dict:
+    def row(self, base: ModelFit, weight: float | None = None) -> dict:
         f, c = self.fit, self.comparison
         out = {"effect": self.effect, "status": self.status, "step": self.step}
         if self.evaluated:
@@ -130,7 +132,7 @@ class CandidateResult:
                         "n_eff": c.n_eff, "tau_samples": c.tau, "extra_parameters": c.dk,
                         "parameters": {k: {"value": v, "std_error": f.std_errors.get(k),
                                            "rel_std_error": f.rel_std_errors.get(k)} for k, v in f.values.items()},
-                        "effect_parameters": C.effect_values(f, self.effect), "quality_flags": self.quality,
+                        "effect_parameters": effect_values(f, self.effect), "quality_flags": self.quality,
                         "signature": self.signature, "indistinguishable_from": self.indistinguishable_from,
                         "identifiability_warnings": f.warnings, "notes": f.spec.notes,
                         "passes": self.passes, "fit_s": f.fit_s, "score_s": f.score_s})
@@ -162,18 +164,18 @@ class Step:
     (``removed_fit``)."""
 
     index: int
-    base: C.ModelFit
+    base: ModelFit
     candidates: list[CandidateResult]
     decision: Decision
     removal: "SupportResult | None" = None
-    removed_fit: C.ModelFit | None = None
+    removed_fit: ModelFit | None = None
 
     @property
     def ranking(self) -> list[CandidateResult]:
         return sorted([c for c in self.candidates if c.evaluated], key=lambda c: self.decision.evidence[c.effect])
 
     @property
-    def result(self) -> C.ModelFit:
+    def result(self) -> ModelFit:
         """The model after this step."""
         if self.removed_fit is not None:
             return self.removed_fit
@@ -231,7 +233,7 @@ class DiagnosisResult:
 
     device: Device
     records: list[PreparedRecord]
-    base: C.ModelFit
+    base: ModelFit
     steps: list[Step]
     support: list[SupportResult]
     verdict: Verdict
@@ -272,12 +274,12 @@ class DiagnosisResult:
         return [s.removal for s in self.steps if s.removal is not None]
 
     @property
-    def final(self) -> C.ModelFit:
+    def final(self) -> ModelFit:
         """The final model: the base with every pick of the chain and without every removal."""
         return self.steps[-1].result if self.steps else self.base
 
     @property
-    def draft_base(self) -> C.ModelFit:
+    def draft_base(self) -> ModelFit:
         """Where drafted effects start from: the model after the last removal (the base without
         the effects the data do not support), else the base."""
         rem = [s for s in self.steps if s.removed_fit is not None]
@@ -461,9 +463,9 @@ def _noise_source(records) -> str:
     return "; ".join(kinds)
 
 
-def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, free_l, per_rh_l, n_starts: int) -> C.ModelFit:
+def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, free_l, per_rh_l, n_starts: int) -> ModelFit:
     """Phase 2: the user's model with its free parameters fitted and scored."""
-    spec = C.ModelSpec("base", base_ids, list(free_l), list(per_rh_l), parse_assignments(options.start),
+    spec = ModelSpec("base", base_ids, list(free_l), list(per_rh_l), parse_assignments(options.start),
                        parse_assignments(options.bounds, ranges=True, what=arg("bounds")))
     for name in free_l:         # an effect's own parameter keeps its range (a drafted refit starts from a pick's)
         if name not in spec.bounds and keeps_spec_range(name) and (b := param_bounds(name, dev)) is not None:
@@ -478,17 +480,17 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
                 raise InputError(f"device {dev.name!r} has no value for free parameter {name}; give a start value with "
                                  f"{arg('start')}")
             spec.start[name] = default
-    base = C.fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
+    base = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
                        n_modes=options.n_modes, df_cache=data.df_cache)
     if not base.ok:
         raise ModelError(f"the base model could not be fitted: {base.error}")
-    C.score(base, data.records)
+    score(base, data.records)
     if not base.ok:
         raise ModelError(f"the base model could not be simulated: {base.error}")
     return base
 
 
-def try_candidates(step: int, base: C.ModelFit, cand_ids, data: PreparedRecords, run: DiagnosisRun) -> list[CandidateResult]:
+def try_candidates(step: int, base: ModelFit, cand_ids, data: PreparedRecords, run: DiagnosisRun) -> list[CandidateResult]:
     """Phase 4: each candidate switched on in ``base``, fitted and scored (independent tasks,
     in this process or on workers: :func:`physics.execution.parallel.map_tasks`)."""
     n_levels = len({t.level for t in data.targets})
@@ -502,7 +504,7 @@ def try_candidates(step: int, base: C.ModelFit, cand_ids, data: PreparedRecords,
                                            step=step))
             continue
         try:
-            spec = C.candidate_spec(eff, base.effects, base.spec.free, base.spec.per_rh, base.device, data.band,
+            spec = candidate_spec(eff, base.effects, base.spec.free, base.spec.per_rh, base.device, data.band,
                                     n_levels)
         except (InputError, KeyError) as exc:
             results.append(CandidateResult(eff, "failed", reason=f"{eff} cannot be added to this device: {exc}",
@@ -523,13 +525,13 @@ def try_candidates(step: int, base: C.ModelFit, cand_ids, data: PreparedRecords,
             results[k] = CandidateResult(c.effect, "failed", reason=f"{c.effect}: fit or simulation failed: {mf.error}",
                                          fit=mf, step=step)
             continue
-        c.status, c.fit = "evaluated", C.no_worse_than_base(mf, base)
+        c.status, c.fit = "evaluated", no_worse_than_base(mf, base)
         run.timings[f"step {step}: candidate {c.effect}" if step > 1 else f"candidate {c.effect}"] = wall
         run.log(f"  {'+' * step}{c.effect:22s} RMS {1e6 * c.fit.rmse:9.4g} µm  ({wall:.1f} s)")
     return results
 
 
-def compare_step(base: C.ModelFit, results: list[CandidateResult], data: PreparedRecords, feats: dict) -> list:
+def compare_step(base: ModelFit, results: list[CandidateResult], data: PreparedRecords, feats: dict) -> list:
     """Every evaluated candidate against ``base`` with one noise model: the autocorrelation
     of the residual closest to noise (the best-fitting model's), so that n_eff does not change
     from candidate to candidate.  Fills comparisons and signatures; returns τ per record."""
@@ -543,10 +545,10 @@ def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Prepare
     sigs = signatures(feats, [c.effect for c in results])
     for c in results:
         if c.evaluated:
-            c.comparison = C.compare_fits(base, c.fit, _nested(c), taus_ref)
+            c.comparison = compare_fits(base, c.fit, _nested(c), taus_ref)
             c.fit.bic = base.bic + c.comparison.delta_bic
             c.fit.aic = base.aic + c.comparison.delta_aic
-            d = C.prediction_distance(c.fit, base)
+            d = prediction_distance(c.fit, base)
             if c.comparison.delta_bic > -10 and math.isfinite(data.noise_d) and d < data.noise_d:
                 c.indistinguishable_from.append("base")
         c.signature = sigs.get(c.effect)
@@ -556,10 +558,10 @@ def compare_step(base: C.ModelFit, results: list[CandidateResult], data: Prepare
 def _nested(c: CandidateResult) -> bool:
     """Whether the candidate's model nests the base (an effect fitted through per-RH parameters
     only when they were freed, ≥ 2 RH levels)."""
-    return C.is_nested(c.effect) and (not spec_of(c.effect).get("per_rh") or bool(c.fit.spec.per_rh))
+    return is_nested(c.effect) and (not spec_of(c.effect).get("per_rh") or bool(c.fit.spec.per_rh))
 
 
-def select(data: PreparedRecords, base: C.ModelFit, cand_ids, feats: dict, run: DiagnosisRun) -> list[Step]:
+def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: DiagnosisRun) -> list[Step]:
     """Phase 5: stepwise selection, both ways.  Forward: the candidates on top of the current
     model, the step's decision (:func:`.verdict.decide`); after a pick the remaining candidates
     are tried again on top of it, up to ``max_effects`` picks.  Backward, when no candidate
@@ -580,14 +582,14 @@ def select(data: PreparedRecords, base: C.ModelFit, cand_ids, feats: dict, run: 
         taus = compare_step(step_base, results, data, step_feats)
         ranked = [c for c in results if c.evaluated]
         def decided():
-            return decide(step_base, ranked, data.noise, taus, data.records, C.compare_fits,
-                          C.prediction_distance, after_pick=n_added > 0,
+            return decide(step_base, ranked, data.noise, taus, data.records, compare_fits,
+                          prediction_distance, after_pick=n_added > 0,
                           structure=bool(shared_structure(data, step_base)), wander=wander_for(data, step_base))
         decision = decided()
-        if decision.pick is not None and C.refine_on_time(decision.pick.fit, data.records):
+        if decision.pick is not None and refine_on_time(decision.pick.fit, data.records):
             # the pick refitted on the time records (its FRF optimum is not theirs): the pick stands,
             # and its evidence, reason and confidence are those of the error the verdict reports
-            decision.pick.comparison = C.compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
+            decision.pick.comparison = compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
             run.log(f"  {decision.pick.effect} refined on the time records: RMS {1e6 * decision.pick.fit.rmse:.4g} µm")
             again = decided()
             if again.pick is not None and again.pick.effect == decision.pick.effect:
@@ -627,12 +629,12 @@ def select(data: PreparedRecords, base: C.ModelFit, cand_ids, feats: dict, run: 
     return steps
 
 
-def _features_after(data: PreparedRecords, fit: C.ModelFit, label: str, run: DiagnosisRun) -> dict:
+def _features_after(data: PreparedRecords, fit: ModelFit, label: str, run: DiagnosisRun) -> dict:
     ra = analyse(label, data.records, fit.resid_d, fit.pred_d, resonance_hz=_resonance(fit, data.band, data.records))
     return features_of(ra, data, fit, run)
 
 
-def try_removal(current: C.ModelFit, effects, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, C.ModelFit] | None":
+def try_removal(current: ModelFit, effects, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, ModelFit] | None":
     """The backward step: each of ``effects`` switched off in ``current`` and the model refitted
     (:func:`_support_of`); (its support, the fit without it) for the effect whose removal the
     data favour most — the model without it has the lower BIC — or None."""
@@ -646,7 +648,7 @@ def try_removal(current: C.ModelFit, effects, data: PreparedRecords, run: Diagno
     return best
 
 
-def build_verdict(data: PreparedRecords, base: C.ModelFit, steps: list[Step], max_effects: int) -> Verdict:
+def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_effects: int) -> Verdict:
     """Phase 6: the chain of picks, the adequacy of the final model and what remains."""
     picks, removed = [], []
     for s in steps:
@@ -657,7 +659,7 @@ def build_verdict(data: PreparedRecords, base: C.ModelFit, steps: list[Step], ma
                             "reason": s.removal.explanation})
         if p is None:
             continue
-        own = C.effect_values(p.fit, p.effect)
+        own = effect_values(p.fit, p.effect)
         picks.append(Pick(s.index, p.effect, s.decision.weight, s.base.rmse, p.fit.rmse, p.comparison.delta_bic,
                           p.comparison.p_value,
                           {n: {"value": v, "std_error": p.fit.std_errors.get(n)} for n, v in own.items()},
@@ -722,7 +724,7 @@ def build_verdict(data: PreparedRecords, base: C.ModelFit, steps: list[Step], ma
                    nuisance_summary(final, data.records), removed)
 
 
-def assess_support(final: C.ModelFit, picked: Sequence[str], data: PreparedRecords, run: DiagnosisRun) -> list[SupportResult]:
+def assess_support(final: ModelFit, picked: Sequence[str], data: PreparedRecords, run: DiagnosisRun) -> list[SupportResult]:
     """Phase 7: switch each effect of the final model off (but the double layer and the picks)
     and refit: does the data support it?"""
     out = []
@@ -734,25 +736,25 @@ def assess_support(final: C.ModelFit, picked: Sequence[str], data: PreparedRecor
     return out
 
 
-def _support_of(eff: str, final: C.ModelFit, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, C.ModelFit | None]":
+def _support_of(eff: str, final: ModelFit, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, ModelFit | None]":
     """``eff`` switched off in ``final`` and the model refitted: (its support, the fit without it)."""
     ok, why = revealable(eff, data.records, run.resonance)
     if not ok:
         return SupportResult(eff, "not_assessable",
                              explanation=f"cannot be assessed: the data cannot reveal {eff} ({why})"), None
     try:
-        spec = C.removal_spec(eff, final.effects, final.spec.free, final.spec.per_rh, final.device, data.band)
+        spec = removal_spec(eff, final.effects, final.spec.free, final.spec.per_rh, final.device, data.band)
     except (InputError, KeyError) as exc:
         return SupportResult(eff, "failed", explanation=str(exc)), None
     if not spec.free and not spec.per_rh:
         return SupportResult(eff, "failed", explanation="no free parameter left without it"), None
-    mf = C.fit_model(spec, final.device, data.targets, data.target_records, n_starts=run.n_starts,
+    mf = fit_model(spec, final.device, data.targets, data.target_records, n_starts=run.n_starts,
                      seed=run.options.seed, n_modes=run.options.n_modes, df_cache=data.df_cache)
     if mf.ok:
-        C.score(mf, data.records)
+        score(mf, data.records)
     if not mf.ok:
         return SupportResult(eff, "failed", explanation=f"the model without {eff} failed: {mf.error}"), None
-    cmp = C.compare_fits(mf, final, C.is_nested(eff))
+    cmp = compare_fits(mf, final, is_nested(eff))
     supported = cmp.delta_bic <= -SUPPORT_BIC
     if supported:
         txt = (f"supported: removing {eff} raises the RMS error from {1e6 * final.rmse:.4g} to "
@@ -785,7 +787,7 @@ def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list,
     vocabulary: a per-RH name is any parameter the model uses or one an effect of the model
     declares per RH (a Table V humidity map of ``Y`` scales whichever modulus is active).
     Per RH ``None``: "auto" (:func:`_resolve_free`)."""
-    free_l = parse_names(free) if free not in (None, "") else C.default_free(base_ids)
+    free_l = parse_names(free) if free not in (None, "") else default_free(base_ids)
     auto = per_rh in (None, "", (), [], "auto")
     per_rh_l = [] if auto or per_rh == "none" else parse_names(per_rh, arg("per_rh"))
     specs = all_param_specs()
@@ -793,9 +795,9 @@ def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list,
     for name, what in [(n, "free") for n in free_l] + [(n, "per_rh") for n in per_rh_l]:
         if name not in specs:
             raise InputError(f"{arg(what)}: unknown parameter {name!r}")
-        if not C.param_used(name, base_ids) and not (what == "per_rh" and name in declared):
+        if not param_used(name, base_ids) and not (what == "per_rh" and name in declared):
             raise InputError(f"{arg(what)}: {name} has no effect in a model with effects [{', '.join(base_ids)}]; "
-                             f"free parameters of this model by default: {', '.join(C.default_free(base_ids))}"
+                             f"free parameters of this model by default: {', '.join(default_free(base_ids))}"
                              + (f"; per RH level: {', '.join(declared)}" if declared else ""))
     both = sorted(set(free_l) & set(per_rh_l))
     if both and free not in (None, ""):
@@ -803,7 +805,7 @@ def _check_names(dev: Device, base_ids, free, per_rh, candidates) -> tuple[list,
                          f"({arg('per_rh')}), not both")
     free_l = [n for n in free_l if n not in per_rh_l]
     if candidates in (None, "", "default"):
-        cand_ids = [e for e in C.default_candidates() if e not in base_ids]
+        cand_ids = [e for e in default_candidates() if e not in base_ids]
     else:
         cand_ids = parse_names(candidates, arg("candidates"))
         bad = [e for e in cand_ids if not spec_of(e)]
@@ -836,7 +838,7 @@ def _resolve_free(dev: Device, base_ids, free_l: list, per_rh_l: list | None, re
         declared = [n for n in _declared_per_rh(base_ids) if n not in per]
         if declared:
             per += declared
-            for role in (C.ROLE_GAIN, C.ROLE_STIFF):
+            for role in (ROLE_GAIN, ROLE_STIFF):
                 if any(n in role_family(role) for n in per):
                     free_l = [n for n in free_l if n not in role_family(role)]
             notes.append(f"records at {len(levels)} RH levels ({', '.join(f'{x:g}' for x in levels)} %): "
@@ -939,16 +941,16 @@ def _fit_candidate(task: dict):
     """Fit and score one candidate (a task of :func:`physics.execution.parallel.map_tasks`)."""
     ensure_registered(task["effect_files"])
     t0 = time.perf_counter()
-    mf = C.fit_model(task["spec"], task["device"], task["targets"], task["trecs"], n_starts=task["n_starts"],
+    mf = fit_model(task["spec"], task["device"], task["targets"], task["trecs"], n_starts=task["n_starts"],
                      seed=task["seed"], n_modes=task["n_modes"], df_cache=task["df_cache"] if task["df_cache"]
                      is not None else {})
     if mf.ok:
-        C.score(mf, task["records"])
-        C.start_on_time(mf, task["records"])
+        score(mf, task["records"])
+        start_on_time(mf, task["records"])
     return mf, time.perf_counter() - t0
 
 
-def _resonance(mf: C.ModelFit, band, records) -> float | None:
+def _resonance(mf: ModelFit, band, records) -> float | None:
     try:
         f = np.geomspace(max(band[0], 0.05), band[1] * 1.5, 400)
         fr = frequency_response(mf.model, None, f, rh=records[0].rh_measured)
@@ -977,9 +979,9 @@ def _fmt_params(values: dict, errors: dict) -> str:
     return ", ".join(parts)
 
 
-def _explain(c: CandidateResult, base: C.ModelFit) -> str:
+def _explain(c: CandidateResult, base: ModelFit) -> str:
     f, cmp = c.fit, c.comparison
-    vals = C.effect_values(f, c.effect)
+    vals = effect_values(f, c.effect)
     txt = (f"Adding {c.effect}" + (f" ({_fmt_params(vals, f.std_errors)})" if vals else "") +
            f" changes the RMS error from {1e6 * base.rmse:.4g} to {1e6 * f.rmse:.4g} µm (fit {base.fit_pct:.2f} → "
            f"{f.fit_pct:.2f} %); ΔBIC = {cmp.delta_bic:.4g} with n_eff = {cmp.n_eff:.4g} (τ = {cmp.tau:.3g} samples): "
@@ -991,7 +993,7 @@ def _explain(c: CandidateResult, base: C.ModelFit) -> str:
         else:
             txt += f" Its signature ({', '.join(sig['expected'])}) is not observed."
     if "base" in c.indistinguishable_from:
-        d = C.prediction_distance(f, base)
+        d = prediction_distance(f, base)
         txt += (f" Its fitted model predicts the same deflection as the base with re-tuned "
                 f"{', '.join(base.spec.free)} (RMS difference {1e6 * d:.3g} µm, below the noise): the data cannot "
                 "tell it apart from the base.")

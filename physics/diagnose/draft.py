@@ -17,17 +17,17 @@ from typing import Sequence
 
 from ..errors import InputError, ModelError
 from ..execution.threads import single_threaded
-from . import forms as F
+from .forms import FormFit, MIN_GAIN, SIGNIFICANT_BIC, describe, form_of, residual_of
 from .effect_draft import EffectDraft
 
 
-def drafts(forms: Sequence[F.FormFit], fit, records) -> list[EffectDraft]:
+def drafts(forms: Sequence[FormFit], fit, records) -> list[EffectDraft]:
     """A draft of every form of ``forms`` that can be written as an effect, its residual fit
     as the start (the forward-selected first, then by ΔBIC)."""
-    res = F.residual_of(fit, records)
+    res = residual_of(fit, records)
     out, seen = [], set()
     for ff in sorted(forms, key=lambda f: (f.selected_step or 99, f.delta_bic)):
-        d = F.form_of(ff.form)().draft(ff, res) if ff.form not in seen else None
+        d = form_of(ff.form)().draft(ff, res) if ff.form not in seen else None
         if d is None:
             continue
         seen.add(ff.form)
@@ -82,11 +82,11 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     if res.verdict.status == "nothing to explain" or (ad is not None and ad.adequate and not res.picks):
         items = []
     else:       # an adequate catalog pick may still be a mimic: the drafts compete with it
-        items = drafts(ad.forms if ad is not None and ad.forms else F.describe(fit, res.records), fit, res.records)
-    from .. import effects as E
+        items = drafts(ad.forms if ad is not None and ad.forms else describe(fit, res.records), fit, res.records)
+    from ..effects import EFFECTS, load_effects_file, unregister
     # a form whose effect is already registered (the user's own file of an earlier draft) is on offer
     # already: drafting it again would name one effect twice
-    items = [d for d in items if d.effect_id not in E.EFFECTS]
+    items = [d for d in items if d.effect_id not in EFFECTS]
     outcome = DraftOutcome([], [], fit.rmse)
     if not items:
         return outcome
@@ -98,7 +98,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
         for d in items:
             path = Path(tmp) / d.file_name
             path.write_text(d.source(), encoding="utf-8")
-            ids += E.load_effects_file(path)
+            ids += load_effects_file(path)
         try:
             pool = list(items)
             while pool and len(outcome.kept) < max_effects:
@@ -136,7 +136,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
                 outcome.rejected += [(d, "not tried: the forward selection stopped") for d in pool]
         finally:
             for i in ids:
-                E.unregister(i)
+                unregister(i)
     return outcome
 
 
@@ -154,7 +154,7 @@ def _scored(keys, again, on_top) -> tuple[list, dict]:
             continue
         gain = 1.0 - c.fit.rmse / again.base.rmse if again.base.rmse > 0 else 0.0
         dbic = c.comparison.delta_bic
-        if dbic <= -F.SIGNIFICANT_BIC and gain >= F.MIN_GAIN:
+        if dbic <= -SIGNIFICANT_BIC and gain >= MIN_GAIN:
             scored.append((dbic, key, c))
         else:
             how = "lowers the RMS error only" if c.fit.rmse <= again.base.rmse else "raises the RMS error"
@@ -169,7 +169,7 @@ def _pick_text(scored, again, on_top) -> str:
     dbic, _, c = scored[0]
     text = (f"fitted with [{', '.join(on_top)}] it lowers the RMS error from {1e6 * again.base.rmse:.4g} "
             f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.4g})")
-    rivals = [(b, k) for b, k, _ in scored[1:] if b - dbic < F.SIGNIFICANT_BIC]
+    rivals = [(b, k) for b, k, _ in scored[1:] if b - dbic < SIGNIFICANT_BIC]
     if rivals:
         text += "; " + ", ".join(f"{k if isinstance(k, str) else k.effect_id} (ΔBIC {b:.4g})"
                                  for b, k in rivals) + " fits almost as well: these records hardly tell them apart"
@@ -179,11 +179,11 @@ def _pick_text(scored, again, on_top) -> str:
 @single_threaded
 def check_draft(path: Path) -> list[str]:
     """The contract (:func:`physics.effects.check_effect`) run on a written draft; [] when it passes."""
-    from .. import effects as E
-    classes = E.effect_classes_in_file(path)
+    from ..effects import check_effect, effect_classes_in_file
+    classes = effect_classes_in_file(path)
     problems = []
     for cls in classes:
-        report = E.check_effect(cls)
+        report = check_effect(cls)
         if not report.ok:
             problems.append(f"{path.name}: {report}")
     return problems

@@ -12,11 +12,17 @@ NAME = "train-compare"
 #: argument destinations that name files or folders this command reads (never replaced by its outputs)
 INPUTS = ("dataset", "physics")
 HELP = "train neural models on a dataset and compare them (free run, held-out RH, physics reference)"
+#: the built-ins that declare themselves defaults, for the help text only (the command line does not
+#: import torch to print its help; a test holds it to :func:`nnmodel.models.default_kinds`)
+DEFAULT_SET = "ff, rbf, narx, lstm, ss"
 
 
 def add_arguments(p):
     p.add_argument("dataset", help="dataset folder (from `eap generate`)")
-    p.add_argument("--models", default="ff,rbf,narx,lstm,ss", help="comma-separated: ff, rbf, narx, lstm, gru, ss, hybrid, or a network installed under the entry-point group eap.networks")
+    p.add_argument("--models", default=None,
+                   help=f"comma-separated: ff, rbf, narx, lstm, gru, ss, hybrid, or a network installed under the "
+                        f"entry-point group eap.networks (default: the networks that declare themselves defaults, "
+                        f"{DEFAULT_SET})")
     add_output_options(p, "runs/train-compare", "run folder (models/, compare.json, the page index.html)")
     p.add_argument("--set", action="append", default=[], metavar="MODEL.KEY=VALUE",
                    help="override a recipe hyper-parameter, e.g. --set narx.hidden=64 (repeatable)")
@@ -67,10 +73,12 @@ def _value(text: str):
 
 
 def run(args) -> int:
-    from nnmodel.models import MODELS, load_plugins
+    from nnmodel.models import MODELS, default_kinds, load_plugins
     from nnmodel.traincompare import format_table, train_compare
-    models = [m.strip() for m in args.models.split(",") if m.strip()]
     load_plugins()
+    if args.models is None:
+        args.models = ",".join(default_kinds())
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
     if not models:
         raise InputError(f"--models {args.models!r} names no model; give e.g. --models ff,narx "
                          f"(known: {', '.join(sorted(MODELS))})")
