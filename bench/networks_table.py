@@ -11,8 +11,15 @@ on the slow plant and the tank the best model at least 30 % below the linear row
 Silverbox `ss` at most 0.30 mV and the best at most 0.20 mV.  Runs already in --out are
 tabulated again, not retrained (--rerun retrains).
 
+With ``--tune N`` each plant is trained a second time with ``eap train-compare --tune N``
+(``--tune-models``, default every model) and a second table gives, per model, the recipe's and
+the tuned model's test RMSE, the kept trial's cross-validation score and spread, the rule that
+kept it, and whether the tuned model scores no worse than the recipe on its own cross-validation
+(issue 35: ``--tune`` never ends worse than the recipe there).
+
     nice python bench/networks_table.py [--plants slow,tank,silverbox] [--models ff,rbf,narx,lstm,gru,ss]
                                         [--silverbox-models ...] [--out runs/networks-table] [--rerun]
+                                        [--tune N --tune-models ss,ff]
 
 Wall times on a shared machine are inflated by whatever else runs there.
 """
@@ -63,23 +70,54 @@ def dataset_args(plant: str, folder: Path) -> list[str]:
     return args + ["--columns", "voltage=u,output=y", "--output", "level:V", "--fs-Hz", f"{FS:g}"]
 
 
-def run_plant(plant: str, models: str, out: Path, rerun: bool, max_time_s: str) -> dict:
-    """Train (unless done) and read one plant's compare.json: {model: row} plus wall time."""
-    run = out / plant / "run"
-    wall_file = out / plant / "wall_s.json"
+def run_plant(plant: str, models: str, out: Path, rerun: bool, max_time_s: str, tune: int | None = None) -> dict:
+    """Train (unless done) and read one plant's compare.json: {model: row} plus wall time
+    (``tune``: the run with ``--tune`` trials per model, in its own folder)."""
+    name = "run" if tune is None else f"run-tune{tune}"
+    run = out / plant / name
+    wall_file = out / plant / f"wall_s_{name}.json"
+    dataset = out / plant / "dataset"
     if rerun or not (run / "compare.json").is_file():
-        t = _cli(["dataset", *dataset_args(plant, out / plant), "--out", str(out / plant / "dataset"), "--overwrite"])
-        print(f"[{plant}] dataset in {t:.1f} s", flush=True)
+        if rerun or not (dataset / "dataset.json").is_file():
+            t = _cli(["dataset", *dataset_args(plant, out / plant), "--out", str(dataset), "--overwrite"])
+            print(f"[{plant}] dataset in {t:.1f} s", flush=True)
         t0 = time.perf_counter()
-        _cli(["train-compare", str(out / plant / "dataset"), "--models", models, "--out", str(run), "--quiet",
-              "--overwrite", "--max-time-s", max_time_s])
+        _cli(["train-compare", str(dataset), "--models", models, "--out", str(run), "--quiet",
+              "--overwrite", "--max-time-s", max_time_s] + ([] if tune is None else ["--tune", str(tune)]))
         wall_file.write_text(json.dumps({"wall_s": time.perf_counter() - t0, "models": models}))
     summary = json.loads((run / "compare.json").read_text())
     rows = {k: {"rmse": r["free_run"]["test"]["rmse_m"], "train_s": r.get("train_time_s"),
-                "vs_linear": r.get("vs_linear_pct"), "kind": r.get("kind", "")}
+                "vs_linear": r.get("vs_linear_pct"), "kind": r.get("kind", ""), "tuning": r.get("tuning")}
             for k, r in summary["models"].items() if "free_run" in r}
     wall = json.loads(wall_file.read_text())["wall_s"] if wall_file.is_file() else None
     return {"rows": rows, "wall_s": wall}
+
+
+def tuned_table(results: dict, tuned: dict) -> str:
+    """Per plant and tuned model: the recipe's and the tuned test RMSE, the kept trial's
+    cross-validation score ± spread, the rule, and whether the kept trial scores no worse than
+    the recipe (trial 0) on that cross-validation."""
+    lines = ["| plant | model | recipe RMSE | tuned RMSE | recipe CV NRMSE | kept CV NRMSE ± spread | kept | "
+             "no worse on its CV | tuning wall s |", "|" + "---|" * 9]
+    for p, res in tuned.items():
+        unit, scale, nd = UNIT[p]
+        for k, r in res["rows"].items():
+            t = r.get("tuning")
+            if not t:
+                continue
+            rec, best = t["trials"][0], t["best"]
+            cv = rec.get("validation_nrmse_folds") is not None
+            ok = best["validation_nrmse"] <= rec["validation_nrmse"]
+            sp = best.get("spread")
+            base = results.get(p, {}).get("rows", {}).get(k)
+            lines.append(f"| {p} | {k} | {'–' if base is None else format(scale * base['rmse'], f'.{nd}f')} {unit} | "
+                         f"{scale * r['rmse']:.{nd}f} {unit} | {100 * rec['validation_nrmse']:.3g} % | "
+                         f"{100 * best['validation_nrmse']:.3g} %"
+                         + (f" ± {100 * sp:.2g} %" if sp is not None else "") + " | "
+                         + ("recipe" if best["trial"] == 0 else f"trial {best['trial']}") + f" | "
+                         f"{'yes' if ok else 'NO'}{'' if cv else ' (one validation tail)'} | "
+                         f"{'–' if res['wall_s'] is None else format(res['wall_s'], '.0f')} |")
+    return "\n".join(lines)
 
 
 def table(results: dict, models: list[str]) -> str:
@@ -132,6 +170,9 @@ def main() -> None:
     ap.add_argument("--silverbox-models", default=None, help="models on Silverbox (default: --models)")
     ap.add_argument("--out", default="runs/networks-table")
     ap.add_argument("--rerun", action="store_true", help="retrain plants already in --out")
+    ap.add_argument("--tune", type=int, default=None, metavar="N",
+                    help="also train each plant with `eap train-compare --tune N` and tabulate recipe vs tuned")
+    ap.add_argument("--tune-models", default=None, help="models tuned (default: --models)")
     ap.add_argument("--max-time-s", default="20000",
                     help="wall-clock guard per model (budgets are epochs; a loaded machine must not cut them short)")
     args = ap.parse_args()
@@ -147,6 +188,11 @@ def main() -> None:
     print(table(results, list(dict.fromkeys(names))))
     for line in verdicts(results):
         print(line)
+    if args.tune is not None:
+        tuned = {p: run_plant(p, args.tune_models or args.models, out, args.rerun, args.max_time_s, args.tune)
+                 for p in results}
+        print(f"\n--tune {args.tune}:")
+        print(tuned_table(results, tuned))
 
 
 if __name__ == "__main__":
