@@ -152,7 +152,9 @@ def test_a_clearly_better_fit_is_not_ambiguous_though_within_the_noise(monkeypat
 def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
     """On top of a pick the error left is mostly the base's own mismatch: a flexible effect
     that lowers it a lot (huge ΔBIC) but with its signature absent is picked on the first step,
-    never on a later one; a clean one is."""
+    never on a later one; a clean one is — and so is a flagged one that removes nearly all the
+    failure left (a hidden pair's second effect on top of the first: 87.5 → 3.8 µm on a 1.5 µm
+    floor, its signature masked by the first pick), which no trim of a mismatch does."""
     from physics.diagnose import verdict as V
 
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
@@ -164,6 +166,11 @@ def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
     assert later.pick is None and "no quality flag after a pick" in later.reason
     clean = Cand("clean", -40.0, 1.3e-6, [])
     assert decide(base, [mimic, clean], *args, after_pick=True).pick is clean
+    assert V.excess_share(1.7e-6, 1.22e-6, floor) < V.AFTER_PICK_SHARE          # the mimic: 78 % of the excess
+    second = Cand("second", -20000.0, 3.84e-6, ["its residual signature (back-relaxation) is absent"])
+    dec = decide(Fit(87.5e-6), [second], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6,
+                 after_pick=True)
+    assert dec.pick is second and dec.confidence.label != "high"
 
 
 def test_identify_keeps_the_start_when_the_fit_is_worse(tmp_path):

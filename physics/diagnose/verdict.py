@@ -14,7 +14,9 @@ absent.  A candidate can be picked when it passes the criteria of :data:`CRITERI
 strong ΔBIC, Bonferroni p-value, at least a third of the failure explained — of the excess
 error power over the noise floor — and a base above the noise: a flexible effect that trims a
 little off an error it does not explain is no answer; on a later step of the chain, no quality
-flag at all); the pick is the one with the lowest E.  Two candidates that pass are
+flag at all — the error left there is mostly the base's own mismatch, which a flexible effect
+trims — unless the candidate removes at least :data:`AFTER_PICK_SHARE` of the excess, nearly
+all the failure left, which no trim does); the pick is the one with the lowest E.  Two candidates that pass are
 **ambiguous** when they are close on fit (their pairwise |ΔBIC| < 6, or the better leaves more
 than two thirds of the other's excess error power over the noise floor while their predictions
 differ by less than the RMS error the better one leaves — two models that differ by more than
@@ -77,6 +79,9 @@ REL_SE_FLAG, CORR_FLAG = 0.5, 0.99
 #: excess error power over the noise floor, rmse² − noise², that the candidate removes) and a
 #: base above the noise.
 DELTA_BIC_MIN, ALPHA, MIN_SHARE = 10.0, 0.01, 1.0 / 3.0
+#: On a later step of the chain a candidate with quality flags passes only when it removes at
+#: least this share of the excess error power the step's base leaves above the noise floor.
+AFTER_PICK_SHARE = 0.9
 CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "explains_a_third_of_the_excess", "base_above_noise",
             "no_quality_flag_after_a_pick")
 #: Two candidates closer than this in pairwise ΔBIC are close on fit.
@@ -171,7 +176,8 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
                     "p_below_alpha_over_m": bool(math.isfinite(cmp.p_value) and cmp.p_value <= alpha),
                     "explains_a_third_of_the_excess": bool(excess_share(base.rmse, c.fit.rmse, noise) >= MIN_SHARE),
                     "base_above_noise": not within,
-                    "no_quality_flag_after_a_pick": not (after_pick and c.quality)}
+                    "no_quality_flag_after_a_pick": not (after_pick and c.quality and excess_share(
+                        base.rmse, c.fit.rmse, noise) < AFTER_PICK_SHARE)}
     ev = {c.effect: c.comparison.delta_bic + QUALITY_BIC * len(c.quality) for c in ranked}
     w = stats.bic_weights([0.0] + list(ev.values()))
     weights = {"base": float(w[0]), **{e: float(x) for e, x in zip(ev, w[1:])}}
@@ -428,6 +434,7 @@ class Verdict:
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
                 "removed": self.removed, "final_rmse_m": self.final_rmse,
                 "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA, "min_excess_share": MIN_SHARE,
+                             "after_pick_flagged_share": AFTER_PICK_SHARE,
                              "adequate_ratio": ADEQUATE_RATIO, "distinct_delta_bic": DISTINCT_BIC,
                              "quality_penalty_bic": QUALITY_BIC, "rel_se_flag": REL_SE_FLAG, "corr_flag": CORR_FLAG,
                              "confidence": conf.thresholds()}}
