@@ -188,6 +188,7 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
                     if name in role_family(role) and role_param(role, to_ids) in free:
                         free.remove(role_param(role, to_ids))
             per_rh += [name for name in per if name not in per_rh]
+            free = [name for name in free if name not in per_rh]      # shared or per RH, never both
             notes.append(f"{effect}: {', '.join(per)} fitted once per RH level (Table V style), replacing the "
                          "shared values")
         else:

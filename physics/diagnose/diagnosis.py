@@ -841,6 +841,7 @@ def _resolve_free(dev: Device, base_ids, free_l: list, per_rh_l: list | None, re
             for role in (ROLE_GAIN, ROLE_STIFF):
                 if any(n in role_family(role) for n in per):
                     free_l = [n for n in free_l if n not in role_family(role)]
+            free_l = [n for n in free_l if n not in per]          # shared or per RH, never both
             notes.append(f"records at {len(levels)} RH levels ({', '.join(f'{x:g}' for x in levels)} %): "
                          f"{', '.join(declared)} fitted once per RH level (the device's humidity law is a start, "
                          "not this strip's; --per-rh none keeps it)")

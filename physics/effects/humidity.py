@@ -71,7 +71,10 @@ class Humidity(HumidityInvariant):
     id = "humidity"
     needs_rh = True
     diagnosis = {
-        "free": (), "per_rh": ("kf", "Y"),                    # Table V style: kf, Y once per RH level
+        # once per RH level: kf and Y as in the thesis's Table V, and the damping beta_f — a strip's
+        # loss changes with its water content (water plasticises the polymer) and, at a fixed damping
+        # ratio, a stiffness that changes with RH moves the stiffness-proportional beta_f with it
+        "free": (), "per_rh": ("kf", "Y", "beta_f"),
         "nested": True,
         "excitation": "records at two or more RH levels at least 10 % apart",
         "reveal": {"rh_levels": 2},
