@@ -251,7 +251,7 @@ def test_parameter_roles_follow_the_effects():
     st = translate_start(dev, ("double_layer",), ("double_layer", "fractional_coupling"), (0.1, 50.0))
     assert st["frac_a"] == 0.3 and st["kf0"] > dev["kf"]
     spec = candidate_spec("humidity", ("double_layer",), ["kf", "Y", "beta_f"], [], dev, (0.1, 50.0), 3)
-    assert spec.per_rh == ["kf", "Y"] and spec.free == ["beta_f"]
+    assert spec.per_rh == ["kf", "Y", "beta_f"] and spec.free == []     # per RH, never also shared
     spec = candidate_spec("solvent_diffusion", ("double_layer",), ["kf", "Y", "beta_f"], [], dev, (0.1, 50.0), 1)
     lo, hi = spec.bounds["D_solvent"]
     h = 0.5 * dev["t_polymer"]

@@ -221,7 +221,7 @@ def test_auto_per_rh_frees_the_humidity_law_when_the_records_span_rh():
     free, per, _ = _check_names(dev, ids, None, None, None)
     assert per is None
     _, f2, p2, _ = _resolve_free(dev, ids, free, per, [R(40, 40.0), R(60, 60.0)], False)
-    assert set(p2) == {"kf", "Y"} and f2 == ["beta_f"]
+    assert set(p2) == {"kf", "Y", "beta_f"} and f2 == []      # per RH, never also shared
     _, f1, p1, _ = _resolve_free(dev, ids, free, [], [R(40, 40.0), R(60, 60.0)], False)
     assert p1 == [] and "kf" in f1                    # --per-rh none keeps the device's law
 
