@@ -719,9 +719,8 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                   "clamp settling), find what does and record the test again")
         ad = assess(label, final, data.records, noise, describe=False, wander=data.wander_beyond)
         kind, forms = remaining_of(ad)
-    return Verdict(status, picks, first.weights, ad, base.rmse, noise, source, reason,
-                   list(first.ambiguous), first.separating, forms, kind, stopped, first.alpha,
-                   nuisance_summary(final, data.records), removed)
+    return Verdict(status, picks, first.weights, ad, base.rmse, noise, source, reason, forms, kind, stopped,
+                   first.alpha, nuisance_summary(final, data.records), removed)
 
 
 def assess_support(final: ModelFit, picked: Sequence[str], data: PreparedRecords, run: DiagnosisRun) -> list[SupportResult]:

@@ -330,8 +330,6 @@ class Verdict:
     noise_floor: float
     noise_source: str
     reason: str = ""
-    ambiguous: list[str] = field(default_factory=list)
-    separating: str = ""
     remaining: list[dict] = field(default_factory=list)      # described forms of what remains
     remaining_kind: str = ""                                 # none | described | base mismatch | unknown
     stopped: str = ""                                        # why the chain stopped
@@ -340,6 +338,17 @@ class Verdict:
     removed: list = field(default_factory=list)             # effects of the model the data do not support
 
     # --- the first answer, as before the chain existed ---------------------------------
+    @property
+    def ambiguous(self) -> list[str]:
+        """The first pick and its near twin when the data could not tell them apart, else []."""
+        p = self.picks[0] if self.picks else None
+        return [p.effect, p.twin] if p is not None and p.twin else []
+
+    @property
+    def separating(self) -> str:
+        """The record that would separate the first pick from its near twin ("" without one)."""
+        return self.picks[0].separating if self.picks else ""
+
     @property
     def missing_effect(self) -> str | None:
         return self.picks[0].effect if self.picks else None
