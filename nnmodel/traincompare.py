@@ -34,7 +34,7 @@ from physics.io.outputs import final_path, output_folder, preflight
 from physics.compare import PhysicsPredictor, cluster_rh, model_rh
 from physics.effects import CORE
 from physics.errors import InputError
-from physics.io.fileio import write_json
+from physics.io.fileio import jsonable, write_json
 from physics.solvers.frequency import frequency_response
 from physics.pages.columns import number, reading_unit
 from physics.pages.plotting import legend_outside, plain_log_axis, plt, rh_axis, save
@@ -388,7 +388,7 @@ def _train_one(task: dict) -> dict:
     res = {"kind": name, "n_parameters": int(model.n_parameters), "train_time_s": fit_time,
            "free_run": _score(free, ds, entries, task["rh_tolerance"]),
            "one_step": _score(one_step, ds, entries, task["rh_tolerance"]),
-           "validation": {"nrmse": selection_score(model, train, val), "cross_validation": cv},
+           "validation": {"nrmse": selection_score(model, train, val), "cross_validation": cv and jsonable(cv)},
            "inference_samples_per_s": _speed(free, ds, entries),
            "rh_range_trained_pct": list(model.rh_range_) if model.rh_range_ else None,
            "training": {**_budget(model), "device": device_name(model.accelerator)},
@@ -768,6 +768,11 @@ def diagnose_command(summary: dict) -> str | None:
     return f"eap diagnose {paths} --device {gen['device']} --effects {effects or 'none'} --out runs/diagnose"
 
 
+def _pct_or_na(x, fmt: str) -> str:
+    """``x`` as a percentage, or "n/a" (a diverged score, a spread of fewer than two folds)."""
+    return "n/a" if x is None or not np.isfinite(x) else f"{100 * x:{fmt}} %"
+
+
 def selection_lines(summary: dict) -> list[str]:
     """How each network was selected and kept (the page): the cross-validation protocol and
     spread where the validation data were few, and the rows that fell back to a parent."""
@@ -782,7 +787,8 @@ def selection_lines(summary: dict) -> list[str]:
                    f"trials were scored by {first['protocol']} ({FOLDS} folds by default: cross-validation costs "
                    "about 2.25 fits instead of one and is used only on such small data). Each network's "
                    "cross-validated score: " + "; ".join(
-                       f"{k} {100 * c['mean']:.3g} % ± {100 * c['spread']:.2g} % NRMSE" for k, c in cv.items()) + ".")
+                       f"{k} {_pct_or_na(c['mean'], '.3g')} ± {_pct_or_na(c['spread'], '.2g')} NRMSE"
+                       for k, c in cv.items()) + ".")
     else:
         out.append(f"Selection protocol: one validation split — the dataset's validation records, which decide alone, "
                    f"or the last val_fraction of each training record when those hold {MIN_WINDOWS} or more "

@@ -83,3 +83,64 @@ def test_a_tuned_trial_replaces_the_recipe_only_when_it_wins_by_more_than_the_sp
     assert best is steady and rule.startswith("trial 2 wins over the recipe")   # not the lucky one
     one = [{**r, "validation_nrmse_folds": None} for r in (recipe, lucky)]   # one split: the lowest score
     assert choose(one)[0]["trial"] == 1
+
+
+def test_heterogeneous_real_gains_win_and_a_fold_clearly_worse_vetoes():
+    from nnmodel.models.crossval import pooled_win
+    # a correction that helps a lot where the block holds the nonlinearity and a little where
+    # it does not: every fold gains beyond its uncertainty, though the gains differ widely
+    wins, mean, se, _ = pooled_win([0.07, 0.004], [0.02, 0.001])
+    assert wins and mean == pytest.approx(0.037) and not paired_win([0.41, 0.066], [0.16, 0.055])[0]
+    wins, _, _, why = pooled_win([0.07, -0.01, 0.004], [0.02, 0.002, 0.001])   # one fold clearly worse
+    assert not wins and "worse than its reference on 1 of 3 folds" in why
+    assert pooled_win([0.07, -0.001, 0.004], [0.02, 0.002, 0.001])[0]         # worse within its noise: no veto
+    assert not pooled_win([0.01, 0.01], [0.02, 0.02])[0]                       # within its uncertainty
+    assert not pooled_win([0.07, math.nan], [0.02, math.nan])[0]               # one fold scored: never a win
+
+
+def _rising(n, seed):
+    """A plant whose last third is driven into a range the first two thirds never reach."""
+    rng = np.random.default_rng(seed)
+    u = np.repeat(rng.uniform(-1, 1, n), rng.integers(1, 8, n))[:n]
+    u[2 * n // 3:] += 2.0
+    a = np.exp(-1 / 5.0)
+    y = np.tanh(lfilter([1 - a], [1, -a], u))
+    return Experiment(u, y + 0.01 * rng.normal(size=n), None, 1.0)
+
+
+def test_a_fold_that_would_measure_extrapolation_is_not_scored():
+    m = make_model("rbf", {"structures": None, "n_centres": 20, "progress_bar": False})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m.fit([_rising(600, 3)], None)
+    cv = m.cross_validation_
+    # fold 1 trains on the first 60 % and validates on 60–80 %, where the output leaves the
+    # range it saw; fold 0 (the model's own split, trained up to 80 %) is always scored
+    assert cv["score_folds"][0] is not None and cv["score_folds"][1] is None
+    assert cv["folds_skipped"][0].startswith("fold 1: ") and "outside the output range its training part" in \
+        cv["folds_skipped"][0]
+
+
+def _linear_plant(n, seed):
+    rng = np.random.default_rng(seed)
+    u = np.repeat(rng.uniform(-1, 1, n), rng.integers(1, 8, n))[:n]
+    a = np.exp(-1 / 5.0)
+    return Experiment(u, lfilter([1 - a], [1, -a], u) + 0.05 * rng.normal(size=n), None, 1.0)
+
+
+def test_a_fold_measures_the_correction_it_trained():
+    """A fold keeps its trained correction for the folds to judge together, where one split
+    alone (``fit``) judges it on its own tail and here drops a gain within its uncertainty."""
+    from nnmodel.models.crossval import _is_reference
+    rec = [_linear_plant(400, 0)]
+    settings = {"structures": None, "hidden": 8, "max_epochs": 20, "progress_bar": False, "cv_folds": 1}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        alone = make_model("ff", settings).fit(rec, None)
+        fold = make_model("ff", settings).fit_fold(rec, None)
+    end = alone.reference_start_["end"]
+    assert end["kept"] == "linear" and end["validation_nrmse_network"] < end["validation_nrmse_reference"]
+    assert _is_reference(alone)                    # its correction zeroed
+    assert fold.reference_start_["end"]["kept"] == "network" and "cross_validation_" not in fold.__dict__
+    assert not _is_reference(fold)                 # the same training, its correction kept
+    assert fold.reference_start_["end"]["validation_nrmse_network"] == end["validation_nrmse_network"]

@@ -210,6 +210,15 @@ class NeuralModel:
     # ------------------------------------------------------------------ fitting
     def fit(self, train, val=None) -> "NeuralModel":
         """Train on ``train`` records (early stopping on the free-run error of ``val``)."""
+        return self._fit_checked(train, val, decide=True)
+
+    def fit_fold(self, train, val=None) -> "NeuralModel":
+        """Train on one cross-validation fold (:mod:`.crossval`): as :meth:`fit` on one split,
+        but a residual core keeps its trained correction whatever the fold's validation says —
+        the folds together judge it, so one fold must not drop it on its own."""
+        return self._fit_checked(train, val, decide=False)
+
+    def _fit_checked(self, train, val, decide: bool) -> "NeuralModel":
         self._validate()
         train = check_records(train, "training")
         if val is not None:
@@ -221,8 +230,8 @@ class NeuralModel:
             if self.search.active:     # each candidate is fitted (and cross-validated) in full
                 select_structure(self, train, val)
             else:
-                folds = crossval.plan(self, train, val)
-                self._fit(train, val, train[0].fs, use_rh, decide=folds is None)
+                folds = crossval.plan(self, train, val) if decide else None
+                self._fit(train, val, train[0].fs, use_rh, decide=decide and folds is None)
                 if folds is not None:
                     self.cross_validation_ = crossval.cross_validate(self, train, val, folds)
         except BaseException:

@@ -15,16 +15,26 @@ their own, which otherwise decide alone; 1 turns it off):
   long as that tail, and trains on what precedes it (*rolling origin*: a model never trains
   on samples after the ones it is scored on, and the block is scored as the continuation of
   its record, its input filters warmed by the record's own past, as fold 0's tail is);
-* a fold whose training part would be shorter than its validation block is not made.
+* a fold whose training part would be shorter than its validation block is not made;
+* a further fold whose block leaves the output range its training part saw (more than
+  :data:`MAX_OUTSIDE` of the block's samples above its largest or below its smallest
+  measured output) is not scored: it would measure extrapolation into a regime — a
+  saturation, an overflow — that the model trained on all records has seen (the card
+  lists it under ``folds_skipped``).
 
-Each fold trains the model anew (same seed, same structure) and scores its free-run NRMSE
+Each fold trains the model anew (same seed, same structure; the fold keeps its trained
+correction, :meth:`~nnmodel.models.base.NeuralModel.fit_fold`) and scores its free-run NRMSE
 on the fold's block; the score of the model is the mean over the folds and its **spread**
 the standard deviation of the fold scores.  A residual model (a linear start, the hybrid's
-physics) keeps its trained correction only when the correction's gain over its reference,
-fold by fold, is larger on average than its spread across the folds — that decision replaces
-the single-tail one (:func:`nnmodel.models.base.keep_if_better`).  The further folds train on
-less data (60 % and 40 % of each record when ``val_fraction`` is 0.2, against fold 0's
-80 %), so cross-validation costs about 1 + 0.75 + 0.5 = 2.25 fits where one was made (a
+physics) keeps its trained correction only when, over the scored folds, its squared-error
+gain over its reference is larger than its standard error (the folds' batch-means errors,
+:func:`nnmodel.batches.paired_gain`, pooled) and no fold is worse than the reference by more
+than its own standard error (:func:`pooled_win`) — that decision replaces the single-tail
+one (:func:`nnmodel.models.base.keep_if_better`).  Blocks differ in how much of the plant's
+nonlinearity they hold, so a real gain differs from fold to fold; the spread across folds
+is reported, and decides where trials are compared (:func:`paired_win`, ``--tune``).  The
+further folds train on less data (60 % and 40 % of each record when ``val_fraction`` is
+0.2, against fold 0's 80 %), so cross-validation costs about 1 + 0.75 + 0.5 = 2.25 fits where one was made (a
 structure search pays it per candidate), and is used only where the data are few, which is
 where a fit is cheap.
 """
@@ -36,7 +46,8 @@ import warnings
 
 import numpy as np
 
-__all__ = ["FOLDS", "MIN_WINDOWS", "independent_windows", "plan", "cross_validate", "paired_win", "describe"]
+__all__ = ["FOLDS", "MIN_WINDOWS", "MAX_OUTSIDE", "independent_windows", "plan", "cross_validate", "paired_win",
+           "pooled_win", "describe"]
 
 #: folds when the validation data are few (``cv_folds: auto``)
 FOLDS = 3
@@ -45,6 +56,9 @@ FOLDS = 3
 MIN_WINDOWS = 20
 #: the shortest block a fold may train or validate on (samples)
 MIN_PIECE = 32
+#: a further fold is not scored when more than this share of its block's measured outputs lie
+#: outside the range of its training part's (extrapolation, not generalisation)
+MAX_OUTSIDE = 0.1
 
 
 def independent_windows(records) -> float:
@@ -101,16 +115,38 @@ def _fold_model(model, val_fraction: float):
     return type(model)(**params)
 
 
-def scores(model, train, val) -> tuple[float, float | None]:
+def extrapolation(train, val_fraction: float) -> float:
+    """Share of a fold's block (the last ``val_fraction`` of each of ``train``) whose measured
+    outputs lie outside the range of the outputs before it."""
+    from ..data import split_records
+    fit, block = split_records(train, val_fraction, MIN_PIECE)
+    if not block:
+        return 0.0
+    lo, hi = min(float(np.min(r.y)) for r in fit), max(float(np.max(r.y)) for r in fit)
+    outside = sum(int(np.sum((r.y < lo) | (r.y > hi))) for r in block)
+    return outside / sum(len(r) for r in block)
+
+
+def scores(model, train, val) -> tuple[float, float | None, float, float]:
     """(free-run validation NRMSE of the fitted ``model``, the same with its correction zeroed
-    — its reference alone — or None without one)."""
-    from .structure import validation_nrmse
+    — its reference alone — or None without one, the correction's gain in squared NRMSE and
+    its standard error by batch means; the last two nan without a reference)."""
+    from ..batches import paired_gain
+    from .base import GAIN_BLOCKS
+    from .structure import validation_errors, validation_nrmse
     net = validation_nrmse(model, train, val)
     if model.__dict__.get("reference_start_") is None:
-        return net, None
+        return net, None, math.nan, math.nan
     ref = copy.deepcopy(model)
     ref.net_.core.zero_correction()
-    return net, validation_nrmse(ref, train, val)
+    e_net, e_ref = validation_errors(model, train, val), validation_errors(ref, train, val)
+    if e_net is None or e_ref is None or not e_ref[1] > 0:
+        gain, se = (-math.inf if e_net is None else math.nan), math.nan
+    else:
+        gain, se, _ = paired_gain(e_ref[0], e_net[0], GAIN_BLOCKS)
+        n = sum(min(a.size, b.size) for a, b in zip(e_ref[0], e_net[0]))
+        gain, se = gain * n / e_ref[1], se * n / e_ref[1]
+    return net, validation_nrmse(ref, train, val), gain, se
 
 
 def paired_win(base: list, new: list) -> tuple[bool, float, float]:
@@ -127,6 +163,31 @@ def paired_win(base: list, new: list) -> tuple[bool, float, float]:
     return bool(mean > 0 and mean > spread), mean, spread
 
 
+def pooled_win(gains: list, ses: list) -> tuple[bool, float, float, str]:
+    """(wins, mean gain, its standard error, why not): a correction's gain over its reference
+    per fold (squared NRMSE) with its standard error by batch means (inf: unknown); it wins
+    when the mean over the folds exceeds :data:`~nnmodel.batches.GAIN_SE` standard errors of
+    that mean (the folds' errors pooled as independent) and no fold is worse than the
+    reference by more than its own standard error (unknown: by anything).  Folds missing
+    (nan) are left out; fewer than two never win."""
+    from ..batches import GAIN_SE
+    pairs = [(g, s) for g, s in zip(gains, ses) if not math.isnan(g)]
+    if len(pairs) < 2:
+        return False, math.nan, math.nan, "fewer than two folds were scored"
+    g = np.array([p[0] for p in pairs], float)
+    s = np.array([p[1] for p in pairs], float)
+    mean = float(g.mean()) if np.all(np.isfinite(g)) else -math.inf
+    known = np.isfinite(s)
+    se = float(np.sqrt(np.sum(s[known] ** 2))) / len(pairs)
+    worse = [k for k, (gk, sk) in enumerate(pairs) if gk < -(GAIN_SE * sk if np.isfinite(sk) else 0.0)]
+    if worse:
+        return False, mean, se, f"it is worse than its reference on {len(worse)} of {len(pairs)} folds, beyond the " \
+                                "fold's own uncertainty"
+    if not mean > GAIN_SE * se:
+        return False, mean, se, "its gain over the folds is within its uncertainty"
+    return True, mean, se, ""
+
+
 def cross_validate(model, train, val, extra) -> dict:
     """Score the fitted ``model`` (fold 0) and fresh fits on the ``extra`` folds of
     :func:`plan` (a fold that cannot be trained, e.g. shorter than one training window, is
@@ -138,14 +199,20 @@ def cross_validate(model, train, val, extra) -> dict:
     from ..batches import gain_is_real
     folds, skipped = [scores(model, train, val)], []
     for k, (tr, va, vf) in enumerate(extra, start=1):
+        share = extrapolation(tr, vf) if va is None else 0.0
+        if share > MAX_OUTSIDE:
+            skipped.append(f"fold {k}: {100 * share:.0f} % of its block lies outside the output range its training "
+                           "part saw (extrapolation; not scored)")
+            folds.append((None, None, math.nan, math.nan))
+            continue
         fm = _fold_model(model, vf)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                fm.fit(tr, va)
+                fm.fit_fold(tr, va)
         except InputError as exc:
             skipped.append(f"fold {k}: {exc}")
-            folds.append((None, None))
+            folds.append((None, None, math.nan, math.nan))
             continue
         folds.append(scores(fm, tr, va))
     net = [f[0] for f in folds]
@@ -158,10 +225,13 @@ def cross_validate(model, train, val, extra) -> dict:
         ref = [f[1] for f in folds]
         end = model.reference_start_["end"]
         if used >= 2:
-            keep, gain, spread = paired_win(ref, net)
-            out.update(reference_nrmse_folds=ref, correction_gain=gain, correction_gain_spread=spread)
-            why = (f"cross-validation over {used} folds: its NRMSE gain over the {model.reference_start_['reference']} "
-                   f"start, {_pct(gain)} on average, is not larger than its spread across the folds ({_pct(spread)})")
+            _, gain, spread = paired_win(ref, net)
+            keep, sq, sq_se, why_not = pooled_win([f[2] for f in folds], [f[3] for f in folds])
+            out.update(reference_nrmse_folds=ref, correction_gain=gain, correction_gain_spread=spread,
+                       correction_gain_sq=sq, correction_gain_sq_se=sq_se)
+            why = (f"cross-validation over {used} folds: {why_not} (NRMSE gain over the "
+                   f"{model.reference_start_['reference']} start {_pct(gain)} on average, spread across the folds "
+                   f"{_pct(spread)})")
             end["decided_by"] = "cross-validation"
         else:                          # no further fold could be trained: the single-split rule
             se = end["validation_gain_se"]
@@ -206,5 +276,5 @@ def describe(folds: int, own_validation: bool) -> str:
     first = "its validation records" if own_validation else "the last val_fraction of every training record"
     return (f"blocked cross-validation, rolling origin, {folds} folds: fold 0 validates on {first}, each further "
             "fold on an earlier block of every training record, as long as that tail (the latest first), trained "
-            "on what precedes it; score = mean free-run validation NRMSE over the folds, spread = their standard "
-            "deviation")
+            "on what precedes it, and not scored when its block leaves the output range that part saw; score = mean "
+            "free-run validation NRMSE over the scored folds, spread = their standard deviation")
