@@ -34,11 +34,11 @@ class _Cand:
     quality: list = field(default_factory=list)
 
 
-def _label(base_um, pick_um, rival_um=None, noise_um=1.0, records=None, flags=0, weight=1.0):
+def _label(base_um, pick_um, rival_um=None, noise_um=1.0, records=None, flags=0, weight=1.0, pinned=0):
     base = _Fit(base_um * UM, [base_um * UM] * 2)
     pick = _Cand("pick", _Fit(pick_um * UM, [x * UM for x in (records or [pick_um] * 2)]), ["f"] * flags)
     rivals = [pick] + ([_Cand("rival", _Fit(rival_um * UM, [rival_um * UM] * 2))] if rival_um else [])
-    return conf.label(conf.features(pick, base, rivals, weight, noise_um * UM))
+    return conf.label(conf.features(pick, base, rivals, weight, noise_um * UM, pinned))
 
 
 def test_a_clear_pick_is_high():
@@ -73,6 +73,17 @@ def test_a_pick_that_makes_a_record_worse_does_not_generalise():
 def test_quality_flags_and_no_noise_floor_keep_a_pick_from_high():
     assert _label(70.0, 1.1, flags=1).label == "medium"
     assert _label(70.0, 1.1, noise_um=math.nan).label == "medium"
+
+
+def test_a_pick_whose_parameter_the_data_pinned_to_a_bound_is_low():
+    """A creep on the output taken for layered_beam: 39.3 → 21.1 µm on a 2.5 µm floor, its
+    electrode modulus on the lower bound of its range with a 591 % standard error — the fit
+    used the effect's limit, not a value of it."""
+    c = _label(39.3, 21.1, noise_um=2.45, flags=4, pinned=1)
+    assert c.label == "low" and any("ended on a bound and are not determined" in w for w in c.why)
+    assert _label(39.3, 21.1, noise_um=2.45, flags=4).label == "medium"     # flags alone: medium
+    d = c.to_dict()
+    assert d["pinned_parameters"] == 1 and conf.Confidence.from_dict(d).pinned == 1
 
 
 # ---------------------------------------------------------------------------- evidence on the reported error

@@ -16,10 +16,13 @@ a little.  The label therefore asks what a weight cannot:
 * **records** — the share of records on which the pick lowers the error: fitted on all
   records, a pick that makes some of them worse does not generalise from record to record
   (a leave-one-record-out test at the cost of none);
-* **flags** — the quality flags of the fit (:func:`.verdict.quality`).
+* **flags** — the quality flags of the fit (:func:`.verdict.quality`);
+* **pinned** — the pick's own parameters that ended on a bound of their range and are not
+  determined (:func:`.verdict.pinned`): the data chose a limit of the effect, not a value, so
+  what the fit gained may come from the limit standing in for something else.
 
 "high" needs all five (and a weight ≥ :data:`WEIGHT_HIGH`), "low" is a pick that barely
-changes the model or has a near twin; everything else is "medium".  The thresholds were
+changes the model, has a near twin or is pinned; everything else is "medium".  The thresholds were
 chosen on some truth families and are reported on others (leave-one-family-out,
 ``bench/diagnose_calibration.py``; ``docs/reference/diagnosis.md`` states what each label has
 meant on held-out physics).  Without a noise floor no pick is "high".
@@ -78,6 +81,7 @@ class Confidence:
     twin_of: str | None            # that rival
     records: float                 # share of records on which the error falls
     flags: int                     # quality flags
+    pinned: int = 0                # own parameters on a bound and not determined
     label: str = "low"
     why: list[str] = field(default_factory=list)   # what kept it from "high"
 
@@ -88,12 +92,13 @@ class Confidence:
             return math.nan if d.get(k) is None else float(d[k])
         return cls(float(d.get("weight") or 0.0), num("change_noise_floors"), num("left_noise_floors"),
                    float(d.get("twin_share", 1.0)), d.get("closest_rival"), float(d.get("records_improved", 1.0)),
-                   int(d.get("quality_flags", 0)))
+                   int(d.get("quality_flags", 0)), int(d.get("pinned_parameters") or 0))
 
     def to_dict(self) -> dict:
         return {"label": self.label, "weight": self.weight, "change_noise_floors": _num(self.change),
                 "left_noise_floors": _num(self.left), "twin_share": self.twin, "closest_rival": self.twin_of,
-                "records_improved": self.records, "quality_flags": self.flags, "not_high_because": self.why}
+                "records_improved": self.records, "quality_flags": self.flags, "pinned_parameters": self.pinned,
+                "not_high_because": self.why}
 
 
 def _num(x: float):
@@ -108,9 +113,10 @@ def excess_share(before: float, after: float, noise: float) -> float:
     return 1.0 - max(after ** 2 - n2, 0.0) / ex if ex > 0 else 0.0
 
 
-def features(pick, base, rivals, weight: float, noise: float) -> Confidence:
+def features(pick, base, rivals, weight: float, noise: float, pinned: int = 0) -> Confidence:
     """The confidence features of ``pick`` (a CandidateResult) against ``base`` (the step's
-    base fit) and the step's other evaluated candidates ``rivals``."""
+    base fit) and the step's other evaluated candidates ``rivals``; ``pinned``: its own
+    parameters on a bound and not determined (:func:`.verdict.pinned`)."""
     ok = math.isfinite(noise) and noise > 0
     b, a = base.rmse, pick.fit.rmse
     change = math.sqrt(max(b * b - a * a, 0.0)) / noise if ok else math.nan
@@ -125,7 +131,7 @@ def features(pick, base, rivals, weight: float, noise: float) -> Confidence:
     rb, rc = base.rmse_records, pick.fit.rmse_records
     better = [c <= (1.0 + RECORD_TOLERANCE) * x for x, c in zip(rb, rc)]
     records = sum(better) / len(better) if better else 1.0
-    return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality))
+    return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality), pinned)
 
 
 def label(c: Confidence, th: dict | None = None) -> Confidence:
@@ -152,12 +158,15 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
                    "does not generalise from record to record)")
     if c.flags:
         why.append(f"{c.flags} quality flag(s)")
+    if c.pinned:
+        why.append(f"{c.pinned} of its parameters ended on a bound and are not determined (the data chose a "
+                   "limit of the effect, not a value)")
     if c.weight < w_hi:
         why.append(f"its weight {c.weight:.3g} is below {w_hi}")
     c.why = why
     if not why:
         c.label = "high"
-    elif (math.isfinite(c.change) and c.change < ch_lo) or (c.twin < twin_lo and c.twin_of):
+    elif (math.isfinite(c.change) and c.change < ch_lo) or (c.twin < twin_lo and c.twin_of) or c.pinned:
         c.label = "low"
     else:
         c.label = "medium"

@@ -97,21 +97,39 @@ STATUSES = ("explained", "partly explained", "found (adequacy not assessed)",
 # ============================================================================ quality
 
 
-def quality(c) -> list[str]:
-    """The quality flags of a fitted candidate (module doc), as sentences."""
+def _own_estimates(c):
+    """(index, parameter, label, value, whether on a bound, relative standard error or None)
+    of each parameter of a fitted candidate's own effect (and of the roles it takes over)."""
     f = c.fit
     own = set(effect_params(c.effect)) | set(_role_params(c.effect))
     problem = f.result.problem
-    labels = problem.labels
-    mine = [i for i, p in enumerate(problem.params) if p.name in own]
-    flags = []
-    for i in mine:
-        prm, lab = problem.params[i], labels[i]
-        v = f.values.get(lab, float(f.result.fit.theta[i]))
-        if on_bound(prm, v):
+    for i, prm in enumerate(problem.params):
+        if prm.name in own:
+            lab = problem.labels[i]
+            v = f.values.get(lab, float(f.result.fit.theta[i]))
+            yield i, prm, lab, v, on_bound(prm, v), f.rel_std_errors.get(lab)
+
+
+def _undetermined(rel) -> bool:
+    return rel is not None and (not math.isfinite(rel) or rel > REL_SE_FLAG)
+
+
+def pinned(c) -> list[str]:
+    """The own parameters of a fitted candidate that ended on a bound of their range *and*
+    are not determined: the data chose a limit of the effect, not a value of it."""
+    return [lab for _, _, lab, _, bound, rel in _own_estimates(c) if bound and _undetermined(rel)]
+
+
+def quality(c) -> list[str]:
+    """The quality flags of a fitted candidate (module doc), as sentences."""
+    f = c.fit
+    labels = f.result.problem.labels
+    mine, flags = [], []
+    for i, prm, lab, v, bound, rel in _own_estimates(c):
+        mine.append(i)
+        if bound:
             flags.append(f"{lab} = {v:.4g} {prm.unit} is on a bound of its range [{prm.lower:.3g}, {prm.upper:.3g}]")
-        rel = f.rel_std_errors.get(lab)
-        if rel is not None and (not math.isfinite(rel) or rel > REL_SE_FLAG):
+        if _undetermined(rel):
             flags.append(f"{lab} is not determined (relative standard error "
                          f"{'∞' if not math.isfinite(rel) else f'{100 * rel:.3g} %'})")
     corr = f.correlation
@@ -209,7 +227,7 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
             # the chain does not stop at a pair it cannot separate: it carries on with the twin of
             # stronger evidence (a hidden pair's second effect is found on top of it, and the model
             # written is the better one), labelled "low" — the data do not say which twin it is
-            c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise))
+            c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top))))
             c.label = "low"
             c.why.insert(0, f"a near twin, {ru.effect}, fits as well: these data cannot tell them apart")
             return Decision(top, weights, ev, [top.effect, ru.effect], sep, reason, alpha, c)
@@ -224,7 +242,7 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
         reason += (f"; {', '.join(c.effect for c in rivals)} lowered the error as much or more but "
                    f"{'is' if len(rivals) == 1 else 'are'} less credible (" +
                    "; ".join(f"{c.effect}: " + "; ".join(c.quality) for c in rivals) + ")")
-    c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise))
+    c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top))))
     if c.label != "high":
         reason += "; confidence " + c.label + ": " + "; ".join(c.why)
     return Decision(top, weights, ev, reason=reason, alpha=alpha, confidence=c)
