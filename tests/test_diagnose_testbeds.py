@@ -114,6 +114,7 @@ def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
     flexible = Cand("flexible", -5020.0, 2.00e-6, ["a on a bound", "a and b correlated", "signature absent"])
     user = Cand("user_creep", -5000.0, 2.01e-6, [])
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
+    monkeypatch.setattr(V, "pinned", lambda c: [])
     monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a square pulse held 60 s would separate them")
     dec = decide(base, [flexible, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
     assert set(dec.ambiguous) == {"user_creep", "flexible"} and "pulse" in dec.separating
@@ -139,6 +140,7 @@ def test_a_clearly_better_fit_is_not_ambiguous_though_within_the_noise(monkeypat
     from physics.diagnose import verdict as V
 
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
+    monkeypatch.setattr(V, "pinned", lambda c: [])
     monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a sweep would separate them")
     base, floor, near = Fit(40e-6), 3.1e-6, lambda a, b: 0.5e-6      # predictions 0.5 µm apart
     draft, mimic = Cand("draft", -9000.0, 3.21e-6, []), Cand("mimic", -8500.0, 3.84e-6, [])
@@ -158,6 +160,7 @@ def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
     from physics.diagnose import verdict as V
 
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
+    monkeypatch.setattr(V, "pinned", lambda c: [])
     base, floor = Fit(1.7e-6), 1.04e-6
     mimic = Cand("mimic", -13000.0, 1.22e-6, ["its residual signature (phase lag) is absent"])
     args = (floor, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
@@ -274,6 +277,7 @@ def test_a_shared_drift_within_the_noise_is_still_something_to_explain(monkeypat
     from physics.diagnose import verdict as V
 
     monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
+    monkeypatch.setattr(V, "pinned", lambda c: [])
     base, floor = Fit(4.06e-6), 3.57e-6                   # 1.14× the floor
     drift = Cand("drift", -11.5, 3.57e-6, [])
     args = (floor, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
