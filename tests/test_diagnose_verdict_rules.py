@@ -12,7 +12,7 @@ import pytest
 from physics.device import load_device
 from physics.diagnose import confidence as conf
 from physics.diagnose.candidates import compare_fits
-from physics.diagnose.records import DRIFT_SHARE, OFFSET_SHARE, bounded_nuisance, nuisance_bounds
+from physics.diagnose.records import DRIFT_SHARE, OFFSET_NOISE, OFFSET_SHARE, bounded_nuisance, nuisance_bounds
 from physics.io.timeseries import TimeSeries
 
 UM = 1e-6
@@ -175,6 +175,26 @@ def test_an_implausible_offset_is_flagged_and_not_used():
     assert abs(nz.offset - nz.level) == pytest.approx(OFFSET_SHARE * rng)
     ts = TimeSeries(t, np.sin(2 * np.pi * 0.2 * t), y, rh=np.full(t.size, 50.0))
     assert nuisance_bounds(ts)[2] == math.inf
+
+
+def test_the_rest_pins_the_offset_to_within_the_noise():
+    """A step record of 2 mm stroke whose model misses a slow creep of 60 µm after the step
+    (lab-like slow physics): its rest before the step measures the sensor's zero to within the
+    3 µm noise, so the offset stays within OFFSET_NOISE noise levels of it — not the 2 % of
+    the stroke (40 µm) that would let the offset take the creep the model lacks."""
+    fs = 100.0
+    t = np.arange(int(60 * fs)) / fs
+    drive = np.where(t >= 1.0, 1.0, 0.0)
+    y = 2e-3 * drive
+    creep = np.where(t >= 1.0, 60e-6 * (1 - np.exp(-(t - 1.0) / 5.0)), 0.0)
+    e = 29e-6 + creep + 3e-6 * np.random.default_rng(1).standard_normal(t.size)
+    ts = TimeSeries(t, drive, y, rh=np.full(t.size, 50.0))
+    assert nuisance_bounds(ts)[2] == pytest.approx(OFFSET_SHARE * 2e-3, rel=0.02)     # noise unknown
+    rng, drift, off, start = nuisance_bounds(ts, white=3e-6)
+    assert off == pytest.approx(OFFSET_NOISE * 3e-6)
+    nz = bounded_nuisance(e, t, 0.0, off, start)
+    assert nz.offset_clipped and abs(nz.offset - 29e-6) <= OFFSET_NOISE * 3e-6 + 1e-6
+    assert nz.offset_free > 29e-6 + 40e-6                  # what least squares would have taken
 
 
 def test_a_sensor_offset_and_drift_are_taken_whole():

@@ -289,8 +289,11 @@ DRIFT_NOISE = 5.0
 #: this × d.
 STATED_DRIFT_FACTOR = 4.0
 #: The offset may stand at most this share of the signal's robust peak-to-peak from the level the
-#: residual has during the rest before the drive (the device at rest: no model's response there).
+#: residual has during the rest before the drive (the device at rest: no model's response there) ...
 OFFSET_SHARE = 0.02
+#: ... and, when the record's white noise is known, at most this × that noise: the rest measures
+#: the sensor's zero to within its noise, so a larger departure is slow physics the model lacks.
+OFFSET_NOISE = 3.0
 #: A record whose voltage holds still for at least this long [s] (and 8 samples) before the drive has
 #: a rest that anchors its offset; without one the offset is the least-squares one.
 START_S = 0.1
@@ -366,7 +369,10 @@ def nuisance_bounds(ts: TimeSeries, scale: float | None = None, white: float = m
     rest = int(moved[0]) if moved.size else v.size
     if rest < max(8, int(round(START_S * ts.fs))):
         return rng, drift, math.inf, 0          # no rest before the drive: nothing anchors the offset
-    return rng, drift, OFFSET_SHARE * scale, min(rest, max(ts.n // 4, 1))
+    offset = OFFSET_SHARE * scale
+    if math.isfinite(white) and white > 0:
+        offset = min(offset, OFFSET_NOISE * white)
+    return rng, drift, offset, min(rest, max(ts.n // 4, 1))
 
 
 def sensor_noise_floor(ts: TimeSeries) -> tuple[float, str] | None:
