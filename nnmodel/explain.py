@@ -220,6 +220,8 @@ def dropped(summary: dict) -> list[dict]:
         ref = (row.get("reference_start") or {}).get("reference", end.get("kept"))
         if end.get("kept") in (None, "network") or "reason" not in end or ref == "physics":  # hybrid(): its own note
             continue
+        if not end.get("validation_nrmse_network", math.inf) < end.get("validation_nrmse_reference", -math.inf):
+            continue        # it lowered nothing: the shortfall findings say so ("no better at all")
         score = _nrmse(row, "test")
         if ref == "linear" and score is not None and lin_score is not None \
                 and abs(score - lin_score) <= SAME * max(lin_score, 1e-300):
