@@ -109,6 +109,9 @@ def paired_gain(err_ref, err_new, blocks: int) -> tuple[float, float, int]:
     return gain, math.sqrt(var), len(parts)
 
 
+#: blocks the validation data are cut into to judge a correction's gain
+#: (:func:`nnmodel.models.base.keep_if_better`, :mod:`nnmodel.models.crossval`)
+GAIN_BLOCKS = 10
 #: standard errors by which a correction's validation gain must exceed zero: the gain must exceed
 #: its own uncertainty (a stricter test dropped networks 35 % better than linear on 500
 #: validation samples, bench/slow_plant.py)

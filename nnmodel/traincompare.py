@@ -447,8 +447,7 @@ def beats(parent, child, train, val) -> tuple[bool, str]:
     by more than the spread when both were cross-validated, else by more than
     :data:`~nnmodel.models.base.GAIN_SE` standard errors of the paired squared-error gain by
     batch means over the validation data (:func:`nnmodel.batches.paired_gain`); and why."""
-    from .batches import paired_gain
-    from .models.base import GAIN_BLOCKS, GAIN_SE
+    from .batches import GAIN_BLOCKS, GAIN_SE, paired_gain
     from .models.crossval import paired_win
     from .models.structure import validation_errors
     cp, cc = parent.__dict__.get("cross_validation_"), child.__dict__.get("cross_validation_")

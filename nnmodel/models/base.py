@@ -40,7 +40,7 @@ import torch
 
 from physics.errors import InputError
 
-from ..batches import GAIN_SE, gain_is_real
+from ..batches import GAIN_BLOCKS, GAIN_SE, gain_is_real
 from ..data import check_prediction_inputs, check_records, rh_range, split_index
 from ..startup import start_samples
 from .config import TrainingConfig
@@ -530,10 +530,6 @@ class NeuralModel:
         if extra.get("reference_start"):
             self.reference_start_ = extra["reference_start"]
         return self
-
-
-#: blocks the validation data are cut into to judge a correction's gain (:func:`keep_if_better`)
-GAIN_BLOCKS = 10
 
 
 def keep_if_better(core, val, reference: str = "linear", decide: bool = True) -> dict:

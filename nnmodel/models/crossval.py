@@ -131,8 +131,7 @@ def scores(model, train, val) -> tuple[float, float | None, float, float]:
     """(free-run validation NRMSE of the fitted ``model``, the same with its correction zeroed
     — its reference alone — or None without one, the correction's gain in squared NRMSE and
     its standard error by batch means; the last two nan without a reference)."""
-    from ..batches import paired_gain
-    from .base import GAIN_BLOCKS
+    from ..batches import GAIN_BLOCKS, paired_gain
     from .structure import validation_errors, validation_nrmse
     net = validation_nrmse(model, train, val)
     if model.__dict__.get("reference_start_") is None:
