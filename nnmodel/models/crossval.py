@@ -132,20 +132,20 @@ def scores(model, train, val) -> tuple[float, float | None, float, float]:
     — its reference alone — or None without one, the correction's gain in squared NRMSE and
     its standard error by batch means; the last two nan without a reference)."""
     from ..batches import GAIN_BLOCKS, paired_gain
-    from .structure import validation_errors, validation_nrmse
-    net = validation_nrmse(model, train, val)
+    from .structure import nrmse_of, validation_errors
+    e_net = validation_errors(model, train, val)
     if model.__dict__.get("reference_start_") is None:
-        return net, None, math.nan, math.nan
+        return nrmse_of(e_net), None, math.nan, math.nan
     ref = copy.deepcopy(model)
     ref.net_.core.zero_correction()
-    e_net, e_ref = validation_errors(model, train, val), validation_errors(ref, train, val)
+    e_ref = validation_errors(ref, train, val)
     if e_net is None or e_ref is None or not e_ref[1] > 0:
         gain, se = (-math.inf if e_net is None else math.nan), math.nan
     else:
         gain, se, _ = paired_gain(e_ref[0], e_net[0], GAIN_BLOCKS)
         n = sum(min(a.size, b.size) for a, b in zip(e_ref[0], e_net[0]))
         gain, se = gain * n / e_ref[1], se * n / e_ref[1]
-    return net, validation_nrmse(ref, train, val), gain, se
+    return nrmse_of(e_net), nrmse_of(e_ref), gain, se
 
 
 def paired_win(base: list, new: list) -> tuple[bool, float, float]:

@@ -22,7 +22,8 @@ from physics.errors import InputError
 from ..data import split_index
 from .params import Part
 
-__all__ = ["StructureSearch", "select_structure", "selection_score", "validation_errors", "validation_nrmse"]
+__all__ = ["StructureSearch", "select_structure", "selection_score", "validation_errors", "validation_nrmse",
+           "nrmse_of"]
 
 
 def _check(v):
@@ -123,7 +124,12 @@ def validation_errors(model, train, val) -> tuple[list[np.ndarray], float] | Non
 def validation_nrmse(model, train, val) -> float:
     """Pooled free-run NRMSE of a fitted ``model`` on its validation data
     (:func:`validation_errors`); inf when the simulation diverges."""
-    got = validation_errors(model, train, val)
+    return nrmse_of(validation_errors(model, train, val))
+
+
+def nrmse_of(got) -> float:
+    """The pooled NRMSE of :func:`validation_errors`' result; inf for None (diverged) or a
+    validation without variance."""
     if got is None or not got[1] > 0:
         return math.inf
     return math.sqrt(sum(float(e.sum()) for e in got[0]) / got[1])
