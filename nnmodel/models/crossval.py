@@ -34,9 +34,9 @@ one (:func:`nnmodel.models.base.keep_if_better`).  Blocks differ in how much of 
 nonlinearity they hold, so a real gain differs from fold to fold; the spread across folds
 is reported, and decides where trials are compared (:func:`paired_win`, ``--tune``).  The
 further folds train on less data (60 % and 40 % of each record when ``val_fraction`` is
-0.2, against fold 0's 80 %), so cross-validation costs about 1 + 0.75 + 0.5 = 2.25 fits where one was made (a
-structure search pays it per candidate), and is used only where the data are few, which is
-where a fit is cheap.
+0.2, against fold 0's 80 %), so cross-validation costs about 1 + 0.75 + 0.5 = 2.25 fits
+where one was made (a structure search pays it per candidate), and is used only where the
+data are few, which is where a fit is cheap.
 """
 from __future__ import annotations
 
@@ -178,9 +178,9 @@ def pooled_win(gains: list, ses: list) -> tuple[bool, float, float, str]:
     mean = float(g.mean()) if np.all(np.isfinite(g)) else -math.inf
     known = np.isfinite(s)
     se = float(np.sqrt(np.sum(s[known] ** 2))) / len(pairs)
-    worse = [k for k, (gk, sk) in enumerate(pairs) if gk < -(GAIN_SE * sk if np.isfinite(sk) else 0.0)]
+    worse = int(np.sum(g < -GAIN_SE * np.where(known, s, 0.0)))
     if worse:
-        return False, mean, se, f"it is worse than its reference on {len(worse)} of {len(pairs)} folds, beyond the " \
+        return False, mean, se, f"it is worse than its reference on {worse} of {len(pairs)} folds, beyond the " \
                                 "fold's own uncertainty"
     if not mean > GAIN_SE * se:
         return False, mean, se, "its gain over the folds is within its uncertainty"
