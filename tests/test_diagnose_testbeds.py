@@ -103,6 +103,13 @@ def test_an_effect_switched_off_reads_on_its_bound_without_a_warning():
         assert on_bound(prm, 1e-3 * (1 + 1e-4))        # within the tolerance of ln θ
 
 
+def _flags_only(monkeypatch, V):
+    """The fake candidates' quality is their ``_flags``; one is held on a bound when a flag says so."""
+    monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
+    monkeypatch.setattr(V, "pinned", lambda c: [])
+    monkeypatch.setattr(V, "held", lambda c: [q for q in c._flags if "bound" in q])
+
+
 def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
     """Two candidates lower the error alike: near twins, "ambiguous" with the record that
     separates them — even when one has its parameters on bounds and correlated (issue 34: flags
@@ -113,8 +120,7 @@ def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
     base = Fit(50e-6)
     flexible = Cand("flexible", -5020.0, 2.00e-6, ["a on a bound", "a and b correlated", "signature absent"])
     user = Cand("user_creep", -5000.0, 2.01e-6, [])
-    monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
-    monkeypatch.setattr(V, "pinned", lambda c: [])
+    _flags_only(monkeypatch, V)
     monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a square pulse held 60 s would separate them")
     dec = decide(base, [flexible, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
     assert set(dec.ambiguous) == {"user_creep", "flexible"} and "pulse" in dec.separating
@@ -125,6 +131,12 @@ def test_near_twins_are_ambiguous_whatever_their_quality_flags(monkeypatch):
     dec = decide(base, [worse, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-3000.0), lambda a, b: 1e-6)
     assert dec.pick is user and dec.ambiguous == []
     assert dec.weights["user_creep"] > 0.99 and dec.confidence.label == "high"
+    # a rival held on a bound that comes closer (the pick removes 73 % of the excess it leaves;
+    # 'high' needs 95 % against a held rival, whose error is only what its range allowed): medium
+    held = Cand("flexible", -3000.0, 3.0e-6, ["a on a bound"])
+    dec = decide(base, [held, user], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-3000.0), lambda a, b: 1e-6)
+    assert dec.pick is user and dec.confidence.label == "medium" and dec.confidence.held_of == "flexible"
+    assert any("ended with a parameter on a bound" in w for w in dec.confidence.why)
     # close on fit *and* quality: ambiguous too
     twin = Cand("twin", -5001.0, 2.0e-6, [])
     dec = decide(base, [user, twin], 1.5e-6, [1.0], [], lambda *a, **k: Cmp(-1.0), lambda a, b: 1e-6)
@@ -139,8 +151,7 @@ def test_a_clearly_better_fit_is_not_ambiguous_though_within_the_noise(monkeypat
     86 % of the excess the second leaves — is a pick; 3.30 against 3.35 µm (21 %) is ambiguous."""
     from physics.diagnose import verdict as V
 
-    monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
-    monkeypatch.setattr(V, "pinned", lambda c: [])
+    _flags_only(monkeypatch, V)
     monkeypatch.setattr(V, "separating_record", lambda a, b, r, n: "a sweep would separate them")
     base, floor, near = Fit(40e-6), 3.1e-6, lambda a, b: 0.5e-6      # predictions 0.5 µm apart
     draft, mimic = Cand("draft", -9000.0, 3.21e-6, []), Cand("mimic", -8500.0, 3.84e-6, [])
@@ -159,8 +170,7 @@ def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
     floor, its signature masked by the first pick), which no trim of a mismatch does."""
     from physics.diagnose import verdict as V
 
-    monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
-    monkeypatch.setattr(V, "pinned", lambda c: [])
+    _flags_only(monkeypatch, V)
     base, floor = Fit(1.7e-6), 1.04e-6
     mimic = Cand("mimic", -13000.0, 1.22e-6, ["its residual signature (phase lag) is absent"])
     args = (floor, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
@@ -276,8 +286,7 @@ def test_a_shared_drift_within_the_noise_is_still_something_to_explain(monkeypat
     it can be picked."""
     from physics.diagnose import verdict as V
 
-    monkeypatch.setattr(V, "quality", lambda c: list(c._flags))
-    monkeypatch.setattr(V, "pinned", lambda c: [])
+    _flags_only(monkeypatch, V)
     base, floor = Fit(4.06e-6), 3.57e-6                   # 1.14× the floor
     drift = Cand("drift", -11.5, 3.57e-6, [])
     args = (floor, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)

@@ -34,11 +34,11 @@ class _Cand:
     quality: list = field(default_factory=list)
 
 
-def _label(base_um, pick_um, rival_um=None, noise_um=1.0, records=None, flags=0, weight=1.0, pinned=0):
+def _label(base_um, pick_um, rival_um=None, noise_um=1.0, records=None, flags=0, weight=1.0, pinned=0, held=False):
     base = _Fit(base_um * UM, [base_um * UM] * 2)
     pick = _Cand("pick", _Fit(pick_um * UM, [x * UM for x in (records or [pick_um] * 2)]), ["f"] * flags)
     rivals = [pick] + ([_Cand("rival", _Fit(rival_um * UM, [rival_um * UM] * 2))] if rival_um else [])
-    return conf.label(conf.features(pick, base, rivals, weight, noise_um * UM, pinned))
+    return conf.label(conf.features(pick, base, rivals, weight, noise_um * UM, pinned, {"rival"} if held else ()))
 
 
 def test_a_clear_pick_is_high():
@@ -84,6 +84,21 @@ def test_a_pick_whose_parameter_the_data_pinned_to_a_bound_is_low():
     assert _label(39.3, 21.1, noise_um=2.45, flags=4).label == "medium"     # flags alone: medium
     d = c.to_dict()
     assert d["pinned_parameters"] == 1 and conf.Confidence.from_dict(d).pinned == 1
+
+
+def test_a_rival_held_on_a_bound_needs_a_wider_margin():
+    """circuit_lab seed 1, viscoelastic and humidity hidden: fractional_coupling picked at 4.07 µm
+    (70.1 before, 2.4 µm floor) while viscoelastic, its slope held at the top of its range,
+    reached 8.71 µm — 85 % of its excess removed would pass against a free rival, not against
+    one whose error is only what its range allowed.  A held rival left far behind (99.6 %) does
+    not stand in the way."""
+    kw = dict(noise_um=2.43)
+    assert _label(70.1, 4.07, rival_um=8.71, **kw).label == "high"
+    c = _label(70.1, 4.07, rival_um=8.71, held=True, **kw)
+    assert c.label == "medium" and c.held_of == "rival" and 0.8 < c.held < 0.9
+    assert _label(70.1, 2.6, rival_um=40.0, held=True, **kw).label == "high"
+    d = c.to_dict()
+    assert conf.Confidence.from_dict(d).held == pytest.approx(c.held) and d["held_rival"] == "rival"
 
 
 # ---------------------------------------------------------------------------- evidence on the reported error

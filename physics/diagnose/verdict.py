@@ -120,6 +120,12 @@ def pinned(c) -> list[str]:
     return [lab for _, _, lab, _, bound, rel in _own_estimates(c) if bound and _undetermined(rel)]
 
 
+def held(c) -> list[str]:
+    """The own parameters of a fitted candidate that ended on a bound of their range (determined
+    or not): its error is what its range allowed, not necessarily what the effect can reach."""
+    return [lab for _, _, lab, _, bound, _ in _own_estimates(c) if bound]
+
+
 def quality(c) -> list[str]:
     """The quality flags of a fitted candidate (module doc), as sentences."""
     f = c.fit
@@ -227,7 +233,7 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
             # the chain does not stop at a pair it cannot separate: it carries on with the twin of
             # stronger evidence (a hidden pair's second effect is found on top of it, and the model
             # written is the better one), labelled "low" — the data do not say which twin it is
-            c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top))))
+            c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top)), _held(ranked)))
             c.label = "low"
             c.why.insert(0, f"a near twin, {ru.effect}, fits as well: these data cannot tell them apart")
             return Decision(top, weights, ev, [top.effect, ru.effect], sep, reason, alpha, c)
@@ -242,10 +248,15 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
         reason += (f"; {', '.join(c.effect for c in rivals)} lowered the error as much or more but "
                    f"{'is' if len(rivals) == 1 else 'are'} less credible (" +
                    "; ".join(f"{c.effect}: " + "; ".join(c.quality) for c in rivals) + ")")
-    c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top))))
+    c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top)), _held(ranked)))
     if c.label != "high":
         reason += "; confidence " + c.label + ": " + "; ".join(c.why)
     return Decision(top, weights, ev, reason=reason, alpha=alpha, confidence=c)
+
+
+def _held(ranked) -> set[str]:
+    """The effects of the evaluated candidates held on a bound (:func:`held`)."""
+    return {c.effect for c in ranked if held(c)}
 
 
 def _no_pick_reason(base, ranked, noise, within, wander: float = 0.0) -> str:
