@@ -126,7 +126,7 @@ def main(argv=None) -> int:
         for p, (lab, _) in zip(test, rows):
             print(f"      {p['truth']:20s} s{p['seed']} {p['effect']:22s} {p['answer']:10s} {lab:6s} "
                   f"(change {p['features'].change:.3g}, left {p['features'].left:.3g}, twin {p['features'].twin:.2f}, "
-                  f"records {p['features'].records:.2f}, flags {p['features'].flags})")
+                  f"records {p['features'].records:.2f}, flags {p['features'].flags}, held {p['features'].held:.2f})")
     print()
     show("all folds pooled (each family labelled with thresholds chosen without it)", table(pooled))
     show("all families with the package's thresholds", table(pooled_pkg))
