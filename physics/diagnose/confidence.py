@@ -137,23 +137,18 @@ def features(pick, base, rivals, weight: float, noise: float, pinned: int = 0, h
     b, a = base.rmse, pick.fit.rmse
     change = math.sqrt(max(b * b - a * a, 0.0)) / noise if ok else math.nan
     left = a / noise if ok else math.nan
-    twin, twin_of = 1.0, None
-    for r in rivals:
-        if r is pick:
-            continue
-        s = excess_share(r.fit.rmse, a, noise)
-        if s < twin:
-            twin, twin_of = s, r.effect
-    held_share, held_of = 1.0, None
-    for r in rivals:
-        if r is not pick and r.effect in held:
-            s = excess_share(r.fit.rmse, a, noise)
-            if s < held_share:
-                held_share, held_of = s, r.effect
+    twin, twin_of = _closest(pick, rivals, noise)
+    held_share, held_of = _closest(pick, [r for r in rivals if r.effect in held], noise)
     rb, rc = base.rmse_records, pick.fit.rmse_records
     better = [c <= (1.0 + RECORD_TOLERANCE) * x for x, c in zip(rb, rc)]
     records = sum(better) / len(better) if better else 1.0
     return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality), pinned, held_share, held_of)
+
+
+def _closest(pick, rivals, noise: float) -> tuple[float, str | None]:
+    """The smallest share of a rival's excess error the pick removes, and that rival ((1, None): none)."""
+    shares = [(excess_share(r.fit.rmse, pick.fit.rmse, noise), r.effect) for r in rivals if r is not pick]
+    return min(shares, key=lambda x: x[0], default=(1.0, None))
 
 
 def label(c: Confidence, th: dict | None = None) -> Confidence:
