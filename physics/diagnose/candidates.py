@@ -195,15 +195,10 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
             notes.append(f"{effect}: one RH level, so its per-RH parameters ({', '.join(per)}) keep the device's "
                          "values")
     bounds = {name: b for name in free if (b := param_bounds(name, device)) is not None}
-    derived = getattr(EFFECTS[effect], "diagnosis_start", None)
-    derived = derived(device) if callable(derived) else {}      # e.g. a DMA table's own shape
+    derived = derived_starts(effect, device)      # e.g. a DMA table's own shape
     for name, b in bounds.items():
-        if name not in start:
-            v = device.params.get(name, derived.get(name, declared_default(name)))
-            if v is None or not (b[0] <= v <= b[1]):
-                v = math.sqrt(b[0] * b[1]) if b[0] > 0 else 0.5 * (b[0] + b[1])
-            start[name] = v
-        start[name] = float(np.clip(start[name], b[0], b[1]))
+        start[name] = float(np.clip(start[name], b[0], b[1])) if name in start else start_in_range(name, device,
+                                                                                                   derived, b)
     # starts over the effect's own parameters (unknown scale), and the base's optimum with the effect
     # off (a nested effect: its fit then never ends worse than the base on the FRF criterion)
     extra = [st for st in ({k: v for k, v in pt.items() if k in free} for pt in start_points(effect, device)) if st]
@@ -211,6 +206,23 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
     if off:
         extra.append({k: float(np.clip(v, *bounds[k])) if k in bounds else v for k, v in off.items()})
     return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)
+
+
+def start_in_range(name: str, device: Device, derived: dict, bounds) -> float:
+    """Start of a parameter fitted with an effect: the device's value, else the effect's own
+    derived start (``derived``, e.g. a DMA table's own shape), else the declared default, else
+    the middle of its range (geometric for a positive range); always inside ``bounds``."""
+    lo, hi = bounds
+    v = device.params.get(name, derived.get(name, declared_default(name)))
+    if v is None or not (lo <= v <= hi):
+        v = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
+    return float(np.clip(v, lo, hi))
+
+
+def derived_starts(effect: str, device: Device) -> dict:
+    """The effect's own starts derived from the device (its ``diagnosis_start`` hook), or {}."""
+    hook = getattr(EFFECTS[effect], "diagnosis_start", None)
+    return hook(device) if callable(hook) else {}
 
 
 def removal_spec(effect: str, base_ids, base_free, base_per_rh, device: Device, band) -> ModelSpec:

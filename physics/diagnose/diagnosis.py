@@ -54,15 +54,17 @@ from ..model import ActuatorModel, resolve_effects
 from ..execution.parallel import map_tasks, warm_up
 from ..execution.threads import single_threaded
 from .candidates import (Comparison, ModelFit, ModelSpec, ROLE_GAIN, ROLE_STIFF, candidate_spec, compare_fits,
-                         default_candidates, default_free, effect_values, fit_model, is_nested, no_worse_than_base,
-                         param_used, prediction_distance, refine_on_time, removal_spec, score, start_on_time)
+                         default_candidates, default_free, derived_starts, effect_values, fit_model, is_nested,
+                         no_worse_than_base, param_used, prediction_distance, refine_on_time, removal_spec, score,
+                         start_in_range, start_on_time)
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN
 from .records import NUISANCE_TERMS, PreparedRecord, frf_measurements, prepare_records, stated_drift
 from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
-from .specs import declared_default, excitation, keeps_spec_range, param_bounds, role_family, spec_of
+from .specs import (declared_default, effect_params, excitation, keeps_spec_range, param_bounds, role_family,
+                    shape_params, spec_of)
 from .verdict import ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, nuisance_summary, remaining_of
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
@@ -490,6 +492,54 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
     return base
 
 
+def refine_own(data: PreparedRecords, dev: Device, base: ModelFit, options: FitOptions, n_starts: int,
+               resonance_hz: float | None) -> tuple[Device, list[str], dict]:
+    """Phase 2b: the user's own effects' parameters that the records can reveal
+    (:func:`.signatures.revealable`) fitted once beside the base's free ones, from the device's
+    values (else the effect's derived start): the device's values of an effect are a start, not
+    this strip's (as for an effect removed and tried again in :func:`select`).  When that lowers
+    the base's RMS error on the time records, the refined values become the device's; the
+    caller refits the base on them, so every later comparison has the base's own free
+    parameters.  Returns (device, notes, {name: {"device": its value or None, "refined": value}}
+    for the values taken)."""
+    taken = set(base.spec.free) | set(base.spec.per_rh)
+    own: dict[str, list[str]] = {}
+    for e in switchable(base.effects):
+        spec = spec_of(e)
+        if spec and not spec.get("describing_function") and revealable(e, data.records, resonance_hz)[0]:
+            names = [n for n in effect_params(e) + shape_params(e) if n not in taken]
+            if names:
+                own[e] = names
+    if not own:
+        return dev, [], {}
+    names = [n for ns in own.values() for n in ns]
+    start, bounds = dict(base.spec.start), dict(base.spec.bounds)
+    for e, ns in own.items():
+        derived = derived_starts(e, dev)
+        for n in ns:
+            bounds[n] = param_bounds(n, dev)      # an effect's own parameter always has its spec's range
+            start[n] = start_in_range(n, dev, derived, bounds[n])
+    spec = ModelSpec("base, own effects refined", base.effects, list(base.spec.free) + names, list(base.spec.per_rh),
+                     start, bounds)
+    fit = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
+                    n_modes=options.n_modes, df_cache=data.df_cache)
+    if fit.ok:
+        score(fit, data.records)
+    what = ", ".join(names)
+    if not fit.ok or not fit.rmse < base.rmse:
+        return dev, [f"the model's own effects refitted ({what}): no lower error than the device's values "
+                     f"({'fit failed' if not fit.ok else f'{1e6 * fit.rmse:.4g} vs {1e6 * base.rmse:.4g} µm'}); "
+                     "the device's values are kept"], {}
+    values = {n: float(fit.values[n]) for n in names}
+    changes = ", ".join(f"{n} {dev.params[n]:.4g} → {v:.4g}" if n in dev.params else f"{n} {v:.4g}"
+                        for n, v in values.items())
+    return dev.with_params(**values), [
+        f"the model's own effects refitted where the records reveal them ({', '.join(own)}): {changes}; RMS error "
+        f"{1e6 * base.rmse:.4g} → {1e6 * fit.rmse:.4g} µm (the device's values of its effects are a start, not this "
+        "strip's; --free NAMES fits only those)"], {n: {"device": dev.params.get(n), "refined": v}
+                                                      for n, v in values.items()}
+
+
 def try_candidates(step: int, base: ModelFit, cand_ids, data: PreparedRecords, run: DiagnosisRun) -> list[CandidateResult]:
     """Phase 4: each candidate switched on in ``base``, fitted and scored (independent tasks,
     in this process or on workers: :func:`physics.execution.parallel.map_tasks`)."""
@@ -889,6 +939,15 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     run.log(f"{len(data.records)} record(s), {sum(t.freq.size for t in data.targets)} FRF lines over "
             f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
     base = _timed(run, "base", fit_base, data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
+    own_refined = {}
+    if opts.free in (None, "", ()):      # --free: the user's list, nothing besides
+        given, (dev, refined, own_refined) = dev, _timed(run, "own effects", refine_own, data, dev, base, opts, run.n_starts,
+                              _resonance(base, data.band, data.records))
+        for n in refined:
+            run.log(n)
+        notes += refined
+        if dev is not given:
+            base = fit_base(data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
     run.log(f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
     add_wander(data, base)
     run.resonance = _resonance(base, data.band, data.records)
@@ -908,7 +967,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     run.timings["total"] = time.perf_counter() - t_all
     settings = {"effects": list(base_ids), "free": base.spec.free, "per_rh": base.spec.per_rh,
                 "candidates": cand_ids, "force": force, "max_effects": run.max_effects, "backward": run.backward,
-                "n_starts": run.n_starts, "notes": notes,
+                "n_starts": run.n_starts, "notes": notes, "own_refined": own_refined,
                 "options": opts.describe(), "noise_floor_given_m": noise_floor, "fs_max_Hz": fs_max,
                 "noise": {"white_m": data.white, "wander_allowed_m": allowed_wander(data),
                           "wander_unshared_m": data.wander, "wander_total_m": data.wander_total,
