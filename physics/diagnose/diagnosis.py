@@ -247,6 +247,7 @@ class DiagnosisResult:
     settings: dict
     timings: dict
     warnings: list[str] = field(default_factory=list)
+    refined: ModelFit | None = None   # the final model with its own effects refitted (:func:`refine_own`)
 
     @property
     def candidates(self) -> list[CandidateResult]:
@@ -492,52 +493,39 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
     return base
 
 
-def refine_own(data: PreparedRecords, dev: Device, base: ModelFit, options: FitOptions, n_starts: int,
-               resonance_hz: float | None) -> tuple[Device, list[str], dict]:
-    """Phase 2b: the user's own effects' parameters that the records can reveal
-    (:func:`.signatures.revealable`) fitted once beside the base's free ones, from the device's
-    values (else the effect's derived start): the device's values of an effect are a start, not
-    this strip's (as for an effect removed and tried again in :func:`select`).  When that lowers
-    the base's RMS error on the time records, the refined values become the device's; the
-    caller refits the base on them, so every later comparison has the base's own free
-    parameters.  Returns (device, notes, {name: {"device": its value or None, "refined": value}}
-    for the values taken)."""
-    taken = set(base.spec.free) | set(base.spec.per_rh)
-    own: dict[str, list[str]] = {}
-    for e in switchable(base.effects):
-        spec = spec_of(e)
-        if spec and not spec.get("describing_function") and revealable(e, data.records, resonance_hz)[0]:
-            names = [n for n in effect_params(e) + shape_params(e) if n not in taken]
-            if names:
-                own[e] = names
-    if not own:
-        return dev, [], {}
-    names = [n for ns in own.values() for n in ns]
-    start, bounds = dict(base.spec.start), dict(base.spec.bounds)
-    for e, ns in own.items():
+def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_starts: int,
+               resonance_hz: float | None) -> tuple[ModelFit | None, dict]:
+    """Phase 6b: the final model with the parameters of its own effects that the records can
+    reveal (:func:`.signatures.revealable`) and that it holds at the device's values fitted
+    beside its free ones, from those values (else the effect's derived start): the device's
+    values of an effect are a start, not this strip's.  Done after the selection, so it never
+    decides which effect is missing (a refitted effect could stand in for a missing one); kept
+    when it lowers the BIC with its parameters counted (:func:`.candidates.compare_fits`).
+    Returns (the refitted model or None, {name: {"device": value or None, "refined": value}})."""
+    taken = set(fit.spec.free) | set(fit.spec.per_rh)
+    names = [n for e in switchable(fit.effects)
+             if (spec := spec_of(e)) and not spec.get("describing_function") and revealable(e, data.records,
+                                                                                             resonance_hz)[0]
+             for n in effect_params(e) + shape_params(e) if n not in taken]
+    if not names:
+        return None, {}
+    dev = fit.device                    # the fitted model's device: its own effects still at the device's values
+    start, bounds = dict(fit.spec.start), dict(fit.spec.bounds)
+    for e in switchable(fit.effects):
         derived = derived_starts(e, dev)
-        for n in ns:
-            bounds[n] = param_bounds(n, dev)      # an effect's own parameter always has its spec's range
-            start[n] = start_in_range(n, dev, derived, bounds[n])
-    spec = ModelSpec("base, own effects refined", base.effects, list(base.spec.free) + names, list(base.spec.per_rh),
+        for n in names:
+            if n in effect_params(e) + shape_params(e):
+                bounds[n] = param_bounds(n, dev)      # an effect's own parameter keeps its spec's range
+                start[n] = start_in_range(n, dev, derived, bounds[n])
+    spec = ModelSpec("final, own effects refitted", fit.effects, list(fit.spec.free) + names, list(fit.spec.per_rh),
                      start, bounds)
-    fit = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
+    out = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
                     n_modes=options.n_modes, df_cache=data.df_cache)
-    if fit.ok:
-        score(fit, data.records)
-    what = ", ".join(names)
-    if not fit.ok or not fit.rmse < base.rmse:
-        return dev, [f"the model's own effects refitted ({what}): no lower error than the device's values "
-                     f"({'fit failed' if not fit.ok else f'{1e6 * fit.rmse:.4g} vs {1e6 * base.rmse:.4g} µm'}); "
-                     "the device's values are kept"], {}
-    values = {n: float(fit.values[n]) for n in names}
-    changes = ", ".join(f"{n} {dev.params[n]:.4g} → {v:.4g}" if n in dev.params else f"{n} {v:.4g}"
-                        for n, v in values.items())
-    return dev.with_params(**values), [
-        f"the model's own effects refitted where the records reveal them ({', '.join(own)}): {changes}; RMS error "
-        f"{1e6 * base.rmse:.4g} → {1e6 * fit.rmse:.4g} µm (the device's values of its effects are a start, not this "
-        "strip's; --free NAMES fits only those)"], {n: {"device": dev.params.get(n), "refined": v}
-                                                      for n, v in values.items()}
+    if out.ok:
+        score(out, data.records)
+    if not out.ok or not compare_fits(fit, out, True).delta_bic < 0:
+        return None, {}
+    return out, {n: {"device": dev.params.get(n), "refined": float(out.values[n])} for n in names}
 
 
 def try_candidates(step: int, base: ModelFit, cand_ids, data: PreparedRecords, run: DiagnosisRun) -> list[CandidateResult]:
@@ -939,15 +927,6 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     run.log(f"{len(data.records)} record(s), {sum(t.freq.size for t in data.targets)} FRF lines over "
             f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
     base = _timed(run, "base", fit_base, data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
-    own_refined = {}
-    if opts.free in (None, "", ()):      # --free: the user's list, nothing besides
-        given, (dev, refined, own_refined) = dev, _timed(run, "own effects", refine_own, data, dev, base, opts, run.n_starts,
-                              _resonance(base, data.band, data.records))
-        for n in refined:
-            run.log(n)
-        notes += refined
-        if dev is not given:
-            base = fit_base(data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
     run.log(f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
     add_wander(data, base)
     run.resonance = _resonance(base, data.band, data.records)
@@ -960,6 +939,11 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     final = steps[-1].result
     support = _timed(run, "support", assess_support, final, [p.effect for p in picks], data, run) \
         if check_support else []
+    refined, own_refined = _timed(run, "own effects", refine_own, data, final, opts, run.n_starts, run.resonance) \
+        if opts.free in (None, "", ()) else (None, {})       # --free: the user's list, nothing besides
+    if refined is not None:
+        run.log(f"own effects refitted: {', '.join(own_refined)}; RMS error {1e6 * final.rmse:.4g} → "
+                f"{1e6 * refined.rmse:.4g} µm")
     shown = picks[-1] if picks else (steps[0].ranking[0] if steps[0].ranking else None)
     ra_after = None if shown is None else analyse(
         "+" + " +".join(p.effect for p in picks) if picks else f"+{shown.effect}", data.records, shown.fit.resid_d,
@@ -977,7 +961,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
                           "floor_m": data.noise,
                           "source": data.noise_source}}
     return DiagnosisResult(dev, data.records, base, steps, support, verdict, ra_base, ra_after, feats, data.noise,
-                           run.resonance, settings, run.timings, list(base.warnings))
+                           run.resonance, settings, run.timings, list(base.warnings), refined)
 
 
 def _timed(run: DiagnosisRun, label: str, fn, *args, **kw):

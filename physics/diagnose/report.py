@@ -222,7 +222,7 @@ def _write_folder(res: DiagnosisResult, d: Path, apply: bool, name, provenance, 
     fit = best["fit"] if best else res.final
     files = list(best.get("effect_files", [])) if best else []
     if apply:
-        if fit is res.base and not res.settings.get("own_refined"):
+        if fit is res.base:
             applied = {"written": None, "reason": "the diagnosis kept the model as it was (nothing added, removed or "
                                                   "drafted): nothing to apply"}
         else:

@@ -185,6 +185,8 @@ def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
     fit, files = res.final, []
     if outcome is not None and outcome.kept and outcome.final is not None and outcome.final.rmse < fit.rmse:
         fit, files = outcome.final, [str(drafts_dir / d.file_name) for d in outcome.kept]
+    if res.refined is not None and res.refined.rmse < fit.rmse:
+        fit, files = res.refined, []
     if fit is res.base and not files:
         return None
     files = list(user_files) + files
@@ -192,8 +194,9 @@ def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
     ratio = f" = {fit.rmse / nf:.2f}× the noise floor of {1e6 * nf:.3g} µm" if nf and nf > 0 else ""
     return {"fit": fit, "effect_files": files,
             "text": f"[{', '.join(fit.effects)}] RMS error {1e6 * res.base.rmse:.4g} → {1e6 * fit.rmse:.4g} µm{ratio}"
-                    + (f" (with the drafted {', '.join(d.effect_id for d in outcome.kept)})"
-                       if fit is not res.final else "")}
+                    + (f" (with the drafted {', '.join(d.effect_id for d in outcome.kept)})" if files and fit is not res.final
+                       else f" (its own effects refitted: {', '.join(res.settings['own_refined'])})"
+                       if fit is res.refined else "")}
 
 
 def _register(kept) -> None:
