@@ -103,6 +103,29 @@ def test_effect_the_data_do_not_support_is_removed():
     assert "not supported" in sup["electrode_resistance"].explanation
 
 
+def test_own_effects_are_refitted_after_the_selection_for_the_model_written():
+    """The strip's electrode resistance is 3× the device's: nothing is missing, but the model's
+    own effect holds a wrong value.  After the selection the final model is refitted with it
+    free (the device's value is a start, not the strip's): the refit recovers the strip's value
+    and lowers the error; the verdict is what the selection decided.  With ``--free`` the user's
+    list is all that is fitted."""
+    dev = load_device("ipmc_pt_eg")
+    case = hidden_effect_case(None, seed=0, device=dev.with_params(Rs=3 * dev["Rs"]),
+                              base_effects="electrode_resistance")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="solvent_diffusion",
+                       check_support=False)
+        assert res.refined is not None and res.refined.rmse < res.final.rmse
+        assert res.refined.rmse < 1.5 * case.noise_floor < res.final.rmse
+        got = res.settings["own_refined"]["Rs"]
+        assert got["device"] == dev["Rs"] and got["refined"] == pytest.approx(3 * dev["Rs"], rel=0.1)
+        assert res.to_dict()["settings"]["own_refined"]["Rs"]["refined"] == got["refined"]
+        fixed = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="solvent_diffusion",
+                         check_support=False, free="kf,Y,beta_f")
+    assert fixed.refined is None and fixed.settings["own_refined"] == {}
+
+
 # ---------------------------------------------------------------------------- what the data can reveal
 
 

@@ -29,6 +29,10 @@
 6. Adequacy of the final model and what remains (:mod:`.adequacy`, :mod:`.verdict`).
 7. :func:`assess_support` — in the final model each of its own effects is switched off and
    refitted; an effect whose removal does not cost ΔBIC ≥ 6 is "not supported by these data".
+8. :func:`refine_own` — unless ``--free`` names the free parameters: the final model refitted
+   with its own effects' parameters free (the device's values of an effect are a start, not the
+   strip's), kept when it lowers the BIC; it never decides what is missing, the model written
+   (the best model) takes it when it fits better.
 
 The verdict (:class:`.verdict.Verdict`) is the one object every output renders.
 """
@@ -495,7 +499,7 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
 
 def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_starts: int,
                resonance_hz: float | None) -> tuple[ModelFit | None, dict]:
-    """Phase 6b: the final model with the parameters of its own effects that the records can
+    """Phase 8: the final model with the parameters of its own effects that the records can
     reveal (:func:`.signatures.revealable`) and that it holds at the device's values fitted
     beside its free ones, from those values (else the effect's derived start): the device's
     values of an effect are a start, not this strip's.  Done after the selection, so it never
