@@ -252,6 +252,7 @@ class DiagnosisResult:
     timings: dict
     warnings: list[str] = field(default_factory=list)
     refined: ModelFit | None = None   # the final model with its own effects refitted (:func:`refine_own`)
+    refined_adequate: bool = False    # ... and within the noise (:func:`.adequacy.assess`)
 
     @property
     def candidates(self) -> list[CandidateResult]:
@@ -945,6 +946,8 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
         if check_support else []
     refined, own_refined = _timed(run, "own effects", refine_own, data, final, opts, run.n_starts, run.resonance) \
         if opts.free in (None, "", ()) else (None, {})       # --free: the user's list, nothing besides
+    refined_adequate = refined is not None and bool(
+        assess("", refined, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate)
     if refined is not None:
         run.log(f"own effects refitted: {', '.join(own_refined)}; RMS error {1e6 * final.rmse:.4g} → "
                 f"{1e6 * refined.rmse:.4g} µm")
@@ -965,7 +968,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
                           "floor_m": data.noise,
                           "source": data.noise_source}}
     return DiagnosisResult(dev, data.records, base, steps, support, verdict, ra_base, ra_after, feats, data.noise,
-                           run.resonance, settings, run.timings, list(base.warnings), refined)
+                           run.resonance, settings, run.timings, list(base.warnings), refined, refined_adequate)
 
 
 def _timed(run: DiagnosisRun, label: str, fn, *args, **kw):
