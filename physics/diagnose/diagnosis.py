@@ -508,20 +508,19 @@ def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_star
     when it lowers the BIC with its parameters counted (:func:`.candidates.compare_fits`).
     Returns (the refitted model or None, {name: {"device": value or None, "refined": value}})."""
     taken = set(fit.spec.free) | set(fit.spec.per_rh)
-    names = [n for e in switchable(fit.effects)
-             if (spec := spec_of(e)) and not spec.get("describing_function") and revealable(e, data.records,
-                                                                                             resonance_hz)[0]
-             for n in effect_params(e) + shape_params(e) if n not in taken]
+    own = {e: [n for n in effect_params(e) + shape_params(e) if n not in taken] for e in switchable(fit.effects)
+           if (spec := spec_of(e)) and not spec.get("describing_function")
+           and revealable(e, data.records, resonance_hz)[0]}
+    names = [n for ns in own.values() for n in ns]
     if not names:
         return None, {}
     dev = fit.device                    # the fitted model's device: its own effects still at the device's values
     start, bounds = dict(fit.spec.start), dict(fit.spec.bounds)
-    for e in switchable(fit.effects):
+    for e, ns in own.items():
         derived = derived_starts(e, dev)
-        for n in names:
-            if n in effect_params(e) + shape_params(e):
-                bounds[n] = param_bounds(n, dev)      # an effect's own parameter keeps its spec's range
-                start[n] = start_in_range(n, dev, derived, bounds[n])
+        for n in ns:
+            bounds[n] = param_bounds(n, dev)      # an effect's own parameter keeps its spec's range
+            start[n] = start_in_range(n, dev, derived, bounds[n])
     spec = ModelSpec("final, own effects refitted", fit.effects, list(fit.spec.free) + names, list(fit.spec.per_rh),
                      start, bounds)
     out = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,

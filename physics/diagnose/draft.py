@@ -68,11 +68,11 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.
 
     Nothing is drafted when there is nothing to explain, or when the final model with its own
-    effects refitted (``res.refined``) is within the noise: nothing remains for a form.  Otherwise, forward from the base, the
-    drafts compete with the catalog effects the diagnosis picked, even when the model with them
-    is adequate (a catalog effect can mimic physics it does not model within the noise, e.g. the
-    electrode resistance a sensor's low-pass): the candidate that lowers the error most (lowest ΔBIC) is taken when it
-    passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
+    effects refitted (``res.refined``) is within the noise: nothing remains for a form.
+    Otherwise, forward from the base, the drafts compete with the catalog effects the diagnosis
+    picked, even when the model with them is adequate (a catalog effect can mimic physics it
+    does not model within the noise, e.g. the electrode resistance a sensor's low-pass): the
+    candidate that lowers the error most (lowest ΔBIC) is taken when it passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
     and the others are tried again on top of it (at most ``max_effects`` drafts kept).  A kept
     draft takes the values fitted with the model as its defaults (bounds and starts follow)."""
     import tempfile
@@ -80,9 +80,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     from .candidates import effect_values, map_free
     fit = res.final
     ad = res.adequacy
-    refit_adequate = res.refined is not None and res.refined_adequate
     if res.verdict.status == "nothing to explain" or (ad is not None and ad.adequate and not res.picks) \
-            or refit_adequate:
+            or res.refined_adequate:
         items = []
     else:       # an adequate catalog pick may still be a mimic: the drafts compete with it
         items = drafts(ad.forms if ad is not None and ad.forms else describe(fit, res.records), fit, res.records)
@@ -91,7 +90,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     # already: drafting it again would name one effect twice
     items = [d for d in items if d.effect_id not in EFFECTS]
     outcome = DraftOutcome([], [], fit.rmse)
-    if refit_adequate:
+    if res.refined_adequate:
         outcome.notes.append(f"nothing drafted: with its own effects refitted the model leaves "
                              f"{1e6 * res.refined.rmse:.4g} µm, within the noise")
     if not items:
