@@ -99,6 +99,9 @@ def test_a_rival_held_on_a_bound_needs_a_wider_margin():
     assert _label(70.1, 2.6, rival_um=40.0, held=True, **kw).label == "high"
     d = c.to_dict()
     assert conf.Confidence.from_dict(d).held == pytest.approx(c.held) and d["held_rival"] == "rival"
+    # a pick at the noise floor removes all of every rival's excess: no rival is named as closest
+    at_floor = _label(70.1, 2.0, rival_um=8.71, held=True, **kw)
+    assert at_floor.twin == 1.0 and at_floor.twin_of is None and at_floor.held_of is None
 
 
 # ---------------------------------------------------------------------------- evidence on the reported error

@@ -145,9 +145,10 @@ def features(pick, base, rivals, weight: float, noise: float, pinned: int = 0, h
 
 
 def _closest(pick, rivals, noise: float) -> tuple[float, str | None]:
-    """The smallest share of a rival's excess error the pick removes, and that rival ((1, None): none)."""
+    """The smallest share of a rival's excess error the pick removes, and that rival; (1, None)
+    when no rival keeps any of its excess from the pick (a share is at most 1: ties name none)."""
     shares = [(excess_share(r.fit.rmse, pick.fit.rmse, noise), r.effect) for r in rivals if r is not pick]
-    return min(shares, key=lambda x: x[0], default=(1.0, None))
+    return min([(1.0, None)] + shares, key=lambda x: x[0])
 
 
 def label(c: Confidence, th: dict | None = None) -> Confidence:
