@@ -103,12 +103,12 @@ def test_effect_the_data_do_not_support_is_removed():
     assert "not supported" in sup["electrode_resistance"].explanation
 
 
-def test_own_effects_are_refitted_after_the_selection_for_the_model_written():
+def test_own_effects_are_refitted_in_the_chain_when_no_candidate_explains():
     """The strip's electrode resistance is 3× the device's: nothing is missing, but the model's
-    own effect holds a wrong value.  After the selection the final model is refitted with it
-    free (the device's value is a start, not the strip's): the refit recovers the strip's value
-    and lowers the error; the verdict is what the selection decided.  With ``--free`` the user's
-    list is all that is fitted."""
+    own effect holds a wrong value.  No candidate passes, so the chain refits the model's own
+    effects (the device's value is a start, not the strip's): the refit recovers the strip's
+    value, the model is within the noise and the verdict names no effect.  With ``--free`` the
+    user's list is all that is fitted."""
     dev = load_device("ipmc_pt_eg")
     case = hidden_effect_case(None, seed=0, device=dev.with_params(Rs=3 * dev["Rs"]),
                               base_effects="electrode_resistance")
@@ -116,14 +116,19 @@ def test_own_effects_are_refitted_after_the_selection_for_the_model_written():
         warnings.simplefilter("ignore")
         res = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="solvent_diffusion",
                        check_support=False)
-        assert res.refined is not None and res.refined.rmse < res.final.rmse
-        assert res.refined.rmse < 1.5 * case.noise_floor < res.final.rmse
-        got = res.settings["own_refined"]["Rs"]
-        assert got["device"] == dev["Rs"] and got["refined"] == pytest.approx(3 * dev["Rs"], rel=0.1)
-        assert res.to_dict()["settings"]["own_refined"]["Rs"]["refined"] == got["refined"]
+        assert [s.kind for s in res.steps][:2] == ["add", "refit"] and not res.picks
+        assert res.base.rmse > 10 * case.noise_floor > 10 * res.final.rmse / 1.5
+        v = res.verdict
+        assert v.status == "explained" and v.missing_effect is None and v.refitted.keys() == {"Rs"}
+        assert v.refitted["Rs"]["device"] == dev["Rs"]
+        assert v.refitted["Rs"]["refined"] == pytest.approx(3 * dev["Rs"], rel=0.1)
+        assert any(line.startswith("Which effect: none is missing") for line in v.lines())
+        d = res.to_dict()
+        assert d["settings"]["own_refined"] == v.refitted and d["steps"][1]["kind"] == "refit"
         fixed = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="solvent_diffusion",
                          check_support=False, free="kf,Y,beta_f")
-    assert fixed.refined is None and fixed.settings["own_refined"] == {}
+    assert "refit" not in [s.kind for s in fixed.steps] and fixed.settings["own_refined"] == {}
+    assert fixed.final.rmse > 10 * case.noise_floor
 
 
 # ---------------------------------------------------------------------------- what the data can reveal

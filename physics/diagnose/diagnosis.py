@@ -166,8 +166,9 @@ class SupportResult:
 @dataclass
 class Step:
     """One step of the stepwise selection: its base, its candidates and its decision — or,
-    a backward step, the effect of the model removed (``removal``) and the model without it
-    (``removed_fit``)."""
+    a backward step, the effect removed (``removal``: of the user's model, or a pick withdrawn)
+    and the model without it (``removed_fit``) — or a refit step, the model with its own
+    effects' parameters refitted (``refit``, the values in ``refitted``: :func:`refine_own`)."""
 
     index: int
     base: ModelFit
@@ -175,6 +176,12 @@ class Step:
     decision: Decision
     removal: "SupportResult | None" = None
     removed_fit: ModelFit | None = None
+    refit: ModelFit | None = None
+    refitted: dict = field(default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        return "refit" if self.refit is not None else "remove" if self.removal is not None else "add"
 
     @property
     def ranking(self) -> list[CandidateResult]:
@@ -183,6 +190,8 @@ class Step:
     @property
     def result(self) -> ModelFit:
         """The model after this step."""
+        if self.refit is not None:
+            return self.refit
         if self.removed_fit is not None:
             return self.removed_fit
         return self.decision.pick.fit if self.decision.pick is not None else self.base
@@ -224,6 +233,8 @@ class DiagnosisRun:
     force: bool = False
     max_effects: int = 2
     backward: bool = True
+    refit_own: bool = True            # the own effects refitted in the chain (:func:`select`); not with --free
+    refit_tried: bool = False         # ... and the chain tried it (kept or not)
     resonance: float | None = None
     timings: dict = field(default_factory=dict)
     progress: Callable[[str], None] | None = None
@@ -270,12 +281,14 @@ class DiagnosisResult:
 
     @property
     def winner(self) -> CandidateResult | None:
-        """The first pick (None for a null verdict)."""
-        return self.steps[0].decision.pick
+        """The first pick still in the final model (None for a null verdict)."""
+        return next(iter(self.picks), None)
 
     @property
     def picks(self) -> list[CandidateResult]:
-        return [s.decision.pick for s in self.steps if s.decision.pick is not None]
+        """The picks of the chain still in the final model (not withdrawn)."""
+        return [s.decision.pick for s in self.steps
+                if s.decision.pick is not None and s.decision.pick.effect in self.final.effects]
 
     @property
     def removals(self) -> list["SupportResult"]:
@@ -288,9 +301,9 @@ class DiagnosisResult:
 
     @property
     def draft_base(self) -> ModelFit:
-        """Where drafted effects start from: the model after the last removal (the base without
-        the effects the data do not support), else the base."""
-        rem = [s for s in self.steps if s.removed_fit is not None]
+        """Where drafted effects start from: the model after the last removal of an effect of the
+        user's model (the base without the effects the data do not support), else the base."""
+        rem = [s for s in self.steps if s.removed_fit is not None and s.removal.effect in self.base.effects]
         return rem[-1].removed_fit if rem else self.base
 
     @property
@@ -313,7 +326,7 @@ class DiagnosisResult:
                      "n_samples_analysed": b.n},
             "noise_floor_m": self.noise_floor, "resonance_Hz": self.resonance_hz,
             "verdict": self.verdict.to_dict(),
-            "steps": [{"step": s.index, "kind": "remove" if s.removal else "add",
+            "steps": [{"step": s.index, "kind": s.kind, "refitted": s.refitted or None,
                        "base_effects": list(s.base.effects), "base_rmse": s.base.rmse,
                        "ranking": [c.row(s.base, s.decision.weights.get(c.effect)) for c in s.ranking],
                        "weight_of_base": s.decision.weights.get("base"),
@@ -606,69 +619,107 @@ def _nested(c: CandidateResult) -> bool:
 def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: DiagnosisRun) -> list[Step]:
     """Phase 5: stepwise selection, both ways.  Forward: the candidates on top of the current
     model, the step's decision (:func:`.verdict.decide`); after a pick the remaining candidates
-    are tried again on top of it, up to ``max_effects`` picks.  Backward, when no candidate
-    passes (``run.backward``): each effect of the user's model is switched off and the model
-    refitted (:func:`try_removal`); the one whose removal the data favour most (the model without
-    it has the lower BIC) is removed, and it becomes a candidate again with its own parameters
-    free (the device's values of an effect are a start, not the strip's), then forward again.
-    Each effect is removed at most once.  Returns the steps (the first always)."""
+    are tried again on top of it, up to ``max_effects`` picks.  When no candidate passes and the
+    model is not within the noise, backward (``run.backward``): each effect of the user's model
+    is switched off and the model refitted (:func:`try_removal`); the one whose removal the data
+    favour most (the model without it has the lower BIC) is removed, and it becomes a candidate
+    again with its own parameters free, then forward again.  When no removal is favoured (or the
+    chain is full), once and unless ``--free`` names the free parameters (``run.refit_own``): the
+    model's own effects refitted (:func:`refine_own`: the device's values of an effect are a
+    start, not the strip's), kept when it lowers the BIC; on top of it, the picks the data no
+    longer favour are withdrawn (removal, as above, not tried again) and the candidates are
+    tried again.  The refit comes after the candidates so that a refitted effect never stands
+    in for a missing one the candidates find.  Each effect is removed at most once.  Returns the
+    steps (the first always)."""
     steps: list[Step] = []
     step_base, left, step_feats = base, list(cand_ids), feats
     removed: set = set()
     own = [e for e in switchable(base.effects)]
-    n_added = 0
+    picked: list[str] = []
+    refitted = False
     while True:
         k = len(steps) + 1
-        t0 = time.perf_counter()
-        results = try_candidates(k, step_base, left, data, run)
-        taus = compare_step(step_base, results, data, step_feats)
-        ranked = [c for c in results if c.evaluated]
-        def decided():
-            return decide(step_base, ranked, data.noise, taus, data.records, compare_fits,
-                          prediction_distance, after_pick=n_added > 0,
-                          structure=bool(shared_structure(data, step_base)), wander=wander_for(data, step_base))
-        decision = decided()
-        if decision.pick is not None and refine_on_time(decision.pick.fit, data.records):
-            # the pick refitted on the time records (its FRF optimum is not theirs): the pick stands,
-            # and its evidence, reason and confidence are those of the error the verdict reports
-            decision.pick.comparison = compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
-            run.log(f"  {decision.pick.effect} refined on the time records: RMS {1e6 * decision.pick.fit.rmse:.4g} µm")
-            again = decided()
-            if again.pick is not None and again.pick.effect == decision.pick.effect:
-                decision = again
-        for c in ranked:
-            c.explanation = _explain(c, step_base)
-        steps.append(Step(k, step_base, results, decision))
-        run.timings[f"step {k}"] = time.perf_counter() - t0
-        pick = decision.pick
-        if pick is not None:
-            n_added += 1
-            left = [e for e in left if e != pick.effect and e not in pick.fit.effects]
-            ad = assess("", pick.fit, data.records, data.noise, describe=False, wander=allowed_wander(data))
-            if n_added >= run.max_effects or not left or ad.adequate:
-                break
-            step_base = pick.fit
-            step_feats = _features_after(data, pick.fit, f"+{pick.effect}", run)
-            run.log(f"step {k + 1}: the remaining candidates on top of {pick.effect}")
-            continue
+        if len(picked) < run.max_effects and left:
+            pick = _forward(k, step_base, left, step_feats, data, run, bool(picked), steps)
+            if pick is not None:
+                picked.append(pick.effect)
+                left = [e for e in left if e != pick.effect and e not in pick.fit.effects]
+                step_base = pick.fit
+                if assess("", pick.fit, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate:
+                    break
+                if len(picked) < run.max_effects and left:
+                    step_feats = _features_after(data, pick.fit, f"+{pick.effect}", run)
+                    run.log(f"step {k + 1}: the remaining candidates on top of {pick.effect}")
+                    continue
+            k = len(steps) + 1
         within = math.isfinite(data.noise) and step_base.rmse <= ADEQUATE_RATIO * math.hypot(
             data.noise, wander_for(data, step_base))
-        if not run.backward or within:
+        if within:
             break
-        t0 = time.perf_counter()
-        got = try_removal(step_base, [e for e in own if e in step_base.effects and e not in removed], data, run)
-        run.timings[f"step {k + 1}: removal"] = time.perf_counter() - t0
-        if got is None:
+        removable = [e for e in own + (picked if refitted else []) if e in step_base.effects and e not in removed]
+        if run.backward and removable and (len(picked) < run.max_effects or refitted):
+            t0 = time.perf_counter()
+            got = try_removal(step_base, removable, data, run)
+            run.timings[f"step {k}: removal"] = time.perf_counter() - t0
+            if got is not None:
+                sup, fit = got
+                removed.add(sup.effect)
+                steps.append(Step(k, step_base, [], Decision(None, {}, {}, reason=sup.explanation), sup, fit))
+                if sup.effect in picked:
+                    picked.remove(sup.effect)
+                    run.log(f"step {k}: {sup.effect} withdrawn ({sup.explanation})")
+                else:
+                    run.log(f"step {k}: {sup.effect} removed ({sup.explanation})")
+                    if spec_of(sup.effect) and sup.effect not in left:
+                        left.append(sup.effect)
+                step_base = fit
+                step_feats = _features_after(data, fit, f"-{sup.effect}", run)
+                continue
+        if not run.refit_own or refitted:
             break
-        sup, fit = got
-        removed.add(sup.effect)
-        steps.append(Step(k + 1, step_base, [], Decision(None, {}, {}, reason=sup.explanation), sup, fit))
-        run.log(f"step {k + 1}: {sup.effect} removed ({sup.explanation})")
+        refitted = run.refit_tried = True
+        fit, values = _timed(run, f"step {k}: own effects", refine_own, data, step_base, run.options, run.n_starts,
+                             run.resonance)
+        if fit is None:
+            break
+        reason = (f"its own effects refitted ({', '.join(values)}): RMS error {1e6 * step_base.rmse:.4g} → "
+                  f"{1e6 * fit.rmse:.4g} µm")
+        steps.append(Step(k, step_base, [], Decision(None, {}, {}, reason=reason), refit=fit, refitted=values))
+        run.log(f"step {k}: {reason}")
         step_base = fit
-        if spec_of(sup.effect) and sup.effect not in left:
-            left.append(sup.effect)
-        step_feats = _features_after(data, fit, f"-{sup.effect}", run)
+        if assess("", fit, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate:
+            break
+        step_feats = _features_after(data, fit, "refitted", run)
     return steps
+
+
+def _forward(k: int, step_base: ModelFit, left, step_feats: dict, data: PreparedRecords, run: DiagnosisRun,
+             after_pick: bool, steps: list) -> "CandidateResult | None":
+    """One forward step of :func:`select`: ``left`` tried on top of ``step_base``, compared and
+    decided; the step appended to ``steps``; returns its pick (or None)."""
+    t0 = time.perf_counter()
+    results = try_candidates(k, step_base, left, data, run)
+    taus = compare_step(step_base, results, data, step_feats)
+    ranked = [c for c in results if c.evaluated]
+
+    def decided():
+        return decide(step_base, ranked, data.noise, taus, data.records, compare_fits,
+                      prediction_distance, after_pick=after_pick,
+                      structure=bool(shared_structure(data, step_base)), wander=wander_for(data, step_base))
+    decision = decided()
+    if decision.pick is not None and refine_on_time(decision.pick.fit, data.records):
+        # the pick refitted on the time records (its FRF optimum is not theirs): the pick stands,
+        # and its evidence, reason and confidence are those of the error the verdict reports
+        decision.pick.comparison = compare_fits(step_base, decision.pick.fit, _nested(decision.pick), taus)
+        run.log(f"  {decision.pick.effect} refined on the time records: RMS {1e6 * decision.pick.fit.rmse:.4g} µm")
+        again = decided()
+        if again.pick is not None and again.pick.effect == decision.pick.effect:
+            decision = again
+    for c in ranked:
+        c.explanation = _explain(c, step_base)
+    steps.append(Step(k, step_base, results, decision))
+    run.timings[f"step {k}"] = time.perf_counter() - t0
+    return decision.pick
 
 
 def _features_after(data: PreparedRecords, fit: ModelFit, label: str, run: DiagnosisRun) -> dict:
@@ -692,14 +743,17 @@ def try_removal(current: ModelFit, effects, data: PreparedRecords, run: Diagnosi
 
 def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_effects: int) -> Verdict:
     """Phase 6: the chain of picks, the adequacy of the final model and what remains."""
-    picks, removed = [], []
+    picks, removed, withdrawn, refitted = [], [], [], {}
+    final = steps[-1].result
     for s in steps:
         p = s.decision.pick
+        refitted.update(s.refitted)
         if s.removal is not None:
-            removed.append({"step": s.index, "effect": s.removal.effect, "rmse_before_m": s.base.rmse,
-                            "rmse_after_m": s.removed_fit.rmse, "delta_bic": s.removal.delta_bic_if_removed,
-                            "reason": s.removal.explanation})
-        if p is None:
+            (removed if s.removal.effect in base.effects else withdrawn).append(
+                {"step": s.index, "effect": s.removal.effect, "rmse_before_m": s.base.rmse,
+                 "rmse_after_m": s.removed_fit.rmse, "delta_bic": s.removal.delta_bic_if_removed,
+                 "reason": s.removal.explanation})
+        if p is None or p.effect not in final.effects:        # a pick withdrawn later is not in the chain
             continue
         own = effect_values(p.fit, p.effect)
         picks.append(Pick(s.index, p.effect, s.decision.weight, s.base.rmse, p.fit.rmse, p.comparison.delta_bic,
@@ -707,8 +761,8 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                           {n: {"value": v, "std_error": p.fit.std_errors.get(n)} for n, v in own.items()},
                           list(p.quality), s.decision.reason, s.decision.confidence,
                           next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating))
-    final = steps[-1].result
-    label = "base" + "".join(f" − {r['effect']}" for r in removed) + "".join(f" + {p.effect}" for p in picks)
+    label = "base" + "".join(f" − {r['effect']}" for r in removed) + (" (own effects refitted)" if refitted else "") \
+        + "".join(f" + {p.effect}" for p in picks)
     allowed = allowed_wander(data)
     ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final), wander=allowed)
     first = steps[0].decision
@@ -724,18 +778,21 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
         status = UNATTRIBUTED
     elif within:
         status = "nothing to explain"
-    elif picks or (removed and ad.adequate):
+    elif picks or ((removed or refitted) and ad.adequate):
         status = {True: "explained", False: "partly explained", None: "found (adequacy not assessed)"}[ad.adequate]
     else:
         status = "not explained by the catalog"
     kind, forms = remaining_of(ad)
     stopped = ""
     last = steps[-1]
-    if (picks or removed) and last.decision.pick is None and last.removal is None and last is not steps[0]:
+    if (picks or removed or refitted) and last.decision.pick is None and last.removal is None and last is not steps[0]:
         stopped = f"no further candidate passes on top of [{', '.join(last.base.effects)}] ({last.decision.reason})"
     elif picks and len(picks) == max_effects and ad.adequate is False:
         stopped = f"the chain reached max_effects = {max_effects}"
     reason = first.reason if not picks else picks[0].reason
+    if refitted and not picks:
+        reason = (f"with its own effects refitted ({', '.join(refitted)}) the model leaves {1e6 * final.rmse:.4g} µm "
+                  f"(the base {1e6 * base.rmse:.4g} µm): the device's values of its effects were not this strip's")
     noise, source = data.noise, data.noise_source
     if unattributed:
         reason = (f"the base leaves {1e6 * base.rmse:.4g} µm = {base.rmse / data.noise:.2f}× the noise floor of "
@@ -762,7 +819,7 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
         ad = assess(label, final, data.records, noise, describe=False, wander=data.wander_beyond)
         kind, forms = remaining_of(ad)
     return Verdict(status, picks, first.weights, ad, base.rmse, noise, source, reason, forms, kind, stopped,
-                   first.alpha, nuisance_summary(final, data.records), removed)
+                   first.alpha, nuisance_summary(final, data.records), removed, withdrawn, refitted)
 
 
 def assess_support(final: ModelFit, picked: Sequence[str], data: PreparedRecords, run: DiagnosisRun) -> list[SupportResult]:
@@ -914,7 +971,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     analysis = analysis if analysis is not None else AnalysisOptions()
     max_effects, noise_floor, fs_max = selection.max_effects, analysis.noise_floor, analysis.fs_max
     run = DiagnosisRun(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects),
-                       bool(selection.backward), progress=progress)
+                       bool(selection.backward), opts.free in (None, "", ()), progress=progress)
     if run.n_starts < 1:
         raise InputError(f"{arg('n_starts')} must be at least 1")
     if run.max_effects < 1:
@@ -938,13 +995,15 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
                      resonance_hz=run.resonance)
     feats = features_of(ra_base, data, base, run)
     steps = select(data, base, cand_ids, feats, run)
-    picks = [s.decision.pick for s in steps if s.decision.pick is not None]
-    verdict = build_verdict(data, base, steps, run.max_effects)
     final = steps[-1].result
+    picks = [s.decision.pick for s in steps if s.decision.pick is not None and s.decision.pick.effect in final.effects]
+    verdict = build_verdict(data, base, steps, run.max_effects)
     support = _timed(run, "support", assess_support, final, [p.effect for p in picks], data, run) \
         if check_support else []
-    refined, own_refined = _timed(run, "own effects", refine_own, data, final, opts, run.n_starts, run.resonance) \
-        if opts.free in (None, "", ()) else (None, {})       # --free: the user's list, nothing besides
+    chain_refit = next((s for s in steps if s.refit is not None), None)
+    refined, own_refined = (None, chain_refit.refitted) if chain_refit is not None else \
+        _timed(run, "own effects", refine_own, data, final, opts, run.n_starts, run.resonance) \
+        if run.refit_own and not run.refit_tried else (None, {})       # --free: the user's list, nothing besides
     refined_adequate = refined is not None and bool(
         assess("", refined, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate)
     if refined is not None:

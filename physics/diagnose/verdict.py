@@ -365,6 +365,8 @@ class Verdict:
     alpha_bonferroni: float = ALPHA
     nuisance: dict = field(default_factory=dict)
     removed: list = field(default_factory=list)             # effects of the model the data do not support
+    withdrawn: list = field(default_factory=list)           # picks the data no longer favour once refitted
+    refitted: dict = field(default_factory=dict)            # own effects' parameters refitted: {name: values}
 
     # --- the first answer, as before the chain existed ---------------------------------
     @property
@@ -407,6 +409,13 @@ class Verdict:
             out.append(f"Removed from the model: {r['effect']} — RMS error {1e6 * r['rmse_before_m']:.4g} → "
                        f"{1e6 * r['rmse_after_m']:.4g} µm ({r['reason']}); tried again as a candidate with its own "
                        "parameters free.")
+        if self.refitted:
+            out.append("Its own effects refitted (the device's values are a start, not this strip's): "
+                       + ", ".join(_fmt_refit(n, v) for n, v in self.refitted.items()) + ".")
+        for r in self.withdrawn:
+            out.append(f"Withdrawn: {r['effect']} (picked at an earlier step) — with the model's own effects refitted "
+                       f"the data no longer favour it: RMS error {1e6 * r['rmse_before_m']:.4g} → "
+                       f"{1e6 * r['rmse_after_m']:.4g} µm without it ({r['reason']}).")
         if self.picks:
             for k, p in enumerate(self.picks):
                 head = "Which effect: " if k == 0 else "Then, on top of it: "
@@ -424,6 +433,8 @@ class Verdict:
                 out.append(f"The chain stops: {self.stopped}.")
         elif self.status == "nothing to explain":
             out.append(f"Which effect: none is needed — {self.reason}.")
+        elif self.refitted and self.adequacy is not None and self.adequacy.adequate:
+            out.append(f"Which effect: none is missing — {self.reason}.")
         else:
             out.append(f"Which effect: none named — {self.reason}.")
         out.append("Is the model adequate: " + self._adequacy_text())
@@ -438,7 +449,7 @@ class Verdict:
     def _adequacy_text(self) -> str:
         ad = self.adequacy
         model = "the base" + "".join(f" − {r['effect']}" for r in self.removed) + \
-            "".join(f" + {e}" for e in self.chain)
+            (" with its own effects refitted" if self.refitted else "") + "".join(f" + {e}" for e in self.chain)
         if ad is None or ad.adequate is None:
             return f"not assessed — the noise floor is unknown ({self.noise_source})."
         verdict = "yes" if ad.adequate else "no"
@@ -470,7 +481,8 @@ class Verdict:
                 "adequacy": self.adequacy.to_dict() if self.adequacy else None,
                 "remaining_kind": self.remaining_kind, "remaining": self.remaining, "chain_stopped": self.stopped,
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
-                "removed": self.removed, "final_rmse_m": self.final_rmse,
+                "removed": self.removed, "withdrawn": self.withdrawn, "refitted": self.refitted,
+                "final_rmse_m": self.final_rmse,
                 "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA, "min_excess_share": MIN_SHARE,
                              "after_pick_flagged_share": AFTER_PICK_SHARE,
                              "adequate_ratio": ADEQUATE_RATIO, "distinct_delta_bic": DISTINCT_BIC,
@@ -499,9 +511,20 @@ def readable_unit(unit: str) -> str:
     return unit
 
 
-def _fmt_param(name: str, v: dict) -> str:
+def _unit_of(name: str) -> str:
     spec = all_param_specs().get(name.split("@")[0])
-    unit = readable_unit(spec.unit) if spec else ""
+    return readable_unit(spec.unit) if spec else ""
+
+
+def _fmt_refit(name: str, v: dict) -> str:
+    """``Rs 120 → 360 Ω``: a refitted parameter from the device's value (or its start)."""
+    unit = _unit_of(name)
+    dev = "its start" if v.get("device") is None else f"{v['device']:.4g}"
+    return f"{name} {dev} → {v['refined']:.4g}{(' ' + unit) if unit else ''}"
+
+
+def _fmt_param(name: str, v: dict) -> str:
+    unit = _unit_of(name)
     se = v.get("std_error")
     se_txt = f" ± {se:.2g}" if se is not None and math.isfinite(se) else ""
     return f"{name} = {v['value']:.4g}{se_txt}{(' ' + unit) if unit else ''}"
