@@ -103,32 +103,61 @@ def test_effect_the_data_do_not_support_is_removed():
     assert "not supported" in sup["electrode_resistance"].explanation
 
 
-def test_own_effects_are_refitted_in_the_chain_when_no_candidate_explains():
-    """The strip's electrode resistance is 3× the device's: nothing is missing, but the model's
-    own effect holds a wrong value.  No candidate passes, so the chain refits the model's own
-    effects (the device's value is a start, not the strip's): the refit recovers the strip's
-    value, the model is within the noise and the verdict names no effect.  With ``--free`` the
-    user's list is all that is fitted."""
+def _rs_case(hidden, factor=3.0):
+    """A strip whose electrode resistance is ``factor``× the device's, ``hidden`` missing from the model."""
     dev = load_device("ipmc_pt_eg")
-    case = hidden_effect_case(None, seed=0, device=dev.with_params(Rs=3 * dev["Rs"]),
-                              base_effects="electrode_resistance")
+    return dev, hidden_effect_case(hidden, seed=0, device=dev.with_params(Rs=factor * dev["Rs"]),
+                                   base_effects="electrode_resistance")
+
+
+def test_a_pick_that_stood_in_for_the_devices_values_is_withdrawn_once_they_are_refitted():
+    """The strip's electrode resistance is 3× the device's and nothing is missing.  The base
+    misfits by ~80 noise floors, so `viscoelastic` lowers the error and is picked; no candidate
+    passes on top of it, so the chain refits the model's own effects (the device's value is a
+    start, not the strip's): the refit recovers the strip's Rs and, on the refitted model, the
+    data favour the model without `viscoelastic`: it is withdrawn and the verdict names no
+    effect.  With ``--free`` the user's list is all that is fitted."""
+    dev, case = _rs_case(None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="viscoelastic",
+                       check_support=False)
+        fixed = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="viscoelastic",
+                         check_support=False, free="kf,Y,beta_f")
+    assert [s.kind for s in res.steps] == ["add", "refit", "remove"]
+    assert res.steps[0].decision.pick.effect == "viscoelastic" and not res.picks and res.winner is None
+    assert res.base.rmse > 10 * case.noise_floor and res.final.rmse < 1.5 * case.noise_floor
+    v = res.verdict
+    assert v.status == "explained" and v.missing_effect is None and v.chain == []
+    assert [w["effect"] for w in v.withdrawn] == ["viscoelastic"] and v.removed == []
+    assert v.refitted["Rs"]["device"] == dev["Rs"]
+    assert v.refitted["Rs"]["refined"] == pytest.approx(3 * dev["Rs"], rel=0.1)
+    assert any(line.startswith("Which effect: none is missing") for line in v.lines())
+    assert any(line.startswith("Withdrawn: viscoelastic") for line in v.lines())
+    d = res.to_dict()
+    assert [s["kind"] for s in d["steps"]] == ["add", "refit", "remove"]
+    assert d["settings"]["own_refined"] == v.refitted and d["verdict"]["withdrawn"][0]["effect"] == "viscoelastic"
+    assert "refit" not in [s.kind for s in fixed.steps] and fixed.settings["own_refined"] == {}
+    assert fixed.verdict.chain == ["viscoelastic"] and fixed.final.rmse > 10 * case.noise_floor
+
+
+def test_a_pick_the_refitted_model_needs_is_labelled_again_on_it():
+    """Solvent diffusion is missing and the strip's electrode resistance is 3× the device's.
+    The pick leaves ~50 noise floors (a possible proxy, "medium") until the model's own effects
+    are refitted; on the refitted model it stays (the data need it) and is labelled on what it
+    removes and leaves there."""
+    _, case = _rs_case("solvent_diffusion")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="solvent_diffusion",
                        check_support=False)
-        assert [s.kind for s in res.steps][:2] == ["add", "refit"] and not res.picks
-        assert res.base.rmse > 10 * case.noise_floor > 10 * res.final.rmse / 1.5
-        v = res.verdict
-        assert v.status == "explained" and v.missing_effect is None and v.refitted.keys() == {"Rs"}
-        assert v.refitted["Rs"]["device"] == dev["Rs"]
-        assert v.refitted["Rs"]["refined"] == pytest.approx(3 * dev["Rs"], rel=0.1)
-        assert any(line.startswith("Which effect: none is missing") for line in v.lines())
-        d = res.to_dict()
-        assert d["settings"]["own_refined"] == v.refitted and d["steps"][1]["kind"] == "refit"
-        fixed = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="solvent_diffusion",
-                         check_support=False, free="kf,Y,beta_f")
-    assert "refit" not in [s.kind for s in fixed.steps] and fixed.settings["own_refined"] == {}
-    assert fixed.final.rmse > 10 * case.noise_floor
+    assert [s.kind for s in res.steps][:2] == ["add", "refit"] and res.verdict.chain == ["solvent_diffusion"]
+    pick = res.verdict.picks[0]
+    assert pick.rmse_after > 10 * case.noise_floor > 10 * res.final.rmse / 1.5
+    c = pick.confidence
+    assert c.refitted and c.left == pytest.approx(res.final.rmse / res.noise_floor)
+    assert c.change > 3 and c.label == "high", c.why
+    assert "on the model with its own effects refitted" in pick.reason
 
 
 # ---------------------------------------------------------------------------- what the data can reveal

@@ -34,7 +34,7 @@ meant on held-out physics).  Without a noise floor no pick is "high".
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 #: Weight a "high" pick needs at least (Schwarz, among the step's base and candidates).
 WEIGHT_HIGH = 0.99
@@ -95,6 +95,7 @@ class Confidence:
     pinned: int = 0                # own parameters on a bound and not determined
     held: float = 1.0              # share of the excess a rival held on a bound leaves that the pick removes
     held_of: str | None = None     # that rival (None: no rival held on a bound)
+    refitted: bool = False         # change and left judged on the model with its own effects refitted
     label: str = "low"
     why: list[str] = field(default_factory=list)   # what kept it from "high"
 
@@ -106,13 +107,14 @@ class Confidence:
         return cls(float(d.get("weight") or 0.0), num("change_noise_floors"), num("left_noise_floors"),
                    float(d.get("twin_share", 1.0)), d.get("closest_rival"), float(d.get("records_improved", 1.0)),
                    int(d.get("quality_flags", 0)), int(d.get("pinned_parameters") or 0),
-                   float(d.get("held_rival_share", 1.0)), d.get("held_rival"))
+                   float(d.get("held_rival_share", 1.0)), d.get("held_rival"), bool(d.get("on_refitted_model")))
 
     def to_dict(self) -> dict:
         return {"label": self.label, "weight": self.weight, "change_noise_floors": _num(self.change),
                 "left_noise_floors": _num(self.left), "twin_share": self.twin, "closest_rival": self.twin_of,
                 "records_improved": self.records, "quality_flags": self.flags, "pinned_parameters": self.pinned,
-                "held_rival_share": self.held, "held_rival": self.held_of, "not_high_because": self.why}
+                "held_rival_share": self.held, "held_rival": self.held_of, "on_refitted_model": self.refitted,
+                "not_high_because": self.why}
 
 
 def _num(x: float):
@@ -142,6 +144,18 @@ def features(pick, base, rivals, weight: float, noise: float, pinned: int = 0, h
     better = [c <= (1.0 + RECORD_TOLERANCE) * x for x, c in zip(rb, rc)]
     records = sum(better) / len(better) if better else 1.0
     return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality), pinned, held_share, held_of)
+
+
+def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float) -> Confidence:
+    """``c`` labelled again with the pick's size judged on the model whose own effects were
+    refitted (:func:`.diagnosis.select`): the error the pick removes there (``without`` →
+    ``with_pick`` [m RMS], the refitted model without and with it) and the error that model
+    leaves.  Before the refit a pick can leave a large residual only because the device's values
+    of the model's own effects are not the strip's; once they are refitted, what it leaves is
+    what a missing physics could still hide.  The other features are the pick's step's."""
+    ok = math.isfinite(noise) and noise > 0
+    change = math.sqrt(max(without ** 2 - with_pick ** 2, 0.0)) / noise if ok else math.nan
+    return label(replace(c, change=change, left=with_pick / noise if ok else math.nan, why=[], refitted=True))
 
 
 def _closest(pick, rivals, noise: float) -> tuple[float, str | None]:

@@ -25,14 +25,16 @@
    after a pick the remaining candidates are tried again on top of it while one passes, up to
    ``max_effects``; when none passes, an effect of the user's model that the data do not
    support is removed (:func:`try_removal`) and tried again as a candidate with its own
-   parameters free.
+   parameters free; when no removal is favoured either (or the chain is full), the model's own
+   effects are refitted once (:func:`refine_own`), the picks the refitted model does not need
+   are withdrawn and the candidates tried again on top of it.
 6. Adequacy of the final model and what remains (:mod:`.adequacy`, :mod:`.verdict`).
 7. :func:`assess_support` — in the final model each of its own effects is switched off and
    refitted; an effect whose removal does not cost ΔBIC ≥ 6 is "not supported by these data".
-8. :func:`refine_own` — unless ``--free`` names the free parameters: the final model refitted
-   with its own effects' parameters free (the device's values of an effect are a start, not the
-   strip's), kept when it lowers the BIC; it never decides what is missing, the model written
-   (the best model) takes it when it fits better.
+8. :func:`refine_own` — when the chain did not refit (it ended on a pick within the noise) and
+   ``--free`` does not name the free parameters: the final model refitted with its own effects'
+   parameters free, kept when it lowers the BIC; the model written (the best model) takes it
+   when it fits better.
 
 The verdict (:class:`.verdict.Verdict`) is the one object every output renders.
 """
@@ -61,6 +63,7 @@ from .candidates import (Comparison, ModelFit, ModelSpec, ROLE_GAIN, ROLE_STIFF,
                          default_candidates, default_free, derived_starts, effect_values, fit_model, is_nested,
                          no_worse_than_base, param_used, prediction_distance, refine_on_time, removal_spec, score,
                          start_in_range, start_on_time)
+from . import confidence as conf
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN
 from .records import NUISANCE_TERMS, PreparedRecord, frf_measurements, prepare_records, stated_drift
@@ -513,11 +516,11 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
 
 def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_starts: int,
                resonance_hz: float | None) -> tuple[ModelFit | None, dict]:
-    """Phase 8: the final model with the parameters of its own effects that the records can
-    reveal (:func:`.signatures.revealable`) and that it holds at the device's values fitted
-    beside its free ones, from those values (else the effect's derived start): the device's
-    values of an effect are a start, not this strip's.  Done after the selection, so it never
-    decides which effect is missing (a refitted effect could stand in for a missing one); kept
+    """``fit`` with the parameters of its own effects that the records can reveal
+    (:func:`.signatures.revealable`) and that it holds at the device's values fitted beside its
+    free ones, from those values (else the effect's derived start): the device's values of an
+    effect are a start, not this strip's.  A step of the chain after the candidates (:func:`select`;
+    refitted before them, a refitted effect could stand in for a missing one), else phase 8; kept
     when it lowers the BIC with its parameters counted (:func:`.candidates.compare_fits`).
     Returns (the refitted model or None, {name: {"device": value or None, "refined": value}})."""
     taken = set(fit.spec.free) | set(fit.spec.per_rh)
@@ -645,7 +648,7 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
                 picked.append(pick.effect)
                 left = [e for e in left if e != pick.effect and e not in pick.fit.effects]
                 step_base = pick.fit
-                if assess("", pick.fit, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate:
+                if _adequate(data, pick.fit):
                     break
                 if len(picked) < run.max_effects and left:
                     step_feats = _features_after(data, pick.fit, f"+{pick.effect}", run)
@@ -656,24 +659,16 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
             data.noise, wander_for(data, step_base))
         if within:
             break
-        removable = [e for e in own + (picked if refitted else []) if e in step_base.effects and e not in removed]
+        removable = [e for e in own if e in step_base.effects and e not in removed]
         if run.backward and removable and (len(picked) < run.max_effects or refitted):
             t0 = time.perf_counter()
-            got = try_removal(step_base, removable, data, run)
+            got, _ = try_removal(step_base, removable, data, run)
             run.timings[f"step {k}: removal"] = time.perf_counter() - t0
             if got is not None:
-                sup, fit = got
-                removed.add(sup.effect)
-                steps.append(Step(k, step_base, [], Decision(None, {}, {}, reason=sup.explanation), sup, fit))
-                if sup.effect in picked:
-                    picked.remove(sup.effect)
-                    run.log(f"step {k}: {sup.effect} withdrawn ({sup.explanation})")
-                else:
-                    run.log(f"step {k}: {sup.effect} removed ({sup.explanation})")
-                    if spec_of(sup.effect) and sup.effect not in left:
-                        left.append(sup.effect)
-                step_base = fit
-                step_feats = _features_after(data, fit, f"-{sup.effect}", run)
+                step_base = _removal_step(k, step_base, got, steps, removed, run)
+                if spec_of(got[0].effect) and got[0].effect not in left:
+                    left.append(got[0].effect)
+                step_feats = _features_after(data, step_base, f"-{got[0].effect}", run)
                 continue
         if not run.refit_own or refitted:
             break
@@ -686,11 +681,54 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
                   f"{1e6 * fit.rmse:.4g} µm")
         steps.append(Step(k, step_base, [], Decision(None, {}, {}, reason=reason), refit=fit, refitted=values))
         run.log(f"step {k}: {reason}")
-        step_base = fit
-        if assess("", fit, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate:
+        step_base = _withdraw(fit, picked, steps, removed, data, run)
+        if _adequate(data, step_base):
             break
-        step_feats = _features_after(data, fit, "refitted", run)
+        step_feats = _features_after(data, step_base, "refitted", run)
     return steps
+
+
+def _adequate(data: PreparedRecords, fit: ModelFit) -> bool:
+    return bool(assess("", fit, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate)
+
+
+def _removal_step(k: int, current: ModelFit, got, steps: list, removed: set, run: DiagnosisRun) -> ModelFit:
+    """Append the backward step removing ``got`` = (support, fit without it); returns that fit."""
+    sup, fit = got
+    removed.add(sup.effect)
+    steps.append(Step(k, current, [], Decision(None, {}, {}, reason=sup.explanation), sup, fit))
+    run.log(f"step {k}: {sup.effect} {'removed' if sup.effect in steps[0].base.effects else 'withdrawn'} "
+            f"({sup.explanation})")
+    return fit
+
+
+def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: PreparedRecords,
+              run: DiagnosisRun) -> ModelFit:
+    """After the own effects were refitted: each pick switched off again; the one the refitted
+    model needs least is withdrawn while the data favour its removal (it stood in for the
+    device's values, not for missing physics).  The picks that stay are labelled again on the
+    refitted model (:func:`.confidence.reconfirmed`): the error each removes there and the
+    error the model leaves.  Returns the model after the withdrawals."""
+    every: dict = {}          # the last test's supports, all on ``current`` when no withdrawal followed
+    while picked:
+        got, every = try_removal(current, [e for e in picked if e not in removed], data, run)
+        if got is None:
+            break
+        current = _removal_step(len(steps) + 1, current, got, steps, removed, run)
+        picked.remove(got[0].effect)
+        every = {}
+    for s in steps:
+        d = s.decision
+        if d.pick is None or d.pick.effect not in every or d.confidence is None or d.ambiguous:
+            continue
+        sup, _ = every[d.pick.effect]
+        if sup.status == "assessed" and sup.rmse_without is not None:
+            d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise)
+            d.reason += (f"; on the model with its own effects refitted it lowers the RMS error "
+                         f"{1e6 * sup.rmse_without:.4g} → {1e6 * current.rmse:.4g} µm: confidence {c.label}"
+                         + (": " + "; ".join(c.why) if c.why else ""))
+            run.log(f"  {d.pick.effect} on the refitted model: confidence {c.label}")
+    return current
 
 
 def _forward(k: int, step_base: ModelFit, left, step_feats: dict, data: PreparedRecords, run: DiagnosisRun,
@@ -727,18 +765,20 @@ def _features_after(data: PreparedRecords, fit: ModelFit, label: str, run: Diagn
     return features_of(ra, data, fit, run)
 
 
-def try_removal(current: ModelFit, effects, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, ModelFit] | None":
+def try_removal(current: ModelFit, effects, data: PreparedRecords, run: DiagnosisRun) \
+        -> "tuple[tuple[SupportResult, ModelFit] | None, dict]":
     """The backward step: each of ``effects`` switched off in ``current`` and the model refitted
     (:func:`_support_of`); (its support, the fit without it) for the effect whose removal the
-    data favour most — the model without it has the lower BIC — or None."""
-    best = None
+    data favour most — the model without it has the lower BIC — or None; and every effect's
+    ``(support, fit without it)``."""
+    best, every = None, {}
     for eff in effects:
-        sup, mf = _support_of(eff, current, data, run)
+        sup, mf = every[eff] = _support_of(eff, current, data, run)
         if sup.status != "assessed" or sup.delta_bic_if_removed is None or sup.delta_bic_if_removed >= 0:
             continue
         if best is None or sup.delta_bic_if_removed < best[0].delta_bic_if_removed:
             best = (sup, mf)
-    return best
+    return best, every
 
 
 def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_effects: int) -> Verdict:
@@ -755,10 +795,11 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                  "reason": s.removal.explanation})
         if p is None or p.effect not in final.effects:        # a pick withdrawn later is not in the chain
             continue
-        own = effect_values(p.fit, p.effect)
+        at = final if any(t.refit is not None and t.index > s.index for t in steps) else p.fit   # its values now
+        own = effect_values(at, p.effect)
         picks.append(Pick(s.index, p.effect, s.decision.weight, s.base.rmse, p.fit.rmse, p.comparison.delta_bic,
                           p.comparison.p_value,
-                          {n: {"value": v, "std_error": p.fit.std_errors.get(n)} for n, v in own.items()},
+                          {n: {"value": v, "std_error": at.std_errors.get(n)} for n, v in own.items()},
                           list(p.quality), s.decision.reason, s.decision.confidence,
                           next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating))
     label = "base" + "".join(f" − {r['effect']}" for r in removed) + (" (own effects refitted)" if refitted else "") \
@@ -785,7 +826,7 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
     kind, forms = remaining_of(ad)
     stopped = ""
     last = steps[-1]
-    if (picks or removed or refitted) and last.decision.pick is None and last.removal is None and last is not steps[0]:
+    if (picks or removed or refitted) and last.kind == "add" and last.decision.pick is None and last is not steps[0]:
         stopped = f"no further candidate passes on top of [{', '.join(last.base.effects)}] ({last.decision.reason})"
     elif picks and len(picks) == max_effects and ad.adequate is False:
         stopped = f"the chain reached max_effects = {max_effects}"
