@@ -25,6 +25,11 @@ a little.  The label therefore asks what a weight cannot:
   range allowed, an upper bound of what the effect can reach, so the pick must beat it by a
   wider margin than it must beat a free rival.
 
+When the chain refits the model's own effects after a pick (:func:`.diagnosis.select`), a pick
+that stays is labelled again with **change** and **left** measured on the refitted model
+(:func:`reconfirmed`): before the refit a right pick can leave a large residual only because
+the device's values of the model's own effects are not the strip's.
+
 "high" needs all of them (and a weight ≥ :data:`WEIGHT_HIGH`), "low" is a pick that barely
 changes the model, has a near twin or is pinned; everything else is "medium".  The thresholds were
 chosen on some truth families and are reported on others (leave-one-family-out,

@@ -630,8 +630,8 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
     chain is full), once and unless ``--free`` names the free parameters (``run.refit_own``): the
     model's own effects refitted (:func:`refine_own`: the device's values of an effect are a
     start, not the strip's), kept when it lowers the BIC; on top of it, the picks the data no
-    longer favour are withdrawn (removal, as above, not tried again) and the candidates are
-    tried again.  The refit comes after the candidates so that a refitted effect never stands
+    longer favour are withdrawn (removal, as above, not tried again), those that stay are
+    labelled again on it (:func:`_withdraw`) and the candidates are tried again.  The refit comes after the candidates so that a refitted effect never stands
     in for a missing one the candidates find.  Each effect is removed at most once.  Returns the
     steps (the first always)."""
     steps: list[Step] = []
@@ -689,6 +689,7 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
 
 
 def _adequate(data: PreparedRecords, fit: ModelFit) -> bool:
+    """Whether ``fit`` is within the noise (:func:`.adequacy.assess`, the records' wander allowed)."""
     return bool(assess("", fit, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate)
 
 
@@ -1045,8 +1046,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     refined, own_refined = (None, chain_refit.refitted) if chain_refit is not None else \
         _timed(run, "own effects", refine_own, data, final, opts, run.n_starts, run.resonance) \
         if run.refit_own and not run.refit_tried else (None, {})       # --free: the user's list, nothing besides
-    refined_adequate = refined is not None and bool(
-        assess("", refined, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate)
+    refined_adequate = refined is not None and _adequate(data, refined)
     if refined is not None:
         run.log(f"own effects refitted: {', '.join(own_refined)}; RMS error {1e6 * final.rmse:.4g} → "
                 f"{1e6 * refined.rmse:.4g} µm")
