@@ -124,7 +124,7 @@ def test_a_pick_that_stood_in_for_the_devices_values_is_withdrawn_once_they_are_
                        check_support=False)
         fixed = diagnose(case.measurements, "ipmc_pt_eg", case.base_effects, candidates="viscoelastic",
                          check_support=False, free="kf,Y,beta_f")
-    assert [s.kind for s in res.steps] == ["add", "refit", "remove"]
+    assert [s.kind for s in res.steps] == ["add", "refit", "withdraw"]
     assert res.steps[0].decision.pick.effect == "viscoelastic" and not res.picks and res.winner is None
     assert res.base.rmse > 10 * case.noise_floor and res.final.rmse < 1.5 * case.noise_floor
     v = res.verdict
@@ -135,7 +135,7 @@ def test_a_pick_that_stood_in_for_the_devices_values_is_withdrawn_once_they_are_
     assert any(line.startswith("Which effect: none is missing") for line in v.lines())
     assert any(line.startswith("Withdrawn: viscoelastic") for line in v.lines())
     d = res.to_dict()
-    assert [s["kind"] for s in d["steps"]] == ["add", "refit", "remove"]
+    assert [s["kind"] for s in d["steps"]] == ["add", "refit", "withdraw"]
     assert d["settings"]["own_refined"] == v.refitted and d["verdict"]["withdrawn"][0]["effect"] == "viscoelastic"
     assert "refit" not in [s.kind for s in fixed.steps] and fixed.settings["own_refined"] == {}
     assert fixed.verdict.chain == ["viscoelastic"] and fixed.final.rmse > 10 * case.noise_floor

@@ -173,8 +173,7 @@ def _diagnosis_stub(winner, res, rmse_final):
     forms = F.describe(fit, res.records)
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
                  adequacy=_Stub(adequate=False, forms=forms), records=res.records,
-                 verdict=_Stub(status="partly explained" if winner else "not explained by the catalog"),
-                 refined=None, refined_adequate=False)
+                 verdict=_Stub(status="partly explained" if winner else "not explained by the catalog"))
 
 
 def _rediagnose(table, calls):
@@ -229,12 +228,6 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     adequate.verdict.status = "nothing to explain"
     calls.clear()
     assert not draft_effects(adequate, _rediagnose(table, calls)).kept and not calls
-    # ... nor when the final model with its own effects refitted is within the noise
-    left = _diagnosis_stub(pick, res, 4e-6)
-    left.refined, left.refined_adequate = _fit_stub(1.1e-6), True
-    calls.clear()
-    out = draft_effects(left, _rediagnose(table, calls))
-    assert not out.kept and not calls and "own effects refitted" in out.notes[0]
 
 
 def test_a_model_that_cannot_be_refitted_with_the_drafts_leaves_the_diagnosis_standing():

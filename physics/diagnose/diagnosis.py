@@ -27,14 +27,11 @@
    support is removed (:func:`try_removal`) and tried again as a candidate with its own
    parameters free; when no removal is favoured either (or the chain is full), the model's own
    effects are refitted once (:func:`refine_own`), the picks the refitted model does not need
-   are withdrawn and the candidates tried again on top of it.
+   are withdrawn and the candidates tried again on top of it (unless ``--free`` names the free
+   parameters: the user's list, nothing besides).
 6. Adequacy of the final model and what remains (:mod:`.adequacy`, :mod:`.verdict`).
 7. :func:`assess_support` — in the final model each of its own effects is switched off and
    refitted; an effect whose removal does not cost ΔBIC ≥ 6 is "not supported by these data".
-8. :func:`refine_own` — when the chain did not refit (it ended on a pick within the noise) and
-   ``--free`` does not name the free parameters: the final model refitted with its own effects'
-   parameters free, kept when it lowers the BIC; the model written (the best model) takes it
-   when it fits better.
 
 The verdict (:class:`.verdict.Verdict`) is the one object every output renders.
 """
@@ -181,10 +178,14 @@ class Step:
     removed_fit: ModelFit | None = None
     refit: ModelFit | None = None
     refitted: dict = field(default_factory=dict)
+    withdrawn: bool = False           # the removal is of a pick (after the refit), not of the user's model
 
     @property
     def kind(self) -> str:
-        return "refit" if self.refit is not None else "remove" if self.removal is not None else "add"
+        """``add`` (a forward step), ``remove``, ``withdraw`` (a pick) or ``refit``."""
+        if self.refit is not None:
+            return "refit"
+        return "add" if self.removal is None else "withdraw" if self.withdrawn else "remove"
 
     @property
     def ranking(self) -> list[CandidateResult]:
@@ -237,7 +238,6 @@ class DiagnosisRun:
     max_effects: int = 2
     backward: bool = True
     refit_own: bool = True            # the own effects refitted in the chain (:func:`select`); not with --free
-    refit_tried: bool = False         # ... and the chain tried it (kept or not)
     resonance: float | None = None
     timings: dict = field(default_factory=dict)
     progress: Callable[[str], None] | None = None
@@ -265,8 +265,6 @@ class DiagnosisResult:
     settings: dict
     timings: dict
     warnings: list[str] = field(default_factory=list)
-    refined: ModelFit | None = None   # the final model with its own effects refitted (:func:`refine_own`)
-    refined_adequate: bool = False    # ... and within the noise (:func:`.adequacy.assess`)
 
     @property
     def candidates(self) -> list[CandidateResult]:
@@ -304,10 +302,11 @@ class DiagnosisResult:
 
     @property
     def draft_base(self) -> ModelFit:
-        """Where drafted effects start from: the model after the last removal of an effect of the
-        user's model (the base without the effects the data do not support), else the base."""
-        rem = [s for s in self.steps if s.removed_fit is not None and s.removal.effect in self.base.effects]
-        return rem[-1].removed_fit if rem else self.base
+        """Where drafted effects start from: the model after the last backward or refit step (the
+        base without the effects the data do not support, with its own effects refitted), else
+        the base."""
+        back = [s for s in self.steps if s.kind != "add"]
+        return back[-1].result if back else self.base
 
     @property
     def best(self) -> CandidateResult | None:
@@ -520,8 +519,8 @@ def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_star
     (:func:`.signatures.revealable`) and that it holds at the device's values fitted beside its
     free ones, from those values (else the effect's derived start): the device's values of an
     effect are a start, not this strip's.  A step of the chain after the candidates (:func:`select`;
-    refitted before them, a refitted effect could stand in for a missing one), else phase 8; kept
-    when it lowers the BIC with its parameters counted (:func:`.candidates.compare_fits`).
+    refitted before them, a refitted effect could stand in for a missing one); kept when it
+    lowers the BIC with its parameters counted (:func:`.candidates.compare_fits`).
     Returns (the refitted model or None, {name: {"device": value or None, "refined": value}})."""
     taken = set(fit.spec.free) | set(fit.spec.per_rh)
     own = {e: [n for n in effect_params(e) + shape_params(e) if n not in taken] for e in switchable(fit.effects)
@@ -543,6 +542,7 @@ def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_star
                     n_modes=options.n_modes, df_cache=data.df_cache)
     if out.ok:
         score(out, data.records)
+        refine_on_time(out, data.records)      # the FRF optimum need not be the time records' (the fit's may be)
     if not out.ok or not compare_fits(fit, out, True).delta_bic < 0:
         return None, {}
     return out, {n: {"device": dev.params.get(n), "refined": float(out.values[n])} for n in names}
@@ -672,7 +672,7 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
                 continue
         if not run.refit_own or refitted:
             break
-        refitted = run.refit_tried = True
+        refitted = True
         fit, values = _timed(run, f"step {k}: own effects", refine_own, data, step_base, run.options, run.n_starts,
                              run.resonance)
         if fit is None:
@@ -697,9 +697,10 @@ def _removal_step(k: int, current: ModelFit, got, steps: list, removed: set, run
     """Append the backward step removing ``got`` = (support, fit without it); returns that fit."""
     sup, fit = got
     removed.add(sup.effect)
-    steps.append(Step(k, current, [], Decision(None, {}, {}, reason=sup.explanation), sup, fit))
-    run.log(f"step {k}: {sup.effect} {'removed' if sup.effect in steps[0].base.effects else 'withdrawn'} "
-            f"({sup.explanation})")
+    s = Step(k, current, [], Decision(None, {}, {}, reason=sup.explanation), sup, fit,
+             withdrawn=sup.effect not in steps[0].base.effects)
+    steps.append(s)
+    run.log(f"step {k}: {sup.effect} {'withdrawn' if s.withdrawn else 'removed'} ({sup.explanation})")
     return fit
 
 
@@ -790,7 +791,7 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
         p = s.decision.pick
         refitted.update(s.refitted)
         if s.removal is not None:
-            (removed if s.removal.effect in base.effects else withdrawn).append(
+            (withdrawn if s.withdrawn else removed).append(
                 {"step": s.index, "effect": s.removal.effect, "rmse_before_m": s.base.rmse,
                  "rmse_after_m": s.removed_fit.rmse, "delta_bic": s.removal.delta_bic_if_removed,
                  "reason": s.removal.explanation})
@@ -832,7 +833,7 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
     elif picks and len(picks) == max_effects and ad.adequate is False:
         stopped = f"the chain reached max_effects = {max_effects}"
     reason = first.reason if not picks else picks[0].reason
-    if refitted and not picks:
+    if refitted and not picks and ad.adequate:
         reason = (f"with its own effects refitted ({', '.join(refitted)}) the model leaves {1e6 * final.rmse:.4g} µm "
                   f"(the base {1e6 * base.rmse:.4g} µm): the device's values of its effects were not this strip's")
     noise, source = data.noise, data.noise_source
@@ -1042,14 +1043,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     verdict = build_verdict(data, base, steps, run.max_effects)
     support = _timed(run, "support", assess_support, final, [p.effect for p in picks], data, run) \
         if check_support else []
-    chain_refit = next((s for s in steps if s.refit is not None), None)
-    refined, own_refined = (None, chain_refit.refitted) if chain_refit is not None else \
-        _timed(run, "own effects", refine_own, data, final, opts, run.n_starts, run.resonance) \
-        if run.refit_own and not run.refit_tried else (None, {})       # --free: the user's list, nothing besides
-    refined_adequate = refined is not None and _adequate(data, refined)
-    if refined is not None:
-        run.log(f"own effects refitted: {', '.join(own_refined)}; RMS error {1e6 * final.rmse:.4g} → "
-                f"{1e6 * refined.rmse:.4g} µm")
+    own_refined = next((s.refitted for s in steps if s.refit is not None), {})
     shown = picks[-1] if picks else (steps[0].ranking[0] if steps[0].ranking else None)
     ra_after = None if shown is None else analyse(
         "+" + " +".join(p.effect for p in picks) if picks else f"+{shown.effect}", data.records, shown.fit.resid_d,
@@ -1067,7 +1061,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
                           "floor_m": data.noise,
                           "source": data.noise_source}}
     return DiagnosisResult(dev, data.records, base, steps, support, verdict, ra_base, ra_after, feats, data.noise,
-                           run.resonance, settings, run.timings, list(base.warnings), refined, refined_adequate)
+                           run.resonance, settings, run.timings, list(base.warnings))
 
 
 def _timed(run: DiagnosisRun, label: str, fn, *args, **kw):

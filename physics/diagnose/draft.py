@@ -67,8 +67,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
     the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.
 
-    Nothing is drafted when there is nothing to explain, or when the final model with its own
-    effects refitted (``res.refined``) is within the noise: nothing remains for a form.
+    Nothing is drafted when there is nothing to explain, or when the final model (its own
+    effects refitted by the chain when it did) is within the noise without a pick.
     Otherwise, forward from the base, the drafts compete with the catalog effects the diagnosis
     picked, even when the model with them is adequate (a catalog effect can mimic physics it
     does not model within the noise, e.g. the electrode resistance a sensor's low-pass): the
@@ -80,8 +80,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     from .candidates import effect_values, map_free
     fit = res.final
     ad = res.adequacy
-    if res.verdict.status == "nothing to explain" or (ad is not None and ad.adequate and not res.picks) \
-            or res.refined_adequate:
+    if res.verdict.status == "nothing to explain" or (ad is not None and ad.adequate and not res.picks):
         items = []
     else:       # an adequate catalog pick may still be a mimic: the drafts compete with it
         items = drafts(ad.forms if ad is not None and ad.forms else describe(fit, res.records), fit, res.records)
@@ -90,12 +89,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     # already: drafting it again would name one effect twice
     items = [d for d in items if d.effect_id not in EFFECTS]
     outcome = DraftOutcome([], [], fit.rmse)
-    if res.refined_adequate:
-        outcome.notes.append(f"nothing drafted: with its own effects refitted the model leaves "
-                             f"{1e6 * res.refined.rmse:.4g} µm, within the noise")
     if not items:
         return outcome
-    base = getattr(res, "draft_base", res.base)       # the base without the effects the data do not support
+    base = getattr(res, "draft_base", res.base)       # without the effects the data do not support, refitted
     on_top, free, device = list(base.effects), list(base.spec.free), base.device
     catalog = [p.effect for p in res.picks if p.effect not in on_top]
     with tempfile.TemporaryDirectory(prefix="eap-drafts-") as tmp:

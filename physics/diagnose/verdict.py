@@ -413,9 +413,9 @@ class Verdict:
             out.append("Its own effects refitted (the device's values are a start, not this strip's): "
                        + ", ".join(_fmt_refit(n, v) for n, v in self.refitted.items()) + ".")
         for r in self.withdrawn:
-            out.append(f"Withdrawn: {r['effect']} (picked at an earlier step) — with the model's own effects refitted "
-                       f"the data no longer favour it: RMS error {1e6 * r['rmse_before_m']:.4g} → "
-                       f"{1e6 * r['rmse_after_m']:.4g} µm without it ({r['reason']}).")
+            out.append(f"Withdrawn: {r['effect']}, picked before the model's own effects were refitted — on the "
+                       f"refitted model it is {r['reason']}: it stood in for the device's values, not for missing "
+                       "physics.")
         if self.picks:
             for k, p in enumerate(self.picks):
                 head = "Which effect: " if k == 0 else "Then, on top of it: "

@@ -84,8 +84,18 @@ def print_summary(res, file=None) -> None:
     print("where it fails:", file=file)
     for f in res.analysis_base.findings:
         print(f"  - {f}", file=file)
+    prev = None
     for s in res.steps:
-        on = "" if s.index == 1 else f" on top of {s.base.effects[-1]}"
+        if s.kind != "add":         # a backward or refit step: what it did, in one line
+            print(f"step {s.index}: " + (s.decision.reason if s.kind == "refit" else
+                                         f"{s.removal.effect} {'withdrawn' if s.withdrawn else 'removed'} "
+                                         f"({s.removal.explanation})"), file=file)
+            prev = s
+            continue
+        on = "" if prev is None else (" on top of the model with its own effects refitted" if prev.kind == "refit"
+                                      else f" without {prev.removal.effect}" if prev.removal is not None
+                                      else f" on top of {s.base.effects[-1]}")
+        prev = s
         print(f"step {s.index}: candidates{on}, most to least supported:", file=file)
         print(f"  {'effect':22s} {'weight':>7s} {'RMS after [µm]':>15s} {'ΔBIC':>11s} {'p-value':>9s} {'flags':>5s}  "
               "evidence", file=file)
@@ -185,8 +195,6 @@ def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
     fit, files = res.final, []
     if outcome is not None and outcome.kept and outcome.final is not None and outcome.final.rmse < fit.rmse:
         fit, files = outcome.final, [str(drafts_dir / d.file_name) for d in outcome.kept]
-    if res.refined is not None and res.refined.rmse < fit.rmse:
-        fit, files = res.refined, []
     if fit is res.base and not files:
         return None
     files = list(user_files) + files
@@ -196,7 +204,7 @@ def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
             "text": f"[{', '.join(fit.effects)}] RMS error {1e6 * res.base.rmse:.4g} → {1e6 * fit.rmse:.4g} µm{ratio}"
                     + (f" (with the drafted {', '.join(d.effect_id for d in outcome.kept)})" if files and fit is not res.final
                        else f" (its own effects refitted: {', '.join(res.settings['own_refined'])})"
-                       if fit is res.refined else "")}
+                       if res.settings["own_refined"] else "")}
 
 
 def _register(kept) -> None:
