@@ -64,7 +64,8 @@ def extract(diag: dict) -> dict:
                       "rmse_before": p.get("rmse_before_m"), "rmse_after": p.get("rmse_after_m"),
                       "quality_flags": p.get("quality_flags") or []})
     base = (diag.get("base") or {}).get("rmse")
-    final = chain[-1]["rmse_after"] if chain else base
+    # the model the verdict describes: the base with the chain's removals, refit and picks
+    final = v.get("final_rmse_m") or (chain[-1]["rmse_after"] if chain else base)
     offsets = {}
     for r in (v.get("nuisance") or {}).get("records") or []:
         if r.get("offset_um") is not None:

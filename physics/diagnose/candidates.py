@@ -667,9 +667,11 @@ def model_at(mf: ModelFit, theta) -> ActuatorModel:
     return ActuatorModel(dev.with_params(**extra) if extra else dev, mf.effects, n_modes=mf.model.n_modes)
 
 
-def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
+def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int = TIME_REFINE_SIMS,
+                   start=None) -> bool:
     """Refit the FRF-fitted free parameters of ``mf`` on the time records, from the FRF
-    optimum (in place; True when the error fell).  The FRF fit weighs the frequencies by
+    optimum — or from ``start`` (problem coordinates), e.g. its start point when that fits the
+    time records better — within ``sims`` simulations (in place; True when the error fell).  The FRF fit weighs the frequencies by
     their coherence on a log scale; the verdict's error is the time records' RMS, dominated
     by the large slow motion: with a base that cannot match the device exactly the two optima
     differ.  Bounded least squares in the FRF fit's search coordinates (at most
@@ -694,9 +696,9 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
         m = model_at(mf, problem.from_x(x))
         return np.concatenate([r.detrend_d(r.y_d - predict(m, r)) for r in records]) / scale
 
-    x0 = np.clip(problem.to_x(fit.theta), lo + 1e-9 * span, hi - 1e-9 * span)
+    x0 = np.clip(problem.to_x(fit.theta if start is None else start), lo + 1e-9 * span, hi - 1e-9 * span)
     p = x0.size
-    iterations = (TIME_REFINE_SIMS - 2 * p - 1) // (p + 1)
+    iterations = (sims - 2 * p - 1) // (p + 1)
     if iterations < 1:
         return False
     with warnings.catch_warnings():
@@ -720,8 +722,9 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     mf.warnings = unc["warnings"] + [w for w in mf.warnings if any(w.startswith(n + " ") for n in extra)]
     score(mf, records)
     mf.time_refined = True
-    mf.spec.notes.append(f"{', '.join(labels)} refined on the time records from the FRF optimum: RMS error "
-                         f"{1e6 * before:.4g} → {1e6 * mf.rmse:.4g} µm")
+    mf.spec.notes.append(f"{', '.join(labels)} refined on the time records from the "
+                         f"{'FRF optimum' if start is None else 'start'}: RMS error {1e6 * before:.4g} → "
+                         f"{1e6 * mf.rmse:.4g} µm")
     return True
 
 

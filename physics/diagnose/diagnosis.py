@@ -59,7 +59,7 @@ from ..execution.threads import single_threaded
 from .candidates import (Comparison, ModelFit, ModelSpec, ROLE_GAIN, ROLE_STIFF, candidate_spec, compare_fits,
                          default_candidates, default_free, derived_starts, effect_values, fit_model, is_nested,
                          no_worse_than_base, param_used, prediction_distance, refine_on_time, removal_spec, score,
-                         start_in_range, start_on_time)
+                         start_in_range, start_on_time, TIME_REFINE_SIMS)
 from . import confidence as conf
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN
@@ -75,6 +75,9 @@ from .verdict import ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, deci
 SUPPORT_BIC = 6.0
 #: Default length of the forward-selection chain.
 MAX_EFFECTS = 2
+#: Simulations of the records the time refinement of the own-effects refit may spend (it frees
+#: many parameters: ~12 iterations at 16).
+REFIT_TIME_SIMS = 4 * TIME_REFINE_SIMS
 
 
 @dataclass(frozen=True)
@@ -530,7 +533,8 @@ def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_star
     if not names:
         return None, {}
     dev = fit.device                    # the fitted model's device: its own effects still at the device's values
-    start, bounds = dict(fit.spec.start), dict(fit.spec.bounds)
+    start = {**fit.spec.start, **{n: float(fit.values[n]) for n in fit.spec.free if n in fit.values}}   # where it is
+    bounds = dict(fit.spec.bounds)
     for e, ns in own.items():
         derived = derived_starts(e, dev)
         for n in ns:
@@ -542,7 +546,10 @@ def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_star
                     n_modes=options.n_modes, df_cache=data.df_cache)
     if out.ok:
         score(out, data.records)
-        refine_on_time(out, data.records)      # the FRF optimum need not be the time records' (the fit's may be)
+        # the FRF optimum need not be the time records': refined on them, from the start (the model as it
+        # was) when that fits them better
+        refine_on_time(out, data.records, sims=REFIT_TIME_SIMS,
+                       start=out.result.problem.theta0 if out.rmse > fit.rmse else None)
     if not out.ok or not compare_fits(fit, out, True).delta_bic < 0:
         return None, {}
     return out, {n: {"device": dev.params.get(n), "refined": float(out.values[n])} for n in names}

@@ -517,9 +517,9 @@ def _unit_of(name: str) -> str:
 
 
 def _fmt_refit(name: str, v: dict) -> str:
-    """``Rs 120 → 360 Ω``: a refitted parameter from the device's value (or its start)."""
+    """``Rs 120 → 360 Ω``: a refitted parameter from the device's value (when it has one)."""
     unit = _unit_of(name)
-    dev = "its start" if v.get("device") is None else f"{v['device']:.4g}"
+    dev = "(no device value)" if v.get("device") is None else f"{v['device']:.4g}"
     return f"{name} {dev} → {v['refined']:.4g}{(' ' + unit) if unit else ''}"
 
 
