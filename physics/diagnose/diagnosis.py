@@ -717,7 +717,8 @@ def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: 
     model needs least is withdrawn while the data favour its removal (it stood in for the
     device's values, not for missing physics).  The picks that stay are labelled again on the
     refitted model (:func:`.confidence.reconfirmed`): the error each removes there and the
-    error the model leaves.  Returns the model after the withdrawals."""
+    error the model leaves (a near twin's pick stays "low").  Returns the model after the
+    withdrawals."""
     every: dict = {}          # the last test's supports, all on ``current`` when no withdrawal followed
     while picked:
         got, every = try_removal(current, [e for e in picked if e not in removed], data, run)
