@@ -671,12 +671,12 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
                    start=None) -> bool:
     """Refit the FRF-fitted free parameters of ``mf`` on the time records, from the FRF
     optimum — or from ``start`` (problem coordinates), e.g. its start point when that fits the
-    time records better — within ``sims`` simulations (in place; True when the error fell).  The FRF fit weighs the frequencies by
-    their coherence on a log scale; the verdict's error is the time records' RMS, dominated
-    by the large slow motion: with a base that cannot match the device exactly the two optima
-    differ.  Bounded least squares in the FRF fit's search coordinates (at most
-    :data:`TIME_REFINE_NFEV` evaluations, each a simulation of every record at the analysis
-    rate) within :data:`TIME_REFINE_SIMS` simulations of the records (each iteration costs one
+    time records better — within ``sims`` simulations (in place; True when the error fell).
+    The FRF fit weighs the frequencies by their coherence on a log scale; the verdict's error
+    is the time records' RMS, dominated by the large slow motion: with a base that cannot match
+    the device exactly the two optima differ.  Bounded least squares in the FRF fit's search
+    coordinates, each evaluation a simulation of every record at the analysis rate, within
+    ``sims`` simulations of the records (default :data:`TIME_REFINE_SIMS`; each iteration costs one
     per parameter for its Jacobian, the uncertainty two per parameter); the uncertainties are
     then those of the time residual (Bates & Watts, the covariance inflated by its
     autocorrelation time).  Linear models only: a large-signal model runs the implicit stepper,

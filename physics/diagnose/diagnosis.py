@@ -244,6 +244,7 @@ class DiagnosisRun:
     resonance: float | None = None
     timings: dict = field(default_factory=dict)
     progress: Callable[[str], None] | None = None
+    supports: dict = field(default_factory=dict)   # (effect, id(fit)) -> (fit, support, fit without it)
 
     def log(self, msg: str) -> None:
         if self.progress is not None:
@@ -886,7 +887,19 @@ def assess_support(final: ModelFit, picked: Sequence[str], data: PreparedRecords
 
 
 def _support_of(eff: str, final: ModelFit, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, ModelFit | None]":
-    """``eff`` switched off in ``final`` and the model refitted: (its support, the fit without it)."""
+    """``eff`` switched off in ``final`` and the model refitted: (its support, the fit without it).
+    Computed once per model: the backward step after a refit and the support check (phase 7)
+    ask the same of a final model the chain did not change."""
+    key = (eff, id(final))
+    if key in run.supports and run.supports[key][0] is final:
+        return run.supports[key][1:]
+    out = _support_fit(eff, final, data, run)
+    run.supports[key] = (final, *out)
+    return out
+
+
+def _support_fit(eff: str, final: ModelFit, data: PreparedRecords, run: DiagnosisRun) -> "tuple[SupportResult, ModelFit | None]":
+    """:func:`_support_of`, computed."""
     ok, why = revealable(eff, data.records, run.resonance)
     if not ok:
         return SupportResult(eff, "not_assessable",
