@@ -275,6 +275,47 @@ def test_residual_checks_white_vs_missing_dynamics():
     assert any("correlated with the input" in f for f in ra2.findings)
 
 
+def test_amplitude_dependence_is_read_at_one_humidity_and_harmonics_above_the_noise():
+    """A model whose gain is off at RH 40 % only, on a linear strip driven at two amplitudes at
+    RH 60 %: no gain that depends on the amplitude (the misfit differs by humidity, not by
+    amplitude), and a residual at the noise floor shows no harmonic distortion — the features
+    once pooled 0.3 V records across humidities and counted white noise at the quiet
+    frequencies as harmonics.  A gain that drops at the higher amplitude, and a cubic term in
+    the residual, are then found."""
+    from physics.diagnose.signatures import features
+    rng = np.random.default_rng(5)
+    recs = []
+    for k, (amp, rh) in enumerate([(0.3, 40.0), (0.3, 60.0), (0.75, 60.0)]):
+        sig = signals.multisine(amp, 0.1, 10.0, 20.0, periods=3, fs=100.0, seed=k)
+        y = 1e-3 * np.convolve(sig.v, np.exp(-np.arange(40) / 8.0) / 8.0)[:sig.v.size]
+        recs.append(TimeSeries(sig.t, sig.v, y + 1e-6 * rng.standard_normal(sig.t.size),
+                               rh=np.full(sig.t.size, rh), source=f"ms{k}"))
+    recs = prepare_records(recs)
+    assert [r.kind for r in recs] == ["broadband"] * 3 and len({r.amplitude_level for r in recs}) == 2
+
+    def feats(gains, cubic=0.0):
+        preds, resid = [], []
+        for r, g in zip(recs, gains):
+            white = r.noise_floor_d * rng.standard_normal(r.y_d.size)
+            pred = r.y_d / g
+            e = r.y_d - pred + white + cubic * (r.v_d / np.abs(r.v_d).max()) ** 3
+            preds.append(pred)
+            resid.append(e - e.mean())
+        ra = analyse("m", recs, resid, preds)
+        return ra, features(ra, recs, None)
+
+    ra, f = feats([1.25, 1.0, 1.0])
+    assert [c["rh_pct"] for c in ra.amplitude_contrast] == [60.0]
+    assert f["amplitude_dependence"]["present"] is False and abs(ra.amplitude_contrast[0]["change"]) < 0.01
+    assert f["harmonics"]["present"] is False and f["harmonics"]["share"] < 0.01
+    assert not any("depends on the amplitude" in x or "harmonic" in x for x in ra.findings)
+    ra, f = feats([1.25, 1.0, 0.85])
+    assert f["amplitude_dependence"]["present"] is True and ra.amplitude_contrast[0]["change"] < -0.1
+    assert any("at RH 60 %" in x and "depends on the amplitude" in x for x in ra.findings)
+    ra, f = feats([1.0, 1.0, 1.0], cubic=50e-6)         # ~2.5 µm RMS of cubic products, a 1 µm floor
+    assert f["harmonics"]["present"] is True and f["amplitude_dependence"]["present"] is False
+
+
 def test_findings_are_phrased_for_a_person():
     case = hidden_effect_case("solvent_diffusion", seed=0)
     res = _diagnose(case, candidates="solvent_diffusion", check_support=False)

@@ -20,7 +20,10 @@ offset removed, u the voltage.
   and modelled responses, estimated the same way, give the relative gain and phase error.
 * **Error by frequency band** (decades; :func:`physics.compare.residual_by_band`), **by
   amplitude level** (gain ratio measured/model and the harmonic-distortion share of the
-  residual: power at frequencies where the input has none), **by RH level**, and **over
+  residual: power at frequencies where the input has none, beyond :data:`NOISE_MARGIN` times
+  what the record's noise floor puts there), the **amplitude contrast** (the gain ratio at two
+  amplitudes of one kind of excitation at one RH level, :func:`amplitude_contrast`: only there
+  is a change a gain that depends on the amplitude), **by RH level**, and **over
   time after steps** (mean residual early vs. late in each hold: slow drifts such as
   back-relaxation).
 * **Findings**: sentences for a person, e.g. "Between 0.10 and 0.30 Hz the model
@@ -43,6 +46,12 @@ from .records import PreparedRecord
 Z99 = float(sstats.norm.ppf(0.995))
 BANDS_PER_DECADE = 10
 ALPHA = 0.01
+#: Power at the quiet frequencies counted as distortion only beyond this multiple of what white
+#: noise at the record's floor puts there (3 dB: room for a floor estimated a little low).
+NOISE_MARGIN = 2.0
+#: A measured/model gain that changes by more than this share between two amplitudes of the
+#: same excitation at one RH level depends on the amplitude.
+AMPLITUDE_CHANGE = 0.03
 
 
 @dataclass
@@ -88,6 +97,7 @@ class ResidualAnalysis:
     after_steps: list[dict]
     findings: list[str] = field(default_factory=list)
     trend: list[dict] = field(default_factory=list)
+    amplitude_contrast: list[dict] = field(default_factory=list)   # :func:`amplitude_contrast`
 
     @property
     def acf_outside(self) -> float:
@@ -114,7 +124,8 @@ class ResidualAnalysis:
                 "cross_correlation": {"lag_s": self.ccf_lag_s.tolist(), "rho": self.ccf.tolist(),
                                       "band_99": self.ccf_band, "fraction_outside": self.ccf_outside},
                 "ljung_box": self.ljung_box, "residual_frf": frf, "by_band": self.by_band,
-                "by_amplitude": self.by_amplitude, "by_rh": self.by_rh, "after_steps": self.after_steps, "trend": self.trend,
+                "by_amplitude": self.by_amplitude, "amplitude_contrast": self.amplitude_contrast, "by_rh": self.by_rh,
+                "after_steps": self.after_steps, "trend": self.trend,
                 "findings": self.findings}
 
 
@@ -248,7 +259,32 @@ def _distortion_share(r: PreparedRecord, e: np.ndarray) -> float | None:
     tot = E[1:].sum()
     if tot <= 0 or not quiet.any():
         return None
-    return float(E[quiet].sum() / tot)
+    # white noise of RMS σ puts N σ² into each bin (E|X_k|² for 0 < k < N/2): only the power beyond
+    # NOISE_MARGIN times that is distortion — a residual near the noise would otherwise show half its
+    # power "at harmonics"
+    sigma = r.noise_floor_d
+    noise = NOISE_MARGIN * int(quiet.sum()) * e.size * sigma ** 2 if math.isfinite(sigma) else 0.0
+    return float(max(E[quiet].sum() - noise, 0.0) / tot)
+
+
+def amplitude_contrast(records, resid, preds) -> list[dict]:
+    """The measured/model gain at the lowest and the highest amplitude level of the same kind of
+    excitation at one RH level, for each such pair: a misfit that differs with humidity or with
+    the excitation is not read as a gain that depends on the amplitude."""
+    groups: dict[tuple, dict[float, list[int]]] = {}
+    for i, r in enumerate(records):
+        if r.kind in ("broadband", "tone", "steps"):
+            groups.setdefault((r.rh, r.kind), {}).setdefault(r.amplitude_level, []).append(i)
+    out = []
+    for (rh, kind), levels in sorted(groups.items()):
+        if len(levels) < 2:
+            continue
+        lo, hi = min(levels), max(levels)
+        g_lo, g_hi = _gain_phase(records, resid, preds, levels[lo])[0], _gain_phase(records, resid, preds, levels[hi])[0]
+        if g_lo and g_hi:
+            out.append({"rh_pct": rh, "kind": kind, "amplitude_low_V": lo, "amplitude_high_V": hi,
+                        "gain_ratio_low": g_lo, "gain_ratio_high": g_hi, "change": g_hi / g_lo - 1.0})
+    return out
 
 
 def by_group(records, resid, preds, key: str) -> list[dict]:
@@ -318,6 +354,7 @@ def analyse(label: str, records: Sequence[PreparedRecord], resid: Sequence[np.nd
                           by_group(records, resid, preds, "amplitude"), by_group(records, resid, preds, "rh"),
                           after_steps(records, resid, noise if math.isfinite(noise) else 0.0))
     ra.trend = trend(records, resid)
+    ra.amplitude_contrast = amplitude_contrast(records, resid, preds)
     ra.findings = findings(ra, records, resonance_hz=resonance_hz)
     return ra
 
@@ -384,13 +421,13 @@ def findings(ra: ResidualAnalysis, records: Sequence[PreparedRecord], *, resonan
                    "missing input dynamics.")
     else:
         out.append("The residual passes the whiteness and independence checks at 1 %.")
-    if len(ra.by_amplitude) >= 2:
-        a0, a1 = ra.by_amplitude[0], ra.by_amplitude[-1]
-        g0, g1 = a0.get("gain_ratio_meas_over_model"), a1.get("gain_ratio_meas_over_model")
-        if g0 and g1 and abs(g1 / g0 - 1) > 0.03:
-            out.append(f"The gain depends on the amplitude: relative to the model it is {100 * (g1 / g0 - 1):+.2g} % "
-                       f"at {a1['amplitude_V']:.3g} V compared with {a0['amplitude_V']:.3g} V "
-                       "(a linear model cannot do this).")
+    for c in ra.amplitude_contrast:
+        if abs(c["change"]) > AMPLITUDE_CHANGE:
+            out.append(f"The gain depends on the amplitude: at RH {c['rh_pct']:g} % relative to the model it is "
+                       f"{100 * c['change']:+.2g} % at {c['amplitude_high_V']:.3g} V compared with "
+                       f"{c['amplitude_low_V']:.3g} V, the same kind of excitation (a linear model cannot do this).")
+    if ra.by_amplitude:
+        a1 = ra.by_amplitude[-1]
         d = a1.get("distortion_share_of_residual")
         if d is not None and d > 0.05:
             out.append(f"At {a1['amplitude_V']:.3g} V, {100 * d:.2g} % of the residual lies at harmonics outside "

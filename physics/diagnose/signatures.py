@@ -39,8 +39,9 @@ thermal                     (not by default) long large-amplitude records
   width or frequency): ``viscoelastic`` (``layered_beam``);
 * ``lf_small_lag`` — a nearly constant small phase lag (−0.5° to −10°) below resonance:
   material loss, ``viscoelastic``;
-* ``amplitude_dependence`` — the measured/model gain differs by > 3 % between amplitude
-  levels: ``nonlinear_charge``; ``harmonics`` — > 5 % of the residual at harmonics;
+* ``amplitude_dependence`` — the measured/model gain differs by > 3 % between two amplitudes
+  of the same kind of excitation at one RH level (:func:`.residuals.amplitude_contrast`):
+  ``nonlinear_charge``; ``harmonics`` — > 5 % of the residual at harmonics, beyond the noise;
 * ``rh_dependence`` — the measured/model gain differs by > 5 % between RH levels: ``humidity``;
 * ``step_back_relaxation`` / ``step_creep`` — after steps the measurement relaxes back
   (``solvent_diffusion``) or keeps creeping (``fractional_coupling``) relative to the model;
@@ -60,7 +61,7 @@ from typing import Sequence
 import numpy as np
 
 from .records import RH_SPAN, PreparedRecord, amplitude_groups, rh_levels
-from .residuals import ResidualAnalysis
+from .residuals import AMPLITUDE_CHANGE, ResidualAnalysis
 from .specs import excitation, signature, spec_of
 
 FEATURE_TEXT = {
@@ -139,17 +140,13 @@ def features(ra: ResidualAnalysis, records: Sequence[PreparedRecord], resonance_
     frf = ra.frf
     if frf is not None and frf.freq.size >= 3:
         out.update(_frf_features(frf, resonance_hz))
-    if len(ra.by_amplitude) >= 2 and len({r.rh for r in records}) >= 1:
-        g = [a.get("gain_ratio_meas_over_model") for a in ra.by_amplitude]
-        g = [x for x in g if x]
-        out["amplitude_dependence"] = {"present": bool(len(g) >= 2 and abs(g[-1] / g[0] - 1) > 0.03),
-                                       "gain_ratios": g}
-        d = [a.get("distortion_share_of_residual") for a in ra.by_amplitude]
-        d = [x for x in d if x is not None]
-        out["harmonics"] = {"present": bool(d and max(d) > 0.05) if d else None, "share": max(d) if d else None}
+    if ra.amplitude_contrast:
+        g = [c["change"] for c in ra.amplitude_contrast]
+        out["amplitude_dependence"] = {"present": bool(max(abs(x) for x in g) > AMPLITUDE_CHANGE), "changes": g}
     else:
         out["amplitude_dependence"] = {"present": None}
-        out["harmonics"] = {"present": None}
+    d = [x for x in (a.get("distortion_share_of_residual") for a in ra.by_amplitude) if x is not None]
+    out["harmonics"] = {"present": bool(max(d) > 0.05), "share": max(d)} if d else {"present": None}
     if len(ra.by_rh) >= 2:
         g = [row.get("gain_ratio_meas_over_model") for row in ra.by_rh]
         g = [x for x in g if x]

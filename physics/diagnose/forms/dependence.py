@@ -1,6 +1,8 @@
 """Amplitude and RH dependence of what remains: the relative residual (RMS residual / RMS
 output) of the largest against the smallest amplitude (RH) level, within records of one
-kind (a pulse and a sweep differ in relative residual whatever their levels).  A ratio
+kind (a pulse and a sweep differ in relative residual whatever their levels) at one RH
+(amplitude) level: a misfit that changes with humidity is not an amplitude dependence, nor
+one that changes with the amplitude a humidity dependence.  A ratio
 ≥ :data:`DEPENDENCE_RATIO` (or ≤ its inverse) is called a dependence.  Described, not
 drafted: the catalog's ``nonlinear_charge`` and ``humidity`` are the effects for them.
 """
@@ -16,13 +18,15 @@ DEPENDENCE_RATIO = 1.5
 
 class _Dependence(Form):
     attr: str
+    within: str             # the other level, held fixed
     unit: str
     key: str
 
     def fit(self, res: Residual) -> FormFit | None:
         by_kind: dict = {}
         for r, e, p in zip(res.records, res.resid, res.preds):
-            by_kind.setdefault(r.kind, {}).setdefault(round(float(getattr(r, self.attr)), 6), []).append((e, p))
+            by_kind.setdefault((r.kind, round(float(getattr(r, self.within)), 6)), {}).setdefault(
+                round(float(getattr(r, self.attr)), 6), []).append((e, p))
         groups = max(by_kind.values(), key=len)
         if len(groups) < 2:
             return None
@@ -38,8 +42,9 @@ class _Dependence(Form):
 
 
 class AmplitudeDependence(_Dependence):
-    id, title, attr, unit, key = "amplitude_dependence", "amplitude dependence", "amplitude_level", "V", "amplitude"
+    id, title, attr, within, unit, key = ("amplitude_dependence", "amplitude dependence", "amplitude_level", "rh", "V",
+                                          "amplitude")
 
 
 class RHDependence(_Dependence):
-    id, title, attr, unit, key = "rh_dependence", "RH dependence", "rh", "%", "rh"
+    id, title, attr, within, unit, key = "rh_dependence", "RH dependence", "rh", "amplitude_level", "%", "rh"
