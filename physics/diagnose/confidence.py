@@ -66,15 +66,14 @@ LABELS = ("high", "medium", "low")
 #: (``bench/diagnose_lofo.py`` then ``bench/diagnose_calibration.py``): per label, the picks and
 #: how many named the hidden effect (right), a near twin's relative (acceptable) or another
 #: (wrong).  Measured, not assumed; :func:`calibration_text` says it in one sentence.
-CALIBRATION = {"held_out": "circuit_lab", "families": ("circuit_lab",), "cases": 23, "code": "3149f5d",
-               "caveat": "fresh draws (seed 2) of a family held out of the choice of the label thresholds; its "
-                         "seeds 0-1 were read when the rules for pinned picks and for rivals held on a bound "
-                         "were chosen",
-               "command": "python bench/diagnose_lofo.py --families circuit_lab --seeds 2; "
-                          "python bench/diagnose_calibration.py --families circuit_lab --seeds 2 --held-out circuit_lab",
-               "labels": {"high": {"n": 2, "right": 2, "acceptable": 0, "wrong": 0},
-                          "medium": {"n": 20, "right": 14, "acceptable": 3, "wrong": 3},
-                          "low": {"n": 3, "right": 0, "acceptable": 0, "wrong": 3}},
+CALIBRATION = {"held_out": "circuit_lab", "families": ("circuit_lab",), "cases": 19, "code": "463500c",
+               "caveat": "fresh draws (seed 4) of a family held out of the choice of the label thresholds: 19 of its "
+                         "23 truths (two ran past the bench's 30-minute limit, two were not run); its in-catalog "
+                         "cases were seen when a refit rule was chosen",
+               "command": "python bench/diagnose_lofo.py --families circuit_lab --seeds 4 --held-out circuit_lab",
+               "labels": {"high": {"n": 3, "right": 3, "acceptable": 0, "wrong": 0},
+                          "medium": {"n": 15, "right": 9, "acceptable": 3, "wrong": 3},
+                          "low": {"n": 1, "right": 0, "acceptable": 0, "wrong": 1}},
                #: a second family, reported too: an early copy of it was among those the thresholds were
                #: chosen on and its seeds 0-4 were read while later fixes and rules were chosen; these are
                #: fresh draws (seed 5) run at 6ee2a33, with every rule above
