@@ -52,6 +52,8 @@ NOISE_MARGIN = 2.0
 #: A measured/model gain that changes by more than this share between two amplitudes of the
 #: same excitation at one RH level depends on the amplitude.
 AMPLITUDE_CHANGE = 0.03
+#: A residual with more than this share of its power at harmonics (beyond the noise) is distorted.
+HARMONIC_SHARE = 0.05
 
 
 @dataclass
@@ -429,7 +431,7 @@ def findings(ra: ResidualAnalysis, records: Sequence[PreparedRecord], *, resonan
     if ra.by_amplitude:
         a1 = ra.by_amplitude[-1]
         d = a1.get("distortion_share_of_residual")
-        if d is not None and d > 0.05:
+        if d is not None and d > HARMONIC_SHARE:
             out.append(f"At {a1['amplitude_V']:.3g} V, {100 * d:.2g} % of the residual lies at harmonics outside "
                        "the excited band (harmonic distortion).")
     if len(ra.by_rh) >= 2:

@@ -61,7 +61,7 @@ from typing import Sequence
 import numpy as np
 
 from .records import RH_SPAN, PreparedRecord, amplitude_groups, rh_levels
-from .residuals import AMPLITUDE_CHANGE, ResidualAnalysis
+from .residuals import AMPLITUDE_CHANGE, HARMONIC_SHARE, ResidualAnalysis
 from .specs import excitation, signature, spec_of
 
 FEATURE_TEXT = {
@@ -146,7 +146,7 @@ def features(ra: ResidualAnalysis, records: Sequence[PreparedRecord], resonance_
     else:
         out["amplitude_dependence"] = {"present": None}
     d = [x for x in (a.get("distortion_share_of_residual") for a in ra.by_amplitude) if x is not None]
-    out["harmonics"] = {"present": bool(max(d) > 0.05), "share": max(d)} if d else {"present": None}
+    out["harmonics"] = {"present": bool(max(d) > HARMONIC_SHARE), "share": max(d)} if d else {"present": None}
     if len(ra.by_rh) >= 2:
         g = [row.get("gain_ratio_meas_over_model") for row in ra.by_rh]
         g = [x for x in g if x]
