@@ -42,6 +42,23 @@ def test_load_filter_realisations_are_accurate(device):
     np.testing.assert_allclose(KB.freqresp(s)[0, 0], exact_KB, rtol=1e-3)
 
 
+@pytest.mark.parametrize("slow_s", [3e6, 1e9])
+def test_solvent_factor_with_a_corner_far_below_the_band_is_realised(monkeypatch, slow_s):
+    """A back-diffusion time h²/Ds of weeks (D_solvent inside its admissible range; a refit can
+    end there) leaves only the slow tail 1 − tanh(g)/g ≈ 1 − 1/g in the band: the realisation
+    widens its pole grid instead of failing, and matches the closed form."""
+    from physics.solvers import realize
+    m = ActuatorModel("ipmc_pt_eg", "solvent_diffusion")
+    p = dict(m.device.params)
+    p["D_solvent"] = (0.5 * p["t_polymer"]) ** 2 / slow_s
+    _, B = _load_filters(m, p, 2 * np.pi * 100)
+    s = 2j * np.pi * np.logspace(-5, 2, 300)
+    np.testing.assert_allclose(B.freqresp(s)[0, 0], m.stages["solvent"].solvent_factor(s, p), rtol=1e-3)
+    monkeypatch.setattr(realize, "WIDE_MARGIN", 1.0)       # the first grid alone cannot
+    with pytest.raises(physics.errors.ModelError, match="could not realise"):
+        _load_filters(m, p, 2 * np.pi * 100)
+
+
 def test_constant_input_from_rest_stays_at_the_static_deflection():
     t = np.arange(0, 5, 1e-3)
     r = physics.simulate("ipmc_pt_eg", "electrode_resistance", t, np.full(t.size, 0.1))
