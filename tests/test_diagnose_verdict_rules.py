@@ -86,6 +86,19 @@ def test_a_pick_whose_parameter_the_data_pinned_to_a_bound_is_low():
     assert d["pinned_parameters"] == 1 and conf.Confidence.from_dict(d).pinned == 1
 
 
+def test_on_the_refitted_model_a_pick_is_judged_by_its_flags_there():
+    """A relaxing modulus taken for viscoelastic: at its step it leaves 4.3 noise floors with its
+    slope on a bound and correlated with the modulus (3 flags); once the model's own effects are
+    refitted it leaves 1.1 floors and its parameters are clear of bounds.  The label is that of the
+    refitted model; a pinned parameter there still makes it "low"."""
+    step = _label(71.7, 11.4, noise_um=2.65, flags=3)
+    assert step.label == "medium"
+    again = conf.reconfirmed(step, 3.02 * UM, 11.0 * UM, 2.65 * UM, flags=0, pinned=0)
+    assert again.refitted and again.flags == 0 and again.label == "high", again.why
+    assert conf.reconfirmed(step, 3.02 * UM, 11.0 * UM, 2.65 * UM, flags=2, pinned=0).label == "medium"
+    assert conf.reconfirmed(step, 3.02 * UM, 11.0 * UM, 2.65 * UM, flags=1, pinned=1).label == "low"
+
+
 def test_a_rival_held_on_a_bound_needs_a_wider_margin():
     """circuit_lab seed 1, viscoelastic and humidity hidden: fractional_coupling picked at 4.07 µm
     (70.1 before, 2.4 µm floor) while viscoelastic, its slope held at the top of its range,

@@ -26,9 +26,9 @@ a little.  The label therefore asks what a weight cannot:
   wider margin than it must beat a free rival.
 
 When the chain refits the model's own effects after a pick (:func:`.diagnosis.select`), a pick
-that stays is labelled again with **change** and **left** measured on the refitted model
-(:func:`reconfirmed`): before the refit a right pick can leave a large residual only because
-the device's values of the model's own effects are not the strip's.
+that stays is labelled again with **change**, **left**, **flags** and **pinned** measured on the
+refitted model (:func:`reconfirmed`): before the refit a right pick can leave a large residual, or
+a parameter on a bound, only because the device's values of the model's own effects are not the strip's.
 
 "high" needs all of them (and a weight ≥ :data:`WEIGHT_HIGH`), "low" is a pick that barely
 changes the model, has a near twin or is pinned; everything else is "medium".  The thresholds were
@@ -150,16 +150,19 @@ def features(pick, base, rivals, weight: float, noise: float, pinned: int = 0, h
     return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality), pinned, held_share, held_of)
 
 
-def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float) -> Confidence:
-    """``c`` labelled again with the pick's size judged on the model whose own effects were
-    refitted (:func:`.diagnosis.select`): the error the pick removes there (``without`` →
-    ``with_pick`` [m RMS], the refitted model without and with it) and the error that model
-    leaves.  Before the refit a pick can leave a large residual only because the device's values
-    of the model's own effects are not the strip's; once they are refitted, what it leaves is
-    what a missing physics could still hide.  The other features are the pick's step's."""
+def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float, flags: int, pinned: int) -> Confidence:
+    """``c`` labelled again on the model whose own effects were refitted (:func:`.diagnosis.select`):
+    the error the pick removes there (``without`` → ``with_pick`` [m RMS], the refitted model
+    without and with it), the error that model leaves, and the quality ``flags`` and ``pinned``
+    parameters of the pick's own parameters in it (the refit frees them again beside the own
+    effects').  Before the refit a pick can leave a large residual, or a parameter on a bound, only
+    because the device's values of the model's own effects are not the strip's; once they are
+    refitted, what it leaves is what a missing physics could still hide.  The rival shares, the
+    records and the weight are the pick's step's."""
     ok = math.isfinite(noise) and noise > 0
     change = math.sqrt(max(without ** 2 - with_pick ** 2, 0.0)) / noise if ok else math.nan
-    return label(replace(c, change=change, left=with_pick / noise if ok else math.nan, why=[], refitted=True))
+    return label(replace(c, change=change, left=with_pick / noise if ok else math.nan, flags=flags, pinned=pinned,
+                         why=[], refitted=True))
 
 
 def _closest(pick, rivals, noise: float) -> tuple[float, str | None]:

@@ -37,6 +37,7 @@ The verdict (:class:`.verdict.Verdict`) is the one object every output renders.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -69,7 +70,8 @@ from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
 from .specs import (declared_default, effect_params, excitation, keeps_spec_range, param_bounds, role_family,
                     shape_params, spec_of)
-from .verdict import ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, nuisance_summary, remaining_of
+from .verdict import (ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, nuisance_summary, pinned, quality,
+                      remaining_of)
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
 SUPPORT_BIC = 6.0
@@ -734,7 +736,9 @@ def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: 
             continue
         sup, _ = every[d.pick.effect]
         if sup.status == "assessed" and sup.rmse_without is not None:
-            d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise)
+            on_refit = dataclasses.replace(d.pick, fit=current)    # the pick's own parameters as refitted
+            d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
+                                                len(quality(on_refit)), len(pinned(on_refit)))
             d.reason += (f"; on the model with its own effects refitted it lowers the RMS error "
                          f"{1e6 * sup.rmse_without:.4g} → {1e6 * current.rmse:.4g} µm: confidence {c.label}"
                          + (": " + "; ".join(c.why) if c.why else ""))
