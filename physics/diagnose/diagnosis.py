@@ -37,11 +37,10 @@ The verdict (:class:`.verdict.Verdict`) is the one object every output renders.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -736,7 +735,7 @@ def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: 
             continue
         sup, _ = every[d.pick.effect]
         if sup.status == "assessed" and sup.rmse_without is not None:
-            on_refit = dataclasses.replace(d.pick, fit=current)    # the pick's own parameters as refitted
+            on_refit = replace(d.pick, fit=current)    # the pick's own parameters as refitted
             d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
                                                 len(quality(on_refit)), len(pinned(on_refit)))
             d.reason += (f"; on the model with its own effects refitted it lowers the RMS error "
