@@ -162,6 +162,14 @@ class ActuatorModel:
         rh = self.check_rh(rh)
         return self.hook("params_at")(dict(self.device.params), float(np.mean(rh)))
 
+    def key_at(self, rh: float, p: dict | None = None) -> tuple:
+        """What this model's small-signal response and its linear time response at a constant
+        ``rh`` [%] depend on besides the input: the parameters there (``p``: :meth:`params_at`
+        when the caller has them) and the stiffness factor.  Two models with the same effects
+        and modes and equal keys give the same numbers (a memo's key)."""
+        p = self.params_at(rh) if p is None else p
+        return tuple(self.effect_ids), self.n_modes, tuple(sorted(p.items())), float(self.hook("stiffness_factor")(rh))
+
     def chain_params(self, rh=None) -> dict:
         """Parameters (SI) of the load filters and the beam of a time record at ``rh`` [%] (its
         median): humidity maps applied except the stiffness's and the coupling's, which the

@@ -66,6 +66,7 @@ from ..device import Device, all_param_specs
 from ..identify.problem import InertParameterError
 from ..identify.settings import DEFAULT_DECADES
 from ..errors import InputError, ModelError
+from ..execution.memo import remembered
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
 from ..effects import EFFECTS
 from ..model import ActuatorModel, resolve_effects
@@ -691,10 +692,15 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
     lo, hi = problem.x_bounds
     span = hi - lo
     scale = math.sqrt(sum(mf.rss) / sum(mf.n)) or 1.0
+    memos = [{} for _ in records]       # a per-RH parameter's Jacobian column re-simulates only its level's records
 
     def resid(x):
         m = model_at(mf, problem.from_x(x))
-        return np.concatenate([r.detrend_d(r.y_d - predict(m, r)) for r in records]) / scale
+        parts = []
+        for r, memo in zip(records, memos):
+            key = None if np.ndim(r.rh_model) else m.key_at(r.rh_model)
+            parts.append(r.detrend_d(r.y_d - remembered(memo, key, lambda: predict(m, r))))
+        return np.concatenate(parts) / scale
 
     x0 = np.clip(problem.to_x(fit.theta if start is None else start), lo + 1e-9 * span, hi - 1e-9 * span)
     p = x0.size

@@ -14,6 +14,7 @@ from ..compare import (FRFOptions, cluster_rh, estimate_record_frf, model_rh,
                       valid_points)
 from ..device import Device, HumidityMap, all_param_specs, load_device
 from ..errors import InputError, arg
+from ..execution.memo import remembered
 from ..solvers.frequency import response_per_volt
 from ..analysis.frf_estimation import detect_excitation
 from ..io.frfdata import FRFData
@@ -172,6 +173,7 @@ class IdentificationProblem:
         self.targets = list(targets)
         if not self.targets:
             raise InputError("no measurement to fit")
+        self._memos: list[dict] = [{} for _ in self.targets]     # :meth:`responses`
         if residual not in ("frf", "time", "both"):
             raise InputError(f"residual {residual!r}: expected frf, time or both")
         self.residual = residual
@@ -279,13 +281,19 @@ class IdentificationProblem:
 
     # --- model evaluations -------------------------------------------------------------------
     def responses(self, theta) -> list[np.ndarray]:
-        """Model FRF [m/V] (sensor included) at each target's frequencies."""
+        """Model FRF [m/V] (sensor included) at each target's frequencies.
+
+        A target's response depends on θ only through the parameters at its RH (and the
+        stiffness factor there), so it is kept for the last few parameter sets per target
+        (:mod:`physics.execution.memo`): a finite-difference Jacobian column of a per-RH parameter recomputes only
+        the targets at that RH level (the same numbers, bit for bit)."""
         model = self.model_for(theta)
         self.n_eval += 1
         out = []
-        for t in self.targets:
-            H = response_per_volt(model, t.s, t.rh)[0]
-            out.append(H * sensor_response(t.freq, t.sensor_bandwidth))
+        for t, memo in zip(self.targets, self._memos):
+            p = model.params_at(t.rh)
+            out.append(remembered(memo, model.key_at(t.rh, p), lambda: response_per_volt(model, t.s, t.rh, p)[0]
+                                  * sensor_response(t.freq, t.sensor_bandwidth)))
         return out
 
     def frf_residuals(self, theta) -> np.ndarray:

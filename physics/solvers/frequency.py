@@ -154,9 +154,10 @@ def frequency_response(device, effects=None, freqs=None, rh=None, *, n_modes: in
                              device=model.device.name, effects=model.effect_ids, natural_frequencies=fn)
 
 
-def response_per_volt(model: ActuatorModel, s: np.ndarray, rh: float):
-    """(tip [m/V], current [A/V], Cs_up [mol/m³/V], natural frequencies [Hz]) at ``s`` [rad/s]."""
-    p = model.params_at(rh)
+def response_per_volt(model: ActuatorModel, s: np.ndarray, rh: float, p: dict | None = None):
+    """(tip [m/V], current [A/V], Cs_up [mol/m³/V], natural frequencies [Hz]) at ``s`` [rad/s];
+    ``p``: ``model.params_at(rh)`` when the caller has it already."""
+    p = model.params_at(rh) if p is None else p
     d = model.double_layer_props(p)
     q, cint = model.hook("small_signal")(s, d, p)
     Yp = s * q + d.G_leak

@@ -15,7 +15,7 @@ from math import factorial
 
 import numpy as np
 from scipy import linalg
-from scipy.signal import lfilter, lfiltic
+from scipy.signal import lfilter
 
 
 @dataclass
@@ -342,9 +342,7 @@ class Stream:
                     b = taps[:, k] * Bt[k, i]
                     b = b.real if real else b
                     y0 = z0[k] if i == first else np.zeros(B)
-                    zi = np.stack([lfiltic(b, acc, [y0[bb].real if real else y0[bb]], x_past[i, bb])
-                                   for bb in range(B)])
-                    filters.append([r, b, acc, i, zi])
+                    filters.append([r, b, acc, i, _initial_state(b, a[k], y0, x_past[i], real)])
             free = [r for r, k in enumerate(idx) if _first_input(Bt[k]) < 0 and z0[k].any()]
             self.groups.append((idx, Ct[:, idx] * wgt[None, c0:c0 + idx.size], filters, free, z0[idx]))
 
@@ -418,6 +416,21 @@ def _add_modes(y: np.ndarray, Cw: np.ndarray, Z: np.ndarray) -> None:
     m, B, T = Z.shape
     Zf = Z.reshape(m, B * T)
     y += (Cw.real @ Zf.real - Cw.imag @ Zf.imag).reshape(-1, B, T)
+
+
+def _initial_state(b: np.ndarray, a: complex, y0: np.ndarray, x_past: np.ndarray, real: bool) -> np.ndarray:
+    """``scipy.signal.lfiltic(b, [1, −a], [y0], x_past)`` for the B records at once (B, max(M, 1)),
+    M = len(b) − 1: the state of the transposed direct form II of y[n] = a y[n−1] + Σ_j b[j] u[n−j]
+    after the inputs ``x_past`` (B, P; newest first, zeros beyond P) and the output ``y0`` (B,)."""
+    m_taps = b.size - 1
+    xp = x_past[:, :m_taps]
+    if xp.shape[1] < m_taps:
+        xp = np.pad(xp, ((0, 0), (0, m_taps - xp.shape[1])))
+    zi = np.zeros((x_past.shape[0], max(m_taps, 1)), dtype=float if real else complex)
+    for m in range(m_taps):
+        zi[:, m] = xp[:, :m_taps - m] @ b[m + 1:]
+    zi[:, 0] += (a.real * y0.real) if real else a * y0
+    return zi
 
 
 def _first_input(b: np.ndarray) -> int:
