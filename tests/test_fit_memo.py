@@ -116,3 +116,21 @@ def test_the_modal_start_up_state_is_lfiltic(real, taps, past):
     got = _initial_state(b, a, y0, x_past, real)
     assert got.shape == ref.shape and got.dtype == ref.dtype
     np.testing.assert_allclose(got, ref, rtol=1e-14, atol=1e-300)
+
+
+def test_the_memo_stays_within_its_size_and_bytes(monkeypatch):
+    from physics.execution import memo as M
+    memo = {}
+    for k in range(M.SIZE + 5):
+        M.remembered(memo, k, lambda: np.zeros(10))
+    assert len(memo) == M.SIZE and 0 not in memo and M.SIZE + 4 in memo      # the oldest went first
+    monkeypatch.setattr(M, "MAX_BYTES", 250)
+    memo = {}
+    for k in range(4):
+        M.remembered(memo, k, lambda: np.zeros(10))                           # 80 B each
+    assert list(memo) == [1, 2, 3]
+    big = M.remembered(memo, "big", lambda: np.zeros(100))                    # over the cap alone: kept alone
+    assert list(memo) == ["big"] and not big.flags.writeable
+    calls = []
+    M.remembered(memo, "big", lambda: calls.append(1) or np.zeros(100))
+    assert not calls                                                          # a hit computes nothing

@@ -10,21 +10,23 @@ from typing import Callable, Hashable
 
 import numpy as np
 
-#: Results kept per memo: the centre of a finite-difference Jacobian outlives its columns.
+#: Results kept per memo: the centre of a finite-difference Jacobian outlives its columns ...
 SIZE = 32
+#: ... within this many bytes per memo [B] (a simulated hour-long record is megabytes).
+MAX_BYTES = 64 << 20
 
 
 def remembered(memo: dict, key: Hashable | None, compute: Callable[[], np.ndarray]) -> np.ndarray:
-    """``memo[key]``, or ``compute()`` kept there (the oldest entry dropped beyond :data:`SIZE`);
-    ``key`` None: computed and not kept.  A kept array is made read-only, since later calls
-    share it."""
+    """``memo[key]``, or ``compute()`` kept there (the oldest entries dropped beyond :data:`SIZE`
+    results or :data:`MAX_BYTES`; the newest is always kept); ``key`` None: computed and not
+    kept.  A kept array is made read-only, since later calls share it."""
     if key is None:
         return compute()
     out = memo.get(key)
     if out is None:
         out = compute()
         out.flags.writeable = False
-        if len(memo) >= SIZE:
-            memo.pop(next(iter(memo)))
         memo[key] = out
+        while len(memo) > 1 and (len(memo) > SIZE or sum(v.nbytes for v in memo.values()) > MAX_BYTES):
+            memo.pop(next(iter(memo)))
     return out

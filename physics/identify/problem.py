@@ -285,8 +285,8 @@ class IdentificationProblem:
 
         A target's response depends on θ only through the parameters at its RH (and the
         stiffness factor there), so it is kept for the last few parameter sets per target
-        (:mod:`physics.execution.memo`): a finite-difference Jacobian column of a per-RH parameter recomputes only
-        the targets at that RH level (the same numbers, bit for bit)."""
+        (:mod:`physics.execution.memo`): a finite-difference Jacobian column of a per-RH
+        parameter recomputes only the targets at that RH level (the same numbers, bit for bit)."""
         model = self.model_for(theta)
         self.n_eval += 1
         out = []
