@@ -13,7 +13,7 @@ import numpy as np
 #: Results kept per memo: the centre of a finite-difference Jacobian outlives its columns ...
 SIZE = 32
 #: ... within this many bytes per memo [B] (a simulated hour-long record is megabytes).
-MAX_BYTES = 64 << 20
+MAX_BYTES = 16 << 20
 
 
 def remembered(memo: dict, key: Hashable | None, compute: Callable[[], np.ndarray]) -> np.ndarray:
