@@ -162,11 +162,12 @@ class ActuatorModel:
         rh = self.check_rh(rh)
         return self.hook("params_at")(dict(self.device.params), float(np.mean(rh)))
 
-    def key_at(self, rh: float, p: dict | None = None) -> tuple:
-        """What this model's small-signal response and its linear time response at a constant
-        ``rh`` [%] depend on besides the input: the parameters there (``p``: :meth:`params_at`
-        when the caller has them) and the stiffness factor.  Two models with the same effects
-        and modes and equal keys give the same numbers (a memo's key)."""
+    def key_at(self, rh: float | None, p: dict | None = None) -> tuple:
+        """What this model's small-signal response and its time response at a constant ``rh``
+        [%] depend on besides the input: the effects, the modes, the parameters there (``p``:
+        :meth:`params_at` when the caller has them) and the stiffness factor.  Equal keys give
+        the same numbers (a memo's key)."""
+        rh = self.check_rh(rh)
         p = self.params_at(rh) if p is None else p
         return tuple(self.effect_ids), self.n_modes, tuple(sorted(p.items())), float(self.hook("stiffness_factor")(rh))
 

@@ -134,3 +134,23 @@ def test_the_memo_stays_within_its_size_and_bytes(monkeypatch):
     calls = []
     M.remembered(memo, "big", lambda: calls.append(1) or np.zeros(100))
     assert not calls                                                          # a hit computes nothing
+
+
+def test_a_time_residual_takes_the_untouched_level_from_the_memo(two_levels, monkeypatch):
+    """``identify --residual time``: a per-RH column re-simulates only its level's record, and
+    the errors are those of a fresh problem."""
+    dev, data = two_levels
+    ids = tuple(C.resolve_effects("default", dev))
+    targets = data.targets
+    problem = P.IdentificationProblem(dev, ids, targets, ["beta_f"], ["Y", "kf"], residual="time")
+    theta = problem.theta0
+    problem.time_errors(theta)
+    import physics.solvers.timedomain as T
+    sims = _counting(monkeypatch, T, "simulate")
+    moved = theta.copy()
+    moved[problem.labels.index("kf@RH60")] *= 1.02
+    got = problem.time_errors(moved)
+    assert len(sims) == sum(t.record is not None and t.level == 60.0 for t in targets) == 1
+    assert len(got) == 2
+    fresh = P.IdentificationProblem(dev, ids, targets, ["beta_f"], ["Y", "kf"], residual="time").time_errors(moved)
+    assert all(np.array_equal(a, b) for a, b in zip(got, fresh))

@@ -174,6 +174,7 @@ class IdentificationProblem:
         if not self.targets:
             raise InputError("no measurement to fit")
         self._memos: list[dict] = [{} for _ in self.targets]     # :meth:`responses`
+        self._sim_memos: list[dict] = [{} for _ in self.targets]  # :meth:`time_errors`
         if residual not in ("frf", "time", "both"):
             raise InputError(f"residual {residual!r}: expected frf, time or both")
         self.residual = residual
@@ -330,14 +331,15 @@ class IdentificationProblem:
         model = self.model_for(theta)
         self.n_eval += 1
         parts = []
-        for t in self.targets:
+        for t, memo in zip(self.targets, self._sim_memos):
             ts = t.record
             if ts is None:
                 continue
             v = ts.voltage
             tt = np.arange(v.size) / ts.fs
-            y_hat = simulate(model, None, tt, v, rh=t.rh_model, hold="cubic").deflection
-            y_hat = sensor_lowpass(y_hat, ts.fs, t.sensor_bandwidth)
+            key = None if np.ndim(t.rh_model) else model.key_at(t.rh_model)     # as :meth:`responses`
+            y_hat = remembered(memo, key, lambda: sensor_lowpass(
+                simulate(model, None, tt, v, rh=t.rh_model, hold="cubic").deflection, ts.fs, t.sensor_bandwidth))
             i0 = int(math.ceil(self.skip_s * ts.fs))
             parts.append(remove_nuisance((y_hat - ts.deflection)[i0:]))
         return parts
