@@ -162,12 +162,14 @@ class ActuatorModel:
         rh = self.check_rh(rh)
         return self.hook("params_at")(dict(self.device.params), float(np.mean(rh)))
 
-    def key_at(self, rh: float | None, p: dict | None = None) -> tuple:
+    def key_at(self, rh, p: dict | None = None) -> tuple | None:
         """What this model's small-signal response and its time response at a constant ``rh``
         [%] depend on besides the input: the effects, the modes, the parameters there (``p``:
         :meth:`params_at` when the caller has them) and the stiffness factor.  Equal keys give
-        the same numbers (a memo's key)."""
+        the same numbers (a memo's key); None for an RH series (no key)."""
         rh = self.check_rh(rh)
+        if np.ndim(rh):
+            return None
         p = self.params_at(rh) if p is None else p
         return tuple(self.effect_ids), self.n_modes, tuple(sorted(p.items())), float(self.hook("stiffness_factor")(rh))
 

@@ -154,3 +154,10 @@ def test_a_time_residual_takes_the_untouched_level_from_the_memo(two_levels, mon
     assert len(got) == 2
     fresh = P.IdentificationProblem(dev, ids, targets, ["beta_f"], ["Y", "kf"], residual="time").time_errors(moved)
     assert all(np.array_equal(a, b) for a, b in zip(got, fresh))
+
+
+def test_an_rh_series_has_no_key():
+    from physics.model import ActuatorModel
+    m = ActuatorModel(load_device("ipmc_pt_eg"), "default")
+    assert m.key_at(np.array([59.0, 61.0])) is None
+    assert m.key_at(60.0) == m.key_at(60.0) != m.key_at(61.0)

@@ -698,8 +698,7 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
         m = model_at(mf, problem.from_x(x))
         parts = []
         for r, memo in zip(records, memos):
-            key = None if np.ndim(r.rh_model) else m.key_at(r.rh_model)
-            parts.append(r.detrend_d(r.y_d - remembered(memo, key, lambda: predict(m, r))))
+            parts.append(r.detrend_d(r.y_d - remembered(memo, m.key_at(r.rh_model), lambda: predict(m, r))))
         return np.concatenate(parts) / scale
 
     x0 = np.clip(problem.to_x(fit.theta if start is None else start), lo + 1e-9 * span, hi - 1e-9 * span)

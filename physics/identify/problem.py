@@ -337,8 +337,7 @@ class IdentificationProblem:
                 continue
             v = ts.voltage
             tt = np.arange(v.size) / ts.fs
-            key = None if np.ndim(t.rh_model) else model.key_at(t.rh_model)     # as :meth:`responses`
-            y_hat = remembered(memo, key, lambda: sensor_lowpass(
+            y_hat = remembered(memo, model.key_at(t.rh_model), lambda: sensor_lowpass(
                 simulate(model, None, tt, v, rh=t.rh_model, hold="cubic").deflection, ts.fs, t.sensor_bandwidth))
             i0 = int(math.ceil(self.skip_s * ts.fs))
             parts.append(remove_nuisance((y_hat - ts.deflection)[i0:]))
