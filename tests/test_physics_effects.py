@@ -156,6 +156,23 @@ def test_rh_outside_the_table_warns():
         frequency_response("ipmc_pt_eg", "humidity", F, rh=20)
 
 
+
+def test_an_rh_series_warns_once_per_map_with_its_range_and_stays_silent_inside():
+    import warnings
+    from physics.effects.humidity import Humidity
+    h = Humidity(load_device("ipmc_pt_eg"))
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        f = h.factors(np.array([30.0, 45.0, 60.0]))
+    assert sorted(str(w.message) for w in got) == [
+        f"RH 30–60 % is outside the 40–100 % range of the {name} map of device 'ipmc_pt_eg'; the end value is used"
+        for name in sorted(f)]
+    assert float(f["Y"][0]) == pytest.approx(float(h.factors(40.0)["Y"]))     # the end value is used
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        h.factors(np.array([40.0, 70.0, 100.0]))
+        h.factors(np.array([]))
+
 # --- thesis behaviour ---------------------------------------------------------------------
 def test_ipmc_at_full_hydration_is_an_underdamped_resonator_inside_1_50_Hz():
     f = np.logspace(0, np.log10(50), 400)

@@ -105,10 +105,12 @@ class Humidity(HumidityInvariant):
 
     def factors(self, rh) -> dict[str, np.ndarray]:
         rh = np.asarray(rh, dtype=float)
+        # the range checked once per call, as floats: a fit evaluates this millions of times
+        lo, hi = (float(rh.min()), float(rh.max())) if rh.size else (np.inf, -np.inf)
         out = {}
         for name, m in self.device.humidity_maps.items():
-            if np.any(rh < m.rh[0] - 1e-9) or np.any(rh > m.rh[-1] + 1e-9):
-                warnings.warn(f"RH {float(np.min(rh)):.3g}–{float(np.max(rh)):.3g} % is outside the "
+            if lo < m.rh[0] - 1e-9 or hi > m.rh[-1] + 1e-9:
+                warnings.warn(f"RH {lo:.3g}–{hi:.3g} % is outside the "
                               f"{m.rh[0]:g}–{m.rh[-1]:g} % range of the {name} map of device "
                               f"{self.device.name!r}; the end value is used", stacklevel=3)
             base = self.device.params.get(name, 1.0)
