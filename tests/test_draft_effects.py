@@ -230,6 +230,33 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     assert not draft_effects(adequate, _rediagnose(table, calls)).kept and not calls
 
 
+def test_each_draft_round_is_announced_before_it_runs_and_says_what_it_took():
+    """A draft round refits the whole model (minutes on long records): the progress callback
+    hears of each round before its refit starts, of what it took, and of the round that took
+    nothing; without a callback the outcome is the same."""
+    from physics.diagnose.draft import draft_effects
+    pick, lp, sp, dr = "electrode_resistance", "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift"
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+    on_base = ("double_layer",)
+    table = {on_base: (90e-6, {pick: (5e-6, -515.0, {"Rs": 40.0}), lp: (4e-6, -520.0, {"lowpass_tau": 0.0265}),
+                               sp: (80e-6, -20.0, {}), dr: (95e-6, 3.0, {})}),
+             on_base + (lp,): (4e-6, {pick: (3.95e-6, -2.0, {}), sp: (3.9e-6, -1.0, {}), dr: (4.2e-6, 6.0, {})})}
+    calls, heard = [], []
+
+    def rediagnose(*a):
+        heard.append(f"refit {len(calls) + 1}")
+        return _rediagnose(table, calls)(*a)
+    out = draft_effects(_diagnosis_stub(pick, res, 5e-6), rediagnose, progress=heard.append)
+    rounds = [m for m in heard if m.startswith("drafts: round")]
+    assert len(rounds) == len(calls) == 2
+    assert heard.index(rounds[0]) < heard.index("refit 1") < heard.index(rounds[1]) < heard.index("refit 2")
+    assert pick in rounds[0] and lp in rounds[0] and f"[{', '.join(on_base + (lp,))}]" in rounds[1]
+    assert any(m.startswith(f"drafts: {lp} taken, RMS error 90 → 4 µm") for m in heard)
+    assert heard[-1].startswith("drafts: nothing more taken")
+    quiet = draft_effects(_diagnosis_stub(pick, res, 5e-6), _rediagnose(table, []))
+    assert [d.effect_id for d in quiet.kept] == [d.effect_id for d in out.kept] == [lp]
+
+
 def test_a_model_that_cannot_be_refitted_with_the_drafts_leaves_the_diagnosis_standing():
     """The refit the drafts would join fails (a fitted model the time solver cannot realise):
     the drafts are rejected with the reason, the diagnosis's own result stands, no error exit."""

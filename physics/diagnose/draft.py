@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 from ..errors import InputError, ModelError
 from ..execution.threads import single_threaded
@@ -61,7 +61,8 @@ class DraftOutcome:
 
 
 @single_threaded
-def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
+def draft_effects(res, rediagnose, max_effects: int = 2,
+                  progress: Callable[[str], None] | None = None) -> DraftOutcome:
     """Draft what remains after the final model of the diagnosis ``res`` and select the drafts
     by fitting them with the model: ``rediagnose(device, effects, free, candidates)`` runs the
     diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
@@ -74,7 +75,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     does not model within the noise, e.g. the electrode resistance a sensor's low-pass): the
     candidate that lowers the error most (lowest ΔBIC) is taken when it passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
     and the others are tried again on top of it (at most ``max_effects`` drafts kept).  A kept
-    draft takes the values fitted with the model as its defaults (bounds and starts follow)."""
+    draft takes the values fitted with the model as its defaults (bounds and starts follow).
+    ``progress``: a callback for one-line progress messages (each round refits the model, minutes
+    on long records)."""
     import tempfile
 
     from .candidates import effect_values, map_free
@@ -94,6 +97,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
     base = getattr(res, "draft_base", res.base)       # without the effects the data do not support, refitted
     on_top, free, device = list(base.effects), list(base.spec.free), base.device
     catalog = [p.effect for p in res.picks if p.effect not in on_top]
+    say = progress or (lambda msg: None)
     with tempfile.TemporaryDirectory(prefix="eap-drafts-") as tmp:
         ids = []
         for d in items:
@@ -103,6 +107,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
         try:
             pool = list(items)
             while pool and len(outcome.kept) < max_effects:
+                say(f"drafts: round {len(outcome.steps) + 1} (at most {max_effects} kept): "
+                    f"{', '.join([d.effect_id for d in pool] + catalog)} fitted with [{', '.join(on_top)}]")
                 try:
                     again = rediagnose(device, on_top, free, [d.effect_id for d in pool] + catalog)
                 except (InputError, ModelError) as exc:     # the diagnosis stands; the drafts are not tried
@@ -112,10 +118,12 @@ def draft_effects(res, rediagnose, max_effects: int = 2) -> DraftOutcome:
                 outcome.steps.append((list(on_top), again))
                 scored, why = _scored(pool + catalog, again, on_top)
                 if not scored:
+                    say("drafts: nothing more taken (none lowers the error enough)")
                     outcome.rejected += [(d, why.get(d.effect_id, "")) for d in pool]
                     break
                 dbic, key, c = scored[0]
                 eid = key if isinstance(key, str) else key.effect_id
+                say(f"drafts: {eid} taken, RMS error {1e6 * again.base.rmse:.4g} → {1e6 * c.fit.rmse:.4g} µm")
                 values = effect_values(c.fit, eid)
                 text = _pick_text(scored, again, on_top)
                 if isinstance(key, str):            # the catalog's pick: on the chain, then the drafts on top

@@ -185,7 +185,7 @@ def _diagnose(args):
     return res, draft_effects(res, lambda dev, eff, free, cands: diagnose(
         ms, dev, eff, free, options=dataclasses.replace(opts, per_rh=per, n_starts=1), candidates=cands, force=True,
         check_support=False, selection=SelectionOptions(max_effects=1, backward=False),
-        analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=args.fs_max_Hz)))
+        analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=args.fs_max_Hz), progress=log), progress=log)
 
 
 def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
