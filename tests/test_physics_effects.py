@@ -156,7 +156,6 @@ def test_rh_outside_the_table_warns():
         frequency_response("ipmc_pt_eg", "humidity", F, rh=20)
 
 
-
 def test_an_rh_series_warns_once_per_map_with_its_range_and_stays_silent_inside():
     import warnings
     from physics.effects.humidity import Humidity
@@ -172,6 +171,7 @@ def test_an_rh_series_warns_once_per_map_with_its_range_and_stays_silent_inside(
         warnings.simplefilter("error")
         h.factors(np.array([40.0, 70.0, 100.0]))
         h.factors(np.array([]))
+
 
 # --- thesis behaviour ---------------------------------------------------------------------
 def test_ipmc_at_full_hydration_is_an_underdamped_resonator_inside_1_50_Hz():

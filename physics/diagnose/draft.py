@@ -107,10 +107,11 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
         try:
             pool = list(items)
             while pool and len(outcome.kept) < max_effects:
+                offered = [d.effect_id for d in pool] + catalog
                 say(f"drafts: round {len(outcome.steps) + 1} (at most {max_effects} kept): "
-                    f"{', '.join([d.effect_id for d in pool] + catalog)} fitted with [{', '.join(on_top)}]")
+                    f"{', '.join(offered)} fitted with [{', '.join(on_top)}]")
                 try:
-                    again = rediagnose(device, on_top, free, [d.effect_id for d in pool] + catalog)
+                    again = rediagnose(device, on_top, free, offered)
                 except (InputError, ModelError) as exc:     # the diagnosis stands; the drafts are not tried
                     outcome.rejected += [(d, f"not tried: the model they would join could not be refitted ({exc})")
                                          for d in pool]
