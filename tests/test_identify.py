@@ -315,3 +315,22 @@ def test_multistarts_on_two_workers_give_the_serial_fit(ipmc, ipmc_record):
     assert len(par.fit.starts) == 3 and par.fit.starts == serial.fit.starts
     np.testing.assert_array_equal(par.fit.theta, serial.fit.theta)
     assert par.n_evaluations == serial.n_evaluations > 3
+
+
+def test_screened_starts_reach_the_full_fit_with_fewer_evaluations(ipmc, ipmc_record, monkeypatch):
+    """``keep_starts``: every start runs a short way, only the lowest go on to convergence.
+    On a problem whose starts meet in one optimum the fit is the full one's, the evaluations
+    fewer, and each start's record says whether it was continued or screened out (the short
+    run shortened here so that no start converges within it)."""
+    from physics.identify import fitting
+    kw = dict(start={"kf": 1.5 * ipmc.device["kf"], "beta_f": 0.6 * ipmc.device["beta_f"]}, n_starts=5)
+    full = identify([ipmc_record], "ipmc_pt_eg", "default", "kf,Rs,beta_f", **kw)
+    monkeypatch.setattr(fitting, "SCREEN_NFEV_PER_PARAM", 1)
+    kept = identify([ipmc_record], "ipmc_pt_eg", "default", "kf,Rs,beta_f", keep_starts=1, **kw)
+    np.testing.assert_allclose(kept.fit.theta, full.fit.theta, rtol=1e-4)
+    assert kept.n_evaluations < 0.6 * full.n_evaluations
+    notes = [s["screened"] for s in kept.fit.starts]
+    assert len(notes) == 5 and sum(n.startswith("continued") for n in notes) == 1
+    assert sum("not among the 1 lowest" in n for n in notes) == 4
+    with pytest.raises(InputError, match="keep_starts"):
+        identify([ipmc_record], "ipmc_pt_eg", "default", "kf", keep_starts=0)

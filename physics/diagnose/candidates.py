@@ -301,8 +301,9 @@ class ModelFit:
 
 
 def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence[PreparedRecord], *, n_starts: int = 4,
-              seed: int = 0, n_modes: int = 4, df_cache: dict | None = None) -> ModelFit:
-    """Fit ``spec`` on the FRF ``targets`` (one record each in ``target_records``)."""
+              seed: int = 0, n_modes: int = 4, df_cache: dict | None = None, keep: int | None = None) -> ModelFit:
+    """Fit ``spec`` on the FRF ``targets`` (one record each in ``target_records``); ``keep``: the
+    starts screened, only that many to convergence (:func:`physics.identify.fitting.fit_lsq`)."""
     t0 = time.perf_counter()
     try:
         kw = dict(start={k: v for k, v in spec.start.items() if k in spec.free},
@@ -343,7 +344,7 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
             warnings.simplefilter("ignore", IdentifiabilityWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
             j0 = problem.j_err(problem.theta0)
-            fit = fit_lsq(problem, n_starts=n_starts, seed=seed, extra_starts=extra)
+            fit = fit_lsq(problem, n_starts=n_starts, seed=seed, extra_starts=extra, keep=keep)
             for _ in range(RECENTRE_ROUNDS):
                 edge = _on_search_window_edge(problem, fit.x, set(kw["bounds"]))
                 if not edge:

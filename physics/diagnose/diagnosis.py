@@ -509,7 +509,7 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
                                  f"{arg('start')}")
             spec.start[name] = default
     base = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
-                       n_modes=options.n_modes, df_cache=data.df_cache)
+                       n_modes=options.n_modes, df_cache=data.df_cache, keep=options.keep_starts)
     if not base.ok:
         raise ModelError(f"the base model could not be fitted: {base.error}")
     score(base, data.records)
@@ -545,7 +545,7 @@ def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_star
     spec = ModelSpec("final, own effects refitted", fit.effects, list(fit.spec.free) + names, list(fit.spec.per_rh),
                      start, bounds)
     out = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
-                    n_modes=options.n_modes, df_cache=data.df_cache)
+                    n_modes=options.n_modes, df_cache=data.df_cache, keep=options.keep_starts)
     if out.ok:
         score(out, data.records)
         # the FRF optimum need not be the time records': refined on them, from the start (the model as it
@@ -582,7 +582,7 @@ def try_candidates(step: int, base: ModelFit, cand_ids, data: PreparedRecords, r
         slots.append(len(results))
         results.append(CandidateResult(eff, "pending", reason=why if ok else f"forced ({why})", step=step))
         tasks.append({"spec": spec, "device": base.device, "targets": data.targets, "trecs": data.target_records,
-                      "records": data.records, "n_starts": run.n_starts, "seed": run.options.seed,
+                      "records": data.records, "n_starts": run.n_starts, "keep": run.options.keep_starts, "seed": run.options.seed,
                       "n_modes": run.options.n_modes, "effect_files": user_effect_files(),
                       "df_cache": data.df_cache if settings is None or settings.serial else None})
     fitted = map_tasks(_fit_candidate, tasks, settings, desc="candidates", progress=False, cost=_candidate_cost)
@@ -914,7 +914,8 @@ def _support_fit(eff: str, final: ModelFit, data: PreparedRecords, run: Diagnosi
     if not spec.free and not spec.per_rh:
         return SupportResult(eff, "failed", explanation="no free parameter left without it"), None
     mf = fit_model(spec, final.device, data.targets, data.target_records, n_starts=run.n_starts,
-                     seed=run.options.seed, n_modes=run.options.n_modes, df_cache=data.df_cache)
+                     keep=run.options.keep_starts, seed=run.options.seed, n_modes=run.options.n_modes,
+                     df_cache=data.df_cache)
     if mf.ok:
         score(mf, data.records)
     if not mf.ok:
@@ -1109,7 +1110,7 @@ def _fit_candidate(task: dict):
     ensure_registered(task["effect_files"])
     t0 = time.perf_counter()
     mf = fit_model(task["spec"], task["device"], task["targets"], task["trecs"], n_starts=task["n_starts"],
-                     seed=task["seed"], n_modes=task["n_modes"], df_cache=task["df_cache"] if task["df_cache"]
+                     keep=task["keep"], seed=task["seed"], n_modes=task["n_modes"], df_cache=task["df_cache"] if task["df_cache"]
                      is not None else {})
     if mf.ok:
         score(mf, task["records"])

@@ -20,6 +20,12 @@ from ..execution.threads import single_threaded
 from .forms import FormFit, MIN_GAIN, SIGNIFICANT_BIC, describe, form_of, residual_of
 from .effect_draft import EffectDraft
 
+#: Starts of each fit in a draft round that run to convergence (the others are screened out by a
+#: short run, :func:`physics.identify.fitting.fit_lsq` ``keep``): a draft's grid over its unknown
+#: scale gives eight starts of a model with ~15 free parameters, which on a low-pass strip all met in
+#: one valley at 9–17 thousand evaluations each (8 minutes of a round's 9).
+DRAFT_KEEP_STARTS = 2
+
 
 def drafts(forms: Sequence[FormFit], fit, records) -> list[EffectDraft]:
     """A draft of every form of ``forms`` that can be written as an effect, its residual fit
@@ -223,4 +229,4 @@ def write_drafts(items: Sequence[EffectDraft], out, *, overwrite: bool = False, 
     return report
 
 
-__all__ = ["DraftOutcome", "drafts", "draft_effects", "write_drafts", "check_draft"]
+__all__ = ["DRAFT_KEEP_STARTS", "DraftOutcome", "drafts", "draft_effects", "write_drafts", "check_draft"]

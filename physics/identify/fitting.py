@@ -15,7 +15,8 @@ from ..execution.parallel import ParallelSettings, map_tasks
 from .problem import IdentificationProblem
 from .settings import COND_LIMIT, CORR_LIMIT, REL_SE_LIMIT, THESIS_MAX_ITER, THESIS_TOL
 
-
+#: Evaluations per free parameter of a screened start's short run (:func:`fit_lsq` ``keep``).
+SCREEN_NFEV_PER_PARAM = 10
 
 
 @dataclass
@@ -174,6 +175,33 @@ def _starts(problem: IdentificationProblem, n_starts: int, seed: int, spread: fl
     return out
 
 
+def _screened(tasks: list[dict], keep: int, budget: int, settings, lo, hi) -> list:
+    """The runs of :func:`fit_lsq`'s screened starts: each task a short way (``budget``
+    evaluations), the ``keep`` lowest on from their short run's end unless it converged there.
+    One run per task; its record says how it was screened, its evaluations count both legs."""
+    short = map_tasks(_fit_start, [{**t, "max_nfev": min(budget, t["max_nfev"] or budget)} for t in tasks],
+                      settings, desc="starts", progress=False)
+    runs = []
+    for rec, res, n in short:
+        if res is not None:
+            how = "converged" if rec["status"] else "stopped"
+            rec = {**rec, "screened": f"{how} after {rec['nfev']} evaluations, cost {rec['cost']:.6g}: "
+                                      f"not among the {keep} lowest"}
+        runs.append((rec, None, n))
+    ranked = sorted((k for k, (_, res, _) in enumerate(short) if res is not None), key=lambda k: short[k][1].cost)
+    on = [k for k in ranked[:keep] if short[k][1].status == 0]     # stopped by the budget
+    for k in ranked[:keep]:
+        if k not in on:
+            runs[k] = ({**short[k][0], "screened": "converged within the short run"}, short[k][1], short[k][2])
+    more = map_tasks(_fit_start, [{**tasks[k], "x": _interior(short[k][1].x, lo, hi)} for k in on], settings,
+                     desc="starts", progress=False)
+    for k, (rec, res, n) in zip(on, more):
+        runs[k] = ({**rec, "start": tasks[k]["start"], "theta_start": short[k][0]["theta_start"],
+                    "screened": f"continued from its short run's end (cost {short[k][0]['cost']:.6g})"},
+                   res, short[k][2] + n)
+    return runs
+
+
 def _interior(x, lo, hi):
     span = hi - lo
     return np.clip(x, lo + 1e-9 * span, hi - 1e-9 * span)
@@ -197,12 +225,16 @@ def _fit_start(task: dict):
 
 def fit_lsq(problem: IdentificationProblem, *, n_starts: int = 5, seed: int = 0, start_spread: float = 1.0,
             max_nfev: int | None = None, extra_starts: Sequence[Sequence[float]] = (),
-            settings: ParallelSettings | None = None) -> Fit:
+            settings: ParallelSettings | None = None, keep: int | None = None) -> Fit:
     """Bounded multi-start least squares (see the module doc).  ``extra_starts``: further
     start points θ (SI, one value per free parameter, in ``problem.labels`` order) tried
-    after the usual ones (e.g. a grid over a parameter whose scale is unknown).  The starts
-    are independent tasks of :func:`physics.execution.parallel.map_tasks` (``settings``: workers or a
-    Dask scheduler); the result does not depend on where they ran."""
+    after the usual ones (e.g. a grid over a parameter whose scale is unknown).  ``keep``:
+    when there are more starts than this, every start first runs
+    :data:`SCREEN_NFEV_PER_PARAM` evaluations per free parameter and only the ``keep`` lowest
+    go on to convergence, from where they stopped (starts that meet in one narrow valley each
+    take hundreds of evaluations to crawl along it; None: every start to convergence).  The
+    starts are independent tasks of :func:`physics.execution.parallel.map_tasks` (``settings``:
+    workers or a Dask scheduler); the result does not depend on where they ran."""
     t0 = time.perf_counter()
     n0 = problem.n_eval
     lo, hi = problem.x_bounds
@@ -215,7 +247,10 @@ def fit_lsq(problem: IdentificationProblem, *, n_starts: int = 5, seed: int = 0,
     remote = settings is not None and not settings.serial
     tasks = [{"problem": problem, "x": _interior(xs, lo, hi), "max_nfev": max_nfev, "start": k,
               "effect_files": user_effect_files() if remote else []} for k, xs in enumerate(points)]
-    runs = map_tasks(_fit_start, tasks, settings, desc="starts", progress=False)
+    if keep is not None and len(tasks) > keep:
+        runs = _screened(tasks, keep, SCREEN_NFEV_PER_PARAM * len(problem.params), settings, lo, hi)
+    else:
+        runs = map_tasks(_fit_start, tasks, settings, desc="starts", progress=False)
     problem.n_eval = n0 + sum(n for _, _, n in runs)
     starts = [rec for rec, _, _ in runs]
     best = min((res for _, res, _ in runs if res is not None), key=lambda r: r.cost, default=None)

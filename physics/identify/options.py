@@ -26,8 +26,10 @@ class FitOptions:
     (:class:`~physics.compare.FRFOptions`); ``min_coherence`` and ``weighting`` of the FRF
     lines.  Fit: ``free`` and ``per_rh`` parameters (names or "a,b"), ``start`` {name: SI} or
     "kf=0.004,Y=0.2 GPa", ``bounds`` {name: (lo, hi)} or "kf=1e-4:1e-1", ``n_starts`` (None:
-    the caller's default), ``seed``, ``n_modes``, ``settings`` (where the fits run,
-    :mod:`physics.execution.parallel`)."""
+    the caller's default), ``keep_starts`` (None: every start of a fit runs to convergence; a
+    number: all are screened by a short run and only that many go on,
+    :func:`~physics.identify.fitting.fit_lsq` ``keep``), ``seed``, ``n_modes``, ``settings``
+    (where the fits run, :mod:`physics.execution.parallel`)."""
 
     rh: float | None = None
     rh_tolerance: float = RH_TOLERANCE
@@ -40,6 +42,7 @@ class FitOptions:
     start: Mapping | str | None = None
     bounds: Mapping | str | None = None
     n_starts: int | None = None
+    keep_starts: int | None = None
     seed: int = 0
     n_modes: int = 4
     settings: ParallelSettings | None = None
@@ -64,6 +67,9 @@ class FitOptions:
         new = dataclasses.replace(opts, **out)
         if not (new.rh_tolerance >= 0):
             raise InputError(f"rh_tolerance={new.rh_tolerance!r} must be a non-negative number of % RH")
+        if new.keep_starts is not None and not (isinstance(new.keep_starts, int) and new.keep_starts >= 1):
+            raise InputError(f"keep_starts={new.keep_starts!r} must be a whole number ≥ 1 (or None: every start "
+                             "runs to convergence)")
         return new
 
     def describe(self) -> dict:

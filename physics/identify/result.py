@@ -158,7 +158,7 @@ def identify(measurements: Sequence, device, effects=None, free: Sequence[str] |
         fits["nelder-mead"] = fit_nelder_mead(problem)
     if method in ("lsq", "both"):
         fits["lsq"] = fit_lsq(problem, n_starts=int(n_starts), seed=seed, start_spread=lsq.start_spread,
-                              max_nfev=lsq.max_nfev, settings=settings)
+                              max_nfev=lsq.max_nfev, settings=settings, keep=opts.keep_starts)
     primary = "lsq" if "lsq" in fits else "nelder-mead"
     check = _check_against_start(problem, fits[primary])
     dev = problem.device_for(problem.theta0 if check.get("kept_start") else fits[primary].theta)
