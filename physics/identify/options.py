@@ -67,7 +67,8 @@ class FitOptions:
         new = dataclasses.replace(opts, **out)
         if not (new.rh_tolerance >= 0):
             raise InputError(f"rh_tolerance={new.rh_tolerance!r} must be a non-negative number of % RH")
-        if new.keep_starts is not None and not (isinstance(new.keep_starts, int) and new.keep_starts >= 1):
+        k = new.keep_starts
+        if k is not None and (isinstance(k, bool) or not isinstance(k, int) or k < 1):
             raise InputError(f"keep_starts={new.keep_starts!r} must be a whole number ≥ 1 (or None: every start "
                              "runs to convergence)")
         return new
