@@ -28,6 +28,17 @@ class _Rec:
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
 
+@pytest.fixture(autouse=True)
+def _no_draft_left_registered():
+    """Effects a test registers (``eap diagnose`` keeps its kept drafts registered for the
+    process) are unregistered after it: a draft still registered is not drafted again, so it
+    leaked into the next test (the default route's slow pole went missing after the others)."""
+    before = set(EFFECTS)
+    yield
+    for eid in set(EFFECTS) - before:
+        unregister(eid)
+
+
 GAIN = 1e-3      # m/V of the stand-in linear model: prediction = GAIN × voltage
 
 
@@ -308,9 +319,11 @@ def test_a_drift_shared_by_lab_records_is_not_taken_for_the_sensors_wander(tmp_p
     """Lab exports (no sensor metadata: the noise floor is estimated, a random-walk sensor drift
     in every record) with a drift A(1 − e^(−t/τ)) the same in both records: the floor does not
     count the shared part, so the drift is described and drafted, and with the draft the error
-    falls by at least half its distance to the noise floor — also when the base is within
+    falls by at least half its distance to what no model reaches (the noise floor and each
+    record's own sensor wander, which the records do not share) — also when the base is within
     1.3× the floor (seed 0: 1.14×), a drift the records share being structure whatever its size;
-    the draft passed back is the verdict with confidence high (its slow trend is seen)."""
+    the draft passed back is the verdict, not labelled "high": it removes less error than 3× the
+    noise floor (0.65× and 1.2×), which the calibration on held-out families does not call high."""
     import json
     from nnmodel.app.cli import main
     from physics.testbeds.demo import outside_catalog_case
@@ -327,10 +340,16 @@ def test_a_drift_shared_by_lab_records_is_not_taken_for_the_sensors_wander(tmp_p
     assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx2"), "--quiet",
                  "--effects-path", str(drafts / "drafted_drift.py")]) == 0
     after = json.loads((tmp_path / "dx2" / "diagnosis.json").read_text())
-    unregister("drafted_drift")
-    assert after["verdict"]["chain"][0]["effect"] == "drafted_drift"
-    assert after["verdict"]["chain"][0]["confidence_label"] == "high"
-    e0, e1, nf = before["base"]["rmse"], after["ranking"][0]["rmse_after"], before["noise_floor_m"]
+    pick = after["verdict"]["chain"][0]
+    assert pick["effect"] == "drafted_drift"
+    # calibrated (issue 34): a pick that removes less than 3× the noise floor of error is not "high"
+    feats = pick["confidence_features"]
+    assert feats["change_noise_floors"] < 3.0
+    assert pick["confidence_label"] != "high"
+    assert any("noise floor" in why for why in feats["not_high_because"])
+    # what no model reaches: the white floor and each record's own sensor wander (unshared)
+    nf = math.hypot(before["noise_floor_m"], before["settings"]["noise"]["wander_allowed_m"])
+    e0, e1 = before["base"]["rmse"], after["ranking"][0]["rmse_after"]
     assert e1 <= e0 - 0.5 * (e0 - nf), (e0, e1, nf)
 
 
