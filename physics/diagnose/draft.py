@@ -66,6 +66,24 @@ class DraftOutcome:
         return out + self.notes
 
 
+def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
+                progress: Callable[[str], None] | None = None, keep_starts: int | None = DRAFT_KEEP_STARTS):
+    """The ``rediagnose`` of :func:`draft_effects` that ``eap diagnose`` uses after the diagnosis
+    ``res`` of ``measurements`` with the fit ``options``: each round a forward-only diagnosis with
+    the drafts as the only candidates, one start per fit (``keep_starts`` of them run to
+    convergence, see :data:`DRAFT_KEEP_STARTS`), the draft base's per-RH parameters and the
+    diagnosis's noise floor, no support test."""
+    import dataclasses
+
+    from .diagnosis import AnalysisOptions, SelectionOptions, diagnose
+    opts = dataclasses.replace(options, per_rh=",".join(res.draft_base.spec.per_rh) or "none", n_starts=1,
+                               keep_starts=keep_starts)
+    return lambda dev, eff, free, cands: diagnose(
+        measurements, dev, eff, free, options=opts, candidates=cands, force=True, check_support=False,
+        selection=SelectionOptions(max_effects=1, backward=False),
+        analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=fs_max), progress=progress)
+
+
 @single_threaded
 def draft_effects(res, rediagnose, max_effects: int = 2,
                   progress: Callable[[str], None] | None = None) -> DraftOutcome:
@@ -229,4 +247,4 @@ def write_drafts(items: Sequence[EffectDraft], out, *, overwrite: bool = False, 
     return report
 
 
-__all__ = ["DRAFT_KEEP_STARTS", "DraftOutcome", "drafts", "draft_effects", "write_drafts", "check_draft"]
+__all__ = ["DRAFT_KEEP_STARTS", "DraftOutcome", "drafts", "draft_effects", "rediagnosis", "write_drafts", "check_draft"]

@@ -1,7 +1,6 @@
 """``eap diagnose``: where a model fails, which physical effect is missing, add it, watch the error fall."""
 from __future__ import annotations
 
-import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -180,13 +179,8 @@ def _diagnose(args):
                    progress=log)
     if args.no_draft:
         return res, None
-    from physics.diagnose.draft import DRAFT_KEEP_STARTS, draft_effects
-    per = ",".join(res.draft_base.spec.per_rh) or "none"
-    return res, draft_effects(res, lambda dev, eff, free, cands: diagnose(
-        ms, dev, eff, free, options=dataclasses.replace(opts, per_rh=per, n_starts=1, keep_starts=DRAFT_KEEP_STARTS),
-        candidates=cands, force=True,
-        check_support=False, selection=SelectionOptions(max_effects=1, backward=False),
-        analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=args.fs_max_Hz), progress=log), progress=log)
+    from physics.diagnose.draft import draft_effects, rediagnosis
+    return res, draft_effects(res, rediagnosis(ms, res, opts, fs_max=args.fs_max_Hz, progress=log), progress=log)
 
 
 def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
