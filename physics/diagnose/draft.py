@@ -23,7 +23,7 @@ from .effect_draft import EffectDraft
 #: Starts of each fit in a draft round that run to convergence (the others are screened out by a
 #: short run, :func:`physics.identify.fitting.fit_lsq` ``keep``): a draft's grid over its unknown
 #: scale gives eight starts of a model with ~15 free parameters, which on a low-pass strip all met in
-#: one valley at 9–17 thousand evaluations each (8 minutes of a round's 9).
+#: one valley at 9–17 thousand evaluations each (over 8 minutes for that one candidate).
 DRAFT_KEEP_STARTS = 2
 
 
