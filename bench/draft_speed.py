@@ -78,7 +78,8 @@ def main(argv=None) -> int:
               f"final model {1e6 * res.final.rmse:.4g} µm")
         count = _counting()
         rows = []
-        for label, keep in (("every start to convergence", None), (f"screened, {DRAFT_KEEP_STARTS} kept", DRAFT_KEEP_STARTS)):
+        variants = (("every start to convergence", None), (f"screened, {DRAFT_KEEP_STARTS} kept", DRAFT_KEEP_STARTS))
+        for label, keep in variants:
             n0, t0 = count[0], time.perf_counter()
             out = draft_effects(res, rediagnosis(files, res, opts, keep_starts=keep))
             wall = time.perf_counter() - t0

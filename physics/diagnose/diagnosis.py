@@ -582,7 +582,8 @@ def try_candidates(step: int, base: ModelFit, cand_ids, data: PreparedRecords, r
         slots.append(len(results))
         results.append(CandidateResult(eff, "pending", reason=why if ok else f"forced ({why})", step=step))
         tasks.append({"spec": spec, "device": base.device, "targets": data.targets, "trecs": data.target_records,
-                      "records": data.records, "n_starts": run.n_starts, "keep": run.options.keep_starts, "seed": run.options.seed,
+                      "records": data.records, "n_starts": run.n_starts, "keep": run.options.keep_starts,
+                      "seed": run.options.seed,
                       "n_modes": run.options.n_modes, "effect_files": user_effect_files(),
                       "df_cache": data.df_cache if settings is None or settings.serial else None})
     fitted = map_tasks(_fit_candidate, tasks, settings, desc="candidates", progress=False, cost=_candidate_cost)
@@ -1110,8 +1111,8 @@ def _fit_candidate(task: dict):
     ensure_registered(task["effect_files"])
     t0 = time.perf_counter()
     mf = fit_model(task["spec"], task["device"], task["targets"], task["trecs"], n_starts=task["n_starts"],
-                     keep=task["keep"], seed=task["seed"], n_modes=task["n_modes"], df_cache=task["df_cache"] if task["df_cache"]
-                     is not None else {})
+                     keep=task["keep"], seed=task["seed"], n_modes=task["n_modes"],
+                     df_cache=task["df_cache"] if task["df_cache"] is not None else {})
     if mf.ok:
         score(mf, task["records"])
         start_on_time(mf, task["records"])
