@@ -342,9 +342,10 @@ def test_a_drift_shared_by_lab_records_is_not_taken_for_the_sensors_wander(tmp_p
     after = json.loads((tmp_path / "dx2" / "diagnosis.json").read_text())
     pick = after["verdict"]["chain"][0]
     assert pick["effect"] == "drafted_drift"
-    # calibrated (issue 34): a pick that removes less than 3× the noise floor of error is not "high"
+    # calibrated (issue 34): a pick that removes less than CHANGE_HIGH noise floors of error is not "high"
+    from physics.diagnose.confidence import CHANGE_HIGH
     feats = pick["confidence_features"]
-    assert feats["change_noise_floors"] < 3.0
+    assert feats["change_noise_floors"] < CHANGE_HIGH
     assert pick["confidence_label"] != "high"
     assert any("noise floor" in why for why in feats["not_high_because"])
     # what no model reaches: the white floor and each record's own sensor wander (unshared)
