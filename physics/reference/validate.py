@@ -149,7 +149,7 @@ def amplitude_sweep(device: str, amps=AMPLITUDES, f0: float = 1.0, periods: int 
     variants = {
         "linear": ActuatorModel(dev, base_fx),
         plain: ActuatorModel(dev.with_params(**limit), base_fx + [law]),
-        _label(law, {k: dev[k] for k in limit}): ActuatorModel(dev, base_fx + [law]),
+        _label(law, {k: EFFECTS[law](dev).value(dev.params, k) for k in limit}): ActuatorModel(dev, base_fx + [law]),
     }
     out = {"device": device, "effects": base_fx, "f0_Hz": f0, "fs_Hz": fs, "periods": periods,
            "amplitudes_V": list(map(float, amps)), "models": {}, "reference": {"thd_current": [], "thd_deflection": [],
