@@ -128,6 +128,23 @@ def _linear_plant(n, seed):
     return Experiment(u, lfilter([1 - a], [1, -a], u) + 0.05 * rng.normal(size=n), None, 1.0)
 
 
+def test_a_fold_keeps_an_untrained_correction_its_start_would_drop():
+    """A correction that is not trained after its start (the RBF recipe: least squares, no
+    epochs): one split drops it at its start for good; a fold keeps it for the folds to judge
+    together (a fold that zeroes it scores as an exact tie with the reference, which once let a
+    correction that was better on one tail only be kept and then diverge on the test)."""
+    from nnmodel.models.crossval import _is_reference
+    rec = [_linear_plant(400, 0)]
+    settings = {"structures": None, "progress_bar": False, "cv_folds": 1}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        alone = make_model("rbf", settings).fit(rec, None)
+        fold = make_model("rbf", settings).fit_fold(rec, None)
+    assert alone.max_epochs == 0
+    assert alone.reference_start_["start"]["kept"] == "linear" and _is_reference(alone)
+    assert fold.reference_start_["start"]["kept"] == "network" and not _is_reference(fold)
+
+
 def test_a_fold_measures_the_correction_it_trained():
     """A fold keeps its trained correction for the folds to judge together, where one split
     alone (``fit``) judges it on its own tail and here drops a gain within its uncertainty."""

@@ -6,6 +6,7 @@ tanh saturation or a hard clip) driven by random steps, an integrator in a close
 P controller on the measured output, random reference steps), and a mass on a spring under a
 P controller (:func:`positioner`).  Sampled at 1 Hz; every test record is 2 000 samples from its own
 seed."""
+import re
 import warnings
 
 import numpy as np
@@ -82,11 +83,11 @@ def _nrmse(run, recs):
     return float(np.sqrt(e2 / v2))
 
 
-def case(plant, name, overrides, n, **kw):
-    """Train ``name`` on ``n`` samples of ``plant`` (seed 1), score it and the linear row on a
+def case(plant, name, overrides, n, seed=1, **kw):
+    """Train ``name`` on ``n`` samples of ``plant`` (``seed``), score it and the linear row on a
     test record (seed 3) under the start-up rule; returns (network NRMSE, linear NRMSE, causes,
     actions)."""
-    train = [Experiment(*plant(n, 1, **kw), None, 1.0)]
+    train = [Experiment(*plant(n, seed, **kw), None, 1.0)]
     test = [Experiment(*plant(2000, 3, **kw), None, 1.0)]
     model = make_model(name, {"progress_bar": False, **overrides})
     with warnings.catch_warnings():
@@ -142,15 +143,18 @@ def test_a_dropped_correction_on_few_data_is_kept_when_more_is_recorded():
 
 @pytest.mark.slow
 def test_a_saturating_plant_is_named_and_more_data_let_a_network_follow_it():
-    """tanh saturation, the default RBF recipe on 350 samples ties the linear row; the finding
-    names the saturation (a cubic term explains most of the linear residual) and says record
-    more; with 1 050 samples the network falls well below the linear row, which still cannot
-    follow the saturation."""
-    net, lin, causes, actions = case(wiener, "rbf", {}, 350)
+    """tanh saturation, the default RBF recipe on 200 samples ties the linear row; the finding
+    names the saturation (a cubic term explains most of the linear residual) and says how many
+    samples to record; followed, the network falls well below the linear row, which still cannot
+    follow the saturation (the median over five training draws: a few hundred samples leave a
+    network's fit to the draw)."""
+    net, lin, causes, actions = case(wiener, "rbf", {}, 200)
     i = next(k for k, c in enumerate(causes) if c.startswith("the output saturates"))
     assert net == pytest.approx(lin, rel=1e-3) and "record more" in actions[i]
-    followed, lin2, _, _ = case(wiener, "rbf", {}, 1050)
-    assert followed < 0.6 * lin2 and lin2 > 0.1
+    advised = int(re.search(r"about ([\d,]+) training samples", actions[i]).group(1).replace(",", ""))
+    assert advised > 200
+    followed = [case(wiener, "rbf", {}, advised, seed=seed)[:2] for seed in (1, 2, 4, 5, 6)]
+    assert np.median([net / lin for net, lin in followed]) < 0.6 and min(lin for _, lin in followed) > 0.1
 
 
 @pytest.mark.slow

@@ -277,7 +277,10 @@ class NeuralModel:
             t0 = time.perf_counter()
             self._initialise(core, tr)
             reference = self._reference()
-            start = keep_if_better(core, va, reference) if reference else None
+            # a correction not trained after its start: dropping it there is the final decision, which a
+            # cross-validation fold leaves to the folds together (fit_fold); trained, the start's reset is
+            # part of the recipe in every fold
+            start = keep_if_better(core, va, reference, decide=decide or self.max_epochs > 0) if reference else None
             history: list[dict] = []
             if self.max_epochs > 0:
                 history, self.training_summary_ = fit_core(core, tr, va, self.training)
