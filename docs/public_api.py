@@ -17,7 +17,8 @@ PAGES = {
         "physics.signals.steps", "physics.signals.multisine", "physics.signals.noise", "physics.signals.fade_in",
     ]),
     "physics.effects": ("physics.effects", "The effect contract: write, register and check an effect.", [
-        "physics.effects.OutputEffect", "physics.effects.LoadEffect", "physics.effects.register",
+        "physics.effects.OutputEffect", "physics.effects.LoadEffect", "physics.effects.InputEffect",
+        "physics.effects.register",
         "physics.effects.load_effects_file", "physics.effects.check_effect", "physics.ContractReport",
         "physics.effects.EFFECTS",
     ]),

@@ -40,11 +40,11 @@ import numpy as np
 
 from . import effects, signals
 from .device import all_param_specs, load_device
-from .effects import BUILT_IN, EFFECTS, Effect, LoadEffect, OutputEffect, register, stage_of, unregister
+from .effects import BUILT_IN, EFFECTS, Effect, InputEffect, LoadEffect, OutputEffect, register, stage_of, unregister
 from .effects.base import rational
 from .effects.declaration import declaration_problems
 from .execution.usercode import UserCodeError
-from .effects.stages import STAGE_PROTOCOLS, CompiledChargeLaw, LoadFactor, OutputFactor
+from .effects.stages import STAGE_PROTOCOLS, CompiledChargeLaw, InputFactor, LoadFactor, OutputFactor
 from .errors import InputError
 from .solvers.frequency import frequency_response
 from .model import ActuatorModel
@@ -230,9 +230,10 @@ class _Context:
         e = self._instance()
         default = stage_of(self.cls)
         if default is None:
-            kinds = [p.__name__ for p in (LoadFactor, OutputFactor) if isinstance(e, p)]
+            kinds = [p.__name__ for p in (LoadFactor, OutputFactor, InputFactor) if isinstance(e, p)]
             if not kinds:
-                return "fail", "adds no factor: define load_factor(s, p) or output_response and filter_output"
+                return "fail", ("adds no factor: define load_factor(s, p), output_response and filter_output, or "
+                                "filter_input")
             return "pass", f"adds factors: {', '.join(kinds)}"
         proto = STAGE_PROTOCOLS[default.stage]
         if not isinstance(e, proto):
@@ -336,11 +337,20 @@ class _Context:
     def solvers(self):
         if not self.cls.linear:
             return "skip", "large-signal effect: the frequency solver gives its small-signal form only"
+        if issubclass(self.cls, InputEffect) and not self._linear_input_map():
+            return "skip", "a nonlinear map of the voltage: the frequency solver gives its small-signal form only"
         f, H = self._periodic_frf(self.model)
         ratio = H / frequency_response(self.model, None, f, rh=self.rh).deflection
         mag, ph = np.max(np.abs(np.abs(ratio) - 1)), np.max(np.abs(np.degrees(np.angle(ratio))))
         detail = f"time vs closed form over 0.1–20 Hz: {100 * mag:.3g} % and {ph:.3g}° at most"
         return ("pass" if mag < 0.01 and ph < 1.0 else "fail"), detail + " (limits 1 %, 1°)"
+
+    def _linear_input_map(self) -> bool:
+        """True when the effect's ``filter_input`` is linear (superposition on two tones)."""
+        e, p = self._instance(), self.model.params_at(self.rh)
+        a, b = signals.tone(0.3, 0.7, 4.0, 100.0).v, signals.tone(0.2, 3.0, 4.0, 100.0).v
+        fa, fb, fab = (np.asarray(e.filter_input(x, 100.0, p), float) for x in (a, b, 2.0 * a + b))
+        return bool(np.allclose(fab, 2.0 * fa + fb, rtol=1e-9, atol=1e-12 * np.max(np.abs(fab))))
 
     def _base_ids(self) -> list[str]:
         """The linear built-in effects, without the one filling the same stage."""
@@ -417,19 +427,25 @@ class _Context:
             + (f"; {', '.join(blind)} on a time record" if blind else "") + ")"
 
     def _identify_in_time(self, dev, names, start, extra) -> dict:
-        """``names`` (output-effect parameters the FRF cannot see) fitted by least squares on a
-        noise-free 60 s multisine record at 100 Hz of the model with ``dev``'s values: the rest
-        of the chain is simulated once, each evaluation only filters it."""
+        """``names`` (parameters the FRF cannot see) fitted by least squares on a noise-free 60 s
+        multisine record at 100 Hz of the model with ``dev``'s values: for an output effect the
+        rest of the chain is simulated once and each evaluation only filters it; an input effect's
+        voltage is mapped and the chain simulated at each evaluation."""
         from scipy.optimize import least_squares
         sig = signals.multisine(rms=0.3, f_start=0.1, f_stop=20.0, period=60.0, fs=100.0, seed=3)
         model = ActuatorModel(dev, f"none,+{self.cls.id}")
         y = simulate(model, None, sig.t, sig.v, rh=self.rh).deflection
-        core = simulate(ActuatorModel(dev, "none"), None, sig.t, sig.v, rh=self.rh).deflection
+        core_model = ActuatorModel(dev, "none")
+        core = simulate(core_model, None, sig.t, sig.v, rh=self.rh).deflection
         e, p = self._instance(), model.params_at(self.rh)
         scale = 1.0 / (np.std(y) or 1.0)
 
         def resid(theta):
-            return (e.filter_output(core, 100.0, {**p, **dict(zip(names, theta))}) - y) * scale
+            q = {**p, **dict(zip(names, theta))}
+            if isinstance(e, InputEffect):
+                return (simulate(core_model, None, sig.t, e.filter_input(sig.v, 100.0, q), rh=self.rh).deflection
+                        - y) * scale
+            return (e.filter_output(core, 100.0, q) - y) * scale
 
         lo, hi = np.array([self._bounds(n) for n in names], float).T
         best = None
@@ -442,18 +458,20 @@ class _Context:
 
 
 def time_only_params(model, names, p: dict) -> list[str]:
-    """Of ``names``, the parameters of ``model``'s output effects that leave the frequency
-    response unchanged (e.g. an additive drift acting in ``filter_output`` only): an FRF
-    cannot determine them, a time record can.  ``p``: the model's parameter values [SI]."""
+    """Of ``names``, the parameters of ``model``'s output and input effects that leave the
+    frequency response unchanged (an additive drift acting in ``filter_output`` only, the
+    threshold of a dead-zone in ``filter_input``): an FRF cannot determine them, a time record
+    can.  ``p``: the model's parameter values [SI]."""
     s = 2j * np.pi * np.array([0.1, 1.0, 10.0])
     out = []
-    for e in model.outputs:
+    for e in model.outputs + model.inputs:
+        response = e.output_response if e in model.outputs else e.input_response
         own = {q.name for q in e.params}
         for n in names:
             if n in own and n not in out:
                 v = float(p.get(n) or 0.0)
                 moved = {**p, n: v * 1.5 if v else 1e-3}
-                if np.allclose(e.output_response(s, p), e.output_response(s, moved), rtol=1e-12, atol=0):
+                if np.allclose(response(s, p), response(s, moved), rtol=1e-12, atol=0):
                     out.append(n)
     return out
 

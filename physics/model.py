@@ -107,6 +107,11 @@ class ActuatorModel:
         return [e for e in self.added if callable(getattr(e, "filter_output", None))]
 
     @property
+    def inputs(self) -> list[Effect]:
+        """Added effects acting on the drive voltage (``filter_input``/``input_response``)."""
+        return [e for e in self.added if callable(getattr(e, "filter_input", None))]
+
+    @property
     def is_linear(self) -> bool:
         return all(type(e).linear for e in self.effects)
 
@@ -202,6 +207,16 @@ class ActuatorModel:
         for e in self.added:
             lines.append(f"  {'added':12s} {e.label:24s} {e.summary}")
         return "\n".join(lines)
+
+    def input_response(self, s: np.ndarray, p: dict) -> np.ndarray | float:
+        """Product of the added effects' small-signal factors on the voltage at ``s`` [rad/s] (1 if none)."""
+        return self.product("input_response", s, p)
+
+    def filter_input(self, v: np.ndarray, fs: float, p: dict) -> np.ndarray:
+        """The drive voltage ``v`` [V] at ``fs`` [Hz] through the added input effects."""
+        for e in self.inputs:
+            v = np.asarray(e.filter_input(v, fs, p), dtype=float)
+        return v
 
     def output_response(self, s: np.ndarray, p: dict) -> np.ndarray | float:
         """Product of the added effects' factors on the deflection at ``s`` [rad/s] (1 if none)."""

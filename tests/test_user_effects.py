@@ -208,3 +208,60 @@ def test_a_load_side_user_effect_works_in_both_solvers():
         assert np.max(np.abs(np.degrees(np.angle(Ht / Hc)))) < 1.0
     finally:
         unregister("load_lag")
+
+
+def test_an_input_effect_maps_the_voltage_in_both_solvers():
+    """An InputEffect (a map of the drive voltage): the time solver drives the chain with the
+    mapped voltage (exactly the model driven by the pre-mapped record; the result keeps the
+    voltage as given), the frequency solver multiplies by its small-signal factor, and a map
+    that returns the wrong shape or an effect without a map is a clear error."""
+    from physics.effects import InputEffect
+    from physics.errors import ModelError
+    from physics.parameters import ParamSpec
+
+    class HalfDrive(InputEffect):
+        id = "half_drive"
+        summary = "test: a divider halves the drive, and nothing passes within ±0.1 V"
+        params = (ParamSpec("hd_zone", "V", 0.0, 10.0, "dead-zone", optional=True, default=0.1),)
+
+        def filter_input(self, v, fs, p):
+            d = self.value(p, "hd_zone")
+            return 0.5 * (v - np.clip(v, -d, d))
+
+        def input_response(self, s, p):
+            return np.full(np.shape(s), 0.5, dtype=complex)
+
+    register(HalfDrive)
+    try:
+        m, base = ActuatorModel("ipmc_pt_eg", "default,+half_drive"), ActuatorModel("ipmc_pt_eg", "default")
+        assert [e.id for e in m.inputs] == ["half_drive"] and not base.inputs
+        sig = signals.tone(0.8, 1.0, 3.0, 200.0)
+        got = simulate(m, None, sig.t, sig.v, rh=60.0)
+        want = simulate(base, None, sig.t, 0.5 * (sig.v - np.clip(sig.v, -0.1, 0.1)), rh=60.0)
+        np.testing.assert_array_equal(got.deflection, want.deflection)
+        np.testing.assert_array_equal(got.current, want.current)
+        np.testing.assert_array_equal(got.voltage, sig.v)
+        f = np.array([0.5, 8.0])
+        a, b = (frequency_response(x, None, f, rh=60.0) for x in (m, base))
+        np.testing.assert_allclose(a.deflection, 0.5 * b.deflection, rtol=1e-12)
+        np.testing.assert_allclose(a.current, 0.5 * b.current, rtol=1e-12)
+    finally:
+        unregister("half_drive")
+
+    class WrongShape(InputEffect):
+        id = "wrong_shape"
+
+        def filter_input(self, v, fs, p):
+            return v[:-1]
+
+    register(WrongShape)
+    try:
+        with pytest.raises(ModelError, match="wrong_shape: filter_input must return one finite voltage per sample"):
+            simulate(ActuatorModel("ipmc_pt_eg", "none,+wrong_shape"), None, sig.t, sig.v, rh=60.0)
+    finally:
+        unregister("wrong_shape")
+
+    class NoMap(InputEffect):
+        id = "no_map"
+    with pytest.raises(InputError, match="define filter_input"):
+        register(NoMap)

@@ -3,7 +3,8 @@
 ``CHAIN`` lists, in chain order, the default variant of every stage of the model (the
 contract is in :mod:`physics.effects.base`, each stage's typed protocol in
 :mod:`physics.effects.stages`); an effect replaces the stage whose default it subclasses, or
-adds factors (:class:`LoadEffect`: ``load_factor``; :class:`OutputEffect`: ``output_response``).
+adds factors (:class:`LoadEffect`: ``load_factor``; :class:`OutputEffect`: ``output_response``;
+:class:`InputEffect`: ``filter_input``).
 :func:`check_effect` runs the contract on any effect (:mod:`physics.contract`).  ``EFFECTS`` maps each id
 to its class: the built-ins of ``BUILT_IN_EFFECTS``, then those added by users with
 :func:`register`, from a file with :func:`load_effects_file` (``--effects-path FILE.py``) or
@@ -17,7 +18,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, arg
-from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
+from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, InputEffect, LoadEffect, OutputEffect
 from .declaration import declaration_problems
 from ..execution.usercode import contain_class, import_limited
 from .catalog import BUILT_IN, BUILT_IN_EFFECTS, CHAIN, CORE, FACTOR_HOOKS, adds_factors, stage_of
@@ -95,7 +96,8 @@ def register(cls: type[Effect]) -> type[Effect]:
     """Register an effect class under its id, so that ``--effects`` and the diagnosis know it.
 
     The class either replaces a stage of the model (it subclasses that stage's default in
-    ``physics.effects.CHAIN``) or adds a factor (:class:`OutputEffect`, :class:`LoadEffect`).
+    ``physics.effects.CHAIN``) or adds a factor (:class:`OutputEffect`, :class:`LoadEffect`,
+    :class:`InputEffect`).
     Its declaration is checked; the full contract is :func:`check_effect`.
 
     Parameters
@@ -174,8 +176,8 @@ def effect_classes_in_file(path) -> list[type[Effect]]:
     for c in classes:
         c.source_file = str(p.resolve())   # so that worker processes can load it too
     if not classes:
-        raise InputError(f"{_PATH} {p}: defines no subclass of physics.effects.OutputEffect, LoadEffect "
-                         "(or Effect) with an id")
+        raise InputError(f"{_PATH} {p}: defines no subclass of physics.effects.OutputEffect, LoadEffect, "
+                         "InputEffect (or Effect) with an id")
     return classes
 
 
@@ -243,6 +245,6 @@ def load_plugins() -> list[str]:
     return [cls.id for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
 
 
-__all__ = ["Effect", "OutputEffect", "LoadEffect", "EFFECTS", "CHAIN", "CORE", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
+__all__ = ["Effect", "OutputEffect", "LoadEffect", "InputEffect", "EFFECTS", "CHAIN", "CORE", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
            "REFERENCE", "register", "unregister", "stage_of", "adds_factors", "load_effects_file", "load_plugins",
            "effect_classes_in_file", "user_effect_files", "ensure_registered", "check_effect", "declaration_problems"]

@@ -44,6 +44,10 @@ temperature        ``network(p, edges)`` (None: isothermal)
   deflection (:class:`OutputEffect`: give ``output_tf`` and both follow).  ``filter_output``
   may be nonlinear (hysteresis, saturation); the frequency solver then uses
   ``output_response`` as its small-signal form.
+* ``filter_input(v, fs, p)`` with ``input_response(s, p)``: a map of the drive voltage before
+  the electrochemistry (:class:`InputEffect`: an amplifier that clips, a contact that conducts
+  only beyond a threshold); the time solver drives the strip with the mapped voltage, the
+  frequency solver multiplies by ``input_response``, the map's small-signal form.
 
 Effects with internal state (creep, a sensor's dynamics) are rational factors: their
 states live in the time solver's realisation (``output_tf``: a Tustin filter).
@@ -325,3 +329,61 @@ class LoadEffect(Effect):
         """The factor at complex frequencies ``s`` [rad/s] (from :meth:`load_tf`)."""
         num, den = rational(self, "load_tf", p)
         return np.polyval(num, s) / np.polyval(den, s)
+
+
+class InputEffect(Effect):
+    """Base class of an effect acting on the drive voltage, before the electrochemistry.
+
+    For a static (or slow) map of the voltage the strip actually sees: an amplifier that
+    clips, a contact or a driver with a dead-zone.  Subclass it with the class attributes of
+    :class:`OutputEffect` and :meth:`filter_input`.  The time solver drives the whole chain with
+    the mapped voltage; the frequency solver, which has no amplitude, multiplies the response by
+    :meth:`input_response`, the map's small-signal form (1 by default: small signals pass, as
+    through a clip; a dead-zone has no small-signal gain at rest, and the diagnosis fits what
+    passes beyond it with the coupling gain, the map's parameters on the time records).
+
+    Examples
+    --------
+    A drive clipped at ±1.5 V, and the quick checks of the effect contract:
+
+    >>> import numpy as np
+    >>> from physics.effects import InputEffect, check_effect
+    >>> from physics.parameters import ParamSpec
+    >>> class DriveClip(InputEffect):
+    ...     id = "drive_clip"
+    ...     summary = "the amplifier clips the drive at ±clip_level"
+    ...     params = (ParamSpec("clip_level", "V", 0.0, 1e3, "clipping level", optional=True, default=1.5),)
+    ...     def filter_input(self, v, fs, p):
+    ...         level = self.value(p, "clip_level")
+    ...         return np.clip(v, -level, level)
+    >>> check_effect(DriveClip, fast=True).ok
+    True
+    """
+
+    stage = "input"
+    summary = "user-defined input effect"
+    #: the reference solver drives its PNP slab with the voltage as given
+    reference = "unsupported"
+    reference_note = "the reference solver drives its PNP slab with the voltage as given: pre-distort the voltage"
+
+    @classmethod
+    def needed(cls) -> list[str]:
+        return [p.name for p in cls.params if not p.optional and p.default is None] + list(cls.requires)
+
+    def filter_input(self, v: np.ndarray, fs: float, p: dict) -> np.ndarray:
+        """The drive voltage ``v`` [V] sampled at ``fs`` [Hz] as the strip sees it [V].
+
+        Parameters
+        ----------
+        v : ndarray
+            The voltage at the clamp [V].
+        fs : float
+            Its sampling rate [Hz].
+        p : dict
+            The model's parameters in SI units (read yours with ``self.value(p, name)``).
+        """
+        raise NotImplementedError
+
+    def input_response(self, s: np.ndarray, p: dict) -> np.ndarray:
+        """The map's small-signal factor at complex frequencies ``s`` [rad/s] (default 1)."""
+        return np.ones(np.shape(s), dtype=complex)

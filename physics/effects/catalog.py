@@ -26,7 +26,7 @@ CORE = tuple(cls.id for cls in CHAIN if cls.id)
 #: Ids of the effects shipped with the package (the rest were registered by users).
 BUILT_IN = tuple(cls.id for cls in BUILT_IN_EFFECTS)
 #: Factor hooks an added effect may implement (see :mod:`physics.effects.base`).
-FACTOR_HOOKS = ("load_factor", "output_response", "filter_output")
+FACTOR_HOOKS = ("load_factor", "output_response", "filter_output", "filter_input")
 
 
 def stage_of(cls: type[Effect]) -> type[Effect] | None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import inspect
 
-from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, LoadEffect, OutputEffect
+from .base import DIAGNOSIS_KEYS, REFERENCE, REVEAL_RULES, Effect, InputEffect, LoadEffect, OutputEffect
 from .catalog import BUILT_IN, CHAIN, adds_factors, stage_of
 
 
@@ -12,7 +12,7 @@ def declaration_problems(cls, *, user: bool = True) -> list[str]:
     """What is wrong with the declaration of effect class ``cls`` (empty: nothing).  ``user``:
     checked as a user effect (its id is not a built-in one, every parameter has a default)."""
     if not (inspect.isclass(cls) and issubclass(cls, Effect)):
-        return ["a user effect must subclass physics.effects.OutputEffect, LoadEffect (or Effect)"]
+        return ["a user effect must subclass physics.effects.OutputEffect, LoadEffect, InputEffect (or Effect)"]
     out = []
     if not isinstance(cls.id, str) or not cls.id.isidentifier():
         out.append(f"needs an id that is a Python identifier, got {cls.id!r}")
@@ -24,6 +24,9 @@ def declaration_problems(cls, *, user: bool = True) -> list[str]:
     elif issubclass(cls, LoadEffect):
         if cls.load_tf is LoadEffect.load_tf and cls.load_factor is LoadEffect.load_factor:
             out.append("define load_tf(self, p) (or load_factor(self, s, p))")
+    elif issubclass(cls, InputEffect):
+        if cls.filter_input is InputEffect.filter_input:
+            out.append("define filter_input(self, v, fs, p)")
     elif stage_of(cls) is None and not adds_factors(cls):
         out.append(f"an effect must replace a stage (subclass one of {', '.join(c.__name__ for c in CHAIN)}) or "
                    "define load_factor(self, s, p); the simplest is a subclass of OutputEffect or LoadEffect")

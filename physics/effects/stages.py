@@ -164,6 +164,17 @@ class LoadFactor(Protocol):
 
 
 @runtime_checkable
+class InputFactor(Protocol):
+    """An added effect on the drive voltage (:class:`~physics.effects.InputEffect`)."""
+
+    def filter_input(self, v: np.ndarray, fs: float, p: dict) -> np.ndarray:
+        """The drive voltage ``v`` [V] at ``fs`` [Hz] as the strip sees it."""
+
+    def input_response(self, s, p) -> np.ndarray:
+        """The map's small-signal factor at ``s`` (what the frequency solver uses)."""
+
+
+@runtime_checkable
 class OutputFactor(Protocol):
     """An added effect on the tip deflection (:class:`~physics.effects.OutputEffect`)."""
 

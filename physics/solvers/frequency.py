@@ -176,8 +176,9 @@ def response_per_volt(model: ActuatorModel, s: np.ndarray, rh: float, p: dict | 
     k_unit = modes.beta ** 4 * L
     qm = Q / (s[:, None] ** 2 * rhoA * L + EIs[:, None] * k_unit[None, :])
     resid = (stat - Q @ (modes.tip / k_unit)) / EIs
-    tip = (qm @ modes.tip + resid) * model.output_response(s, p)
-    current = w * Yp * (Lc + intU)
-    cs = n * model.hook("solvent_factor")(s, p) * cint * (Lc + intU) / Lt
+    drive = model.input_response(s, p)                              # the voltage the strip sees, per volt
+    tip = (qm @ modes.tip + resid) * model.output_response(s, p) * drive
+    current = w * Yp * (Lc + intU) * drive
+    cs = n * model.hook("solvent_factor")(s, p) * cint * (Lc + intU) / Lt * drive
     fn = modes.natural_frequencies(float(EI(np.array([0.0]))[0].real), rhoA)
     return tip, current, cs, fn

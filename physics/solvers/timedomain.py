@@ -192,11 +192,13 @@ def simulate(device, effects=None, t=None, voltage=None, rh=None, *, fields=(), 
 
 @dataclass(frozen=True)
 class _Record:
-    """A checked record of :func:`simulate`: time ``t`` [s], voltage ``v`` [V], RH ``rh`` [%]
-    per sample, step ``dt`` [s], segment ``edges`` [m], and whether the stepper runs."""
+    """A checked record of :func:`simulate`: time ``t`` [s], voltage ``v`` [V] and the ``drive``
+    the strip sees (``v`` through the model's input effects) [V], RH ``rh`` [%] per sample, step
+    ``dt`` [s], segment ``edges`` [m], and whether the stepper runs."""
 
     t: np.ndarray
     v: np.ndarray
+    drive: np.ndarray
     rh: np.ndarray
     dt: float
     edges: np.ndarray
@@ -225,7 +227,8 @@ def _prepare(model, t, voltage, rh, fields, n_segments, periodic) -> _Record:
     distributed = _distributed(model, p_mid)
     edges = _line_grid(model, p_mid, w_hi, n_segments, distributed) if (distributed or fields) \
         else segment_edges(model.free_length, 1)
-    return _Record(t, v, rh_t, dt, edges, bool(stepper_needed))
+    drive = _input_effects(model, v, p_mid, dt)
+    return _Record(t, v, drive, rh_t, dt, edges, bool(stepper_needed))
 
 
 def _stages(model, rec: _Record, hold, periodic):
@@ -247,7 +250,7 @@ def _stage1_stepper(model, rec: _Record, fields, reduce, chain, progress):
     from . import stepper
     t, rh_t, flds = rec.t, rec.rh, {}
     want = {"voltage": "U", "charge": "Q", "temperature": "T", "cation": "c"}
-    out = stepper.run(model, model.params_at, t, rec.v, rh_t, rec.edges,
+    out = stepper.run(model, model.params_at, t, rec.drive, rh_t, rec.edges,
                       {want[f] for f in fields if f in want}, progress=progress)
     load, current = out["load"], out["current"]
     c_up, c_low = out.get("c_up"), out.get("c_low")
@@ -268,7 +271,7 @@ def _stage1_stepper(model, rec: _Record, fields, reduce, chain, progress):
 def _stage1_linear(model, rec: _Record, fields, reduce, chain, hold, periodic):
     """Stage 1 as one LTI system (:class:`_Electrochemistry`), fed through ``chain`` in
     pieces: (current, fields)."""
-    v, edges = rec.v, rec.edges
+    v, edges = rec.drive, rec.edges
     p = model.params_at(float(rec.rh[0]))
     per_segment = "cation" in fields
     stage1 = _Electrochemistry(model, p, edges, v.size, rec.dt, hold, fields, periodic, reduce, per_segment)
@@ -317,6 +320,20 @@ def _tip(model, base, ell, edges, rh_t, load_filter, dt, hold, periodic):
     for a in range(0, rh_t.size, PIECE_SAMPLES):
         chain.push(proj @ ell[:, a:a + PIECE_SAMPLES])
     return _output_effects(model, chain.finish()[1], rh_t, dt)
+
+
+def _input_effects(model, v, p, dt) -> np.ndarray:
+    """The voltage ``v`` [V] through the model's added input effects (parameters ``p``, at the
+    record's median RH), checked: one finite value per sample."""
+    if not model.inputs:
+        return v
+    drive = model.filter_input(v, 1.0 / dt, p)
+    if drive.shape != v.shape or not np.all(np.isfinite(drive)):
+        who = ", ".join(e.label for e in model.inputs)
+        got = f"shape {drive.shape}" if drive.shape != v.shape else "non-finite values"
+        raise ModelError(f"input effect {who}: filter_input must return one finite voltage per sample ({v.size}), "
+                         f"got {got}")
+    return drive
 
 
 def _output_effects(model, tip, rh_t, dt) -> np.ndarray:
