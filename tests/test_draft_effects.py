@@ -11,7 +11,8 @@ import pytest
 
 from physics.diagnose import forms as F
 from physics.diagnose.draft import check_draft, write_drafts
-from physics.effects import EFFECTS, load_effects_file, unregister
+from physics.device import load_device
+from physics.effects import EFFECTS, InputEffect, effect_classes_in_file, load_effects_file, unregister
 from physics.errors import InputError
 
 
@@ -89,7 +90,55 @@ def test_input_side_forms_recover_a_dead_zone_and_a_saturation():
         and ff.params["gain"] == pytest.approx(1.0, rel=0.15)
     ff = _fit("input_saturation", _residual(lambda p, t, fs: GAIN * (np.clip(p / GAIN, -0.6, 0.6) - p / GAIN)))
     assert ff.significant and ff.params["level_V"] == pytest.approx(0.6, rel=0.1)
-    assert F.form_of("input_deadzone")().draft(ff, None) is None          # described, not drafted
+
+
+@pytest.mark.parametrize("form", ["input_deadzone", "input_saturation"])
+def test_input_side_drafts_are_input_effects_that_pass_the_contract(form, tmp_path):
+    """The drafted file maps the voltage (physics.effects.InputEffect) with the fitted threshold
+    as its default, and passes the full contract (its off value is the model without it, its
+    threshold is recovered on a time record)."""
+    make = {"input_deadzone": lambda p, t, fs: -GAIN * np.clip(p / GAIN, -0.15, 0.15),
+            "input_saturation": lambda p, t, fs: GAIN * (np.clip(p / GAIN, -0.6, 0.6) - p / GAIN)}[form]
+    ff = _fit(form, _residual(make))
+    d = F.form_of(form)().draft(ff, None)
+    d.seen = "a test residual"
+    path = tmp_path / d.file_name
+    path.write_text(d.source(), encoding="utf-8")
+    assert check_draft(path) == []
+    (cls,) = effect_classes_in_file(path)
+    assert issubclass(cls, InputEffect)
+    level = ff.params["level_V"]
+    v = np.linspace(-1.0, 1.0, 9)
+    mapped = cls(load_device("ipmc_pt_eg")).filter_input(v, 100.0, {})
+    expected = v - np.clip(v, -level, level) if form == "input_deadzone" else np.clip(v, -level, level)
+    np.testing.assert_allclose(mapped, expected, rtol=1e-3, atol=1e-3 * level)
+
+
+def test_input_dead_zone_found_behind_a_base_fitted_to_the_distorted_records():
+    """A base fitted to dead-zoned records has lowered its gain to a compromise; the form fits
+    the records' own linear gain beside the nonlinearity and still finds the threshold, and a
+    residual that is only a gain error is no input nonlinearity."""
+    rng = np.random.default_rng(3)
+    t = np.arange(6000) / 100.0
+    sweep = np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
+    multisine = sum(np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) for f in (0.2, 0.7, 1.9, 4.3)) / 2.5
+    volts = [0.4 * sweep, 1.0 * sweep, multisine]
+    truth = [GAIN * (v - np.clip(v, -0.15, 0.15)) + rng.normal(0, 1e-6, t.size) for v in volts]
+    g = sum(float(y @ v) for y, v in zip(truth, volts)) / sum(float(v @ v) for v in volts) / GAIN
+
+    def residual(ys):
+        recs = [_Rec(y, v) for y, v in zip(ys, volts)]
+        resid = [y - g * GAIN * v - np.mean(y - g * GAIN * v) for y, v in zip(ys, volts)]
+        return F.Residual(recs, resid, [g * GAIN * v for v in volts], [float(t.size)] * 3,
+                          lambda k, u: g * GAIN * u)
+
+    ff = _fit("input_deadzone", residual(truth))
+    assert g < 0.9 and ff.significant and ff.params["level_V"] == pytest.approx(0.15, rel=0.15)
+    assert ff.params["gain"] == pytest.approx(1.0, rel=0.15)
+    assert ff.params["linear_gain"] == pytest.approx(1 / g, rel=0.1)
+    gain_only = [1.3 * g * GAIN * v + rng.normal(0, 1e-6, t.size) for v in volts]
+    for form in ("input_deadzone", "input_saturation"):
+        assert not _fit(form, residual(gain_only)).significant, form
 
 
 def test_forms_stay_quiet_on_white_noise_and_describe_selects_nothing():

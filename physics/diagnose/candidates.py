@@ -83,6 +83,10 @@ DF_MIN_SENSITIVITY = 0.10
 #: Simulations of every record the time-domain refinement of a pick may spend, its finite-difference
 #: Jacobians and final uncertainty included (:func:`refine_on_time`).
 TIME_REFINE_SIMS = 60
+#: Evaluations per start of the time refinement of an input effect's parameters, each a simulation
+#: of every record on the mapped voltage (:func:`_refine_output_effects`; an output effect's only filter
+#: one simulation and may spend 200).
+INPUT_REFINE_NFEV = 40
 #: A parameter ending on the edge of its default search window is searched again around it at most this often.
 RECENTRE_ROUNDS = 3
 #: ... when that lowers the fit's cost by more than this share (else the window edge lies along a
@@ -508,31 +512,44 @@ def score(mf: ModelFit, records: Sequence[PreparedRecord], n_offsets: int | None
 
 
 def _refine_output_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> None:
-    """Refit the free parameters of user output effects on the time records (in place).
+    """Refit the free parameters of user output and input effects on the time records (in place).
 
     An output effect (:class:`physics.effects.OutputEffect`) filters the deflection of the
     rest of the model, so the rest is simulated once and each evaluation only filters it
-    (milliseconds): bounded least squares over the effect's parameters, the coupling gain
-    solved in closed form at each step, from the FRF estimate and the spec's starts.  Slow
-    effects (creep) that a frequency response over 0.1–50 Hz cannot determine are then set
-    by the steps and holds of the records.  A nested effect is also started from its off values
-    (the model without it), so that its fit never ends worse than the base on this criterion."""
+    (milliseconds); an input effect (:class:`physics.effects.InputEffect`) maps the voltage, so
+    while its parameters are free each evaluation simulates the rest on the mapped voltage (a
+    linear chain: a fraction of a second per record, :data:`INPUT_REFINE_NFEV` evaluations per
+    start).  Bounded least squares over the effects' parameters, the coupling gain solved in
+    closed form at each step, from the FRF estimate and the spec's starts.  Slow effects (creep)
+    and maps of the voltage (a dead-zone) that a frequency response cannot determine are then
+    set by the records.  A nested effect is also started from its off values (the model without
+    it), so that its fit never ends worse than the base on this criterion."""
     from scipy.optimize import least_squares
     outs = [e for e in mf.model.outputs if spec_of(e.id)]
-    names = [n for e in outs for n in effect_params(e.id) if n in mf.spec.free]
+    ins = [e for e in mf.model.inputs if spec_of(e.id)]
+    names = [n for e in outs + ins for n in effect_params(e.id) if n in mf.spec.free]
     if not names:
         return
-    core = ActuatorModel(mf.device, [e for e in mf.effects if e not in {o.id for o in outs}],
+    core = ActuatorModel(mf.device, [e for e in mf.effects if e not in {o.id for o in outs + ins}],
                          n_modes=mf.model.n_modes)
-    raw = [simulate(core, None, r.t_sim, r.v_sim, rh=r.rh_model, hold=r.hold).deflection for r in records]
     p0 = mf.model.params_at(records[0].rh_measured if np.ndim(records[0].rh_model) == 0 else None)
+    mapped = any(n in effect_params(e.id) for e in ins for n in names)      # the voltage map moves
+
+    def core_response(r, q):
+        v = r.v_sim
+        for e in ins:
+            v = np.asarray(e.filter_input(v, r.fs_d, q), dtype=float)
+        return simulate(core, None, r.t_sim, v, rh=r.rh_model, hold=r.hold).deflection
+
+    raw = None if mapped else [core_response(r, p0) for r in records]
     ys = [remove_nuisance(r.y_d) for r in records]
     scale = [1.0 / (np.std(y) * math.sqrt(y.size) or 1.0) for y in ys]
 
     def resid(theta):
         q = {**p0, **dict(zip(names, theta))}
         preds = []
-        for r, y in zip(records, raw):
+        for k, r in enumerate(records):
+            y = core_response(r, q) if mapped else raw[k]
             for e in outs:
                 y = e.filter_output(y, r.fs_d, q)
             yh = sensor_filter(y, r.fs_d, r.sensor_bandwidth)[r.i0:]
@@ -553,7 +570,8 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> N
     best = None
     for x0 in starts:
         x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
-        sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=200)
+        sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac",
+                            max_nfev=INPUT_REFINE_NFEV if mapped else 200)
         if best is None or sol.cost < best.cost:
             best = sol
     vals = dict(zip(names, best.x.tolist()))
@@ -561,7 +579,7 @@ def _refine_output_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> N
     mf.result.device = mf.device
     mf.model = ActuatorModel(mf.device, mf.effects, n_modes=mf.model.n_modes)
     _time_uncertainty(mf, names, best, resid, lo, hi)
-    mf.spec.notes.append("parameters of " + ", ".join(e.id for e in outs) + " refined on the time records: "
+    mf.spec.notes.append("parameters of " + ", ".join(e.id for e in outs + ins) + " refined on the time records: "
                          + ", ".join(f"{k} = {v:.4g}" for k, v in vals.items()))
 
 

@@ -2,8 +2,8 @@
 
 An :class:`EffectDraft` is what a residual form (:mod:`.forms`) writes as an effect: rendered
 here as one Python file following the effect contract (:class:`physics.effects.OutputEffect`,
-README "Adding an effect"): the fitted values as parameter defaults, the ``diagnosis`` spec
-filled in (free parameters, bounds and starts around the fitted values, the off values, the
+or :class:`physics.effects.InputEffect` for a map of the drive voltage; README "Adding an
+effect"): the fitted values as parameter defaults, the ``diagnosis`` spec filled in (free parameters, bounds and starts around the fitted values, the off values, the
 excitation and reveal rule, the residual signature) and a docstring saying what was seen, with
 numbers and units.  It imports nothing of the diagnosis, so the forms and :mod:`.draft` (which
 selects and writes the drafts) both build on it.
@@ -66,6 +66,7 @@ class EffectDraft:
     imports: tuple[str, ...] = ()
     seen: str = ""
     evidence: dict = field(default_factory=dict)
+    base: str = "OutputEffect"       # the effect class it subclasses (physics.effects)
 
     def refit(self, values: dict) -> None:
         """Take ``values`` (fitted jointly with the model) as the defaults; bounds and starts follow."""
@@ -108,8 +109,9 @@ class EffectDraft:
         spec = textwrap.indent(spec, " " * 16).strip()
         imports = "".join(f"{line}\n" for line in self.imports)
         return (f'"""{doc}\n"""\n'
-                f"{imports}from physics.effects import OutputEffect\nfrom physics.parameters import ParamSpec\n\n\n"
-                f"class {self.class_name}(OutputEffect):\n"
+                f"{imports}from physics.effects import {self.base}\n"
+                "from physics.parameters import ParamSpec\n\n\n"
+                f"class {self.class_name}({self.base}):\n"
                 f"    id = {self.effect_id!r}\n"
                 f"    summary = {self.summary!r}\n"
                 f"    explanation = __doc__\n"

@@ -45,7 +45,9 @@ class Residual:
         preds = [np.asarray(p, float) for p in fit.pred_d]
         n_eff = [e.size / max(stats.integrated_time(e), 1.0) for e in resid]
         model = getattr(fit, "model", None)
-        respond = linear_response(model, records) if model is not None and model.is_linear else None
+        # H is the model's frequency response: not the model's own when it maps the voltage first
+        respond = linear_response(model, records) if model is not None and model.is_linear and not model.inputs \
+            else None
         return cls(list(records), resid, preds, n_eff, respond)
 
     def minus(self, parts: list) -> "Residual":
