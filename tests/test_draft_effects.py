@@ -290,6 +290,23 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     assert not draft_effects(adequate, _rediagnose(table, calls)).kept and not calls
 
 
+def test_a_later_round_never_leaves_the_chain_worse_than_the_round_before():
+    """Round 2 refits the model with the kept draft; when that refit loses what round 1 gained
+    (its base at 20 µm, round 1 ended at 4 µm), a draft that only lowers the refitted base is
+    not kept: the error to lower is the model round 1 kept."""
+    from physics.diagnose.draft import draft_effects
+    lp, sp, dr = "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift"
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+    on_base = ("double_layer",)
+    table = {on_base: (90e-6, {lp: (4e-6, -520.0, {"lowpass_tau": 0.0265}), sp: (80e-6, -20.0, {}),
+                               dr: (95e-6, 3.0, {})}),
+             on_base + (lp,): (20e-6, {sp: (15e-6, -50.0, {"slow_tau": 10.0}), dr: (21e-6, 6.0, {})})}
+    out = draft_effects(_diagnosis_stub(None, res, 90e-6), _rediagnose(table, []))
+    assert [d.effect_id for d in out.kept] == [lp] and out.rmse_after == 4e-6
+    why = dict((d.effect_id, w) for d, w in out.rejected)
+    assert "raises the RMS error from 4 (the model the previous round kept) to 15 µm" in why[sp]
+
+
 def test_each_draft_round_is_announced_before_it_runs_and_says_what_it_took():
     """A draft round refits the whole model (minutes on long records): the progress callback
     hears of each round before its refit starts, of what it took, and of the round that took

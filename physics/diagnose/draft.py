@@ -141,7 +141,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                                          for d in pool]
                     break
                 outcome.steps.append((list(on_top), again))
-                scored, why = _scored(pool + catalog, again, on_top)
+                scored, why = _scored(pool + catalog, again, on_top, outcome.chain[-1][1] if outcome.chain else None)
                 if not scored:
                     say("drafts: nothing more taken (none lowers the error enough)")
                     outcome.rejected += [(d, why.get(d.effect_id, "")) for d in pool]
@@ -174,11 +174,15 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     return outcome
 
 
-def _scored(keys, again, on_top) -> tuple[list, dict]:
+def _scored(keys, again, on_top, before: float | None = None) -> tuple[list, dict]:
     """The candidates ``keys`` (drafts, or catalog effect ids) of the diagnosis ``again`` that
     pass ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
-    as (ΔBIC, key, candidate) sorted by ΔBIC, and {effect id: why not} for the others."""
+    as (ΔBIC, key, candidate) sorted by ΔBIC, and {effect id: why not} for the others.  The error
+    to lower is that of the round's refitted base, or ``before`` [m] when lower: the model the
+    previous round kept (refitted without a time refinement of its own, the base can lose what
+    that round gained, and a draft must never leave the chain worse than it was)."""
     by_id = {c.effect: c for c in again.candidates}
+    ref = min(again.base.rmse, before) if before is not None else again.base.rmse
     scored, why = [], {}
     for key in keys:
         eid = key if isinstance(key, str) else key.effect_id
@@ -186,13 +190,14 @@ def _scored(keys, again, on_top) -> tuple[list, dict]:
         if c is None or not c.evaluated:
             why[eid] = c.reason if c is not None else "not evaluated"
             continue
-        gain = 1.0 - c.fit.rmse / again.base.rmse if again.base.rmse > 0 else 0.0
+        gain = 1.0 - c.fit.rmse / ref if ref > 0 else 0.0
         dbic = c.comparison.delta_bic
         if dbic <= -SIGNIFICANT_BIC and gain >= MIN_GAIN:
             scored.append((dbic, key, c))
         else:
-            how = "lowers the RMS error only" if c.fit.rmse <= again.base.rmse else "raises the RMS error"
-            why[eid] = (f"fitted with [{', '.join(on_top)}] it {how} from {1e6 * again.base.rmse:.4g} "
+            how = "lowers the RMS error only" if c.fit.rmse <= ref else "raises the RMS error"
+            of = "" if ref == again.base.rmse else " (the model the previous round kept)"
+            why[eid] = (f"fitted with [{', '.join(on_top)}] it {how} from {1e6 * ref:.4g}{of} "
                         f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.3g})")
     scored.sort(key=lambda x: x[0])
     return scored, why
