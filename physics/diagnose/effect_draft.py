@@ -2,7 +2,7 @@
 
 An :class:`EffectDraft` is what a residual form (:mod:`.forms`) writes as an effect: rendered
 here as one Python file following the effect contract (:class:`physics.effects.OutputEffect`,
-or :class:`physics.effects.InputEffect` for a map of the drive voltage; README "Adding an
+or :class:`physics.effects.InputEffect` for a map of the drive voltage; the how-to "Write an
 effect"): the fitted values as parameter defaults, the ``diagnosis`` spec filled in (free parameters, bounds and starts around the fitted values, the off values, the
 excitation and reveal rule, the residual signature) and a docstring saying what was seen, with
 numbers and units.  It imports nothing of the diagnosis, so the forms and :mod:`.draft` (which
@@ -100,7 +100,8 @@ class EffectDraft:
             "remained after the best model.",
             f"What was seen: {self.seen}",
             f"Model: {self.model}",
-            "Check it with the contract tests (README, \"Adding an effect\") and pass it back with "
+            "Check it with the contract tests (``physics.effects.check_effect``; the how-to \"Write an effect\") "
+            "and pass it back with "
             f"``--effects-path {self.file_name}``; edit the defaults, bounds and docstring as you learn more."))
         params = "\n".join(f"        ParamSpec({p.name!r}, {p.unit!r}, {_num(p.lo)!r}, {_num(p.hi)!r}, {p.description!r},"
                            f"\n                  optional=True, default={_num(p.default)!r}),"
