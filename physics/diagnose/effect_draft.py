@@ -3,9 +3,10 @@
 An :class:`EffectDraft` is what a residual form (:mod:`.forms`) writes as an effect: rendered
 here as one Python file following the effect contract (:class:`physics.effects.OutputEffect`,
 or :class:`physics.effects.InputEffect` for a map of the drive voltage; the how-to "Write an
-effect"): the fitted values as parameter defaults, the ``diagnosis`` spec filled in (free parameters, bounds and starts around the fitted values, the off values, the
-excitation and reveal rule, the residual signature) and a docstring saying what was seen, with
-numbers and units.  It imports nothing of the diagnosis, so the forms and :mod:`.draft` (which
+effect"): the fitted values as parameter defaults, the ``diagnosis`` spec filled in (free
+parameters, bounds and starts around the fitted values, the off values, the excitation and
+reveal rule, the residual signature) and a docstring saying what was seen, with numbers and
+units.  It imports nothing of the diagnosis, so the forms and :mod:`.draft` (which
 selects and writes the drafts) both build on it.
 """
 from __future__ import annotations

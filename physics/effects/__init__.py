@@ -245,6 +245,7 @@ def load_plugins() -> list[str]:
     return [cls.id for cls in load_entry_points(ENTRY_POINT_GROUP, register)]
 
 
-__all__ = ["Effect", "OutputEffect", "LoadEffect", "InputEffect", "EFFECTS", "CHAIN", "CORE", "BUILT_IN", "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
+__all__ = ["Effect", "OutputEffect", "LoadEffect", "InputEffect", "EFFECTS", "CHAIN", "CORE", "BUILT_IN",
+           "BUILT_IN_EFFECTS", "LINEAR_EFFECTS",
            "REFERENCE", "register", "unregister", "stage_of", "adds_factors", "load_effects_file", "load_plugins",
            "effect_classes_in_file", "user_effect_files", "ensure_registered", "check_effect", "declaration_problems"]
