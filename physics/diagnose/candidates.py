@@ -84,7 +84,7 @@ DF_MIN_SENSITIVITY = 0.10
 #: Jacobians and final uncertainty included (:func:`refine_on_time`).
 TIME_REFINE_SIMS = 60
 #: Evaluations per start of the time refinement of an input effect's parameters, each a simulation
-#: of every record on the mapped voltage (:func:`_refine_output_effects`; an output effect's only filter
+#: of every record on the mapped voltage (:func:`_refine_added_effects`; an output effect's only filter
 #: one simulation and may spend 200).
 INPUT_REFINE_NFEV = 40
 #: A parameter ending on the edge of its default search window is searched again around it at most this often.
@@ -376,7 +376,7 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
                   rel_std_errors=dict(zip(labels, fit.rel_std_error.tolist())), warnings=list(fit.warnings),
                   k=len(labels) + len(time_only), frf_cost=float(fit.cost), fit_s=time.perf_counter() - t0,
                   df_info=df_info, correlation=np.array(fit.correlation, dtype=float))
-    for n in time_only:     # set on the time records (_refine_output_effects)
+    for n in time_only:     # set on the time records (_refine_added_effects)
         mf.values[n] = float(res.device.params.get(n, declared_default(n)))
     return mf
 
@@ -475,7 +475,7 @@ def score(mf: ModelFit, records: Sequence[PreparedRecord], n_offsets: int | None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
-            _refine_output_effects(mf, records)
+            _refine_added_effects(mf, records)
             preds = [predict(mf.model, r) for r in records]
     except (InputError, ModelError, np.linalg.LinAlgError, FloatingPointError) as exc:
         mf.error = f"time simulation failed: {exc}"
@@ -511,7 +511,7 @@ def score(mf: ModelFit, records: Sequence[PreparedRecord], n_offsets: int | None
     return mf
 
 
-def _refine_output_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> None:
+def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> None:
     """Refit the free parameters of user output and input effects on the time records (in place).
 
     An output effect (:class:`physics.effects.OutputEffect`) filters the deflection of the

@@ -31,8 +31,8 @@ from .base import PURE, Form, FormFit, Residual, best_on_grid
 class _InputNonlinearity(Form):
     grid: tuple[float, float, int]
     what: str                                       # what the strip does, with {level} [V]
-    off: float                                      # the threshold [V] that leaves the voltage as it is
-    #: the drafted effect: id, class, param (its threshold [V]), description, summary, model, body (the map)
+    #: the drafted effect ``drafted_<id>``: param (its threshold [V]), off (the threshold that leaves the
+    #: voltage as it is), description, summary, model, body (the map)
     effect: dict
 
     def distort(self, v: np.ndarray, level: float) -> np.ndarray:
@@ -70,9 +70,10 @@ class _InputNonlinearity(Form):
     def draft(self, ff: FormFit, res: Residual):
         e, name = self.effect, self.effect["param"]
         return EffectDraft(
-            form=self.id, effect_id=e["id"], class_name=e["class"], summary=e["summary"], model=e["model"],
+            form=self.id, effect_id=f"drafted_{self.id}", class_name="Drafted" + self.id.title().replace("_", ""),
+            summary=e["summary"], model=e["model"],
             params=[Param(name, "V", 0.0, 1e3, e["description"], ff.params["level_V"])],
-            scan=name, off={name: self.off},
+            scan=name, off={name: e["off"]},
             excitation="records at two or more drive amplitudes (the share of the voltage the map changes "
                        "depends on the amplitude)",
             reveal={}, signature=[("amplitude_dependence", 1.0), ("harmonics", 0.5)],
@@ -87,9 +88,7 @@ class InputDeadZone(_InputNonlinearity):
     title = "dead-zone of the input"
     what = "the strip does not follow the voltage within ±{level} V"
     grid = (0.005, 0.4, 14)
-    off = 0.0
-    effect = {"id": "drafted_input_deadzone", "class": "DraftedInputDeadZone", "param": "deadzone_level",
-              "description": "half width d of the dead-zone",
+    effect = {"param": "deadzone_level", "off": 0.0, "description": "half width d of the dead-zone",
               "summary": "a dead-zone of the drive: the strip sees v − clip(v, −d, d)",
               "model": "The strip is driven by ``v − clip(v, −d, d)``: nothing passes within ±d (a driver or a "
                        "contact that conducts only beyond a threshold); d = 0 is the model without it.",
@@ -104,9 +103,7 @@ class InputSaturation(_InputNonlinearity):
     title = "saturation of the input"
     what = "the drive acts as if clipped at ±{level} V"
     grid = (0.3, 0.95, 10)
-    off = 1e3
-    effect = {"id": "drafted_input_saturation", "class": "DraftedInputSaturation", "param": "saturation_level",
-              "description": "level L at which the drive clips",
+    effect = {"param": "saturation_level", "off": 1e3, "description": "level L at which the drive clips",
               "summary": "a saturation of the drive: the strip sees clip(v, −L, L)",
               "model": "The strip is driven by ``clip(v, −L, L)`` (an amplifier that clips); a level above every "
                        "drive, e.g. 1000 V, is the model without it.",
