@@ -38,7 +38,8 @@ def _label(base_um, pick_um, rival_um=None, noise_um=1.0, records=None, flags=0,
     base = _Fit(base_um * UM, [base_um * UM] * 2)
     pick = _Cand("pick", _Fit(pick_um * UM, [x * UM for x in (records or [pick_um] * 2)]), ["f"] * flags)
     rivals = [pick] + ([_Cand("rival", _Fit(rival_um * UM, [rival_um * UM] * 2))] if rival_um else [])
-    return conf.label(conf.features(pick, base, rivals, weight, noise_um * UM, pinned, {"rival"} if held else ()))
+    return conf.label(conf.features(pick, base, rivals, weight, noise_um * UM, flags, pinned,
+                                    {"rival"} if held else ()))
 
 
 def test_a_clear_pick_is_high():
@@ -73,6 +74,30 @@ def test_a_pick_that_makes_a_record_worse_does_not_generalise():
 def test_quality_flags_and_no_noise_floor_keep_a_pick_from_high():
     assert _label(70.0, 1.1, flags=1).label == "medium"
     assert _label(70.0, 1.1, noise_um=math.nan).label == "medium"
+
+
+def _fitted(effect: str, names: list[str], corr: np.ndarray):
+    """A candidate of ``effect`` fitted with parameters ``names`` (mid-range, determined) and
+    their correlation matrix ``corr`` (what :func:`verdict.quality` reads)."""
+    from types import SimpleNamespace as NS
+    params = [NS(name=n, unit="1", lower=0.0, upper=2.0, scale="linear", to_x=lambda v: v, x_bounds=(0.0, 2.0))
+              for n in names]
+    fit = NS(result=NS(problem=NS(params=params, labels=list(names)), fit=NS(theta=np.ones(len(names)))),
+             values=dict.fromkeys(names, 1.0), rel_std_errors=dict.fromkeys(names, 0.01), correlation=corr)
+    return NS(effect=effect, fit=fit, signature=None)
+
+
+def test_a_correlation_inside_the_pick_does_not_doubt_that_it_is_there():
+    """Viscoelastic on the lab test bed: its DMA scale (it takes over the modulus) and its slope
+    correlate at ρ = −0.9975 — which of its values, not whether it is needed.  A correlation
+    with a parameter of the rest of the model (the modulus of a per-RH fit) says the rest could
+    stand in for it, and counts."""
+    from physics.diagnose.verdict import doubts, quality
+    inside = _fitted("viscoelastic", ["dma_scale", "ve_slope", "kf"],
+                     np.array([[1.0, -0.9975, 0.1], [-0.9975, 1.0, 0.2], [0.1, 0.2, 1.0]]))
+    assert len(quality(inside)) == 1 and doubts(inside) == []
+    outside = _fitted("viscoelastic", ["ve_slope", "Y@RH60"], np.array([[1.0, -0.998], [-0.998, 1.0]]))
+    assert len(quality(outside)) == 1 and doubts(outside) == quality(outside)
 
 
 def test_a_pick_whose_parameter_the_data_pinned_to_a_bound_is_low():

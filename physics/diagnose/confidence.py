@@ -16,7 +16,9 @@ a little.  The label therefore asks what a weight cannot:
 * **records** — the share of records on which the pick lowers the error: fitted on all
   records, a pick that makes some of them worse does not generalise from record to record
   (a leave-one-record-out test at the cost of none);
-* **flags** — the quality flags of the fit (:func:`.verdict.quality`);
+* **flags** — the quality flags of the fit that question whether the effect is there
+  (:func:`.verdict.doubts`: a correlation between two of the pick's own parameters says which of
+  its values are determined, not whether it is needed, and is not counted);
 * **pinned** — the pick's own parameters that ended on a bound of their range and are not
   determined (:func:`.verdict.pinned`): the data chose a limit of the effect, not a value, so
   what the fit gained may come from the limit standing in for something else;
@@ -133,9 +135,10 @@ def excess_share(before: float, after: float, noise: float) -> float:
     return 1.0 - max(after ** 2 - n2, 0.0) / ex if ex > 0 else 0.0
 
 
-def features(pick, base, rivals, weight: float, noise: float, pinned: int = 0, held=()) -> Confidence:
+def features(pick, base, rivals, weight: float, noise: float, flags: int, pinned: int = 0, held=()) -> Confidence:
     """The confidence features of ``pick`` (a CandidateResult) against ``base`` (the step's
-    base fit) and the step's other evaluated candidates ``rivals``; ``pinned``: its own
+    base fit) and the step's other evaluated candidates ``rivals``; ``flags``: its quality flags
+    that question whether its effect is there (:func:`.verdict.doubts`); ``pinned``: its own
     parameters on a bound and not determined (:func:`.verdict.pinned`); ``held``: the effects
     of the rivals whose own parameter ended on a bound (:func:`.verdict.held`)."""
     ok = math.isfinite(noise) and noise > 0
@@ -147,7 +150,7 @@ def features(pick, base, rivals, weight: float, noise: float, pinned: int = 0, h
     rb, rc = base.rmse_records, pick.fit.rmse_records
     better = [c <= (1.0 + RECORD_TOLERANCE) * x for x, c in zip(rb, rc)]
     records = sum(better) / len(better) if better else 1.0
-    return Confidence(weight, change, left, twin, twin_of, records, len(pick.quality), pinned, held_share, held_of)
+    return Confidence(weight, change, left, twin, twin_of, records, flags, pinned, held_share, held_of)
 
 
 def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float, flags: int, pinned: int) -> Confidence:

@@ -69,7 +69,7 @@ from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
 from .specs import (declared_default, effect_params, excitation, keeps_spec_range, param_bounds, role_family,
                     shape_params, spec_of)
-from .verdict import (ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, nuisance_summary, pinned, quality,
+from .verdict import (ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, doubts, nuisance_summary, pinned,
                       remaining_of)
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
@@ -738,7 +738,7 @@ def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: 
         if sup.status == "assessed" and sup.rmse_without is not None:
             on_refit = replace(d.pick, fit=current)    # the pick's own parameters as refitted
             d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
-                                                len(quality(on_refit)), len(pinned(on_refit)))
+                                                len(doubts(on_refit)), len(pinned(on_refit)))
             d.reason += (f"; on the model with its own effects refitted it lowers the RMS error "
                          f"{1e6 * sup.rmse_without:.4g} → {1e6 * current.rmse:.4g} µm: confidence {c.label}"
                          + (": " + "; ".join(c.why) if c.why else ""))

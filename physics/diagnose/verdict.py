@@ -126,8 +126,9 @@ def held(c) -> list[str]:
     return [lab for _, _, lab, _, bound, _ in _own_estimates(c) if bound]
 
 
-def quality(c) -> list[str]:
-    """The quality flags of a fitted candidate (module doc), as sentences."""
+def quality(c, *, own_pairs: bool = True) -> list[str]:
+    """The quality flags of a fitted candidate (module doc), as sentences; ``own_pairs=False``
+    leaves out a correlation between two of its own parameters (:func:`doubts`)."""
     f = c.fit
     labels = f.result.problem.labels
     mine, flags = [], []
@@ -142,7 +143,7 @@ def quality(c) -> list[str]:
     if corr is not None:
         for i in mine:
             for j in range(len(labels)):
-                if j == i or (j in mine and j < i):
+                if j == i or (j in mine and (j < i or not own_pairs)):
                     continue
                 r = corr[i, j]
                 if math.isfinite(r) and abs(r) > CORR_FLAG:
@@ -152,6 +153,15 @@ def quality(c) -> list[str]:
     if sig.get("score") == 0:
         flags.append(f"its residual signature ({', '.join(sig.get('expected', []))}) is absent")
     return flags
+
+
+def doubts(c) -> list[str]:
+    """The quality flags that question whether a candidate's effect is there, which the
+    confidence label counts (:mod:`.confidence`): all but a correlation between two of its own
+    parameters (a stiffness scale it takes over and its frequency slope), which says which of
+    its values the records determine, not whether it is needed — a correlation with a parameter
+    of the rest of the model says the rest could stand in for it, and counts."""
+    return quality(c, own_pairs=False)
 
 
 def _role_params(effect: str) -> list[str]:
@@ -233,7 +243,7 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
             # the chain does not stop at a pair it cannot separate: it carries on with the twin of
             # stronger evidence (a hidden pair's second effect is found on top of it, and the model
             # written is the better one), labelled "low" — the data do not say which twin it is
-            c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top)), _held(ranked)))
+            c = _confidence(top, base, ranked, weights, noise)
             c.label = "low"
             c.why.insert(0, f"a near twin, {ru.effect}, fits as well: these data cannot tell them apart")
             return Decision(top, weights, ev, [top.effect, ru.effect], sep, reason, alpha, c)
@@ -248,10 +258,16 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
         reason += (f"; {', '.join(c.effect for c in rivals)} lowered the error as much or more but "
                    f"{'is' if len(rivals) == 1 else 'are'} less credible (" +
                    "; ".join(f"{c.effect}: " + "; ".join(c.quality) for c in rivals) + ")")
-    c = conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(pinned(top)), _held(ranked)))
+    c = _confidence(top, base, ranked, weights, noise)
     if c.label != "high":
         reason += "; confidence " + c.label + ": " + "; ".join(c.why)
     return Decision(top, weights, ev, reason=reason, alpha=alpha, confidence=c)
+
+
+def _confidence(top, base, ranked, weights: dict, noise: float) -> conf.Confidence:
+    """The labelled confidence of the pick ``top`` among the step's evaluated ``ranked``."""
+    return conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(doubts(top)),
+                                    len(pinned(top)), _held(ranked)))
 
 
 def _held(ranked) -> set[str]:
@@ -576,5 +592,5 @@ def _drift_basis(r) -> str:
             "the record's white noise")
 
 
-__all__ = ["Verdict", "Pick", "Decision", "decide", "quality", "separating_record", "remaining_of",
+__all__ = ["Verdict", "Pick", "Decision", "decide", "quality", "doubts", "separating_record", "remaining_of",
            "nuisance_summary", "STATUSES", "UNATTRIBUTED", "CRITERIA", "QUALITY_BIC"]
