@@ -108,6 +108,49 @@ def test_a_pick_stopped_short_is_refined_on_the_time_records(clean):
     assert all(np.isfinite(short.rel_std_errors[k]) for k in labels)
 
 
+def test_a_refinement_starts_where_the_time_records_fit_better(clean):
+    """Given a start (a draft round's base: the model the round before kept, refined on the
+    time records), the refinement begins there only when it fits the time records better than
+    the FRF optimum, and says which it began from."""
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+
+    def fitted(**factors):
+        mf = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
+                         n_starts=2)
+        labels = mf.result.problem.labels
+        for name, f in factors.items():
+            mf.result.fit.theta[labels.index(name)] *= f
+        mf.device = mf.result.problem.device_for(mf.result.fit.theta)
+        mf.model = C.ActuatorModel(mf.device, mf.effects)
+        return C.score(mf, data.records)
+
+    best = fitted()
+    short = fitted(beta_f=1.6, Y=1.1)
+    assert C.refine_on_time(short, data.records, sims=40, start=best.result.fit.theta.copy())
+    assert "from the start" in short.spec.notes[-1] and short.rmse <= 1.02 * best.rmse
+    worse_start = fitted(beta_f=4.0, Y=0.7).result.fit.theta.copy()
+    short = fitted(beta_f=1.6, Y=1.1)
+    assert C.refine_on_time(short, data.records, sims=40, start=worse_start)
+    assert "from the FRF optimum" in short.spec.notes[-1]
+
+
+def test_a_draft_round_refines_its_base_only_past_the_first(monkeypatch):
+    """The first draft round's base is the diagnosis's own (refitted as it was); from the second
+    on, the base carries the drafts kept before and is refined on the time records."""
+    from types import SimpleNamespace as NS
+
+    from physics.diagnose import diagnosis, draft
+    seen = []
+    monkeypatch.setattr(diagnosis, "diagnose", lambda *a, selection=None, **k: seen.append(selection.refine_base))
+    res = NS(draft_base=NS(effects=["double_layer", "humidity"], spec=NS(per_rh=[])), noise_floor=1e-6)
+    again = draft.rediagnosis([], res, FitOptions())
+    again(None, ["double_layer", "humidity"], [], ["drafted_slow_pole"])
+    again(None, ["double_layer", "humidity", "drafted_slow_pole"], [], ["drafted_drift"])
+    assert seen == [False, True]
+
+
 def test_a_free_parameter_without_effect_is_held_not_an_error(clean):
     """With the damping factor at ~0 beside a viscoelastic loss, beta_f leaves the FRF unchanged:
     the identification refuses it by name (InertParameterError, which survives pickling), the

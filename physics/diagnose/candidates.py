@@ -690,7 +690,7 @@ def model_at(mf: ModelFit, theta) -> ActuatorModel:
 def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int = TIME_REFINE_SIMS,
                    start=None) -> bool:
     """Refit the FRF-fitted free parameters of ``mf`` on the time records, from the FRF
-    optimum — or from ``start`` (problem coordinates), e.g. its start point when that fits the
+    optimum — or from ``start`` (problem coordinates, e.g. its start point) when that fits the
     time records better — within ``sims`` simulations (in place; True when the error fell).
     The FRF fit weighs the frequencies by their coherence on a log scale; the verdict's error
     is the time records' RMS, dominated by the large slow motion: with a base that cannot match
@@ -720,14 +720,21 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
             parts.append(r.detrend_d(r.y_d - remembered(memo, m.key_at(r.rh_model), lambda: predict(m, r))))
         return np.concatenate(parts) / scale
 
-    x0 = np.clip(problem.to_x(fit.theta if start is None else start), lo + 1e-9 * span, hi - 1e-9 * span)
+    def inside(theta):
+        return np.clip(problem.to_x(theta), lo + 1e-9 * span, hi - 1e-9 * span)
+
+    x0 = inside(fit.theta)
     p = x0.size
-    iterations = (sims - 2 * p - 1) // (p + 1)
+    iterations = (sims - 2 * p - 1 - (start is not None)) // (p + 1)
     if iterations < 1:
         return False
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         r0 = resid(x0)
+        if start is not None and (r := resid(xs := inside(start))) @ r < r0 @ r0:
+            x0, r0 = xs, r
+        else:
+            start = None
         sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=iterations)
         if not sol.cost < 0.5 * float(r0 @ r0) * (1.0 - 1e-9):
             return False

@@ -85,10 +85,14 @@ REFIT_TIME_SIMS = 4 * TIME_REFINE_SIMS
 class SelectionOptions:
     """The stepwise selection of :func:`diagnose` (:func:`select`): at most ``max_effects``
     picks forward; ``backward``: when no candidate passes, an effect of the user's model that
-    the data do not support is removed and tried again as a candidate."""
+    the data do not support is removed and tried again as a candidate; ``refine_base``: the
+    base is refined on the time records (:func:`.candidates.refine_on_time`) from its start when
+    that fits them better than its FRF optimum — a draft round's base is the model the round
+    before kept, refined on them, and refitted on the FRF alone it would lose that."""
 
     max_effects: int = MAX_EFFECTS
     backward: bool = True
+    refine_base: bool = False
 
 
 @dataclass(frozen=True)
@@ -1058,6 +1062,9 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
             f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
     base = _timed(run, "base", fit_base, data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
     run.log(f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
+    if selection.refine_base and _timed(run, "base on the time records", refine_on_time, base, data.records,
+                                        sims=REFIT_TIME_SIMS, start=base.result.problem.theta0):
+        run.log(f"  base refined on the time records: RMS error {1e6 * base.rmse:.4g} µm")
     add_wander(data, base)
     run.resonance = _resonance(base, data.band, data.records)
     ra_base = _timed(run, "residual_analysis", analyse, "base", data.records, base.resid_d, base.pred_d,

@@ -72,15 +72,17 @@ def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
     ``res`` of ``measurements`` with the fit ``options``: each round a forward-only diagnosis with
     the drafts as the only candidates, one start per fit (``keep_starts`` of them run to
     convergence, see :data:`DRAFT_KEEP_STARTS`), the draft base's per-RH parameters and the
-    diagnosis's noise floor, no support test."""
+    diagnosis's noise floor, no support test.  From the second round on, the base (the model the
+    round before kept, whose pick was refined on the time records) is refined on them too."""
     import dataclasses
 
     from .diagnosis import AnalysisOptions, SelectionOptions, diagnose
     opts = dataclasses.replace(options, per_rh=",".join(res.draft_base.spec.per_rh) or "none", n_starts=1,
                                keep_starts=keep_starts)
+    first = set(res.draft_base.effects)
     return lambda dev, eff, free, cands: diagnose(
         measurements, dev, eff, free, options=opts, candidates=cands, force=True, check_support=False,
-        selection=SelectionOptions(max_effects=1, backward=False),
+        selection=SelectionOptions(max_effects=1, backward=False, refine_base=not set(eff) <= first),
         analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=fs_max), progress=progress)
 
 
