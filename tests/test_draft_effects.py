@@ -490,3 +490,26 @@ def test_the_default_route_writes_its_drafts_and_the_best_model_that_needs_them(
     assert (tmp_path / "dx" / "drafts" / "drafted_slow_pole.py").is_file()
     (dev,) = [p for p in (tmp_path / "dx").glob("*.yaml")]
     assert "slow_pole_r" in yaml.safe_load(dev.read_text()).get("drafted_slow_pole", {})
+
+
+def test_a_saturating_drive_behind_a_large_signal_pick_is_drafted_from_the_base(monkeypatch):
+    """A catalog pick that saturates the charge leaves a large-signal final model, whose residual
+    cannot show a map of the drive (no linear response); the draft base's residual can, so the
+    drive's saturation is drafted from it and competes with the pick.  A linear final model
+    drafts from its own residual alone."""
+    from physics.diagnose import draft
+    from physics.diagnose.forms import base as forms_base
+    def respond(k, u):          # the base's linear response: a 2 Hz lag (a gain alone is an output map too)
+        return GAIN * F.lowpass(u, 1 / (2 * math.pi * 2.0), 100.0)
+    monkeypatch.setattr(forms_base, "linear_response", lambda model, records: respond)
+    res = _residual(lambda p, t, fs: respond(0, np.clip(p / GAIN, -0.6, 0.6) - p / GAIN))
+    fit = _fit_stub(20e-6, resid=res.resid, preds=res.preds)
+    fit.model = _Stub(is_linear=False, inputs=())
+    base = _fit_stub(90e-6, resid=res.resid, preds=res.preds)
+    base.model = _Stub(is_linear=True, inputs=())
+    diagnosis = _Stub(final=fit, draft_base=base, base=base, records=res.records)
+    (d,) = draft._behind_the_picks(diagnosis)
+    assert d.effect_id == "drafted_input_saturation" and d.params[0].default == pytest.approx(0.6, rel=0.1)
+    assert "in the residual of base" in d.seen
+    fit.model = _Stub(is_linear=True, inputs=())
+    assert draft._behind_the_picks(diagnosis) == []

@@ -18,6 +18,7 @@ from typing import Callable, Sequence
 from ..errors import InputError, ModelError
 from ..execution.threads import single_threaded
 from .forms import FormFit, MIN_GAIN, SIGNIFICANT_BIC, describe, form_of, residual_of
+from .forms.base import has_response
 from .effect_draft import EffectDraft
 
 #: Starts of each fit in a draft round that run to convergence (the others are screened out by a
@@ -41,6 +42,20 @@ def drafts(forms: Sequence[FormFit], fit, records) -> list[EffectDraft]:
         d.evidence = {"residual_form": ff.to_dict()}
         out.append(d)
     return out
+
+
+def _behind_the_picks(res) -> list[EffectDraft]:
+    """Drafts of the forms written through a linear model's response (a map of the drive,
+    :attr:`.forms.base.Form.needs_response`) that the residual of the draft base shows, when the
+    diagnosis's final model has no such response (a large-signal pick) and that base has one: a
+    pick that saturates the charge can stand in for a drive that saturates, its own residual
+    cannot show the map, and the drafts compete with the picks from that base anyway.  Only
+    the significant forms (the final model's residual drafts every form it fits)."""
+    base = getattr(res, "draft_base", res.base)
+    if has_response(getattr(res.final, "model", None)) or not has_response(getattr(base, "model", None)):
+        return []
+    return drafts([ff for ff in describe(base, res.records) if form_of(ff.form).needs_response and ff.significant],
+                  base, res.records)
 
 
 @dataclass
@@ -94,6 +109,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
     the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.
 
+    The drafts are those of the final model's residual, and, when that model is large-signal,
+    those of the maps of the drive the draft base's residual shows (:func:`_behind_the_picks`).
     Nothing is drafted when there is nothing to explain, or when the final model (its own
     effects refitted by the chain when it did) is within the noise without a pick.
     Otherwise, forward from the base, the drafts compete with the catalog effects the diagnosis
@@ -113,6 +130,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
         items = []
     else:       # an adequate catalog pick may still be a mimic: the drafts compete with it
         items = drafts(ad.forms if ad is not None and ad.forms else describe(fit, res.records), fit, res.records)
+        items += [d for d in _behind_the_picks(res) if d.form not in {i.form for i in items}]
     from ..effects import EFFECTS, load_effects_file, unregister
     # a form whose effect is already registered (the user's own file of an earlier draft) is on offer
     # already: drafting it again would name one effect twice

@@ -45,9 +45,7 @@ class Residual:
         preds = [np.asarray(p, float) for p in fit.pred_d]
         n_eff = [e.size / max(stats.integrated_time(e), 1.0) for e in resid]
         model = getattr(fit, "model", None)
-        # H is the model's frequency response: not the model's own when it maps the voltage first
-        respond = linear_response(model, records) if model is not None and model.is_linear and not model.inputs \
-            else None
+        respond = linear_response(model, records) if has_response(model) else None
         return cls(list(records), resid, preds, n_eff, respond)
 
     def minus(self, parts: list) -> "Residual":
@@ -150,6 +148,9 @@ class Form:
     #: The form follows the input (a slow pole, a low-pass, a play…): what it describes is the
     #: model's error, never a sensor's wander.
     input_driven: ClassVar[bool] = True
+    #: The form is written through the fitted model's linear response (:attr:`Residual.respond`),
+    #: which a large-signal model does not have.
+    needs_response: ClassVar[bool] = False
 
     def fit(self, res: Residual) -> FormFit | None:
         """The form fitted to ``res`` (None: the records cannot show it)."""
@@ -178,6 +179,12 @@ def best_on_grid(res: Residual, grid, columns) -> tuple[float, Regression]:
         if best is None or reg.delta_bic < best[1].delta_bic:
             best = (float(g), reg)
     return best
+
+
+def has_response(model) -> bool:
+    """Whether ``model`` has the linear response :attr:`Residual.respond` needs: a linear model
+    that does not map the voltage first (its frequency response is then not its own)."""
+    return model is not None and model.is_linear and not model.inputs
 
 
 def linear_response(model, records: Sequence) -> Callable:

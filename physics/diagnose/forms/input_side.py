@@ -29,6 +29,7 @@ from .base import PURE, Form, FormFit, Residual, best_on_grid
 
 
 class _InputNonlinearity(Form):
+    needs_response = True
     grid: tuple[float, float, int]
     what: str                                       # what the strip does, with {level} [V]
     #: the drafted effect ``drafted_<id>``: param (its threshold [V]), off (the threshold that leaves the
