@@ -161,6 +161,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                                          for d in pool]
                     break
                 outcome.steps.append((list(on_top), again))
+                if outcome.chain and again.base.rmse < outcome.chain[-1][1]:
+                    _went_further(outcome, again.base, len(outcome.steps))
                 scored, why = _scored(pool + catalog, again, on_top, outcome.chain[-1][1] if outcome.chain else None)
                 if not scored:
                     say("drafts: nothing more taken (none lowers the error enough)")
@@ -192,6 +194,20 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
             for i in ids:
                 unregister(i)
     return outcome
+
+
+def _went_further(outcome: DraftOutcome, base, round_no: int) -> None:
+    """The model the round before kept, refined further on the time records as round
+    ``round_no``'s base (``base``, a ModelFit), replaces it: the chain's last error, the best model
+    and the kept drafts' values become that base's."""
+    from .candidates import effect_values
+    eid, before = outcome.chain[-1]
+    outcome.chain[-1] = (eid, base.rmse)
+    outcome.final = base
+    for d in outcome.kept:
+        d.refit(effect_values(base, d.effect_id))
+    outcome.notes.append(f"round {round_no} refined the model the round before kept on the time records: "
+                         f"RMS error {1e6 * before:.4g} → {1e6 * base.rmse:.4g} µm")
 
 
 def _scored(keys, again, on_top, before: float | None = None) -> tuple[list, dict]:
