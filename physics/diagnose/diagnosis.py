@@ -1062,7 +1062,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
             f"{data.band[0]:.3g}–{data.band[1]:.3g} Hz; noise floor {1e6 * data.noise:.3g} µm")
     base = _timed(run, "base", fit_base, data, dev, base_ids, opts, free_l, per_rh_l, run.n_starts)
     run.log(f"base [{', '.join(base_ids)}] fitted: RMS error {1e6 * base.rmse:.4g} µm, fit {base.fit_pct:.2f} %")
-    if selection.refine_base and _timed(run, "base on the time records", refine_on_time, base, data.records,
+    if selection.refine_base and _timed(run, "base_on_time", refine_on_time, base, data.records,
                                         sims=REFIT_TIME_SIMS, start=base.result.problem.theta0):
         run.log(f"  base refined on the time records: RMS error {1e6 * base.rmse:.4g} µm")
     add_wander(data, base)
