@@ -136,6 +136,33 @@ def test_a_refinement_starts_where_the_time_records_fit_better(clean):
     assert "from the FRF optimum" in short.spec.notes[-1]
 
 
+def test_a_time_only_parameter_beside_a_large_signal_effect_is_set_on_the_time_records(clean, tmp_path):
+    """A drafted drift (its parameters leave the frequency response unchanged) on top of the
+    large-signal double layer: the describing-function fit leaves its parameters to the time
+    records, as the linear fit does, instead of failing with "drift_amplitude has no effect on
+    the frequency response" (a draft round behind a nonlinear_charge pick lost its drift so)."""
+    from physics.diagnose import forms as F
+    from physics.effects import load_effects_file, unregister
+    case, data = clean
+    res = F.residual_of(C.score(C.fit_model(C.ModelSpec("base", ("double_layer",), ["kf"]), load_device(case.device),
+                                            data.targets, data.target_records, n_starts=1), data.records),
+                        data.records)
+    d = F.form_of("drift")().draft(F.form_of("drift")().fit(res), res)
+    path = tmp_path / d.file_name
+    path.write_text(d.source(), encoding="utf-8")
+    ids = load_effects_file(path)
+    try:
+        names = [p.name for p in d.params]
+        spec = C.ModelSpec("+drift", ("double_layer", "nonlinear_charge", d.effect_id), ["kf"] + names)
+        mf = C.fit_model(spec, load_device(case.device), data.targets, data.target_records, n_starts=1)
+        assert mf.ok, mf.error
+        assert set(names) <= set(mf.spec.free) and set(names) <= set(mf.values)
+        assert not any(n in mf.result.problem.labels for n in names)
+    finally:
+        for i in ids:
+            unregister(i)
+
+
 def test_a_draft_round_refines_its_base_only_past_the_first(monkeypatch):
     """The first draft round's base is the diagnosis's own (refitted as it was); from the second
     on, the base carries the drafts kept before and is refined on the time records."""

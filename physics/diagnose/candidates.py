@@ -314,15 +314,14 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
                   bounds={k: v for k, v in spec.bounds.items() if k in spec.free}, n_modes=n_modes)
         time_only = time_only_params(spec, device)
         df = any(spec_of(e).get("describing_function") for e in spec.effects)
-        if not df:
-            frf_free = [n for n in spec.free if n not in time_only]
-            kw = {**kw, "start": {k: v for k, v in kw["start"].items() if k in frf_free},
-                  "bounds": {k: v for k, v in kw["bounds"].items() if k in frf_free}}
+        frf_free = [n for n in spec.free if n not in time_only]
+        kw = {**kw, "start": {k: v for k, v in kw["start"].items() if k in frf_free},
+              "bounds": {k: v for k, v in kw["bounds"].items() if k in frf_free}}
 
         def build(start, drop_inert=True):
             k = {**kw, "start": start}
             if df:
-                return _df_problem(spec, device, targets, target_records, k, df_cache)
+                return _df_problem(spec, device, targets, target_records, k, df_cache, time_only)
             while True:
                 try:
                     return IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **k), None
@@ -410,7 +409,7 @@ def time_only_params(spec: ModelSpec, device: Device) -> list[str]:
     return blind(ActuatorModel(device, spec.effects), spec.free, {**device.params, **p})
 
 
-def _df_problem(spec, device, targets, target_records, kw, df_cache):
+def _df_problem(spec, device, targets, target_records, kw, df_cache, time_only=()):
     amps = [float(f"{r.tone_amplitude:.3g}") for r in target_records]     # one table row per drive level
     lo = min(float(t.freq.min()) for t in targets)
     hi = max(float(t.freq.max()) for t in targets)
@@ -432,7 +431,7 @@ def _df_problem(spec, device, targets, target_records, kw, df_cache):
         cache[key] = (df, sens)
     df, sens = cache[key]
     name = df.param
-    free = list(spec.free)
+    free = [n for n in spec.free if n not in time_only]
     note = None
     if sens > DF_MIN_SENSITIVITY and name not in free and len({r.amplitude_level for r in target_records}) >= 2:
         free.append(name)
@@ -452,7 +451,7 @@ def _df_problem(spec, device, targets, target_records, kw, df_cache):
                 f"{100 * sens:.2g} % and otherwise scales the gain, so these data cannot determine it")
         if note not in spec.notes:
             spec.notes.append(note)
-    spec.free = free
+    spec.free = free + [n for n in spec.free if n in time_only]      # those set on the time records stay free
     problem = DescribingFunctionProblem(device, spec.effects, targets, free, spec.per_rh, amplitudes=amps, df=df, **kw)
     info = {"sensitivity": sens, "parameter": name, "fitted": name in free, **df.gain_table()}
     return problem, info
