@@ -531,3 +531,35 @@ def test_a_saturating_drive_behind_a_large_signal_pick_is_drafted_from_the_base(
     assert "in the residual of base" in d.seen
     fit.model = _Stub(is_linear=True, inputs=())
     assert draft._behind_the_picks(diagnosis) == []
+
+
+def test_a_map_of_the_drive_is_not_fitted_on_top_of_a_large_signal_pick(monkeypatch):
+    """Once the chain takes a large-signal pick, a drafted map of the drive leaves the pool with
+    the reason: fitting its threshold there would simulate every record with the implicit stepper
+    at each evaluation (a held-out saturating strip ran past 40 minutes)."""
+    from physics.diagnose import draft
+    from physics.diagnose.forms import base as forms_base
+
+    def respond(k, u):
+        return GAIN * F.lowpass(u, 1 / (2 * math.pi * 2.0), 100.0)
+    monkeypatch.setattr(forms_base, "linear_response", lambda model, records: respond)
+    res = _residual(lambda p, t, fs: respond(0, np.clip(p / GAIN, -0.6, 0.6) - p / GAIN))
+    diagnosis = _diagnosis_stub("nonlinear_charge", res, 20e-6)
+    diagnosis.final.model = diagnosis.base.model = _Stub(is_linear=True, inputs=())
+    diagnosis.adequacy.forms = F.describe(diagnosis.final, res.records)
+    offered = []
+
+    def rediagnose(device, effects, free, candidates):
+        offered.append(set(candidates))
+        big = {c: (10e-6 if c == "nonlinear_charge" else 60e-6) for c in candidates} if len(offered) == 1 \
+            else dict.fromkeys(candidates, 10e-6)
+        cands = [_Stub(effect=c, evaluated=True, reason="",
+                       comparison=_Stub(delta_bic=-500.0 if big[c] < 20e-6 else 0.0),
+                       fit=_Stub(**vars(_fit_stub(big[c])), model=_Stub(is_linear=c != "nonlinear_charge")))
+                 for c in candidates]
+        return _Stub(base=_fit_stub(90e-6 if len(offered) == 1 else 10e-6), candidates=cands)
+    out = draft.draft_effects(diagnosis, rediagnose)
+    assert "drafted_input_saturation" in offered[0] and len(offered) == 2
+    assert "drafted_input_saturation" not in offered[1]
+    why = dict((d.effect_id, w) for d, w in out.rejected)
+    assert "not tried on top of nonlinear_charge: the model is large-signal" in why["drafted_input_saturation"]

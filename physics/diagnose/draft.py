@@ -188,12 +188,25 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                 free = map_free(free + [n for n in values if n not in free and "@" not in n], on_top, on_top)
                 device = c.fit.device
                 outcome.final = c.fit
+                if not getattr(getattr(c.fit, "model", None), "is_linear", True):
+                    _hold_maps_of_the_drive(outcome, pool, eid)
             else:
                 outcome.rejected += [(d, "not tried: the forward selection stopped") for d in pool]
         finally:
             for i in ids:
                 unregister(i)
     return outcome
+
+
+def _hold_maps_of_the_drive(outcome: DraftOutcome, pool: list, eid: str) -> None:
+    """Take the drafts that map the drive (:attr:`.forms.base.Form.needs_response`) out of
+    ``pool`` once ``eid`` made the model large-signal: each evaluation of their threshold would
+    simulate every record through it with the implicit stepper (a held-out saturating strip ran
+    past 40 minutes so), and their form was read through a linear model's response."""
+    for d in [d for d in pool if form_of(d.form).needs_response]:
+        pool.remove(d)
+        outcome.rejected.append((d, f"not tried on top of {eid}: the model is large-signal, and fitting a map of "
+                                    "the drive there simulates every record at each evaluation"))
 
 
 def _went_further(outcome: DraftOutcome, base, round_no: int) -> None:
