@@ -319,7 +319,16 @@ def test_a_round_whose_refined_base_went_further_carries_it():
     table = {on_base: (90e-6, {lp: (4e-6, -520.0, {"lowpass_tau": 0.0265}), sp: (80e-6, -20.0, {}),
                                dr: (95e-6, 3.0, {})}),
              on_base + (lp,): (3e-6, {sp: (2.95e-6, -1.0, {}), dr: (3.1e-6, 6.0, {})}, {"lowpass_tau": 0.025})}
-    out = draft_effects(_diagnosis_stub(None, res, 90e-6), _rediagnose(table, []))
+    refined = {}
+
+    def rediagnose(*a):         # round 2's base refined on the time records (or, below, only refitted)
+        again = _rediagnose(table, [])(*a)
+        again.base.time_refined = refined.get(len(a[1]), False)
+        return again
+    out = draft_effects(_diagnosis_stub(None, res, 90e-6), rediagnose)
+    assert out.chain == [(lp, 4e-6)] and not out.notes      # a refit that was not refined is not carried
+    refined[2] = True
+    out = draft_effects(_diagnosis_stub(None, res, 90e-6), rediagnose)
     assert out.chain == [(lp, 3e-6)] and out.rmse_after == 3e-6 and out.final.rmse == 3e-6
     assert out.kept[0].params[0].default == pytest.approx(0.025)
     assert any("round 2 refined the model the round before kept" in n and "4 → 3 µm" in n for n in out.notes)

@@ -161,7 +161,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                                          for d in pool]
                     break
                 outcome.steps.append((list(on_top), again))
-                if outcome.chain and again.base.rmse < outcome.chain[-1][1]:
+                if outcome.chain and getattr(again.base, "time_refined", False) and \
+                        again.base.rmse < outcome.chain[-1][1]:
                     _went_further(outcome, again.base, len(outcome.steps))
                 scored, why = _scored(pool + catalog, again, on_top, outcome.chain[-1][1] if outcome.chain else None)
                 if not scored:
