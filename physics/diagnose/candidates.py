@@ -409,7 +409,9 @@ def time_only_params(spec: ModelSpec, device: Device) -> list[str]:
     return blind(ActuatorModel(device, spec.effects), spec.free, {**device.params, **p})
 
 
-def _df_problem(spec, device, targets, target_records, kw, df_cache, time_only=()):
+def _df_problem(spec, device, targets, target_records, kw, df_cache, time_only):
+    """The describing-function problem of a large-signal ``spec`` and its gain table; ``time_only``
+    (:func:`time_only_params`) stay free in the spec but out of the problem, set on the time records."""
     amps = [float(f"{r.tone_amplitude:.3g}") for r in target_records]     # one table row per drive level
     lo = min(float(t.freq.min()) for t in targets)
     hi = max(float(t.freq.max()) for t in targets)
