@@ -553,9 +553,8 @@ def refine_own(data: PreparedRecords, fit: ModelFit, options: FitOptions, n_star
     if out.ok:
         score(out, data.records)
         # the FRF optimum need not be the time records': refined on them, from the start (the model as it
-        # was) when that fits them better
-        refine_on_time(out, data.records, sims=REFIT_TIME_SIMS,
-                       start=out.result.problem.theta0 if out.rmse > fit.rmse else None)
+        # was) when that fits them better (refine_on_time compares the two)
+        refine_on_time(out, data.records, sims=REFIT_TIME_SIMS, start=out.result.problem.theta0)
     if not out.ok or not compare_fits(fit, out, True).delta_bic < 0:
         return None, {}
     return out, {n: {"device": dev.params.get(n), "refined": float(out.values[n])} for n in names}
