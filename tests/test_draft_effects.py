@@ -11,6 +11,8 @@ import pytest
 
 from physics.diagnose import forms as F
 from physics.diagnose.draft import check_draft, write_drafts
+from physics.diagnose.forms.output_lowpass import lowpass2
+from physics.diagnose.records import response_filter
 from physics.device import load_device
 from physics.effects import EFFECTS, InputEffect, effect_classes_in_file, load_effects_file, unregister
 from physics.errors import InputError
@@ -112,6 +114,33 @@ def test_input_side_drafts_are_input_effects_that_pass_the_contract(form, tmp_pa
     mapped = cls(load_device("ipmc_pt_eg")).filter_input(v, 100.0, {})
     expected = v - np.clip(v, -level, level) if form == "input_deadzone" else np.clip(v, -level, level)
     np.testing.assert_allclose(mapped, expected, rtol=1e-3, atol=1e-3 * level)
+
+
+def test_the_low_pass_form_tells_a_second_order_sensor_from_a_first_order_one(tmp_path):
+    """A second-order low-pass (f_c 8 Hz, ζ 0.6: a sensor's filter) is reported with its damping
+    ratio and drafted as a second-order output effect that passes the contract, whose response is
+    that low-pass; a first-order one stays first order (the grid's 20 % steps in f_c do not
+    decide the order)."""
+    fc, zeta = 8.0, 0.6
+    ff = _fit("output_lowpass", _residual(lambda p, t, fs: response_filter(p, fs, lambda f: lowpass2(f, fc, zeta)) - p))
+    assert ff.significant and ff.params["cutoff_Hz"] == pytest.approx(fc, rel=0.05)
+    assert ff.params["damping_ratio"] == pytest.approx(zeta, rel=0.05) and "second-order" in ff.text
+    first = _fit("output_lowpass", _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * fc), fs) - p))
+    assert first.significant and "damping_ratio" not in first.params and "first-order" in first.text
+    d = F.form_of("output_lowpass")().draft(ff, _residual(lambda p, t, fs: 0 * p))
+    d.seen = ff.full_text
+    path = tmp_path / d.file_name
+    path.write_text(d.source(), encoding="utf-8")
+    assert path.name == "drafted_output_lowpass2.py" and check_draft(path) == []
+    (cls,) = effect_classes_in_file(path)
+    effect = cls(load_device("ipmc_pt_eg"))
+    num, den = effect.output_tf({})
+    f = np.array([1.0, 8.0, 20.0])
+    np.testing.assert_allclose(np.polyval(num, 2j * np.pi * f) / np.polyval(den, 2j * np.pi * f),
+                               lowpass2(f, fc, zeta), rtol=0.05)
+    y = np.sin(2 * np.pi * 5.0 * np.arange(2000) / 100.0)
+    np.testing.assert_allclose(effect.filter_output(y, 100.0, {}), response_filter(y, 100.0, lambda f: lowpass2(f, fc, zeta)),
+                               atol=0.05)
 
 
 def test_input_dead_zone_found_behind_a_base_fitted_to_the_distorted_records():

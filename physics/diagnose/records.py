@@ -524,14 +524,21 @@ def frf_measurements(records: Sequence[PreparedRecord]) -> tuple[list, list[Prep
 
 def sensor_filter(y: np.ndarray, fs: float, bandwidth: float | None) -> np.ndarray:
     """Apply the first-order sensor response 1/(1 + j f/f_c) in the frequency domain
-    (zero-padded FFT: the response time ≪ the record, so there is no wrap-around)."""
+    (:func:`response_filter`)."""
     if bandwidth is None:
         return y
+    return response_filter(y, fs, lambda f: sensor_response(f, bandwidth))
+
+
+def response_filter(y: np.ndarray, fs: float, response) -> np.ndarray:
+    """``y`` sampled at ``fs`` [Hz] through the continuous-time response ``response(f)`` (f in
+    Hz, H(0) = 1), applied in the frequency domain from rest at y[0] (zero-padded FFT: the
+    response time ≪ the record, so there is no wrap-around)."""
+    y = np.asarray(y, dtype=float)
     n = y.size
     nfft = 1 << int(math.ceil(math.log2(2 * n)))
     Y = np.fft.rfft(y - y[0], nfft)
-    out = np.fft.irfft(Y * sensor_response(np.fft.rfftfreq(nfft, 1.0 / fs), bandwidth), nfft)[:n]
-    return out + y[0]
+    return np.fft.irfft(Y * response(np.fft.rfftfreq(nfft, 1.0 / fs)), nfft)[:n] + y[0]
 
 
 def upsample(y_d: np.ndarray, q: int, n: int) -> np.ndarray:
@@ -559,6 +566,6 @@ def amplitude_groups(records: Sequence[PreparedRecord]) -> dict[float, list[floa
     return {k: sorted(v) for k, v in out.items()}
 
 
-__all__ = ["PreparedRecord", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter",
+__all__ = ["PreparedRecord", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter", "response_filter",
            "upsample", "estimate_noise_floor", "stated_drift", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
            "FRFOptions"]

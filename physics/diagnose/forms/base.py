@@ -171,14 +171,26 @@ class Form:
                        draftable=type(self).draft is not Form.draft)
 
 
-def best_on_grid(res: Residual, grid, columns) -> tuple[float, Regression]:
-    """(grid value, regression) with the lowest ΔBIC; ``columns(value)`` gives the regressors."""
+def best_on_grid(res: Residual, grid, columns, k_grid: int = 1) -> tuple[float, Regression]:
+    """(grid value, regression) with the lowest ΔBIC; ``columns(value)`` gives the regressors;
+    ``k_grid`` parameters are scanned (counted in ΔBIC)."""
     best = None
     for g in grid:
-        reg = res.regress(columns(g))
+        reg = res.regress(columns(g), k_grid)
         if best is None or reg.delta_bic < best[1].delta_bic:
             best = (float(g), reg)
     return best
+
+
+def refined(res: Residual, x0, bounds, columns, k_grid: int) -> tuple[list[float], Regression]:
+    """(parameters, regression): the scanned parameters ``x0`` (a grid's best point) refined
+    within ``bounds`` to the lowest ΔBIC (Nelder–Mead, at most 60 regressions); ``columns(x)``
+    gives the regressors."""
+    from scipy.optimize import minimize
+    sol = minimize(lambda x: res.regress(columns(x), k_grid).delta_bic, np.asarray(x0, float), method="Nelder-Mead",
+                   bounds=bounds, options={"maxfev": 60, "xatol": 1e-3, "fatol": 0.1})
+    x = [float(v) for v in sol.x]
+    return x, res.regress(columns(x), k_grid)
 
 
 def has_response(model) -> bool:
