@@ -6,7 +6,8 @@ for a pure low-pass; the base's re-tuned parameters take up part of it), either 
 order, 1/(1 + 2ζ s/ω_c + (s/ω_c)²) with ω_c = 2π f_c and damping ratio ζ (a sensor's
 anti-aliasing or averaging filter — Butterworth ζ = 0.71, Bessel ≈ 0.87 — or a resonant mount).
 Both are scanned; the second order is reported when its ΔBIC, its extra parameter counted, is the
-lower.  The effect it drafts multiplies the deflection by that low-pass, off at τ = 0.
+lower and it is a pure low-pass (a within :data:`.base.PURE`): its extra parameter must earn its
+place as the form it names, else the first order stands.  The effect it drafts multiplies the deflection by that low-pass, off at τ = 0.
 """
 from __future__ import annotations
 
@@ -56,7 +57,7 @@ class OutputLowPass(Form):
         (lfc2, zeta), reg2 = refined(res, [math.log(grid[int(i)][0]), grid[int(i)][1]],
                                      bounds + [(ZETAS[0], ZETAS[-1])], second, 2)
         fc = math.exp(lfc)
-        if reg2.delta_bic < reg.delta_bic:
+        if reg2.delta_bic < reg.delta_bic and PURE[0] <= reg2.gains[0] <= PURE[1]:
             fc, reg = math.exp(lfc2), reg2
         else:
             zeta = None
