@@ -532,13 +532,21 @@ def sensor_filter(y: np.ndarray, fs: float, bandwidth: float | None) -> np.ndarr
 
 def response_filter(y: np.ndarray, fs: float, response) -> np.ndarray:
     """``y`` sampled at ``fs`` [Hz] through the continuous-time response ``response(f)`` (f in
-    Hz, H(0) = 1), applied in the frequency domain from rest at y[0] (zero-padded FFT: the
-    response time ≪ the record, so there is no wrap-around)."""
+    Hz, H(0) = 1), applied in the frequency domain from rest at y[0] (:func:`spectral_filter`)."""
+    return spectral_filter(y, fs)(response)
+
+
+def spectral_filter(y: np.ndarray, fs: float):
+    """``apply(response)``: ``y`` sampled at ``fs`` [Hz] through the continuous-time response
+    ``response(f)`` (f in Hz, H(0) = 1), applied in the frequency domain from rest at y[0]
+    (zero-padded FFT: the response time ≪ the record, so there is no wrap-around); y's spectrum
+    is taken once, for many responses."""
     y = np.asarray(y, dtype=float)
     n = y.size
     nfft = 1 << int(math.ceil(math.log2(2 * n)))
     Y = np.fft.rfft(y - y[0], nfft)
-    return np.fft.irfft(Y * response(np.fft.rfftfreq(nfft, 1.0 / fs)), nfft)[:n] + y[0]
+    f = np.fft.rfftfreq(nfft, 1.0 / fs)
+    return lambda response: np.fft.irfft(Y * response(f), nfft)[:n] + y[0]
 
 
 def upsample(y_d: np.ndarray, q: int, n: int) -> np.ndarray:
@@ -566,6 +574,6 @@ def amplitude_groups(records: Sequence[PreparedRecord]) -> dict[float, list[floa
     return {k: sorted(v) for k, v in out.items()}
 
 
-__all__ = ["PreparedRecord", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter", "response_filter",
+__all__ = ["PreparedRecord", "Nuisance", "bounded_nuisance", "nuisance_bounds", "prepare_records", "classify", "find_steps", "frf_measurements", "sensor_filter", "response_filter", "spectral_filter",
            "upsample", "estimate_noise_floor", "stated_drift", "remove_nuisance", "nuisance_terms", "NUISANCE_TERMS", "amplitude_levels", "rh_levels", "amplitude_groups",
            "FRFOptions"]

@@ -16,11 +16,11 @@ import math
 import numpy as np
 
 from ..effect_draft import EffectDraft, Param
-from ..records import response_filter
+from ..records import spectral_filter
 from .base import PURE, Form, FormFit, Residual, best_on_grid, lowpass, refined
 
 #: Damping ratios the second-order scan tries (under-damped mounts to over-damped filters).
-ZETAS = (0.3, 0.4, 0.5, 0.6, 0.7, 0.85, 1.0, 1.3)
+ZETAS = (0.3, 0.45, 0.6, 0.8, 1.0, 1.3)
 
 
 def lowpass2(f, fc: float, zeta: float) -> np.ndarray:
@@ -44,9 +44,10 @@ class OutputLowPass(Form):
         def first(x):
             return [[lowpass(p, 1.0 / (2 * math.pi * math.exp(x[0])), r.fs_d) - p] for r, p in zip(res.records, res.preds)]
 
+        spectra = [spectral_filter(p, r.fs_d) for r, p in zip(res.records, res.preds)]
+
         def second(x):
-            return [[response_filter(p, r.fs_d, lambda f: lowpass2(f, math.exp(x[0]), x[1])) - p]
-                    for r, p in zip(res.records, res.preds)]
+            return [[through(lambda f: lowpass2(f, math.exp(x[0]), x[1])) - p] for through, p in zip(spectra, res.preds)]
         # each order's best grid point refined (the 30-point grid steps 20 % in f_c: its misfit must not
         # decide the order)
         bounds = [(math.log(f_bot), math.log(f_top))]
