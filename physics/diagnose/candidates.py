@@ -326,10 +326,13 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
                 try:
                     return IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **k), None
                 except InertParameterError as exc:   # e.g. a damping another effect's loss replaces: held
-                    if not drop_inert or exc.name not in frf_free or (len(frf_free) == 1 and not spec.per_rh):
+                    left = len(frf_free) + len(spec.per_rh) - 1      # what would still be fitted without it
+                    if not drop_inert or exc.name not in frf_free + list(spec.per_rh) or left < 1:
                         raise
-                    frf_free.remove(exc.name)
+                    if exc.name in frf_free:
+                        frf_free.remove(exc.name)
                     spec.free = [n for n in spec.free if n != exc.name]
+                    spec.per_rh = [n for n in spec.per_rh if n != exc.name]     # held at each level's value
                     k = {**k, "start": {a: v for a, v in k["start"].items() if a != exc.name},
                          "bounds": {a: v for a, v in k["bounds"].items() if a != exc.name}}
                     spec.notes.append(f"{exc.name} has no effect on the frequency response of this model: held at "
