@@ -7,7 +7,8 @@ order, 1/(1 + 2ζ s/ω_c + (s/ω_c)²) with ω_c = 2π f_c and damping ratio ζ 
 anti-aliasing or averaging filter — Butterworth ζ = 0.71, Bessel ≈ 0.87 — or a resonant mount).
 Both are scanned; the second order is reported when its ΔBIC, its extra parameter counted, is the
 lower and it is a pure low-pass (a within :data:`.base.PURE`): its extra parameter must earn its
-place as the form it names, else the first order stands.  The effect it drafts multiplies the deflection by that low-pass, off at τ = 0.
+place as the form it names, else the first order stands.  The effect it drafts multiplies the
+deflection by that low-pass, off at τ = 0.
 """
 from __future__ import annotations
 
@@ -124,7 +125,7 @@ class OutputLowPass(Form):
                   '        tau, zeta = self.value(p, "lowpass_tau"), self.value(p, "lowpass_zeta")\n'
                   '        if tau <= 0:\n'
                   '            return np.asarray(y, float)\n'
-                  '        return response_filter(y, fs, lambda f: 1.0 / (1.0 + 2j * math.pi * f * tau * (2.0 * zeta)\n'
-                  '                                                      - (2.0 * math.pi * f * tau) ** 2))\n'),
-            imports=("import math", "", "import numpy as np", "", "from physics.diagnose.records import response_filter"),
+                  '        return response_filter(y, fs, lambda f: lowpass2(f, 1.0 / (2 * math.pi * tau), zeta))\n'),
+            imports=("import math", "", "import numpy as np", "", "from physics.diagnose.forms.output_lowpass import lowpass2",
+                     "from physics.diagnose.records import response_filter"),
             **common)
