@@ -147,7 +147,7 @@ def test_a_time_only_parameter_beside_a_large_signal_effect_is_set_on_the_time_r
     res = F.residual_of(C.score(C.fit_model(C.ModelSpec("base", ("double_layer",), ["kf"]), load_device(case.device),
                                             data.targets, data.target_records, n_starts=1), data.records),
                         data.records)
-    d = F.form_of("drift")().draft(F.form_of("drift")().fit(res), res)
+    (d,) = F.form_of("drift")().draft(F.form_of("drift")().fit(res), res)
     path = tmp_path / d.file_name
     path.write_text(d.source(), encoding="utf-8")
     ids = load_effects_file(path)

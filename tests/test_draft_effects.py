@@ -102,7 +102,7 @@ def test_input_side_drafts_are_input_effects_that_pass_the_contract(form, tmp_pa
     make = {"input_deadzone": lambda p, t, fs: -GAIN * np.clip(p / GAIN, -0.15, 0.15),
             "input_saturation": lambda p, t, fs: GAIN * (np.clip(p / GAIN, -0.6, 0.6) - p / GAIN)}[form]
     ff = _fit(form, _residual(make))
-    d = F.form_of(form)().draft(ff, None)
+    (d,) = F.form_of(form)().draft(ff, None)
     d.seen = "a test residual"
     path = tmp_path / d.file_name
     path.write_text(d.source(), encoding="utf-8")
@@ -127,10 +127,15 @@ def test_the_low_pass_form_tells_a_second_order_sensor_from_a_first_order_one(tm
     assert ff.params["damping_ratio"] == pytest.approx(zeta, rel=0.05) and "second-order" in ff.text
     first = _fit("output_lowpass", _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * fc), fs) - p))
     assert first.significant and "damping_ratio" not in first.params and "first-order" in first.text
-    # a quarter of a second-order low-pass is a band of error, not that sensor: the first order stands
+    # a quarter of a second-order low-pass is a band of error, not that sensor: the first order stands,
+    # and as the second fits the residual better, both are drafted for the fit with the model to decide
     band = _fit("output_lowpass", _residual(lambda p, t, fs: 0.25 * (response_filter(p, fs, lambda f: lowpass2(f, fc, 0.4)) - p)))
-    assert "damping_ratio" not in band.params
-    d = F.form_of("output_lowpass")().draft(ff, _residual(lambda p, t, fs: 0 * p))
+    assert "damping_ratio" not in band.params and band.info["other_order"]["damping_ratio"] == pytest.approx(0.4, rel=0.05)
+    nothing = _residual(lambda p, t, fs: 0 * p)
+    both = F.form_of("output_lowpass")().draft(band, nothing)
+    assert [b.effect_id for b in both] == ["drafted_output_lowpass", "drafted_output_lowpass2"]
+    assert "both are drafted" in band.text and "other_order" not in ff.info and "other_order" not in first.info
+    (d,) = F.form_of("output_lowpass")().draft(ff, nothing)
     d.seen = ff.full_text
     path = tmp_path / d.file_name
     path.write_text(d.source(), encoding="utf-8")
@@ -195,7 +200,7 @@ def test_a_draft_is_a_valid_effect_file_written_atomically(tmp_path):
     items = []
     for form_id in ("slow_pole", "output_lowpass", "drift"):
         ff = _fit(form_id, res)
-        d = next(f for f in F.FORMS if f.id == form_id)().draft(ff, res)
+        (d,) = next(f for f in F.FORMS if f.id == form_id)().draft(ff, res)
         d.seen = ff.full_text
         items.append(d)
     out = tmp_path / "drafts"
@@ -320,6 +325,26 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     adequate.verdict.status = "nothing to explain"
     calls.clear()
     assert not draft_effects(adequate, _rediagnose(table, calls)).kept and not calls
+
+
+def test_both_orders_of_a_low_pass_compete_and_the_one_not_chosen_leaves_the_pool():
+    """A residual that cannot choose the low-pass's order offers both drafts; the fit with the
+    model takes one, and the other is not tried again on top of it."""
+    from physics.diagnose.draft import draft_effects
+    lp, lp2 = "drafted_output_lowpass", "drafted_output_lowpass2"
+    res = _residual(lambda p, t, fs: 0.25 * (response_filter(p, fs, lambda f: lowpass2(f, 8.0, 0.4)) - p))
+    on_base = ("double_layer",)
+    calls = []
+    table = {on_base: (90e-6, {lp: (30e-6, -400.0, {"lowpass_tau": 0.02}),
+                               lp2: (4e-6, -900.0, {"lowpass_tau": 0.02, "lowpass_zeta": 0.4}),
+                               "drafted_slow_pole": (89e-6, -1.0, {}), "drafted_drift": (91e-6, 2.0, {})}),
+             on_base + (lp2,): (4e-6, {"drafted_slow_pole": (3.99e-6, -1.0, {}), "drafted_drift": (4.1e-6, 3.0, {})})}
+    out = draft_effects(_diagnosis_stub(None, res, 90e-6), _rediagnose(table, calls))
+    assert {lp, lp2} <= set(calls[0][1])
+    assert [d.effect_id for d in out.kept] == [lp2] and out.kept[0].params[1].default == pytest.approx(0.4)
+    assert lp not in calls[1][1]
+    why = dict((d.effect_id, w) for d, w in out.rejected)
+    assert "another version of the same residual form" in why[lp]
 
 
 def test_a_later_round_never_leaves_the_chain_worse_than_the_round_before():
@@ -486,7 +511,7 @@ def test_the_contract_recovers_a_drift_on_a_time_record(tmp_path):
     from physics.effects import check_effect, effect_classes_in_file
     res = _residual(lambda p, t, fs: 12e-6 * -np.expm1(-t / 60.0))
     ff = _fit("drift", res)
-    d = F.form_of("drift")().draft(ff, res)
+    (d,) = F.form_of("drift")().draft(ff, res)
     good = tmp_path / d.file_name
     good.write_text(d.source())
     report = check_effect(effect_classes_in_file(good)[0])

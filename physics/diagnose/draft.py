@@ -30,17 +30,18 @@ DRAFT_KEEP_STARTS = 2
 
 def drafts(forms: Sequence[FormFit], fit, records) -> list[EffectDraft]:
     """A draft of every form of ``forms`` that can be written as an effect, its residual fit
-    as the start (the forward-selected first, then by ΔBIC)."""
+    as the start (the forward-selected first, then by ΔBIC; each version of a form whose
+    residual could not choose between them, :meth:`.forms.base.Form.draft`)."""
     res = residual_of(fit, records)
     out, seen = [], set()
     for ff in sorted(forms, key=lambda f: (f.selected_step or 99, f.delta_bic)):
-        d = form_of(ff.form)().draft(ff, res) if ff.form not in seen else None
-        if d is None:
+        if ff.form in seen:
             continue
         seen.add(ff.form)
-        d.seen = f"in the residual of {fit.spec.label} (RMS error {1e6 * fit.rmse:.4g} µm), {ff.full_text}."
-        d.evidence = {"residual_form": ff.to_dict()}
-        out.append(d)
+        for each in form_of(ff.form)().draft(ff, res):
+            each.seen = f"in the residual of {fit.spec.label} (RMS error {1e6 * fit.rmse:.4g} µm), {ff.full_text}."
+            each.evidence = {"residual_form": ff.to_dict()}
+            out.append(each)
     return out
 
 
@@ -184,6 +185,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                     key.seen += " Fitted jointly, " + text[len("fitted "):] + "."
                     outcome.kept.append(key)
                     pool.remove(key)
+                    _drop_siblings(outcome, pool, key)
                 outcome.chain.append((eid, c.fit.rmse))
                 on_top.append(eid)
                 free = map_free(free + [n for n in values if n not in free and "@" not in n], on_top, on_top)
@@ -197,6 +199,16 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
             for i in ids:
                 unregister(i)
     return outcome
+
+
+def _drop_siblings(outcome: DraftOutcome, pool: list, kept) -> None:
+    """Take the other versions of the kept draft's residual form (a low-pass of the other order)
+    out of ``pool``: they were offered because the residual could not choose, and the fit with
+    the model chose ``kept``."""
+    for d in [d for d in pool if d.form == kept.form]:
+        pool.remove(d)
+        outcome.rejected.append((d, f"not tried on top of {kept.effect_id}: another version of the same residual "
+                                    f"form ({d.form}), and the fit with the model chose {kept.effect_id}"))
 
 
 def _hold_maps_of_the_drive(outcome: DraftOutcome, pool: list, eid: str) -> None:

@@ -197,7 +197,7 @@ def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
     ratio = f" = {fit.rmse / nf:.2f}× the noise floor of {1e6 * nf:.3g} µm" if nf and nf > 0 else ""
     return {"fit": fit, "effect_files": files,
             "text": f"[{', '.join(fit.effects)}] RMS error {1e6 * res.base.rmse:.4g} → {1e6 * fit.rmse:.4g} µm{ratio}"
-                    + (f" (with the drafted {', '.join(d.effect_id for d in outcome.kept)})" if files and fit is not res.final
+                    + (f" (with the drafts {', '.join(d.effect_id for d in outcome.kept)})" if files and fit is not res.final
                        else f" (its own effects refitted: {', '.join(res.settings['own_refined'])})"
                        if res.settings["own_refined"] else "")}
 

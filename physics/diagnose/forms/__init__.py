@@ -20,7 +20,8 @@ effective samples; the noise left once the creep is removed has thousands).  Sel
 forward: the best significant form is taken, its fitted part removed from the residual,
 and the others are fitted again on what is left, while one stays significant (at most
 :data:`MAX_SELECTED`).  A selected form that can be written as an effect gives a draft
-(:meth:`Form.draft`, an :class:`..effect_draft.EffectDraft`; selected by :mod:`..draft`).
+(:meth:`Form.draft`, a list of :class:`..effect_draft.EffectDraft`: one, or each version of the
+form the residual cannot choose between; selected by :mod:`..draft`).
 
 The pieces every form builds on (:class:`Residual`, :class:`Form`, :class:`FormFit`, the
 regression) live in :mod:`.base`.  A form is a subclass of :class:`Form` with an ``id``,

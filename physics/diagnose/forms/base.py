@@ -156,9 +156,11 @@ class Form:
         """The form fitted to ``res`` (None: the records cannot show it)."""
         raise NotImplementedError
 
-    def draft(self, ff: FormFit, res: Residual):
-        """An :class:`..effect_draft.EffectDraft` writing ``ff`` as an effect (None: not as an effect)."""
-        return None
+    def draft(self, ff: FormFit, res: Residual) -> list:
+        """The :class:`..effect_draft.EffectDraft` writing ``ff`` as an effect ([]: not as an
+        effect), or each version of the form when the residual cannot choose between them (the
+        fit with the model does)."""
+        return []
 
     def scored(self, res: Residual, reg: Regression, params: dict, units: dict, text: str, **info) -> FormFit:
         """A :class:`FormFit` from a regression, with its evidence and significance (on the

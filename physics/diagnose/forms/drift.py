@@ -43,7 +43,7 @@ class Drift(Form):
 
     def draft(self, ff: FormFit, res: Residual):
         amp, tau = ff.params["amplitude_m"], ff.params["tau_s"]
-        return EffectDraft(
+        return [EffectDraft(
             form=self.id, effect_id="drafted_drift", class_name="DraftedDrift",
             summary="an additive drift of the tip reading: + A (1 − e^(−t/τ)) from the record's start",
             model=("The simulated deflection gets ``A (1 − exp(−t/τ))`` added, t from the start of the record, "
@@ -64,4 +64,4 @@ class Drift(Form):
                   '\n'
                   '    def output_response(self, s, p):\n'
                   '        return np.ones_like(np.asarray(s), dtype=complex)     # independent of the input\n'),
-            imports=("import numpy as np",))
+            imports=("import numpy as np",))]

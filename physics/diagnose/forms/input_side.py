@@ -70,7 +70,7 @@ class _InputNonlinearity(Form):
 
     def draft(self, ff: FormFit, res: Residual):
         e, name = self.effect, self.effect["param"]
-        return EffectDraft(
+        return [EffectDraft(
             form=self.id, effect_id=f"drafted_{self.id}", class_name="Drafted" + self.id.title().replace("_", ""),
             summary=e["summary"], model=e["model"],
             params=[Param(name, "V", 0.0, 1e3, e["description"], ff.params["level_V"])],
@@ -81,7 +81,7 @@ class _InputNonlinearity(Form):
             body=("    def filter_input(self, v, fs, p):\n"
                   f"        level = self.value(p, {name!r})\n"
                   f"        return {e['body']}\n"),
-            imports=("import numpy as np", ""), base="InputEffect")
+            imports=("import numpy as np", ""), base="InputEffect")]
 
 
 class InputDeadZone(_InputNonlinearity):

@@ -43,7 +43,7 @@ class SlowPole(Form):
         # what reveals it, relaxed to what the records it was found in offer
         f_max, hold = max(2.0 * f_lo, 1.1 * res.band[0]), min(0.5 * tau, 0.5 * res.span_s)
         creeps = r > 0
-        return EffectDraft(
+        return [EffectDraft(
             form=self.id, effect_id="drafted_slow_pole", class_name="DraftedSlowPole",
             summary="a slow pole on the tip: deflection × (1 + r/(1 + sτ))",
             model=("The deflection is multiplied by ``1 + r / (1 + s τ)``: a fraction ``r`` of it builds up "
@@ -59,4 +59,4 @@ class SlowPole(Form):
                       [("step_back_relaxation", 1.0), ("lf_droop_lead", 0.5)],
             body=('    def output_tf(self, p):\n'
                   '        r, tau = self.value(p, "slow_pole_r"), self.value(p, "slow_pole_tau")\n'
-                  '        return [tau, 1.0 + r], [tau, 1.0]     # (τ s + 1 + r) / (τ s + 1)\n'))
+                  '        return [tau, 1.0 + r], [tau, 1.0]     # (τ s + 1 + r) / (τ s + 1)\n'))]
