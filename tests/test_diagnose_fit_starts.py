@@ -345,3 +345,20 @@ def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
         fit = C.score(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=2), data.records)
     assert fit.ok, fit.error
     assert fit.values["diffuse_share"] == pytest.approx(0.25, rel=0.2)
+
+
+def test_parameters_refined_on_time_records_without_information_have_unknown_correlations():
+    """A Jacobian without information (JᵀJ singular) gives infinite standard errors: the
+    correlations stay unknown (NaN) and the parameter is flagged, without ∞/∞ warnings (``eap
+    run`` printed "invalid value encountered in scalar divide" from here)."""
+    from types import SimpleNamespace as NS
+    params = [NS(name=n, rh=None) for n in ("a", "b")]
+    fit = NS(theta=np.zeros(2), std_error=np.zeros(2), rel_std_error=np.zeros(2))
+    mf = NS(result=NS(problem=NS(labels=["a", "b"], params=params), fit=fit), correlation=None, warnings=[],
+            values={}, std_errors={}, rel_std_errors={})
+    sol = NS(x=np.array([1.0, 2.0]), jac=np.zeros((50, 2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        C._time_uncertainty(mf, ["a", "b"], sol, lambda x: np.ones(50), [0.0, 0.0], [10.0, 10.0])
+    assert np.isnan(mf.correlation[0, 1]) and np.isnan(mf.correlation[1, 0])
+    assert any(w.startswith("a is not identifiable") for w in mf.warnings)

@@ -627,9 +627,10 @@ def _time_uncertainty(mf: ModelFit, names: list[str], sol, resid, lo, hi) -> Non
         if v <= lo[a] + 1e-6 * span or v >= hi[a] - 1e-6 * span:
             mf.warnings.append(f"{name} ended on a bound of its search range [{lo[a]:g}, {hi[a]:g}]: widen the "
                                "bounds or fix it; its interval is not meaningful")
+    known = np.isfinite(se) & (se > 0)      # a singular J'J leaves the correlations unknown (NaN), not ∞/∞
     for a, na in enumerate(names):
         for b, nb in enumerate(names):
-            if a != b and se[a] > 0 and se[b] > 0 and na in idx and nb in idx:
+            if a != b and known[a] and known[b] and na in idx and nb in idx:
                 corr[idx[na], idx[nb]] = cov[a, b] / (se[a] * se[b])
     mf.correlation = corr
 
