@@ -347,6 +347,33 @@ def test_both_orders_of_a_low_pass_compete_and_the_one_not_chosen_leaves_the_poo
     assert "another version of the same residual form" in why[lp]
 
 
+def test_a_catalog_effect_that_did_not_help_before_the_drafts_is_tried_again_on_top_of_them():
+    """A missing sensor low-pass can hide a catalog effect (a saturating strip's charge law): once
+    a draft is kept, the candidates the diagnosis evaluated compete again on top of it; before
+    that they are not refitted (the diagnosis already tried them)."""
+    from physics.diagnose.draft import draft_effects
+    lp, sp, dr, nl = "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift", "nonlinear_charge"
+    fc = "fractional_coupling"
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+    on_base = ("double_layer",)
+    calls = []
+    table = {on_base: (90e-6, {lp: (20e-6, -520.0, {"lowpass_tau": 0.0265}), sp: (80e-6, -20.0, {}),
+                               dr: (95e-6, 3.0, {})}),
+             on_base + (lp,): (20e-6, {sp: (19.9e-6, -1.0, {}), dr: (20.2e-6, 6.0, {}), fc: (19.9e-6, -2.0, {}),
+                                       nl: (8e-6, -300.0, {"diffuse_share": 0.7})}),
+             on_base + (lp, nl): (8e-6, {sp: (7.95e-6, -1.0, {}), dr: (8.1e-6, 6.0, {}), fc: (7.9e-6, -3.0, {})})}
+    diagnosis = _diagnosis_stub(None, res, 90e-6)
+    diagnosis.candidates = [_Stub(effect=nl, evaluated=True), _Stub(effect=fc, evaluated=True),
+                            _Stub(effect="thermal", evaluated=False)]
+    out = draft_effects(diagnosis, _rediagnose(table, calls))
+    assert nl not in calls[0][1] and nl in calls[1][1] and "thermal" not in calls[1][1]
+    assert out.chain == [(lp, 20e-6), (nl, 8e-6)] and [d.effect_id for d in out.kept] == [lp]
+    assert any(n.startswith(f"{nl} (tried again on top of the kept drafts)") for n in out.notes)
+    # what was tried again and not taken is said, with the last round's reason
+    assert any(n.startswith("tried again on top of the kept drafts, not taken: fractional_coupling (fitted with "
+                            "[double_layer, drafted_output_lowpass, nonlinear_charge]") for n in out.notes)
+
+
 def test_a_later_round_never_leaves_the_chain_worse_than_the_round_before():
     """Round 2 refits the model with the kept draft; when that refit loses what round 1 gained
     (its base at 20 µm, round 1 ended at 4 µm), a draft that only lowers the refitted base is

@@ -118,7 +118,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     picked, even when the model with them is adequate (a catalog effect can mimic physics it
     does not model within the noise, e.g. the electrode resistance a sensor's low-pass): the
     candidate that lowers the error most (lowest ΔBIC) is taken when it passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
-    and the others are tried again on top of it (at most ``max_effects`` drafts kept).  A kept
+    and the others are tried again on top of it (at most ``max_effects`` drafts kept); once a
+    draft is kept, the catalog effects that did not help before compete too (:func:`_tried_before`).  A kept
     draft takes the values fitted with the model as its defaults (bounds and starts follow).
     ``progress``: a callback for one-line progress messages (each round refits the model, minutes
     on long records)."""
@@ -142,6 +143,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     base = getattr(res, "draft_base", res.base)       # without the effects the data do not support, refitted
     on_top, free, device = list(base.effects), list(base.spec.free), base.device
     catalog = [p.effect for p in res.picks if p.effect not in on_top]
+    before_drafts, passed_over = _tried_before(res, on_top + catalog), {}
     say = progress or (lambda msg: None)
     with tempfile.TemporaryDirectory(prefix="eap-drafts-") as tmp:
         ids = []
@@ -152,7 +154,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
         try:
             pool = list(items)
             while pool and len(outcome.kept) < max_effects:
-                offered = [d.effect_id for d in pool] + catalog
+                retry = before_drafts if outcome.kept else []
+                offered = [d.effect_id for d in pool] + catalog + retry
                 say(f"drafts: round {len(outcome.steps) + 1} (at most {max_effects} kept): "
                     f"{', '.join(offered)} fitted with [{', '.join(on_top)}]")
                 try:
@@ -165,7 +168,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                 if outcome.chain and getattr(again.base, "time_refined", False) and \
                         again.base.rmse < outcome.chain[-1][1]:
                     _went_further(outcome, again.base, len(outcome.steps))
-                scored, why = _scored(pool + catalog, again, on_top, outcome.chain[-1][1] if outcome.chain else None)
+                scored, why = _scored(pool + catalog + retry, again, on_top,
+                                      outcome.chain[-1][1] if outcome.chain else None)
+                passed_over.update({e: why[e] for e in retry if e in why})
                 if not scored:
                     say("drafts: nothing more taken (none lowers the error enough)")
                     outcome.rejected += [(d, why.get(d.effect_id, "")) for d in pool]
@@ -175,9 +180,12 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                 say(f"drafts: {eid} taken, RMS error {1e6 * again.base.rmse:.4g} → {1e6 * c.fit.rmse:.4g} µm")
                 values = effect_values(c.fit, eid)
                 text = _pick_text(scored, again, on_top)
-                if isinstance(key, str):            # the catalog's pick: on the chain, then the drafts on top
+                if key in catalog:                  # the catalog's pick: on the chain, then the drafts on top
                     outcome.notes.append(f"{eid} (the diagnosis's pick) {text}; the drafts are tried on top of it")
                     catalog.remove(key)
+                elif isinstance(key, str):          # a catalog effect that did not help before the drafts did
+                    outcome.notes.append(f"{eid} (tried again on top of the kept drafts) {text}")
+                    before_drafts.remove(key)
                 else:
                     key.refit(values)
                     key.evidence.update({"rmse_before_m": again.base.rmse, "rmse_after_m": c.fit.rmse,
@@ -195,10 +203,25 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                     _hold_maps_of_the_drive(outcome, pool, eid)
             else:
                 outcome.rejected += [(d, "not tried: the forward selection stopped") for d in pool]
+            left = {e: w for e, w in passed_over.items() if e in before_drafts}
+            if left:
+                outcome.notes.append("tried again on top of the kept drafts, not taken: "
+                                     + "; ".join(f"{e} ({w})" for e, w in left.items()))
         finally:
             for i in ids:
                 unregister(i)
     return outcome
+
+
+def _tried_before(res, taken: list) -> list[str]:
+    """The catalog effects that did not help before the drafts, tried again on top of a kept
+    draft: the candidates the diagnosis evaluated, and the model's own effects its draft base
+    leaves out (not supported), none of ``taken``.  A missing effect can hide another: a sensor's
+    low-pass left a saturating strip's ``nonlinear_charge`` unsupported until it was modelled."""
+    base = getattr(res, "draft_base", res.base)
+    ids = [e for e in res.base.effects if e not in base.effects]
+    ids += [c.effect for c in getattr(res, "candidates", []) if c.evaluated and c.effect not in ids]
+    return [e for e in ids if e not in taken]
 
 
 def _drop_siblings(outcome: DraftOutcome, pool: list, kept) -> None:
