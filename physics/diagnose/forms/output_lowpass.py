@@ -60,20 +60,19 @@ class OutputLowPass(Form):
         i, _ = best_on_grid(res, range(len(grid)), lambda i: second([math.log(grid[int(i)][0]), grid[int(i)][1]]), 2)
         (lfc2, zeta), reg2 = refined(res, [math.log(grid[int(i)][0]), grid[int(i)][1]],
                                      bounds + [(ZETAS[0], ZETAS[-1])], second, 2)
-        pure = lambda r: PURE[0] <= r.gains[0] <= PURE[1]      # noqa: E731
         orders = {1: (math.exp(lfc), None, reg), 2: (math.exp(lfc2), zeta, reg2)}
-        chosen = 2 if reg2.delta_bic < reg.delta_bic and pure(reg2) else 1
+        chosen = 2 if reg2.delta_bic < reg.delta_bic and _pure(reg2) else 1
         fc, zeta, reg = orders[chosen]
         other = orders[3 - chosen]
-        undecided = (not pure(reg) or other[2].delta_bic < reg.delta_bic) and other[2].delta_bic <= -SIGNIFICANT_BIC
-        ff = self.scored(res, reg, *_described(fc, zeta, reg), f_excited_Hz=[f_lo, f_hi])
+        undecided = (not _pure(reg) or other[2].delta_bic < reg.delta_bic) and other[2].delta_bic <= -SIGNIFICANT_BIC
+        alt, also = _described(*other)[0], ""
         if undecided:
-            params, _, _ = _described(*other)
-            ff.info["other_order"] = {**params, "order": 3 - chosen, "delta_bic": other[2].delta_bic}
-            ff.text = ff.text[:-1] + (f"; the {'second' if chosen == 1 else 'first'} order fits too (ΔBIC "
-                                      f"{other[2].delta_bic:.3g}, a = {params['gain']:+.3g}): both are drafted, the fit "
-                                      "with the model decides)")
-        ff.admissible = pure(reg)
+            also = (f"; the {'second' if chosen == 1 else 'first'} order fits too (ΔBIC {other[2].delta_bic:.3g}, "
+                    f"a = {alt['gain']:+.3g}): both are drafted, the fit with the model decides")
+        ff = self.scored(res, reg, *_described(fc, zeta, reg, also), f_excited_Hz=[f_lo, f_hi])
+        if undecided:
+            ff.info["other_order"] = {**alt, "order": 3 - chosen, "delta_bic": other[2].delta_bic}
+        ff.admissible = _pure(reg)
         ff.significant = ff.significant and ff.admissible
         return ff
 
@@ -87,9 +86,14 @@ class OutputLowPass(Form):
         return out
 
 
-def _described(fc: float, zeta: float | None, reg) -> tuple[dict, dict, str]:
+def _pure(reg) -> bool:
+    """Whether the regression's gain a is that of a pure low-pass (within :data:`.base.PURE`)."""
+    return PURE[0] <= reg.gains[0] <= PURE[1]
+
+
+def _described(fc: float, zeta: float | None, reg, also: str = "") -> tuple[dict, dict, str]:
     """(params, units, sentence) of a low-pass of cut-off ``fc`` [Hz], damping ratio ``zeta``
-    (None: first order) and gain ``reg.gains[0]``."""
+    (None: first order) and gain ``reg.gains[0]``; ``also`` ends the sentence's parenthesis."""
     a = reg.gains[0]
     params, units = {"cutoff_Hz": fc, "gain": a}, {"cutoff_Hz": "Hz", "gain": "1"}
     if zeta is None:
@@ -100,7 +104,7 @@ def _described(fc: float, zeta: float | None, reg) -> tuple[dict, dict, str]:
         what = (f"a second-order low-pass on the output with cut-off f_c ≈ {fc:.3g} Hz and damping ratio "
                 f"ζ ≈ {zeta:.2g} (residual ≈ a·(1/(1 + 2ζ s/ω_c + (s/ω_c)²) − 1) · model output")
     return params, units, what + f", a = {a:+.3g}" + (
-        "" if PURE[0] <= a <= PURE[1] else "; a is far from 1: a band of error, not a sensor's low-pass") + ")"
+        "" if _pure(reg) else "; a is far from 1: a band of error, not a sensor's low-pass") + also + ")"
 
 
 def _draft(form: str, fc: float, zeta: float | None, ff: FormFit, res: Residual) -> EffectDraft:
