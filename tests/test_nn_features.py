@@ -7,7 +7,7 @@ import pytest
 from scipy import signal
 
 import nnmodel
-from physics.errors import InputError
+from physics.errors import InputError, InputNotice
 from nnmodel.benchmarks import toy
 from nnmodel.bundle import save
 from nnmodel.data import Experiment, nrmse
@@ -147,7 +147,7 @@ def test_memory_filters_adapt_to_the_sampling_rate_and_record_length(tmp_path):
     y = np.tanh(2 * lfilter([1 - a], [1, -a], u))
     rec = Experiment(u=u, y=y, rh=None, fs=fs)
     m = MODELS["ff"](nb=4, memory_filters=6, memory_min_s=0.01, memory_max_s=1e5, max_epochs=1, progress_bar=False)
-    with pytest.warns(UserWarning, match="memory filters 0.01–100000 s do not fit these data"):
+    with pytest.warns(InputNotice, match="memory filters 0.01–100000 s do not fit these data"):
         m.fit([rec])
     lo, hi = m.memory_range_
     assert lo == pytest.approx(2 / fs) and hi == pytest.approx(0.5 * n / fs)

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from physics.errors import InputError
+from physics.errors import InputError, InputNotice
 
 from .params import MAX_FILTERS, Part, flag, pos_float, size
 
@@ -196,7 +196,7 @@ class InputFeatures(Part):
             if (lo, hi) != want:
                 warnings.warn(f"model {kind!r}: memory filters {want[0]:g}–{want[1]:g} s do not fit these data "
                               f"(sample period {1 / fs:.3g} s, records of ~{ceiling / MEMORY_MAX_FRACTION:.3g} s); "
-                              f"using {lo:.3g}–{hi:.3g} s", UserWarning, stacklevel=4)
+                              f"using {lo:.3g}–{hi:.3g} s", InputNotice, stacklevel=4)    # adapted as documented: a note
             rng = (lo, hi)
         linear = None
         if self.linear_start:
