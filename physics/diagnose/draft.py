@@ -216,8 +216,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
 def _tried_before(res, taken: list) -> list[str]:
     """The catalog effects that did not help before the drafts, tried again on top of a kept
     draft: the candidates the diagnosis evaluated, and the model's own effects its draft base
-    leaves out (not supported), none of ``taken``.  A missing effect can hide another: a sensor's
-    low-pass left a saturating strip's ``nonlinear_charge`` unsupported until it was modelled."""
+    leaves out (not supported), none of ``taken``.  A missing effect can hide another: behind an
+    unmodelled sensor low-pass a strip's ``solvent_diffusion`` was found unsupported, and fitted on
+    top of the drafted low-pass it took the place of a drafted slow pole."""
     base = getattr(res, "draft_base", res.base)
     ids = [e for e in res.base.effects if e not in base.effects]
     ids += [c.effect for c in getattr(res, "candidates", []) if c.evaluated and c.effect not in ids]
