@@ -479,6 +479,10 @@ def test_lab_like_drift_loop_from_the_command_line(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "drafted_drift.py: contract check passed" in out
     before = json.loads((tmp_path / "dx" / "diagnosis.json").read_text())
+    # the page and the JSON say how the drafts were chosen, as the terminal does
+    rounds = before["best_model"]["draft_rounds"]
+    assert rounds and rounds[0].startswith("drafted_drift.py: fitted with") and f"draft: {rounds[0]}" in out
+    assert "How the drafts were chosen" in (tmp_path / "dx" / "index.html").read_text()
     assert main(["diagnose", *files, "--effects", "none", "--out", str(tmp_path / "dx2"), "--quiet",
                  "--effects-path", str(drafts / "drafted_drift.py")]) == 0
     after = json.loads((tmp_path / "dx2" / "diagnosis.json").read_text())

@@ -245,7 +245,8 @@ def _write_folder(res: DiagnosisResult, d: Path, apply: bool, name, provenance, 
             written.append(path.name)
     out["applied"] = applied
     out["best_model"] = None if not best else {"effects": list(fit.effects), "rmse_m": fit.rmse,
-                                               "effect_files": files, "text": best["text"]}
+                                               "effect_files": files, "text": best["text"],
+                                               "draft_rounds": list(best.get("draft_rounds", []))}
     out["files"] = ["diagnosis.json", "index.html", "report.html"] + written
     if provenance:
         out["provenance"] = provenance
@@ -275,6 +276,9 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     rep.paragraph("What the confidence labels mean: " + calibration_text(), note=True)
     if out.get("best_model"):
         rep.paragraph(f"Best model: {out['best_model']['text']}.")
+        if out["best_model"]["draft_rounds"]:
+            rep.paragraph("How the drafts were chosen (fitted with the model, round by round):")
+            rep.bullets(out["best_model"]["draft_rounds"])
     if out.get("applied") and out["applied"].get("written"):
         rep.paragraph(f"Device file of the best model written: {out['applied']['path']} (use it: "
                       f"{out['applied']['usage']}).")

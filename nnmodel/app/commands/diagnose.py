@@ -186,7 +186,7 @@ def _diagnose(args):
 def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
     """The best model of the run (the diagnosis's final model, or the one fitted with the kept
     drafts when they lower its error) as the report writes it: its fit, its effects, the effect
-    files it needs and a one-line summary."""
+    files it needs, a one-line summary and what the draft rounds did (as printed)."""
     fit, files = res.final, []
     if outcome is not None and outcome.kept and outcome.final is not None and outcome.final.rmse < fit.rmse:
         fit, files = outcome.final, [str(drafts_dir / d.file_name) for d in outcome.kept]
@@ -195,7 +195,7 @@ def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
     files = list(user_files) + files
     nf = res.noise_floor
     ratio = f" = {fit.rmse / nf:.2f}× the noise floor of {1e6 * nf:.3g} µm" if nf and nf > 0 else ""
-    return {"fit": fit, "effect_files": files,
+    return {"fit": fit, "effect_files": files, "draft_rounds": outcome.lines() if outcome is not None else [],
             "text": f"[{', '.join(fit.effects)}] RMS error {1e6 * res.base.rmse:.4g} → {1e6 * fit.rmse:.4g} µm{ratio}"
                     + (f" (with the drafts {', '.join(d.effect_id for d in outcome.kept)})" if files and fit is not res.final
                        else f" (its own effects refitted: {', '.join(res.settings['own_refined'])})"
