@@ -360,18 +360,22 @@ def test_a_catalog_effect_that_did_not_help_before_the_drafts_is_tried_again_on_
     table = {on_base: (90e-6, {lp: (20e-6, -520.0, {"lowpass_tau": 0.0265}), sp: (80e-6, -20.0, {}),
                                dr: (95e-6, 3.0, {})}),
              on_base + (lp,): (20e-6, {sp: (19.9e-6, -1.0, {}), dr: (20.2e-6, 6.0, {}), fc: (19.9e-6, -2.0, {}),
-                                       nl: (8e-6, -300.0, {"diffuse_share": 0.7})}),
-             on_base + (lp, nl): (8e-6, {sp: (7.95e-6, -1.0, {}), dr: (8.1e-6, 6.0, {}), fc: (7.9e-6, -3.0, {})})}
+                                       nl: (8e-6, -300.0, {"diffuse_share": 0.7}), "humidity": (9e-6, -200.0, {})}),
+             on_base + (lp, nl): (8e-6, {sp: (7.95e-6, -1.0, {}), dr: (8.1e-6, 6.0, {}), fc: (7.9e-6, -3.0, {}),
+                                         "humidity": (7.9e-6, -2.0, {})})}
     diagnosis = _diagnosis_stub(None, res, 90e-6)
     diagnosis.candidates = [_Stub(effect=nl, evaluated=True), _Stub(effect=fc, evaluated=True),
                             _Stub(effect="thermal", evaluated=False)]
+    diagnosis.base.effects = ["double_layer", "humidity"]       # the draft base left humidity out (unsupported)
+    diagnosis.draft_base = _fit_stub(90e-6)
     out = draft_effects(diagnosis, _rediagnose(table, calls))
     assert nl not in calls[0][1] and nl in calls[1][1] and "thermal" not in calls[1][1]
     assert out.chain == [(lp, 20e-6), (nl, 8e-6)] and [d.effect_id for d in out.kept] == [lp]
     assert any(n.startswith(f"{nl} (tried again on top of the kept drafts)") for n in out.notes)
     # what was tried again and not taken is said, with the last round's reason
-    assert any(n.startswith("tried again on top of the kept drafts, not taken: fractional_coupling (fitted with "
-                            "[double_layer, drafted_output_lowpass, nonlinear_charge]") for n in out.notes)
+    note = next(n for n in out.notes if n.startswith("tried again on top of the kept drafts, not taken: "))
+    assert "fractional_coupling (fitted with [double_layer, drafted_output_lowpass, nonlinear_charge]" in note
+    assert "humidity (fitted with" in note
 
 
 def test_a_later_round_never_leaves_the_chain_worse_than_the_round_before():

@@ -171,6 +171,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                 scored, why = _scored(pool + catalog + retry, again, on_top,
                                       outcome.chain[-1][1] if outcome.chain else None)
                 passed_over.update({e: why[e] for e in retry if e in why})
+                passed_over.update({k: f"fitted with [{', '.join(on_top)}] it lowers the RMS error to "
+                                       f"{1e6 * c_.fit.rmse:.4g} µm (ΔBIC {b:.3g}), less than the round's pick"
+                                    for b, k, c_ in scored[1:] if k in retry})
                 if not scored:
                     say("drafts: nothing more taken (none lowers the error enough)")
                     outcome.rejected += [(d, why.get(d.effect_id, "")) for d in pool]
