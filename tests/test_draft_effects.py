@@ -269,7 +269,7 @@ def _diagnosis_stub(winner, res, rmse_final):
         fit.spec = _Stub(label=f"+{winner}", free=["kf", "Y", "beta_f"])
     forms = F.describe(fit, res.records)
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
-                 adequacy=_Stub(adequate=False, forms=forms), records=res.records,
+                 adequacy=_Stub(adequate=False, forms=forms), records=res.records, candidates=[],
                  verdict=_Stub(status="partly explained" if winner else "not explained by the catalog"))
 
 
@@ -347,10 +347,11 @@ def test_both_orders_of_a_low_pass_compete_and_the_one_not_chosen_leaves_the_poo
     assert "another version of the same residual form" in why[lp]
 
 
-def test_a_catalog_effect_that_did_not_help_before_the_drafts_is_tried_again_on_top_of_them():
-    """A missing sensor low-pass can hide a catalog effect (a saturating strip's charge law): once
-    a draft is kept, the candidates the diagnosis evaluated compete again on top of it; before
-    that they are not refitted (the diagnosis already tried them)."""
+def test_an_effect_the_support_test_removed_is_tried_again_on_top_of_the_kept_drafts():
+    """A missing sensor low-pass can hide one of the model's own effects (a strip's solvent
+    diffusion, found unsupported): once a draft is kept, the effects the draft base left out compete
+    again on top of it; before that they are not refitted, and the catalog candidates the diagnosis
+    evaluated are not tried again (each would add a round of fits on the time records)."""
     from physics.diagnose.draft import draft_effects
     lp, sp, dr, nl = "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift", "nonlinear_charge"
     fc = "fractional_coupling"
@@ -364,12 +365,11 @@ def test_a_catalog_effect_that_did_not_help_before_the_drafts_is_tried_again_on_
              on_base + (lp, nl): (8e-6, {sp: (7.95e-6, -1.0, {}), dr: (8.1e-6, 6.0, {}), fc: (7.9e-6, -3.0, {}),
                                          "humidity": (7.9e-6, -2.0, {})})}
     diagnosis = _diagnosis_stub(None, res, 90e-6)
-    diagnosis.candidates = [_Stub(effect=nl, evaluated=True), _Stub(effect=fc, evaluated=True),
-                            _Stub(effect="thermal", evaluated=False)]
-    diagnosis.base.effects = ["double_layer", "humidity"]       # the draft base left humidity out (unsupported)
+    diagnosis.candidates = [_Stub(effect="layered_beam", evaluated=True)]     # tried by the diagnosis: not again
+    diagnosis.base.effects = ["double_layer", nl, fc, "humidity"]     # the draft base left these out (unsupported)
     diagnosis.draft_base = _fit_stub(90e-6)
     out = draft_effects(diagnosis, _rediagnose(table, calls))
-    assert nl not in calls[0][1] and nl in calls[1][1] and "thermal" not in calls[1][1]
+    assert nl not in calls[0][1] and nl in calls[1][1] and "layered_beam" not in calls[1][1]
     assert out.chain == [(lp, 20e-6), (nl, 8e-6)] and [d.effect_id for d in out.kept] == [lp]
     assert any(n.startswith(f"{nl} (tried again on top of the kept drafts)") for n in out.notes)
     # what was tried again and not taken is said, with the last round's reason
