@@ -87,6 +87,10 @@ TIME_REFINE_SIMS = 60
 #: of every record on the mapped voltage (:func:`_refine_added_effects`; an output effect's only filter
 #: one simulation and may spend 200).
 INPUT_REFINE_NFEV = 40
+#: ... from this many of its starts, those whose first evaluation fits the records best (each start
+#: of a kept draft low-pass's grid cost 160 simulations of every record per candidate map of the
+#: drive fitted with it: over 4 minutes per candidate on a held-out strip).
+INPUT_REFINE_STARTS = 2
 #: A parameter ending on the edge of its default search window is searched again around it at most this often.
 RECENTRE_ROUNDS = 3
 #: ... when that lowers the fit's cost by more than this share (else the window edge lies along a
@@ -523,7 +527,8 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     (milliseconds); an input effect (:class:`physics.effects.InputEffect`) maps the voltage, so
     while its parameters are free each evaluation simulates the rest on the mapped voltage (a
     linear chain: a fraction of a second per record, :data:`INPUT_REFINE_NFEV` evaluations per
-    start).  Bounded least squares over the effects' parameters, the coupling gain solved in
+    start, from the :data:`INPUT_REFINE_STARTS` starts that fit best at once; the rest is simulated
+    again only when the map's parameters move).  Bounded least squares over the effects' parameters, the coupling gain solved in
     closed form at each step, from the FRF estimate and the spec's starts.  Slow effects (creep)
     and maps of the voltage (a dead-zone) that a frequency response cannot determine are then
     set by the records.  A nested effect is also started from its off values (the model without
@@ -537,13 +542,16 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     core = ActuatorModel(mf.device, [e for e in mf.effects if e not in {o.id for o in outs + ins}],
                          n_modes=mf.model.n_modes)
     p0 = mf.model.params_at(records[0].rh_measured if np.ndim(records[0].rh_model) == 0 else None)
-    mapped = any(n in effect_params(e.id) for e in ins for n in names)      # the voltage map moves
+    mapped = [n for e in ins for n in effect_params(e.id) if n in names]      # the voltage map moves
+    memos = [{} for _ in records]       # an output parameter's Jacobian column does not simulate again
 
-    def core_response(r, q):
-        v = r.v_sim
-        for e in ins:
-            v = np.asarray(e.filter_input(v, r.fs_d, q), dtype=float)
-        return simulate(core, None, r.t_sim, v, rh=r.rh_model, hold=r.hold).deflection
+    def core_response(r, q, memo=None):
+        def run():
+            v = r.v_sim
+            for e in ins:
+                v = np.asarray(e.filter_input(v, r.fs_d, q), dtype=float)
+            return simulate(core, None, r.t_sim, v, rh=r.rh_model, hold=r.hold).deflection
+        return run() if memo is None else remembered(memo, tuple(float(q[n]) for n in mapped), run)
 
     raw = None if mapped else [core_response(r, p0) for r in records]
     ys = [remove_nuisance(r.y_d) for r in records]
@@ -553,7 +561,7 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
         q = {**p0, **dict(zip(names, theta))}
         preds = []
         for k, r in enumerate(records):
-            y = core_response(r, q) if mapped else raw[k]
+            y = core_response(r, q, memos[k]) if mapped else raw[k]
             for e in outs:
                 y = e.filter_output(y, r.fs_d, q)
             yh = sensor_filter(y, r.fs_d, r.sensor_bandwidth)[r.i0:]
@@ -571,9 +579,11 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     off = {n: v for e in outs for n, v in off_values(e.id, mf.device).items()}
     if any(n in off for n in names):       # a nested effect also starts from the model without it
         starts.append(np.array([float(off.get(n, x)) for n, x in zip(names, x_now)]))
+    starts = [np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo)) for x0 in starts]
+    if mapped:          # a cost never rises along a fit: the best never ends worse than any start
+        starts = sorted(starts, key=lambda x: float(np.sum(resid(x) ** 2)))[:INPUT_REFINE_STARTS]
     best = None
     for x0 in starts:
-        x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
         sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac",
                             max_nfev=INPUT_REFINE_NFEV if mapped else 200)
         if best is None or sol.cost < best.cost:
