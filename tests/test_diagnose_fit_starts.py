@@ -362,3 +362,48 @@ def test_parameters_refined_on_time_records_without_information_have_unknown_cor
         C._time_uncertainty(mf, ["a", "b"], sol, lambda x: np.ones(50), [0.0, 0.0], [10.0, 10.0])
     assert np.isnan(mf.correlation[0, 1]) and np.isnan(mf.correlation[1, 0])
     assert any(w.startswith("a is not identifiable") for w in mf.warnings)
+
+
+def test_a_map_of_the_drive_refined_on_the_time_records_screens_its_starts(clean, tmp_path, monkeypatch):
+    """A drafted clip of the drive fitted with a drafted output low-pass (both parameters free,
+    the low-pass's grid gives many starts): only the :data:`~C.INPUT_REFINE_STARTS` starts that
+    fit best at once run, the rest of the model is simulated again only when the clip's level
+    moves (a level is simulated again only once the bounded memo has let it go)."""
+    import scipy.optimize
+    from physics.diagnose import forms as F
+    from physics.effects import load_effects_file, unregister
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    base = C.score(C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets,
+                               data.target_records, n_starts=1), data.records)
+    res = F.residual_of(base, data.records)
+    lp = F.form_of("output_lowpass")().fit(res)
+    level = 0.6 * max(float(np.max(np.abs(r.v_sim))) for r in data.records)      # the clip bites
+    clip = F.FormFit("input_saturation", {"level_V": level}, {"level_V": "V"}, "")
+    loaded = []
+    for d in [*F.form_of("output_lowpass")().draft(lp, res)[:1], *F.form_of("input_saturation")().draft(clip, res)]:
+        (tmp_path / d.file_name).write_text(d.source(), encoding="utf-8")
+        loaded += load_effects_file(tmp_path / d.file_name)
+    try:
+        lp_id, clip_id = loaded
+        free = ["kf", "Y", "beta_f", *C.effect_params(lp_id), "saturation_level"]
+        mf = C.fit_model(C.ModelSpec("both", ids + (lp_id, clip_id), free), dev, data.targets, data.target_records,
+                         n_starts=1)
+        seen, runs = [], []
+        simulate = C.simulate
+
+        def counted(model, effects, t, v, **kw):
+            if clip_id not in model.effect_ids:          # the rest of the model, on the clipped drive
+                seen.append((t.size, hash(np.asarray(v).tobytes())))
+            return simulate(model, effects, t, v, **kw)
+        fit = scipy.optimize.least_squares
+        monkeypatch.setattr(C, "simulate", counted)
+        monkeypatch.setattr(scipy.optimize, "least_squares", lambda *a, **k: runs.append(a[1]) or fit(*a, **k))
+        C.score(mf, data.records)
+        assert len(C.start_points(lp_id, dev)) + 2 > C.INPUT_REFINE_STARTS == len(runs)
+        # without the memo each low-pass Jacobian column would simulate again: about one in three
+        assert len(data.records) < len(seen) <= 1.1 * len(set(seen))
+    finally:
+        for i in loaded:
+            unregister(i)
