@@ -165,17 +165,20 @@ def test_a_time_only_parameter_beside_a_large_signal_effect_is_set_on_the_time_r
 
 def test_a_draft_round_refines_its_base_only_past_the_first(monkeypatch):
     """The first draft round's base is the diagnosis's own (refitted as it was); from the second
-    on, the base carries the drafts kept before and is refined on the time records."""
+    on, the base carries the drafts kept before and is refined on the time records.  Every
+    round fits from the diagnosis's starts (an effect tried again from one start missed its
+    optimum), of which only the best two run to convergence."""
     from types import SimpleNamespace as NS
 
     from physics.diagnose import diagnosis, draft
     seen = []
-    monkeypatch.setattr(diagnosis, "diagnose", lambda *a, selection=None, **k: seen.append(selection.refine_base))
+    monkeypatch.setattr(diagnosis, "diagnose", lambda *a, selection=None, options=None, **k: seen.append(
+        (selection.refine_base, options.n_starts, options.keep_starts)))
     res = NS(draft_base=NS(effects=["double_layer", "humidity"], spec=NS(per_rh=[])), noise_floor=1e-6)
-    again = draft.rediagnosis([], res, FitOptions())
+    again = draft.rediagnosis([], res, FitOptions(n_starts=3))
     again(None, ["double_layer", "humidity"], [], ["drafted_slow_pole"])
     again(None, ["double_layer", "humidity", "drafted_slow_pole"], [], ["drafted_drift"])
-    assert seen == [False, True]
+    assert seen == [(False, 3, draft.DRAFT_KEEP_STARTS), (True, 3, draft.DRAFT_KEEP_STARTS)]
 
 
 def test_a_free_parameter_without_effect_is_held_not_an_error(clean):

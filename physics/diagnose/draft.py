@@ -86,15 +86,17 @@ def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
                 progress: Callable[[str], None] | None = None, keep_starts: int | None = DRAFT_KEEP_STARTS):
     """The ``rediagnose`` of :func:`draft_effects` that ``eap diagnose`` uses after the diagnosis
     ``res`` of ``measurements`` with the fit ``options``: each round a forward-only diagnosis with
-    the drafts as the only candidates, one start per fit (``keep_starts`` of them run to
-    convergence, see :data:`DRAFT_KEEP_STARTS`), the draft base's per-RH parameters and the
-    diagnosis's noise floor, no support test.  From the second round on, the base (the model the
-    round before kept, whose pick was refined on the time records) is refined on them too."""
+    the round's candidates, each fit from the diagnosis's starts (``options.n_starts``) and its
+    own grid, of which ``keep_starts`` run to convergence (:data:`DRAFT_KEEP_STARTS`), the draft
+    base's per-RH parameters and the diagnosis's noise floor, no support test.  One start was
+    too few for an effect tried again: behind a drafted sensor low-pass a strip's ``humidity``
+    fitted from one start lowered the error from 50.0 to 40.8 µm, from four to 24.0 µm.  From the
+    second round on, the base (the model the round before kept, whose pick was refined on the time
+    records) is refined on them too."""
     import dataclasses
 
     from .diagnosis import AnalysisOptions, SelectionOptions, diagnose
-    opts = dataclasses.replace(options, per_rh=",".join(res.draft_base.spec.per_rh) or "none", n_starts=1,
-                               keep_starts=keep_starts)
+    opts = dataclasses.replace(options, per_rh=",".join(res.draft_base.spec.per_rh) or "none", keep_starts=keep_starts)
     first = set(res.draft_base.effects)
     return lambda dev, eff, free, cands: diagnose(
         measurements, dev, eff, free, options=opts, candidates=cands, force=True, check_support=False,
