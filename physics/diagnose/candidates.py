@@ -528,8 +528,9 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     while its parameters are free each evaluation simulates the rest on the mapped voltage (a
     linear chain: a fraction of a second per record, :data:`INPUT_REFINE_NFEV` evaluations per
     start, from the :data:`INPUT_REFINE_STARTS` starts that fit best at once; the rest is simulated
-    again only when the map's parameters move).  Bounded least squares over the effects' parameters, the coupling gain solved in
-    closed form at each step, from the FRF estimate and the spec's starts.  Slow effects (creep)
+    again only when the map's parameters move).  Bounded least squares over the effects'
+    parameters, the coupling gain solved in closed form at each step, from the FRF estimate and
+    the spec's starts.  Slow effects (creep)
     and maps of the voltage (a dead-zone) that a frequency response cannot determine are then
     set by the records.  A nested effect is also started from its off values (the model without
     it), so that its fit never ends worse than the base on this criterion."""
