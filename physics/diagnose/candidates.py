@@ -544,17 +544,16 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
                          n_modes=mf.model.n_modes)
     p0 = mf.model.params_at(records[0].rh_measured if np.ndim(records[0].rh_model) == 0 else None)
     mapped = [n for e in ins for n in effect_params(e.id) if n in names]      # the voltage map moves
-    memos = [{} for _ in records]       # an output parameter's Jacobian column does not simulate again
+    memos = [{} for _ in records]       # the rest is simulated again only when the map moves
 
-    def core_response(r, q, memo=None):
+    def core_response(k, q):
         def run():
-            v = r.v_sim
+            r, v = records[k], records[k].v_sim
             for e in ins:
                 v = np.asarray(e.filter_input(v, r.fs_d, q), dtype=float)
             return simulate(core, None, r.t_sim, v, rh=r.rh_model, hold=r.hold).deflection
-        return run() if memo is None else remembered(memo, tuple(float(q[n]) for n in mapped), run)
+        return remembered(memos[k], tuple(float(q[n]) for n in mapped), run)
 
-    raw = None if mapped else [core_response(r, p0) for r in records]
     ys = [remove_nuisance(r.y_d) for r in records]
     scale = [1.0 / (np.std(y) * math.sqrt(y.size) or 1.0) for y in ys]
 
@@ -562,7 +561,7 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
         q = {**p0, **dict(zip(names, theta))}
         preds = []
         for k, r in enumerate(records):
-            y = core_response(r, q, memos[k]) if mapped else raw[k]
+            y = core_response(k, q)
             for e in outs:
                 y = e.filter_output(y, r.fs_d, q)
             yh = sensor_filter(y, r.fs_d, r.sensor_bandwidth)[r.i0:]
