@@ -94,6 +94,44 @@ def test_input_side_forms_recover_a_dead_zone_and_a_saturation():
     assert ff.significant and ff.params["level_V"] == pytest.approx(0.6, rel=0.1)
 
 
+def test_the_input_saturation_tells_a_soft_law_from_a_clip_and_drafts_it(tmp_path):
+    """A drive whose effect grows as a logarithm or a square root beyond a knee (a charge that
+    saturates softly; independent closed forms, not :func:`compress`) is fitted by the soft law, with
+    its exponent (0, 0.5) and a map within a few per cent of the truth over the drive; a clip stays a
+    clip.  The soft draft is an input effect that passes the contract and maps the voltage by the
+    fitted law."""
+    from physics.diagnose.forms.input_side import compress
+    v = np.linspace(-1.0, 1.0, 41)
+    laws = {0.0: lambda u: 0.5 * np.sign(u) * np.log1p(np.abs(u) / 0.5),
+            0.5: lambda u: 0.4 * np.sign(u) * (np.sqrt(1 + 2 * np.abs(u) / 0.4) - 1)}
+    for gamma, law in laws.items():
+        ff = _fit("input_saturation", _residual(lambda p, t, fs: GAIN * (law(p / GAIN) - p / GAIN)))
+        assert ff.significant and "soft saturation" in ff.text
+        assert ff.params["exponent"] == pytest.approx(gamma, abs=0.2)
+        fitted = ff.params["gain"] * (compress(v, ff.params["level_V"], ff.params["exponent"]) - v) + v
+        np.testing.assert_allclose(fitted, law(v), atol=0.03 * np.max(np.abs(law(v))))
+    clip = _fit("input_saturation", _residual(lambda p, t, fs: GAIN * (np.clip(p / GAIN, -0.6, 0.6) - p / GAIN)))
+    assert "exponent" not in clip.params and "clipped" in clip.text
+    (d,) = F.form_of("input_saturation")().draft(ff, None)
+    d.seen = "a test residual"
+    path = tmp_path / d.file_name
+    path.write_text(d.source(), encoding="utf-8")
+    assert check_draft(path) == []
+    (cls,) = effect_classes_in_file(path)
+    assert issubclass(cls, InputEffect) and cls.diagnosis["off"] == {"saturation_exponent": 1.0}
+    np.testing.assert_allclose(cls(load_device("ipmc_pt_eg")).filter_input(v, 100.0, {}),
+                               compress(v, ff.params["level_V"], ff.params["exponent"]), rtol=1e-3)
+
+
+def test_compress_is_the_line_the_logarithm_and_the_square_root():
+    from physics.diagnose.forms.input_side import compress
+    v = np.linspace(-3.0, 3.0, 13)
+    np.testing.assert_allclose(compress(v, 0.7, 1.0), v, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(compress(v, 0.7, 0.0), np.sign(v) * 0.7 * np.log1p(np.abs(v) / 0.7), rtol=1e-12)
+    np.testing.assert_allclose(compress(v, 0.7, 0.5), np.sign(v) * 1.4 * (np.sqrt(1 + np.abs(v) / 0.7) - 1), rtol=1e-12)
+    assert np.all(np.abs(compress(v, 0.7, -1.0)) < 0.7)          # γ < 0: bounded at L/|γ|
+
+
 @pytest.mark.parametrize("form", ["input_deadzone", "input_saturation"])
 def test_input_side_drafts_are_input_effects_that_pass_the_contract(form, tmp_path):
     """The drafted file maps the voltage (physics.effects.InputEffect) with the fitted threshold

@@ -349,7 +349,9 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
             for i, prm in enumerate(problem.params):
                 if prm.name in e:
                     th[i] = float(np.clip(e[prm.name], prm.lower, prm.upper))
-            extra.append(th)
+            # a start over parameters the FRF cannot see (set on the time records) is the first one again
+            if not any(np.array_equal(th, t) for t in [problem.theta0] + extra):
+                extra.append(th)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IdentifiabilityWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -528,7 +530,8 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     while its parameters are free each evaluation simulates the rest on the mapped voltage (a
     linear chain: a fraction of a second per record, :data:`INPUT_REFINE_NFEV` evaluations per
     start, from the :data:`INPUT_REFINE_STARTS` starts that fit best at once; the rest is simulated
-    again only when the map's parameters move).  Bounded least squares over the effects'
+    again only when the map's parameters move; a large-signal rest holds the map at its values, as
+    each evaluation would run the implicit stepper on every record).  Bounded least squares over the effects'
     parameters, the coupling gain solved in closed form at each step, from the FRF estimate and
     the spec's starts.  Slow effects (creep)
     and maps of the voltage (a dead-zone) that a frequency response cannot determine are then
@@ -544,6 +547,11 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
                          n_modes=mf.model.n_modes)
     p0 = mf.model.params_at(records[0].rh_measured if np.ndim(records[0].rh_model) == 0 else None)
     mapped = [n for e in ins for n in effect_params(e.id) if n in names]      # the voltage map moves
+    if mapped and not core.is_linear:   # each evaluation would run the implicit stepper on every record: held
+        names = [n for n in names if n not in mapped]
+        mapped = []
+        if not names:
+            return
     memos = [{} for _ in records]       # the rest is simulated again only when the map moves
 
     def core_response(k, q):
@@ -575,7 +583,7 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
     x_now = np.array([float(mf.device.params.get(n, declared_default(n))) for n in names])
     starts = [x_now] + [np.array([float(st.get(n, x)) for n, x in zip(names, x_now)])
-                        for e in outs for st in start_points(e.id, mf.device)]
+                        for e in outs + ins for st in start_points(e.id, mf.device)]
     off = {n: v for e in outs for n, v in off_values(e.id, mf.device).items()}
     if any(n in off for n in names):       # a nested effect also starts from the model without it
         starts.append(np.array([float(off.get(n, x)) for n, x in zip(names, x_now)]))

@@ -92,7 +92,8 @@ def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
     too few for an effect tried again: behind a drafted sensor low-pass a strip's ``humidity``
     fitted from one start lowered the error from 50.0 to 40.8 µm, from four to 24.0 µm.  From the
     second round on, the base (the model the round before kept, whose pick was refined on the time
-    records) is refined on them too."""
+    records) is refined on them too.  When a round's pick is large-signal, its best linear rival is
+    refined on the time records before the round decides (:attr:`.diagnosis.SelectionOptions.refine_rival`)."""
     import dataclasses
 
     from .diagnosis import AnalysisOptions, SelectionOptions, diagnose
@@ -100,7 +101,8 @@ def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
     first = set(res.draft_base.effects)
     return lambda dev, eff, free, cands: diagnose(
         measurements, dev, eff, free, options=opts, candidates=cands, force=True, check_support=False,
-        selection=SelectionOptions(max_effects=1, backward=False, refine_base=not set(eff) <= first),
+        selection=SelectionOptions(max_effects=1, backward=False, refine_base=not set(eff) <= first,
+                                   refine_rival=True),
         analysis=AnalysisOptions(noise_floor=res.noise_floor, fs_max=fs_max), progress=progress)
 
 

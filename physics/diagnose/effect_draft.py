@@ -68,6 +68,7 @@ class EffectDraft:
     seen: str = ""
     evidence: dict = field(default_factory=dict)
     base: str = "OutputEffect"       # the effect class it subclasses (physics.effects)
+    starts: list = field(default_factory=list)    # further start points {param: value} (SI)
 
     def refit(self, values: dict) -> None:
         """Take ``values`` (fitted jointly with the model) as the defaults; bounds and starts follow."""
@@ -82,7 +83,8 @@ class EffectDraft:
     def diagnosis(self) -> dict:
         return {"free": tuple(p.name for p in self.params),
                 "bounds": {p.name: tuple(_num(b) for b in p.bounds) for p in self.params},
-                "starts": [{self.scan: _num(v)} for v in self.scan_values()],
+                "starts": [{self.scan: _num(v)} for v in self.scan_values()]
+                + [{k: _num(v) for k, v in st.items()} for st in self.starts],
                 "nested": True, "off": {k: _num(v) for k, v in self.off.items()},
                 "excitation": self.excitation, "reveal": {k: _num(v) for k, v in self.reveal.items()},
                 "signature": [tuple(s) for s in self.signature]}

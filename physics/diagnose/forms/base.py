@@ -173,23 +173,31 @@ class Form:
                        draftable=type(self).draft is not Form.draft)
 
 
-def best_on_grid(res: Residual, grid, columns, k_grid: int = 1) -> tuple[float, Regression]:
+def best_on_grid(res: Residual, grid, columns, k_grid: int = 1,
+                 admit: Callable[[Regression], bool] | None = None) -> tuple[float, Regression] | None:
     """(grid value, regression) with the lowest ΔBIC; ``columns(value)`` gives the regressors;
-    ``k_grid`` parameters are scanned (counted in ΔBIC)."""
+    ``k_grid`` parameters are scanned (counted in ΔBIC); ``admit``: only regressions it accepts
+    compete (None when it accepts none)."""
     best = None
     for g in grid:
         reg = res.regress(columns(g), k_grid)
-        if best is None or reg.delta_bic < best[1].delta_bic:
+        if (admit is None or admit(reg)) and (best is None or reg.delta_bic < best[1].delta_bic):
             best = (float(g), reg)
     return best
 
 
-def refined(res: Residual, x0, bounds, columns, k_grid: int) -> tuple[list[float], Regression]:
+def refined(res: Residual, x0, bounds, columns, k_grid: int,
+            admit: Callable[[Regression], bool] | None = None) -> tuple[list[float], Regression]:
     """(parameters, regression): the scanned parameters ``x0`` (a grid's best point) refined
     within ``bounds`` to the lowest ΔBIC (Nelder–Mead, at most 60 regressions); ``columns(x)``
-    gives the regressors."""
+    gives the regressors; ``admit``: the regressions it refuses score +∞ (an admitted ``x0`` stays
+    admitted)."""
     from scipy.optimize import minimize
-    sol = minimize(lambda x: res.regress(columns(x), k_grid).delta_bic, np.asarray(x0, float), method="Nelder-Mead",
+
+    def cost(x):
+        reg = res.regress(columns(x), k_grid)
+        return reg.delta_bic if admit is None or admit(reg) else math.inf
+    sol = minimize(cost, np.asarray(x0, float), method="Nelder-Mead",
                    bounds=bounds, options={"maxfev": 60, "xatol": 1e-3, "fatol": 0.1})
     x = [float(v) for v in sol.x]
     return x, res.regress(columns(x), k_grid)

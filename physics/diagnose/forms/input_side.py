@@ -1,11 +1,15 @@
 """Static nonlinearities on the input side: a dead-zone or a saturation of the drive
 voltage before the (linear) electrochemistry — an amplifier that clips, a contact that
-conducts only beyond a threshold.
+conducts only beyond a threshold, a double layer whose charge grows slower than the voltage.
 
 Form: e ≈ a · H(N(v) − v) + c · H(v), H the fitted linear model (:attr:`.Residual.respond`), v
 each record's voltage and N the nonlinearity: the dead-zone N(v) = v − clip(v, −d, d) with d
 scanned from 0.5 % to 40 % of the largest |v|, or the saturation N(v) = clip(v, −L, L) with L
-from 30 % to 95 % of it, then finer between the grid neighbours of the best.
+from 30 % to 95 % of it, then finer between the grid neighbours of the best.  The saturation is
+also fitted as a soft one, :func:`compress` (slope 1 at rest, growing as |v|^γ beyond a knee L:
+a charge that saturates logarithmically, as a square root, or towards a bound), on a grid of
+knees from 10 % to 3× the largest |v| and of exponents γ from −1 to 0.5, refined; the lower
+ΔBIC (which counts the soft law's extra parameter) chooses the law that is reported and drafted.
 
 The second term is there because the base was fitted to the distorted records: if they are
 κ·H(N(v)), the fitted gain has taken up part of the distortion and the residual is
@@ -25,7 +29,26 @@ from __future__ import annotations
 import numpy as np
 
 from ..effect_draft import EffectDraft, Param
-from .base import PURE, Form, FormFit, Residual, best_on_grid
+from .base import PURE, Form, FormFit, Residual, best_on_grid, refined
+
+#: Exponents γ of the soft saturation's grid (then refined within :data:`SOFT_BOUNDS`): bounded
+#: (−1: v/(1 + |v|/L)), logarithmic (0), square-root (0.5).
+SOFT_EXPONENTS = (-1.0, -0.5, 0.0, 0.5)
+#: Knee L / largest |v| and exponent γ of the soft saturation: the grid's range, the refinement's bounds.
+SOFT_KNEES = (0.1, 3.0, 8)
+SOFT_BOUNDS = ((0.02, 10.0), (-2.0, 0.9))
+SHIFT = 3.0
+
+
+def compress(v, level: float, exponent: float) -> np.ndarray:
+    """A soft saturation of the voltage ``v`` [V]: slope 1 at rest and, beyond the knee ``level``
+    [V], growth as |v|^``exponent`` — sign(v)·L·((1 + |v|/L)^γ − 1)/γ, the Box–Cox transform of
+    1 + |v|/L (Box & Cox, J. R. Stat. Soc. B 26, 211, 1964).  γ = 1 leaves v as it is, 0.5 is a
+    square root, 0 a logarithm L·ln(1 + |v|/L), γ < 0 bounded at L/|γ|."""
+    v = np.asarray(v, dtype=float)
+    x = np.log1p(np.abs(v) / level)
+    m = x if abs(exponent) < 1e-9 else np.expm1(exponent * x) / exponent
+    return np.sign(v) * level * m
 
 
 class _InputNonlinearity(Form):
@@ -40,56 +63,76 @@ class _InputNonlinearity(Form):
         """N(v) − v for the threshold ``level`` [V]."""
         raise NotImplementedError
 
+    def search(self, res: Residual, vmax: float, columns) -> tuple[tuple, "object"]:
+        """(the law's parameters, regression) that fit the residual best: the threshold on the
+        form's grid, then finer between the neighbours of the best; ``columns(x)`` gives the
+        regressors for the parameters ``x`` (arguments of :meth:`distort` after the voltage)."""
+        levels = np.geomspace(*self.grid[:2], self.grid[2]) * vmax
+        level, reg = best_on_grid(res, levels, lambda x: columns((x,)))
+        i = int(np.argmin(np.abs(levels - level)))
+        fine = np.geomspace(levels[max(i - 1, 0)], levels[min(i + 1, levels.size - 1)], 9)
+        level, reg = best_on_grid(res, fine, lambda x: columns((x,)))
+        return (level,), reg
+
     def fit(self, res: Residual) -> FormFit | None:
         if res.respond is None:
             return None
         volts = [r.v_d for r in res.records]
         vmax = max(float(np.max(np.abs(v))) for v in volts) or 1.0
-        levels = np.geomspace(*self.grid[:2], self.grid[2]) * vmax
         linear = [res.respond(k, v) for k, v in enumerate(volts)]
 
         def columns(x):
-            return [[res.respond(k, self.distort(v, x)), lin] for k, (v, lin) in enumerate(zip(volts, linear))]
-        level, reg = best_on_grid(res, levels, columns)
-        i = int(np.argmin(np.abs(levels - level)))      # then finer between the neighbours of the best
-        fine = np.geomspace(levels[max(i - 1, 0)], levels[min(i + 1, levels.size - 1)], 9)
-        level, reg = best_on_grid(res, fine, columns)
+            return [[res.respond(k, self.distort(v, *x)), lin] for k, (v, lin) in enumerate(zip(volts, linear))]
+        x, reg = self.search(res, vmax, columns)
         kappa = 1.0 + reg.gains[1]                  # the records' linear gain over the fitted model's
         a = reg.gains[0] / kappa if kappa > 0 else float("nan")
-        ff = self.scored(res, reg, {"level_V": level, "gain": a, "linear_gain": kappa},
-                         {"level_V": "V", "gain": "1", "linear_gain": "1"}, self.sentence(level, vmax, a, kappa))
-        ff.admissible = kappa > 0 and PURE[0] <= a <= PURE[1]
+        params, units = {"level_V": x[0], "gain": a, "linear_gain": kappa}, {"level_V": "V", "gain": "1",
+                                                                            "linear_gain": "1"}
+        if len(x) > 1:
+            params["exponent"], units["exponent"] = x[1], "1"
+        ff = self.scored(res, reg, params, units, self.sentence(x, vmax, a, kappa), v_max_V=vmax)
+        ff.admissible = _pure(reg)
         ff.significant = ff.significant and ff.admissible
         return ff
 
-    def sentence(self, level: float, vmax: float, a: float, kappa: float) -> str:
-        what = self.what.format(level=f"{level:.3g}")
-        return (f"a {self.title}: {what} ({100 * level / vmax:.0f} % of the largest |v|; "
+    def law(self, x: tuple) -> dict:
+        """The effect description (:attr:`effect`) of the law with parameters ``x``."""
+        return self.effect
+
+    def sentence(self, x: tuple, vmax: float, a: float, kappa: float) -> str:
+        e = self.law(x)
+        what = e["what"].format(*(f"{v:.3g}" for v in x))
+        return (f"a {e['title']}: {what} ({100 * x[0] / vmax:.0f} % of the largest |v|; "
                 f"residual ≈ κ·a·H(N(v) − v) + (κ − 1)·H(v), a = {a:+.3g}, κ = {kappa:.3g}: the records' "
                 "linear gain over the model's)")
 
     def draft(self, ff: FormFit, res: Residual):
-        e, name = self.effect, self.effect["param"]
+        x = (ff.params["level_V"],) + ((ff.params["exponent"],) if "exponent" in ff.params else ())
+        e = self.law(x)
+        names = [q[0] for q in e["params"]]
         return [EffectDraft(
             form=self.id, effect_id=f"drafted_{self.id}", class_name="Drafted" + self.id.title().replace("_", ""),
             summary=e["summary"], model=e["model"],
-            params=[Param(name, "V", 0.0, 1e3, e["description"], ff.params["level_V"])],
-            scan=name, off={name: e["off"]},
+            params=[Param(name, unit, lo, hi, text, value, rng)
+                    for (name, unit, lo, hi, text, rng), value in zip(e["params"], x)],
+            scan=names[0], off=e["off"],
             excitation="records at two or more drive amplitudes (the share of the voltage the map changes "
                        "depends on the amplitude)",
             reveal={}, signature=[("amplitude_dependence", 1.0), ("harmonics", 0.5)],
             body=("    def filter_input(self, v, fs, p):\n"
-                  f"        level = self.value(p, {name!r})\n"
-                  f"        return {e['body']}\n"),
-            imports=("import numpy as np", ""), base="InputEffect")]
+                  + "".join(f"        {var} = self.value(p, {name!r})\n" for var, name in zip(e["vars"], names))
+                  + f"        return {e['body']}\n"),
+            imports=e.get("imports", ("import numpy as np", "")), base="InputEffect",
+            starts=[dict(zip(names, st)) for st in e.get("starts", lambda ff: [])(ff)])]
 
 
 class InputDeadZone(_InputNonlinearity):
     id = "input_deadzone"
     title = "dead-zone of the input"
-    what = "the strip does not follow the voltage within ±{level} V"
     grid = (0.005, 0.4, 14)
-    effect = {"param": "deadzone_level", "off": 0.0, "description": "half width d of the dead-zone",
+    effect = {"title": title, "what": "the strip does not follow the voltage within ±{0} V",
+              "params": [("deadzone_level", "V", 0.0, 1e3, "half width d of the dead-zone", "log")],
+              "vars": ["level"], "off": {"deadzone_level": 0.0},
               "summary": "a dead-zone of the drive: the strip sees v − clip(v, −d, d)",
               "model": "The strip is driven by ``v − clip(v, −d, d)``: nothing passes within ±d (a driver or a "
                        "contact that conducts only beyond a threshold); d = 0 is the model without it.",
@@ -102,13 +145,58 @@ class InputDeadZone(_InputNonlinearity):
 class InputSaturation(_InputNonlinearity):
     id = "input_saturation"
     title = "saturation of the input"
-    what = "the drive acts as if clipped at ±{level} V"
     grid = (0.3, 0.95, 10)
-    effect = {"param": "saturation_level", "off": 1e3, "description": "level L at which the drive clips",
+    effect = {"title": title, "what": "the drive acts as if clipped at ±{0} V",
+              "params": [("saturation_level", "V", 0.0, 1e3, "level L at which the drive clips", "log")],
+              "vars": ["level"], "off": {"saturation_level": 1e3},
               "summary": "a saturation of the drive: the strip sees clip(v, −L, L)",
               "model": "The strip is driven by ``clip(v, −L, L)`` (an amplifier that clips); a level above every "
                        "drive, e.g. 1000 V, is the model without it.",
               "body": "np.clip(v, -level, level)"}
+    soft = {"title": "soft saturation of the input",
+            "what": "beyond a knee of ±{0} V the drive acts as if growing as |v|^γ, γ = {1}",
+            "params": [("saturation_knee", "V", 1e-3, 1e3, "knee L beyond which the drive's effect saturates", "log"),
+                       ("saturation_exponent", "1", SOFT_BOUNDS[1][0], 1.0,
+                        "exponent γ of the growth beyond the knee (1: none, 0.5: square root, 0: logarithm, "
+                        "< 0: bounded)", SOFT_BOUNDS[1])],
+            "vars": ["knee", "exponent"], "off": {"saturation_exponent": 1.0},
+            "summary": "a soft saturation of the drive: the strip sees sign(v)·L·((1 + |v|/L)^γ − 1)/γ",
+            "model": "The strip is driven by ``compress(v, L, γ)`` = sign(v)·L·((1 + |v|/L)^γ − 1)/γ: slope 1 "
+                     "at rest and growth as |v|^γ beyond the knee L (a double layer whose charge grows slower "
+                     "than the voltage: γ = 0.5 a square root, γ = 0 a logarithm, γ < 0 towards a bound); "
+                     "γ = 1 is the model without it.",
+            "body": "compress(v, knee, exponent)",
+            # the residual's estimate can lie on a ridge (a knee far beyond the drive with a small
+            # curvature); the time records choose among the grid's exponents at two knees
+            "starts": lambda ff: [(k * ff.info["v_max_V"], g) for k in (0.25, 1.0) for g in SOFT_EXPONENTS],
+            "imports": ("from physics.diagnose.forms.input_side import compress", "")}
 
-    def distort(self, v, level):
-        return np.clip(v, -level, level) - v
+    def distort(self, v, level, exponent=None):
+        return (np.clip(v, -level, level) if exponent is None else compress(v, level, exponent)) - v
+
+    def law(self, x):
+        return self.effect if len(x) == 1 else self.soft
+
+    def search(self, res, vmax, columns):
+        """The clip's threshold, and the soft law's knee and exponent (grid, then refined); the
+        lower ΔBIC chooses."""
+        x, reg = super().search(res, vmax, columns)
+        grid = [(k, g + SHIFT) for g in SOFT_EXPONENTS for k in np.geomspace(*SOFT_KNEES[:2], SOFT_KNEES[2])]
+
+        def soft(z):        # z: knee / largest |v|, and γ + SHIFT (Nelder–Mead first steps 5 % of a coordinate)
+            return columns((z[0] * vmax, z[1] - SHIFT))
+        best = best_on_grid(res, range(len(grid)), lambda i: soft(grid[int(i)]), 2, admit=_pure)
+        if best is None:
+            return x, reg
+        (k, g), reg2 = refined(res, list(grid[int(best[0])]), [SOFT_BOUNDS[0], tuple(b + SHIFT for b in SOFT_BOUNDS[1])],
+                               soft, 2, admit=_pure)
+        return ((k * vmax, g - SHIFT), reg2) if reg2.delta_bic < reg.delta_bic else (x, reg)
+
+
+def _pure(reg) -> bool:
+    """Whether the regression e ≈ a'·H(N(v) − v) + c·H(v) is the pure nonlinearity: κ = 1 + c > 0 and
+    a = a'/κ in :data:`.PURE`.  The soft law needs it while it is fitted: a knee far beyond the drive
+    with γ near 1 leaves only a small curvature of the voltage, and a large a can fit any band of error
+    with it (a held-out strip's residual took a = 84 at a knee 10× its largest drive)."""
+    kappa = 1.0 + reg.gains[1]
+    return kappa > 0 and PURE[0] <= reg.gains[0] / kappa <= PURE[1]
