@@ -702,3 +702,40 @@ def test_a_map_of_the_drive_is_not_fitted_on_top_of_a_large_signal_pick(monkeypa
     assert "drafted_input_saturation" not in offered[1]
     why = dict((d.effect_id, w) for d, w in out.rejected)
     assert "not tried on top of nonlinear_charge: the model is large-signal" in why["drafted_input_saturation"]
+
+
+def test_the_own_effects_are_refitted_beside_the_kept_drafts():
+    """Once drafts are kept (a linear model), the model's own effects are refitted beside them (a
+    round with no candidate and ``refit_own``): taken when it lowers the chain's error, with a note
+    naming what was refitted; a large-signal model is not refitted."""
+    from physics.diagnose.draft import DraftOutcome, _refit_own
+    calls = []
+
+    def rediagnose(device, effects, free, candidates, refit_own=False):
+        calls.append((tuple(candidates), refit_own))
+        return _Stub(steps=[_Stub(refit=None), _Stub(refit=_Stub(rmse=after, model=_Stub(is_linear=True)),
+                                                     refitted={"Rs": {}, "D_solvent": {}})])
+    for after, taken in ((6e-6, True), (13e-6, False)):
+        out = DraftOutcome([], [], 30e-6, chain=[("drafted_x", 12e-6)], final=_Stub(model=_Stub(is_linear=True)))
+        _refit_own(out, rediagnose, "device", ["double_layer", "drafted_x"], ["kf"], lambda msg: None)
+        assert calls[-1] == ((), True)
+        assert out.chain[-1] == ("drafted_x", after if taken else 12e-6)
+        assert any("own effects refitted beside the kept drafts (Rs, D_solvent): RMS error 12 → 6 µm" in n
+                   for n in out.notes) == taken
+    calls.clear()
+    out = DraftOutcome([], [], 30e-6, chain=[("nonlinear_charge", 12e-6)], final=_Stub(model=_Stub(is_linear=False)))
+    _refit_own(out, rediagnose, "device", ["double_layer"], ["kf"], lambda msg: None)
+    assert not calls and out.chain[-1][1] == 12e-6
+
+
+def test_a_large_signal_pick_meets_its_best_linear_rival():
+    """In a draft round a large-signal pick cannot be refined on the time records; the linear
+    candidate with the lowest ΔBIC is the one refined before the round decides again."""
+    from physics.diagnose.diagnosis import _linear_rival
+
+    def cand(name, linear, dbic):
+        return _Stub(effect=name, fit=_Stub(model=_Stub(is_linear=linear)), comparison=_Stub(delta_bic=dbic))
+    big = cand("nonlinear_charge", False, -4872.0)
+    ranked = [big, cand("a", True, -100.0), cand("b", True, -3000.0), cand("c", False, -4000.0)]
+    assert _linear_rival(big, ranked).effect == "b"
+    assert _linear_rival(ranked[1], ranked) is None and _linear_rival(None, ranked) is None

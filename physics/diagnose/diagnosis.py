@@ -93,12 +93,14 @@ class SelectionOptions:
     records), the best linear candidate is refined on them before the step decides again, as a
     linear pick would have been — the draft rounds, where a drafted map of the drive competes with
     a large-signal catalog effect (a held-out strip's soft saturation of the drive: 16.2 µm from its
-    FRF fit, 12.4 µm refined, against the catalog double layer's 15.4 µm)."""
+    FRF fit, 12.4 µm refined, against the catalog double layer's 15.4 µm); ``refit_own``: the
+    model's own effects refitted after the picks (:func:`refine_own`; None: unless ``free`` is given)."""
 
     max_effects: int = MAX_EFFECTS
     backward: bool = True
     refine_base: bool = False
     refine_rival: bool = False
+    refit_own: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -1065,7 +1067,9 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     analysis = analysis if analysis is not None else AnalysisOptions()
     max_effects, noise_floor, fs_max = selection.max_effects, analysis.noise_floor, analysis.fs_max
     run = DiagnosisRun(opts, 4 if opts.n_starts is None else int(opts.n_starts), force, int(max_effects),
-                       bool(selection.backward), opts.free in (None, "", ()), bool(selection.refine_rival),
+                       bool(selection.backward),
+                       opts.free in (None, "", ()) if selection.refit_own is None else bool(selection.refit_own),
+                       bool(selection.refine_rival),
                        progress=progress)
     if run.n_starts < 1:
         raise InputError(f"{arg('n_starts')} must be at least 1")
