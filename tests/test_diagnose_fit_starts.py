@@ -410,3 +410,26 @@ def test_a_map_of_the_drive_refined_on_the_time_records_screens_its_starts(clean
     finally:
         for i in loaded:
             unregister(i)
+
+
+def test_starts_that_differ_only_where_the_frf_is_blind_are_fitted_once(clean, tmp_path, monkeypatch):
+    """A drafted clip's starts over its level (a parameter the frequency response cannot see, set on
+    the time records) are all the FRF fit's first start again: they are not run as further starts."""
+    from physics.diagnose import forms as F
+    from physics.effects import load_effects_file, unregister
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    clip = F.FormFit("input_saturation", {"level_V": 0.5}, {"level_V": "V"}, "")
+    (d,) = F.form_of("input_saturation")().draft(clip, None)
+    (tmp_path / d.file_name).write_text(d.source(), encoding="utf-8")
+    (clip_id,) = load_effects_file(tmp_path / d.file_name)
+    try:
+        extras, fit = [], C.fit_lsq
+        monkeypatch.setattr(C, "fit_lsq", lambda problem, **kw: extras.append(len(kw["extra_starts"])) or fit(problem, **kw))
+        spec = C.ModelSpec("clip", ids + (clip_id,), ["kf", "Y", "beta_f", "saturation_level"],
+                           extra_starts=[{"saturation_level": v} for v in (0.2, 0.6, 1.8)] + [{"kf": 1e-3}])
+        C.fit_model(spec, dev, data.targets, data.target_records, n_starts=1)
+        assert extras[0] == 1          # the kf start only
+    finally:
+        unregister(clip_id)
