@@ -458,3 +458,16 @@ def test_lag_by_lag_correlations_equal_the_fft_ones(monkeypatch):
     np.testing.assert_allclose(direct[0], fft[0], atol=1e-12)
     np.testing.assert_allclose(direct[1], fft[1], atol=1e-12)
     assert abs(direct[1][30]) > 5 * 2.576 / np.sqrt(e.size)   # lag 0: u contains e, far outside the 99 % band
+
+
+def test_a_diagnosis_with_no_candidate_refits_the_own_effects_or_stands_still():
+    """The draft rounds refit the model's own effects beside the kept drafts through a diagnosis
+    with no candidate (``refit_own``): it returns one step, the model as fitted when nothing is
+    refitted, and a verdict (an empty selection once ended in an IndexError)."""
+    case = hidden_effect_case("solvent_diffusion", seed=0, duration=20.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = diagnose(case.measurements, case.device, case.base_effects, candidates=[], check_support=False,
+                       selection=SelectionOptions(max_effects=1, backward=False, refit_own=True))
+    assert len(res.steps) == 1 and res.steps[0].decision.pick is None
+    assert res.final.rmse <= res.base.rmse and res.verdict.status and json.dumps(res.to_dict(), default=str)

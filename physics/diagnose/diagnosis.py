@@ -707,6 +707,8 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
         if _adequate(data, step_base):
             break
         step_feats = _features_after(data, step_base, "refitted", run)
+    if not steps:       # no candidate (the draft rounds' refit of the own effects alone), nothing refitted
+        steps.append(Step(1, base, [], Decision(None, {}, {}, reason="no candidate was tried")))
     return steps
 
 
