@@ -110,9 +110,10 @@ def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
 def draft_effects(res, rediagnose, max_effects: int = 2,
                   progress: Callable[[str], None] | None = None) -> DraftOutcome:
     """Draft what remains after the final model of the diagnosis ``res`` and select the drafts
-    by fitting them with the model: ``rediagnose(device, effects, free, candidates)`` runs the
-    diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
-    the model ``device`` (fitted values) + ``effects`` with ``free`` parameters.
+    by fitting them with the model: ``rediagnose(device, effects, free, candidates, refit_own=False)``
+    runs the diagnosis of the records with ``candidates`` (the drafts, registered meanwhile) on top of
+    the model ``device`` (fitted values) + ``effects`` with ``free`` parameters (``refit_own``: the
+    model's own effects refitted after it, :func:`_refit_own`).
 
     The drafts are those of the final model's residual, and, when that model is large-signal,
     those of the maps of the drive the draft base's residual shows (:func:`_behind_the_picks`).

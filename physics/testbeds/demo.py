@@ -295,9 +295,10 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     err = [remove_nuisance(m.deflection - y, m.time) for m, y in zip(ms, clean)]
     true_error = float(np.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err)))
     before = diagnose(files, device, "none")
-    outcome = draft_effects(before, lambda dev, eff, free, cands: diagnose(
+    outcome = draft_effects(before, lambda dev, eff, free, cands, refit_own=False: diagnose(
         files, dev, eff, free, candidates=cands, force=True, check_support=False,
-        selection=SelectionOptions(max_effects=1), analysis=AnalysisOptions(noise_floor=before.noise_floor)))
+        selection=SelectionOptions(max_effects=1, refit_own=refit_own),
+        analysis=AnalysisOptions(noise_floor=before.noise_floor)))
     checks = write_drafts(outcome.kept, folder / "drafts") if outcome.kept else {}
     ids = [i for d in outcome.kept for i in load_effects_file(folder / "drafts" / d.file_name)]
     try:
