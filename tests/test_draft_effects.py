@@ -3,6 +3,7 @@ parameters from a residual made with known values and stays quiet on noise; a dr
 valid effect file (contract checks) written atomically; the loop on lab-like records of a
 drifting sensor: described, drafted, passed back, the verdict and the error."""
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -739,3 +740,15 @@ def test_a_large_signal_pick_meets_its_best_linear_rival():
     ranked = [big, cand("a", True, -100.0), cand("b", True, -3000.0), cand("c", False, -4000.0)]
     assert _linear_rival(big, ranked).effect == "b"
     assert _linear_rival(ranked[1], ranked) is None and _linear_rival(None, ranked) is None
+
+
+def test_the_loop_eap_run_shows_beyond_the_catalog_drafts_and_keeps_the_creep(tmp_path):
+    """`eap run`'s outside-catalog loop (a creeping tip, the bare device) keeps the drafted slow pole
+    and lowers the error; its own rediagnose takes the draft rounds' ``refit_own`` (without it the
+    own-effects refit beside the kept draft ended the command in a TypeError)."""
+    from physics.testbeds.demo import outside_loop
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        loop = outside_loop("creep", 0, tmp_path / "loop", fs=200.0, duration=20.0)
+    assert [d.effect_id for d in loop.outcome.kept] == ["drafted_slow_pole"]
+    assert loop.outcome.rmse_after < 0.5 * loop.outcome.rmse_before
