@@ -34,9 +34,11 @@ from .base import PURE, Form, FormFit, Residual, best_on_grid, refined
 #: Exponents γ of the soft saturation's grid (then refined within :data:`SOFT_BOUNDS`): bounded
 #: (−1: v/(1 + |v|/L)), logarithmic (0), square-root (0.5).
 SOFT_EXPONENTS = (-1.0, -0.5, 0.0, 0.5)
-#: Knee L / largest |v| and exponent γ of the soft saturation: the grid's range, the refinement's bounds.
+#: Knees L / largest |v| of the soft saturation's grid (from, to, points, geometric) ...
 SOFT_KNEES = (0.1, 3.0, 8)
+#: ... and the refinement's bounds on L / largest |v| and on γ (γ = 1, the line, is the drafted effect's off value).
 SOFT_BOUNDS = ((0.02, 10.0), (-2.0, 0.9))
+#: γ is refined as γ + SHIFT: Nelder–Mead's first steps are 5 % of each coordinate, too small around γ = 0.
 SHIFT = 3.0
 
 
