@@ -433,3 +433,20 @@ def test_starts_that_differ_only_where_the_frf_is_blind_are_fitted_once(clean, t
         assert extras[0] == 1          # the kf start only
     finally:
         unregister(clip_id)
+
+
+def test_a_device_value_outside_an_effects_search_range_starts_on_its_edge(clean):
+    """A value fitted in a wider range (the model without an unsupported effect, refitted, handed the
+    draft rounds ve_slope = 0.69 for a search range up to 0.6) starts the base fit on the range's
+    edge, with a note: the draft rounds of a held-out strip all failed with 'start value … is outside
+    its bounds'."""
+    from physics.diagnose.diagnosis import fit_base
+    from physics.diagnose.specs import param_bounds
+    case, data = clean
+    dev = load_device(case.device)
+    ids = C.resolve_effects("double_layer,viscoelastic", dev)
+    lo, hi = param_bounds("ve_slope", dev)
+    dev = dev.with_params(ve_slope=hi + 0.09, ve_tan_delta=0.05)     # (ve_slope acts beside a loss)
+    base = fit_base(data, dev, ids, FitOptions(), ["kf", "Y", "beta_f", "ve_slope"], [], 1)
+    assert base.spec.start["ve_slope"] == hi and lo <= base.values["ve_slope"] <= hi
+    assert any(n.startswith("ve_slope: the device's value") for n in base.spec.notes)

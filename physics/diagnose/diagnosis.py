@@ -511,6 +511,13 @@ def fit_base(data: PreparedRecords, dev: Device, base_ids, options: FitOptions, 
     for name in free_l:         # an effect's own parameter keeps its range (a drafted refit starts from a pick's)
         if name not in spec.bounds and keeps_spec_range(name) and (b := param_bounds(name, dev)) is not None:
             spec.bounds[name] = b
+            v = dev.params.get(name)
+            if v is not None and name not in spec.start and not b[0] <= v <= b[1]:
+                # a value fitted in a wider range (the model without an unsupported effect, refitted, hands
+                # the draft rounds a ve_slope of 0.69 for a search range up to 0.6): started on its edge
+                spec.start[name] = float(min(max(v, b[0]), b[1]))
+                spec.notes.append(f"{name}: the device's value {v:.4g} lies outside its search range [{b[0]:.4g}, "
+                                  f"{b[1]:.4g}]; started at {spec.start[name]:.4g}")
     for name in spec.start:
         if name not in free_l + per_rh_l:
             raise InputError(f"{arg('start')}: {name} is not a free parameter")
