@@ -242,7 +242,6 @@ def _refit_own(outcome: DraftOutcome, rediagnose, device, on_top: list, free: li
     compensating for it (a held-out strip whose drive saturates softly: its drafted map 12.4 µm with the
     electrode, solvent and polymer at their values fitted without it, 6.3 µm refitted).  Taken when it
     lowers the chain's error; linear models only (a large-signal refit runs the implicit stepper)."""
-    from .candidates import effect_values
     if not getattr(getattr(outcome.final, "model", None), "is_linear", False):
         return
     say(f"drafts: the own effects of [{', '.join(on_top)}] refitted beside the kept drafts")
@@ -252,15 +251,10 @@ def _refit_own(outcome: DraftOutcome, rediagnose, device, on_top: list, free: li
         outcome.notes.append(f"the own effects were not refitted beside the kept drafts ({exc})")
         return
     step = next((s for s in again.steps if s.refit is not None), None)
-    eid, before = outcome.chain[-1]
-    if step is None or not step.refit.rmse < before:
-        return
-    outcome.chain[-1] = (eid, step.refit.rmse)
-    outcome.final = step.refit
-    for d in outcome.kept:
-        d.refit(effect_values(step.refit, d.effect_id))
-    outcome.notes.append(f"the own effects refitted beside the kept drafts ({', '.join(step.refitted)}): RMS error "
-                         f"{1e6 * before:.4g} → {1e6 * step.refit.rmse:.4g} µm")
+    before = outcome.chain[-1][1]
+    if step is not None and step.refit.rmse < before:
+        _carry(outcome, step.refit, f"the own effects refitted beside the kept drafts ({', '.join(step.refitted)}): "
+                                    f"RMS error {1e6 * before:.4g} → {1e6 * step.refit.rmse:.4g} µm")
 
 
 def _drop_siblings(outcome: DraftOutcome, pool: list, kept) -> None:
@@ -288,14 +282,20 @@ def _went_further(outcome: DraftOutcome, base, round_no: int) -> None:
     """The model the round before kept, refined further on the time records as round
     ``round_no``'s base (``base``, a ModelFit), replaces it: the chain's last error, the best model
     and the kept drafts' values become that base's."""
+    _carry(outcome, base, f"round {round_no} refined the model the round before kept on the time records: "
+                          f"RMS error {1e6 * outcome.chain[-1][1]:.4g} → {1e6 * base.rmse:.4g} µm")
+
+
+def _carry(outcome: DraftOutcome, fit, note: str) -> None:
+    """``fit`` (a ModelFit of the chain's last model, fitted further) replaces it: the chain's last
+    error, the best model and the kept drafts' values become its own, and ``note`` says why."""
     from .candidates import effect_values
-    eid, before = outcome.chain[-1]
-    outcome.chain[-1] = (eid, base.rmse)
-    outcome.final = base
+    eid, _ = outcome.chain[-1]
+    outcome.chain[-1] = (eid, fit.rmse)
+    outcome.final = fit
     for d in outcome.kept:
-        d.refit(effect_values(base, d.effect_id))
-    outcome.notes.append(f"round {round_no} refined the model the round before kept on the time records: "
-                         f"RMS error {1e6 * before:.4g} → {1e6 * base.rmse:.4g} µm")
+        d.refit(effect_values(fit, d.effect_id))
+    outcome.notes.append(note)
 
 
 def _scored(keys, again, on_top, before: float | None = None) -> tuple[list, dict]:
