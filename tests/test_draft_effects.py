@@ -744,8 +744,8 @@ def test_a_large_signal_pick_meets_its_best_linear_rival():
 
 def test_the_loop_eap_run_shows_beyond_the_catalog_drafts_and_keeps_the_creep(tmp_path):
     """`eap run`'s outside-catalog loop (a creeping tip, the bare device) keeps the drafted slow pole
-    and lowers the error; its own rediagnose takes the draft rounds' ``refit_own`` (without it the
-    own-effects refit beside the kept draft ended the command in a TypeError)."""
+    and lowers the error; its rounds are those of ``eap diagnose`` (:func:`.draft.rediagnosis`: a
+    rediagnose of its own once lacked the rounds' ``refit_own`` and ended the command in a TypeError)."""
     from physics.testbeds.demo import outside_loop
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -278,15 +278,16 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     """The loop a user runs on records with physics outside the catalog: the records of
     :func:`outside_catalog_case` written into ``folder/records`` (``lab``: as a lab exports
     them, tip in mm) and read back, the diagnosis of the bare ``device`` (effects none), what
-    remains drafted as effect files (:func:`.draft.draft_effects`) into ``folder/drafts``
-    (contract-checked), and the diagnosis again with the kept drafts as candidates (what
-    ``--effects-path`` does).  ``folder`` is created; its parent must exist."""
+    remains drafted as effect files into ``folder/drafts`` (contract-checked) by the rounds
+    ``eap diagnose`` runs (:func:`.draft.draft_effects` with :func:`.draft.rediagnosis`), and
+    the diagnosis again with the kept drafts as candidates (what ``--effects-path`` does).  ``folder`` is created; its parent must exist."""
     from pathlib import Path
     from ..effects import load_effects_file, unregister
     from ..analysis.metrics import remove_nuisance
     from ..io.timeseries import write_timeseries
-    from ..diagnose.diagnosis import AnalysisOptions, SelectionOptions, diagnose
-    from ..diagnose.draft import draft_effects, write_drafts
+    from ..diagnose.diagnosis import diagnose
+    from ..diagnose.draft import draft_effects, rediagnosis, write_drafts
+    from ..identify.options import FitOptions
     folder = Path(folder)
     ms, truth, clean = outside_catalog_case(kind, seed, device=device, fs=fs, duration=duration, lab=lab, clean=True)
     (folder / "records").mkdir(parents=True)
@@ -295,10 +296,7 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     err = [remove_nuisance(m.deflection - y, m.time) for m, y in zip(ms, clean)]
     true_error = float(np.sqrt(sum(float(e @ e) for e in err) / sum(e.size for e in err)))
     before = diagnose(files, device, "none")
-    outcome = draft_effects(before, lambda dev, eff, free, cands, refit_own=False: diagnose(
-        files, dev, eff, free, candidates=cands, force=True, check_support=False,
-        selection=SelectionOptions(max_effects=1, refit_own=refit_own),
-        analysis=AnalysisOptions(noise_floor=before.noise_floor)))
+    outcome = draft_effects(before, rediagnosis(files, before, FitOptions()))
     checks = write_drafts(outcome.kept, folder / "drafts") if outcome.kept else {}
     ids = [i for d in outcome.kept for i in load_effects_file(folder / "drafts" / d.file_name)]
     try:
