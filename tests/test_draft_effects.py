@@ -673,6 +673,29 @@ def test_a_saturating_drive_behind_a_large_signal_pick_is_drafted_from_the_base(
     assert draft._behind_the_picks(diagnosis) == []
 
 
+def test_the_drafts_start_without_a_large_signal_pick_the_own_effects_were_refitted_beside():
+    """A chain whose own effects were refitted beside a pick that saturates the charge ends on a
+    large-signal draft base holding the pick: the rounds start from it without the pick (the own
+    effects at their refitted values and free, the pick's parameter not), so that the pick and
+    the maps of the drive compete.  A linear draft base, or a chain without a linear model,
+    is where the rounds start as it is."""
+    from physics.diagnose import draft
+    lin, big, nl = _Stub(is_linear=True, inputs=()), _Stub(is_linear=False, inputs=()), "nonlinear_charge"
+    base = _fit_stub(90e-6)
+    base.model = lin
+    refit = _fit_stub(20e-6)
+    refit.model, refit.effects = big, ["double_layer", "electrode_resistance", nl]
+    refit.spec = _Stub(label="final, own effects refitted", free=["kf", "Y", "Rs", "diffuse_share"])
+    res = _Stub(base=base, draft_base=refit, final=refit, steps=[_Stub(result=refit)], picks=[_Stub(effect=nl)])
+    assert draft._draft_start(res) == (["double_layer", "electrode_resistance"], ["kf", "Y", "Rs"], refit.device)
+    assert draft._linear_of_the_chain(res) is base
+    whole = (refit.effects, refit.spec.free, refit.device)
+    refit.model = lin                         # a linear pick refitted beside: the rounds start on top of it
+    assert draft._draft_start(res) == whole
+    refit.model, base.model = big, big        # no linear model to read a map of the drive through
+    assert draft._draft_start(res) == whole and draft._behind_the_picks(res) == []
+
+
 def test_a_map_of_the_drive_is_not_fitted_on_top_of_a_large_signal_pick(monkeypatch):
     """Once the chain takes a large-signal pick, a drafted map of the drive leaves the pool with
     the reason: fitting its threshold there would simulate every record with the implicit stepper

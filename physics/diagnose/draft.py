@@ -45,18 +45,47 @@ def drafts(forms: Sequence[FormFit], fit, records) -> list[EffectDraft]:
     return out
 
 
+def _linear_of_the_chain(res):
+    """The last model of the diagnosis ``res`` with a linear response (its base, or a step's
+    result; :func:`.forms.base.has_response`), None when none has one."""
+    fits = [res.base] + [s.result for s in getattr(res, "steps", [])]
+    return next((f for f in reversed(fits) if has_response(getattr(f, "model", None))), None)
+
+
 def _behind_the_picks(res) -> list[EffectDraft]:
     """Drafts of the forms written through a linear model's response (a map of the drive,
-    :attr:`.forms.base.Form.needs_response`) that the residual of the draft base shows, when the
-    diagnosis's final model has no such response (a large-signal pick) and that base has one: a
-    pick that saturates the charge can stand in for a drive that saturates, its own residual
-    cannot show the map, and the drafts compete with the picks from that base anyway.  Only
-    the significant forms (the final model's residual drafts every form it fits)."""
-    base = getattr(res, "draft_base", res.base)
-    if has_response(getattr(res.final, "model", None)) or not has_response(getattr(base, "model", None)):
+    :attr:`.forms.base.Form.needs_response`) that the residual of the chain's last linear model
+    (:func:`_linear_of_the_chain`) shows, when the diagnosis's final model has no such response
+    (a large-signal pick): a pick that saturates the charge can stand in for a drive that
+    saturates, its own residual cannot show the map, and the drafts compete with the picks
+    (:func:`_draft_start`).  Only the significant forms (the final model's residual drafts every
+    form it fits)."""
+    linear = _linear_of_the_chain(res)
+    if has_response(getattr(res.final, "model", None)) or linear is None:
         return []
-    return drafts([ff for ff in describe(base, res.records) if form_of(ff.form).needs_response and ff.significant],
-                  base, res.records)
+    return drafts([ff for ff in describe(linear, res.records) if form_of(ff.form).needs_response and ff.significant],
+                  linear, res.records)
+
+
+def _draft_start(res) -> tuple[list, list, object]:
+    """(effects, free parameters, device) the draft rounds start from: the draft base's
+    (:attr:`.diagnosis.DiagnosisResult.draft_base`, the model without the effects the data do not
+    support, its own effects refitted), without the diagnosis's picks when that base holds them
+    and is large-signal while the chain has a linear model: the picks then compete with the drafts
+    from it (the catalog effects of :func:`draft_effects`), the own effects start at their values
+    refitted beside the picks and stay free.  Left in, the pick would take the maps of the drive
+    out of the pool (:func:`_hold_maps_of_the_drive`): on a held-out saturating strip whose own
+    effects were refitted beside a saturating charge no map was fitted, and the best model stayed
+    at 6.41× the true model's error (2.92× from the model without the pick)."""
+    from .candidates import map_free
+    base = getattr(res, "draft_base", res.base)
+    on_top, free = list(base.effects), list(base.spec.free)
+    picks = [p.effect for p in res.picks]
+    if not has_response(getattr(base, "model", None)) and set(picks) & set(on_top) \
+            and _linear_of_the_chain(res) is not None:
+        keep = [e for e in on_top if e not in picks]
+        return keep, map_free(free, on_top, keep), base.device
+    return on_top, free, base.device
 
 
 @dataclass
@@ -116,11 +145,12 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     model's own effects refitted after it, :func:`_refit_own`).
 
     The drafts are those of the final model's residual, and, when that model is large-signal,
-    those of the maps of the drive the draft base's residual shows (:func:`_behind_the_picks`).
+    those of the maps of the drive the chain's last linear model's residual shows
+    (:func:`_behind_the_picks`).
     Nothing is drafted when there is nothing to explain, or when the final model (its own
     effects refitted by the chain when it did) is within the noise without a pick.
-    Otherwise, forward from the base, the drafts compete with the catalog effects the diagnosis
-    picked, even when the model with them is adequate (a catalog effect can mimic physics it
+    Otherwise, forward from the draft base (:func:`_draft_start`), the drafts compete with the
+    catalog effects the diagnosis picked, even when the model with them is adequate (a catalog effect can mimic physics it
     does not model within the noise, e.g. the electrode resistance a sensor's low-pass): the
     candidate that lowers the error most (lowest ΔBIC) is taken when it passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
     and the others are tried again on top of it (at most ``max_effects`` drafts kept); once a
@@ -145,8 +175,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     outcome = DraftOutcome([], [], fit.rmse)
     if not items:
         return outcome
-    base = getattr(res, "draft_base", res.base)       # without the effects the data do not support, refitted
-    on_top, free, device = list(base.effects), list(base.spec.free), base.device
+    on_top, free, device = _draft_start(res)
     catalog = [p.effect for p in res.picks if p.effect not in on_top]
     before_drafts, passed_over = _tried_before(res, on_top + catalog), {}
     say = progress or (lambda msg: None)
