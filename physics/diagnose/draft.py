@@ -150,8 +150,9 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     Nothing is drafted when there is nothing to explain, or when the final model (its own
     effects refitted by the chain when it did) is within the noise without a pick.
     Otherwise, forward from the draft base (:func:`_draft_start`), the drafts compete with the
-    catalog effects the diagnosis picked, even when the model with them is adequate (a catalog effect can mimic physics it
-    does not model within the noise, e.g. the electrode resistance a sensor's low-pass): the
+    catalog effects the diagnosis picked, even when the model with them is adequate (a catalog
+    effect can mimic physics it does not model within the noise, e.g. the electrode resistance a
+    sensor's low-pass): the
     candidate that lowers the error most (lowest ΔBIC) is taken when it passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
     and the others are tried again on top of it (at most ``max_effects`` drafts kept); once a
     draft is kept, the model's own effects the support test removed compete too (:func:`_tried_before`).  A kept

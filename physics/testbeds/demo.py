@@ -280,7 +280,8 @@ def outside_loop(kind: str, seed: int, folder, *, device: str = "ipmc_pt_eg", fs
     them, tip in mm) and read back, the diagnosis of the bare ``device`` (effects none), what
     remains drafted as effect files into ``folder/drafts`` (contract-checked) by the rounds
     ``eap diagnose`` runs (:func:`.draft.draft_effects` with :func:`.draft.rediagnosis`), and
-    the diagnosis again with the kept drafts as candidates (what ``--effects-path`` does).  ``folder`` is created; its parent must exist."""
+    the diagnosis again with the kept drafts as candidates (what ``--effects-path`` does).
+    ``folder`` is created; its parent must exist."""
     from pathlib import Path
     from ..effects import load_effects_file, unregister
     from ..analysis.metrics import remove_nuisance
