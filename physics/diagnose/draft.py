@@ -154,7 +154,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
     effect can mimic physics it does not model within the noise, e.g. the electrode resistance a
     sensor's low-pass): the
     candidate that lowers the error most (lowest ΔBIC) is taken when it passes ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
-    and the others are tried again on top of it (at most ``max_effects`` drafts kept); once a
+    and the others are tried again on top of it (at most ``max_effects`` drafts kept, and no further
+    round once the kept model is within the noise: :func:`_within_the_noise`); once a
     draft is kept, the model's own effects the support test removed compete too (:func:`_tried_before`).  A kept
     draft takes the values fitted with the model as its defaults (bounds and starts follow).
     ``progress``: a callback for one-line progress messages (each round refits the model, minutes
@@ -239,6 +240,11 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                 outcome.final = c.fit
                 if not getattr(getattr(c.fit, "model", None), "is_linear", True):
                     _hold_maps_of_the_drive(outcome, pool, eid)
+                if pool and len(outcome.kept) < max_effects and _within_the_noise(again, c):
+                    say(f"drafts: [{', '.join(on_top)}] is within the noise: no further round")
+                    outcome.rejected += [(d, f"not tried: the model the round kept ([{', '.join(on_top)}]) is "
+                                             "within the noise") for d in pool]
+                    break
             else:
                 outcome.rejected += [(d, "not tried: the forward selection stopped") for d in pool]
             if outcome.kept:
@@ -251,6 +257,16 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
             for i in ids:
                 unregister(i)
     return outcome
+
+
+def _within_the_noise(again, c) -> bool:
+    """Whether the model the round ``again`` kept (candidate ``c``) is adequate, as the round's own
+    verdict judged it (:func:`.adequacy.assess`: the noise floor, the records' wander and any
+    structure they share); only when that verdict ended on the same fit.  Once the kept model is
+    within the noise the drafts have competed with the picks already, and a further round would
+    only fit the rest of the noise, as drafting on an adequate model without a pick would."""
+    ad = getattr(again, "adequacy", None)
+    return again.final is c.fit and ad is not None and bool(ad.adequate)
 
 
 def _tried_before(res, taken: list) -> list[str]:
