@@ -312,15 +312,20 @@ def _diagnosis_stub(winner, res, rmse_final):
                  verdict=_Stub(status="partly explained" if winner else "not explained by the catalog"))
 
 
-def _rediagnose(table, calls):
+def _rediagnose(table, calls, verdicts=None):
     """rediagnose(device, effects, free, candidates) answering from ``table``:
-    {effects on top (tuple): (base RMS, {candidate: (RMS, ΔBIC, values)})}."""
+    {effects on top (tuple): (base RMS, {candidate: (RMS, ΔBIC, values)})}; ``verdicts``:
+    {effects on top: (the candidate the round's own verdict ends on, whether it is adequate)}."""
     def run(device, effects, free, candidates):
         calls.append((tuple(effects), tuple(sorted(candidates))))
         base_rmse, rows, *base_values = table[tuple(effects)]
         cands = [_Stub(effect=c, evaluated=True, reason="", fit=_fit_stub(rows[c][0], rows[c][2]),
                        comparison=_Stub(delta_bic=rows[c][1])) for c in candidates]
-        return _Stub(base=_fit_stub(base_rmse, *base_values), candidates=cands)
+        out = _Stub(base=_fit_stub(base_rmse, *base_values), candidates=cands)
+        if tuple(effects) in (verdicts or {}):
+            pick, adequate = verdicts[tuple(effects)]
+            out.final, out.adequacy = next(c.fit for c in cands if c.effect == pick), _Stub(adequate=adequate)
+        return out
     return run
 
 
@@ -364,6 +369,32 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     adequate.verdict.status = "nothing to explain"
     calls.clear()
     assert not draft_effects(adequate, _rediagnose(table, calls)).kept and not calls
+
+
+def test_no_further_round_once_the_kept_model_is_within_the_noise():
+    """A catalog pick that wins the first round against the drafts and leaves a model its round's
+    own verdict finds within the noise ends the rounds: the drafts left are not fitted on top of it
+    (as nothing is drafted on an adequate model without a pick).  The rounds go on when that verdict
+    finds the model above the noise, or ended on another model than the one kept."""
+    from physics.diagnose.draft import draft_effects
+    pick, lp, sp, dr = "electrode_resistance", "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift"
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+    on_base = ("double_layer",)
+    table = {on_base: (90e-6, {pick: (4e-6, -520.0, {"Rs": 40.0}), lp: (6e-6, -400.0, {}), sp: (80e-6, -20.0, {}),
+                               dr: (95e-6, 3.0, {})}),
+             on_base + (pick,): (4e-6, {lp: (3.5e-6, -30.0, {"lowpass_tau": 0.02}), sp: (3.9e-6, -1.0, {}),
+                                        dr: (4.2e-6, 6.0, {})}),
+             on_base + (pick, lp): (3.5e-6, {sp: (3.45e-6, -1.0, {}), dr: (3.6e-6, 6.0, {})})}
+    calls = []
+    out = draft_effects(_diagnosis_stub(pick, res, 4e-6), _rediagnose(table, calls, {on_base: (pick, True)}))
+    assert [c[0] for c in calls] == [on_base] and out.chain == [(pick, 4e-6)] and not out.kept
+    why = dict((d.effect_id, w) for d, w in out.rejected)
+    assert set(why) == {lp, sp, dr} and all("within the noise" in why[e] for e in (lp, sp, dr))
+    for verdict in [(pick, False), (lp, True)]:     # above the noise, or the verdict's model is another
+        calls.clear()
+        out = draft_effects(_diagnosis_stub(pick, res, 4e-6), _rediagnose(table, calls, {on_base: verdict}))
+        assert [c[0] for c in calls] == [on_base, on_base + (pick,), on_base + (pick, lp)]
+        assert [d.effect_id for d in out.kept] == [lp]
 
 
 def test_both_orders_of_a_low_pass_compete_and_the_one_not_chosen_leaves_the_pool():

@@ -266,7 +266,7 @@ def _within_the_noise(again, c) -> bool:
     within the noise the drafts have competed with the picks already, and a further round would
     only fit the rest of the noise, as drafting on an adequate model without a pick would."""
     ad = getattr(again, "adequacy", None)
-    return again.final is c.fit and ad is not None and bool(ad.adequate)
+    return ad is not None and bool(ad.adequate) and getattr(again, "final", None) is c.fit
 
 
 def _tried_before(res, taken: list) -> list[str]:
