@@ -319,18 +319,14 @@ def test_a_slow_effect_held_at_its_off_bound_starts_again_on_the_time_records():
     assert held.time_refined and any("is not the time records'" in n for n in held.spec.notes)
 
 
-def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
-    """Records of a strip whose charge saturates at volts (compact layers, diffuse_share 0.25)
-    under multisines of 0.5 and 1.5 V peak: each multisine stands for a tone with its drive's
-    power (√2·RMS, about half its peak), so the describing-function fit of ``nonlinear_charge``
-    recovers the share; read at the multisines' peaks it would see more compression than there is."""
+def _saturating_multisines():
+    """Two multisines (0.5 and 1.5 V peak, 0.1–20 Hz, RH 60 %) of a strip whose charge saturates
+    at volts (compact layers, diffuse_share 0.25), with 0.3 µm noise: (records, prepared data)."""
     from physics import signals
-    from physics.diagnose.records import prepare_records
     from physics.io.record import TimeSeries
     from physics.model import ActuatorModel
     from physics.solvers.timedomain import simulate
-    dev = load_device("ipmc_pt_eg")
-    truth = ActuatorModel(dev.with_params(diffuse_share=0.25), ["nonlinear_charge"])
+    truth = ActuatorModel(load_device("ipmc_pt_eg").with_params(diffuse_share=0.25), ["nonlinear_charge"])
     rng = np.random.default_rng(1)
     records = []
     for k, amp in enumerate((0.5, 1.5)):
@@ -340,7 +336,19 @@ def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
                                   source=f"ms{k}"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        data = read_records(records, FitOptions())
+        return records, read_records(records, FitOptions())
+
+
+def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
+    """Records of a strip whose charge saturates at volts under multisines of 0.5 and 1.5 V peak:
+    each multisine stands for a tone with its drive's power (√2·RMS, about half its peak), so the
+    describing-function fit of ``nonlinear_charge`` recovers the share; read at the multisines'
+    peaks it would see more compression than there is."""
+    from physics.diagnose.records import prepare_records
+    dev = load_device("ipmc_pt_eg")
+    records, data = _saturating_multisines()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
         recs = prepare_records(records)
         assert all(r.tone_amplitude < 0.6 * r.amplitude for r in recs)        # multisines: crest factor > 1.7
         ids = tuple(C.resolve_effects(["double_layer"], dev))
@@ -348,6 +356,23 @@ def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
         fit = C.score(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=2), data.records)
     assert fit.ok, fit.error
     assert fit.values["diffuse_share"] == pytest.approx(0.25, rel=0.2)
+
+
+def test_a_large_signal_fit_holds_a_free_parameter_without_effect():
+    """The describing-function fit of a large-signal candidate holds a free parameter that leaves
+    the frequency response unchanged, as the linear fit does (the damping factor at ~0 beside a
+    viscoelastic loss), instead of failing the candidate with "beta_f has no effect on the
+    frequency response" (a draft round on top of a saturating pick lost its candidates so)."""
+    _, data = _saturating_multisines()
+    dev = load_device("ipmc_pt_eg").with_params(beta_f=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ids = tuple(C.resolve_effects(["double_layer", "viscoelastic"], dev))
+        spec = C.candidate_spec("nonlinear_charge", ids, ["kf", "beta_f"], [], dev, data.band, 1)
+        fit = C.fit_model(spec, dev, data.targets, data.target_records, n_starts=1)
+    assert fit.ok, fit.error
+    assert fit.df_info is not None and "beta_f" not in fit.spec.free and "beta_f" not in fit.result.problem.labels
+    assert any(n.startswith("beta_f has no effect") for n in fit.spec.notes)
 
 
 def test_parameters_refined_on_time_records_without_information_have_unknown_correlations():

@@ -324,10 +324,10 @@ def fit_model(spec: ModelSpec, device: Device, targets, target_records: Sequence
 
         def build(start, drop_inert=True):
             k = {**kw, "start": start}
-            if df:
-                return _df_problem(spec, device, targets, target_records, k, df_cache, time_only)
             while True:
                 try:
+                    if df:
+                        return _df_problem(spec, device, targets, target_records, k, df_cache, time_only)
                     return IdentificationProblem(device, spec.effects, targets, frf_free, spec.per_rh, **k), None
                 except InertParameterError as exc:   # e.g. a damping another effect's loss replaces: held
                     left = len(frf_free) + len(spec.per_rh) - 1      # what would still be fitted without it
