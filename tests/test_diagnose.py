@@ -48,7 +48,11 @@ def _check_found(case, res):
 # ---------------------------------------------------------------------------- hidden effects (one seed each)
 
 
-@pytest.mark.parametrize("effect", list(hidden_effects()))
+# The large-signal case takes minutes (its describing-function fits): it runs with the heavier
+# tests, beside its rate over seeds (test_diagnose_slow.py); the large-signal fit itself is
+# checked by the default suite in test_diagnose_fit_starts.py.
+@pytest.mark.parametrize("effect", [pytest.param(e, marks=pytest.mark.slow) if e == "nonlinear_charge" else e
+                                    for e in hidden_effects()])
 def test_hidden_effect_is_found(effect):
     case = hidden_effect_case(effect, seed=0)
     res = _diagnose(case, check_support=False)
@@ -110,6 +114,7 @@ def _rs_case(hidden, factor=3.0):
                                    base_effects="electrode_resistance")
 
 
+@pytest.mark.slow
 def test_a_pick_that_stood_in_for_the_devices_values_is_withdrawn_once_they_are_refitted():
     """The strip's electrode resistance is 3× the device's and nothing is missing.  The base
     misfits by ~80 noise floors, so `viscoelastic` lowers the error and is picked; no candidate

@@ -796,6 +796,7 @@ def test_a_large_signal_pick_meets_its_best_linear_rival():
     assert _linear_rival(ranked[1], ranked) is None and _linear_rival(None, ranked) is None
 
 
+@pytest.mark.slow      # the default suite's run page test (test_reports_browser.py) runs this loop too
 def test_the_loop_eap_run_shows_beyond_the_catalog_drafts_and_keeps_the_creep(tmp_path):
     """`eap run`'s outside-catalog loop (a creeping tip, the bare device) keeps the drafted slow pole
     and lowers the error; its rounds are those of ``eap diagnose`` (:func:`.draft.rediagnosis`: a

@@ -112,6 +112,7 @@ def test_command_line(tmp_path, capsys):
 
 # ------------------------------------------------------------------ the diagnosis loop
 
+@pytest.mark.slow
 def test_creep_outside_the_catalog_is_not_named_then_found_with_the_example():
     ms, tp = outside_catalog_case("creep", seed=0)
     before = diagnose(ms, "ipmc_pt_eg", "none")
