@@ -49,6 +49,25 @@ def test_transmission_line_matches_a_boundary_value_solve():
     assert np.all(np.diff(np.abs(U)) < 0)     # the voltage falls along the strip
 
 
+@pytest.mark.parametrize("mL", [0.3, 5.0, 200.0, 600.0, 5000.0])
+def test_line_voltage_is_the_closed_form_on_short_and_very_long_lines(mL):
+    """cosh(m(L−z))/cosh(mL) (Re m > 0, arg m = 30°) on short lines, and on lines so long that
+    cosh overflows and e^{−2mL} underflows: there the same ratio written with the two decaying
+    waves, (e^{−mz} + e^{−m(2L−z)})/(1 + e^{−2mL}), each exponential taken whole."""
+    m = ActuatorModel("ipmc_pt_eg", "electrode_resistance")
+    p = dict(m.device.params)
+    L = m.free_length
+    mc = mL / L * np.exp(1j * np.pi / 6)
+    Yp = mc ** 2 / (2.0 * p["Rs"])
+    z = np.linspace(0.0, L, 101)
+    U = m.stages["line"].distribution(np.array([1j]), np.array([Yp]), p, z)[0]
+    assert np.all(np.isfinite(U))
+    if mL < 300:            # cosh itself overflows beyond ≈ 710
+        np.testing.assert_allclose(U, np.cosh(mc * (L - z)) / np.cosh(mc * L), rtol=1e-12)
+    waves = (np.exp(-mc * z) + np.exp(-mc * (2.0 * L - z))) / (1.0 + np.exp(-2.0 * mc * L))
+    np.testing.assert_allclose(U, waves, rtol=1e-12, atol=1e-320)
+
+
 def test_voltage_falls_along_the_strip_in_time():
     sig = signals.tone(1.0, 20.0, 1.0, 2000.0)
     r = physics.simulate("ipmc_pt_eg", "electrode_resistance", sig.t, sig.v, fields=("voltage",), periodic=True)

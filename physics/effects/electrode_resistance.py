@@ -56,9 +56,21 @@ class ElectrodeResistance(EquipotentialElectrodes):
     def distribution(self, s, Yp, p, z) -> np.ndarray:
         L = p["L_total"] - p["L_clamp"]
         m = np.sqrt(2.0 * p["Rs"] * np.asarray(Yp, dtype=complex))[:, None]
+        # cosh(m(L−z))/cosh(mL) written with decaying exponentials (Re m >= 0), one complex
+        # exponential per node: e^{−m(2L−z)} = e^{−2mL}/e^{−mz}.  That quotient is exact to
+        # rounding while |e^{−2mL}| ≥ 1e−290 (then Re(m)z ≤ 334 and |e^{−mz}| ≥ 1e−145); the
+        # rare rows of longer lines get the far term's own exponential.
         z = np.asarray(z, dtype=float)[None, :]
-        # cosh(m(L−z))/cosh(mL) written with decaying exponentials (Re m >= 0)
-        return (np.exp(-m * z) + np.exp(-m * (2.0 * L - z))) / (1.0 + np.exp(-2.0 * m * L))
+        near = np.exp(-m * z)
+        far_end = np.exp(-2.0 * m * L)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            far = far_end / near
+        long_line = np.abs(far_end[:, 0]) < 1e-290
+        if long_line.any():
+            far[long_line] = np.exp(-m[long_line] * (2.0 * L - z))
+        far += near
+        far *= 1.0 / (1.0 + far_end)
+        return far
 
     def series_conductances(self, p, edges) -> np.ndarray | None:
         """Conductance of the differential path (top + bottom electrode) between the clamp

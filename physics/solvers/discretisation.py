@@ -28,6 +28,19 @@ def quadrature(L: float, panels: int = 8, order: int = 12) -> tuple[np.ndarray, 
     return z, wt
 
 
+@lru_cache(maxsize=32)
+def line_functionals(L: float, n_modes: int) -> np.ndarray:
+    """The three linear functionals the frequency solver takes of a per-volt voltage U(z) along
+    the strip, as quadrature weights on the nodes of :func:`quadrature`: column 0 gives ∫U dz
+    [m], columns 1..n_modes the modal loads ∫U phi_i' dz (per unit couple) and the last
+    column ∫U(a) a (L − a/2) da [m³] (the static tip numerator). Shape (n_q, n_modes + 2);
+    read-only, shared between calls."""
+    z, w = quadrature(L)
+    out = np.column_stack([w, (CantileverModes(L, n_modes).dphi(z) * w).T, w * z * (L - 0.5 * z)])
+    out.flags.writeable = False
+    return out
+
+
 def segment_edges(L: float, n: int, grading: float = 1.0) -> np.ndarray:
     """Segment edges on [0, L]; ``grading`` > 1 refines towards the clamp (z = 0)."""
     return L * np.linspace(0.0, 1.0, n + 1) ** grading

@@ -14,7 +14,7 @@ import numpy as np
 from ..execution.threads import single_threaded
 from ..errors import InputError
 from ..model import ActuatorModel, as_model
-from .discretisation import quadrature
+from .discretisation import line_functionals, quadrature
 
 
 @dataclass
@@ -163,14 +163,15 @@ def response_per_volt(model: ActuatorModel, s: np.ndarray, rh: float, p: dict | 
     Yp = s * q + d.G_leak
     L, Lc, Lt = model.free_length, p["L_clamp"], p["L_total"]
     w, h, n = p["width"], 0.5 * p["t_polymer"], p["n_solvation"]
-    zq, wq = quadrature(L)
+    zq, _ = quadrature(L)
     U = model.hook("distribution")(s, Yp, p, zq)                 # (n_s, n_q) per volt
-    intU = U @ wq
-    load = model.load_response(s, p) * cint
-    mu = (2.0 * h * w * n * load)[:, None] * U                     # couple per volt [N m/m/V]
     modes = model.modes()
-    Q = (mu * wq[None, :]) @ modes.dphi(zq).T                       # generalised loads (n_s, n_modes)
-    stat = (mu * wq[None, :]) @ (zq * (L - 0.5 * zq))
+    ints = U @ line_functionals(L, modes.n_modes)                   # ∫U, ∫U phi_i', ∫U a(L − a/2)
+    intU = ints[:, 0]
+    load = model.load_response(s, p) * cint
+    c = 2.0 * h * w * n * load                                      # couple per volt and unit U [N m/m/V]
+    Q = c[:, None] * ints[:, 1:-1]                                  # generalised loads (n_s, n_modes)
+    stat = c * ints[:, -1]
     EI, rhoA = model.section(p, float(model.hook("stiffness_factor")(rh)))
     EIs = EI(s) * (1.0 + s * p["beta_f"])
     k_unit = modes.beta ** 4 * L

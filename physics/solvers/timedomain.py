@@ -29,7 +29,7 @@ from ..errors import InputError, ModelError
 from .lti import StateSpace
 from ..model import ActuatorModel, as_model
 from .realize import fit_pole_residue
-from .discretisation import projection, quadrature, segment_edges
+from .discretisation import line_functionals, projection, quadrature, segment_edges
 
 FIELDS = {
     "voltage": "voltage across the polymer along the strip [V]",
@@ -495,10 +495,10 @@ def _line_grid(model: ActuatorModel, p: dict, w_hi: float, n_segments: int | Non
     q, c = model.hook("small_signal")(s, d, p)
     Yp = s * q + d.G_leak
     modes = model.modes()
-    zq, wq = quadrature(L)
-    U = model.hook("distribution")(s, Yp, p, zq)
-    exact_Q = (U * wq) @ modes.dphi(zq).T
-    exact_I = Yp * (U @ wq)
+    zq, _ = quadrature(L)
+    ints = model.hook("distribution")(s, Yp, p, zq) @ line_functionals(L, modes.n_modes)
+    exact_Q = ints[:, 1:-1]
+    exact_I = Yp * ints[:, 0]
     for n in (8, 12, 16, 24, 32, 48, 64, 96, 128):
         edges = segment_edges(L, n, 1.5)
         Ud = _ladder_voltage(model, p, edges, Yp)
