@@ -136,6 +136,42 @@ def test_a_refinement_starts_where_the_time_records_fit_better(clean):
     assert "from the FRF optimum" in short.spec.notes[-1]
 
 
+def test_a_start_at_the_time_optimum_is_kept_when_the_search_cannot_improve_on_it(clean, monkeypatch):
+    """A draft round refits a model refined on the time records before on the FRF alone and
+    gives the refinement that model as its start: when the start fits better than the FRF
+    optimum and the search cannot improve on it (it is the optimum already; here the search is
+    made to return where it began), the start is kept, not the FRF optimum."""
+    import scipy.optimize
+
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+
+    def fitted(**factors):
+        mf = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
+                         n_starts=2)
+        labels = mf.result.problem.labels
+        for name, f in factors.items():
+            mf.result.fit.theta[labels.index(name)] *= f
+        mf.device = mf.result.problem.device_for(mf.result.fit.theta)
+        mf.model = C.ActuatorModel(mf.device, mf.effects)
+        return C.score(mf, data.records)
+
+    good, short, alone = fitted(), fitted(beta_f=1.6, Y=1.1), fitted(beta_f=1.6, Y=1.1)
+    assert short.rmse > 1.5 * good.rmse
+    monkeypatch.setattr(scipy.optimize, "least_squares", lambda fun, x0, **kw: dataclasses.make_dataclass(
+        "Stuck", ["x", "fun", "cost"])(x0, fun(x0), 0.5 * float(fun(x0) @ fun(x0))))
+    assert C.refine_on_time(short, data.records, sims=40, start=good.result.fit.theta.copy())
+    assert short.rmse == pytest.approx(good.rmse, rel=1e-9)
+    assert short.values["beta_f"] == pytest.approx(good.values["beta_f"], rel=1e-9)
+    assert "from the start" in short.spec.notes[-1] and short.time_refined
+    assert all(np.isfinite(short.rel_std_errors[k]) for k in short.result.problem.labels)
+    # without a better start a search that cannot improve changes nothing
+    before = alone.rmse
+    assert not C.refine_on_time(alone, data.records, sims=40)
+    assert alone.rmse == before and not alone.time_refined
+
+
 def test_a_time_only_parameter_beside_a_large_signal_effect_is_set_on_the_time_records(clean, tmp_path):
     """A drafted drift (its parameters leave the frequency response unchanged) on top of the
     large-signal double layer: the describing-function fit leaves its parameters to the time
@@ -163,22 +199,26 @@ def test_a_time_only_parameter_beside_a_large_signal_effect_is_set_on_the_time_r
             unregister(i)
 
 
-def test_a_draft_round_refines_its_base_only_past_the_first(monkeypatch):
-    """The first draft round's base is the diagnosis's own (refitted as it was); from the second
-    on, the base carries the drafts kept before and is refined on the time records.  Every
-    round fits from the diagnosis's starts (an effect tried again from one start missed its
-    optimum), of which only the best two run to convergence."""
+@pytest.mark.parametrize("base_refined", [False, True])
+def test_a_draft_round_refines_its_base_as_the_diagnosis_did(monkeypatch, base_refined):
+    """The first draft round's base is the diagnosis's own draft base, refitted as it was: on the
+    FRF alone, and on the time records too when the diagnosis refined it there (its own effects
+    refitted; an FRF refit alone lost that); from the second round on, the base carries the
+    drafts kept before and is refined on the time records.  Every round fits from the
+    diagnosis's starts (an effect tried again from one start missed its optimum), of which only
+    the best two run to convergence."""
     from types import SimpleNamespace as NS
 
     from physics.diagnose import diagnosis, draft
     seen = []
     monkeypatch.setattr(diagnosis, "diagnose", lambda *a, selection=None, options=None, **k: seen.append(
         (selection.refine_base, options.n_starts, options.keep_starts)))
-    res = NS(draft_base=NS(effects=["double_layer", "humidity"], spec=NS(per_rh=[])), noise_floor=1e-6)
+    res = NS(draft_base=NS(effects=["double_layer", "humidity"], spec=NS(per_rh=[]), time_refined=base_refined),
+             noise_floor=1e-6)
     again = draft.rediagnosis([], res, FitOptions(n_starts=3))
     again(None, ["double_layer", "humidity"], [], ["drafted_slow_pole"])
     again(None, ["double_layer", "humidity", "drafted_slow_pole"], [], ["drafted_drift"])
-    assert seen == [(False, 3, draft.DRAFT_KEEP_STARTS), (True, 3, draft.DRAFT_KEEP_STARTS)]
+    assert seen == [(base_refined, 3, draft.DRAFT_KEEP_STARTS), (True, 3, draft.DRAFT_KEEP_STARTS)]
 
 
 def test_a_free_parameter_without_effect_is_held_not_an_error(clean):

@@ -722,7 +722,9 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
     ``sims`` simulations of the records (default :data:`TIME_REFINE_SIMS`; each iteration costs one
     per parameter for its Jacobian, the uncertainty two per parameter); the uncertainties are
     then those of the time residual (Bates & Watts, the covariance inflated by its
-    autocorrelation time).  Linear models only: a large-signal model runs the implicit stepper,
+    autocorrelation time).  A start that fits better than the FRF optimum is kept even when the
+    search cannot improve on it (it is the time records' optimum already: a model refined before,
+    refitted on the FRF alone).  Linear models only: a large-signal model runs the implicit stepper,
     ~10× dearer.  A fit already refined (:func:`start_on_time`) is left as it is (False)."""
     from scipy.optimize import least_squares
     from ..identify.fitting import uncertainty
@@ -759,12 +761,16 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
         else:
             start = None
         sol = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=iterations)
-        if not sol.cost < 0.5 * float(r0 @ r0) * (1.0 - 1e-9):
+        if sol.cost < 0.5 * float(r0 @ r0) * (1.0 - 1e-9):
+            x, r = sol.x, sol.fun
+        elif start is not None:     # the start beats the FRF optimum and is the time records' optimum already
+            x, r = x0, r0
+        else:
             return False
-        unc = uncertainty(problem, sol.x, resid, inflate=stats.integrated_time(sol.fun))
+        unc = uncertainty(problem, x, resid, inflate=stats.integrated_time(r))
     before = mf.rmse
-    theta = problem.from_x(sol.x)
-    fit.theta[:], fit.x[:] = theta, sol.x
+    theta = problem.from_x(x)
+    fit.theta[:], fit.x[:] = theta, x
     fit.std_error[:], fit.rel_std_error[:], fit.ci95[:] = unc["std_error"], unc["rel_std_error"], unc["ci95"]
     labels = problem.labels
     mf.model = model_at(mf, theta)
