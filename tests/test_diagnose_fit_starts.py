@@ -83,23 +83,29 @@ def test_a_nested_effect_never_ends_worse_than_the_base(clean):
     assert C.no_worse_than_base(forced, poorer) is forced
 
 
+def _moved_base(clean, **factors):
+    """The clean case's base fitted on its FRF, its parameters then multiplied by ``factors``
+    (moved off the optimum, as an FRF optimum is off the time records'), scored on the records."""
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(case.base_effects, dev))
+    mf = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
+                     n_starts=2)
+    labels = mf.result.problem.labels
+    for name, f in factors.items():
+        mf.result.fit.theta[labels.index(name)] *= f
+    mf.device = mf.result.problem.device_for(mf.result.fit.theta)
+    mf.model = C.ActuatorModel(mf.device, mf.effects)
+    return C.score(mf, data.records)
+
+
 def test_a_pick_stopped_short_is_refined_on_the_time_records(clean):
     """A fit left short of the time records' optimum (its damping and gain moved off it, as an
     FRF optimum of a model that cannot match the device exactly is) is refitted on them: the
     error falls back to the optimum's, the uncertainties are those of the time residual."""
-    case, data = clean
-    dev = load_device(case.device)
-    ids = tuple(C.resolve_effects(case.base_effects, dev))
-    best = C.score(C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets,
-                               data.target_records, n_starts=2), data.records)
-    short = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
-                        n_starts=2)
+    data = clean[1]
+    best, short = _moved_base(clean), _moved_base(clean, beta_f=1.6, Y=1.1)
     labels = short.result.problem.labels
-    short.result.fit.theta[labels.index("beta_f")] *= 1.6
-    short.result.fit.theta[labels.index("Y")] *= 1.1
-    short.device = short.result.problem.device_for(short.result.fit.theta)
-    short.model = C.ActuatorModel(short.device, short.effects)
-    C.score(short, data.records)
     assert short.rmse > 2 * best.rmse
     assert C.refine_on_time(short, data.records)
     assert short.rmse <= 1.02 * best.rmse
@@ -112,26 +118,13 @@ def test_a_refinement_starts_where_the_time_records_fit_better(clean):
     """Given a start (a draft round's base: the model the round before kept, refined on the
     time records), the refinement begins there only when it fits the time records better than
     the FRF optimum, and says which it began from."""
-    case, data = clean
-    dev = load_device(case.device)
-    ids = tuple(C.resolve_effects(case.base_effects, dev))
-
-    def fitted(**factors):
-        mf = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
-                         n_starts=2)
-        labels = mf.result.problem.labels
-        for name, f in factors.items():
-            mf.result.fit.theta[labels.index(name)] *= f
-        mf.device = mf.result.problem.device_for(mf.result.fit.theta)
-        mf.model = C.ActuatorModel(mf.device, mf.effects)
-        return C.score(mf, data.records)
-
-    best = fitted()
-    short = fitted(beta_f=1.6, Y=1.1)
+    data = clean[1]
+    best = _moved_base(clean)
+    short = _moved_base(clean, beta_f=1.6, Y=1.1)
     assert C.refine_on_time(short, data.records, sims=40, start=best.result.fit.theta.copy())
     assert "from the start" in short.spec.notes[-1] and short.rmse <= 1.02 * best.rmse
-    worse_start = fitted(beta_f=4.0, Y=0.7).result.fit.theta.copy()
-    short = fitted(beta_f=1.6, Y=1.1)
+    worse_start = _moved_base(clean, beta_f=4.0, Y=0.7).result.fit.theta.copy()
+    short = _moved_base(clean, beta_f=1.6, Y=1.1)
     assert C.refine_on_time(short, data.records, sims=40, start=worse_start)
     assert "from the FRF optimum" in short.spec.notes[-1]
 
@@ -143,21 +136,9 @@ def test_a_start_at_the_time_optimum_is_kept_when_the_search_cannot_improve_on_i
     made to return where it began), the start is kept, not the FRF optimum."""
     import scipy.optimize
 
-    case, data = clean
-    dev = load_device(case.device)
-    ids = tuple(C.resolve_effects(case.base_effects, dev))
-
-    def fitted(**factors):
-        mf = C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets, data.target_records,
-                         n_starts=2)
-        labels = mf.result.problem.labels
-        for name, f in factors.items():
-            mf.result.fit.theta[labels.index(name)] *= f
-        mf.device = mf.result.problem.device_for(mf.result.fit.theta)
-        mf.model = C.ActuatorModel(mf.device, mf.effects)
-        return C.score(mf, data.records)
-
-    good, short, alone = fitted(), fitted(beta_f=1.6, Y=1.1), fitted(beta_f=1.6, Y=1.1)
+    data = clean[1]
+    good = _moved_base(clean)
+    short, alone = (_moved_base(clean, beta_f=1.6, Y=1.1) for _ in range(2))
     assert short.rmse > 1.5 * good.rmse
     monkeypatch.setattr(scipy.optimize, "least_squares", lambda fun, x0, **kw: dataclasses.make_dataclass(
         "Stuck", ["x", "fun", "cost"])(x0, fun(x0), 0.5 * float(fun(x0) @ fun(x0))))
