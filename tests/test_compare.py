@@ -243,6 +243,12 @@ def test_helpers():
     ramp = np.linspace(40, 80, 2000)
     out = model_rh(ramp, 10.0)
     assert out.shape == ramp.shape and np.all(np.diff(out) >= 0) and np.all(np.mod(out, 0.5) == 0)
+    # the smoothing is the centred 10 s moving mean, the ends held at the first and last values:
+    # against that mean written as a convolution, on a step between two RH levels at 50 Hz
+    step = np.r_[np.full(1500, 40.0), np.full(1500, 80.0)] + np.random.default_rng(1).normal(0.0, 0.4, 3000)
+    k = 500
+    mean = np.convolve(np.pad(step, (k // 2, k - 1 - k // 2), mode="edge"), np.ones(k) / k, mode="valid")
+    np.testing.assert_array_equal(model_rh(step, 50.0), np.clip(np.round(mean / 0.5) * 0.5, 0, 100))
 
 
 def test_report_files(result, tmp_path):

@@ -139,10 +139,11 @@ def model_rh(rh: np.ndarray, fs: float, tolerance: float = 2.5, window_s: float 
     rh = np.asarray(rh, dtype=float)
     if rh.size and rh.min() == rh.max():      # one value (a constant channel): no smoothing to do
         return float(rh[0])
-    k = max(1, int(round(window_s * fs)))
-    kernel = np.ones(min(k, rh.size)) / min(k, rh.size)
-    pad = kernel.size // 2
-    smooth = np.convolve(np.pad(rh, (pad, kernel.size - 1 - pad), mode="edge"), kernel, mode="valid")
+    n = min(max(1, int(round(window_s * fs))), rh.size)
+    pad = n // 2
+    ref = float(rh[0])                        # running sums of the departures stay small
+    c = np.concatenate([[0.0], np.cumsum(np.pad(rh - ref, (pad, n - 1 - pad), mode="edge"))])
+    smooth = ref + (c[n:] - c[:-n]) / n       # the centred moving mean, O(len) whatever the window
     if np.ptp(smooth) <= tolerance:
         return float(np.median(rh))
     return np.clip(np.round(smooth / step) * step, 0.0, 100.0)
