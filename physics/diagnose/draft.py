@@ -124,7 +124,7 @@ def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
     records) is refined on them too.  When a round's pick is large-signal, its best linear rival is
     refined on the time records before the round decides (:attr:`.diagnosis.SelectionOptions.refine_rival`).
     The first round's base is refined so too when the draft base was (its own effects refitted on
-    the time records): refitted on the FRF alone, a held-out strip's rough-electrode model went
+    the time records): refitted on the FRF alone, a test-bed strip's rough-electrode model went
     from 8.16 µm to 221 µm, and its drafts were fitted on top of that."""
     import dataclasses
 
