@@ -249,6 +249,9 @@ def test_helpers():
     k = 500
     mean = np.convolve(np.pad(step, (k // 2, k - 1 - k // 2), mode="edge"), np.ones(k) / k, mode="valid")
     np.testing.assert_array_equal(model_rh(step, 50.0), np.clip(np.round(mean / 0.5) * 0.5, 0, 100))
+    step[700] = np.nan
+    with pytest.raises(InputError, match="RH channel has 1 non-finite"):
+        model_rh(step, 50.0)
 
 
 def test_report_files(result, tmp_path):

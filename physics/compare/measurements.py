@@ -137,6 +137,9 @@ def model_rh(rh: np.ndarray, fs: float, tolerance: float = 2.5, window_s: float 
     median is used (robust to a sensor clipped at 100 %), otherwise the smoothed series
     rounded to ``step`` [%] (RH changes slowly compared with the mechanics)."""
     rh = np.asarray(rh, dtype=float)
+    if not np.all(np.isfinite(rh)):           # a running sum would carry one gap to the record's end
+        raise InputError(f"the RH channel has {int(np.sum(~np.isfinite(rh)))} non-finite value(s); "
+                         "give finite RH values in % (fill or cut the gaps)")
     if rh.size and rh.min() == rh.max():      # one value (a constant channel): no smoothing to do
         return float(rh[0])
     n = min(max(1, int(round(window_s * fs))), rh.size)
