@@ -522,6 +522,21 @@ def test_the_first_round_s_refinement_of_the_model_is_written_when_no_draft_is_k
         assert out.refined is None and best["fit"] is diagnosis.final
 
 
+def test_a_draft_that_leaves_the_error_as_printed_says_so_not_that_it_raises_it():
+    """A draft whose error equals the round's to the printed digits "leaves" it there (a report
+    read "raises the RMS error from 2.387 to 2.387 µm"); a larger one still "raises" it."""
+    from physics.diagnose.draft import _scored
+
+    def cand(eid, rmse, dbic):
+        return _Stub(effect=eid, evaluated=True, reason="", fit=_fit_stub(rmse), comparison=_Stub(delta_bic=dbic))
+    again = _Stub(base=_fit_stub(2.387e-6), candidates=[cand("drafted_drift", 2.38701e-6, 10.8),
+                                                       cand("drafted_slow_pole", 2.5e-6, 30.0)])
+    scored, why = _scored(["drafted_drift", "drafted_slow_pole"], again, ["double_layer"], before=2.387e-6)
+    assert not scored
+    assert why["drafted_drift"] == "fitted with [double_layer] it leaves the RMS error at 2.387 µm (ΔBIC 10.8)"
+    assert "raises the RMS error from 2.387 to 2.5 µm" in why["drafted_slow_pole"]
+
+
 def test_each_draft_round_is_announced_before_it_runs_and_says_what_it_took():
     """A draft round refits the whole model (minutes on long records): the progress callback
     hears of each round before its refit starts, of what it took, and of the round that took

@@ -383,10 +383,14 @@ def _scored(keys, again, on_top, before: float | None = None) -> tuple[list, dic
         if dbic <= -SIGNIFICANT_BIC and gain >= MIN_GAIN:
             scored.append((dbic, key, c))
         else:
+            a, b = f"{1e6 * ref:.4g}", f"{1e6 * c.fit.rmse:.4g}"
+            if a == b:          # equal as printed: neither "lowers" nor "raises" reads true
+                of = "" if ref == again.base.rmse else ", that of the model the previous round kept"
+                why[eid] = f"fitted with [{', '.join(on_top)}] it leaves the RMS error at {a} µm{of} (ΔBIC {dbic:.3g})"
+                continue
             how = "lowers the RMS error only" if c.fit.rmse <= ref else "raises the RMS error"
             of = "" if ref == again.base.rmse else " (the model the previous round kept)"
-            why[eid] = (f"fitted with [{', '.join(on_top)}] it {how} from {1e6 * ref:.4g}{of} "
-                        f"to {1e6 * c.fit.rmse:.4g} µm (ΔBIC {dbic:.3g})")
+            why[eid] = f"fitted with [{', '.join(on_top)}] it {how} from {a}{of} to {b} µm (ΔBIC {dbic:.3g})"
     scored.sort(key=lambda x: x[0])
     return scored, why
 
