@@ -99,8 +99,8 @@ class DraftOutcome:
     chain: list = field(default_factory=list)     # (effect id, RMS after [m]) per step from the base
     notes: list = field(default_factory=list)
     steps: list = field(default_factory=list)     # (effects fitted on, DiagnosisResult) per round
-    final: object = None                           # the model fitted with every kept effect (a ModelFit)
-    refined: object = None                         # nothing kept: the diagnosis's model, refined further by round 1
+    final: object = None          # the best model the rounds reached (a ModelFit): fitted with every effect on
+                                  # the chain, or round 1's refinement of the diagnosis's model; None: no better one
 
     @property
     def rmse_after(self) -> float:
@@ -341,11 +341,11 @@ def _went_further(outcome: DraftOutcome, base, round_no: int) -> None:
 
 def _refined_further(outcome: DraftOutcome, base, fit) -> None:
     """Round 1's base ``base`` (a ModelFit), when it is the diagnosis's final model ``fit`` refined
-    further on the time records and fits better, is kept as :attr:`DraftOutcome.refined`: the model
-    written when no draft is kept.  A held-out strip with rough electrodes: the diagnosis's model
-    8.16 µm, round 1's refinement of it 7.98 µm, no draft kept, and 8.16 µm was written."""
+    further on the time records and fits better, becomes :attr:`DraftOutcome.final` until a round
+    takes an effect.  A held-out strip with rough electrodes: the diagnosis's model 8.16 µm, round
+    1's refinement of it 7.98 µm, no draft kept, and 8.16 µm was written."""
     if getattr(base, "time_refined", False) and tuple(base.effects) == tuple(fit.effects) and base.rmse < fit.rmse:
-        outcome.refined = base
+        outcome.final = base
         outcome.notes.append(f"round 1 refined the diagnosis's model on the time records: RMS error "
                              f"{1e6 * fit.rmse:.4g} → {1e6 * base.rmse:.4g} µm")
 
