@@ -426,3 +426,65 @@ def test_a_wander_never_excuses_what_follows_the_input():
     assert ad.adequate is False and "follows the input" in ad.structure and ad.wander == 0
     white = fit(1.6 * floor * np.random.default_rng(1).standard_normal(pred.size))
     assert assess("", white, [rec], floor, describe=False, wander=2 * floor).adequate is True
+
+
+# ---------------------------------------------------------------------------- the swap move
+
+
+def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
+    """A chain base → viscoelastic (101 µm; runner-up fractional_coupling, ΔBIC ``rival_bic``)
+    → solvent_diffusion (35.2 µm); the model with fractional_coupling in viscoelastic's place
+    fits to ``swapped_um``.  Returns (steps, the log)."""
+    from types import SimpleNamespace as NS
+
+    from physics.diagnose import diagnosis as dg
+    from physics.diagnose.verdict import Decision
+
+    def fit(effects, um):
+        return NS(effects=["double_layer", *effects], rmse=um * UM, taus=[1.0], n=[1000], k=3 + len(effects),
+                  resid_d=None)
+
+    def cand(effect, f, dbic):
+        return NS(effect=effect, fit=f, evaluated=True, comparison=NS(delta_bic=dbic))
+    ve, fc = cand("viscoelastic", fit(["viscoelastic"], 101), -217.0), cand("fractional_coupling",
+                                                                            fit(["fractional_coupling"], 114), rival_bic)
+    sd = cand("solvent_diffusion", fit(["viscoelastic", "solvent_diffusion"], 35.2), -1302.0)
+    steps = [dg.Step(1, fit([], 136), [ve, fc], Decision(ve, {}, {"viscoelastic": -217.0, "fractional_coupling": rival_bic})),
+             dg.Step(2, ve.fit, [sd], Decision(sd, {}, {"solvent_diffusion": -1302.0}))]
+    without = fit(["solvent_diffusion"], 98.0)
+    swapped = cand("fractional_coupling", fit(["solvent_diffusion", "fractional_coupling"], swapped_um), -900.0)
+
+    def forward(k, base, left, feats, data, run, after_pick, trial):
+        assert base is without and left == ["fractional_coupling"] and after_pick
+        trial.append(dg.Step(k, base, [swapped], Decision(swapped, {}, {"fractional_coupling": -900.0})))
+        return swapped
+    monkeypatch.setattr(dg, "_support_of", lambda eff, final, data, run: (
+        dg.SupportResult(eff, "assessed", True, 500.0, 0.0, without.rmse, "supported"), without))
+    monkeypatch.setattr(dg, "_forward", forward)
+    monkeypatch.setattr(dg, "_features_after", lambda *a: {})
+    monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
+    log = []
+    dg._swap_first(steps, set(), None, NS(log=log.append))
+    return steps, log
+
+
+def test_the_first_pick_s_runner_up_takes_its_place_when_the_chain_then_fits_better(monkeypatch):
+    """A greedy chain cannot undo its first pick: viscoelastic beat fractional_coupling on the
+    base, solvent_diffusion went on top, and the chain stopped at 35.2 µm (a held-out strip with
+    rough electrodes and solvent diffusion).  With fractional_coupling in viscoelastic's place the
+    model fits better: the swap is two steps (a withdrawal, then the runner-up's forward step),
+    the final model is the swapped one and the verdict says why."""
+    steps, _ = _swap_case(monkeypatch, 2.0)
+    assert [s.kind for s in steps] == ["add", "add", "withdraw", "add"]
+    assert steps[2].swapped_for == "fractional_coupling" and steps[2].removal.effect == "viscoelastic"
+    assert steps[-1].result.effects == ["double_layer", "solvent_diffusion", "fractional_coupling"]
+    assert "35.2 → 2 µm" in steps[2].removal.explanation
+
+
+@pytest.mark.parametrize("swapped_um, rival_bic", [(35.15, -127.0), (2.0, -5.0)])
+def test_no_swap_when_the_runner_up_does_not_fit_better_or_did_not_pass(monkeypatch, swapped_um, rival_bic):
+    """The swap is taken only when the runner-up passed its step (ΔBIC ≤ −10 there) and the
+    model with it in the first pick's place has a BIC lower than the chain's by 10."""
+    steps, log = _swap_case(monkeypatch, swapped_um, rival_bic)
+    assert [s.kind for s in steps] == ["add", "add"]
+    assert (rival_bic > -10) == (log == [])

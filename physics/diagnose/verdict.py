@@ -429,7 +429,9 @@ class Verdict:
             out.append("Its own effects refitted (the device's values are a start, not this strip's): "
                        + ", ".join(_fmt_refit(n, v) for n, v in self.refitted.items()) + ".")
         for r in self.withdrawn:
-            out.append(f"Withdrawn: {r['effect']}, picked before the model's own effects were refitted — on the "
+            out.append(f"Swapped out: {r['effect']}, the first pick — {r['reason']}: picked before the later effects "
+                       "were in the model, it stood in for its runner-up." if r.get("swapped_for") else
+                       f"Withdrawn: {r['effect']}, picked before the model's own effects were refitted — on the "
                        f"refitted model it is {r['reason']}: it stood in for the device's values, not for missing "
                        "physics.")
         if self.picks:
