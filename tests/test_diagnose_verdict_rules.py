@@ -431,6 +431,14 @@ def test_a_wander_never_excuses_what_follows_the_input():
 # ---------------------------------------------------------------------------- the swap move
 
 
+@dataclass
+class _Ranked:
+    effect: str
+    fit: object
+    comparison: object
+    evaluated: bool = True
+
+
 def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
     """A chain base → viscoelastic (101 µm; runner-up fractional_coupling, ΔBIC ``rival_bic``)
     → solvent_diffusion (35.2 µm); the model with fractional_coupling in viscoelastic's place
@@ -445,7 +453,7 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
                   resid_d=None)
 
     def cand(effect, f, dbic):
-        return NS(effect=effect, fit=f, evaluated=True, comparison=NS(delta_bic=dbic))
+        return _Ranked(effect, f, NS(delta_bic=dbic))
     ve, fc = cand("viscoelastic", fit(["viscoelastic"], 101), -217.0), cand("fractional_coupling",
                                                                             fit(["fractional_coupling"], 114), rival_bic)
     sd = cand("solvent_diffusion", fit(["viscoelastic", "solvent_diffusion"], 35.2), -1302.0)
@@ -463,8 +471,11 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
     monkeypatch.setattr(dg, "_forward", forward)
     monkeypatch.setattr(dg, "_features_after", lambda *a: {})
     monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
+    monkeypatch.setattr(dg, "doubts", lambda c: [])
+    monkeypatch.setattr(dg, "pinned", lambda c: [])
+    steps[1].decision.confidence = _label(101.2, 35.2)          # "medium": 35× the noise floor left
     log = []
-    dg._swap_first(steps, set(), None, NS(log=log.append))
+    dg._swap_first(steps, set(), NS(noise=UM), NS(log=log.append))
     return steps, log
 
 
@@ -479,6 +490,10 @@ def test_the_first_pick_s_runner_up_takes_its_place_when_the_chain_then_fits_bet
     assert steps[2].swapped_for == "fractional_coupling" and steps[2].removal.effect == "viscoelastic"
     assert steps[-1].result.effects == ["double_layer", "solvent_diffusion", "fractional_coupling"]
     assert "35.2 → 2 µm" in steps[2].removal.explanation
+    # the later pick is labelled again on the model after the swap (its step had viscoelastic in it)
+    d = steps[1].decision
+    assert "on the model after the swap it lowers the RMS error 98 → 2 µm" in d.reason
+    assert d.confidence.left == pytest.approx(2.0) and d.confidence.label != _label(101.2, 35.2).label
 
 
 @pytest.mark.parametrize("swapped_um, rival_bic", [(35.15, -127.0), (2.0, -5.0)])

@@ -101,7 +101,7 @@ class Confidence:
     pinned: int = 0                # own parameters on a bound and not determined
     held: float = 1.0              # share of the excess a rival held on a bound leaves that the pick removes
     held_of: str | None = None     # that rival (None: no rival held on a bound)
-    refitted: bool = False         # change and left judged on the model with its own effects refitted
+    refitted: bool = False         # change and left judged on a later model (own effects refitted, or a swap)
     label: str = "low"
     why: list[str] = field(default_factory=list)   # what kept it from "high"
 
@@ -160,8 +160,9 @@ def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float, f
     parameters of the pick's own parameters in it (the refit frees them again beside the own
     effects').  Before the refit a pick can leave a large residual, or a parameter on a bound, only
     because the device's values of the model's own effects are not the strip's; once they are
-    refitted, what it leaves is what a missing physics could still hide.  The rival shares, the
-    records and the weight are the pick's step's."""
+    refitted, what it leaves is what a missing physics could still hide.  Used so too on the model
+    after a swap (:func:`.diagnosis._swap_first`): a later pick's step had the withdrawn pick in
+    its model.  The rival shares, the records and the weight are the pick's step's."""
     ok = math.isfinite(noise) and noise > 0
     change = math.sqrt(max(without ** 2 - with_pick ** 2, 0.0)) / noise if ok else math.nan
     return label(replace(c, change=change, left=with_pick / noise if ok else math.nan, flags=flags, pinned=pinned,

@@ -766,6 +766,9 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
                       withdrawn=True, swapped_for=rival.effect))
     run.log(f"step {k}: {p1} swapped out ({why})")
     steps += trial
+    later = [s.decision.pick.effect for s in adds[1:]]
+    _relabel(steps[:-1], {e: _support_of(e, pick.fit, data, run) for e in later}, pick.fit, data, run,
+             "the model after the swap")
 
 
 def _adequate(data: PreparedRecords, fit: ModelFit) -> bool:
@@ -800,20 +803,28 @@ def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: 
         current = _removal_step(len(steps) + 1, current, got, steps, removed, run)
         picked.remove(got[0].effect)
         every = {}
+    _relabel(steps, every, current, data, run, "the model with its own effects refitted")
+    return current
+
+
+def _relabel(steps: list[Step], every: dict, current: ModelFit, data: PreparedRecords, run: DiagnosisRun,
+             where: str) -> None:
+    """The picks of ``steps`` in ``every`` ({effect: (support, fit without it)} on ``current``)
+    labelled again on ``current`` (:func:`.confidence.reconfirmed`): the error each removes
+    there, the error the model leaves and its own parameters' quality flags there; a near
+    twin's pick stays "low".  ``where`` names ``current`` in the pick's reason."""
     for s in steps:
         d = s.decision
         if d.pick is None or d.pick.effect not in every or d.confidence is None or d.ambiguous:
             continue
         sup, _ = every[d.pick.effect]
         if sup.status == "assessed" and sup.rmse_without is not None:
-            on_refit = replace(d.pick, fit=current)    # the pick's own parameters as refitted
+            on_it = replace(d.pick, fit=current)    # the pick's own parameters as fitted there
             d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
-                                                len(doubts(on_refit)), len(pinned(on_refit)))
-            d.reason += (f"; on the model with its own effects refitted it lowers the RMS error "
-                         f"{1e6 * sup.rmse_without:.4g} → {1e6 * current.rmse:.4g} µm: confidence {c.label}"
-                         + (": " + "; ".join(c.why) if c.why else ""))
-            run.log(f"  {d.pick.effect} on the refitted model: confidence {c.label}")
-    return current
+                                                len(doubts(on_it)), len(pinned(on_it)))
+            d.reason += (f"; on {where} it lowers the RMS error {1e6 * sup.rmse_without:.4g} → "
+                         f"{1e6 * current.rmse:.4g} µm: confidence {c.label}" + (": " + "; ".join(c.why) if c.why else ""))
+            run.log(f"  {d.pick.effect} on {where}: confidence {c.label}")
 
 
 def _forward(k: int, step_base: ModelFit, left, step_feats: dict, data: PreparedRecords, run: DiagnosisRun,
