@@ -473,7 +473,8 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
     monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
     monkeypatch.setattr(dg, "doubts", lambda c: [])
     monkeypatch.setattr(dg, "pinned", lambda c: [])
-    steps[1].decision.confidence = _label(101.2, 35.2)          # "medium": 35× the noise floor left
+    from dataclasses import replace          # "medium": 35× the noise floor left, fractional_coupling held on a bound
+    steps[1].decision.confidence = replace(_label(101.2, 35.2), held=0.879, held_of="fractional_coupling")
     log = []
     dg._swap_first(steps, set(), NS(noise=UM), NS(log=log.append))
     return steps, log
@@ -494,6 +495,16 @@ def test_the_first_pick_s_runner_up_takes_its_place_when_the_chain_then_fits_bet
     d = steps[1].decision
     assert "on the model after the swap it lowers the RMS error 98 → 2 µm" in d.reason
     assert d.confidence.left == pytest.approx(2.0) and d.confidence.label != _label(101.2, 35.2).label
+    # the rival held on a bound at its step is in the model now: no alternative to the pick any more
+    assert d.confidence.held_of is None and "on a bound" not in d.reason.split("after the swap")[1]
+
+
+def test_a_pick_labelled_again_keeps_its_rivals_unless_they_are_in_the_model_now():
+    c = conf.label(conf.Confidence(1.0, 100.0, 1.2, 0.5, "rival", 1.0, 0, 0, 0.8, "held"))
+    again = conf.reconfirmed(c, 1.2 * UM, 100 * UM, UM, 0, 0, in_model=["double_layer"])
+    assert again.twin_of == "rival" and again.held_of == "held" and again.label != "high"
+    again = conf.reconfirmed(c, 1.2 * UM, 100 * UM, UM, 0, 0, in_model=["double_layer", "rival", "held"])
+    assert again.twin_of is None and again.held_of is None and again.label == "high"
 
 
 @pytest.mark.parametrize("swapped_um, rival_bic", [(35.15, -127.0), (2.0, -5.0)])

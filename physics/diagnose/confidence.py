@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Sequence
 
 #: Weight a "high" pick needs at least (Schwarz, among the step's base and candidates).
 WEIGHT_HIGH = 0.99
@@ -153,7 +154,8 @@ def features(pick, base, rivals, weight: float, noise: float, flags: int, pinned
     return Confidence(weight, change, left, twin, twin_of, records, flags, pinned, held_share, held_of)
 
 
-def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float, flags: int, pinned: int) -> Confidence:
+def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float, flags: int, pinned: int,
+                in_model: Sequence[str] = ()) -> Confidence:
     """``c`` labelled again on the model whose own effects were refitted (:func:`.diagnosis.select`):
     the error the pick removes there (``without`` → ``with_pick`` [m RMS], the refitted model
     without and with it), the error that model leaves, and the quality ``flags`` and ``pinned``
@@ -162,8 +164,14 @@ def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float, f
     because the device's values of the model's own effects are not the strip's; once they are
     refitted, what it leaves is what a missing physics could still hide.  Used so too on the model
     after a swap (:func:`.diagnosis._swap_first`): a later pick's step had the withdrawn pick in
-    its model.  The rival shares, the records and the weight are the pick's step's."""
+    its model.  The rival shares, the records and the weight are the pick's step's, but a rival
+    now in the model (``in_model``: its effects) is no alternative to the pick any more: after a
+    swap, a rival held on a bound at the pick's step was the effect the swap put in."""
     ok = math.isfinite(noise) and noise > 0
+    if c.twin_of in in_model:
+        c = replace(c, twin=1.0, twin_of=None)
+    if c.held_of in in_model:
+        c = replace(c, held=1.0, held_of=None)
     change = math.sqrt(max(without ** 2 - with_pick ** 2, 0.0)) / noise if ok else math.nan
     return label(replace(c, change=change, left=with_pick / noise if ok else math.nan, flags=flags, pinned=pinned,
                          why=[], refitted=True))

@@ -760,7 +760,7 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
                 f"(ΔBIC {cmp.delta_bic:+.4g})")
         return
     why = (f"the runner-up of step {first.index}, {rival.effect}, in its place fits better: RMS error "
-           f"{1e6 * final.rmse:.4g} → {1e6 * pick.fit.rmse:.4g} µm, ΔBIC {cmp.delta_bic:.4g}")
+           f"{1e6 * final.rmse:.4g} → {1e6 * pick.fit.rmse:.4g} µm, ΔBIC {f'{cmp.delta_bic:.4g}'.replace('-', '−')}")
     removed.add(p1)
     steps.append(Step(k, final, [], Decision(None, {}, {}, reason=why), replace(sup, explanation=why), without,
                       withdrawn=True, swapped_for=rival.effect))
@@ -821,7 +821,7 @@ def _relabel(steps: list[Step], every: dict, current: ModelFit, data: PreparedRe
         if sup.status == "assessed" and sup.rmse_without is not None:
             on_it = replace(d.pick, fit=current)    # the pick's own parameters as fitted there
             d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
-                                                len(doubts(on_it)), len(pinned(on_it)))
+                                                len(doubts(on_it)), len(pinned(on_it)), current.effects)
             d.reason += (f"; on {where} it lowers the RMS error {1e6 * sup.rmse_without:.4g} → "
                          f"{1e6 * current.rmse:.4g} µm: confidence {c.label}" + (": " + "; ".join(c.why) if c.why else ""))
             run.log(f"  {d.pick.effect} on {where}: confidence {c.label}")
