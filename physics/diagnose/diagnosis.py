@@ -69,8 +69,8 @@ from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
 from .specs import (declared_default, effect_params, excitation, keeps_spec_range, param_bounds, role_family,
                     shape_params, spec_of)
-from .verdict import (ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, decide, doubts, nuisance_summary, pinned,
-                      remaining_of)
+from .verdict import (ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, _signed, decide, doubts,
+                      nuisance_summary, pinned, remaining_of)
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
 SUPPORT_BIC = 6.0
@@ -729,7 +729,7 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
     it).  It takes the place when the model so made has a BIC lower than the chain's by
     :data:`.forms.SIGNIFICANT_BIC`: a withdrawal step and its forward step are appended.  A
     greedy chain cannot undo its first pick, which was chosen before the later effects were in
-    the model: on a held-out strip with rough electrodes and solvent diffusion, viscoelastic
+    the model: on the test strip it was found on (rough electrodes and solvent diffusion), viscoelastic
     (101 µm) beat fractional_coupling (114 µm) on the base, and with solvent_diffusion on top
     the chain stopped at 35.2 µm against the true model's 1.5 µm."""
     final = steps[-1].result
@@ -760,7 +760,7 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
                 f"(ΔBIC {cmp.delta_bic:+.4g})")
         return
     why = (f"the runner-up of step {first.index}, {rival.effect}, in its place fits better: RMS error "
-           f"{1e6 * final.rmse:.4g} → {1e6 * pick.fit.rmse:.4g} µm, ΔBIC {f'{cmp.delta_bic:.4g}'.replace('-', '−')}")
+           f"{1e6 * final.rmse:.4g} → {1e6 * pick.fit.rmse:.4g} µm, ΔBIC {_signed(cmp.delta_bic)}")
     removed.add(p1)
     steps.append(Step(k, final, [], Decision(None, {}, {}, reason=why), replace(sup, explanation=why), without,
                       withdrawn=True, swapped_for=rival.effect))

@@ -188,7 +188,7 @@ def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
     draft rounds' best (:attr:`~physics.diagnose.draft.DraftOutcome.final`: with the kept drafts,
     or the diagnosis's picks refined further on the time records) when it fits better.  Its fit,
     its effects, the effect files it needs, a one-line summary and what the draft rounds did (as
-    printed).  A held-out strip with rough electrodes and solvent diffusion: the rounds refined the
+    printed).  A test strip with rough electrodes and solvent diffusion: the rounds refined the
     picks to 33.4 µm, kept no draft, and 35.2 µm was written while only the kept drafts' model was
     taken from them."""
     fit, files = res.final, []
