@@ -158,7 +158,10 @@ def test_a_pick_the_refitted_model_needs_is_labelled_again_on_it():
                        check_support=False)
     assert [s.kind for s in res.steps][:2] == ["add", "refit"] and res.verdict.chain == ["solvent_diffusion"]
     pick = res.verdict.picks[0]
-    assert pick.rmse_after > 10 * case.noise_floor > 10 * res.final.rmse / 1.5
+    assert res.steps[0].decision.pick.fit.rmse > 10 * case.noise_floor > 10 * res.final.rmse / 1.5
+    # its line of the verdict reads on the refitted model (without it → with it there), not on its step
+    assert pick.on == "the model with its own effects refitted" and pick.rmse_after == res.final.rmse
+    assert pick.rmse_before > 3 * pick.rmse_after and pick.delta_bic < 0
     c = pick.confidence
     assert c.refitted and c.left == pytest.approx(res.final.rmse / res.noise_floor)
     assert c.change > 3 and c.label == "high", c.why

@@ -497,6 +497,23 @@ def test_the_first_pick_s_runner_up_takes_its_place_when_the_chain_then_fits_bet
     assert d.confidence.left == pytest.approx(2.0) and d.confidence.label != _label(101.2, 35.2).label
     # the rival held on a bound at its step is in the model now: no alternative to the pick any more
     assert d.confidence.held_of is None and "on a bound" not in d.reason.split("after the swap")[1]
+    # and its line of the verdict reads on that model, not on its step's (which held viscoelastic)
+    assert d.relabelled == {"on": "the model after the swap", "rmse_without": 98 * UM, "rmse_with": 2 * UM,
+                            "delta_bic": -500.0}
+
+
+def test_a_pick_labelled_again_reads_its_numbers_on_the_later_model():
+    """The verdict's line of a pick labelled again on a later model (after a swap or a refit of
+    the model's own effects) gives that model's error without it → with it, and says so: its
+    step's numbers were on a model that no longer exists."""
+    from physics.diagnose.verdict import Pick, Verdict
+    later = Pick(2, "solvent_diffusion", 1.0, 98 * UM, 2 * UM, -500.0, 0.0, {}, [], "", on="the model after the swap")
+    own = Pick(4, "fractional_coupling", 1.0, 98 * UM, 2 * UM, -900.0, 0.0, {}, [], "")
+    text = "\n".join(Verdict("explained", [later, own], {}, None, 136 * UM, UM, "stated").lines())
+    assert "solvent_diffusion (confidence low, weight 1.000) — on the model after the swap, without it → with it: " \
+        "RMS error 98 → 2 µm, ΔBIC −500" in text
+    assert "fractional_coupling (confidence low, weight 1.000) — RMS error 98 → 2 µm" in text
+    assert later.to_dict()["relabelled_on"] == "the model after the swap" and own.to_dict()["relabelled_on"] is None
 
 
 def test_a_pick_labelled_again_keeps_its_rivals_unless_they_are_in_the_model_now():

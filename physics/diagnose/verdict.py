@@ -184,6 +184,7 @@ class Decision:
     reason: str = ""
     alpha: float = ALPHA
     confidence: conf.Confidence | None = None     # of the pick (:mod:`.confidence`)
+    relabelled: dict = field(default_factory=dict)  # the pick labelled again on a later model: where, RMS without/with [m], ΔBIC
 
     @property
     def weight(self) -> float | None:
@@ -335,7 +336,10 @@ def separating_record(a, b, records, noise: float) -> str:
 
 @dataclass
 class Pick:
-    """One effect of the chain: picked at step ``step`` on top of the effects before it."""
+    """One effect of the chain: picked at step ``step`` on top of the effects before it.  Its
+    RMS errors [m] and ΔBIC are the step's — or, when it was labelled again on a later model
+    (``on`` names it: after a refit of the model's own effects or a swap), that model's without
+    it → with it, so that every line of the chain reads on the model the verdict describes."""
 
     step: int
     effect: str
@@ -350,6 +354,7 @@ class Pick:
     confidence: conf.Confidence | None = None
     twin: str = ""                   # a near twin the data could not tell from it (the chain carried on)
     separating: str = ""             # the record that would separate them
+    on: str = ""                     # labelled again on a later model (its numbers are then without → with it there)
 
     @property
     def label(self) -> str:
@@ -360,7 +365,8 @@ class Pick:
                 "confidence_features": self.confidence.to_dict() if self.confidence else None,
                 "rmse_before_m": self.rmse_before, "rmse_after_m": self.rmse_after, "delta_bic": self.delta_bic,
                 "p_value": self.p_value, "parameters": self.parameters, "quality_flags": self.quality,
-                "reason": self.reason, "near_twin": self.twin or None, "separating_record": self.separating or None}
+                "reason": self.reason, "near_twin": self.twin or None, "separating_record": self.separating or None,
+                "relabelled_on": self.on or None}
 
 
 @dataclass
@@ -442,7 +448,8 @@ class Verdict:
                     out.append(f"{head}ambiguous between {p.effect} and {p.twin} — these data cannot tell them apart"
                                + (f"; {p.separating}" if p.separating else "") + ".")
                     head = "  The chain carries on with the one of stronger evidence: "
-                out.append(f"{head}{p.effect} (confidence {p.label}, weight {_w(p.weight)}) — RMS error "
+                on = f"on {p.on}, without it → with it: " if p.on else ""
+                out.append(f"{head}{p.effect} (confidence {p.label}, weight {_w(p.weight)}) — {on}RMS error "
                            f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {_signed(p.delta_bic)}"
                            + (f"; {params}" if params else "") + ".")
                 if p.quality:
