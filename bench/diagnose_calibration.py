@@ -29,7 +29,7 @@ if str(ROOT) not in sys.path:
 #: The grid (names of :func:`physics.diagnose.confidence.thresholds`).
 GRID = {"change_high_noise_floors": (1.5, 2.0, 3.0, 5.0, 8.0),
         "left_high_noise_floors": (1.5, 2.0, 3.0, 5.0, 10.0, 1e9),
-        "twin_high_share": (1.0 / 3.0, 0.5, 0.6, 0.8),
+        "twin_high_share": (1.0 / 3.0, 0.5, 0.6, 0.8, 0.95),
         "records_high_share": (0.5, 0.75, 1.0)}
 
 

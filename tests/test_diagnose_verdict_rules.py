@@ -124,17 +124,23 @@ def test_on_the_refitted_model_a_pick_is_judged_by_its_flags_there():
     assert conf.reconfirmed(step, 3.02 * UM, 11.0 * UM, 2.65 * UM, flags=1, pinned=1).label == "low"
 
 
-def test_a_rival_held_on_a_bound_needs_a_wider_margin():
+def test_a_pick_must_leave_every_rival_far_behind_for_high():
     """circuit_lab seed 1, viscoelastic and humidity hidden: fractional_coupling picked at 4.07 µm
     (70.1 before, 2.4 µm floor) while viscoelastic, its slope held at the top of its range,
-    reached 8.71 µm — 85 % of its excess removed would pass against a free rival, not against
-    one whose error is only what its range allowed.  A held rival left far behind (99.6 %) does
+    reached 8.71 µm; pnp_fd seed 20, an electrode and a Cole-Cole modulus hidden: fractional_coupling
+    1.96 µm, a free viscoelastic 2.86 µm (1.5 µm floor).  Both picks were wrong; they removed 85 %
+    and 73 % of their rival's excess error.  "high" needs 95 % of every rival's, held on a bound
+    or not, and the reason says when the rival was held.  A rival left far behind (99.6 %) does
     not stand in the way."""
     kw = dict(noise_um=2.43)
-    assert _label(70.1, 4.07, rival_um=8.71, **kw).label == "high"
+    free = _label(70.1, 4.07, rival_um=8.71, **kw)
+    assert free.label == "medium" and "rival comes close" in free.why[0] and "on a bound" not in free.why[0]
+    assert _label(16.44, 1.96, rival_um=2.86, noise_um=1.5).label == "medium"
     c = _label(70.1, 4.07, rival_um=8.71, held=True, **kw)
     assert c.label == "medium" and c.held_of == "rival" and 0.8 < c.held < 0.9
+    assert len(c.why) == 1 and "rival comes close" in c.why[0] and "on a bound of its range" in c.why[0]
     assert _label(70.1, 2.6, rival_um=40.0, held=True, **kw).label == "high"
+    assert _label(70.1, 2.6, rival_um=40.0, **kw).label == "high"
     d = c.to_dict()
     assert conf.Confidence.from_dict(d).held == pytest.approx(c.held) and d["held_rival"] == "rival"
     # a pick at the noise floor removes all of every rival's excess: no rival is named as closest
