@@ -822,8 +822,9 @@ def _relabel(steps: list[Step], every: dict, current: ModelFit, data: PreparedRe
             on_it = replace(d.pick, fit=current)    # the pick's own parameters as fitted there
             d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
                                                 len(doubts(on_it)), len(pinned(on_it)), current.effects)
-            d.relabelled = {"on": where, "rmse_without": sup.rmse_without, "rmse_with": current.rmse,
-                            "delta_bic": -sup.delta_bic_if_removed if sup.delta_bic_if_removed is not None else None}
+            if sup.delta_bic_if_removed is not None:       # the verdict's line of the pick reads on ``current``
+                d.relabelled = {"on": where, "rmse_without": sup.rmse_without, "rmse_with": current.rmse,
+                                "delta_bic": -sup.delta_bic_if_removed}
             d.reason += (f"; on {where} it lowers the RMS error {1e6 * sup.rmse_without:.4g} → "
                          f"{1e6 * current.rmse:.4g} µm: confidence {c.label}" + (": " + "; ".join(c.why) if c.why else ""))
             run.log(f"  {d.pick.effect} on {where}: confidence {c.label}")
@@ -912,12 +913,12 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
         at = final if again or any(t.refit is not None and t.index > s.index for t in steps) else p.fit   # its values now
         own = effect_values(at, p.effect)
         before, after, dbic = ((again["rmse_without"], again["rmse_with"], again["delta_bic"]) if again
-                               and again["delta_bic"] is not None else (s.base.rmse, p.fit.rmse, p.comparison.delta_bic))
+                               else (s.base.rmse, p.fit.rmse, p.comparison.delta_bic))
         picks.append(Pick(s.index, p.effect, s.decision.weight, before, after, dbic, p.comparison.p_value,
                           {n: {"value": v, "std_error": at.std_errors.get(n)} for n, v in own.items()},
                           list(p.quality), s.decision.reason, s.decision.confidence,
                           next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating,
-                          again["on"] if again and again["delta_bic"] is not None else ""))
+                          again.get("on", "")))
     label = "base" + "".join(f" − {r['effect']}" for r in removed) + (" (own effects refitted)" if refitted else "") \
         + "".join(f" + {p.effect}" for p in picks)
     allowed = allowed_wander(data)
