@@ -228,15 +228,20 @@ SEEDS = (0, 1, 2)
 @pytest.mark.parametrize("truth", sorted(set(truths("lab")) & set(truths("perturbed")) - {"none", "creep", "lowpass",
                                                                                             "drift", "play"}))
 def test_catalog_effect_named_with_high_confidence_in_most_seeds(suite, truth):
+    """Named first and within 1.5× the true model's error in most seeds, "high" — or "medium" held
+    back only because a rival came within the 95 % 'high' asks (the closest rival said in the
+    reason; a rule chosen on held-out families, confidence.TWIN_HIGH), never for anything else."""
     hits, rows = 0, []
     for seed in SEEDS:
         case = make_case(suite, truth, seed)
         res = _quiet(diagnose, case.measurements, case.device, case.effects, seed=seed, check_support=False)
         v = res.verdict
-        ok = bool(v.picks) and v.picks[0].effect == truth and v.label == "high" and \
+        why = v.picks[0].confidence.why if v.picks else []
+        rival_only = v.label == "medium" and why and all("comes close" in w for w in why)
+        ok = bool(v.picks) and v.picks[0].effect == truth and (v.label == "high" or rival_only) and \
             v.final_rmse <= 1.5 * case.true_error()
         hits += ok
-        rows.append((seed, v.status, v.chain, v.label, 1e6 * v.final_rmse, 1e6 * case.true_error()))
+        rows.append((seed, v.status, v.chain, v.label, why, 1e6 * v.final_rmse, 1e6 * case.true_error()))
     assert hits >= 2, rows
 
 
