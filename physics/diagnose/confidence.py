@@ -68,27 +68,30 @@ RECORDS_HIGH = 1.0
 #: ... where "lower" allows this relative tolerance (a record the pick leaves as it was).
 RECORD_TOLERANCE = 0.02
 LABELS = ("high", "medium", "low")
+
+
+def _labels(**counts: tuple[int, int, int]) -> dict:
+    """One table of :data:`CALIBRATION`: per label (right, acceptable, wrong) → those and ``n``, the picks."""
+    return {lab: {"n": sum(c), "right": c[0], "acceptable": c[1], "wrong": c[2]} for lab, c in counts.items()}
+
+
 #: What each label has meant on truth families held out of the choice of the thresholds
 #: (``bench/diagnose_lofo.py`` then ``bench/diagnose_calibration.py``): per label, the picks and
 #: how many named the hidden effect (right), a near twin's relative (acceptable) or another
-#: (wrong).  Measured, not assumed; :func:`calibration_text` says it in one sentence.  The first
-#: table is measured with the rules in force; ``rule`` marks the tables measured under an earlier
+#: (wrong), given as ``_labels(high=(right, acceptable, wrong), …)``.  Measured, not assumed;
+#: :func:`calibration_text` says it in one sentence.  The first table is measured with the rules in force; ``rule`` marks the tables measured under an earlier
 #: rule (kept: more cases, and that rule's change can only turn a "high" into a "medium").
 CALIBRATION = (
     {"family": "circuit_lab", "cases": 23, "code": "416e7b9", "seeds": "21",
      "caveat": "seed 21, a fresh draw of a family held out of the choice of the label thresholds, all 23 of its "
                "truths once, measured with the current rules",
      "command": "python bench/diagnose_lofo.py --families circuit_lab --seeds 21 --held-out circuit_lab",
-     "labels": {"high": {"n": 5, "right": 4, "acceptable": 1, "wrong": 0},
-                "medium": {"n": 15, "right": 11, "acceptable": 2, "wrong": 2},
-                "low": {"n": 2, "right": 0, "acceptable": 0, "wrong": 2}}},
+     "labels": _labels(high=(4, 1, 0), medium=(11, 2, 2), low=(0, 0, 2))},
     {"family": "circuit_lab", "cases": 25, "code": "409893e, ca35c0a", "seeds": "6, 7",
      "caveat": "fresh draws (seeds 6 and 7): every one of its 23 truths at least once",
      "command": "python bench/diagnose_lofo.py --families circuit_lab --seeds 6,7 --held-out circuit_lab",
      "rule": "60 %",
-     "labels": {"high": {"n": 8, "right": 7, "acceptable": 1, "wrong": 0},
-                "medium": {"n": 16, "right": 11, "acceptable": 2, "wrong": 3},
-                "low": {"n": 3, "right": 1, "acceptable": 0, "wrong": 2}}},
+     "labels": _labels(high=(7, 1, 0), medium=(11, 2, 3), low=(1, 0, 2))},
     #: an early copy of pnp_fd was among the families the thresholds were chosen on and its seeds
     #: 0-4 were read while later fixes and rules were chosen; these are fresh draws, seed 5 run at
     #: 6ee2a33 (23 cases) and seed 19 at 6e5b198–b4b63ea (23 cases), pooled
@@ -96,9 +99,7 @@ CALIBRATION = (
      "caveat": "fresh draws (seeds 5 and 19); an early copy of it was seen when the thresholds were chosen",
      "command": "python bench/diagnose_lofo.py --families pnp_fd --seeds 5,19 --held-out pnp_fd",
      "rule": "60 %",
-     "labels": {"high": {"n": 12, "right": 11, "acceptable": 1, "wrong": 0},
-                "medium": {"n": 29, "right": 18, "acceptable": 7, "wrong": 4},
-                "low": {"n": 3, "right": 2, "acceptable": 0, "wrong": 1}}},
+     "labels": _labels(high=(11, 1, 0), medium=(18, 7, 4), low=(2, 0, 1))},
 )
 
 
