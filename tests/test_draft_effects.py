@@ -308,8 +308,8 @@ def _diagnosis_stub(winner, res, rmse_final):
         fit.spec = _Stub(label=f"+{winner}", free=["kf", "Y", "beta_f"])
     forms = F.describe(fit, res.records)
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
-                 adequacy=_Stub(adequate=False, forms=forms), records=res.records, candidates=[],
-                 verdict=_Stub(status="partly explained" if winner else "not explained by the catalog"))
+                 adequacy=_Stub(adequate=False, forms=forms), records=res.records, candidates=[], steps=[],
+                 verdict=_Stub(status="partly explained" if winner else "not explained by the catalog", picks=[]))
 
 
 def _rediagnose(table, calls, verdicts=None):
@@ -395,6 +395,79 @@ def test_no_further_round_once_the_kept_model_is_within_the_noise():
         out = draft_effects(_diagnosis_stub(pick, res, 4e-6), _rediagnose(table, calls, {on_base: verdict}))
         assert [c[0] for c in calls] == [on_base, on_base + (pick,), on_base + (pick, lp)]
         assert [d.effect_id for d in out.kept] == [lp]
+
+
+def _verdict_pick(effect, label, before, after, step=1):
+    """A verdict line of ``effect`` labelled ``label`` (a real :class:`.verdict.Pick`)."""
+    from physics.diagnose.confidence import Confidence
+    from physics.diagnose.verdict import Pick
+    c = Confidence(1.0, 3.5, 4.2, 1.0, None, 1.0, 0, 0, 1.0, None)
+    c.label = label
+    return Pick(step, effect, 1.0, before, after, -500.0, 0.0, {}, [], "the step's reason", c)
+
+
+def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_against_its_step_s_rivals():
+    """When the draft rounds keep a draft beside a pick of the chain, the pick is labelled again on
+    the model written: a forward step on that model less the pick, offered with its step's rivals
+    not in the model; its verdict line (label, errors, where) becomes that step's.  When that step
+    picks a rival, or nothing, the pick keeps its label and the notes say why; without a kept draft
+    nothing is labelled again."""
+    from physics.diagnose.draft import WRITTEN, draft_effects
+    sd, sp, lp, dr = "solvent_diffusion", "drafted_slow_pole", "drafted_output_lowpass", "drafted_drift"
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+    on_base = ("double_layer", sd)
+    written = on_base + (sp,)
+    table = {on_base: (10e-6, {sp: (3e-6, -900.0, {"slow_pole_tau": 6.0}), lp: (9.9e-6, -1.0, {}),
+                               dr: (10.2e-6, 6.0, {})}),
+             written: (3e-6, {lp: (2.99e-6, -1.0, {}), dr: (3.1e-6, 6.0, {})})}
+
+    def diagnosis():
+        d = _diagnosis_stub(sd, res, 10e-6)
+        d.final.effects = list(on_base)
+        d.draft_base = _fit_stub(10e-6)
+        d.draft_base.effects = list(on_base)
+        d.steps = [_Stub(index=1, result=d.final,
+                         ranking=[_Stub(effect=e) for e in (sd, "fractional_coupling", "viscoelastic")])]
+        d.verdict.picks = [_verdict_pick(sd, "medium", 90e-6, 10e-6)]
+        return d
+
+    def rediagnose(relabel):
+        rounds, calls = _rediagnose(table, []), []
+
+        def run(device, effects, free, candidates):
+            calls.append((tuple(effects), tuple(candidates)))
+            if sd in candidates:            # the relabel: the model written less the pick
+                return _Stub(verdict=_Stub(picks=relabel, status="nothing to explain"))
+            out = rounds(device, effects, free, candidates)
+            for c in out.candidates:
+                c.fit.effects = list(effects) + [c.effect]
+            return out
+        return run, calls
+
+    high = _verdict_pick(sd, "high", 159e-6, 2.95e-6)
+    high.confidence.why = []
+    d = diagnosis()
+    run, calls = rediagnose([high])
+    out = draft_effects(d, run)
+    assert [k.effect_id for k in out.kept] == [sp]
+    assert calls[-1] == (("double_layer", sp), (sd, "fractional_coupling", "viscoelastic"))
+    p = d.verdict.picks[0]
+    assert (p.label, p.on, p.rmse_before, p.rmse_after) == ("high", WRITTEN, 159e-6, 2.95e-6)
+    assert "against fractional_coupling, viscoelastic fitted there too: confidence high" in p.reason
+    # a rival picked in its place, or nothing picked: the pick keeps its label
+    for relabel, said in [([_verdict_pick("viscoelastic", "high", 159e-6, 2.9e-6)], "viscoelastic is picked in its place"),
+                          ([], "no candidate is picked (nothing to explain)")]:
+        d = diagnosis()
+        out = draft_effects(d, rediagnose(relabel)[0])
+        p = d.verdict.picks[0]
+        assert (p.label, p.on, p.rmse_after) == ("medium", "", 10e-6)
+        assert any(said in n and f"{sd} keeps its confidence (medium)" in n for n in out.notes)
+    # no draft kept: no relabel is tried
+    table[on_base] = (10e-6, {sp: (9.95e-6, -1.0, {}), lp: (9.9e-6, -1.0, {}), dr: (10.2e-6, 6.0, {})})
+    d = diagnosis()
+    run, calls = rediagnose([high])
+    out = draft_effects(d, run)
+    assert not out.kept and all(sd not in c[1] for c in calls) and d.verdict.picks[0].label == "medium"
 
 
 def test_both_orders_of_a_low_pass_compete_and_the_one_not_chosen_leaves_the_pool():
