@@ -349,7 +349,7 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
             what = (f"{q.effect} is picked in its place" if q is not None and q.effect != p.effect
                     else f"it is ambiguous with {q.twin}" if q is not None
                     else f"no candidate is picked ({again.verdict.status})")
-            outcome.notes.append(f"on {WRITTEN} without {p.effect}, {what}: {p.effect} keeps its confidence ({p.label})")
+            outcome.notes.append(f"without {p.effect} on {WRITTEN}, {what}: {p.effect} keeps its confidence ({p.label})")
             continue
         c = q.confidence
         p.reason += (f"; on {WRITTEN} it lowers the RMS error {1e6 * q.rmse_before:.4g} → {1e6 * q.rmse_after:.4g} µm "
