@@ -940,6 +940,13 @@ def effect_values(mf: ModelFit, effect: str) -> dict:
     return {k: v for k, v in mf.values.items() if k in names}
 
 
+
+def effect_rows(mf: ModelFit, effect: str) -> dict:
+    """:func:`effect_values` with their standard errors, as a verdict line gives them:
+    {name: {"value", "std_error"}} (SI units)."""
+    return {n: {"value": v, "std_error": mf.std_errors.get(n)} for n, v in effect_values(mf, effect).items()}
+
+
 def prediction_distance(a: ModelFit, b: ModelFit) -> float:
     """RMS difference [m] between two fitted models' predictions (decimated, offsets removed)."""
     sq, cnt = 0.0, 0

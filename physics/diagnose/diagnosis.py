@@ -57,7 +57,7 @@ from ..model import ActuatorModel, resolve_effects
 from ..execution.parallel import map_tasks, warm_up
 from ..execution.threads import single_threaded
 from .candidates import (Comparison, ModelFit, ModelSpec, ROLE_GAIN, ROLE_STIFF, candidate_spec, compare_fits,
-                         default_candidates, default_free, derived_starts, effect_values, fit_model, is_nested,
+                         default_candidates, default_free, derived_starts, effect_rows, effect_values, fit_model, is_nested,
                          no_worse_than_base, param_used, prediction_distance, refine_on_time, removal_spec, score,
                          start_in_range, start_on_time, TIME_REFINE_SIMS)
 from . import confidence as conf
@@ -911,11 +911,10 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
             continue
         again = s.decision.relabelled       # labelled again on a later model: its numbers there
         at = final if again or any(t.refit is not None and t.index > s.index for t in steps) else p.fit   # its values now
-        own = effect_values(at, p.effect)
         before, after, dbic = ((again["rmse_without"], again["rmse_with"], again["delta_bic"]) if again
                                else (s.base.rmse, p.fit.rmse, p.comparison.delta_bic))
         picks.append(Pick(s.index, p.effect, s.decision.weight, before, after, dbic, p.comparison.p_value,
-                          {n: {"value": v, "std_error": at.std_errors.get(n)} for n, v in own.items()},
+                          effect_rows(at, p.effect),
                           list(p.quality), s.decision.reason, s.decision.confidence,
                           next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating,
                           again.get("on", "")))

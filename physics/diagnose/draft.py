@@ -329,7 +329,7 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
     read "high".  A pick that is not picked again (another candidate is, or the model without it
     is within the noise: the draft took its part), or that has a near twin, keeps its label; the
     notes say so."""
-    from .candidates import effect_values, map_free
+    from .candidates import effect_rows, map_free
     fit = outcome.final
     if not outcome.kept or fit is None or fit.rmse >= res.final.rmse:
         return
@@ -359,7 +359,7 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
         p.confidence, p.weight, p.on = c, q.weight, WRITTEN
         p.rmse_before, p.rmse_after, p.delta_bic = q.rmse_before, q.rmse_after, q.delta_bic
         p.quality = list(q.quality)
-        p.parameters = {n: {"value": v, "std_error": fit.std_errors.get(n)} for n, v in effect_values(fit, p.effect).items()}
+        p.parameters = effect_rows(fit, p.effect)
         outcome.notes.append(f"{p.effect} labelled again on {WRITTEN}: confidence {q.label}")
         say(f"drafts: {p.effect} on {WRITTEN}: confidence {q.label}")
 
