@@ -1,15 +1,24 @@
 """``solvent_diffusion``: solvent dragged by the cations and diffusing back (back-relaxation).
 
 Thesis eq. 7: ∂Cs/∂t = −∇·(n⁺ f⁺ − Ds ∇Cs).  Cations carry n⁺ solvent molecules to the
-cathode; the excess then diffuses back through the thickness (no-flux faces).  For the
-first moment of the solvent excess — the quantity that bends the strip — relative to
-its value without diffusion the exact factor is (docs/reference/physics.md)
+cathode; the excess then diffuses back through the thickness (no flux at the face, zero at the
+mid-plane by symmetry).  For the first moment of the solvent excess — the quantity that bends
+the strip — relative to its value without diffusion, with the solvent released uniformly in a
+layer of thickness δ at each face (``solvent_layer``; the electrode's interpenetrated layer,
+a few µm in platinum IPMCs), the exact factor is
+
+    B(s) = 1 − (1 − e^{−2kσ})(1 − e^{−kδ}) / (k² σ δ (1 + e^{−2kh})),   k = sqrt(s/Ds), σ = h − δ/2,
+
+i.e. 1 − shc(kσ)·shc(kδ/2)/cosh(kh) with shc(z) = sinh(z)/z, written so that it cannot
+overflow.  Its δ → 0 limit is the classical sheet release (Crank, *The Mathematics of
+Diffusion*, §4.3; docs/reference/physics.md)
 
     B(s) = 1 − tanh(g)/g,   g = h sqrt(s/Ds),
 
 B → 1 at high frequency and B ≈ s h²/(3 Ds) → 0 at DC: the deflection relaxes back with
 a time scale ~h²/Ds (≈ 34 s for the IP2C's water, ≈ 1 h for the IPMC's ethylene glycol;
-Porfiri, Sharghi & Zhang 2018).  The interface solvent excess Cs_up (eq. 8) is reported
+Porfiri, Sharghi & Zhang 2018).  A layer δ > 0 keeps more of the moment above ~Ds/δ²: the
+solvent must first leave the layer.  The interface solvent excess Cs_up (eq. 8) is reported
 as the first-moment-equivalent interface value, so it carries the same factor.
 Off: the solvent stays with the cations (B = 1).
 """
@@ -17,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
+from ..parameters import ParamSpec
 from .base import Effect
 
 
@@ -40,10 +51,15 @@ class SolventDiffusion(SolventDrag):
     summary = "solvent dragged by cations (n+) and diffusing back (Ds): back-relaxation, time scale h²/Ds"
     explanation = __doc__
     requires = ("D_solvent", "n_solvation")
+    params = (ParamSpec("solvent_layer", "m", 0.0, 1e-3,
+                        "thickness δ of the layer at each face into which the cations release their solvent "
+                        "(0: at the face)", optional=True, default=0.0),)
     # h²/Ds from 0.2 s to 1e5 s, with h² = t_polymer²/4
     diagnosis = {
-        "free": ("D_solvent",), "bounds": {"D_solvent": (0.25 / 1e5, 0.25 / 0.2, "t_polymer^2")},
-        "starts": [{"D_solvent": (0.25 / x, "t_polymer^2")} for x in (3.0, 30.0, 300.0, 3000.0)],
+        "free": ("D_solvent",), "shape": ("solvent_layer",),
+        "bounds": {"D_solvent": (0.25 / 1e5, 0.25 / 0.2, "t_polymer^2"), "solvent_layer": (0.005, 0.25, "t_polymer")},
+        "starts": [{"D_solvent": (0.25 / x, "t_polymer^2"), "solvent_layer": (0.02, "t_polymer")}
+                   for x in (3.0, 30.0, 300.0, 3000.0)],
         "nested": True,                      # in the limit Ds -> 0 (B(s) -> 1), outside the admissible range
         "excitation": "a swept sine starting at 0.5 Hz or lower, or a square pulse/step holding at least 5 s "
                       "(back-relaxation)",
@@ -60,14 +76,31 @@ class SolventDiffusion(SolventDrag):
         return device.with_params(D_solvent=ds), {"D_solvent": ds}
 
     def solvent_diffusivity(self, p) -> float:
+        """Ds [m²/s]; the reference solver releases the solvent where its PNP puts the cations (a
+        Debye-thin layer), so a ``solvent_layer`` δ > 0 is refused there."""
+        dl = self.value(p, "solvent_layer")
+        if dl > 0.0:
+            raise InputError(f"the reference solver releases the solvent in the double layer, not in a "
+                             f"{1e6 * dl:.3g}-µm layer: set solvent_layer to 0 in section {self.id!r} of the "
+                             "device file to compare with it")
         return float(p["D_solvent"])
 
     def solvent_factor(self, s, p) -> np.ndarray:
-        g = 0.5 * p["t_polymer"] * np.sqrt(np.asarray(s, dtype=complex) / p["D_solvent"])
+        """B(s) of the module doc at ``s`` [rad/s]; series in k² below |kh| = 1e-3."""
+        h = 0.5 * p["t_polymer"]
+        dl = min(self.value(p, "solvent_layer"), h)
+        k = np.sqrt(np.asarray(s, dtype=complex) / p["D_solvent"])
+        g = k * h
         out = np.empty_like(g)
-        small = np.abs(g) < 1e-2
-        gs = g[small] ** 2
-        out[small] = gs / 3.0 - 2.0 * gs ** 2 / 15.0 + 17.0 * gs ** 3 / 315.0
-        gb = g[~small]
-        out[~small] = 1.0 - np.tanh(gb) / gb
+        small = np.abs(g) < 1e-3
+        if dl <= 0.0:
+            gs = g[small] ** 2
+            out[small] = gs / 3.0 - 2.0 * gs ** 2 / 15.0 + 17.0 * gs ** 3 / 315.0
+            gb = g[~small]
+            out[~small] = 1.0 - np.tanh(gb) / gb
+            return out
+        sig = h - 0.5 * dl
+        out[small] = k[small] ** 2 * (h * h / 2 - sig * sig / 6 - dl * dl / 24)
+        kb = k[~small]
+        out[~small] = 1.0 - np.expm1(-2 * kb * sig) * np.expm1(-kb * dl) / (kb * kb * sig * dl * (1 + np.exp(-2 * kb * h)))
         return out
