@@ -283,6 +283,50 @@ def test_residual_checks_white_vs_missing_dynamics():
     assert any("correlated with the input" in f for f in ra2.findings)
 
 
+def test_a_misfit_that_moves_with_humidity_is_read_from_records_of_one_design_even_when_the_gain_ratio_holds():
+    """The same multisine at RH 40 % and at RH 80 %: a model that misses a narrow band (a resonance
+    that moved) at RH 80 % only keeps the median measured/model gain within 5 % at both levels, yet
+    the residual beyond the noise differs many-fold between the two records of one design: the RH
+    dependence is present.  A gain 10 % lower at RH 80 % is one too.  The same misfit at both levels, or a misfit on a record of another
+    design, is not RH dependence; nor is a contrast read when the model has parameters per RH
+    level (each level then has its own fit)."""
+    from scipy import signal as ssig
+    from physics.diagnose.signatures import features
+    rng = np.random.default_rng(7)
+    recs = []
+    for k, (amp, rh, f_hi) in enumerate([(0.3, 40.0, 20.0), (0.3, 80.0, 20.0), (0.6, 60.0, 10.0)]):
+        sig = signals.multisine(amp, 0.1, f_hi, 20.0, periods=3, fs=100.0, seed=k)
+        y = 1e-3 * np.convolve(sig.v, np.exp(-np.arange(40) / 8.0) / 8.0)[:sig.v.size]
+        recs.append(TimeSeries(sig.t, sig.v, y + 1e-6 * rng.standard_normal(sig.t.size),
+                               rh=np.full(sig.t.size, rh), source=f"ms{k}"))
+    recs = prepare_records(recs)
+    sos = ssig.butter(2, [5.0, 7.0], btype="bandpass", fs=recs[0].fs_d, output="sos")
+
+    def feats(missed, per_rh=False, gains=(1.0, 1.0, 1.0)):
+        preds, resid = [], []
+        for r, m, g in zip(recs, missed, gains):
+            pred = (r.y_d - m * ssig.sosfilt(sos, r.y_d)) / g
+            e = r.y_d - pred + r.noise_floor_d * rng.standard_normal(r.y_d.size)
+            preds.append(pred)
+            resid.append(e - e.mean())
+        ra = analyse("m", recs, resid, preds, per_rh=per_rh)
+        return ra, features(ra, recs, None)
+
+    ra, f = feats([0.0, 0.5, 0.0])
+    [c] = ra.rh_contrast
+    assert abs(c["gain_change"]) < 0.05                 # the gain ratio alone would not see it
+    assert (c["rh_low_pct"], c["rh_high_pct"]) == (40.0, 80.0) and c["depends_on_rh"] and c["contrast"] > 5
+    assert f["rh_dependence"]["present"] is True
+    assert any("at RH 40 %" in x and "depends on humidity" in x for x in ra.findings)
+    for missed in ([0.5, 0.5, 0.0], [0.0, 0.0, 0.5]):
+        ra, f = feats(missed)
+        assert not ra.rh_contrast[0]["depends_on_rh"] and f["rh_dependence"]["present"] is False, missed
+    ra, f = feats([0.0, 0.0, 0.0], gains=(1.0, 1.1, 1.0))     # the whole gain, 10 % off, at RH 80 % only
+    assert f["rh_dependence"]["present"] is True and ra.rh_contrast[0]["gain_change"] > 0.05
+    ra, f = feats([0.0, 0.5, 0.0], per_rh=True)
+    assert ra.rh_contrast == [] and f["rh_dependence"]["present"] is None      # not readable there
+
+
 def test_amplitude_dependence_is_read_at_one_humidity_and_harmonics_above_the_noise():
     """A model whose gain is off at RH 40 % only, on a linear strip driven at two amplitudes at
     RH 60 %: no gain that depends on the amplitude (the misfit differs by humidity, not by

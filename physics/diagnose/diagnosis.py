@@ -875,7 +875,8 @@ def _linear_rival(pick, ranked) -> "CandidateResult | None":
 
 
 def _features_after(data: PreparedRecords, fit: ModelFit, label: str, run: DiagnosisRun) -> dict:
-    ra = analyse(label, data.records, fit.resid_d, fit.pred_d, resonance_hz=_resonance(fit, data.band, data.records))
+    ra = analyse(label, data.records, fit.resid_d, fit.pred_d, resonance_hz=_resonance(fit, data.band, data.records),
+                 per_rh=bool(fit.spec.per_rh))
     return features_of(ra, data, fit, run)
 
 
@@ -1168,7 +1169,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     add_wander(data, base)
     run.resonance = _resonance(base, data.band, data.records)
     ra_base = _timed(run, "residual_analysis", analyse, "base", data.records, base.resid_d, base.pred_d,
-                     resonance_hz=run.resonance)
+                     resonance_hz=run.resonance, per_rh=bool(base.spec.per_rh))
     feats = features_of(ra_base, data, base, run)
     steps = select(data, base, cand_ids, feats, run)
     final = steps[-1].result
@@ -1180,7 +1181,7 @@ def diagnose(measurements: Sequence, device, effects=None, free: Sequence[str] |
     shown = picks[-1] if picks else (steps[0].ranking[0] if steps[0].ranking else None)
     ra_after = None if shown is None else analyse(
         "+" + " +".join(p.effect for p in picks) if picks else f"+{shown.effect}", data.records, shown.fit.resid_d,
-        shown.fit.pred_d, resonance_hz=_resonance(shown.fit, data.band, data.records))
+        shown.fit.pred_d, resonance_hz=_resonance(shown.fit, data.band, data.records), per_rh=bool(shown.fit.spec.per_rh))
     run.timings["total"] = time.perf_counter() - t_all
     settings = {"effects": list(base_ids), "free": base.spec.free, "per_rh": base.spec.per_rh,
                 "candidates": cand_ids, "force": force, "max_effects": run.max_effects, "backward": run.backward,

@@ -42,7 +42,10 @@ thermal                     (not by default) long large-amplitude records
 * ``amplitude_dependence`` — the measured/model gain differs by > 3 % between two amplitudes
   of the same kind of excitation at one RH level (:func:`.residuals.amplitude_contrast`):
   ``nonlinear_charge``; ``harmonics`` — > 5 % of the residual at harmonics, beyond the noise;
-* ``rh_dependence`` — the measured/model gain differs by > 5 % between RH levels: ``humidity``;
+* ``rh_dependence`` — records of one design (kind, amplitude level, band) at two RH levels differ in
+  measured/model gain by > 5 % or leave residuals beyond the noise differing by > 2×
+  (:func:`.residuals.rh_contrast`; records of different designs are not compared, and a model with
+  parameters per RH level is not read): ``humidity``;
 * ``step_back_relaxation`` / ``step_creep`` — after steps the measurement relaxes back
   (``solvent_diffusion``) or keeps creeping (``fractional_coupling``) relative to the model;
 * ``slow_trend`` — the residual moves by more than 3× the noise floor from the first to the
@@ -73,7 +76,7 @@ FEATURE_TEXT = {
     "lf_small_lag": "small constant phase lag below resonance (material loss)",
     "amplitude_dependence": "gain that depends on amplitude",
     "harmonics": "harmonic distortion",
-    "rh_dependence": "gain that depends on RH",
+    "rh_dependence": "a misfit that depends on RH (one design at two RH levels)",
     "step_back_relaxation": "back-relaxation after steps",
     "step_creep": "creep after steps",
     "slow_trend": "a slow trend of the same sign in every record",
@@ -147,10 +150,10 @@ def features(ra: ResidualAnalysis, records: Sequence[PreparedRecord], resonance_
         out["amplitude_dependence"] = {"present": None}
     d = [x for x in (a.get("distortion_share_of_residual") for a in ra.by_amplitude) if x is not None]
     out["harmonics"] = {"present": bool(max(d) > HARMONIC_SHARE), "share": max(d)} if d else {"present": None}
-    if len(ra.by_rh) >= 2:
-        g = [row.get("gain_ratio_meas_over_model") for row in ra.by_rh]
-        g = [x for x in g if x]
-        out["rh_dependence"] = {"present": bool(len(g) >= 2 and max(g) / min(g) > 1.05), "gain_ratios": g}
+    if ra.rh_contrast:
+        out["rh_dependence"] = {"present": any(c["depends_on_rh"] for c in ra.rh_contrast),
+                                "contrasts": [c["contrast"] for c in ra.rh_contrast],
+                                "gain_changes": [c["gain_change"] for c in ra.rh_contrast]}
     else:
         out["rh_dependence"] = {"present": None}
     steps = ra.after_steps
