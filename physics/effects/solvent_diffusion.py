@@ -85,7 +85,8 @@ class SolventDiffusion(SolventDrag):
         return float(p["D_solvent"])
 
     def solvent_factor(self, s, p) -> np.ndarray:
-        """B(s) of the module doc at ``s`` [rad/s]; series in k² below |kh| = 1e-2 (δ = 0) or 1e-3."""
+        """B(s) of the module doc at ``s`` [rad/s] (δ ≥ h: released over the whole half-thickness); series
+        in k² below |kh| = 1e-2 (δ = 0) or 1e-3."""
         h = 0.5 * p["t_polymer"]
         dl = min(self.value(p, "solvent_layer"), h)
         k = np.sqrt(np.asarray(s, dtype=complex) / p["D_solvent"])
