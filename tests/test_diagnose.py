@@ -287,9 +287,10 @@ def test_a_misfit_that_moves_with_humidity_is_read_from_records_of_one_design_ev
     """The same multisine at RH 40 % and at RH 80 %: a model that misses a narrow band (a resonance
     that moved) at RH 80 % only keeps the median measured/model gain within 5 % at both levels, yet
     the residual beyond the noise differs many-fold between the two records of one design: the RH
-    dependence is present.  A gain 10 % lower at RH 80 % is one too.  The same misfit at both levels, or a misfit on a record of another
-    design, is not RH dependence; nor is a contrast read when the model has parameters per RH
-    level (each level then has its own fit)."""
+    dependence is present.  A model whose whole gain is 10 % low at RH 80 % only is one too.  The
+    same misfit at both levels, or a misfit on a record of another design, is not RH dependence;
+    nor is a contrast read when the model has parameters per RH level (each level then has its
+    own fit)."""
     from scipy import signal as ssig
     from physics.diagnose.signatures import features
     rng = np.random.default_rng(7)
@@ -321,7 +322,7 @@ def test_a_misfit_that_moves_with_humidity_is_read_from_records_of_one_design_ev
     for missed in ([0.5, 0.5, 0.0], [0.0, 0.0, 0.5]):
         ra, f = feats(missed)
         assert not ra.rh_contrast[0]["depends_on_rh"] and f["rh_dependence"]["present"] is False, missed
-    ra, f = feats([0.0, 0.0, 0.0], gains=(1.0, 1.1, 1.0))     # the whole gain, 10 % off, at RH 80 % only
+    ra, f = feats([0.0, 0.0, 0.0], gains=(1.0, 1.1, 1.0))     # the model's gain 10 % low at RH 80 % only
     assert f["rh_dependence"]["present"] is True and ra.rh_contrast[0]["gain_change"] > 0.05
     ra, f = feats([0.0, 0.5, 0.0], per_rh=True)
     assert ra.rh_contrast == [] and f["rh_dependence"]["present"] is None      # not readable there
