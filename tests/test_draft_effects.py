@@ -406,6 +406,56 @@ def _verdict_pick(effect, label, before, after, step=1):
     return Pick(step, effect, 1.0, before, after, -500.0, 0.0, {}, [], "the step's reason", c)
 
 
+def test_a_pick_the_model_written_leaves_out_says_so_on_its_verdict_line():
+    """A catalog pick that loses the first round to a draft (a sensor low-pass that the electrode
+    resistance mimics) is not in the model written: its verdict line says so, names the draft and
+    both errors, and keeps its label; a pick that wins the round and stays in the model says nothing."""
+    from physics.diagnose.verdict import Verdict
+    from physics.diagnose.draft import draft_effects
+    pick, lp, sp, dr = "electrode_resistance", "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift"
+    res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
+    on_base = ("double_layer",)
+
+    def run(table):
+        rounds = _rediagnose(table, [])
+
+        def go(device, effects, free, candidates):
+            out = rounds(device, effects, free, candidates)
+            for c in out.candidates:
+                c.fit.effects = list(effects) + [c.effect]
+            return out
+        return go
+
+    def diagnosis():
+        d = _diagnosis_stub(pick, res, 5e-6)
+        d.final.effects = ["double_layer", pick]
+        d.verdict.picks = [_verdict_pick(pick, "medium", 90e-6, 5e-6)]
+        return d
+
+    lost = {on_base: (90e-6, {pick: (5e-6, -515.0, {"Rs": 40.0}), lp: (4e-6, -520.0, {"lowpass_tau": 0.0265}),
+                              sp: (80e-6, -20.0, {}), dr: (95e-6, 3.0, {})}),
+            on_base + (lp,): (4e-6, {pick: (3.95e-6, -2.0, {}), sp: (3.9e-6, -1.0, {}), dr: (4.2e-6, 6.0, {})})}
+    d = diagnosis()
+    out = draft_effects(d, run(lost))
+    p = d.verdict.picks[0]
+    assert [k.effect_id for k in out.kept] == [lp] and pick not in out.final.effects
+    assert p.label == "medium" and lp in p.left_out and "4 µm against 5 µm with it" in p.left_out
+    assert any(n.startswith(f"{pick} (the diagnosis's pick) is left out") for n in out.notes)
+    v = Verdict("partly explained", d.verdict.picks, {}, None, 90e-6, 1e-6, "test")
+    assert any(line.startswith("  Left out of the model written:") and lp in line for line in v.lines())
+    assert v.to_dict()["chain"][0]["left_out_of_written"] == p.left_out
+    won = {on_base: (90e-6, {pick: (4e-6, -520.0, {"Rs": 40.0}), lp: (6e-6, -400.0, {}), sp: (80e-6, -20.0, {}),
+                             dr: (95e-6, 3.0, {})}),
+           on_base + (pick,): (4e-6, {lp: (3.5e-6, -30.0, {"lowpass_tau": 0.02}), sp: (3.9e-6, -1.0, {}),
+                                      dr: (4.2e-6, 6.0, {})}),
+           on_base + (pick, lp): (3.5e-6, {sp: (3.45e-6, -1.0, {}), dr: (3.6e-6, 6.0, {})})}
+    d = diagnosis()
+    out = draft_effects(d, run(won))
+    assert pick in out.final.effects and d.verdict.picks[0].left_out == ""
+    assert not any("left out" in line for line in
+                   Verdict("partly explained", d.verdict.picks, {}, None, 90e-6, 1e-6, "test").lines())
+
+
 def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_against_its_step_s_rivals():
     """When the draft rounds keep a draft beside a pick of the chain, the pick is labelled again on
     the model written: a forward step on that model less the pick, offered with its step's rivals

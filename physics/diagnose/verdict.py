@@ -355,6 +355,7 @@ class Pick:
     twin: str = ""                   # a near twin the data could not tell from it (the chain carried on)
     separating: str = ""             # the record that would separate them
     on: str = ""                     # labelled again on a later model (its numbers are then without → with it there)
+    left_out: str = ""               # why the model written leaves it out (the draft rounds put drafts in its place)
 
     @property
     def label(self) -> str:
@@ -366,7 +367,7 @@ class Pick:
                 "rmse_before_m": self.rmse_before, "rmse_after_m": self.rmse_after, "delta_bic": self.delta_bic,
                 "p_value": self.p_value, "parameters": self.parameters, "quality_flags": self.quality,
                 "reason": self.reason, "near_twin": self.twin or None, "separating_record": self.separating or None,
-                "relabelled_on": self.on or None}
+                "relabelled_on": self.on or None, "left_out_of_written": self.left_out or None}
 
 
 @dataclass
@@ -454,6 +455,8 @@ class Verdict:
                            + (f"; {params}" if params else "") + ".")
                 if p.quality:
                     out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
+                if p.left_out:
+                    out.append(f"  Left out of the model written: {p.left_out}.")
             if self.stopped:
                 out.append(f"The chain stops: {self.stopped}.")
         elif self.status == "nothing to explain":
