@@ -168,6 +168,44 @@ def test_a_pick_the_refitted_model_needs_is_labelled_again_on_it():
     assert "on the model with its own effects refitted" in pick.reason
 
 
+def test_a_pick_s_refine_parameter_is_fitted_on_the_final_model_only(monkeypatch):
+    """Solvent diffusion hidden with its solvent released in a layer at each face 5 % of the
+    membrane thick (δ = 9 µm, the closed form checked against a finite-volume solve in
+    test_physics_effects.py): the chain picks it with δ held at the device's 0 (the classical law);
+    its last step fits δ on the final model, which brings the error to the noise and δ near the
+    truth.  The same strip with δ = 0 keeps no such step (the extra parameter buys nothing)."""
+    from physics.effects import EFFECTS
+    cls = EFFECTS["solvent_diffusion"]
+    draw = cls.draw_truth
+
+    def with_layer(share):
+        def drawn(device, rng):
+            dev, own = draw(device, rng)
+            delta = share * device.params["t_polymer"]
+            return dev.with_params(solvent_layer=delta), {**own, "solvent_layer": delta}
+        return staticmethod(drawn)
+
+    found = {}
+    for share in (0.05, 0.0):
+        monkeypatch.setattr(cls, "draw_truth", with_layer(share))
+        case = hidden_effect_case("solvent_diffusion", seed=1)
+        res = _diagnose(case, candidates="solvent_diffusion", check_support=False)
+        assert res.verdict.chain == ["solvent_diffusion"], res.verdict.reason
+        found[share] = (case, res)
+    case, res = found[0.05]
+    last, pick = res.steps[-1], res.steps[0].decision.pick
+    assert last.kind == "refit" and list(last.refitted) == ["solvent_layer"]
+    assert "solvent_layer" not in pick.fit.spec.free          # not freed while the candidates competed
+    delta = case.truth_params["solvent_layer"]
+    assert last.refitted["solvent_layer"]["refined"] == pytest.approx(delta, rel=0.15)
+    assert pick.fit.rmse > 1.5 * res.final.rmse and res.final.rmse < 1.3 * case.noise_floor
+    assert "solvent_layer" in res.verdict.refined and not res.verdict.refitted
+    assert any(line.startswith("Then the picks' shape refined on the final model") and "solvent_layer 0 → 9" in line
+               for line in res.verdict.lines())
+    case, res = found[0.0]
+    assert not any(s.picks_refined for s in res.steps) and not res.verdict.refined
+
+
 # ---------------------------------------------------------------------------- what the data can reveal
 
 

@@ -40,13 +40,20 @@ def shape_params(effect: str) -> tuple[str, ...]:
     return tuple(spec_of(effect).get("shape", ()))
 
 
+def refine_params(effect: str) -> tuple[str, ...]:
+    """Parameters of the effect's law fitted only once the chain has picked it, on the final model
+    (its spec's ``refine``, :func:`.diagnosis.refine_picks`): freed while the candidates compete, they
+    would let the effect stand in for others."""
+    return tuple(spec_of(effect).get("refine", ()))
+
+
 def keeps_spec_range(name: str) -> bool:
     """True when ``name`` is an effect's own parameter in the diagnosis (:func:`effect_params`,
     :func:`shape_params`): it keeps its spec's range in every fit of the diagnosis, the base's
     included — a drafted refit starts from a pick's model with its parameters free, and the
     device check's wider range reaches values the time solver cannot realise (D_solvent of
     1e-18 m²/s, a diffusion time of 10⁹ s)."""
-    return any(name in shape_params(e) or name in effect_params(e) for e in owners(name))
+    return any(name in shape_params(e) or name in effect_params(e) or name in refine_params(e) for e in owners(name))
 
 
 def is_nested(effect: str) -> bool:
@@ -76,7 +83,7 @@ def owners(name: str) -> list[str]:
     for e, cls in EFFECTS.items():
         sp = spec_of(e)
         if any(p.name == name for p in cls.params) or name in sp.get("free", ()) or name in sp.get("shape", ()) \
-                or name in sp.get("bounds", {}):
+                or name in sp.get("refine", ()) or name in sp.get("bounds", {}):
             out.append(e)
     return out
 

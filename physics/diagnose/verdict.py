@@ -390,6 +390,7 @@ class Verdict:
     removed: list = field(default_factory=list)             # effects of the model the data do not support
     withdrawn: list = field(default_factory=list)           # picks the data no longer favour once refitted
     refitted: dict = field(default_factory=dict)            # own effects' parameters refitted: {name: values}
+    refined: dict = field(default_factory=dict)             # the picks' refine parameters fitted at the end: likewise
 
     # --- the first answer, as before the chain existed ---------------------------------
     @property
@@ -459,6 +460,10 @@ class Verdict:
                     out.append(f"  Left out of the model written: {p.left_out}.")
             if self.stopped:
                 out.append(f"The chain stops: {self.stopped}.")
+            if self.refined:
+                out.append("Then the picks' shape refined on the final model (held at the device's values while the "
+                           "candidates competed, so that it could not let a pick stand in for another effect): "
+                           + ", ".join(_fmt_refit(n, v) for n, v in self.refined.items()) + ".")
         elif self.status == "nothing to explain":
             out.append(f"Which effect: none is needed — {self.reason}.")
         elif self.refitted and self.adequacy is not None and self.adequacy.adequate:
@@ -477,7 +482,8 @@ class Verdict:
     def _adequacy_text(self) -> str:
         ad = self.adequacy
         model = "the base" + "".join(f" − {r['effect']}" for r in self.removed) + \
-            (" with its own effects refitted" if self.refitted else "") + "".join(f" + {e}" for e in self.chain)
+            (" with its own effects refitted" if self.refitted else "") + "".join(f" + {e}" for e in self.chain) + \
+            (" (the picks' shape refined)" if self.refined else "")
         if ad is None or ad.adequate is None:
             return f"not assessed — the noise floor is unknown ({self.noise_source})."
         verdict = "yes" if ad.adequate else "no"
@@ -509,7 +515,7 @@ class Verdict:
                 "adequacy": self.adequacy.to_dict() if self.adequacy else None,
                 "remaining_kind": self.remaining_kind, "remaining": self.remaining, "chain_stopped": self.stopped,
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
-                "removed": self.removed, "withdrawn": self.withdrawn, "refitted": self.refitted,
+                "removed": self.removed, "withdrawn": self.withdrawn, "refitted": self.refitted, "refined": self.refined,
                 "final_rmse_m": self.final_rmse,
                 "criteria": {"delta_bic_max": -DELTA_BIC_MIN, "alpha": ALPHA, "min_excess_share": MIN_SHARE,
                              "after_pick_flagged_share": AFTER_PICK_SHARE,

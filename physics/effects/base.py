@@ -76,7 +76,8 @@ from ..parameters import ParamSpec, TableSpec
 #: ``per_rh`` parameters fitted once per RH level instead of shared ones; ``shape`` parameters fitted
 #: with the effect that shape its law but do not decide whether it is there (no quality flag when the
 #: records leave them undetermined, e.g. a low-frequency corner below what a record resolves);
-#: ``describing_function``
+#: ``refine`` parameters of its law fitted only once the chain has picked it, on the final model
+#: (freed while the candidates compete, they would let it stand in for other effects); ``describing_function``
 #: True for a large-signal effect fitted through the describing function; ``by_default`` False
 #: to try it only on request (``--candidates``).  An effect may also define a classmethod
 #: ``diagnosis_start(device) -> {name: value}`` for starts derived from the device (e.g. a table).
@@ -85,8 +86,8 @@ from ..parameters import ParamSpec, TableSpec
 #: a near twin outside its own parametrisation; ``describing_grid(device) -> (parameter, coordinates,
 #: scale)`` the large-signal parameter of a ``describing_function`` effect and its grid (c = scale /
 #: parameter); ``hints`` {parameter: sentence}: why a parameter may have no effect.
-DIAGNOSIS_KEYS = ("free", "shape", "bounds", "starts", "nested", "off", "excitation", "reveal", "signature", "roles",
-                  "per_rh", "describing_function", "by_default")
+DIAGNOSIS_KEYS = ("free", "shape", "refine", "bounds", "starts", "nested", "off", "excitation", "reveal", "signature",
+                  "roles", "per_rh", "describing_function", "by_default")
 #: ``reveal`` rules: {"f_hi_min": Hz}, {"decades_min": n}, {"f_lo_max": Hz, "hold_s": s} (either),
 #: {"spans_resonance": True}, {"rh_levels": n}, {"amplitude_levels": n}; absent: always revealable.
 REVEAL_RULES = ("f_hi_min", "decades_min", "f_lo_max", "hold_s", "spans_resonance", "rh_levels", "amplitude_levels")

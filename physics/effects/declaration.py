@@ -44,7 +44,7 @@ def declaration_problems(cls, *, user: bool = True) -> list[str]:
         unknown = sorted(set(spec) - set(DIAGNOSIS_KEYS))
         if unknown:
             out.append(f"unknown diagnosis key(s) {unknown}; known: {', '.join(DIAGNOSIS_KEYS)}")
-        names = list(spec["free"]) + list(spec.get("shape", ())) + list(spec.get("bounds", {}))
+        names = [*spec["free"], *spec.get("shape", ()), *spec.get("refine", ()), *spec.get("bounds", {})]
         bad = [n for n in names if n not in known | set(cls.requires)]
         if user and bad:
             out.append(f"diagnosis names parameters {bad} that the effect does not declare")

@@ -54,10 +54,12 @@ class SolventDiffusion(SolventDrag):
     params = (ParamSpec("solvent_layer", "m", 0.0, 1e-3,
                         "thickness δ of the layer at each face into which the cations release their solvent "
                         "(0: at the face)", optional=True, default=0.0),)
-    # h²/Ds from 0.2 s to 1e5 s, with h² = t_polymer²/4; solvent_layer is held at the device's value (fitting it
-    # with Ds helped the strips it was chosen on and cost a held-out one its label: CHANGELOG, 2026-12-03)
+    # h²/Ds from 0.2 s to 1e5 s, with h² = t_polymer²/4; solvent_layer (0.5-25 % of the thickness) is refined only
+    # once the chain has picked the effect (fitted with Ds it helped the strips it was chosen on and cost a held-out
+    # one its label: CHANGELOG, 2026-12-03)
     diagnosis = {
-        "free": ("D_solvent",), "bounds": {"D_solvent": (0.25 / 1e5, 0.25 / 0.2, "t_polymer^2")},
+        "free": ("D_solvent",), "refine": ("solvent_layer",),
+        "bounds": {"D_solvent": (0.25 / 1e5, 0.25 / 0.2, "t_polymer^2"), "solvent_layer": (0.005, 0.25, "t_polymer")},
         "starts": [{"D_solvent": (0.25 / x, "t_polymer^2")} for x in (3.0, 30.0, 300.0, 3000.0)],
         "nested": True,                      # in the limit Ds -> 0 (B(s) -> 1), outside the admissible range
         "excitation": "a swept sine starting at 0.5 Hz or lower, or a square pulse/step holding at least 5 s "
