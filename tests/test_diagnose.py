@@ -206,6 +206,50 @@ def test_a_pick_s_refine_parameter_is_fitted_on_the_final_model_only(monkeypatch
     assert not any(s.picks_refined for s in res.steps) and not res.verdict.refined
 
 
+_SLOW_CREEP = """
+from physics.effects import OutputEffect
+from physics.parameters import ParamSpec
+
+
+class SlowCreep(OutputEffect):
+    id = "slow_creep_test"
+    summary = "tip load x (1 + r/(1 + s tau)); tau refined only once picked, no diagnosis bounds for it"
+    params = (ParamSpec("sct_r", "1", -0.9, 10.0, "fraction", optional=True, default=0.0),
+              ParamSpec("sct_tau", "s", 0.01, 1e4, "time constant", optional=True, default=2.0))
+    diagnosis = {"free": ("sct_r",), "refine": ("sct_tau",), "bounds": {"sct_r": (-0.9, 5.0)},
+                 "starts": [{"sct_r": 0.3}], "nested": True, "off": {"sct_r": 0.0},
+                 "excitation": "a step held 10 s", "signature": [("step_creep", 1.0)]}
+
+    @classmethod
+    def draw_truth(cls, device, rng):
+        return device.with_params(sct_r=0.4, sct_tau=12.0), {"sct_r": 0.4, "sct_tau": 12.0}
+
+    def output_tf(self, p):
+        r, tau = self.value(p, "sct_r"), self.value(p, "sct_tau")
+        return [tau, 1.0 + r], [tau, 1.0]
+"""
+
+
+def test_a_user_effect_s_refine_parameter_without_bounds_is_fitted_within_its_declared_range(tmp_path):
+    """A user effect may name a ``refine`` parameter without diagnosis bounds: it is held at the
+    device's value (2 s) while the candidate is fitted and refitted last within its declared
+    range, where it finds the strip's 12 s."""
+    from physics.effects import load_effects_file, unregister
+    path = tmp_path / "slow_creep_test.py"
+    path.write_text(_SLOW_CREEP, encoding="utf-8")
+    ids = load_effects_file(path)
+    try:
+        case = hidden_effect_case("slow_creep_test", seed=0, design=("sweep", "pulse"))
+        res = _diagnose(case, candidates="slow_creep_test", check_support=False)
+    finally:
+        for i in ids:
+            unregister(i)
+    assert res.verdict.chain == ["slow_creep_test"]
+    assert res.verdict.refined["sct_tau"]["device"] == 2.0
+    assert res.verdict.refined["sct_tau"]["refined"] == pytest.approx(12.0, rel=0.1)
+    assert res.final.rmse < 0.9 * res.steps[0].decision.pick.fit.rmse
+
+
 # ---------------------------------------------------------------------------- what the data can reveal
 
 

@@ -587,11 +587,12 @@ def _freed(data: PreparedRecords, fit: ModelFit, own: dict, options: FitOptions,
         return None, {}
     dev = fit.device                    # the fitted model's device: its own effects still at the device's values
     start = {**fit.spec.start, **{n: float(fit.values[n]) for n in fit.spec.free if n in fit.values}}   # where it is
-    bounds = dict(fit.spec.bounds)
+    bounds, specs = dict(fit.spec.bounds), all_param_specs()
     for e, ns in own.items():
         derived = derived_starts(e, dev)
         for n in ns:
-            bounds[n] = param_bounds(n, dev)      # an effect's own parameter keeps its spec's range
+            # an effect's own parameter keeps its spec's range (a user effect's without one: its declared range)
+            bounds[n] = param_bounds(n, dev) or (specs[n].lo, specs[n].hi)
             start[n] = start_in_range(n, dev, derived, bounds[n])
     spec = ModelSpec(label, fit.effects, list(fit.spec.free) + names, list(fit.spec.per_rh), start, bounds)
     out = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
