@@ -348,7 +348,8 @@ class DiagnosisResult:
                      "n_samples_analysed": b.n},
             "noise_floor_m": self.noise_floor, "resonance_Hz": self.resonance_hz,
             "verdict": self.verdict.to_dict(),
-            "steps": [{"step": s.index, "kind": s.kind, "refitted": s.refitted or None, "picks_refined": s.picks_refined,
+            "steps": [{"step": s.index, "kind": s.kind, "refitted": s.refitted or None,
+                       "picks_refined": s.picks_refined,
                        "base_effects": list(s.base.effects), "base_rmse": s.base.rmse,
                        "ranking": [c.row(s.base, s.decision.weights.get(c.effect)) for c in s.ranking],
                        "weight_of_base": s.decision.weights.get("base"),
@@ -569,7 +570,8 @@ def refine_picks(data: PreparedRecords, fit: ModelFit, picked: Sequence[str], op
     −:data:`.forms.SIGNIFICANT_BIC` with the parameters counted and an RMS error lower by
     :data:`.forms.MIN_GAIN` (over thousands of correlated samples a lower BIC alone gave a layer to a
     test strip whose solvent is released at the face, for 0.3 % less error).  The user's own effects
-    are not refined (their device values are the user's).  Returns (the refined model or None, {name: {"device": value, "refined": value}})."""
+    are not refined (their device values are the user's).  Returns (the refined model or None,
+    {name: {"device": value, "refined": value}})."""
     taken = set(fit.spec.free) | set(fit.spec.per_rh)
     own = {e: [n for n in refine_params(e) if n not in taken] for e in picked if e in fit.effects}
     return _freed(data, fit, own, options, n_starts, "final, picks refined", need_bic=SIGNIFICANT_BIC,
@@ -605,7 +607,8 @@ def _freed(data: PreparedRecords, fit: ModelFit, own: dict, options: FitOptions,
     if not out.ok or not compare_fits(fit, out, True).delta_bic < -need_bic \
             or out.rmse > (1.0 - need_gain) * fit.rmse:
         return None, {}
-    return out, {n: {"device": dev.params.get(n, declared_default(n)), "refined": float(out.values[n])} for n in names}
+    return out, {n: {"device": dev.params.get(n, declared_default(n)), "refined": float(out.values[n])}
+                 for n in names}
 
 
 def try_candidates(step: int, base: ModelFit, cand_ids, data: PreparedRecords, run: DiagnosisRun) -> list[CandidateResult]:
