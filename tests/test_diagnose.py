@@ -200,6 +200,10 @@ def test_a_pick_s_refine_parameter_is_fitted_on_the_final_model_only(monkeypatch
     assert last.refitted["solvent_layer"]["refined"] == pytest.approx(delta, rel=0.15)
     assert pick.fit.rmse > 1.5 * res.final.rmse and res.final.rmse < 1.3 * case.noise_floor
     assert "solvent_layer" in res.verdict.refined and not res.verdict.refitted
+    # the pick is labelled again on the refined model: its line reads there (without it → with it)
+    line = res.verdict.picks[0]
+    assert line.on == "the model with the picks' shape refined" and line.rmse_after == res.final.rmse
+    assert line.confidence.refitted and line.confidence.left == pytest.approx(res.final.rmse / res.noise_floor)
     assert any(line.startswith("Then the picks' shape refined on the final model") and "solvent_layer 0 → 9" in line
                for line in res.verdict.lines())
     case, res = found[0.0]

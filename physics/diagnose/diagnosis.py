@@ -757,9 +757,15 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
     return steps
 
 
+#: Where the picks are labelled again after the refinement of their shape (:func:`_refine_last`).
+REFINED = "the model with the picks' shape refined"
+
+
 def _refine_last(steps: list[Step], data: PreparedRecords, run: DiagnosisRun) -> None:
     """The picks' ``refine`` parameters fitted on the chain's final model (:func:`refine_picks`): a
-    refit step at the end of the chain when the data favour them."""
+    refit step at the end of the chain when the data favour them; the picks are then labelled
+    again on the refined model, as on a model whose own effects were refitted (:func:`_relabel`:
+    each switched off there, the error it removes and the error the model leaves)."""
     last = steps[-1].result
     picked = [s.decision.pick.effect for s in steps if s.decision.pick is not None]
     k = len(steps) + 1
@@ -771,6 +777,9 @@ def _refine_last(steps: list[Step], data: PreparedRecords, run: DiagnosisRun) ->
     steps.append(Step(k, last, [], Decision(None, {}, {}, reason=reason), refit=fit, refitted=values,
                       picks_refined=True))
     run.log(f"step {k}: {reason}")
+    every = _timed(run, f"step {k}: picks labelled again", lambda: {
+        e: _support_of(e, fit, data, run) for e in picked if e in fit.effects})
+    _relabel(steps, every, fit, data, run, REFINED)
 
 
 def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: DiagnosisRun) -> None:
