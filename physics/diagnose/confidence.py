@@ -73,55 +73,56 @@ RECORD_TOLERANCE = 0.02
 LABELS = ("high", "medium", "low")
 
 
-def _labels(**counts: tuple[int, int, int]) -> dict:
-    """One table of :data:`CALIBRATION`: per label (right, acceptable, wrong) → those and ``n``, the picks."""
-    return {lab: {"n": sum(c), "right": c[0], "acceptable": c[1], "wrong": c[2]} for lab, c in counts.items()}
+def _table(family: str, seeds: str, cases: int, code: str, caveat: str, rule: str | None = None,
+           **counts: tuple[int, int, int]) -> dict:
+    """One table of :data:`CALIBRATION`: the draws it was measured on, the command that measures it
+    again, and per label (right, acceptable, wrong) → those and ``n``, the picks; ``rule``: the
+    earlier rule it was measured under (None: the rules in force)."""
+    out = {"family": family, "cases": cases, "code": code, "seeds": seeds, "caveat": caveat,
+           "command": f"python bench/diagnose_lofo.py --families {family} --seeds {seeds.replace(' ', '')} "
+                      f"--held-out {family}",
+           "labels": {lab: {"n": sum(c), "right": c[0], "acceptable": c[1], "wrong": c[2]}
+                      for lab, c in counts.items()}}
+    return {**out, "rule": rule} if rule else out
 
 
 #: What each label has meant on truth families held out of the choice of the thresholds
 #: (``bench/diagnose_lofo.py`` then ``bench/diagnose_calibration.py``): per label, the picks and
 #: how many named the hidden effect (right), a near twin's relative (acceptable) or another
-#: (wrong), given as ``_labels(high=(right, acceptable, wrong), …)``.  Measured, not assumed;
+#: (wrong), given as ``_table(…, high=(right, acceptable, wrong), …)``.  Measured, not assumed;
 #: :func:`calibration_text` says it in one sentence.  The first table was measured with the rules in force, the
 #: next two before the one-design reading of RH dependence (their caveats say so); ``rule`` marks the tables
 #: measured under an earlier rule (kept: more cases, and that rule's change can only turn a "high" into a "medium").
 CALIBRATION = (
     #: seed 25 as run at f568218; its five strips with a solvent line run again at 3ad4d27 (the refinement of a
     #: pick's shape, the only change since that can act on them: the other strips' chains and labels are the same)
-    {"family": "pnp_fd", "cases": 23, "code": "f568218, 3ad4d27", "seeds": "25",
-     "caveat": "seed 25, a fresh draw, all 23 of its truths once, measured with the rules in force (the label "
-               "thresholds were chosen on other families; the one-design reading of RH dependence and the refinement "
-               "of a pick's shape last were chosen on this family's seeds 22 and 23)",
-     "command": "python bench/diagnose_lofo.py --families pnp_fd --seeds 25 --held-out pnp_fd",
-     "labels": _labels(high=(7, 0, 0), medium=(6, 4, 4), low=(0, 0, 1))},
-    {"family": "pnp_fd", "cases": 46, "code": "4fdfcda", "seeds": "22, 23",
-     "caveat": "seeds 22 and 23, fresh draws of a family held out of the choice of the relabel on the model written "
-               "(its other seeds were seen when earlier rules were chosen), all 23 of its truths on each, measured "
-               "at 4fdfcda, before the one-design reading of RH dependence and the refinement of a pick's shape last, "
-               "chosen on them afterwards",
-     "command": "python bench/diagnose_lofo.py --families pnp_fd --seeds 22,23 --held-out pnp_fd",
-     "labels": _labels(high=(13, 1, 0), medium=(18, 7, 4), low=(1, 0, 0))},
+    _table("pnp_fd", "25", 23, "f568218, 3ad4d27",
+           "seed 25, a fresh draw, all 23 of its truths once, measured with the rules in force (the label thresholds "
+           "were chosen on other families; the one-design reading of RH dependence and the refinement of a pick's "
+           "shape last were chosen on this family's seeds 22 and 23)",
+           high=(7, 0, 0), medium=(6, 4, 4), low=(0, 0, 1)),
+    _table("pnp_fd", "22, 23", 46, "4fdfcda",
+           "seeds 22 and 23, fresh draws of a family held out of the choice of the relabel on the model written (its "
+           "other seeds were seen when earlier rules were chosen), all 23 of its truths on each, measured at 4fdfcda, "
+           "before the one-design reading of RH dependence and the refinement of a pick's shape last, chosen on them "
+           "afterwards",
+           high=(13, 1, 0), medium=(18, 7, 4), low=(1, 0, 0)),
     #: seed 21 as run at 416e7b9, its six cases with a draft kept beside a pick run again at 4fdfcda
     #: (the relabel on the model written, chosen on them, acts nowhere else)
-    {"family": "circuit_lab", "cases": 23, "code": "416e7b9, 4fdfcda", "seeds": "21",
-     "caveat": "seed 21, a fresh draw of a family held out of the choice of the label thresholds, all 23 of its "
-               "truths once, measured at 4fdfcda (before the one-design reading of RH dependence and the refinement "
-               "of a pick's shape last); the relabel on the model written was chosen on it",
-     "command": "python bench/diagnose_lofo.py --families circuit_lab --seeds 21 --held-out circuit_lab",
-     "labels": _labels(high=(6, 1, 0), medium=(9, 2, 2), low=(0, 0, 2))},
-    {"family": "circuit_lab", "cases": 25, "code": "409893e, ca35c0a", "seeds": "6, 7",
-     "caveat": "fresh draws (seeds 6 and 7): every one of its 23 truths at least once",
-     "command": "python bench/diagnose_lofo.py --families circuit_lab --seeds 6,7 --held-out circuit_lab",
-     "rule": "60 %",
-     "labels": _labels(high=(7, 1, 0), medium=(11, 2, 3), low=(1, 0, 2))},
+    _table("circuit_lab", "21", 23, "416e7b9, 4fdfcda",
+           "seed 21, a fresh draw of a family held out of the choice of the label thresholds, all 23 of its truths "
+           "once, measured at 4fdfcda (before the one-design reading of RH dependence and the refinement of a pick's "
+           "shape last); the relabel on the model written was chosen on it",
+           high=(6, 1, 0), medium=(9, 2, 2), low=(0, 0, 2)),
+    _table("circuit_lab", "6, 7", 25, "409893e, ca35c0a",
+           "fresh draws (seeds 6 and 7): every one of its 23 truths at least once", rule="60 %",
+           high=(7, 1, 0), medium=(11, 2, 3), low=(1, 0, 2)),
     #: an early copy of pnp_fd was among the families the thresholds were chosen on and its seeds
     #: 0-4 were read while later fixes and rules were chosen; these are fresh draws, seed 5 run at
     #: 6ee2a33 (23 cases) and seed 19 at 6e5b198–b4b63ea (23 cases), pooled
-    {"family": "pnp_fd", "cases": 46, "code": "6ee2a33 (seed 5), 6e5b198–b4b63ea (seed 19)", "seeds": "5, 19",
-     "caveat": "fresh draws (seeds 5 and 19); an early copy of it was seen when the thresholds were chosen",
-     "command": "python bench/diagnose_lofo.py --families pnp_fd --seeds 5,19 --held-out pnp_fd",
-     "rule": "60 %",
-     "labels": _labels(high=(11, 1, 0), medium=(18, 7, 4), low=(2, 0, 1))},
+    _table("pnp_fd", "5, 19", 46, "6ee2a33 (seed 5), 6e5b198–b4b63ea (seed 19)",
+           "fresh draws (seeds 5 and 19); an early copy of it was seen when the thresholds were chosen", rule="60 %",
+           high=(11, 1, 0), medium=(18, 7, 4), low=(2, 0, 1)),
 )
 
 
