@@ -768,6 +768,8 @@ def _refine_last(steps: list[Step], data: PreparedRecords, run: DiagnosisRun) ->
     each switched off there, the error it removes and the error the model leaves)."""
     last = steps[-1].result
     picked = [s.decision.pick.effect for s in steps if s.decision.pick is not None]
+    if not any(refine_params(e) for e in picked):
+        return                              # nothing to refine: no fit, no timing row
     k = len(steps) + 1
     fit, values = _timed(run, f"step {k}: picks refined", refine_picks, data, last, picked, run.options, run.n_starts)
     if fit is None:
