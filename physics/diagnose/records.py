@@ -54,7 +54,7 @@ from ..analysis.metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
 from ..io.timeseries import TimeSeries
 
 #: fs_d / highest excited frequency after decimation.
-OVERSAMPLING = 5.0
+OVERSAMPLING = 12.0
 #: Amplitudes within this ratio form one amplitude level.
 AMPLITUDE_RATIO = 1.25
 #: Minimum span [%] between two RH levels for them to count as different humidities.
