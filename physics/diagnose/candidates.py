@@ -472,9 +472,34 @@ def _df_problem(spec, device, targets, target_records, kw, df_cache, time_only):
 
 
 def predict(model: ActuatorModel, rec: PreparedRecord) -> np.ndarray:
-    """Model deflection [m] at the record's analysis rate, sensor response applied."""
+    """Model deflection [m] at the record's analysis rate, sensor response applied, each jump
+    of the voltage placed within its sample interval (:func:`place_edges`)."""
     res = simulate(model, None, rec.t_sim, rec.v_sim, rh=rec.rh_model, hold=rec.hold)
-    return sensor_filter(res.deflection, rec.fs_d, rec.sensor_bandwidth)[rec.i0:]
+    return place_edges(sensor_filter(res.deflection, rec.fs_d, rec.sensor_bandwidth)[rec.i0:], rec)
+
+
+def place_edges(yh: np.ndarray, rec: PreparedRecord) -> np.ndarray:
+    """``yh`` (a prediction of a step record at its analysis rate [m]) with the response to each
+    jump of the voltage shifted in time by δ within ±½ sample interval: the samples show only
+    that a jump happened between two of them, not where, and the linear hold puts it in the
+    middle; a resonance ringing after a jump tells where (δ ω of its phase).  δ of each jump is
+    the least-squares shift of the prediction over the jump's stretch (to the next jump),
+    linearised, y(t − δ) ≈ y(t) − δ ẏ(t), with the residual's offset and drift removed; every
+    model's prediction is placed alike.  Bounded by half a sample, it cannot take a lag the
+    records resolve (a delay of a few samples stays in the error)."""
+    if rec.kind != "steps" or not rec.steps.size or yh.size < 3:
+        return yh
+    h = 1.0 / rec.fs_d
+    dy = np.gradient(yh, h)
+    e = remove_nuisance(rec.y_d[:yh.size] - yh)
+    out = yh.copy()
+    for a, b in zip(rec.steps, list(rec.steps[1:]) + [yh.size]):
+        g = dy[a:b] - dy[a:b].mean()
+        den = float(g @ g)
+        if den > 0:
+            d = float(np.clip(-float(e[a:b] @ g) / den, -0.5 * h, 0.5 * h))
+            out[a:b] -= d * dy[a:b]
+    return out
 
 
 def score(mf: ModelFit, records: Sequence[PreparedRecord], n_offsets: int | None = None) -> ModelFit:
