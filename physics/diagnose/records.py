@@ -14,7 +14,9 @@ Each time-series record is
   frequency that matters: the excited band and the response standing above the noise
   (a step excites the resonance whatever its "band"; scipy's polyphase FIR with zero
   phase, applied to the voltage and the deflection alike, so a linear model driven by the
-  decimated voltage is compared with the equally filtered measurement);
+  decimated voltage is compared with the equally filtered measurement); in a step record
+  each jump is placed within its sample interval by the response after it
+  (:func:`physics.diagnose.candidates.place_edges`);
 * given its **noise floor** [m], from the measurement alone, never from a model's misfit:
   the RMS of what a perfect model would leave — the sensor's white noise and quantisation and
   the part of its drift that the nuisance terms do not absorb — from the record's sensor
@@ -53,7 +55,9 @@ from ..io.frfdata import FRFData
 from ..analysis.metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
 from ..io.timeseries import TimeSeries
 
-#: fs_d / highest excited frequency after decimation.
+#: fs_d / highest frequency that matters after decimation: the solver's cubic hold then errs by
+#: < 0.1 % near a resonance (a thesis strip driven to 20 Hz: 1.5 % at 5×, 0.04 % at 12×), below a
+#: laser's noise on a millimetre stroke.
 OVERSAMPLING = 12.0
 #: Amplitudes within this ratio form one amplitude level.
 AMPLITUDE_RATIO = 1.25
