@@ -694,9 +694,10 @@ def select(data: PreparedRecords, base: ModelFit, cand_ids, feats: dict, run: Di
     chain is full), once and unless ``--free`` names the free parameters (``run.refit_own``): the
     model's own effects refitted (:func:`refine_own`: the device's values of an effect are a
     start, not the strip's), kept when it lowers the BIC; on top of it, the picks the data no
-    longer favour are withdrawn (removal, as above, not tried again), those that stay are
-    labelled again on it (:func:`_withdraw`) and the candidates are tried again.  The refit comes after the candidates so that a refitted effect never stands
-    in for a missing one the candidates find.  Each effect is removed at most once.  Returns the
+    longer favour (or without which it is within the noise floor) are withdrawn (removal, as
+    above, not tried again), those that stay are labelled again on it (:func:`_withdraw`) and
+    the candidates are tried again.  The refit comes after the candidates so that a refitted
+    effect never stands in for a missing one the candidates find.  Each effect is removed at most once.  Returns the
     steps (the first always)."""
     steps: list[Step] = []
     step_base, left, step_feats = base, list(cand_ids), feats
@@ -853,8 +854,9 @@ def _removal_step(k: int, current: ModelFit, got, steps: list, removed: set, run
 def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: PreparedRecords,
               run: DiagnosisRun) -> ModelFit:
     """After the own effects were refitted: each pick switched off again; the one the refitted
-    model needs least is withdrawn while the data favour its removal (it stood in for the
-    device's values, not for missing physics).  The picks that stay are labelled again on the
+    model needs least is withdrawn while the data favour its removal, or, when none is, one
+    without which the model is within the noise floor (:func:`_not_needed`): it stood in for
+    the device's values, not for missing physics.  The picks that stay are labelled again on the
     refitted model (:func:`.confidence.reconfirmed`): the error each removes there and the
     error the model leaves (a near twin's pick stays "low").  Returns the model after the
     withdrawals."""
@@ -862,12 +864,42 @@ def _withdraw(current: ModelFit, picked: list, steps: list, removed: set, data: 
     while picked:
         got, every = try_removal(current, [e for e in picked if e not in removed], data, run)
         if got is None:
+            got = _not_needed(every, data)
+        if got is None:
             break
         current = _removal_step(len(steps) + 1, current, got, steps, removed, run)
         picked.remove(got[0].effect)
         every = {}
     _relabel(steps, every, current, data, run, "the model with its own effects refitted")
     return current
+
+
+def _within_floor(data: PreparedRecords, fit: ModelFit) -> bool:
+    """Whether ``fit`` is within the noise floor as a forward step reads it (:func:`.verdict.decide`:
+    within ADEQUATE_RATIO of the floor with the records' wander beside it, and no drift the records
+    share): a base on which no candidate is picked."""
+    return (math.isfinite(data.noise)
+            and fit.rmse <= ADEQUATE_RATIO * math.hypot(data.noise, wander_for(data, fit))
+            and not shared_structure(data, fit))
+
+
+def _not_needed(every: dict, data: PreparedRecords) -> "tuple[SupportResult, ModelFit] | None":
+    """Of ``every`` ({pick: (support, fit without it)} on the refitted model), the pick without
+    which the model is within the noise floor (:func:`_within_floor`; the lowest such error when
+    several are), its support's explanation saying so; else None.  A forward step on that model
+    would not pick it: the lower error it buys there is within the noise, however many samples
+    make its ΔBIC significant (the residual numerics of the solver, a noise realisation)."""
+    best = None
+    for sup, mf in every.values():
+        if sup.status == "assessed" and mf is not None and _within_floor(data, mf) \
+                and (best is None or mf.rmse < best[1].rmse):
+            best = (sup, mf)
+    if best is None:
+        return None
+    sup, mf = best
+    why = (f"not needed: without it the RMS error is {1e6 * mf.rmse:.4g} µm, within the noise floor of "
+           f"{1e6 * data.noise:.4g} µm (adequate within {ADEQUATE_RATIO:g}×), where no candidate is picked")
+    return replace(sup, explanation=why), mf
 
 
 def _relabel(steps: list[Step], every: dict, current: ModelFit, data: PreparedRecords, run: DiagnosisRun,
