@@ -145,3 +145,35 @@ def test_wander_per_trend_is_brownian_motion_theory():
     assert abs(left - WALK_AFTER_TREND) < 2e-3 * WALK_AFTER_TREND
     assert abs(rise - 1.2) < 2e-3
     assert abs(WANDER_PER_TREND - left / rise) < 2e-3 * WANDER_PER_TREND
+
+
+def test_a_model_is_allowed_no_more_wander_than_its_own_residual_shows():
+    """The wander counted beside the floor is measured on the base's residual, which also holds
+    the base's slow error: a slow effect the base lacks leaves a transient from each record's
+    start (a different one per record: not a shared drift) that reaches the lowest lines and
+    would pass for the sensor's wander.  A better model's residual shows the sensor's wander
+    without it; beside that model only what its own residual shows is allowed
+    (physics.diagnose.diagnosis.allowed_wander), never the base's figure."""
+    from physics.diagnose.diagnosis import allowed_wander
+    from physics.diagnose.wander import WanderSplit
+    rng = np.random.default_rng(4)
+    fs, duration = 20.0, 60.0
+    t = np.arange(int(duration * fs)) / fs
+    recs, walk_only, with_misfit, nui = [], [], [], []
+    for amp in (30e-6, -18e-6, 45e-6):             # the missing slow pole's start transient, per record
+        walk = np.cumsum(rng.normal(0.0, 2e-6 / math.sqrt(t.size), t.size)) + rng.normal(0, 1e-6, t.size)
+        for y, out in ((walk, walk_only), (walk + amp * np.exp(-t / 15.0), with_misfit)):
+            A = np.column_stack([np.ones_like(t), t])
+            out.append(y - A @ np.linalg.lstsq(A, y, rcond=None)[0])
+        recs.append(_Rec(band=(0.05, 20.0), fs_d=fs, ts=SimpleNamespace(duration=duration)))
+        nui.append((0.0, 0.0))
+    w_walk, w_base = slow_wander(recs, walk_only, nui, trend=False), slow_wander(recs, with_misfit, nui, trend=False)
+    assert w_base > 3 * w_walk                     # the base's slow error dominates its lowest lines
+    data = SimpleNamespace(estimated=True, wander_split=WanderSplit(0.0, 0.5, 3, 5), wander=w_base, records=recs)
+    base = SimpleNamespace(resid_d=with_misfit, nuisance=nui, rmse=float(np.std(np.concatenate(with_misfit))))
+    better = SimpleNamespace(resid_d=walk_only, nuisance=nui, rmse=float(np.std(np.concatenate(walk_only))))
+    assert allowed_wander(data) == w_base and allowed_wander(data, base) == w_base
+    assert allowed_wander(data, better) == w_walk
+    # the records could not tell whose wander it is: nothing is allowed, whatever the fit
+    data.wander_split = WanderSplit(math.nan, math.nan, 3, 5, why="one record")
+    assert allowed_wander(data, better) == 0.0

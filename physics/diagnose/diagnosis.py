@@ -448,24 +448,34 @@ def wander_of(data: PreparedRecords, fit) -> tuple[float, object]:
 
 
 def wander_for(data: PreparedRecords, fit) -> float:
-    """:func:`allowed_wander`, unless ``fit`` is within the floor only thanks to it and what it
-    leaves follows the input (:func:`.adequacy.assess`: an input-driven residual form describes
-    it) — then 0: a creep or a back-relaxation below the excited band is the model's error, not
-    the records' wander."""
-    w = allowed_wander(data)
+    """:func:`allowed_wander` beside ``fit``, unless ``fit`` is within the floor only thanks to
+    it and what it leaves follows the input (:func:`.adequacy.assess`: an input-driven residual
+    form describes it) — then 0: a creep or a back-relaxation below the excited band is the
+    model's error, not the records' wander."""
+    w = allowed_wander(data, fit)
     if w <= 0 or not math.isfinite(data.noise) or fit.rmse <= ADEQUATE_RATIO * data.noise:
         return w
     return assess("", fit, data.records, data.noise, describe=False, wander=w).wander
 
 
-def allowed_wander(data: PreparedRecords) -> float:
+def allowed_wander(data: PreparedRecords, fit=None) -> float:
     """The records' slow wander [m] a model may leave beside the noise floor and still be
     adequate: the part that does not repeat from record to record, when the floor was estimated
-    and the records could tell (testable, not inconclusive); else 0 (:func:`add_wander`)."""
+    and the records could tell (testable, not inconclusive); else 0 (:func:`add_wander`).
+
+    Beside ``fit``, at most what ``fit``'s own residual holds below the excited band
+    (:func:`.wander.slow_wander`, its lowest lines): the base's holds the sensor's wander *and*
+    the base's own slow error — a slow effect it lacks leaves a transient from each record's
+    start, which reaches those lines — while the sensor's wander is in every model's residual.
+    The least of the two bounds the sensor's part; a model never has a wander its own residual
+    does not show counted beside it."""
     split = data.wander_split
     if not data.estimated or split is None or not split.testable or split.inconclusive:
         return 0.0
-    return data.wander
+    if fit is None:
+        return data.wander
+    own = slow_wander(data.records, fit.resid_d, fit.nuisance, trend=False)
+    return min(data.wander, own) if math.isfinite(own) else data.wander
 
 
 def features_of(ra: ResidualAnalysis, data: PreparedRecords, fit, run: DiagnosisRun) -> dict:
@@ -837,7 +847,7 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
 
 def _adequate(data: PreparedRecords, fit: ModelFit) -> bool:
     """Whether ``fit`` is within the noise (:func:`.adequacy.assess`, the records' wander allowed)."""
-    return bool(assess("", fit, data.records, data.noise, describe=False, wander=allowed_wander(data)).adequate)
+    return bool(assess("", fit, data.records, data.noise, describe=False, wander=allowed_wander(data, fit)).adequate)
 
 
 def _removal_step(k: int, current: ModelFit, got, steps: list, removed: set, run: DiagnosisRun) -> ModelFit:
@@ -1016,8 +1026,8 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                           again.get("on", "")))
     label = "base" + "".join(f" − {r['effect']}" for r in removed) + (" (own effects refitted)" if refitted else "") \
         + "".join(f" + {p.effect}" for p in picks) + (" (the picks' shape refined)" if refined else "")
-    allowed = allowed_wander(data)
-    ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final), wander=allowed)
+    ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final),
+                wander=allowed_wander(data, final))
     first = steps[0].decision
     tol = math.hypot(data.noise, wander_for(data, base))
     structured = bool(shared_structure(data, base) if final is not base else ad.structure)
