@@ -415,9 +415,10 @@ def add_wander(data: PreparedRecords, base) -> None:
     from record to record (:func:`.wander.shared_wander`: a drift shared by the records is the
     setup's, deterministic, left to be described and drafted) is kept in ``data.wander``: when the
     floor was estimated (the sensor states no drift) a model within the adequacy ratio of the
-    floor *with* that wander is adequate, and the verdict says so with both numbers.  With sensor
-    metadata the wander beyond the stated drift is kept in ``data.wander_beyond`` for the verdict
-    (:func:`build_verdict`).  A floor the user gave is taken as the whole noise."""
+    floor *with* that wander (at most its own residual's: :func:`allowed_wander`) is adequate,
+    and the verdict says so with both numbers.  With sensor metadata the wander beyond the
+    stated drift is kept in ``data.wander_beyond`` for the verdict (:func:`build_verdict`).  A
+    floor the user gave is taken as the whole noise."""
     if not math.isfinite(data.white) or any(r.noise_source == "given" for r in data.records):
         return
     w, split = wander_of(data, base)
