@@ -169,7 +169,8 @@ def test_a_model_is_allowed_no_more_wander_than_its_own_residual_shows():
         nui.append((0.0, 0.0))
     w_walk, w_base = slow_wander(recs, walk_only, nui, trend=False), slow_wander(recs, with_misfit, nui, trend=False)
     assert w_base > 3 * w_walk                     # the base's slow error dominates its lowest lines
-    data = SimpleNamespace(estimated=True, wander_split=WanderSplit(0.0, 0.5, 3, 5), wander=w_base, records=recs)
+    data = SimpleNamespace(estimated=True, wander_split=WanderSplit(0.0, 0.5, 3, 5), wander=w_base, records=recs,
+                           wanders={})
     base = SimpleNamespace(resid_d=with_misfit, nuisance=nui, rmse=float(np.std(np.concatenate(with_misfit))))
     better = SimpleNamespace(resid_d=walk_only, nuisance=nui, rmse=float(np.std(np.concatenate(walk_only))))
     assert allowed_wander(data) == w_base and allowed_wander(data, base) == w_base

@@ -465,7 +465,7 @@ def allowed_wander(data: PreparedRecords, fit=None) -> float:
     and the records could tell (testable, not inconclusive); else 0 (:func:`add_wander`).
 
     Beside ``fit``, at most what ``fit``'s own residual holds below the excited band
-    (:func:`.wander.slow_wander`, its lowest lines): the base's holds the sensor's wander *and*
+    (:func:`wander_of`, its lowest lines; computed once per fit): the base's holds the sensor's wander *and*
     the base's own slow error — a slow effect it lacks leaves a transient from each record's
     start, which reaches those lines — while the sensor's wander is in every model's residual.
     The least of the two bounds the sensor's part; a model never has a wander its own residual
@@ -475,7 +475,7 @@ def allowed_wander(data: PreparedRecords, fit=None) -> float:
         return 0.0
     if fit is None:
         return data.wander
-    own = slow_wander(data.records, fit.resid_d, fit.nuisance, trend=False)
+    own, _ = wander_of(data, fit)
     return min(data.wander, own) if math.isfinite(own) else data.wander
 
 
