@@ -460,8 +460,8 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
     """When the draft rounds keep a draft beside a pick of the chain, the pick is labelled again on
     the model written: a forward step on that model less the pick, offered with its step's rivals
     not in the model; its verdict line (label, errors, where) becomes that step's.  When that step
-    picks a rival, or nothing, the pick keeps its label and the notes say why; without a kept draft
-    nothing is labelled again."""
+    picks a rival, or nothing, or the pick at a lower label, the pick keeps its label and the notes
+    say why; without a kept draft nothing is labelled again."""
     from physics.diagnose.draft import WRITTEN, draft_effects
     sd, sp, lp, dr = "solvent_diffusion", "drafted_slow_pole", "drafted_output_lowpass", "drafted_drift"
     res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
@@ -512,6 +512,15 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
         p = d.verdict.picks[0]
         assert (p.label, p.on, p.rmse_after) == ("medium", "", 10e-6)
         assert any(said in n and f"{sd} keeps its confidence (medium)" in n for n in out.notes)
+    # picked again but labelled lower there: the pick keeps its label, its line says what the step found
+    for chain, written_label, kept in [("high", "medium", "high"), ("medium", "low", "medium"), ("low", "medium", "medium")]:
+        d = diagnosis()
+        d.verdict.picks = [_verdict_pick(sd, chain, 90e-6, 10e-6)]
+        out = draft_effects(d, rediagnose([_verdict_pick(sd, written_label, 159e-6, 2.95e-6)])[0])
+        p = d.verdict.picks[0]
+        assert p.label == kept and p.on == ("" if kept == chain else WRITTEN)
+        assert f"fitted there too: confidence {written_label}" in p.reason
+        assert (f"keeps its confidence ({chain})" in p.reason) == (kept == chain)
     # no draft kept: no relabel is tried
     table[on_base] = (10e-6, {sp: (9.95e-6, -1.0, {}), lp: (9.9e-6, -1.0, {}), dr: (10.2e-6, 6.0, {})})
     d = diagnosis()

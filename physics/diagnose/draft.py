@@ -17,6 +17,7 @@ from typing import Callable, Sequence
 
 from ..errors import InputError, ModelError
 from ..execution.threads import single_threaded
+from .confidence import LABELS
 from .forms import FormFit, MIN_GAIN, SIGNIFICANT_BIC, describe, form_of, residual_of
 from .forms.base import has_response
 from .effect_draft import EffectDraft
@@ -329,7 +330,11 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
     only refined further on the time records, a wrong pick of a bending eigen-moment offered alone
     read "high".  A pick that is not picked again (another candidate is, or the model without it
     is within the noise: the draft took its part), or that has a near twin, keeps its label; the
-    notes say so."""
+    notes say so.  So does a pick labelled lower there than on the chain: the drafts answer the
+    residual a pick left, they do not question a pick that held without them (a viscoelastic
+    modulus, ``circuit_lab`` seed 24, "high" on its refitted model, read "medium" beside a drafted
+    slow pole only for two quality flags the pole brought: its loss correlated with a solvent
+    constant, its signature shared with the pole); its verdict line still says what that step found."""
     from .candidates import effect_rows, map_free
     fit = outcome.final
     if not outcome.kept or fit is None or fit.rmse >= res.final.rmse:
@@ -357,6 +362,11 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
         p.reason += (f"; on {WRITTEN} it lowers the RMS error {1e6 * q.rmse_before:.4g} → {1e6 * q.rmse_after:.4g} µm "
                      f"against {', '.join(rivals) or 'no rival'} fitted there too: confidence {q.label}"
                      + (": " + "; ".join(c.why) if c is not None and c.why else ""))
+        if LABELS.index(q.label) > LABELS.index(p.label):
+            p.reason += f"; it keeps its confidence ({p.label}): the drafts answer what a pick left, not whether it holds"
+            outcome.notes.append(f"{p.effect} on {WRITTEN} reads {q.label}, lower than on the chain: it keeps its "
+                                 f"confidence ({p.label})")
+            continue
         p.confidence, p.weight, p.on = c, q.weight, WRITTEN
         p.rmse_before, p.rmse_after, p.delta_bic = q.rmse_before, q.rmse_after, q.delta_bic
         p.quality = list(q.quality)
