@@ -334,7 +334,7 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
     residual a pick left, they do not question a pick that held without them (a viscoelastic
     modulus, ``circuit_lab`` seed 24, "high" on its refitted model, read "medium" beside a drafted
     slow pole only for two quality flags the pole brought: its loss correlated with a solvent
-    constant, its signature shared with the pole); its verdict line still says what that step found."""
+    constant, its signature no longer seen beside the pole); its verdict line still says what that step found."""
     from .candidates import effect_rows, map_free
     fit = outcome.final
     if not outcome.kept or fit is None or fit.rmse >= res.final.rmse:
