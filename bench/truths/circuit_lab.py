@@ -39,7 +39,8 @@ modulus          Maxwell arms 2–4× stronger than the DMA-like base (user mode
 zener            one Maxwell arm (loss peak log-U(1, 8) Hz, strength U(0.3, 0.6)) instead of the
                  seven (user model without viscoelastic)
 saturation       large-signal double layer: charge ∝ U_s ln(1 + |U|/U_s), U_s U(0.5, 1.2) × the
-                 low drive amplitude
+                 low drive amplitude, applied as a static map of the drive before the circuit (the
+                 electrode line and the branches see the compressed voltage)
 humidity         Table V ratios raised to a power (user model without humidity)
 rh_law           Table V ratios raised to a power U(1.5, 2) (the user's model keeps Table V)
 eigen_moment     the charge bends each section with an eigen-moment (a swelling bimorph's uniform

@@ -32,7 +32,8 @@ solvent          solvent released in a cathode layer δ U(2, 8) µm thick diffus
 modulus          Cole–Cole polymer: E*(s) = E0 [1 + Δ (sτ)^γ / (1 + (sτ)^γ)], γ U(0.15, 0.3),
                  Δ U(0.4, 0.8), centre log-U(1, 10) Hz
 saturation       steric-limited double layer, q ∝ U_s (sqrt(1 + 2|U|/U_s) − 1),
-                 U_s U(0.5, 1.2) × the low drive amplitude
+                 U_s U(0.5, 1.2) × the low drive amplitude, applied as a static map of the drive
+                 before the linear chain (the charging is fast against the band)
 humidity,        E(RH) = E65 exp(−k_E (RH − 65)/40), k_E U(0.6, 1.0); κ(RH) = κ65 (1 + k_κ
 rh_law           (RH − 65)/40), |k_κ| U(0.15, 0.4)
 contact          lumped contact resistance at the clamp charging the whole strip: a first-order
