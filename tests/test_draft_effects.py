@@ -309,7 +309,8 @@ def _diagnosis_stub(winner, res, rmse_final):
     forms = F.describe(fit, res.records)
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
                  adequacy=_Stub(adequate=False, forms=forms), records=res.records, candidates=[], steps=[],
-                 verdict=_Stub(status="partly explained" if winner else "not explained by the catalog", picks=[]))
+                 verdict=_Stub(status="partly explained" if winner else "not explained by the catalog", picks=[],
+                               remaining_kind="described", drafted_remaining=""))
 
 
 def _rediagnose(table, calls, verdicts=None):
@@ -409,7 +410,9 @@ def _verdict_pick(effect, label, before, after, step=1):
 def test_a_pick_the_model_written_leaves_out_says_so_on_its_verdict_line():
     """A catalog pick that loses the first round to a draft (a sensor low-pass that the electrode
     resistance mimics) is not in the model written: its verdict line says so, names the draft and
-    both errors, and keeps its label; a pick that wins the round and stays in the model says nothing."""
+    both errors, and keeps its label; a pick that wins the round and stays in the model says nothing.
+    Where the verdict had found no residual form for the rest, its "What remains" says what the
+    drafts found instead of calling it a mismatch of the base."""
     from physics.diagnose.verdict import Verdict
     from physics.diagnose.draft import draft_effects
     pick, lp, sp, dr = "electrode_resistance", "drafted_output_lowpass", "drafted_slow_pole", "drafted_drift"
@@ -444,6 +447,20 @@ def test_a_pick_the_model_written_leaves_out_says_so_on_its_verdict_line():
     v = Verdict("partly explained", d.verdict.picks, {}, None, 90e-6, 1e-6, "test")
     assert any(line.startswith("  Left out of the model written:") and lp in line for line in v.lines())
     assert v.to_dict()["chain"][0]["left_out_of_written"] == p.left_out
+    # the verdict found forms describing the rest: its "What remains" is its own
+    assert d.verdict.drafted_remaining == ""
+    # it found none ("base mismatch"): it says what the drafts fitted with the model found instead
+    d = diagnosis()
+    d.verdict.remaining_kind = "base mismatch"
+    draft_effects(d, run(lost))
+    assert lp in d.verdict.drafted_remaining and "to 4 µm against 5 µm" in d.verdict.drafted_remaining
+    v = Verdict("partly explained", d.verdict.picks, {}, None, 90e-6, 1e-6, "test",
+                remaining_kind="base mismatch", drafted_remaining=d.verdict.drafted_remaining)
+    remains = next(line for line in v.lines() if line.startswith("What remains:"))
+    assert "but the drafts fitted with the model do" in remains and lp in remains
+    assert "not a missing effect" not in remains and v.to_dict()["drafted_remaining"] == d.verdict.drafted_remaining
+    v.drafted_remaining = ""
+    assert "not a missing effect" in next(line for line in v.lines() if line.startswith("What remains:"))
     won = {on_base: (90e-6, {pick: (4e-6, -520.0, {"Rs": 40.0}), lp: (6e-6, -400.0, {}), sp: (80e-6, -20.0, {}),
                              dr: (95e-6, 3.0, {})}),
            on_base + (pick,): (4e-6, {lp: (3.5e-6, -30.0, {"lowpass_tau": 0.02}), sp: (3.9e-6, -1.0, {}),

@@ -391,6 +391,8 @@ class Verdict:
     withdrawn: list = field(default_factory=list)           # picks the data no longer favour once refitted
     refitted: dict = field(default_factory=dict)            # own effects' parameters refitted: {name: values}
     refined: dict = field(default_factory=dict)             # the picks' refine parameters fitted at the end: likewise
+    #: what the draft rounds found where no residual form of the final model described the rest ("" none)
+    drafted_remaining: str = ""
 
     # --- the first answer, as before the chain existed ---------------------------------
     @property
@@ -500,6 +502,9 @@ class Verdict:
             return "; and ".join(d["text"] for d in self.remaining) + \
                 (" — to model it, `eap diagnose … --draft-effects DIR` drafts effect files for it (or write one like "
                  "examples/effects/creep.py); pass one back with --effects-path.")
+        if self.remaining_kind == "base mismatch" and self.drafted_remaining:
+            return ("no residual form fitted to the final model's residual describes it, but the drafts fitted "
+                    f"with the model do: {self.drafted_remaining} (the best model below).")
         if self.remaining_kind == "base mismatch":
             return ("no residual form describes it: an unstructured mismatch of the model's own base forms "
                     "(its physics differs a little from the device's), not a missing effect of the catalog.")
@@ -513,7 +518,8 @@ class Verdict:
                 "confidence_label": self.label, "weights": self.weights, "reason": self.reason,
                 "ambiguous": self.ambiguous, "separating_record": self.separating,
                 "adequacy": self.adequacy.to_dict() if self.adequacy else None,
-                "remaining_kind": self.remaining_kind, "remaining": self.remaining, "chain_stopped": self.stopped,
+                "remaining_kind": self.remaining_kind, "remaining": self.remaining,
+                "drafted_remaining": self.drafted_remaining or None, "chain_stopped": self.stopped,
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
                 "removed": self.removed, "withdrawn": self.withdrawn, "refitted": self.refitted, "refined": self.refined,
                 "final_rmse_m": self.final_rmse,
