@@ -149,6 +149,30 @@ def test_a_pick_must_leave_every_rival_far_behind_for_high():
 
 
 
+def test_the_calibration_table_has_a_row_per_draw_with_each_label_s_count_and_its_caveat_beneath():
+    """The pages show the calibration as a table: one row per held-out draw in the order of
+    :data:`CALIBRATION`, each label's picks right out of its picks (or "never given"), the rules it
+    was measured under, and the draw's caveat as the footnote beneath."""
+    import html
+    from physics.diagnose.report import calibration_table
+    from physics.pages.report import Report
+    rows, notes = conf.calibration_rows(), conf.calibration_notes()
+    assert len(rows) == len(notes) == len(conf.CALIBRATION)
+    for row, note, c in zip(rows, notes, conf.CALIBRATION):
+        assert (row["family"], row["seeds"], row["cases"]) == (c["family"], c["seeds"], c["cases"])
+        for lab in conf.LABELS:
+            x = c["labels"][lab]
+            cell = row[f'"{lab}" right']
+            assert cell.startswith(f"{x['right'] + x['acceptable']} of {x['n']}") if x["n"] else cell == "never given"
+            assert ("near twin's relative" in cell) == bool(x["acceptable"])
+        assert (row["rules"] == "in force") == (not c.get("rule")) and c["caveat"] in note
+    rep = Report("t")
+    calibration_table(rep)
+    page = html.unescape(rep.to_html())
+    assert "the labels on held-out physics" in page and all(n in page for n in notes)
+    assert page.index(notes[0]) < page.index(notes[-1])
+
+
 def test_the_calibration_sentence_says_each_table_and_marks_those_of_an_earlier_rule():
     """The sentence gives each label's count of each table, the table measured with the current
     rules first, and says that the others were measured under an earlier rule, naming it and the

@@ -314,19 +314,41 @@ def calibration_text() -> str:
     return text.strip()
 
 
+def calibration_rows() -> list[dict]:
+    """:data:`CALIBRATION` as the rows of a page's table, one per held-out draw, in its order:
+    family, seeds, cases, the code it was measured at, per label "k of n" picks right (a near twin's
+    relative counted right, and said), and the rules it was measured under.  The draws' caveats are
+    the table's footnotes (:func:`calibration_notes`)."""
+    rows = []
+    for c in CALIBRATION:
+        row = {"family": c["family"], "seeds": c["seeds"], "cases": c["cases"], "measured at": c["code"]}
+        row.update({f"\"{lab}\" right": _right_of(c["labels"][lab]) for lab in LABELS})
+        row["rules"] = "in force" if not c.get("rule") else f"\"high\" at {c['rule']} of a rival's excess"
+        rows.append(row)
+    return rows
+
+
+def calibration_notes() -> list[str]:
+    """One footnote per row of :func:`calibration_rows`: which truths, and what changed since."""
+    return [f"{c['family']} seed{'s' if ',' in c['seeds'] else ''} {c['seeds']}: {c['caveat']}"
+            + (f" (measured under an earlier rule: \"high\" asked {c['rule']} of a free rival's excess error; the "
+               f"rule since, {100 * TWIN_HIGH:.0f} %, can only turn a \"high\" into a \"medium\")" if c.get("rule") else "")
+            for c in CALIBRATION]
+
+
+def _right_of(x: dict, what: str = "") -> str:
+    """'k of n' (+ ``what``) picks right, a near twin's relative counted right and said; or 'never given'."""
+    if not x["n"]:
+        return "never given"
+    return f"{x['right'] + x['acceptable']} of {x['n']}{what}" + (f" ({x['acceptable']} a near twin's relative)"
+                                                                   if x["acceptable"] else "")
+
+
 def _per_label(labels: dict) -> str:
     """'"high": k of n picks right (…), …' for one family's table."""
-    parts = []
-    for lab in LABELS:
-        x = labels[lab]
-        if x["n"]:
-            ok = x["right"] + x["acceptable"]
-            parts.append(f"\"{lab}\": {ok} of {x['n']} picks right" + (f" ({x['acceptable']} a near twin's relative)"
-                                                                      if x["acceptable"] else ""))
-        else:
-            parts.append(f"\"{lab}\": never given")
-    return ", ".join(parts)
+    return ", ".join(f"\"{lab}\": {_right_of(labels[lab], ' picks right')}" for lab in LABELS)
 
 
-__all__ = ["Confidence", "features", "label", "excess_share", "thresholds", "calibration_text", "CALIBRATION",
+__all__ = ["Confidence", "features", "label", "excess_share", "thresholds", "calibration_text", "calibration_rows",
+           "calibration_notes", "CALIBRATION",
            "LABELS"]

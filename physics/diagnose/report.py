@@ -25,7 +25,7 @@ from ..identify import write_device
 from ..identify.free_parameters import switchable
 from ..io.outputs import component, final_path
 from ..pages.report import Report, header
-from .confidence import calibration_text
+from .confidence import calibration_notes, calibration_rows
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
 
@@ -264,6 +264,17 @@ def _fmt(x, unit="", scale=1.0, digits=4):
     return f"{x * scale:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
+def calibration_table(rep: Report, rows: Sequence[dict] | None = None, notes: Sequence[str] | None = None) -> None:
+    """What the confidence labels have meant on held-out physics (:func:`.confidence.calibration_rows`,
+    or the ``rows`` and ``notes`` a run stored), as a table with the draws' caveats under it."""
+    rep.paragraph("What the confidence labels mean: how often a pick of each label named the hidden effect "
+                  "(right, or a near twin's relative) on records from truth families held out of the choice of "
+                  "the rules (python bench/diagnose_lofo.py; docs/reference/truth-families.md), newest first.",
+                  note=True)
+    rep.table(list(calibration_rows() if rows is None else rows), caption="the labels on held-out physics",
+              notes=list(calibration_notes() if notes is None else notes))
+
+
 def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     v = res.verdict
     b = res.base
@@ -273,7 +284,7 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     rep.heading("Verdict")
     for line in v.lines():
         rep.paragraph(line)
-    rep.paragraph("What the confidence labels mean: " + calibration_text(), note=True)
+    calibration_table(rep)
     if out.get("best_model"):
         rep.paragraph(f"Best model: {out['best_model']['text']}.")
         if out["best_model"]["draft_rounds"]:

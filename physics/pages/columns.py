@@ -161,7 +161,7 @@ COLUMNS: dict[str, Column] = {
     # dimensionless quantities named for a reader by the page that shows them
     **{label: _col(label, ONE) for label in ("model evaluations", "residual variance s²", "degrees of freedom",
                                              "condition number of J", "ΔBIC if removed", "evaluations",
-                                             "BIC (effective n)", "test", "iterations", "trial")},
+                                             "BIC (effective n)", "test", "iterations", "trial", "cases", "seeds")},
 }
 
 
