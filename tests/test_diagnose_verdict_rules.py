@@ -579,3 +579,21 @@ def test_no_swap_when_the_runner_up_does_not_fit_better_or_did_not_pass(monkeypa
     steps, log = _swap_case(monkeypatch, swapped_um, rival_bic)
     assert [s.kind for s in steps] == ["add", "add"]
     assert (rival_bic > -10) == (log == [])
+
+
+def test_the_verdict_names_records_by_file_name_unless_two_share_one():
+    """The nuisance line names each record by its file name, not its whole path (five paths of a
+    lab's folder made it a paragraph); where two records share a file name (two folders), every
+    record keeps its whole source; diagnosis.json keeps the sources either way."""
+    from types import SimpleNamespace as NS
+    from physics.diagnose.verdict import nuisance_summary, record_names
+    nz = NS(offset=12e-6, drift=1e-7 / 60, offset_ls=12e-6, drift_ls=1e-7 / 60, offset_clipped=False,
+            drift_clipped=False)
+    recs = [NS(source="/lab/2026-12-01/strip_a/01_multisine.csv"), NS(source="/lab/2026-12-01/strip_a/02_step.csv")]
+    assert record_names(recs) == ["01_multisine.csv", "02_step.csv"]
+    out = nuisance_summary(NS(nuisance=[nz, nz]), recs)
+    assert out["text"].startswith("01_multisine.csv: offset +12 µm, drift +0.1 µm/min; 02_step.csv:")
+    assert "/lab/" not in out["text"] and [x["record"] for x in out["records"]] == [r.source for r in recs]
+    twins = [NS(source="/lab/a/run.csv"), NS(source="/lab/b/run.csv")]
+    assert record_names(twins) == ["/lab/a/run.csv", "/lab/b/run.csv"]
+    assert "/lab/b/run.csv: offset" in nuisance_summary(NS(nuisance=[nz, nz]), twins)["text"]

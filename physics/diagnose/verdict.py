@@ -57,6 +57,7 @@ the page and ``diagnosis.json`` show.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -585,26 +586,33 @@ def nuisance_summary(fit, records) -> dict:
     plausibility: a least-squares term beyond what a sensor's zero does (:func:`.records.bounded_nuisance`)
     is flagged and not used — the bound is, and the rest stays in the error as the model's."""
     rows, flags = [], []
-    for r, nz in zip(records, fit.nuisance):
+    for r, nz, name in zip(records, fit.nuisance, record_names(records)):
         row = {"record": r.source, "offset_um": 1e6 * nz.offset, "drift_um_per_min": 60e6 * nz.drift,
                "least_squares_offset_um": 1e6 * nz.offset_ls, "least_squares_drift_um_per_min": 60e6 * nz.drift_ls,
                "offset_bounded": nz.offset_clipped, "drift_bounded": nz.drift_clipped}
         rows.append(row)
         if nz.drift_clipped:
-            flags.append(f"{r.source}: a least-squares drift of {60e6 * nz.drift_ls:+.3g} µm/min would rise "
+            flags.append(f"{name}: a least-squares drift of {60e6 * nz.drift_ls:+.3g} µm/min would rise "
                          f"{1e6 * abs(nz.drift_ls) * r.ts.duration:.3g} µm over the record, more than a sensor's zero "
                          f"drifts ({1e6 * r.drift_bound:.3g} µm: {_drift_basis(r)}); bounded to "
                          f"{60e6 * nz.drift:+.3g} µm/min, the rest is the model's error")
         if nz.offset_clipped:
-            flags.append(f"{r.source}: the offset that fits best, {1e6 * nz.offset_free:+.4g} µm, stands "
+            flags.append(f"{name}: the offset that fits best, {1e6 * nz.offset_free:+.4g} µm, stands "
                          f"{1e6 * abs(nz.offset_free - nz.level):.3g} µm from the level the record starts at "
                          f"({1e6 * nz.level:+.4g} µm, the device at rest), more than a sensor's zero allows "
                          f"({1e6 * r.offset_bound:.3g} µm); not used: the offset is held at {1e6 * nz.offset:+.4g} µm")
     if not rows:
         return {}
-    text = "; ".join(f"{x['record']}: offset {x['offset_um']:+.4g} µm, drift {x['drift_um_per_min']:+.3g} µm/min"
-                     for x in rows)
+    text = "; ".join(f"{name}: offset {x['offset_um']:+.4g} µm, drift {x['drift_um_per_min']:+.3g} µm/min"
+                     for x, name in zip(rows, record_names(records)))
     return {"records": rows, "text": text, "flags": flags}
+
+
+def record_names(records) -> list[str]:
+    """How the verdict's text names each record: its file name, or every record's whole source
+    where two share a file name (``diagnosis.json`` keeps the sources)."""
+    names = [Path(r.source).name or r.source for r in records]
+    return names if len(set(names)) == len(names) else [r.source for r in records]
 
 
 def _drift_basis(r) -> str:
