@@ -57,8 +57,8 @@ the page and ``diagnosis.json`` show.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
