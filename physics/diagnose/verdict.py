@@ -585,8 +585,8 @@ def nuisance_summary(fit, records) -> dict:
     """Offsets [µm] and drifts [µm/min] of the final model's residual, per record, with their
     plausibility: a least-squares term beyond what a sensor's zero does (:func:`.records.bounded_nuisance`)
     is flagged and not used — the bound is, and the rest stays in the error as the model's."""
-    rows, flags = [], []
-    for r, nz, name in zip(records, fit.nuisance, record_names(records)):
+    rows, flags, names = [], [], record_names(records)
+    for r, nz, name in zip(records, fit.nuisance, names):
         row = {"record": r.source, "offset_um": 1e6 * nz.offset, "drift_um_per_min": 60e6 * nz.drift,
                "least_squares_offset_um": 1e6 * nz.offset_ls, "least_squares_drift_um_per_min": 60e6 * nz.drift_ls,
                "offset_bounded": nz.offset_clipped, "drift_bounded": nz.drift_clipped}
@@ -604,7 +604,7 @@ def nuisance_summary(fit, records) -> dict:
     if not rows:
         return {}
     text = "; ".join(f"{name}: offset {x['offset_um']:+.4g} µm, drift {x['drift_um_per_min']:+.3g} µm/min"
-                     for x, name in zip(rows, record_names(records)))
+                     for x, name in zip(rows, names))
     return {"records": rows, "text": text, "flags": flags}
 
 
