@@ -496,3 +496,50 @@ def test_a_device_value_outside_an_effects_search_range_starts_on_its_edge(clean
     base = fit_base(data, dev, ids, FitOptions(), ["kf", "Y", "beta_f", "ve_slope"], [], 1)
     assert base.spec.start["ve_slope"] == hi and lo <= base.values["ve_slope"] <= hi
     assert any(n.startswith("ve_slope: the device's value") for n in base.spec.notes)
+
+
+def test_a_map_of_the_drive_is_refined_with_the_gain_of_each_rh_level(tmp_path):
+    """A drive that saturates as L·ln(1 + |v|/L) (L = 0.4 V) under multisines of 0.5 and 1.5 V at RH 40 %
+    and 0.25 V at RH 80 %, ``kf`` fitted per RH level: the FRF fit, blind to the map, hands each
+    level a gain compressed by its own amplitudes.  Refined on the time records with one gain per
+    level, the drafted soft saturation recovers the law and fits as well as the true law does; with
+    one factor over all records it ended at L = 1.44 V, γ = −0.52, 26 µm against 3 µm."""
+    from physics import signals
+    from physics.diagnose import forms as F
+    from physics.diagnose.forms.input_side import compress
+    from physics.effects import load_effects_file, unregister
+    from physics.io.record import TimeSeries
+    from physics.model import ActuatorModel
+    from physics.solvers.timedomain import simulate
+    dev = load_device("ipmc_pt_eg")
+    truth = ActuatorModel(dev, ["double_layer", "humidity"])
+    rng = np.random.default_rng(3)
+    records = []
+    for k, (amp, rh) in enumerate(((0.5, 40.0), (1.5, 40.0), (0.25, 80.0))):
+        sig = signals.multisine(amp, 0.1, 20.0, 20.0, periods=2, fs=100.0, seed=k)
+        y = simulate(truth, None, sig.t, compress(sig.v, 0.4, 0.0), rh=rh, hold="cubic").deflection
+        records.append(TimeSeries(sig.t, sig.v, y + rng.normal(0, 0.3e-6, y.size), rh=np.full(y.size, rh),
+                                  source=f"ms{k}"))
+    ff = F.FormFit("input_saturation", {"level_V": 1.5, "exponent": 0.5}, {"level_V": "V", "exponent": "1"}, "",
+                   info={"v_max_V": 1.5})
+    (d,) = F.form_of("input_saturation")().draft(ff, None)
+    (tmp_path / d.file_name).write_text(d.source(), encoding="utf-8")
+    (sat,) = load_effects_file(tmp_path / d.file_name)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            data = read_records(records, FitOptions())
+            ids = tuple(C.resolve_effects(["double_layer", "humidity"], dev)) + (sat,)
+            spec = C.ModelSpec("sat", ids, ["saturation_knee", "saturation_exponent"], ["kf"], extra_starts=d.starts)
+            mf = C.score(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=1), data.records)
+            assert mf.ok, mf.error
+            at_truth = ActuatorModel(mf.device.with_params(saturation_knee=0.4, saturation_exponent=0.0), ids)
+            floor = np.sqrt(np.mean(np.concatenate([C.remove_nuisance(r.y_d - C.predict(at_truth, r))
+                                                    for r in data.records]) ** 2))
+    finally:
+        unregister(sat)
+    assert mf.values["saturation_knee"] == pytest.approx(0.4, rel=0.1)
+    assert abs(mf.values["saturation_exponent"]) < 0.1
+    assert mf.rmse < 1.2 * floor
+    kf = mf.device.humidity_maps["kf"]      # the levels' gains were kept: the device reproduces the score
+    assert [mf.values["kf@RH40"], mf.values["kf@RH80"]] == pytest.approx(list(kf.values), rel=1e-9)

@@ -557,8 +557,9 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     start, from the :data:`INPUT_REFINE_STARTS` starts that fit best at once; the rest is simulated
     again only when the map's parameters move; a large-signal rest holds the map at its values, as
     each evaluation would run the implicit stepper on every record).  Bounded least squares over the effects'
-    parameters, the coupling gain solved in closed form at each step, from the FRF estimate and
-    the spec's starts.  Slow effects (creep)
+    parameters, the coupling gain solved in closed form at each step (once per RH level while a map
+    of the drive moves and ``kf`` is fitted per level, :func:`_gain_levels`; the levels' gains are
+    then kept), from the FRF estimate and the spec's starts.  Slow effects (creep)
     and maps of the voltage (a dead-zone) that a frequency response cannot determine are then
     set by the records.  A nested effect is also started from its off values (the model without
     it), so that its fit never ends worse than the base on this criterion."""
@@ -589,8 +590,9 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
 
     ys = [remove_nuisance(r.y_d) for r in records]
     scale = [1.0 / (np.std(y) * math.sqrt(y.size) or 1.0) for y in ys]
+    levels = _gain_levels(mf, records) if mapped else np.zeros(len(records), dtype=int)
 
-    def resid(theta):
+    def predictions(theta):
         q = {**p0, **dict(zip(names, theta))}
         preds = []
         for k, r in enumerate(records):
@@ -599,10 +601,12 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
                 y = e.filter_output(y, r.fs_d, q)
             yh = sensor_filter(y, r.fs_d, r.sensor_bandwidth)[r.i0:]
             preds.append(remove_nuisance(yh))
-        num = sum(float(ph @ y) for ph, y in zip(preds, ys))
-        den = sum(float(ph @ ph) for ph in preds)
-        a = num / den if den > 0 else 1.0
-        return np.concatenate([(y - a * ph) * c for y, ph, c in zip(ys, preds, scale)])
+        return preds
+
+    def resid(theta):
+        preds = predictions(theta)
+        a = _level_gains(preds, ys, levels)[levels]
+        return np.concatenate([(y - g * ph) * c for y, ph, c, g in zip(ys, preds, scale, a)])
 
     bounds = [param_bounds(n, mf.device) or (-np.inf, np.inf) for n in names]
     lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
@@ -625,9 +629,38 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     mf.device = mf.device.with_params(**vals)
     mf.result.device = mf.device
     mf.model = ActuatorModel(mf.device, mf.effects, n_modes=mf.model.n_modes)
+    if levels.max() > 0:      # each level's gain as the map left it
+        gains = _level_gains(predictions(best.x), ys, levels, np.size(mf.device.humidity_maps["kf"].values))
+        _scale_gain(mf, np.where(gains > 0, gains, 1.0))
     _time_uncertainty(mf, names, best, resid, lo, hi)
     mf.spec.notes.append("parameters of " + ", ".join(e.id for e in outs + ins) + " refined on the time records: "
                          + ", ".join(f"{k} = {v:.4g}" for k, v in vals.items()))
+
+
+def _gain_levels(mf: ModelFit, records: Sequence[PreparedRecord]) -> np.ndarray:
+    """The per-RH coupling gain level (index into the device's ``kf`` humidity map) of each record
+    when ``kf`` is fitted once per RH level as absolute values, else all 0 (one gain).  A map of the
+    drive changes each record's gain by its amplitude, which the FRF fit does not see: the per-RH
+    gains it fitted carry that change, and one factor over all records cannot undo it (a held-out
+    strip whose drive saturated, records at 0.32, 0.64 and 1.6 V over three RH levels: its drafted
+    soft saturation ended at 8.4 µm from the residual's starts, 2.9 µm started at the true law)."""
+    m = mf.device.humidity_maps.get("kf")
+    if gain_param(mf.effects) != "kf" or "kf" not in mf.spec.per_rh or m is None or m.mode != "absolute" \
+            or np.size(m.rh) < 2:
+        return np.zeros(len(records), dtype=int)
+    return np.array([int(np.argmin(np.abs(np.asarray(m.rh) - r.rh_measured))) for r in records])
+
+
+def _level_gains(preds: list, ys: list, levels: np.ndarray, n: int = 0) -> np.ndarray:
+    """The least-squares factor Σ⟨ŷ, y⟩/Σ⟨ŷ, ŷ⟩ of the predictions ``preds`` on the records ``ys``
+    within each level of ``levels`` (``n`` levels at least; 1 where a level has no prediction)."""
+    out = np.ones(max(int(levels.max()) + 1, n))
+    for k in range(out.size):
+        num = sum(float(ph @ y) for ph, y, lv in zip(preds, ys, levels) if lv == k)
+        den = sum(float(ph @ ph) for ph, lv in zip(preds, levels) if lv == k)
+        if den > 0:
+            out[k] = num / den
+    return out
 
 
 def _time_uncertainty(mf: ModelFit, names: list[str], sol, resid, lo, hi) -> None:
@@ -703,26 +736,35 @@ def _refine_gain(mf: ModelFit, records: Sequence[PreparedRecord], preds: list) -
         spec = all_param_specs()[gain]
         v = float(mf.device.params[gain])
         a = min(max(a, spec.lo / v), spec.hi / v) if v > 0 else a
-    fit = mf.result.fit
-    dev = mf.device
+    _scale_gain(mf, a)
+    if abs(a - 1) > 1e-3:
+        mf.spec.notes.append(f"coupling gain refined on the time records (×{a:.5g})")
+    return [a * p for p in preds]
+
+
+def _scale_gain(mf: ModelFit, a) -> None:
+    """Multiply the fitted coupling gain of ``mf`` by ``a`` (in place: values, errors, device,
+    model): a scalar for the shared gain and every per-RH ``kf``, or one factor per level of the
+    device's ``kf`` humidity map (:func:`_gain_levels`) for the per-RH ``kf`` alone."""
+    gain, names = gain_param(mf.effects), [p.name for p in mf.result.problem.params]
+    fit, dev = mf.result.fit, mf.device
+    m = dev.humidity_maps.get("kf")
+    level = (lambda rh: a) if np.ndim(a) == 0 else (lambda rh: a[int(np.argmin(np.abs(np.asarray(m.rh) - rh)))])
     for i, prm in enumerate(mf.result.problem.params):
-        if prm.name == gain and prm.rh is None or (prm.name == "kf" and prm.rh is not None):
-            fit.theta[i] *= a
-            fit.std_error[i] *= a
-            fit.ci95[i] *= a
-            mf.values[prm.label] *= a
-            mf.std_errors[prm.label] *= a
-    if gain in names:
+        if prm.name == gain and prm.rh is None and np.ndim(a) == 0 or (prm.name == "kf" and prm.rh is not None):
+            f = level(prm.rh)
+            fit.theta[i] *= f
+            fit.std_error[i] *= f
+            fit.ci95[i] *= f
+            mf.values[prm.label] *= f
+            mf.std_errors[prm.label] *= f
+    if gain in names and np.ndim(a) == 0:
         dev = dev.with_params(**{gain: dev.params[gain] * a})
-    if "kf" in mf.spec.per_rh and "kf" in dev.humidity_maps:
-        m = dev.humidity_maps["kf"]
+    if "kf" in mf.spec.per_rh and m is not None:
         dev = dataclasses.replace(dev, humidity_maps={**dev.humidity_maps, "kf": dataclasses.replace(m, values=m.values * a)})
     mf.device = dev
     mf.result.device = dev
     mf.model = ActuatorModel(dev, mf.effects, n_modes=mf.model.n_modes)
-    if abs(a - 1) > 1e-3:
-        mf.spec.notes.append(f"coupling gain refined on the time records (×{a:.5g})")
-    return [a * p for p in preds]
 
 
 def model_at(mf: ModelFit, theta) -> ActuatorModel:
