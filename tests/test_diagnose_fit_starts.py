@@ -543,3 +543,4 @@ def test_a_map_of_the_drive_is_refined_with_the_gain_of_each_rh_level(tmp_path):
     assert mf.rmse < 1.2 * floor
     kf = mf.device.humidity_maps["kf"]      # the levels' gains were kept: the device reproduces the score
     assert [mf.values["kf@RH40"], mf.values["kf@RH80"]] == pytest.approx(list(kf.values), rel=1e-9)
+    assert any(n.startswith("coupling gain of each RH level refined") for n in mf.spec.notes)

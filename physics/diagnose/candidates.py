@@ -631,7 +631,11 @@ def _refine_added_effects(mf: ModelFit, records: Sequence[PreparedRecord]) -> No
     mf.model = ActuatorModel(mf.device, mf.effects, n_modes=mf.model.n_modes)
     if levels.max() > 0:      # each level's gain as the map left it
         gains = _level_gains(predictions(best.x), ys, levels, np.size(mf.device.humidity_maps["kf"].values))
-        _scale_gain(mf, np.where(gains > 0, gains, 1.0))
+        gains = np.where(gains > 0, gains, 1.0)
+        _scale_gain(mf, gains)
+        rh = mf.device.humidity_maps["kf"].rh
+        mf.spec.notes.append("coupling gain of each RH level refined with the map on the time records: "
+                             + ", ".join(f"RH {r:.3g} % ×{g:.5g}" for r, g in zip(rh, gains)))
     _time_uncertainty(mf, names, best, resid, lo, hi)
     mf.spec.notes.append("parameters of " + ", ".join(e.id for e in outs + ins) + " refined on the time records: "
                          + ", ".join(f"{k} = {v:.4g}" for k, v in vals.items()))
@@ -641,9 +645,10 @@ def _gain_levels(mf: ModelFit, records: Sequence[PreparedRecord]) -> np.ndarray:
     """The per-RH coupling gain level (index into the device's ``kf`` humidity map) of each record
     when ``kf`` is fitted once per RH level as absolute values, else all 0 (one gain).  A map of the
     drive changes each record's gain by its amplitude, which the FRF fit does not see: the per-RH
-    gains it fitted carry that change, and one factor over all records cannot undo it (a held-out
+    gains it fitted carry that change, and one factor over all records cannot undo it (a test-bed
     strip whose drive saturated, records at 0.32, 0.64 and 1.6 V over three RH levels: its drafted
-    soft saturation ended at 8.4 µm from the residual's starts, 2.9 µm started at the true law)."""
+    soft saturation ended at 3.04× the true model's error with one factor, 1.03× with one per level;
+    docs/reference/truth-families.md)."""
     m = mf.device.humidity_maps.get("kf")
     if gain_param(mf.effects) != "kf" or "kf" not in mf.spec.per_rh or m is None or m.mode != "absolute" \
             or np.size(m.rh) < 2:
