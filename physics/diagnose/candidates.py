@@ -653,7 +653,12 @@ def _gain_levels(mf: ModelFit, records: Sequence[PreparedRecord]) -> np.ndarray:
     if gain_param(mf.effects) != "kf" or "kf" not in mf.spec.per_rh or m is None or m.mode != "absolute" \
             or np.size(m.rh) < 2:
         return np.zeros(len(records), dtype=int)
-    return np.array([int(np.argmin(np.abs(np.asarray(m.rh) - r.rh_measured))) for r in records])
+    return np.array([_level_of(m, r.rh_measured) for r in records])
+
+
+def _level_of(m, rh: float) -> int:
+    """Index of the level of the humidity map ``m`` nearest to ``rh`` [%]."""
+    return int(np.argmin(np.abs(np.asarray(m.rh) - rh)))
 
 
 def _level_gains(preds: list, ys: list, levels: np.ndarray, n: int = 0) -> np.ndarray:
@@ -754,7 +759,7 @@ def _scale_gain(mf: ModelFit, a) -> None:
     gain, names = gain_param(mf.effects), [p.name for p in mf.result.problem.params]
     fit, dev = mf.result.fit, mf.device
     m = dev.humidity_maps.get("kf")
-    level = (lambda rh: a) if np.ndim(a) == 0 else (lambda rh: a[int(np.argmin(np.abs(np.asarray(m.rh) - rh)))])
+    level = (lambda rh: a) if np.ndim(a) == 0 else (lambda rh: a[_level_of(m, rh)])
     for i, prm in enumerate(mf.result.problem.params):
         if prm.name == gain and prm.rh is None and np.ndim(a) == 0 or (prm.name == "kf" and prm.rh is not None):
             f = level(prm.rh)
