@@ -45,7 +45,7 @@ from .effects.base import rational
 from .effects.declaration import declaration_problems
 from .execution.usercode import UserCodeError
 from .effects.stages import STAGE_PROTOCOLS, CompiledChargeLaw, InputFactor, LoadFactor, OutputFactor
-from .errors import InputError
+from .errors import InputError, ModelError
 from .solvers.frequency import frequency_response
 from .model import ActuatorModel
 from .solvers.timedomain import simulate
@@ -241,7 +241,12 @@ class _Context:
             return "fail", f"stage {default.stage!r}: missing {', '.join(missing)} ({proto.__name__})"
         if default.stage == "charge_law":
             p = self.model.params_at(self.rh)
-            law = e.compiled(self.model.double_layer_props(p), p)
+            try:
+                law = e.compiled(self.model.double_layer_props(p), p)
+            except ModelError as exc:          # a linear law the stepper cannot carry, said plainly
+                if not e.linear:
+                    raise
+                return "pass", f"stage {default.stage!r} ({proto.__name__}); the time stepper refuses it: {exc}"
             if not isinstance(law, CompiledChargeLaw):
                 return "fail", "compiled(d, p) must return an object with evaluate(Q) and excess(Q)"
             Q = np.linspace(-1e-3, 1e-3, 6).reshape(2, 3)

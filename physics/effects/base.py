@@ -22,8 +22,9 @@ module, everything the rest of the package needs:
 =================  ==========================================================================
 stage (default)    hooks
 =================  ==========================================================================
-double_layer       ``props(p, T)``, ``realize(d, w_hi)`` (linearised PNP, always present)
-charge_law         ``small_signal(s, d, p)``, ``compiled(d, p)`` → ``evaluate(Q)``, ``excess(Q)``
+double_layer       ``props(p, T)``, ``realize(d, w_hi, law)`` (linearised PNP, always present)
+charge_law         ``small_signal(s, d, p)``, ``realized_charge(d, p)``, ``compiled(d, p)`` → ``evaluate(Q)``,
+                   ``excess(Q)``
 line               ``distribution(s, Yp, p, z)``, ``series_conductances(p, edges)``
 solvent            ``solvent_factor(s, p)``, ``solvent_diffusivity(p)``
 coupling           ``kf(s, p)``; roles: ``gain_equivalent(p, w)``, ``gain_start(value, p, w)``

@@ -5,6 +5,7 @@ from __future__ import annotations
 from .base import Effect
 from .double_layer import DoubleLayer
 from .electrode_resistance import ElectrodeResistance, EquipotentialElectrodes
+from .fractional_charge import FractionalCharge
 from .fractional_coupling import ConstantCoupling, FractionalCoupling
 from .humidity import Humidity, HumidityInvariant
 from .layered_beam import HomogeneousSection, LayeredBeam
@@ -19,7 +20,8 @@ CHAIN: tuple[type[Effect], ...] = (DoubleLayer, LinearCharge, EquipotentialElect
                                    ElasticModulus, HomogeneousSection, HumidityInvariant, Isothermal)
 #: The effects shipped with the package.
 BUILT_IN_EFFECTS: tuple[type[Effect], ...] = (DoubleLayer, NonlinearCharge, ElectrodeResistance, SolventDiffusion,
-                                              FractionalCoupling, Viscoelastic, LayeredBeam, Humidity, Thermal)
+                                              FractionalCoupling, FractionalCharge, Viscoelastic, LayeredBeam,
+                                              Humidity, Thermal)
 
 #: The model's core: stage defaults with an id, always on (they cannot be removed).
 CORE = tuple(cls.id for cls in CHAIN if cls.id)

@@ -109,22 +109,28 @@ class DoubleLayer(Effect):
         return s * cls.charge_per_volt(s, d)[0] + d.G_leak
 
     @classmethod
-    def realize(cls, d: DoubleLayerProps, w_hi: float) -> StateSpace:
+    def realize(cls, d: DoubleLayerProps, w_hi: float, law=None) -> StateSpace:
         """Time-domain branch: input U [V]; outputs current density j [A/m²], interface
         excess ΔC⁺(h) [mol/m³] and electrode charge Q [C/m²].  When K ≫ the band the exact
         response is, to O(s/K), the single pole Q = C0 U/(1 + s tau); otherwise the exact
-        functions are fitted with real poles over the band (1/tau and K included)."""
-        if d.K > 1e3 * w_hi:
+        functions are fitted with real poles over the band (1/tau and K included).  ``law``:
+        the charge law's (functions, lowest frequency [rad/s]) when they are not the double
+        layer's own (:meth:`~physics.effects.nonlinear_charge.LinearCharge.realized_charge`)."""
+        charge, w_lo = ((lambda s: cls.charge_per_volt(s, d)), np.inf) if law is None else law
+        if law is None and d.K > 1e3 * w_hi:
             a = 1.0 / d.tau
             return StateSpace([[-a]], [[d.C0 * a]], [[-a], [d.c0 / d.C0], [1.0]],
                               [[d.C0 * a + d.G_leak], [0.0], [0.0]])
 
         def funcs(s):
-            q, c = cls.charge_per_volt(s, d)
+            q, c = charge(s)
             return np.vstack([s * q, c, q])
 
-        band = (min(0.1 / d.tau, 1e-3 * w_hi), w_hi)
-        fit = fit_pole_residue(funcs, band, extra_poles=(1.0 / d.tau, d.K), per_decade=3.0, tol=1e-3,
+        band = (min(0.1 / d.tau, 1e-3 * w_hi, w_lo), w_hi)
+        # a law whose current still rises at the band's top (a constant-phase charge, s^(1−a)) gets
+        # three poles beyond the fit's grid (which ends 10× above the band), not a denser grid
+        top = () if law is None else tuple(10.0 * w_hi * np.array([3.0, 10.0, 30.0]))
+        fit = fit_pole_residue(funcs, band, extra_poles=(1.0 / d.tau, d.K) + top, per_decade=3.0, tol=1e-3,
                                what="double-layer response")
         D = fit.direct[:, None].copy()
         D[0, 0] += d.G_leak

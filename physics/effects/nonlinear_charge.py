@@ -62,6 +62,12 @@ class LinearCharge(Effect):
         first-moment-equivalent interface cation excess [mol/m³] (= ΔC⁺(h) in the linear model)."""
         return DoubleLayer.charge_per_volt(s, d)
 
+    def realized_charge(self, d: DoubleLayerProps, p):
+        """What the time solver's linear branch realises: None for the double layer's own charge
+        (:meth:`DoubleLayer.realize`), else (s -> (Q/U, load/U), lowest frequency it must hold to
+        [rad/s]) for a law whose small-signal functions differ from it."""
+        return None
+
     def nu(self, p) -> float:
         return 0.0
 

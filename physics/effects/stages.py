@@ -22,9 +22,10 @@ class DoubleLayerStage(Protocol):
     def props(self, p: dict, T=None):
         """Derived double-layer quantities at temperature ``T`` [K] (None: T_ext)."""
 
-    def realize(self, d, w_hi: float):
+    def realize(self, d, w_hi: float, law=None):
         """The branch as a :class:`physics.solvers.lti.StateSpace`: input U [V]; outputs current density
-        [A/m²], interface excess [mol/m³], charge [C/m²]; accurate up to ``w_hi`` [rad/s]."""
+        [A/m²], interface excess [mol/m³], charge [C/m²]; accurate up to ``w_hi`` [rad/s]; ``law``: the
+        charge law's :meth:`ChargeLawStage.realized_charge` when not None."""
 
 
 @runtime_checkable
@@ -49,6 +50,10 @@ class ChargeLawStage(Protocol):
 
     def compiled(self, d, p) -> CompiledChargeLaw:
         """The large-signal law for the time stepper."""
+
+    def realized_charge(self, d, p):
+        """None when the linear time branch is the double layer's own; else (s -> (Q/U, load/U),
+        lowest frequency [rad/s]) for the double layer to realise instead."""
 
 
 @runtime_checkable

@@ -384,7 +384,7 @@ class _Electrochemistry:
     def __init__(self, model: ActuatorModel, p: dict, edges, N: int, dt, hold, fields, periodic,
                  reduce: np.ndarray, per_segment: bool):
         d = model.double_layer_props(p)
-        branch = model.hook("realize")(d, np.pi / dt)
+        branch = model.hook("realize")(d, np.pi / dt, model.hook("realized_charge")(d, p))
         nc = branch.n_states
         area = p["width"] * np.diff(edges)
         n = area.size
