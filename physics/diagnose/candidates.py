@@ -13,6 +13,8 @@ effect                      extra free parameters (bounds)                      
 ``electrode_resistance``    ``Rs`` (0.1–10⁴ Ω/□)                                    yes (Rs→0)
 ``fractional_coupling``     ``frac_a`` (0–0.95), its DC corner ``frac_f_lo``         yes (a→0)
                             (shape: 10⁻⁴–0.05 Hz); ``kf0`` replaces ``kf``
+``fractional_charge``       ``cpe_a`` (0–0.95), its DC corner ``cpe_f_lo``           yes (a→0)
+                            (shape: 10⁻⁴–0.05 Hz)
 ``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→0)
 ``viscoelastic``            the free shape ``ve_slope``, ``ve_tan_delta`` and its    no
                             low end ``ve_f_lo`` (10⁻³–20 Hz); ``dma_scale``
@@ -208,10 +210,16 @@ def candidate_spec(effect: str, base_ids, base_free: Sequence[str], base_per_rh:
     for name, b in bounds.items():
         start[name] = float(np.clip(start[name], b[0], b[1])) if name in start else start_in_range(name, device,
                                                                                                    derived, b)
+    off = {k: v for k, v in off_values(effect, device).items() if k in free} if is_nested(effect) else {}
+    # an effect switched on does not start at its "off" value (a declared default that leaves it off):
+    # its shape parameters would have no effect there and be held; it starts at its spec's first start
+    first = next(iter(start_points(effect, device)), {})
+    for name, v in off.items():
+        if name in first and name in start and np.isclose(start[name], v):
+            start[name] = float(np.clip(first[name], *bounds.get(name, (-np.inf, np.inf))))
     # starts over the effect's own parameters (unknown scale), and the base's optimum with the effect
     # off (a nested effect: its fit then never ends worse than the base on the FRF criterion)
     extra = [st for st in ({k: v for k, v in pt.items() if k in free} for pt in start_points(effect, device)) if st]
-    off = {k: v for k, v in off_values(effect, device).items() if k in free} if is_nested(effect) else {}
     if off:
         extra.append({k: float(np.clip(v, *bounds[k])) if k in bounds else v for k, v in off.items()})
     return ModelSpec(f"+{effect}", to_ids, free, per_rh, start, bounds, extra, added=effect, notes=notes)
