@@ -90,7 +90,7 @@ def judge(meta: dict, x: dict | None) -> dict:
     exp, acc = set(meta["expected"]), set(meta["acceptable"])
     if x is None:
         return {"exit_error": True, "right": False, "picks": [], "named": False, "wrong_high": False,
-                "ratio": None, "offset_err": None}
+                "ratio": None, "best_ratio": None, "offset_err": None}
 
     def verdict_of(e):
         return "right" if e in exp else ("acceptable" if e in acc else "wrong")

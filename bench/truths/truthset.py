@@ -9,7 +9,8 @@ truth              kind     ingredients (family physics)                expected
 =================  =======  ==========================================  ==========================
 none               none     —                                           — (nothing named)
 electrode          catalog  electrode sheet resistance along the strip  electrode_resistance
-rough              catalog  rough / porous electrode, constant phase    fractional_coupling
+rough              catalog  rough / porous electrode, constant phase    fractional_charge
+                                                                        (fractional_coupling)
 solvent            catalog  solvent back-diffusion (back-relaxation)    solvent_diffusion
 modulus            catalog  frequency-dependent modulus                 viscoelastic
 saturation         catalog  large-signal double-layer saturation        nonlinear_charge
@@ -35,25 +36,32 @@ route_creep_rh     route    creep + an RH law the user's model lacks    (humidit
 =================  =======  ==========================================  ==========================
 
 A near twin's relative is *acceptable* (not wrong, not required): its physics is the same
-phenomenon in a form the catalog effect's parametrisation does not hold.
+phenomenon in a form the catalog effect's parametrisation does not hold.  Both families write a
+rough electrode as a constant-phase double layer (the charge is fractional, behind the electrodes'
+resistance): ``fractional_charge`` is its catalog form, the thesis's fractional load constant
+``fractional_coupling`` (the same deflection on equipotential electrodes) its relative.
 """
 from __future__ import annotations
 
 from .case import Truth
 
 #: ingredient → the catalog effect it is an analogue of (None: outside the catalog)
-CATALOG_OF = {"electrode": "electrode_resistance", "rough": "fractional_coupling", "solvent": "solvent_diffusion",
+CATALOG_OF = {"electrode": "electrode_resistance", "rough": "fractional_charge", "solvent": "solvent_diffusion",
               "modulus": "viscoelastic", "saturation": "nonlinear_charge", "humidity": "humidity"}
+#: ingredient → a catalog relative: the same phenomenon in another form (acceptable, not required)
+RELATIVE_OF = {"rough": "fractional_coupling"}
 SLOW = ("solvent", "rough")
 
 
 def _catalog(name: str) -> Truth:
-    return Truth(name, "catalog", (CATALOG_OF[name],), (), (name,), slow=name in SLOW)
+    relative = (RELATIVE_OF[name],) if name in RELATIVE_OF else ()
+    return Truth(name, "catalog", (CATALOG_OF[name],), relative, (name,), slow=name in SLOW)
 
 
 def _pair(name: str, a: str, b: str) -> Truth:
     exp = tuple(CATALOG_OF[x] for x in (a, b) if x in CATALOG_OF)
-    return Truth(name, "pair", exp, (), (a, b), slow=any(x in SLOW for x in (a, b)))
+    return Truth(name, "pair", exp, tuple(RELATIVE_OF[x] for x in (a, b) if x in RELATIVE_OF), (a, b),
+                 slow=any(x in SLOW for x in (a, b)))
 
 
 TRUTHS: dict[str, Truth] = {t.name: t for t in (
