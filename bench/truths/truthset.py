@@ -9,8 +9,8 @@ truth              kind     ingredients (family physics)                expected
 =================  =======  ==========================================  ==========================
 none               none     —                                           — (nothing named)
 electrode          catalog  electrode sheet resistance along the strip  electrode_resistance
-rough              catalog  rough / porous electrode, constant phase    fractional_charge
-                                                                        (fractional_coupling)
+rough              catalog  rough / porous electrode, constant phase    fractional_coupling
+                                                                        (fractional_charge)
 solvent            catalog  solvent back-diffusion (back-relaxation)    solvent_diffusion
 modulus            catalog  frequency-dependent modulus                 viscoelastic
 saturation         catalog  large-signal double-layer saturation        nonlinear_charge
@@ -38,18 +38,19 @@ route_creep_rh     route    creep + an RH law the user's model lacks    (humidit
 A near twin's relative is *acceptable* (not wrong, not required): its physics is the same
 phenomenon in a form the catalog effect's parametrisation does not hold.  Both families write a
 rough electrode as a constant-phase double layer (the charge is fractional, behind the electrodes'
-resistance): ``fractional_charge`` is its catalog form, the thesis's fractional load constant
-``fractional_coupling`` (the same deflection on equipotential electrodes) its relative.
+resistance), which is ``fractional_charge``; the diagnosis tries that law only on request, so the
+default route's answer is the thesis's fractional load constant ``fractional_coupling`` (the same
+deflection on equipotential electrodes) and ``fractional_charge`` is acceptable.
 """
 from __future__ import annotations
 
 from .case import Truth
 
 #: ingredient → the catalog effect it is an analogue of (None: outside the catalog)
-CATALOG_OF = {"electrode": "electrode_resistance", "rough": "fractional_charge", "solvent": "solvent_diffusion",
+CATALOG_OF = {"electrode": "electrode_resistance", "rough": "fractional_coupling", "solvent": "solvent_diffusion",
               "modulus": "viscoelastic", "saturation": "nonlinear_charge", "humidity": "humidity"}
 #: ingredient → a catalog relative: the same phenomenon in another form (acceptable, not required)
-RELATIVE_OF = {"rough": "fractional_coupling"}
+RELATIVE_OF = {"rough": "fractional_charge"}
 SLOW = ("solvent", "rough")
 
 

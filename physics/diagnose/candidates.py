@@ -14,7 +14,7 @@ effect                      extra free parameters (bounds)                      
 ``fractional_coupling``     ``frac_a`` (0–0.95), its DC corner ``frac_f_lo``         yes (a→0)
                             (shape: 10⁻⁴–0.05 Hz); ``kf0`` replaces ``kf``
 ``fractional_charge``       ``cpe_a`` (0–0.95), its DC corner ``cpe_f_lo``           yes (a→0)
-                            (shape: 10⁻⁴–0.05 Hz)
+                            (shape: 10⁻⁴–0.05 Hz); tried on request only
 ``solvent_diffusion``       ``D_solvent`` (h²/Ds from 0.2 s to 10⁵ s)               yes (Ds→0)
 ``viscoelastic``            the free shape ``ve_slope``, ``ve_tan_delta`` and its    no
                             low end ``ve_f_lo`` (10⁻³–20 Hz); ``dma_scale``

@@ -11,8 +11,9 @@ electrode_resistance        a swept sine / multisine reaching ≥ 10 Hz: the pha
                             frequency as the voltage falls along the strip
 fractional_coupling         a broadband record spanning ≥ 1 decade (constant log-log slope and
                             constant phase), ideally down to 0.1 Hz; a step shows the creep
-fractional_charge           the same, with the electrodes' resistance in the band (the line sees
-                            the constant-phase charge, which tells it from fractional_coupling)
+fractional_charge           (on request) the same, with the electrodes' resistance in the band (the
+                            line sees the constant-phase charge, which tells it from
+                            fractional_coupling)
 solvent_diffusion           low frequencies: a swept sine starting at ≤ 0.5 Hz, or a square pulse /
                             step holding ≥ 5 s (back-relaxation)
 viscoelastic                a broadband record spanning the first resonance (peak shape, stiffness
