@@ -72,20 +72,25 @@ class FractionalCharge(LinearCharge):
         w_lo = 2.0 * np.pi * p.get("cpe_f_lo", 1e-4)
         return (np.hypot(2.0 * np.pi * F_REF, w_lo) / (s + w_lo)) ** p.get("cpe_a", 0.0)
 
+    @staticmethod
+    def is_off(p) -> bool:
+        """True when the order is zero: the ideal double layer exactly."""
+        return p.get("cpe_a", 0.0) == 0.0
+
     def small_signal(self, s, d: DoubleLayerProps, p):
         q, c = DoubleLayer.charge_per_volt(s, d)
-        if p.get("cpe_a", 0.0) == 0.0:
+        if self.is_off(p):
             return q, c
         ratio = 1.0 / (1.0 + q * (1.0 / self.factor(s, p) - 1.0) / d.C0)
         return q * ratio, c * ratio
 
     def realized_charge(self, d: DoubleLayerProps, p):
-        if p.get("cpe_a", 0.0) == 0.0:
+        if self.is_off(p):
             return None
         return (lambda s: self.small_signal(s, d, p)), 2.0 * np.pi * p.get("cpe_f_lo", 1e-4)
 
     def compiled(self, d: DoubleLayerProps, p):
-        if p.get("cpe_a", 0.0) == 0.0:
+        if self.is_off(p):
             return super().compiled(d, p)
         raise ModelError("fractional_charge is a linear, frequency-dependent charge law: the time stepper (thermal, "
                          "or RH changing inside a record with a humidity map upstream of the mechanics) cannot carry "
