@@ -544,3 +544,27 @@ def test_a_map_of_the_drive_is_refined_with_the_gain_of_each_rh_level(tmp_path):
     kf = mf.device.humidity_maps["kf"]      # the levels' gains were kept: the device reproduces the score
     assert [mf.values["kf@RH40"], mf.values["kf@RH80"]] == pytest.approx(list(kf.values), rel=1e-9)
     assert any(n.startswith("coupling gain of each RH level refined") for n in mf.spec.notes)
+
+
+def test_a_refit_of_own_effects_also_starts_from_their_spec_starts(clean, monkeypatch):
+    """The refit of the model's own effects starts where the model is and, one effect at a time,
+    from each freed effect's spec start points (Rs 10, 100, 1000 Ω/□): the device's value of a
+    strip's parameter may sit in another valley than this strip's."""
+    from physics.diagnose import diagnosis as D
+    case, data = clean
+    dev = load_device(case.device)
+    ids = tuple(C.resolve_effects(list(case.base_effects) + ["electrode_resistance"], dev))
+    fit = C.fit_model(C.ModelSpec("base", ids, ["kf", "beta_f"]), dev, data.targets, data.target_records,
+                      n_starts=1)
+    assert fit.ok, fit.error
+    seen = []
+
+    def capture(spec, *a, **kw):
+        seen.append(spec)
+        return C.ModelFit(spec, None, None, None, error="captured")
+
+    monkeypatch.setattr(D, "fit_model", capture)
+    assert D._freed(data, fit, {"electrode_resistance": ["Rs"]}, FitOptions(), 1, "own") == (None, {})
+    (spec,) = seen
+    assert spec.start["Rs"] == pytest.approx(dev.params["Rs"])          # from where the model is
+    assert [s["Rs"] for s in spec.extra_starts] == pytest.approx([10.0, 100.0, 1000.0])

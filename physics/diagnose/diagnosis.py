@@ -68,7 +68,7 @@ from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
 from .signatures import features, revealable, signatures
 from .specs import (declared_default, effect_params, excitation, keeps_spec_range, param_bounds, refine_params,
-                    role_family, shape_params, spec_of)
+                    role_family, shape_params, spec_of, start_points)
 from .verdict import (ADEQUATE_RATIO, UNATTRIBUTED, Decision, Pick, Verdict, _signed, decide, doubts,
                       nuisance_summary, pinned, remaining_of)
 
@@ -593,8 +593,10 @@ def _freed(data: PreparedRecords, fit: ModelFit, own: dict, options: FitOptions,
            label: str, need_bic: float = 0.0, need_gain: float = 0.0) -> tuple[ModelFit | None, dict]:
     """``fit`` refitted with the parameters ``own`` ({effect: names}) freed beside its free ones, from
     where it is (a freed parameter from its device value, else the effect's derived start, inside its
-    spec's range); kept when it lowers the BIC with them counted (by more than ``need_bic``) and the
-    RMS error by at least the share ``need_gain``."""
+    spec's range) and, one effect at a time, from its spec's start points (the device's value of a
+    strip's parameter may sit in another valley than this strip's: a rough electrode's line fitted
+    with a constant-phase charge); kept when it lowers the BIC with them counted (by more than
+    ``need_bic``) and the RMS error by at least the share ``need_gain``."""
     names = [n for ns in own.values() for n in ns]
     if not names:
         return None, {}
@@ -607,7 +609,9 @@ def _freed(data: PreparedRecords, fit: ModelFit, own: dict, options: FitOptions,
             # an effect's own parameter keeps its spec's range (a user effect's without one: its declared range)
             bounds[n] = param_bounds(n, dev) or (specs[n].lo, specs[n].hi)
             start[n] = start_in_range(n, dev, derived, bounds[n])
-    spec = ModelSpec(label, fit.effects, list(fit.spec.free) + names, list(fit.spec.per_rh), start, bounds)
+    extra = [st for e, ns in own.items() for pt in start_points(e, dev)
+             if (st := {n: float(np.clip(v, *bounds[n])) for n, v in pt.items() if n in ns})]
+    spec = ModelSpec(label, fit.effects, list(fit.spec.free) + names, list(fit.spec.per_rh), start, bounds, extra)
     out = fit_model(spec, dev, data.targets, data.target_records, n_starts=n_starts, seed=options.seed,
                     n_modes=options.n_modes, df_cache=data.df_cache, keep=options.keep_starts)
     if out.ok:
