@@ -57,10 +57,10 @@ class FractionalCharge(LinearCharge):
                       "ideally down to 0.1 Hz, with the electrodes' resistance in the band",
         "reveal": {"decades_min": 1.0},
         "signature": [("constant_slope_phase", 1.0), ("lf_excess_lag", 0.5), ("step_creep", 0.5)],
-        # tried on request (--candidates): on circuit_lab's rough strips (seeds 28, 29) the default chain
-        # with it ended further from the true model than with fractional_coupling (12.7x against 4.0x
-        # on seed 29: the electrodes' resistance, held while the candidate is fitted, stays near its start
-        # in the refit) and took 2.7x longer (a constant-phase charge is ~32 states per line segment)
+        # tried on request (--candidates): on circuit_lab's rough strips the chain with it ends at 1.11x the
+        # true model's error on seed 29 (4.04x with fractional_coupling) but 8.2x on seed 30 (1.93x), and its
+        # refit of the model's own effects takes ~4x longer (1035 s against 234 s on seed 29: a
+        # constant-phase charge is ~32 states per line segment)
         "by_default": False,
     }
     hints = {"cpe_f_lo": "cpe_f_lo has no effect when cpe_a = 0"}
