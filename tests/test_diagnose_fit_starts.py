@@ -551,6 +551,7 @@ def test_a_refit_of_own_effects_also_starts_from_their_spec_starts(clean, monkey
     from each freed effect's spec start points (Rs 10, 100, 1000 Ω/□): the device's value of a
     strip's parameter may sit in another valley than this strip's."""
     from physics.diagnose import diagnosis as D
+    from physics.diagnose.specs import start_points
     case, data = clean
     dev = load_device(case.device)
     ids = tuple(C.resolve_effects(list(case.base_effects) + ["electrode_resistance"], dev))
@@ -567,4 +568,6 @@ def test_a_refit_of_own_effects_also_starts_from_their_spec_starts(clean, monkey
     assert D._freed(data, fit, {"electrode_resistance": ["Rs"]}, FitOptions(), 1, "own") == (None, {})
     (spec,) = seen
     assert spec.start["Rs"] == pytest.approx(dev.params["Rs"])          # from where the model is
-    assert [s["Rs"] for s in spec.extra_starts] == pytest.approx([10.0, 100.0, 1000.0])
+    spec_starts = [pt["Rs"] for pt in start_points("electrode_resistance", dev)]
+    assert [s["Rs"] for s in spec.extra_starts] == pytest.approx(spec_starts)
+    assert min(spec_starts) < dev.params["Rs"] / 2 and max(spec_starts) > 3 * dev.params["Rs"]    # other valleys
