@@ -34,6 +34,8 @@ from .nonlinear_charge import LinearCharge
 
 #: Frequency at which the constant-phase charge keeps the ideal double layer's magnitude [Hz].
 F_REF = 1.0
+#: Default low-frequency corner ``cpe_f_lo`` [Hz].
+F_LO = 1e-4
 
 
 class FractionalCharge(LinearCharge):
@@ -46,7 +48,7 @@ class FractionalCharge(LinearCharge):
         ParamSpec("cpe_a", "1", 0.0, 0.95, "constant-phase order a: charge per volt ∝ f^(−a) around 1 Hz",
                   optional=True, default=0.0),
         ParamSpec("cpe_f_lo", "Hz", 1e-5, 1.0, "low-frequency corner below which the constant-phase charge "
-                  "flattens", optional=True, default=1e-4),
+                  "flattens", optional=True, default=F_LO),
     )
     diagnosis = {
         "free": ("cpe_a",), "shape": ("cpe_f_lo",),
@@ -69,7 +71,7 @@ class FractionalCharge(LinearCharge):
     def factor(s, p) -> np.ndarray:
         """F(s), the constant-phase factor on the double-layer capacitance (module doc)."""
         s = np.asarray(s, dtype=complex)
-        w_lo = 2.0 * np.pi * p.get("cpe_f_lo", 1e-4)
+        w_lo = 2.0 * np.pi * p.get("cpe_f_lo", F_LO)
         return (np.hypot(2.0 * np.pi * F_REF, w_lo) / (s + w_lo)) ** p.get("cpe_a", 0.0)
 
     @staticmethod
@@ -87,7 +89,7 @@ class FractionalCharge(LinearCharge):
     def realized_charge(self, d: DoubleLayerProps, p):
         if self.is_off(p):
             return None
-        return (lambda s: self.small_signal(s, d, p)), 2.0 * np.pi * p.get("cpe_f_lo", 1e-4)
+        return (lambda s: self.small_signal(s, d, p)), 2.0 * np.pi * p.get("cpe_f_lo", F_LO)
 
     def compiled(self, d: DoubleLayerProps, p):
         if self.is_off(p):
