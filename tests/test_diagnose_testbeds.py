@@ -188,6 +188,31 @@ def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
     assert dec.pick is second and dec.confidence.label != "high"
 
 
+def test_a_step_without_a_pick_looks_ahead_with_its_best_and_takes_the_pair_as_never_high(monkeypatch):
+    """pnp_fd seed 31, rough electrodes and solvent back-relaxation hidden: no candidate passes
+    alone — solvent_diffusion, the best, takes 132 → 114 µm on a 1.5 µm floor (25 % of the excess
+    error power, not a third).  The lead the chain looks ahead with fails that criterion only (a candidate that
+    is not very strong is none, however low its error); with fractional_coupling picked on top of it
+    (→ 1.6 µm) the step's decision becomes the lead, never "high", its reason giving both shares."""
+    from physics.diagnose import verdict as V
+
+    _flags_only(monkeypatch, V)
+    base, floor = Fit(132e-6), 1.5e-6
+    solvent = Cand("solvent_diffusion", -161.0, 114e-6, [])
+    weak = Cand("weak", +12.0, 100e-6, [])               # lower error, evidence not very strong
+    electrode = Cand("electrode_resistance", -97.0, 120e-6, [])
+    dec = decide(base, [solvent, weak, electrode], floor, [1.0], [], lambda *a, **k: Cmp(-5.0),
+                 lambda a, b: 1e-6)
+    assert dec.pick is None and "explains a third of the excess" in dec.reason
+    assert V.lead_of(dec, [solvent, weak, electrode]) is solvent
+    assert V.lead_of(dec, [weak]) is None
+    second = Cand("fractional_coupling", -4000.0, 1.6e-6, [])
+    taken = V.ahead(dec, solvent, second, base, [solvent, weak, electrode], floor)
+    assert taken.pick is solvent and dec.pick is None                    # a new decision, the step's kept
+    assert taken.confidence.label != "high" and taken.confidence.ahead_of == "fractional_coupling"
+    assert "25 %" in taken.reason and "fractional_coupling" in taken.reason
+
+
 def test_identify_keeps_the_start_when_the_fit_is_worse(tmp_path):
     """A fit that makes the time records worse than its start is not written as the result."""
     from physics.identify import identify, write_identification

@@ -4,7 +4,7 @@ that cannot eat physics, one vocabulary with identify, a fit on a bound that is 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pytest
@@ -122,6 +122,18 @@ def test_on_the_refitted_model_a_pick_is_judged_by_its_flags_there():
     assert again.refitted and again.flags == 0 and again.label == "high", again.why
     assert conf.reconfirmed(step, 3.02 * UM, 11.0 * UM, 2.65 * UM, flags=2, pinned=0).label == "medium"
     assert conf.reconfirmed(step, 3.02 * UM, 11.0 * UM, 2.65 * UM, flags=1, pinned=1).label == "low"
+
+
+def test_a_pick_taken_only_with_a_second_effect_on_top_is_never_high():
+    """The look-ahead (:func:`physics.diagnose.diagnosis._look_ahead`) takes a lead for what it does
+    with a second effect: whatever its own features, it is not "high", it says why, and the label
+    survives being judged again on a refitted model and a round trip through ``diagnosis.json``."""
+    clear = _label(70.0, 1.1, rival_um=40.0)
+    assert clear.label == "high"
+    ahead = conf.label(replace(clear, ahead_of="fractional_coupling"))
+    assert ahead.label == "medium" and any("only with fractional_coupling on top" in w for w in ahead.why)
+    assert conf.reconfirmed(ahead, 1.1 * UM, 70.0 * UM, 1.0 * UM, flags=0, pinned=0).label == "medium"
+    assert conf.Confidence.from_dict(ahead.to_dict()).ahead_of == "fractional_coupling"
 
 
 def test_a_pick_must_leave_every_rival_far_behind_for_high():

@@ -37,6 +37,9 @@ written (:func:`.draft._relabel_on_written`: a forward step there, its step's ri
 a form the catalog lacks beside a right pick is a residual the pick leaves, not one it stands in for,
 so that label replaces the pick's only when it is not lower.
 
+* **ahead of** — a pick the chain took only with a second effect on top of it (the look-ahead
+  of :func:`.diagnosis.select`): alone it explains too little of the failure, so it is never "high".
+
 "high" needs all of them (and a weight ≥ :data:`WEIGHT_HIGH`), "low" is a pick that barely
 changes the model, has a near twin or is pinned; everything else is "medium".  The thresholds were
 chosen on some truth families and are reported on others (leave-one-family-out,
@@ -173,6 +176,7 @@ class Confidence:
     held: float = 1.0              # share of the excess a rival held on a bound leaves that the pick removes
     held_of: str | None = None     # that rival (None: no rival held on a bound)
     refitted: bool = False         # change and left judged on a later model (own effects refitted, or a swap)
+    ahead_of: str | None = None    # picked only with this effect on top (the look-ahead: :func:`.diagnosis.select`)
     label: str = "low"
     why: list[str] = field(default_factory=list)   # what kept it from "high"
 
@@ -184,14 +188,15 @@ class Confidence:
         return cls(float(d.get("weight") or 0.0), num("change_noise_floors"), num("left_noise_floors"),
                    float(d.get("twin_share", 1.0)), d.get("closest_rival"), float(d.get("records_improved", 1.0)),
                    int(d.get("quality_flags", 0)), int(d.get("pinned_parameters") or 0),
-                   float(d.get("held_rival_share", 1.0)), d.get("held_rival"), bool(d.get("on_refitted_model")))
+                   float(d.get("held_rival_share", 1.0)), d.get("held_rival"), bool(d.get("on_refitted_model")),
+                   d.get("picked_ahead_of"))
 
     def to_dict(self) -> dict:
         return {"label": self.label, "weight": self.weight, "change_noise_floors": _num(self.change),
                 "left_noise_floors": _num(self.left), "twin_share": self.twin, "closest_rival": self.twin_of,
                 "records_improved": self.records, "quality_flags": self.flags, "pinned_parameters": self.pinned,
                 "held_rival_share": self.held, "held_rival": self.held_of, "on_refitted_model": self.refitted,
-                "not_high_because": self.why}
+                "picked_ahead_of": self.ahead_of, "not_high_because": self.why}
 
 
 def _num(x: float):
@@ -288,6 +293,8 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
                    "limit of the effect, not a value)")
     if c.weight < w_hi:
         why.append(f"its weight {c.weight:.3g} is below {w_hi}")
+    if c.ahead_of:
+        why.append(f"alone it explains too little of the failure: it was picked only with {c.ahead_of} on top of it")
     c.why = why
     if not why:
         c.label = "high"

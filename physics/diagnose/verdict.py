@@ -36,7 +36,10 @@ its weight.  The thresholds are chosen on some truth families and reported on a 
 (``bench/diagnose_calibration.py``).
 
 The selection runs both ways (:func:`.diagnosis.select`): after a pick the remaining
-candidates are tried again on top of it (up to ``max_effects``); when none passes, an effect
+candidates are tried again on top of it (up to ``max_effects``); when none passes but the best
+fails only "explains a third of the excess" (:func:`lead_of`), the others are tried on top of it,
+and the two are taken when they remove nearly all the failure together (:func:`ahead`: two effects
+that pull the response in opposite ways each explain little alone); when none passes, an effect
 of the user's model that the data do not support is removed and tried again as a candidate
 with its own parameters free.
 
@@ -57,7 +60,7 @@ the page and ``diagnosis.json`` show.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -264,6 +267,34 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
     if c.label != "high":
         reason += "; confidence " + c.label + ": " + "; ".join(c.why)
     return Decision(top, weights, ev, reason=reason, alpha=alpha, confidence=c)
+
+
+def lead_of(d: Decision, ranked) -> "object | None":
+    """Of a step without a pick, the candidate of lowest evidence among those that fail only
+    "explains a third of the excess" (every other criterion passed), else None: the one the chain
+    looks ahead with (:func:`.diagnosis.select`)."""
+    if d.pick is not None:
+        return None
+    near = [c for c in ranked if c.passes and all(v for k, v in c.passes.items()
+                                                  if k != "explains_a_third_of_the_excess")]
+    return min(near, key=lambda c: d.evidence[c.effect], default=None)
+
+
+def ahead(d: Decision, lead, second, base, ranked, noise: float) -> Decision:
+    """The decision of a step without a pick once its lead (:func:`lead_of`), with ``second`` picked
+    on top of it, removes at least :data:`AFTER_PICK_SHARE` of the excess error the step's ``base``
+    leaves above the noise floor: the lead is the step's pick, never "high" (it was picked for what
+    the two do together; :attr:`.confidence.Confidence.ahead_of`)."""
+    c = _confidence(lead, base, ranked, d.weights, noise)
+    c.ahead_of = second.effect
+    conf.label(c)
+    alone, both = (excess_share(base.rmse, f.rmse, noise) for f in (lead.fit, second.fit))
+    reason = (f"no candidate passes alone: the best, {lead.effect} (ΔBIC {lead.comparison.delta_bic:.4g}), removes "
+              f"{100 * alone:.2g} % of the excess error over the noise floor (RMS {1e6 * base.rmse:.4g} → "
+              f"{1e6 * lead.fit.rmse:.4g} µm); with {second.effect} picked on top of it the two remove "
+              f"{100 * both:.3g} % (→ {1e6 * second.fit.rmse:.4g} µm): two effects that each hide what the other "
+              f"does; confidence {c.label}: " + "; ".join(c.why))
+    return replace(d, pick=lead, reason=reason, confidence=c)
 
 
 def _confidence(top, base, ranked, weights: dict, noise: float) -> conf.Confidence:
