@@ -24,12 +24,12 @@
    evidence, quality flags, weights, the pick or the ambiguity, the pick's confidence label);
    after a pick the remaining candidates are tried again on top of it while one passes, up to
    ``max_effects``; when none passes alone, the others are tried on top of the best once
-   (:func:`_look_ahead`: a pair each of whose effects hides the other); when none passes, an effect of the user's model that the data do not
-   support is removed (:func:`try_removal`) and tried again as a candidate with its own
-   parameters free; when no removal is favoured either (or the chain is full), the model's own
-   effects are refitted once (:func:`refine_own`), the picks the refitted model does not need
-   are withdrawn and the candidates tried again on top of it (unless ``--free`` names the free
-   parameters: the user's list, nothing besides).
+   (:func:`_look_ahead`: a pair each of whose effects hides the other); when none passes, an
+   effect of the user's model that the data do not support is removed (:func:`try_removal`) and
+   tried again as a candidate with its own parameters free; when no removal is favoured either
+   (or the chain is full), the model's own effects are refitted once (:func:`refine_own`), the
+   picks the refitted model does not need are withdrawn and the candidates tried again on top of
+   it (unless ``--free`` names the free parameters: the user's list, nothing besides).
 6. Adequacy of the final model and what remains (:mod:`.adequacy`, :mod:`.verdict`).
 7. :func:`assess_support` — in the final model each of its own effects is switched off and
    refitted; an effect whose removal does not cost ΔBIC ≥ 6 is "not supported by these data".
@@ -1005,10 +1005,12 @@ def _look_ahead(step: Step, left, data: PreparedRecords, run: DiagnosisRun, step
                       trial)
     if second is None or conf.excess_share(step.base.rmse, second.fit.rmse, data.noise) < AFTER_PICK_SHARE:
         run.timings[f"step {k}: look-ahead on {lead.effect}, not taken"] = run.timings.pop(f"step {k}")
-        run.log(f"  not taken: {'no pick on top of it' if second is None else f'the two leave RMS {1e6 * second.fit.rmse:.4g} µm'}")
+        why = "no pick on top of it" if second is None else f"the two leave RMS {1e6 * second.fit.rmse:.4g} µm"
+        run.log(f"  not taken: {why}")
         return None
     step.decision = ahead(step.decision, lead, second, step.base, step.ranking, data.noise)
-    run.log(f"  taken: {lead.effect} and {second.effect}, RMS {1e6 * step.base.rmse:.4g} → {1e6 * second.fit.rmse:.4g} µm")
+    run.log(f"  taken: {lead.effect} and {second.effect}, RMS {1e6 * step.base.rmse:.4g} → "
+            f"{1e6 * second.fit.rmse:.4g} µm")
     steps += trial
     return lead, second
 
