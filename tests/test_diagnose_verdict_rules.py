@@ -134,6 +134,12 @@ def test_a_pick_taken_only_with_a_second_effect_on_top_is_never_high():
     assert ahead.label == "medium" and any("only with fractional_coupling on top" in w for w in ahead.why)
     assert conf.reconfirmed(ahead, 1.1 * UM, 70.0 * UM, 1.0 * UM, flags=0, pinned=0).label == "medium"
     assert conf.Confidence.from_dict(ahead.to_dict()).ahead_of == "fractional_coupling"
+    from physics.diagnose.verdict import Pick, Verdict
+    lead = Pick(1, "solvent_diffusion", 1.0, 132 * UM, 114 * UM, -161.0, 0.0, {}, [], "", ahead)
+    second = Pick(2, "fractional_coupling", 1.0, 114 * UM, 1.5 * UM, -3e5, 0.0, {}, [], "", clear)
+    text = "\n".join(Verdict("explained", [lead, second], {}, None, 132 * UM, 1.5 * UM, "stated").lines())
+    assert "solvent_diffusion was picked for what it does with fractional_coupling" in text
+    assert text.count("look-ahead") == 1                      # on the lead's line only
 
 
 def test_a_pick_must_leave_every_rival_far_behind_for_high():
