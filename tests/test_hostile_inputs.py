@@ -36,6 +36,17 @@ def test_common_csv_dialects_are_read_exactly(tmp_path, sep, decimal, newline):
     np.testing.assert_array_equal(ts.deflection, D)
 
 
+@pytest.mark.parametrize("sep,decimal", [(",", "."), (";", ","), (";", ".")])
+def test_comment_lines_above_the_header_are_named_not_taken_for_it(tmp_path, sep, decimal):
+    """A lab export with '# …' notes above the header: the error names line 1 and the fix (before,
+    the comment was sniffed as a blank-separated header and line 2 was said to have the wrong
+    number of fields)."""
+    p = _write(tmp_path / "rec.csv", sep=sep, decimal=decimal)
+    p.write_text("# exported by the lab\n# RH 60 %\n" + p.read_text())
+    with pytest.raises(InputError, match=r"rec\.csv, line 1: starts with '#', a comment line.*YAML sidecar"):
+        read_timeseries(p)
+
+
 def test_latin1_file_is_read_and_a_bad_cell_is_named(tmp_path):
     rows = [(a, b, c, 60.0) for a, b, c in zip(T.tolist(), V.tolist(), D.tolist())]
     p = _write(tmp_path / "ok.csv", rows=rows, encoding="latin-1")

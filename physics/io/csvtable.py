@@ -197,6 +197,10 @@ def _setup(path: Path) -> tuple[list[str], dict, str, str]:
                          "followed by data rows")
     encoding, delim, decimal = sniff_dialect(path)
     names = csv_header(path)
+    if names and names[0].lstrip().startswith("#"):
+        raise InputError(f"{path}, line 1: starts with '#', a comment line; expected a header line of column names "
+                         "(time_s, voltage_V, …): remove the comment lines above it, or move their notes (RH, "
+                         "device, units) to the file's YAML sidecar")
     if not any(names):
         raise InputError(f"{path}: empty file; expected a header line of column names "
                          "followed by data rows")
