@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from nnmodel.app.cli import main
 from physics.errors import InputError
-from physics.io.timeseries import read_timeseries
+from physics.io.timeseries import read_timeseries, read_timeseries_pieces
 
 T = np.arange(300) / 100.0
 V = np.sin(2 * np.pi * 2 * T)
@@ -36,15 +36,36 @@ def test_common_csv_dialects_are_read_exactly(tmp_path, sep, decimal, newline):
     np.testing.assert_array_equal(ts.deflection, D)
 
 
-@pytest.mark.parametrize("sep,decimal", [(",", "."), (";", ","), (";", ".")])
-def test_comment_lines_above_the_header_are_named_not_taken_for_it(tmp_path, sep, decimal):
-    """A lab export with '# …' notes above the header: the error names line 1 and the fix (before,
-    the comment was sniffed as a blank-separated header and line 2 was said to have the wrong
-    number of fields)."""
-    p = _write(tmp_path / "rec.csv", sep=sep, decimal=decimal)
-    p.write_text("# exported by the lab\n# RH 60 %\n" + p.read_text())
-    with pytest.raises(InputError, match=r"rec\.csv, line 1: starts with '#', a comment line.*YAML sidecar"):
-        read_timeseries(p)
+@pytest.mark.parametrize("sep,decimal", [(",", "."), (";", ","), (";", "."), ("\t", ",")])
+def test_comment_lines_above_the_header_are_skipped_and_later_lines_keep_their_numbers(tmp_path, sep, decimal):
+    """A lab export with '# …' notes (and a blank line) above the header reads as the file without
+    them, and an error further down names the file's own line (before, the comment was sniffed as a
+    blank-separated header and line 2 was said to have the wrong number of fields)."""
+    plain = _write(tmp_path / "plain.csv", sep=sep, decimal=decimal)
+    p = tmp_path / "rec.csv"
+    p.write_bytes(b"# exported by the lab\n#RH 60 %\n\n" + plain.read_bytes())
+    ts = read_timeseries(p)
+    np.testing.assert_array_equal(ts.time, read_timeseries(plain).time)
+    np.testing.assert_array_equal(ts.deflection, D)
+    pieces = list(read_timeseries_pieces(p, rows=100))        # the streaming reader of long records
+    np.testing.assert_array_equal(np.concatenate([q.time for q in pieces]), ts.time)
+    rows = [(a, b, c, 60.0) for a, b, c in zip(T.tolist(), V.tolist(), D.tolist())]
+    rows[5] = rows[205] = (T[5], "x", D[5], 60.0)      # data rows 6 and 206: lines 7, 207 of the plain file
+    bad = _write(tmp_path / "bad.csv", sep=sep, decimal=decimal, rows=rows)
+    bad.write_bytes(b"# exported by the lab\n#RH 60 %\n\n" + bad.read_bytes())
+    with pytest.raises(InputError, match=r"bad\.csv, line 10, column 'voltage_V': 'x' is not a number"):
+        read_timeseries(bad)
+    rows[5] = (T[5], V[5], D[5], 60.0)
+    bad = _write(tmp_path / "bad.csv", sep=sep, decimal=decimal, rows=rows)
+    bad.write_bytes(b"# exported by the lab\n#RH 60 %\n\n" + bad.read_bytes())
+    with pytest.raises(InputError, match=r"bad\.csv, line 210, column 'voltage_V': 'x' is not a number"):
+        list(read_timeseries_pieces(bad, rows=100))
+    short = tmp_path / "short.csv"                     # a line with a field missing: line 6 of this file
+    lines = plain.read_text().splitlines()
+    lines[2] = sep.join(lines[2].split(sep)[:-1])
+    short.write_text("# notes\n\n" + "\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=r"short\.csv, line 5: 3 fields but the header has 4"):
+        read_timeseries(short)
 
 
 def test_latin1_file_is_read_and_a_bad_cell_is_named(tmp_path):

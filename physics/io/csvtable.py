@@ -2,8 +2,8 @@
 
 :func:`read_table` reads a CSV with a header line of column names (dialect sniffed: comma,
 semicolon, tab, bar or blank separated; decimal point or comma; UTF-8 with or without BOM,
-or Latin-1; LF or CRLF) or a ``.mat`` file of vectors into a :class:`Table` of raw columns,
-naming the line and column of every bad cell.  :func:`write_table` writes columns and a
+or Latin-1; LF or CRLF; ``#`` comment lines above the header skipped) or a ``.mat`` file of
+vectors into a :class:`Table` of raw columns, naming the line and column of every bad cell.  :func:`write_table` writes columns and a
 YAML sidecar atomically under the output policy of :mod:`physics.io.outputs`.
 """
 from __future__ import annotations
@@ -75,12 +75,18 @@ DELIMITERS = (",", ";", "\t", "|")
 ENCODINGS = ("utf-8-sig", "latin-1")
 
 
-def sniff_dialect(path: Path) -> tuple[str, str, str]:
-    """(encoding, delimiter, decimal mark) of a CSV from its first 64 kB.
+#: A line above the header starting with this is a comment (a lab export's notes: instrument,
+#: operator, RH): skipped, with blank lines among such lines.
+COMMENT = "#"
 
-    The delimiter is the separator most frequent in the header line (comma, semicolon,
-    tab, bar; runs of blanks if none); a decimal comma is recognised when the separator
-    is not a comma and data cells look like ``1,5``.
+
+def sniff_dialect(path: Path) -> tuple[str, str, str, int]:
+    """(encoding, delimiter, decimal mark, lines above the header) of a CSV from its first 64 kB.
+
+    The lines above the header are the leading comment lines (:data:`COMMENT`) and blank
+    lines.  The delimiter is the separator most frequent in the header line (comma,
+    semicolon, tab, bar; runs of blanks if none); a decimal comma is recognised when the
+    separator is not a comma and data cells look like ``1,5``.
     """
     with path.open("rb") as fh:
         head = fh.read(1 << 16)
@@ -94,6 +100,8 @@ def sniff_dialect(path: Path) -> tuple[str, str, str]:
         else:
             text, encoding = head[:exc.start].decode("utf-8-sig"), "utf-8-sig"
     lines = text.splitlines()
+    skip = next((k for k, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith(COMMENT)), len(lines))
+    lines = lines[skip:]
     header = lines[0] if lines else ""
     counts = {d: header.count(d) for d in DELIMITERS}
     delim = max(DELIMITERS, key=lambda d: counts[d]) if any(counts.values()) else \
@@ -103,7 +111,7 @@ def sniff_dialect(path: Path) -> tuple[str, str, str]:
         body = "\n".join(lines[1:50])
         if re.search(r"\d,\d", body) and not re.search(r"\d\.\d", body):
             decimal = ","
-    return encoding, delim, decimal
+    return encoding, delim, decimal, skip
 
 
 #: Longest header line read (characters): thousands of column names fit in it.
@@ -112,11 +120,13 @@ MAX_HEADER = 1 << 20
 
 def csv_header(path: Path) -> list[str]:
     """Column names of a CSV's header line (dialect sniffed as by :func:`read_table`)."""
-    encoding, delim, _ = sniff_dialect(path)
+    encoding, delim, _, skip = sniff_dialect(path)
     with open(path, encoding=encoding, errors="replace", newline="") as fh:
+        for _ in range(skip):
+            fh.readline(MAX_HEADER + 1)
         header_line = fh.readline(MAX_HEADER + 1)
     if len(header_line) > MAX_HEADER:
-        raise InputError(f"{path}: the first line is longer than {MAX_HEADER} characters; expected a header line "
+        raise InputError(f"{path}, line {skip + 1}: longer than {MAX_HEADER} characters; expected a header line "
                          "of column names")
     if delim == r"\s+":
         return header_line.split()
@@ -126,31 +136,32 @@ def csv_header(path: Path) -> list[str]:
         raise InputError(f"{path}: the header line cannot be read as CSV ({exc})") from None
 
 
-def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str) -> None:
-    """Refuse a line of the first 64 kB whose number of fields differs from the header's,
-    naming the line (a later one is caught by the parser, without its number)."""
+def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str, skip: int) -> None:
+    """Refuse a line of the first 64 kB whose number of fields differs from the header's (on
+    line ``skip`` + 1), naming the line (a later one is caught by the parser, without its number)."""
     with path.open("rb") as fh:
         head = fh.read(1 << 16).decode(encoding, errors="replace")
-    lines = head.splitlines()[1:-1]   # the last line of the head may be cut
+    lines = head.splitlines()[skip + 1:-1]   # the last line of the head may be cut
     rows = (ln.split() for ln in lines) if delim == r"\s+" else csv.reader(lines, delimiter=delim)
     k = -1
     try:
         for k, fields in enumerate(rows):
             if fields and len(fields) != n and any(f.strip() for f in fields):
-                raise InputError(f"{path}, line {k + 2}: {len(fields)} fields but the header has {n} "
+                raise InputError(f"{path}, line {skip + k + 2}: {len(fields)} fields but the header has {n} "
                                  f"(separator {delim!r}){hint}")
     except csv.Error as exc:
-        raise InputError(f"{path}, line {k + 3}: cannot be read as CSV ({exc})") from None
+        raise InputError(f"{path}, line {skip + k + 3}: cannot be read as CSV ({exc})") from None
 
 
-def _count_rows(path: Path) -> int:
-    """Data rows of a CSV (lines after the header, a last line without a newline included)."""
+def _count_rows(path: Path, skip: int) -> int:
+    """Data rows of a CSV (lines after the header on line ``skip`` + 1, a last line without a
+    newline included)."""
     n, last = 0, b"\n"
     with path.open("rb") as fh:
         for block in iter(lambda: fh.read(1 << 22), b""):
             n += block.count(b"\n")
             last = block[-1:]
-    return n - 1 + (last != b"\n")
+    return n - 1 - skip + (last != b"\n")
 
 
 def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[list | None, np.ndarray | None]:
@@ -161,7 +172,7 @@ def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[list | None
     ``opts["skiprows"]``."""
     try:
         reader = pd.read_csv(path, dtype=float, chunksize=1 << 18, nrows=rows, **opts)
-        total = _count_rows(path) if rows is None else rows
+        total = _count_rows(path, opts["skiprows"] - 1) if rows is None else rows
         values = [np.empty(max(total, 0)) for _ in opts["names"]]
         n = 0
         for chunk in reader:
@@ -191,23 +202,20 @@ def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[list | None
 
 def _setup(path: Path) -> tuple[list[str], dict, str, str]:
     """(column names, pandas options, the hint on a field-count error, decimal mark) of a CSV,
-    its dialect sniffed and its first lines' field counts checked."""
+    its dialect sniffed and its first lines' field counts checked; ``opts["skiprows"]`` is the
+    header's line number (the comment lines above it and the header itself)."""
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file; expected a header line of column names "
                          "followed by data rows")
-    encoding, delim, decimal = sniff_dialect(path)
+    encoding, delim, decimal, skip = sniff_dialect(path)
     names = csv_header(path)
-    if names and names[0].lstrip().startswith("#"):
-        raise InputError(f"{path}, line 1: starts with '#', a comment line; expected a header line of column names "
-                         "(time_s, voltage_V, …): remove the comment lines above it, or move their notes (RH, "
-                         "device, units) to the file's YAML sidecar")
     if not any(names):
         raise InputError(f"{path}: empty file; expected a header line of column names "
                          "followed by data rows")
     hint = ("; a decimal comma needs another field separator (';' or tab) — in a comma-separated file "
             "write numbers with a decimal point") if delim == "," else ""
-    _check_field_counts(path, encoding, delim, len(names), hint)
-    opts = dict(sep=delim, header=None, skiprows=1, names=list(range(len(names))), decimal=decimal,
+    _check_field_counts(path, encoding, delim, len(names), hint, skip)
+    opts = dict(sep=delim, header=None, skiprows=skip + 1, names=list(range(len(names))), decimal=decimal,
                 encoding=encoding, skip_blank_lines=False, engine="c", index_col=False)
     return names, opts, hint, decimal
 
@@ -229,8 +237,9 @@ def _parsed(path: Path, names, opts, hint, rows: int | None = None):
                          f"(separator {opts['sep']!r}){hint}") from None
 
 
-def _table(path: Path, names, values, raw, decimal: str, first: int = 0) -> Table:
-    """The :class:`Table` of parsed values (or text cells) of rows ``first``… of a CSV."""
+def _table(path: Path, names, values, raw, decimal: str, first_line: int) -> Table:
+    """The :class:`Table` of parsed values (or text cells) of a CSV's rows from its line ``first_line``
+    (1-based) on."""
     if raw is not None:
         raw[pd.isna(raw)] = ""
         end = raw.shape[0]
@@ -252,7 +261,7 @@ def _table(path: Path, names, values, raw, decimal: str, first: int = 0) -> Tabl
         if name in columns:
             raise InputError(f"{path}: column {name!r} appears twice in the header")
         columns[name] = col
-    return Table(path, columns, lambda i: f"line {first + i + 2}")
+    return Table(path, columns, lambda i: f"line {first_line + i}")
 
 
 def read_table(path: Path) -> Table:
@@ -267,7 +276,7 @@ def read_table(path: Path) -> Table:
         return _read_mat(path)
     names, opts, hint, decimal = _setup(path)
     values, raw = _parsed(path, names, opts, hint)
-    return _table(path, names, values, raw, decimal)
+    return _table(path, names, values, raw, decimal, opts["skiprows"] + 1)
 
 
 def iter_table(path: Path, rows: int = 1 << 20) -> Iterator[Table]:
@@ -275,7 +284,8 @@ def iter_table(path: Path, rows: int = 1 << 20) -> Iterator[Table]:
     same dialect, checks and messages as :func:`read_table`; ``locate`` names the file's
     lines), so that a long file is never held whole."""
     names, opts, hint, decimal = _setup(path)
-    total, first = _count_rows(path), 0
+    head = opts["skiprows"]                     # the header's line number
+    total, first = _count_rows(path, head - 1), 0
     while total > rows and total % rows == 1:   # no last piece of one row (a record needs two)
         rows += 1
     reader = pd.read_csv(path, dtype=float, chunksize=rows, **opts)
@@ -289,11 +299,11 @@ def iter_table(path: Path, rows: int = 1 << 20) -> Iterator[Table]:
                 raise ValueError("NaN or empty cell")
             raw = None
         except (ValueError, StopIteration, pd.errors.ParserError, pd.errors.ParserWarning):
-            values, raw = _parsed(path, names, dict(opts, skiprows=1 + first), hint, n)   # names the fault
-        table = _table(path, names, values, raw, decimal, first)
+            values, raw = _parsed(path, names, dict(opts, skiprows=head + first), hint, n)   # names the fault
+        table = _table(path, names, values, raw, decimal, head + first + 1)
         got = len(next(iter(table.columns.values()))) if table.columns else 0
         if got < n and first + n < total:   # blank lines, then more data: as read_table says
-            raise InputError(f"{path}, line {first + got + 2}: empty line inside the data; remove it")
+            raise InputError(f"{path}, line {head + first + got + 1}: empty line inside the data; remove it")
         yield table
         first += n
 
