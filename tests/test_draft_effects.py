@@ -1008,6 +1008,38 @@ def test_the_own_effects_are_refitted_beside_the_kept_drafts():
     assert not calls and out.chain[-1][1] == 12e-6
 
 
+def test_an_effect_removed_before_the_drafts_is_restored_beside_them_when_it_pays():
+    """An own effect the support test removed (judged on a model still missing what a draft models)
+    is restored beside the kept drafts at the device's values with the own effects refitted (a
+    round with no candidate and ``refit_own``): kept, with the chain, best model and note, when the
+    error falls by 10 % with very strong evidence; otherwise a note says it was not kept; never on
+    a large-signal model."""
+    from physics.diagnose.draft import DraftOutcome, _restore_removed
+    rng = np.random.default_rng(0)
+
+    def fit(rmse, effects, k):
+        return _Stub(rmse=rmse, effects=list(effects), k=k, n=[4000], taus=[4.0], device=f"device at {rmse}",
+                     resid_d=[rmse * rng.standard_normal(4000)], model=_Stub(is_linear=True))
+    calls = []
+    written = ["double_layer", "viscoelastic", "drafted_input_saturation"]
+    for after, kept in ((2.2e-6, True), (4.2e-6, False)):
+        def rediagnose(device, effects, free, candidates, refit_own=False):
+            calls.append((device, tuple(effects), tuple(candidates), refit_own))
+            return _Stub(base=fit(30e-6, effects, 9), steps=[_Stub(refit=fit(after, effects, 10))])
+        out = DraftOutcome([], [], 20e-6, chain=[("drafted_input_saturation", 4.4e-6)], final=fit(4.4e-6, written, 9))
+        removed = ["solvent_diffusion"]
+        _restore_removed(out, rediagnose, ["kf"], removed, lambda msg: None)
+        assert calls[-1] == ("device at 4.4e-06", tuple(written + ["solvent_diffusion"]), (), True)
+        assert (out.chain[-1] == ("solvent_diffusion", 2.2e-6)) == kept and (removed == []) == kept
+        assert (out.final.rmse == 2.2e-6) == kept
+        note = [n for n in out.notes if n.startswith("solvent_diffusion (removed before the drafts) restored")]
+        assert len(note) == 1 and f"4.4 → {1e6 * after:.2g} µm" in note[0] and note[0].endswith("not kept") != kept
+    calls.clear()
+    out = DraftOutcome([], [], 20e-6, chain=[("x", 4.4e-6)], final=_Stub(rmse=4.4e-6, model=_Stub(is_linear=False)))
+    _restore_removed(out, rediagnose, ["kf"], ["solvent_diffusion"], lambda msg: None)
+    assert not calls and out.chain == [("x", 4.4e-6)]
+
+
 def test_a_large_signal_pick_meets_its_best_linear_rival():
     """In a draft round a large-signal pick cannot be refined on the time records; the linear
     candidate with the lowest ΔBIC is the one refined before the round decides again."""
