@@ -66,6 +66,14 @@ def test_comment_lines_above_the_header_are_skipped_and_later_lines_keep_their_n
     short.write_text("# notes\n\n" + "\n".join(lines) + "\n")
     with pytest.raises(InputError, match=r"short\.csv, line 5: 3 fields but the header has 4"):
         read_timeseries(short)
+    hashed = tmp_path / "hashed.csv"                   # the header itself commented out
+    hashed.write_text("# " + plain.read_text())
+    with pytest.raises(InputError, match=r"hashed\.csv, line 2: numbers where the header line .* remove its '#'"):
+        read_timeseries(hashed)
+    notes = tmp_path / "notes.csv"
+    notes.write_text("# exported by the lab\n# nothing else\n")
+    with pytest.raises(InputError, match=r"notes\.csv: only comment lines"):
+        read_timeseries(notes)
 
 
 def test_latin1_file_is_read_and_a_bad_cell_is_named(tmp_path):

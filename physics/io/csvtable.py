@@ -200,6 +200,13 @@ def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[list | None
     return None, df.to_numpy(dtype=object).copy()
 
 
+def _numbers_only(names: list[str]) -> bool:
+    """Whether a header line split into ``names`` holds only numbers (digits, signs, exponents,
+    decimal marks and separators: a data row, whatever separator its split assumed)."""
+    text = "".join(names)
+    return bool(re.search(r"\d", text)) and re.fullmatch(r"[\d.,;|+\-eE\s]*", text) is not None
+
+
 def _setup(path: Path) -> tuple[list[str], dict, str, str]:
     """(column names, pandas options, the hint on a field-count error, decimal mark) of a CSV,
     its dialect sniffed and its first lines' field counts checked; ``opts["skiprows"]`` is the
@@ -209,6 +216,13 @@ def _setup(path: Path) -> tuple[list[str], dict, str, str]:
                          "followed by data rows")
     encoding, delim, decimal, skip = sniff_dialect(path)
     names = csv_header(path)
+    if skip and not any(names):
+        raise InputError(f"{path}: only comment lines ('#') and no header line of column names (time_s, voltage_V, "
+                         "…) followed by data rows")
+    if skip and _numbers_only(names):
+        raise InputError(f"{path}, line {skip + 1}: numbers where the header line of column names (time_s, "
+                         f"voltage_V, …) should be, after {skip} line(s) skipped as comments ('#'); if the header is "
+                         "among them, remove its '#'")
     if not any(names):
         raise InputError(f"{path}: empty file; expected a header line of column names "
                          "followed by data rows")
