@@ -72,7 +72,7 @@ def test_comment_lines_above_the_header_are_skipped_and_later_lines_keep_their_n
         read_timeseries(hashed)
     notes = tmp_path / "notes.csv"
     notes.write_text("# exported by the lab\n# nothing else\n")
-    with pytest.raises(InputError, match=r"notes\.csv: only comment lines"):
+    with pytest.raises(InputError, match=r"notes\.csv: only comment \('#'\) or blank lines"):
         read_timeseries(notes)
 
 

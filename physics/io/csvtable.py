@@ -3,8 +3,9 @@
 :func:`read_table` reads a CSV with a header line of column names (dialect sniffed: comma,
 semicolon, tab, bar or blank separated; decimal point or comma; UTF-8 with or without BOM,
 or Latin-1; LF or CRLF; ``#`` comment lines above the header skipped) or a ``.mat`` file of
-vectors into a :class:`Table` of raw columns, naming the line and column of every bad cell.  :func:`write_table` writes columns and a
-YAML sidecar atomically under the output policy of :mod:`physics.io.outputs`.
+vectors into a :class:`Table` of raw columns, naming the line and column of every bad cell.
+:func:`write_table` writes columns and a YAML sidecar atomically under the output policy of
+:mod:`physics.io.outputs`.
 """
 from __future__ import annotations
 
@@ -80,6 +81,12 @@ ENCODINGS = ("utf-8-sig", "latin-1")
 COMMENT = "#"
 
 
+def _lines(text: str) -> list[str]:
+    """``text`` split at LF, CRLF or CR, as a file opened with ``newline=""`` reads its lines (not
+    :meth:`str.splitlines`, which also splits at form feeds and Latin-1's NEL, shifting line numbers)."""
+    return re.split(r"\r\n|\r|\n", text)
+
+
 def sniff_dialect(path: Path) -> tuple[str, str, str, int]:
     """(encoding, delimiter, decimal mark, lines above the header) of a CSV from its first 64 kB.
 
@@ -99,7 +106,7 @@ def sniff_dialect(path: Path) -> tuple[str, str, str, int]:
             text, encoding = head.decode("latin-1"), "latin-1"
         else:
             text, encoding = head[:exc.start].decode("utf-8-sig"), "utf-8-sig"
-    lines = text.splitlines()
+    lines = _lines(text)
     skip = next((k for k, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith(COMMENT)), len(lines))
     lines = lines[skip:]
     header = lines[0] if lines else ""
@@ -141,7 +148,7 @@ def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str
     line ``skip`` + 1), naming the line (a later one is caught by the parser, without its number)."""
     with path.open("rb") as fh:
         head = fh.read(1 << 16).decode(encoding, errors="replace")
-    lines = head.splitlines()[skip + 1:-1]   # the last line of the head may be cut
+    lines = _lines(head)[skip + 1:-1]   # the last line of the head may be cut
     rows = (ln.split() for ln in lines) if delim == r"\s+" else csv.reader(lines, delimiter=delim)
     k = -1
     try:
@@ -217,12 +224,12 @@ def _setup(path: Path) -> tuple[list[str], dict, str, str]:
     encoding, delim, decimal, skip = sniff_dialect(path)
     names = csv_header(path)
     if skip and not any(names):
-        raise InputError(f"{path}: only comment lines ('#') and no header line of column names (time_s, voltage_V, "
-                         "…) followed by data rows")
+        raise InputError(f"{path}: only comment ('#') or blank lines, no header line of column names (time_s, "
+                         "voltage_V, …) followed by data rows")
     if skip and _numbers_only(names):
         raise InputError(f"{path}, line {skip + 1}: numbers where the header line of column names (time_s, "
-                         f"voltage_V, …) should be, after {skip} line(s) skipped as comments ('#'); if the header is "
-                         "among them, remove its '#'")
+                         f"voltage_V, …) should be, after {skip} comment ('#') or blank line(s) skipped; if the header "
+                         "is among them, remove its '#'")
     if not any(names):
         raise InputError(f"{path}: empty file; expected a header line of column names "
                          "followed by data rows")
