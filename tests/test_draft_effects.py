@@ -1040,6 +1040,20 @@ def test_an_effect_removed_before_the_drafts_is_restored_beside_them_when_it_pay
     assert not calls and out.chain == [("x", 4.4e-6)]
 
 
+def test_a_pick_left_out_stood_in_for_the_drafts_not_for_an_own_effect_restored():
+    """The pick the model written leaves out may have stood in for what that model adds to the
+    user's: the kept drafts, not an own effect of the user's model restored beside them."""
+    from physics.diagnose.draft import DraftOutcome, _left_out_of_written
+    pick = _Stub(effect="nonlinear_charge", left_out="")
+    res = _Stub(final=_Stub(rmse=19.85e-6, effects=["double_layer", "viscoelastic", "nonlinear_charge"]),
+                base=_Stub(effects=["double_layer", "solvent_diffusion", "viscoelastic"]),
+                verdict=_Stub(picks=[pick]))
+    written = _Stub(rmse=2.5e-6, effects=["double_layer", "solvent_diffusion", "viscoelastic", "drafted_x"])
+    out = DraftOutcome([_Stub(effect_id="drafted_x")], [], 19.85e-6, final=written)
+    _left_out_of_written(res, out)
+    assert pick.left_out.endswith("so nonlinear_charge may have stood in for drafted_x")
+
+
 def test_a_large_signal_pick_meets_its_best_linear_rival():
     """In a draft round a large-signal pick cannot be refined on the time records; the linear
     candidate with the lowest ΔBIC is the one refined before the round decides again."""

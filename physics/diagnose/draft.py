@@ -431,7 +431,9 @@ def _left_out_of_written(res, outcome: DraftOutcome) -> None:
     fit = outcome.final
     if not outcome.kept or fit is None or fit.rmse >= res.final.rmse:
         return
-    added = [e for e in fit.effects if e not in res.final.effects]
+    # what the written model adds to the user's: an own effect the support test removed and the
+    # rounds restored is not what the pick stood in for
+    added = [e for e in fit.effects if e not in res.final.effects and e not in res.base.effects]
     for p in res.verdict.picks:
         if p.effect in fit.effects:
             continue
