@@ -324,7 +324,7 @@ BAD = {  # id: (file text, read kwargs, substrings the message must contain)
                        ["column 'voltage_V' appears twice"]),
     "nameless-data": ("time_s,voltage_V,deflection_m,rh_pct,\n0,1,0,50,7\n1,1,0,50,\n", {},
                       ["column 5 has data but no name"]),
-    "extra-field": (H + "0,1,0,50\n1,1,0,50,9\n", {}, ["line 3", "4 fields"]),
+    "extra-field": (H + "0,1,0,50\n1,1,0,50,9\n", {}, ["line 3", "5 fields but the header has 4"]),
     "map-rh-out-of-range": ("V1,V2,H\n1,0.2,50\n3,0.4,-3\n", {"columns": {"voltage": "V1", "deflection": "V2",
                                                                     "rh": "H"}, "fs": 10.0},
                             ["line 3", "column 'H' (rh)", "-3.0", "0–100"]),
