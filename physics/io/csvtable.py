@@ -160,15 +160,15 @@ def _check_field_counts(path: Path, encoding: str, delim: str, n: int, hint: str
         raise InputError(f"{path}, line {skip + k + 3}: cannot be read as CSV ({exc})") from None
 
 
-def _count_rows(path: Path, skip: int) -> int:
-    """Data rows of a CSV (lines after the header on line ``skip`` + 1, a last line without a
-    newline included)."""
+def _count_rows(path: Path, head: int) -> int:
+    """Data rows of a CSV: its lines after the first ``head`` (the comment lines and the header),
+    a last line without a newline included."""
     n, last = 0, b"\n"
     with path.open("rb") as fh:
         for block in iter(lambda: fh.read(1 << 22), b""):
             n += block.count(b"\n")
             last = block[-1:]
-    return n - 1 - skip + (last != b"\n")
+    return n - head + (last != b"\n")
 
 
 def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[list | None, np.ndarray | None]:
@@ -179,7 +179,7 @@ def _parse(path: Path, opts: dict, rows: int | None = None) -> tuple[list | None
     ``opts["skiprows"]``."""
     try:
         reader = pd.read_csv(path, dtype=float, chunksize=1 << 18, nrows=rows, **opts)
-        total = _count_rows(path, opts["skiprows"] - 1) if rows is None else rows
+        total = _count_rows(path, opts["skiprows"]) if rows is None else rows
         values = [np.empty(max(total, 0)) for _ in opts["names"]]
         n = 0
         for chunk in reader:
@@ -306,7 +306,7 @@ def iter_table(path: Path, rows: int = 1 << 20) -> Iterator[Table]:
     lines), so that a long file is never held whole."""
     names, opts, hint, decimal = _setup(path)
     head = opts["skiprows"]                     # the header's line number
-    total, first = _count_rows(path, head - 1), 0
+    total, first = _count_rows(path, head), 0
     while total > rows and total % rows == 1:   # no last piece of one row (a record needs two)
         rows += 1
     reader = pd.read_csv(path, dtype=float, chunksize=rows, **opts)
