@@ -30,7 +30,8 @@ if str(ROOT) not in sys.path:
 GRID = {"change_high_noise_floors": (1.5, 2.0, 3.0, 5.0, 8.0),
         "left_high_noise_floors": (1.5, 2.0, 3.0, 5.0, 10.0, 1e9),
         "twin_high_share": (1.0 / 3.0, 0.5, 0.6, 0.8, 0.95),
-        "records_high_share": (0.5, 0.75, 1.0)}
+        "records_high_share": (0.5, 0.75, 1.0),
+        "left_low_noise_floors": (5.0, 10.0, 15.0, 20.0, 30.0, 1e9)}
 
 
 def picks(results: Path, selection) -> list[dict]:
@@ -46,10 +47,14 @@ def picks(results: Path, selection) -> list[dict]:
         except (OSError, ValueError):
             continue
         exp, acc = set(meta["expected"]), set(meta["acceptable"])
-        for p in diag["verdict"].get("chain") or []:
+        v, noise = diag["verdict"], diag.get("noise_floor_m")
+        for p in v.get("chain") or []:
             f = p.get("confidence_features")
             if not f:
                 continue
+            if f.get("chain_left_noise_floors") is None and v.get("final_rmse_m") and noise:
+                # recorded before the chain's end entered the features: the same number, from the verdict
+                f = {**f, "chain_left_noise_floors": v["final_rmse_m"] / noise}
             ans = "right" if p["effect"] in exp else ("acceptable" if p["effect"] in acc else "wrong")
             out.append({"family": fam, "truth": truth, "seed": seed, "effect": p["effect"], "answer": ans,
                         "features": Confidence.from_dict(f), "label_as_run": p.get("confidence_label")})
@@ -71,7 +76,9 @@ def table(rows: list[tuple[str, str]]) -> dict:
 
 def choose(ps: list[dict]) -> dict:
     """The grid point with the most right "high" picks and no wrong one on ``ps`` (ties: the
-    most demanding thresholds)."""
+    most demanding thresholds), and among those the one with the most wrong "low" picks less
+    right or acceptable ones (ties: the largest ``left_low_noise_floors``, which turns the fewest
+    picks "low"; the "low" rules do not touch "high")."""
     best, key = None, None
     names = list(GRID)
     for combo in itertools.product(*(GRID[n] for n in names)):
@@ -79,8 +86,9 @@ def choose(ps: list[dict]) -> dict:
         rows = labelled(ps, th)
         wrong = sum(1 for lab, a in rows if lab == "high" and a == "wrong")
         right = sum(1 for lab, a in rows if lab == "high" and a != "wrong")
-        k = (wrong == 0, right, th["change_high_noise_floors"], -th["left_high_noise_floors"],
-             th["twin_high_share"], th["records_high_share"])
+        low = sum(1 if a == "wrong" else -1 for lab, a in rows if lab == "low")
+        k = (wrong == 0, right, low, th["change_high_noise_floors"], -th["left_high_noise_floors"],
+             th["twin_high_share"], th["records_high_share"], th["left_low_noise_floors"])
         if key is None or k > key:
             best, key = th, k
     return best
@@ -126,7 +134,8 @@ def main(argv=None) -> int:
         for p, (lab, _) in zip(test, rows):
             print(f"      {p['truth']:20s} s{p['seed']} {p['effect']:22s} {p['answer']:10s} {lab:6s} "
                   f"(change {p['features'].change:.3g}, left {p['features'].left:.3g}, twin {p['features'].twin:.2f}, "
-                  f"records {p['features'].records:.2f}, flags {p['features'].flags}, held {p['features'].held:.2f})")
+                  f"records {p['features'].records:.2f}, flags {p['features'].flags}, held {p['features'].held:.2f}, "
+                  f"chain left {p['features'].chain_left:.3g})")
     print()
     show("all folds pooled (each family labelled with thresholds chosen without it)", table(pooled))
     show("all families with the package's thresholds", table(pooled_pkg))

@@ -60,6 +60,23 @@ def test_a_pick_leaving_a_large_structured_residual_is_a_possible_proxy():
     assert c.label == "medium" and any("proxy" in w for w in c.why)
 
 
+def test_a_pick_in_a_chain_that_ends_far_from_the_noise_is_low():
+    """A second-order sensor low-pass read as electrode_resistance (pnp_fd seed 33): 110 → 47.2 µm on a
+    1.5 µm floor, the chain ends there (31 noise floors) — "low", and it says why.  The same pick in a
+    chain whose next pick brings the model to the noise (an electrode + solvent pair: the first pick
+    left 28 floors, the chain ends at 1) is not: the rest was the second effect, named."""
+    c = _label(110.0, 47.2, rival_um=60.0, noise_um=1.5)
+    assert c.label == "medium"
+    ended_far = conf.at_chain_end(c, 47.2 * UM, 1.5 * UM)
+    assert ended_far.label == "low" and any("chain ends leaving 31.5× the noise floor" in w for w in ended_far.why)
+    assert c.label == "medium" and math.isnan(c.chain_left)            # the step's own label is not changed
+    assert conf.at_chain_end(c, 1.5 * UM, 1.5 * UM).label == "medium"
+    assert conf.at_chain_end(c, 47.2 * UM, math.nan).label == "medium"  # no floor: nothing to judge it by
+    again = conf.label(conf.Confidence.from_dict(ended_far.to_dict()))
+    assert again.label == "low" and again.chain_left == pytest.approx(47.2 / 1.5)
+    assert math.isnan(conf.Confidence.from_dict({**c.to_dict(), "chain_left_noise_floors": None}).chain_left)
+
+
 def test_a_near_twin_keeps_a_pick_from_high():
     """viscoelastic hidden, fractional_coupling picked at 1.16 µm with viscoelastic at 1.20 µm."""
     c = _label(5.0, 1.16, rival_um=1.20)

@@ -1066,7 +1066,8 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                                else (s.base.rmse, p.fit.rmse, p.comparison.delta_bic))
         picks.append(Pick(s.index, p.effect, s.decision.weight, before, after, dbic, p.comparison.p_value,
                           effect_rows(at, p.effect),
-                          list(p.quality), s.decision.reason, s.decision.confidence,
+                          list(p.quality), s.decision.reason,
+                          s.decision.confidence and conf.at_chain_end(s.decision.confidence, final.rmse, data.noise),
                           next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating,
                           again.get("on", "")))
     label = "base" + "".join(f" − {r['effect']}" for r in removed) + (" (own effects refitted)" if refitted else "") \
