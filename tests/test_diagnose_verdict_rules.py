@@ -75,6 +75,11 @@ def test_a_pick_in_a_chain_that_ends_far_from_the_noise_is_low():
     again = conf.label(conf.Confidence.from_dict(ended_far.to_dict()))
     assert again.label == "low" and again.chain_left == pytest.approx(47.2 / 1.5)
     assert math.isnan(conf.Confidence.from_dict({**c.to_dict(), "chain_left_noise_floors": None}).chain_left)
+    from physics.diagnose.verdict import Pick, Verdict
+    lines = Verdict("partly explained", [Pick(1, "electrode_resistance", 1.0, 110 * UM, 47.2 * UM, -1e5, 0.0, {}, [],
+                                              "", ended_far)], {}, None, 110 * UM, 1.5 * UM, "stated").lines()
+    assert any(w.startswith("  A possible proxy: the chain ends leaving 31.5× the noise floor") for w in lines)
+    assert "confidence low" in "\n".join(lines)
 
 
 def test_a_near_twin_keeps_a_pick_from_high():

@@ -491,6 +491,10 @@ class Verdict:
                 if p.confidence is not None and p.confidence.ahead_of:
                     out.append(f"  Alone it explains less than a third of the failure: {p.effect} was picked for "
                                f"what it does with {p.confidence.ahead_of}, tried on top of it (a look-ahead).")
+                if p.confidence is not None and p.confidence.chain_left > conf.LEFT_LOW:
+                    out.append(f"  A possible proxy: the chain ends leaving {p.confidence.chain_left:.3g}× the noise "
+                               f"floor, so {p.effect} explains a part of the failure, and that part may be physics "
+                               "the catalog lacks that its form happens to follow (hence \"low\").")
                 if p.quality:
                     out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
                 if p.left_out:
