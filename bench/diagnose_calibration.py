@@ -55,10 +55,20 @@ def picks(results: Path, selection) -> list[dict]:
             if f.get("chain_left_noise_floors") is None and v.get("final_rmse_m") and noise:
                 # recorded before the chain's end entered the features: the same number, from the verdict
                 f = {**f, "chain_left_noise_floors": v["final_rmse_m"] / noise}
+            if "undetermined_parameters" not in f:
+                f = {**f, "undetermined_parameters": _undetermined(p.get("quality_flags") or [])}
             ans = "right" if p["effect"] in exp else ("acceptable" if p["effect"] in acc else "wrong")
             out.append({"family": fam, "truth": truth, "seed": seed, "effect": p["effect"], "answer": ans,
                         "features": Confidence.from_dict(f), "label_as_run": p.get("confidence_label")})
     return out
+
+
+def _undetermined(flags: list[str]) -> int:
+    """Own parameters inside their range and not determined, read from a pick's quality flags
+    (:func:`physics.diagnose.verdict.quality`: recorded before they entered the features)."""
+    loose = {f.split(" is not determined")[0] for f in flags if " is not determined" in f}
+    bound = {f.split(" = ")[0] for f in flags if " is on a bound" in f}
+    return len(loose - bound)
 
 
 def labelled(ps: list[dict], th: dict | None) -> list[tuple[str, str]]:

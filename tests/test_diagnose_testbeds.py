@@ -109,6 +109,7 @@ def _flags_only(monkeypatch, V):
     """The fake candidates' quality is their ``_flags``; one is held on a bound when a flag says so."""
     monkeypatch.setattr(V, "quality", lambda c, own_pairs=True: list(c._flags))
     monkeypatch.setattr(V, "pinned", lambda c: [])
+    monkeypatch.setattr(V, "undetermined", lambda c: [])
     monkeypatch.setattr(V, "held", lambda c: [q for q in c._flags if "bound" in q])
 
 

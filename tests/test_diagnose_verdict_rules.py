@@ -133,6 +133,27 @@ def test_a_pick_whose_parameter_the_data_pinned_to_a_bound_is_low():
     assert d["pinned_parameters"] == 1 and conf.Confidence.from_dict(d).pinned == 1
 
 
+def test_a_pick_whose_parameter_the_records_do_not_determine_is_low():
+    """A creep on the output taken for layered_beam (circuit_lab seed 33): on the refitted model
+    10.73 → 3.04 µm on a 2.47 µm floor, its electrode modulus inside its range at 675 % relative
+    standard error and correlated −0.998 with the polymer's modulus.  The records do not say how much
+    of the effect there is: "low", not "medium" for its flags alone; the count is read from the fit
+    (inside the range: not pinned) and survives the refit and diagnosis.json."""
+    from physics.diagnose.verdict import pinned, undetermined
+    layered = _fitted("layered_beam", ["Y_electrode", "Y@RH60"], np.array([[1.0, -0.998], [-0.998, 1.0]]))
+    assert undetermined(layered) == []
+    layered.fit.rel_std_errors["Y_electrode"] = 6.75
+    assert undetermined(layered) == ["Y_electrode"] and pinned(layered) == []
+    layered.fit.values["Y_electrode"] = 0.0                        # on its bound: pinned, not both
+    assert undetermined(layered) == [] and pinned(layered) == ["Y_electrode"]
+    step = _label(31.1, 10.0, noise_um=2.47, flags=2)
+    assert step.label == "medium"
+    again = conf.reconfirmed(step, 3.04 * UM, 10.73 * UM, 2.47 * UM, flags=2, pinned=0, undetermined=1)
+    assert again.label == "low" and any("not determined inside its range" in w for w in again.why)
+    assert conf.Confidence.from_dict(again.to_dict()).undetermined == 1
+    assert conf.reconfirmed(step, 3.04 * UM, 10.73 * UM, 2.47 * UM, flags=2, pinned=0).label == "medium"
+
+
 def test_on_the_refitted_model_a_pick_is_judged_by_its_flags_there():
     """A relaxing modulus taken for viscoelastic: at its step it leaves 4.3 noise floors with its
     slope on a bound and correlated with the modulus (3 flags); once the model's own effects are
@@ -561,6 +582,7 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
     monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
     monkeypatch.setattr(dg, "doubts", lambda c: [])
     monkeypatch.setattr(dg, "pinned", lambda c: [])
+    monkeypatch.setattr(dg, "undetermined", lambda c: [])
     from dataclasses import replace          # "medium": 35× the noise floor left, fractional_coupling held on a bound
     steps[1].decision.confidence = replace(_label(101.2, 35.2), held=0.879, held_of="fractional_coupling")
     log = []

@@ -124,6 +124,12 @@ def pinned(c) -> list[str]:
     return [lab for _, _, lab, _, bound, rel in _own_estimates(c) if bound and _undetermined(rel)]
 
 
+def undetermined(c) -> list[str]:
+    """The own parameters of a fitted candidate that ended inside their range and are not
+    determined: the records do not say how much of the effect there is."""
+    return [lab for _, _, lab, _, bound, rel in _own_estimates(c) if not bound and _undetermined(rel)]
+
+
 def held(c) -> list[str]:
     """The own parameters of a fitted candidate that ended on a bound of their range (determined
     or not): its error is what its range allowed, not necessarily what the effect can reach."""
@@ -300,7 +306,7 @@ def ahead(d: Decision, lead, second, base, ranked, noise: float) -> Decision:
 def _confidence(top, base, ranked, weights: dict, noise: float) -> conf.Confidence:
     """The labelled confidence of the pick ``top`` among the step's evaluated ``ranked``."""
     return conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(doubts(top)),
-                                    len(pinned(top)), _held(ranked)))
+                                    len(pinned(top)), _held(ranked), len(undetermined(top))))
 
 
 def _held(ranked) -> set[str]:
