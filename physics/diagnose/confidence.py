@@ -51,11 +51,9 @@ so that label replaces the pick's only when it is not lower.
 
 "high" needs all of them (and a weight ≥ :data:`WEIGHT_HIGH`), "low" is a pick that barely
 changes the model, has a near twin, is pinned or undetermined, or sits in a chain that ends far
-from the noise;
-everything else is "medium".  The thresholds were
-chosen on some truth families and are reported on others (leave-one-family-out,
-``bench/diagnose_calibration.py``; ``docs/reference/diagnosis.md`` states what each label has
-meant on held-out physics).  Without a noise floor no pick is "high".
+from the noise; everything else is "medium".  The thresholds were chosen on some truth families
+and are reported on others (leave-one-family-out, ``bench/diagnose_calibration.py``;
+``docs/reference/diagnosis.md`` states what each label has meant on held-out physics).  Without a noise floor no pick is "high".
 """
 from __future__ import annotations
 
@@ -87,19 +85,21 @@ RECORDS_HIGH = 1.0
 RECORD_TOLERANCE = 0.02
 #: A pick in a chain whose final model leaves more than this error [noise floors] is "low" (module
 #: doc, **chain left**; chosen with ``bench/diagnose_calibration.py``, whose fold that holds out
-#: circuit_lab chose it on pnp_fd: the largest value of its grid that turns every wrong "medium" pick
-#: there "low" and no right one).
+#: circuit_lab chose it on pnp_fd seeds 31-32: the value of its grid that turns the most wrong picks
+#: "low" less right or acceptable ones, ties to the largest; there four wrong and one near twin's
+#: relative).
 LEFT_LOW = 20.0
 LABELS = ("high", "medium", "low")
 
 
 def _table(family: str, seeds: str, cases: int, code: str, caveat: str, rule: str | None = None,
-           before_chain_end: bool = False, **counts: tuple[int, int, int]) -> dict:
+           before_low_rules: bool = False, **counts: tuple[int, int, int]) -> dict:
     """One table of :data:`CALIBRATION`: the draws it was measured on, the command that measures it
     again, and per label (right, acceptable, wrong) → those and ``n``, the picks; ``rule``: the
-    earlier rule it was measured under (None: the rules in force); ``before_chain_end``: labelled
-    before :data:`LEFT_LOW` (2026-12-05) and not read again since (its caches are gone), said in the caveat."""
-    if before_chain_end:
+    earlier rule it was measured under (None: the rules in force); ``before_low_rules``: labelled
+    before the two "low" rules of 2026-12-05 (**chain left**, **undetermined**) and not read again
+    since (its caches are gone), said in the caveat."""
+    if before_low_rules:
         caveat += (f"; labelled before a pick in a chain ending beyond {LEFT_LOW:g} noise floors, or with an own "
                    "parameter not determined inside its range, was made \"low\" (which can only turn a \"medium\" "
                    "into a \"low\")")
@@ -159,11 +159,11 @@ CALIBRATION = (
            "seed 26, a fresh draw, 16 of its 23 truths (nothing hidden, the six in-catalog effects, the five "
            "out-of-catalog forms, the eigen-moment and the three near twins; its six pairs and the default route "
            "not run), measured with the rules in force; no rule was chosen on it",
-           before_chain_end=True, high=(3, 1, 0), medium=(3, 2, 2), low=(0, 0, 0)),
+           before_low_rules=True, high=(3, 1, 0), medium=(3, 2, 2), low=(0, 0, 0)),
     _table("circuit_lab", "25", 23, "ae78d07, a6ab1f0",
            "seed 25, a fresh draw, all 23 of its truths, measured with the rules in force (the last two chosen on "
            "this family's seeds 23 and 24)",
-           before_chain_end=True, high=(6, 1, 0), medium=(10, 2, 3), low=(0, 0, 0)),
+           before_low_rules=True, high=(6, 1, 0), medium=(10, 2, 3), low=(0, 0, 0)),
     #: seed 24 as run at 945fc60, its relaxing-modulus strip run again at ae78d07 (the relabel on the model
     #: written no longer lowers a label: chosen on that strip, "medium" → "high"; the relabel lowered no other)
     _table("circuit_lab", "24", 14, "945fc60, ae78d07",
@@ -171,7 +171,7 @@ CALIBRATION = (
            "effects, two near twins, three pairs), measured with the rules in force (the wander allowed beside a "
            "model capped at what its own residual shows was found on this family's seed 23; the relabel on the "
            "model written that no longer lowers a label was chosen on this seed's relaxing modulus)",
-           before_chain_end=True, high=(8, 0, 0), medium=(4, 2, 1), low=(0, 0, 0)),
+           before_low_rules=True, high=(8, 0, 0), medium=(4, 2, 1), low=(0, 0, 0)),
     #: seed 25 as run at c3579c4 (the 12x analysis rate and the jump placement, found on this seed's nothing-hidden
     #: strip); it replaces the same draw's table at f568218/3ad4d27: high (7, 0, 0), medium (6, 4, 4), low (0, 0, 1).
     #: Still the rules in force: this family's records carry sensor metadata, so no wander is allowed (945fc60 acts
@@ -181,36 +181,36 @@ CALIBRATION = (
            "were chosen on other families; the one-design reading of RH dependence and the refinement of a pick's "
            "shape last on this family's seeds 22 and 23; the finer analysis rate and the placing of a step's jump "
            "within its sample were found on this seed's nothing-hidden strip)",
-           before_chain_end=True, high=(8, 1, 0), medium=(7, 3, 2), low=(1, 0, 1)),
+           before_low_rules=True, high=(8, 1, 0), medium=(7, 3, 2), low=(1, 0, 1)),
     #: seed 23: 7 strips run at c3579c4, 16 at 456a561 (the withdrawal of a pick not needed within the floor,
     #: which acted on none of them)
     _table("circuit_lab", "23", 23, "c3579c4, 456a561",
            "seed 23, a fresh draw of a family held out of the choice of the rules then in force, all 23 of its "
            "truths, measured before the wander allowed beside a model was capped at what its own residual shows "
            "(found on this seed; it changes where the chain stops on its strips with slow physics hidden)",
-           before_chain_end=True, high=(5, 2, 0), medium=(10, 1, 2), low=(1, 0, 1)),
+           before_low_rules=True, high=(5, 2, 0), medium=(10, 1, 2), low=(1, 0, 1)),
     _table("pnp_fd", "22, 23", 46, "4fdfcda",
            "seeds 22 and 23, fresh draws of a family held out of the choice of the relabel on the model written (its "
            "other seeds were seen when earlier rules were chosen), all 23 of its truths on each, measured at 4fdfcda, "
            "before the one-design reading of RH dependence and the refinement of a pick's shape last, chosen on them "
            "afterwards, and before the finer analysis rate",
-           before_chain_end=True, high=(13, 1, 0), medium=(18, 7, 4), low=(1, 0, 0)),
+           before_low_rules=True, high=(13, 1, 0), medium=(18, 7, 4), low=(1, 0, 0)),
     #: seed 21 as run at 416e7b9, its six cases with a draft kept beside a pick run again at 4fdfcda
     #: (the relabel on the model written, chosen on them, acts nowhere else)
     _table("circuit_lab", "21", 23, "416e7b9, 4fdfcda",
            "seed 21, a fresh draw of a family held out of the choice of the label thresholds, all 23 of its truths "
            "once, measured at 4fdfcda (before the one-design reading of RH dependence, the refinement of a pick's "
            "shape last and the finer analysis rate); the relabel on the model written was chosen on it",
-           before_chain_end=True, high=(6, 1, 0), medium=(9, 2, 2), low=(0, 0, 2)),
+           before_low_rules=True, high=(6, 1, 0), medium=(9, 2, 2), low=(0, 0, 2)),
     _table("circuit_lab", "6, 7", 25, "409893e, ca35c0a",
            "fresh draws (seeds 6 and 7): every one of its 23 truths at least once", rule="60 %",
-           before_chain_end=True, high=(7, 1, 0), medium=(11, 2, 3), low=(1, 0, 2)),
+           before_low_rules=True, high=(7, 1, 0), medium=(11, 2, 3), low=(1, 0, 2)),
     #: an early copy of pnp_fd was among the families the thresholds were chosen on and its seeds
     #: 0-4 were read while later fixes and rules were chosen; these are fresh draws, seed 5 run at
     #: 6ee2a33 (23 cases) and seed 19 at 6e5b198–b4b63ea (23 cases), pooled
     _table("pnp_fd", "5, 19", 46, "6ee2a33 (seed 5), 6e5b198–b4b63ea (seed 19)",
            "fresh draws (seeds 5 and 19); an early copy of it was seen when the thresholds were chosen", rule="60 %",
-           before_chain_end=True, high=(11, 1, 0), medium=(18, 7, 4), low=(2, 0, 1)),
+           before_low_rules=True, high=(11, 1, 0), medium=(18, 7, 4), low=(2, 0, 1)),
 )
 
 
