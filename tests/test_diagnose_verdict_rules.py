@@ -659,3 +659,27 @@ def test_the_verdict_names_records_by_file_name_unless_two_share_one():
     twins = [NS(source="/lab/a/run.csv"), NS(source="/lab/b/run.csv")]
     assert record_names(twins) == ["/lab/a/run.csv", "/lab/b/run.csv"]
     assert "/lab/b/run.csv: offset" in nuisance_summary(NS(nuisance=[nz, nz]), twins)["text"]
+
+
+def test_what_remains_says_which_forms_the_drafts_write_and_which_are_only_described():
+    """A play on the output (pnp_fd seed 34) and an amplitude dependence are described, not drafted:
+    the verdict said "--draft-effects drafts effect files for it", and the drafts wrote none.  It
+    now sends the user to --draft-effects only for the forms the drafts write."""
+    from physics.diagnose.forms import FORMS, Form
+    from physics.diagnose.verdict import Verdict
+    draftable = {f.id: f.draft is not Form.draft for f in FORMS}
+    assert not draftable["hysteresis"] and not draftable["amplitude_dependence"] and draftable["slow_pole"]
+
+    def remains(*kinds):
+        rem = [{"kind": k, "text": f"a {k}", "draftable": draftable[k]} for k in kinds]
+        return "\n".join(Verdict("not explained by the catalog", [], {}, None, 25 * UM, 1.5 * UM, "stated",
+                                 remaining=rem, remaining_kind="described").lines())
+
+    only_described = remains("hysteresis", "amplitude_dependence")
+    assert "--draft-effects" not in only_described
+    assert "the play (backlash) on the output and the amplitude dependence are described, not drafted: write an " \
+           "effect for them" in only_described
+    both = remains("slow_pole", "hysteresis")
+    assert "--draft-effects DIR` drafts effect files for the slow pole" in both and "play (backlash) on the output " \
+        "is described, not drafted" in both
+    assert "--draft-effects DIR` drafts effect files for it" in remains("slow_pole")

@@ -544,9 +544,7 @@ class Verdict:
 
     def _remaining_text(self) -> str:
         if self.remaining_kind == "described":
-            return "; and ".join(d["text"] for d in self.remaining) + \
-                (" — to model it, `eap diagnose … --draft-effects DIR` drafts effect files for it (or write one like "
-                 "examples/effects/creep.py); pass one back with --effects-path.")
+            return "; and ".join(d["text"] for d in self.remaining) + " — " + self._how_to_model() + "."
         if self.remaining_kind == "base mismatch" and self.drafted_remaining:
             return ("no residual form fitted to the final model's residual describes it, but the drafts fitted "
                     f"with the model do: {self.drafted_remaining} (the best model below).")
@@ -556,6 +554,24 @@ class Verdict:
         if self.remaining_kind == "none":
             return "nothing beyond the noise."
         return "unknown (no noise floor to compare with)."
+
+    def _how_to_model(self) -> str:
+        """What to do with the described forms: ``--draft-effects`` writes the draftable ones as
+        effects; the others (a play, an amplitude or RH dependence) are described, not drafted."""
+        from .forms import form_of
+        drafted = [d for d in self.remaining if d.get("draftable")]
+        named = [form_of(d["kind"]).title for d in self.remaining if not d.get("draftable")]
+        write = (f"write an effect for {'it' if len(named) == 1 else 'them'} like examples/effects/creep.py and pass "
+                 "it back with --effects-path")
+        if not named:
+            return ("to model it, `eap diagnose … --draft-effects DIR` drafts effect files for it (or write one like "
+                    "examples/effects/creep.py); pass one back with --effects-path")
+        them = f"the {' and the '.join(named)} {'is' if len(named) == 1 else 'are'} described, not drafted: {write}"
+        if not drafted:
+            return them
+        return (f"`eap diagnose … --draft-effects DIR` drafts effect files for the "
+                f"{' and the '.join(form_of(d['kind']).title for d in drafted)} (pass one back with --effects-path); "
+                + them)
 
     def to_dict(self) -> dict:
         return {"status": self.status, "chain": [p.to_dict() for p in self.picks],
