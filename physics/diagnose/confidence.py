@@ -140,7 +140,7 @@ CALIBRATION = (
     _table("circuit_lab", "33", 7, "9312d44",
            "seed 33, a fresh draw, the same 7 truths, measured with the rules in force read on the recorded "
            "features (the chain-end rule changed no label; the undetermined parameter was chosen on its creep "
-           "strip: `layered_beam` \"medium\" → \"low\", wrong)",
+           "strip: its wrong pick \"medium\" → \"low\")",
            high=(2, 0, 0), medium=(1, 0, 0), low=(0, 0, 1)),
     _table("pnp_fd", "32", 23, "add9387",
            "seed 32, a fresh draw, all 23 of its truths, measured at add9387 and read again on the recorded features "
