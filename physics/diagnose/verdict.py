@@ -561,12 +561,12 @@ class Verdict:
         from .forms import form_of
         drafted = [d for d in self.remaining if d.get("draftable")]
         named = [form_of(d["kind"]).title for d in self.remaining if not d.get("draftable")]
-        write = (f"write an effect for {'it' if len(named) == 1 else 'them'} like examples/effects/creep.py and pass "
-                 "it back with --effects-path")
         if not named:
             return ("to model it, `eap diagnose … --draft-effects DIR` drafts effect files for it (or write one like "
                     "examples/effects/creep.py); pass one back with --effects-path")
-        them = f"the {' and the '.join(named)} {'is' if len(named) == 1 else 'are'} described, not drafted: {write}"
+        them = (f"the {' and the '.join(named)} {'is' if len(named) == 1 else 'are'} described, not drafted: write an "
+                f"effect for {'it' if len(named) == 1 else 'them'} like examples/effects/creep.py and pass it back with "
+                "--effects-path")
         if not drafted:
             return them
         return (f"`eap diagnose … --draft-effects DIR` drafts effect files for the "
