@@ -1078,3 +1078,46 @@ def test_the_loop_eap_run_shows_beyond_the_catalog_drafts_and_keeps_the_creep(tm
         loop = outside_loop("creep", 0, tmp_path / "loop", fs=200.0, duration=20.0)
     assert [d.effect_id for d in loop.outcome.kept] == ["drafted_slow_pole"]
     assert loop.outcome.rmse_after < 0.5 * loop.outcome.rmse_before
+
+
+def _levels(make_resid, attr, levels, seed=0, noise=1e-6):
+    """Sweeps at each of ``levels`` (amplitude [V] or RH [%], the other fixed), the prediction
+    GAIN × voltage, the residual ``make_resid(pred, level, t)`` + white noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(6000) / 100.0
+    sweep = np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
+    recs, resid, preds = [], [], []
+    for lv in levels:
+        v = sweep * (lv if attr == "amplitude_level" else 1.0)
+        p = GAIN * v
+        e = make_resid(p, lv, t) + rng.normal(0, noise, t.size)
+        rec = _Rec(p + e, v)
+        setattr(rec, attr, lv)
+        recs.append(rec)
+        resid.append(e - e.mean())
+        preds.append(p)
+    return F.Residual(recs, resid, preds, [e.size / 1.0 for e in resid], _respond)
+
+
+def test_a_dependence_is_a_gain_that_changes_between_levels_not_an_error_of_one_size():
+    """An additive drift of the same size at 0.5 and 2 V is a smaller share of the larger output
+    (the old relative-residual ratio read it as an amplitude dependence, pnp_fd s34's thermal
+    drift); it does not follow the output and is no dependence.  A gain off by the same 10 % at
+    every level is a wrong parameter, not a dependence.  A compression that grows with the
+    amplitude (a saturation of the drive, the base's gain re-tuned in between) is one, with the
+    gains of each level read back; a gain 10 % low at RH 80 % only is an RH dependence."""
+    drift = _levels(lambda p, lv, t: 20e-6 * -np.expm1(-t / 15.0), "amplitude_level", (0.5, 2.0))
+    assert not _fit("amplitude_dependence", drift).significant
+    same = _levels(lambda p, lv, t: 0.1 * p, "amplitude_level", (0.5, 2.0))
+    assert not _fit("amplitude_dependence", same).significant
+
+    def compressed(p, lv, t):
+        u = p / GAIN
+        return GAIN * 0.8 * np.tanh(u / 0.8) - 0.85 * p     # 0.85: the base's gain between the levels
+    ff = _fit("amplitude_dependence", _levels(compressed, "amplitude_level", (0.5, 2.0)))
+    g = ff.params["gain_error"]
+    assert ff.significant and g[2.0] < g[0.5] - 0.1, ff.text
+    ff = _fit("rh_dependence", _levels(lambda p, lv, t: -0.1 * p * (lv == 80.0), "rh", (40.0, 80.0)))
+    assert ff.significant and ff.params["gain_error"][80.0] - ff.params["gain_error"][40.0] == pytest.approx(-0.1, abs=0.02)
+    ff = _fit("rh_dependence", _levels(lambda p, lv, t: 20e-6 * np.sin(2 * np.pi * t / 40), "rh", (40.0, 80.0)))
+    assert not ff.significant

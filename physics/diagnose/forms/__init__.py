@@ -8,7 +8,8 @@ e_r(t) (measured minus model, per record r, offsets removed) with a small librar
   own prediction ŷ (or time, or the input through the fitted linear model,
   :attr:`Residual.respond`) and a few nonlinear parameters θ scanned on a grid; the gains
   c_j are shared by every record and solved by linear least squares;
-* **dependence** forms compare the relative residual between amplitude or RH levels.
+* **dependence** forms ask whether the error follows the model's output with a gain that changes
+  between amplitude or RH levels (a gain per level against one shared gain).
 
 Each regressor form is scored by ΔBIC on the effective sample size of :mod:`..stats`
 (ΔBIC = Σ_r n_eff,r ln(RSS₁,r/RSS₀,r) + k ln Σ n_eff,r, k = its gains and grid
