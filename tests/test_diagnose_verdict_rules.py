@@ -670,10 +670,10 @@ def test_what_remains_says_which_forms_the_drafts_write_and_which_are_only_descr
     draftable = {f.id: f.draft is not Form.draft for f in FORMS}
     assert not draftable["hysteresis"] and not draftable["amplitude_dependence"] and draftable["slow_pole"]
 
-    def remains(*kinds):
+    def remains(*kinds, drafts=None):
         rem = [{"kind": k, "text": f"a {k}", "draftable": draftable[k]} for k in kinds]
         return "\n".join(Verdict("not explained by the catalog", [], {}, None, 25 * UM, 1.5 * UM, "stated",
-                                 remaining=rem, remaining_kind="described").lines())
+                                 remaining=rem, remaining_kind="described", drafts=drafts).lines())
 
     only_described = remains("hysteresis", "amplitude_dependence")
     assert "--draft-effects" not in only_described
@@ -683,3 +683,14 @@ def test_what_remains_says_which_forms_the_drafts_write_and_which_are_only_descr
     assert "--draft-effects DIR` drafts effect files for the slow pole" in both and "play (backlash) on the output " \
         "is described, not drafted" in both
     assert "--draft-effects DIR` drafts effect files for it" in remains("slow_pole")
+    # once the draft rounds ran, it says what they did instead of offering them (circuit_lab s34's
+    # saturating strip: "--draft-effects drafts … for the saturation of the input" beside "draft:
+    # nothing written … (no draft lowers the error)")
+    none_kept = remains("input_saturation", drafts={"kept": {}, "fitted": ["input_saturation"]})
+    assert "--draft-effects" not in none_kept
+    assert "the draft rounds fitted the draft of the saturation of the input with the model and did not keep it " \
+           "(the draft lines say why): write an effect for it" in none_kept
+    kept = remains("slow_pole", "hysteresis", drafts={"kept": {"slow_pole": "drafted_slow_pole"},
+                                                      "fitted": ["slow_pole"]})
+    assert "--draft-effects" not in kept and "the draft rounds kept drafted_slow_pole for the slow pole on the output " \
+        "(creep), written with the report (pass it back with --effects-path)" in kept and "is described, not drafted" in kept

@@ -196,6 +196,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
             ids += load_effects_file(path)
         try:
             pool = list(items)
+            fitted: set = set()             # the forms whose drafts a round fitted with the model
             while pool and len(outcome.kept) < max_effects:
                 retry = list(before_drafts) if outcome.kept else []
                 offered = [d.effect_id for d in pool] + catalog + retry
@@ -208,6 +209,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                                          for d in pool]
                     break
                 outcome.steps.append((list(on_top), again))
+                fitted.update(d.form for d in pool)
                 if not outcome.chain:
                     _refined_further(outcome, again.base, fit)
                 if outcome.chain and getattr(again.base, "time_refined", False) and \
@@ -266,6 +268,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
             if left:
                 outcome.notes.append("tried again on top of the kept drafts, not taken: "
                                      + "; ".join(f"{e} ({w})" for e, w in left.items()))
+            res.verdict.drafts = {"kept": {d.form: d.effect_id for d in outcome.kept}, "fitted": sorted(fitted)}
         finally:
             for i in ids:
                 unregister(i)

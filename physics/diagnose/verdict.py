@@ -431,6 +431,9 @@ class Verdict:
     refined: dict = field(default_factory=dict)             # the picks' refine parameters fitted at the end: likewise
     #: what the draft rounds found where no residual form of the final model described the rest ("" none)
     drafted_remaining: str = ""
+    #: what the draft rounds did with the drafts of the described forms, once they ran
+    #: ({"kept": {form id: effect id}, "fitted": [form ids]}; None: they did not run)
+    drafts: dict | None = None
 
     # --- the first answer, as before the chain existed ---------------------------------
     @property
@@ -557,21 +560,41 @@ class Verdict:
 
     def _how_to_model(self) -> str:
         """What to do with the described forms: ``--draft-effects`` writes the draftable ones as
-        effects; the others (a play, an amplitude or RH dependence) are described, not drafted."""
+        effects; the others (a play, an amplitude or RH dependence) are described, not drafted.
+        Once the draft rounds ran (:attr:`drafts`), it says what they did with each draft instead
+        of offering them: a page read "--draft-effects drafts effect files for the saturation of
+        the input" beside "nothing written (no draft lowers the error)"."""
         from .forms import form_of
+        write = "write an effect for {} like examples/effects/creep.py and pass it back with --effects-path"
         drafted = [d for d in self.remaining if d.get("draftable")]
         named = [form_of(d["kind"]).title for d in self.remaining if not d.get("draftable")]
-        if not named:
+        parts = []
+        if self.drafts is not None:
+            kept = [d for d in drafted if d["kind"] in self.drafts["kept"]]
+            fitted = [d for d in drafted if d not in kept and d["kind"] in self.drafts["fitted"]]
+            if kept:
+                parts.append(f"the draft rounds kept {', '.join(self.drafts['kept'][d['kind']] for d in kept)} for the "
+                             f"{' and the '.join(form_of(d['kind']).title for d in kept)}, written with the report "
+                             "(pass it back with --effects-path)")
+            if fitted:
+                one = len(fitted) == 1
+                parts.append(f"the draft rounds fitted the draft{'' if one else 's'} of the "
+                             f"{' and the '.join(form_of(d['kind']).title for d in fitted)} with the model and did not "
+                             f"keep {'it' if one else 'them'} (the draft lines say why): "
+                             + write.format("it" if one else "them"))
+            named += [form_of(d["kind"]).title for d in drafted if d not in kept and d not in fitted]
+        elif drafted and not named:
             return ("to model it, `eap diagnose … --draft-effects DIR` drafts effect files for it (or write one like "
                     "examples/effects/creep.py); pass one back with --effects-path")
-        them = (f"the {' and the '.join(named)} {'is' if len(named) == 1 else 'are'} described, not drafted: write an "
-                f"effect for {'it' if len(named) == 1 else 'them'} like examples/effects/creep.py and pass it back with "
-                "--effects-path")
-        if not drafted:
-            return them
-        return (f"`eap diagnose … --draft-effects DIR` drafts effect files for the "
-                f"{' and the '.join(form_of(d['kind']).title for d in drafted)} (pass one back with --effects-path); "
-                + them)
+        elif drafted:
+            parts.append(f"`eap diagnose … --draft-effects DIR` drafts effect files for the "
+                         f"{' and the '.join(form_of(d['kind']).title for d in drafted)} (pass one back with "
+                         "--effects-path)")
+        if named:
+            one = len(named) == 1
+            parts.append(f"the {' and the '.join(named)} {'is' if one else 'are'} described, not drafted: "
+                         + write.format("it" if one else "them"))
+        return "; ".join(parts)
 
     def to_dict(self) -> dict:
         return {"status": self.status, "chain": [p.to_dict() for p in self.picks],
@@ -580,7 +603,7 @@ class Verdict:
                 "ambiguous": self.ambiguous, "separating_record": self.separating,
                 "adequacy": self.adequacy.to_dict() if self.adequacy else None,
                 "remaining_kind": self.remaining_kind, "remaining": self.remaining,
-                "drafted_remaining": self.drafted_remaining or None, "chain_stopped": self.stopped,
+                "drafted_remaining": self.drafted_remaining or None, "drafts": self.drafts, "chain_stopped": self.stopped,
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
                 "removed": self.removed, "withdrawn": self.withdrawn, "refitted": self.refitted, "refined": self.refined,
                 "final_rmse_m": self.final_rmse,
