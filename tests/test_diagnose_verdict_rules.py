@@ -694,3 +694,12 @@ def test_what_remains_says_which_forms_the_drafts_write_and_which_are_only_descr
                                                       "fitted": ["slow_pole"]})
     assert "--draft-effects" not in kept and "the draft rounds kept drafted_slow_pole for the slow pole on the output " \
         "(creep), written with the report (pass it back with --effects-path)" in kept and "is described, not drafted" in kept
+    # kept drafts that bring the model within the noise leave nothing else to write (circuit_lab s34's saturating
+    # strip: its drafted saturation reached 1.10x the floor while the page asked for effects for the amplitude and
+    # RH dependences the saturation had made)
+    within = remains("input_saturation", "amplitude_dependence", drafts={
+        "kept": {"input_saturation": "drafted_input_saturation"}, "fitted": ["input_saturation"], "rmse_m": 1.6 * UM})
+    assert "within the noise (1.6 µm, the best model below): nothing else to write" in within
+    assert "described, not drafted" not in within
+    assert "described, not drafted" in remains("input_saturation", "amplitude_dependence", drafts={
+        "kept": {"input_saturation": "drafted_input_saturation"}, "fitted": ["input_saturation"], "rmse_m": 3 * UM})

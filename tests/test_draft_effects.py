@@ -1067,6 +1067,26 @@ def test_a_large_signal_pick_meets_its_best_linear_rival():
     assert _linear_rival(ranked[1], ranked) is None and _linear_rival(None, ranked) is None
 
 
+def test_without_a_pick_the_lead_is_refined_like_the_base_it_is_compared_with():
+    """A draft round whose base was refined on the time records and which picks nothing refines
+    its best linear candidate on them too, from the base's values (circuit_lab s34's saturating
+    strip: its drafted saturation came back with the FRF optimum of the solvent line, 33.6 µm
+    against the base's 35.7 µm; refined so, 13.5 µm, then 2.41 µm = 1.10× the floor).  Not with a
+    pick (it is refined itself) nor beside a base fitted on the FRF alone."""
+    from physics.diagnose.diagnosis import _lead_to_refine, _values_of
+
+    def cand(name, linear, dbic):
+        return _Stub(effect=name, fit=_Stub(model=_Stub(is_linear=linear)), comparison=_Stub(delta_bic=dbic))
+    ranked = [cand("nonlinear_charge", False, -5000.0), cand("a", True, -100.0), cand("b", True, -3000.0)]
+    refined, frf_only = _Stub(time_refined=True), _Stub(time_refined=False)
+    assert _lead_to_refine(None, ranked, refined).effect == "b"
+    assert _lead_to_refine(ranked[1], ranked, refined) is None and _lead_to_refine(None, ranked, frf_only) is None
+    fit = _Stub(result=_Stub(problem=_Stub(labels=["Rs", "kf@40", "saturation_knee"]),
+                             fit=_Stub(theta=np.array([80.0, 1e-3, 0.4]))))
+    base = _Stub(values={"Rs": 39.4, "kf@40": 2e-3, "D_solvent": 3e-12})
+    assert _values_of(base, fit).tolist() == [39.4, 2e-3, 0.4]
+
+
 @pytest.mark.slow      # the default suite's run page test (test_reports_browser.py) runs this loop too
 def test_the_loop_eap_run_shows_beyond_the_catalog_drafts_and_keeps_the_creep(tmp_path):
     """`eap run`'s outside-catalog loop (a creeping tip, the bare device) keeps the drafted slow pole

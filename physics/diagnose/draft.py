@@ -124,7 +124,8 @@ def rediagnosis(measurements, res, options, *, fs_max: float | None = None,
     fitted from one start lowered the error from 50.0 to 40.8 µm, from four to 24.0 µm.  From the
     second round on, the base (the model the round before kept, whose pick was refined on the time
     records) is refined on them too.  When a round's pick is large-signal, its best linear rival is
-    refined on the time records before the round decides (:attr:`.diagnosis.SelectionOptions.refine_rival`).
+    refined on the time records before the round decides, and a round without a pick refines its best
+    linear candidate on them from the base's values (:attr:`.diagnosis.SelectionOptions.refine_rival`).
     The first round's base is refined so too when the draft base was (its own effects refitted on
     the time records): refitted on the FRF alone, a test-bed strip's rough-electrode model went
     from 8.16 µm to 221 µm, and its drafts were fitted on top of that."""
@@ -268,7 +269,8 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
             if left:
                 outcome.notes.append("tried again on top of the kept drafts, not taken: "
                                      + "; ".join(f"{e} ({w})" for e, w in left.items()))
-            res.verdict.drafts = {"kept": {d.form: d.effect_id for d in outcome.kept}, "fitted": sorted(fitted)}
+            res.verdict.drafts = {"kept": {d.form: d.effect_id for d in outcome.kept}, "fitted": sorted(fitted),
+                                  "rmse_m": outcome.final.rmse if outcome.kept and outcome.final is not None else None}
         finally:
             for i in ids:
                 unregister(i)

@@ -432,7 +432,8 @@ class Verdict:
     #: what the draft rounds found where no residual form of the final model described the rest ("" none)
     drafted_remaining: str = ""
     #: what the draft rounds did with the drafts of the described forms, once they ran
-    #: ({"kept": {form id: effect id}, "fitted": [form ids]}; None: they did not run)
+    #: ({"kept": {form id: effect id}, "fitted": [form ids], "rmse_m": the RMS error [m] of the
+    #: model they reached, None when they kept none}; None: they did not run)
     drafts: dict | None = None
 
     # --- the first answer, as before the chain existed ---------------------------------
@@ -576,6 +577,10 @@ class Verdict:
                 parts.append(f"the draft rounds kept {', '.join(self.drafts['kept'][d['kind']] for d in kept)} for the "
                              f"{' and the '.join(form_of(d['kind']).title for d in kept)}, written with the report "
                              "(pass it back with --effects-path)")
+            rmse = self.drafts.get("rmse_m")
+            if self.drafts["kept"] and rmse is not None and rmse <= ADEQUATE_RATIO * self.noise_floor:
+                return "; ".join(parts + [f"with the kept drafts the model is within the noise ({1e6 * rmse:.4g} µm, "
+                                          "the best model below): nothing else to write"])
             if fitted:
                 one = len(fitted) == 1
                 parts.append(f"the draft rounds fitted the draft{'' if one else 's'} of the "
