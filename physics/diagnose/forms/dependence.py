@@ -45,14 +45,13 @@ class _Dependence(Form):
                 for r, p in zip(res.records, res.preds)]
 
         def columns(per_level: bool) -> list[list[np.ndarray]]:
-            n = len(levels) if per_level else 1
+            """ŷ and dŷ/dt of each record in the group, in its level's pair of columns (or the one pair)."""
             out = []
             for i, (p, d) in enumerate(zip(res.preds, rate)):
-                j = level_of.get(i)
-                cols = [zero[i]] * (2 * n)
-                if j is not None:
-                    at = j if per_level else 0
-                    cols = cols[:2 * at] + [p, d] + cols[2 * at + 2:]
+                cols = [zero[i]] * (2 * len(levels) if per_level else 2)
+                if i in level_of:
+                    at = 2 * level_of[i] if per_level else 0
+                    cols[at:at + 2] = [p, d]
                 out.append(cols)
             return out
         shared, each = res.regress(columns(False)), res.regress(columns(True))
