@@ -435,9 +435,18 @@ class _Context:
         """``names`` (parameters the FRF cannot see) fitted by least squares on a noise-free 60 s
         multisine record at 100 Hz of the model with ``dev``'s values: for an output effect the
         rest of the chain is simulated once and each evaluation only filters it; an input effect's
-        voltage is mapped and the chain simulated at each evaluation."""
+        voltage is mapped and the chain simulated at each evaluation.  The record reaches twice the
+        largest threshold in volts among ``names`` (0.3 V RMS at least): a drafted clip of the drive
+        checked at 3.79 V under a drive peaking near 1 V was never reached, and the check failed
+        a valid effect."""
         from scipy.optimize import least_squares
+        units = {q.name: q.unit for q in self.cls.params}
+        levels = [abs(float(dev.params[n])) for n in names if units.get(n) == "V" and n in dev.params]
         sig = signals.multisine(rms=0.3, f_start=0.1, f_stop=20.0, period=60.0, fs=100.0, seed=3)
+        peak = float(np.max(np.abs(sig.v)))
+        if levels and 2.0 * max(levels) > peak:
+            sig = signals.multisine(rms=0.3 * 2.0 * max(levels) / peak, f_start=0.1, f_stop=20.0, period=60.0,
+                                    fs=100.0, seed=3)
         model = ActuatorModel(dev, f"none,+{self.cls.id}")
         y = simulate(model, None, sig.t, sig.v, rh=self.rh).deflection
         core_model = ActuatorModel(dev, "none")

@@ -155,6 +155,30 @@ def test_input_side_drafts_are_input_effects_that_pass_the_contract(form, tmp_pa
     np.testing.assert_allclose(mapped, expected, rtol=1e-3, atol=1e-3 * level)
 
 
+def test_the_contract_checks_a_drive_clip_on_a_record_that_reaches_it(tmp_path):
+    """The contract identifies a map's threshold at a point of its range away from its starts:
+    a drafted clip of the drive (circuit_lab s34, fitted at 0.69 V, range 0.023–20.8 V) was checked
+    at 3.79 V on a record peaking near 1 V, never clipped, and "contract check FAILED" was printed
+    beside a valid draft.  The record now reaches twice the threshold."""
+    path = tmp_path / "clip.py"
+    path.write_text(
+        "import numpy as np\n"
+        "from physics.effects import InputEffect\n"
+        "from physics.parameters import ParamSpec\n\n\n"
+        "class TestClip(InputEffect):\n"
+        "    id = 'test_clip_check'\n"
+        "    summary = 'the drive clipped at +-L'\n"
+        "    params = (ParamSpec('test_clip_level', 'V', 0.0, 1000.0, 'clip level', optional=True, default=0.6919),)\n"
+        "    diagnosis = {'free': ('test_clip_level',), 'bounds': {'test_clip_level': (0.02306, 20.76)},\n"
+        "                 'starts': [{'test_clip_level': 0.6919}, {'test_clip_level': 0.2306}, {'test_clip_level': 2.076}],\n"
+        "                 'nested': True, 'off': {'test_clip_level': 1000.0}, 'excitation': 'two amplitudes',\n"
+        "                 'reveal': {}, 'signature': [('amplitude_dependence', 1.0)]}\n\n"
+        "    def filter_input(self, v, fs, p):\n"
+        "        level = self.value(p, 'test_clip_level')\n"
+        "        return np.clip(v, -level, level)\n", encoding="utf-8")
+    assert check_draft(path) == []
+
+
 def test_the_low_pass_form_tells_a_second_order_sensor_from_a_first_order_one(tmp_path):
     """A second-order low-pass (f_c 8 Hz, ζ 0.6: a sensor's filter) is reported with its damping
     ratio and drafted as a second-order output effect that passes the contract, whose response is
