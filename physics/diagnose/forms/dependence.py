@@ -14,6 +14,13 @@ sensor's drift, noise) has the same size at every level: its share of a larger o
 smaller, yet it is no dependence, and it leaves both regressions where they started.
 Described, not drafted: the catalog's ``nonlinear_charge`` and ``humidity`` are the effects
 for them.
+
+The RH comparison holds the amplitude fixed, but the model's own parameters at an RH level
+were fitted on every record at that level.  Where one level holds a second amplitude and the
+error changes with the amplitude (the amplitude form's ΔBIC ≤ −:data:`.base.SIGNIFICANT_BIC`),
+those parameters are a compromise between the amplitudes at that level only: a gain that
+differs between RH levels is then the amplitude's doing as much as the humidity's, and the RH
+dependence is described as not separable, not as significant.
 """
 from __future__ import annotations
 
@@ -31,6 +38,9 @@ class _Dependence(Form):
     key: str
 
     def fit(self, res: Residual) -> FormFit | None:
+        return self._fit(res)
+
+    def _fit(self, res: Residual) -> FormFit | None:
         by_kind: dict = {}
         for i, r in enumerate(res.records):
             by_kind.setdefault((r.kind, round(float(getattr(r, self.within)), 6)), {}).setdefault(
@@ -89,3 +99,25 @@ class AmplitudeDependence(_Dependence):
 
 class RHDependence(_Dependence):
     id, title, attr, within, unit, key = "rh_dependence", "RH dependence", "rh", "amplitude_level", "%", "RH"
+
+    def fit(self, res: Residual) -> FormFit | None:
+        own = self._fit(res)
+        if own is None or not own.significant:
+            return own
+        amplitudes: dict = {}
+        for r in res.records:
+            amplitudes.setdefault(round(float(r.rh), 6), set()).add(round(float(r.amplitude_level), 6))
+        held = {lv: sorted(amplitudes.get(lv, ())) for lv in own.params["levels"]}
+        if len({tuple(a) for a in held.values()}) < 2:
+            return own
+        amp = AmplitudeDependence()._fit(res)
+        if amp is None or amp.params["delta_bic_beyond_shared_gain"] > -SIGNIFICANT_BIC:
+            return own
+        mixed = max(held, key=lambda lv: len(held[lv]))
+        own.significant = False
+        own.info["confounded_with_amplitude"] = True
+        own.text += (f"; not told apart from the amplitude dependence: the records at RH {mixed:.3g} % hold amplitudes "
+                     + ", ".join(f"{a:.3g}" for a in held[mixed]) + " V, the model's parameters there are a compromise "
+                     f"between them, and the error changes with the amplitude (ΔBIC "
+                     f"{amp.params['delta_bic_beyond_shared_gain']:.3g})")
+        return own
