@@ -1,5 +1,7 @@
 """Parameter sweeps and the execution layer: closed-form beam scaling, identical results for
 any worker count, clear errors."""
+import os
+
 import pandas as pd
 import pytest
 
@@ -120,3 +122,19 @@ def test_warnings_of_worker_processes_read_like_the_command_s_own(capsys):
     err = capsys.readouterr().err.splitlines()
     for i in range(40):
         assert f"eap sweep: warning: task {i} looks odd" in err
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the signal mask from /proc")
+def test_local_workers_leave_ctrl_c_to_the_command():
+    """A Ctrl-C reaches the terminal's whole process group: a worker still importing printed its
+    own KeyboardInterrupt traceback after 'eap sweep: interrupted'.  The workers start with SIGINT
+    blocked (the resource tracker once unblocked it in the starting thread), this process's main
+    thread does not block it."""
+    import signal
+
+    from physics.execution.parallel import _local_cluster
+    client = _local_cluster(2).result(timeout=120)
+    for pid in client.run(os.getpid).values():
+        blocked = next(int(line.split()[1], 16) for line in open(f"/proc/{pid}/status") if line.startswith("SigBlk"))
+        assert blocked >> (signal.SIGINT - 1) & 1, f"worker {pid} has SIGINT unblocked"
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])

@@ -32,6 +32,7 @@ from __future__ import annotations
 import atexit
 import os
 import re
+import signal
 import socket
 import queue
 import threading
@@ -386,6 +387,7 @@ def _start_cluster(workers: int, fut: Future) -> None:
     try:
         import dask
         from distributed import Client, LocalCluster
+        _workers_leave_ctrl_c_to_this_process()
         # another cluster on this machine holds the dashboard port: not the user's concern
         warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
         cores = os.cpu_count() or 1
@@ -401,6 +403,19 @@ def _start_cluster(workers: int, fut: Future) -> None:
         fut.set_result(client)
     except BaseException as exc:   # every later map_tasks then runs in this process
         fut.set_exception(exc)
+
+
+def _workers_leave_ctrl_c_to_this_process() -> None:
+    """Block SIGINT in the calling (cluster-starting) thread: the threads it starts and the worker
+    processes they spawn inherit the mask, so a Ctrl-C to the terminal's process group reaches
+    this process alone, which stops the run and closes the cluster; a worker still importing
+    once printed its own KeyboardInterrupt traceback.  Other threads of this process (the main
+    one) do not block it, so the user's Ctrl-C is never lost.  The multiprocessing resource
+    tracker is started first: starting it *unblocks* SIGINT in its caller (CPython's
+    ``resource_tracker.ensure_running``), which had silently undone the mask."""
+    from multiprocessing import resource_tracker
+    resource_tracker.ensure_running()
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
 
 
 def shutdown() -> None:
