@@ -121,11 +121,20 @@ def _table(family: str, seeds: str, cases: int, code: str, caveat: str, rule: st
 #: ``rule`` marks the tables measured under an earlier rule (kept: more cases, and that rule's change can only turn
 #: a "high" into a "medium").
 CALIBRATION = (
-    _table("circuit_lab", "35", 6, "85dfd70, c537ee6",
-           "seed 35, a fresh draw, 6 of its 23 truths (a saturation, the low-pass + saturation and saturation + "
-           "solvent pairs, a dead zone, a drift, nothing hidden), measured with the rules in force; no rule was "
-           "chosen on it",
-           high=(1, 0, 0), medium=(2, 0, 0), low=(0, 0, 0)),
+    _table("pnp_fd", "36", 23, "b998019",
+           "seed 36, a fresh draw, all 23 of its truths, measured with the rules in force; no rule was chosen on it "
+           "(the two wrong \"medium\" picks: layered_beam second for the one-relaxation polymer, fractional_coupling "
+           "second for the electrode + modulus pair, viscoelastic close behind it)",
+           high=(8, 0, 0), medium=(6, 3, 2), low=(1, 1, 2)),
+    _table("circuit_lab", "35", 7, "85dfd70, c537ee6, b998019",
+           "seed 35, a fresh draw, 7 of its 23 truths (a saturation, the low-pass + saturation and saturation + "
+           "solvent pairs, a dead zone, a drift, nothing hidden, the default route's creep + humidity strip), "
+           "measured with the rules in force; no rule was chosen on it",
+           high=(1, 0, 0), medium=(2, 0, 0), low=(0, 0, 1)),
+    _table("pnp_fd", "35", 3, "b998019",
+           "seed 35, a fresh draw, 3 of its 23 truths (a saturation, the saturation + solvent pair, the default "
+           "route's creep + humidity strip), measured with the rules in force; no rule was chosen on it",
+           high=(1, 0, 0), medium=(2, 1, 0), low=(0, 0, 0)),
     _table("pnp_fd", "34", 23, "63b6f82",
            "seed 34, a fresh draw, all 23 of its truths, measured with the rules in force (the undetermined "
            "parameter read from the recorded quality flags: no label changed); no rule was chosen on it",
