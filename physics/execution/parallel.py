@@ -412,7 +412,10 @@ def _workers_leave_ctrl_c_to_this_process() -> None:
     once printed its own KeyboardInterrupt traceback.  Other threads of this process (the main
     one) do not block it, so the user's Ctrl-C is never lost.  The multiprocessing resource
     tracker is started first: starting it *unblocks* SIGINT in its caller (CPython's
-    ``resource_tracker.ensure_running``), which had silently undone the mask."""
+    ``resource_tracker.ensure_running``), which had silently undone the mask.  Nothing to do
+    where threads have no signal mask (Windows: no process groups either)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        return
     from multiprocessing import resource_tracker
     resource_tracker.ensure_running()
     signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})

@@ -38,9 +38,6 @@ class _Dependence(Form):
     key: str
 
     def fit(self, res: Residual) -> FormFit | None:
-        return self._fit(res)
-
-    def _fit(self, res: Residual) -> FormFit | None:
         by_kind: dict = {}
         for i, r in enumerate(res.records):
             by_kind.setdefault((r.kind, round(float(getattr(r, self.within)), 6)), {}).setdefault(
@@ -101,7 +98,7 @@ class RHDependence(_Dependence):
     id, title, attr, within, unit, key = "rh_dependence", "RH dependence", "rh", "amplitude_level", "%", "RH"
 
     def fit(self, res: Residual) -> FormFit | None:
-        own = self._fit(res)
+        own = super().fit(res)
         if own is None or not own.significant:
             return own
         amplitudes: dict = {}
@@ -110,7 +107,7 @@ class RHDependence(_Dependence):
         held = {lv: sorted(amplitudes.get(lv, ())) for lv in own.params["levels"]}
         if len({tuple(a) for a in held.values()}) < 2:
             return own
-        amp = AmplitudeDependence()._fit(res)
+        amp = AmplitudeDependence().fit(res)
         if amp is None or amp.params["delta_bic_beyond_shared_gain"] > -SIGNIFICANT_BIC:
             return own
         mixed = max(held, key=lambda lv: len(held[lv]))
