@@ -123,8 +123,8 @@ def _table(family: str, seeds: str, cases: int, code: str, caveat: str, rule: st
 CALIBRATION = (
     _table("pnp_fd", "36", 23, "b998019",
            "seed 36, a fresh draw, all 23 of its truths, measured with the rules in force; no rule was chosen on it "
-           "(the two wrong \"medium\" picks: layered_beam second for the one-relaxation polymer, fractional_coupling "
-           "second for the electrode + modulus pair, viscoelastic close behind it)",
+           "(the two wrong \"medium\" picks: the layered beam second for the one-relaxation polymer, the fractional "
+           "coupling second for the electrode + modulus pair, the relaxing modulus close behind it)",
            high=(8, 0, 0), medium=(6, 3, 2), low=(1, 1, 2)),
     _table("circuit_lab", "35", 7, "85dfd70, c537ee6, b998019",
            "seed 35, a fresh draw, 7 of its 23 truths (a saturation, the low-pass + saturation and saturation + "
