@@ -9,7 +9,11 @@ from 30 % to 95 % of it, then finer between the grid neighbours of the best.  Th
 also fitted as a soft one, :func:`compress` (slope 1 at rest, growing as |v|^γ beyond a knee L:
 a charge that saturates logarithmically, as a square root, or towards a bound), on a grid of
 knees from 10 % to 3× the largest |v| and of exponents γ from −1 to 0.5, refined; the lower
-ΔBIC (which counts the soft law's extra parameter) chooses the law that is reported and drafted.
+ΔBIC (which counts the soft law's extra parameter) chooses the law that is reported; when the other
+law fits the residual too (significant and pure), both are drafted and the fit with the model decides:
+the residual is read through the model's error, which other missing physics contaminates (beside a
+sensor's low-pass the clip won on the residual and a logarithmic map of the drive was drafted as a
+clip, 8.5× the true model's error).
 
 The second term is there because the base was fitted to the distorted records: if they are
 κ·H(N(v)), the fitted gain has taken up part of the distortion and the residual is
@@ -29,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..effect_draft import EffectDraft, Param
-from .base import PURE, Form, FormFit, Residual, best_on_grid, refined
+from .base import PURE, SIGNIFICANT_BIC, Form, FormFit, Residual, best_on_grid, refined
 
 #: Exponents γ of the soft saturation's grid (then refined within :data:`SOFT_BOUNDS`): bounded
 #: (−1: v/(1 + |v|/L)), logarithmic (0), square-root (0.5).
@@ -65,16 +69,16 @@ class _InputNonlinearity(Form):
         """N(v) − v for the threshold ``level`` [V]."""
         raise NotImplementedError
 
-    def search(self, res: Residual, vmax: float, columns) -> tuple[tuple, "object"]:
-        """(the law's parameters, regression) that fit the residual best: the threshold on the
-        form's grid, then finer between the neighbours of the best; ``columns(x)`` gives the
-        regressors for the parameters ``x`` (arguments of :meth:`distort` after the voltage)."""
+    def search(self, res: Residual, vmax: float, columns) -> list[tuple[tuple, "object"]]:
+        """[(the law's parameters, regression)] of each law the form knows, the best fit first: the
+        threshold on the form's grid, then finer between the neighbours of the best; ``columns(x)``
+        gives the regressors for the parameters ``x`` (arguments of :meth:`distort` after the voltage)."""
         levels = np.geomspace(*self.grid[:2], self.grid[2]) * vmax
         level, reg = best_on_grid(res, levels, lambda x: columns((x,)))
         i = int(np.argmin(np.abs(levels - level)))
         fine = np.geomspace(levels[max(i - 1, 0)], levels[min(i + 1, levels.size - 1)], 9)
         level, reg = best_on_grid(res, fine, lambda x: columns((x,)))
-        return (level,), reg
+        return [((level,), reg)]
 
     def fit(self, res: Residual) -> FormFit | None:
         if res.respond is None:
@@ -85,14 +89,23 @@ class _InputNonlinearity(Form):
 
         def columns(x):
             return [[res.respond(k, self.distort(v, *x)), lin] for k, (v, lin) in enumerate(zip(volts, linear))]
-        x, reg = self.search(res, vmax, columns)
+        (x, reg), *others = self.search(res, vmax, columns)
         kappa = 1.0 + reg.gains[1]                  # the records' linear gain over the fitted model's
         a = reg.gains[0] / kappa if kappa > 0 else float("nan")
         params, units = {"level_V": x[0], "gain": a, "linear_gain": kappa}, {"level_V": "V", "gain": "1",
                                                                             "linear_gain": "1"}
         if len(x) > 1:
             params["exponent"], units["exponent"] = x[1], "1"
-        ff = self.scored(res, reg, params, units, self.sentence(x, vmax, a, kappa), v_max_V=vmax)
+        # another law that fits too is drafted beside it: the fit with the model decides (module doc)
+        also = [(y, r) for y, r in others if _pure(r) and r.delta_bic <= -SIGNIFICANT_BIC]
+        text = self.sentence(x, vmax, a, kappa)
+        if also:
+            y, r = also[0]
+            text = (text[:-1] + f"; the {self.law(y)['title']} fits too (ΔBIC {r.delta_bic:.3g}): both are drafted, "
+                    "the fit with the model decides)")
+        ff = self.scored(res, reg, params, units, text, v_max_V=vmax)
+        if also:
+            ff.info["other_law"] = [float(v) for v in also[0][0]]
         ff.admissible = _pure(reg)
         ff.significant = ff.significant and ff.admissible
         return ff
@@ -109,11 +122,18 @@ class _InputNonlinearity(Form):
                 "linear gain over the model's)")
 
     def draft(self, ff: FormFit, res: Residual):
+        """The law of ``ff`` as an input effect, and the other law too when it fit the residual as well
+        (``ff.info['other_law']``)."""
         x = (ff.params["level_V"],) + ((ff.params["exponent"],) if "exponent" in ff.params else ())
+        other = ff.info.get("other_law")
+        return [self._draft(x, ff)] + ([self._draft(tuple(other), ff)] if other else [])
+
+    def _draft(self, x: tuple, ff: FormFit) -> EffectDraft:
         e = self.law(x)
         names = [q[0] for q in e["params"]]
-        return [EffectDraft(
-            form=self.id, effect_id=f"drafted_{self.id}", class_name="Drafted" + self.id.title().replace("_", ""),
+        eid = e.get("id", self.id)
+        return EffectDraft(
+            form=self.id, effect_id=f"drafted_{eid}", class_name="Drafted" + eid.title().replace("_", ""),
             summary=e["summary"], model=e["model"],
             params=[Param(name, unit, lo, hi, text, value, rng)
                     for (name, unit, lo, hi, text, rng), value in zip(e["params"], x)],
@@ -125,7 +145,7 @@ class _InputNonlinearity(Form):
                   + "".join(f"        {var} = self.value(p, {name!r})\n" for var, name in zip(e["vars"], names))
                   + f"        return {e['body']}\n"),
             imports=e.get("imports", ("import numpy as np", "")), base="InputEffect",
-            starts=[dict(zip(names, st)) for st in e.get("starts", lambda ff: [])(ff)])]
+            starts=[dict(zip(names, st)) for st in e.get("starts", lambda ff: [])(ff)])
 
 
 class InputDeadZone(_InputNonlinearity):
@@ -155,7 +175,7 @@ class InputSaturation(_InputNonlinearity):
               "model": "The strip is driven by ``clip(v, −L, L)`` (an amplifier that clips); a level above every "
                        "drive, e.g. 1000 V, is the model without it.",
               "body": "np.clip(v, -level, level)"}
-    soft = {"title": "soft saturation of the input",
+    soft = {"title": "soft saturation of the input", "id": "input_soft_saturation",
             "what": "beyond a knee of ±{0} V the drive acts as if growing as |v|^γ, γ = {1}",
             "params": [("saturation_knee", "V", 1e-3, 1e3, "knee L beyond which the drive's effect saturates", "log"),
                        ("saturation_exponent", "1", SOFT_BOUNDS[1][0], 1.0,
@@ -181,18 +201,18 @@ class InputSaturation(_InputNonlinearity):
 
     def search(self, res, vmax, columns):
         """The clip's threshold, and the soft law's knee and exponent (grid, then refined); the
-        lower ΔBIC chooses."""
-        x, reg = super().search(res, vmax, columns)
+        lower ΔBIC first."""
+        [(x, reg)] = super().search(res, vmax, columns)
         grid = [(k, g + SHIFT) for g in SOFT_EXPONENTS for k in np.geomspace(*SOFT_KNEES[:2], SOFT_KNEES[2])]
 
         def soft(z):        # z: knee / largest |v|, and γ + SHIFT (Nelder–Mead first steps 5 % of a coordinate)
             return columns((z[0] * vmax, z[1] - SHIFT))
         best = best_on_grid(res, range(len(grid)), lambda i: soft(grid[int(i)]), 2, admit=_pure)
         if best is None:
-            return x, reg
+            return [(x, reg)]
         (k, g), reg2 = refined(res, list(grid[int(best[0])]), [SOFT_BOUNDS[0], tuple(b + SHIFT for b in SOFT_BOUNDS[1])],
                                soft, 2, admit=_pure)
-        return ((k * vmax, g - SHIFT), reg2) if reg2.delta_bic < reg.delta_bic else (x, reg)
+        return sorted([(x, reg), ((k * vmax, g - SHIFT), reg2)], key=lambda law: law[1].delta_bic)
 
 
 def _pure(reg) -> bool:
