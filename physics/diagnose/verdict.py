@@ -577,6 +577,15 @@ class Verdict:
                 parts.append(f"the draft rounds kept {', '.join(self.drafts['kept'][d['kind']] for d in kept)} for the "
                              f"{' and the '.join(form_of(d['kind']).title for d in kept)}, written with the report "
                              "(pass it back with --effects-path)")
+            # a kept draft of a form this text does not describe (not significant on the final model's
+            # residual beside the others, or drafted behind a large-signal pick) is named too: a page
+            # listed the sensor's low-pass alone beside a model written with a saturation of the drive
+            unlisted = [k for k in self.drafts["kept"] if k not in {d["kind"] for d in kept}]
+            if unlisted:
+                parts.append(f"{'they' if kept else 'the draft rounds'} also kept "
+                             f"{', '.join(self.drafts['kept'][k] for k in unlisted)} for the "
+                             f"{' and the '.join(form_of(k).title for k in unlisted)}, which the final model's "
+                             "residual did not show on its own")
             rmse = self.drafts.get("rmse_m")
             if self.drafts["kept"] and rmse is not None and rmse <= ADEQUATE_RATIO * self.noise_floor:
                 return "; ".join(parts + [f"with the kept drafts the model is within the noise ({1e6 * rmse:.4g} µm, "
