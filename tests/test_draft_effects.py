@@ -129,7 +129,7 @@ def test_both_laws_of_a_saturation_are_drafted_when_the_residual_cannot_choose()
     """The residual is read through the model's error, which other missing physics contaminates:
     beside a sensor's low-pass (circuit_lab s34) a logarithmic map of the drive won as a clip on the
     residual and was drafted so (8.5× the true model's error).  A law that fits the residual too
-    (significant, pure) is drafted beside the best, under its own effect id and the same form (the
+    (a pure map of the drive, significant there or not) is drafted beside the best, under its own effect id and the same form (the
     draft rounds fit both with the model and keep one: :func:`.draft._drop_siblings`); the
     sentence says so.  A law the residual refuses is not drafted."""
     from physics.diagnose import draft
@@ -142,14 +142,14 @@ def test_both_laws_of_a_saturation_are_drafted_when_the_residual_cannot_choose()
     ff = _fit("input_saturation", _residual(with_lowpass))
     drafts = F.form_of("input_saturation")().draft(ff, None)
     assert [d.effect_id for d in drafts] == ["drafted_input_saturation", "drafted_input_soft_saturation"]
-    assert {d.form for d in drafts} == {"input_saturation"} and "both are drafted" in ff.text
+    assert {d.form for d in drafts} == {"input_saturation"} and "is drafted too" in ff.text
     assert [p.name for p in drafts[1].params] == ["saturation_knee", "saturation_exponent"]
     out = draft.DraftOutcome([], [], 20e-6)
     pool = [drafts[0]]                                     # the soft law kept, out of the pool
     draft._drop_siblings(out, pool, drafts[1])
     assert pool == [] and "another version of the same residual form" in out.rejected[0][1]
     ff = _fit("input_saturation", _residual(log_map))     # the clip's gain is not a pure map's here
-    assert len(F.form_of("input_saturation")().draft(ff, None)) == 1 and "both" not in ff.text
+    assert len(F.form_of("input_saturation")().draft(ff, None)) == 1 and "drafted too" not in ff.text
 
 
 def test_compress_is_the_line_the_logarithm_and_the_square_root():

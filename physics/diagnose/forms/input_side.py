@@ -9,11 +9,12 @@ from 30 % to 95 % of it, then finer between the grid neighbours of the best.  Th
 also fitted as a soft one, :func:`compress` (slope 1 at rest, growing as |v|^γ beyond a knee L:
 a charge that saturates logarithmically, as a square root, or towards a bound), on a grid of
 knees from 10 % to 3× the largest |v| and of exponents γ from −1 to 0.5, refined; the lower
-ΔBIC (which counts the soft law's extra parameter) chooses the law that is reported; when the other
-law fits the residual too (significant and pure), both are drafted and the fit with the model decides:
-the residual is read through the model's error, which other missing physics contaminates (beside a
+ΔBIC (which counts the soft law's extra parameter) chooses the law that is reported, and the other law
+is drafted beside it when it is a pure map of the drive (its gain in :data:`.PURE`): the fit with the
+model decides.  The residual is the model's error, which other missing physics contaminates: beside a
 sensor's low-pass the clip won on the residual and a logarithmic map of the drive was drafted as a
-clip, 8.5× the true model's error).
+clip (8.5× the true model's error), and on a second strip the saturation was 4 % of the residual,
+not significant, its clip's gain 1.7.
 
 The second term is there because the base was fitted to the distorted records: if they are
 κ·H(N(v)), the fitted gain has taken up part of the distortion and the residual is
@@ -33,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..effect_draft import EffectDraft, Param
-from .base import PURE, SIGNIFICANT_BIC, Form, FormFit, Residual, best_on_grid, refined
+from .base import PURE, Form, FormFit, Residual, best_on_grid, refined
 
 #: Exponents γ of the soft saturation's grid (then refined within :data:`SOFT_BOUNDS`): bounded
 #: (−1: v/(1 + |v|/L)), logarithmic (0), square-root (0.5).
@@ -96,13 +97,14 @@ class _InputNonlinearity(Form):
                                                                             "linear_gain": "1"}
         if len(x) > 1:
             params["exponent"], units["exponent"] = x[1], "1"
-        # another law that fits too is drafted beside it: the fit with the model decides (module doc)
-        also = [(y, r) for y, r in others if _pure(r) and r.delta_bic <= -SIGNIFICANT_BIC]
+        # another law that is a pure map of the drive is drafted beside it: the fit with the model decides
+        # (module doc); what the residual shows of it need not be significant there, the form's own may not be
+        also = [(y, r) for y, r in others if _pure(r)]
         text = self.sentence(x, vmax, a, kappa)
         if also:
             y, r = also[0]
-            text = (text[:-1] + f"; the {self.law(y)['title']} fits too (ΔBIC {r.delta_bic:.3g}): both are drafted, "
-                    "the fit with the model decides)")
+            text = (text[:-1] + f"; the {self.law(y)['title']} (ΔBIC {r.delta_bic:.3g}) is drafted too: the fit with "
+                    "the model decides)")
         ff = self.scored(res, reg, params, units, text, v_max_V=vmax)
         if also:
             ff.info["other_law"] = [float(v) for v in also[0][0]]
