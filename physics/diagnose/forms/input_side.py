@@ -124,8 +124,8 @@ class _InputNonlinearity(Form):
                 "linear gain over the model's)")
 
     def draft(self, ff: FormFit, res: Residual):
-        """The law of ``ff`` as an input effect, and the other law too when it fit the residual as well
-        (``ff.info['other_law']``)."""
+        """The law of ``ff`` as an input effect, and the form's other law too when it is a pure map of
+        the drive on the residual (``ff.info['other_law']``)."""
         x = (ff.params["level_V"],) + ((ff.params["exponent"],) if "exponent" in ff.params else ())
         other = ff.info.get("other_law")
         return [self._draft(x, ff)] + ([self._draft(tuple(other), ff)] if other else [])
