@@ -221,3 +221,26 @@ def test_constant_input_at_rest_is_held_without_stepping(monkeypatch):
                  (held.fields["voltage"], stepped.fields["voltage"]),
                  (held.fields["cation_upper"], stepped.fields["cation_upper"])):
         assert np.abs(a - b).max() < 1e-6 * np.ptp(b)
+
+
+def test_the_stepper_takes_the_parameters_at_the_records_own_rh():
+    """The large-signal stepper rebuilds its network when the RH moves by a quarter percent; it
+    took the parameters at the rounded RH, so a record at 40.3 % under a map fitted per RH level
+    (levels at 40.3 and 79.7 %, as ``eap diagnose`` fits them) was evaluated at 40.25 %, outside
+    the map, and every diagnosis of such records warned "RH 40.2–40.2 % is outside the 40.3–79.7 %
+    range".  At the level's own RH there is no warning, and the result is the map's value there:
+    the same as a device whose map is constant at that value."""
+    import dataclasses
+    import warnings
+    dev = load_device("ipmc_pt_eg")
+    def maps(ends):         # absolute maps, as a per-RH fit writes them
+        return {n: dataclasses.replace(m, rh=np.array([40.3, 79.7]), values=dev.params[n] * np.array(ends),
+                                       mode="absolute") for n, m in dev.humidity_maps.items()}
+    fitted = dataclasses.replace(dev, humidity_maps=maps([1.3, 0.7]))
+    flat = dataclasses.replace(dev, humidity_maps=maps([1.3, 1.3]))
+    sig = signals.tone(1.0, 1.0, 1.5, 200.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = physics.simulate(fitted, "nonlinear_charge,humidity", sig.t, sig.v, rh=40.3)
+    ref = physics.simulate(flat, "nonlinear_charge,humidity", sig.t, sig.v, rh=40.3)
+    np.testing.assert_allclose(r.deflection, ref.deflection, rtol=1e-9, atol=1e-15)

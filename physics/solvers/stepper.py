@@ -156,8 +156,10 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
     mol/m³), ``U`` (V), ``Q`` (C/m²) and ``T`` (K) per branch."""
     N = t.size
     dt = float(t[1] - t[0])
+    # the network is rebuilt when the RH moves by a quarter percent, at the RH it has then: a map
+    # fitted per RH level ends at a level's own RH (40.3 %), which a rounded key (40.25 %) left
     rh_key = np.round(rh / 0.25) * 0.25
-    p0 = params_at(float(rh_key[0]))
+    p0 = params_at(float(rh[0]))
     tn = model.hook("network")(p0, edges)             # heat network (None: isothermal)
     thermal = tn is not None
     lumped = not thermal and model.hook("series_conductances")(p0, edges) is None
@@ -203,7 +205,7 @@ def run(model, params_at, t: np.ndarray, vin: np.ndarray, rh: np.ndarray, edges:
             if rh_key[n + 1] != key:
                 key = rh_key[n + 1]
                 Tcur = net.T
-                net = BranchNetwork(model, params_at(float(key)), edges, lumped)
+                net = BranchNetwork(model, params_at(float(rh[n + 1])), edges, lumped)
                 net.set_temperature(Tcur)
                 epochs.append((n + 1, net.law, net.load_ratio))
             d1 = Q - Q_prev
