@@ -1127,14 +1127,21 @@ def test_without_a_pick_the_lead_is_refined_like_the_base_it_is_compared_with():
     strip: its drafted saturation came back with the FRF optimum of the solvent line, 33.6 µm
     against the base's 35.7 µm; refined so, 13.5 µm, then 2.41 µm = 1.10× the floor).  Not with a
     pick (it is refined itself) nor beside a base fitted on the FRF alone."""
-    from physics.diagnose.diagnosis import _lead_to_refine, _values_of
+    from physics.diagnose.diagnosis import _leads_to_refine, _values_of
 
-    def cand(name, linear, dbic):
-        return _Stub(effect=name, fit=_Stub(model=_Stub(is_linear=linear)), comparison=_Stub(delta_bic=dbic))
+    def cand(name, linear, dbic, rmse=20e-6):
+        return _Stub(effect=name, fit=_Stub(model=_Stub(is_linear=linear), rmse=rmse),
+                     comparison=_Stub(delta_bic=dbic))
     ranked = [cand("nonlinear_charge", False, -5000.0), cand("a", True, -100.0), cand("b", True, -3000.0)]
-    refined, frf_only = _Stub(time_refined=True), _Stub(time_refined=False)
-    assert _lead_to_refine(None, ranked, refined).effect == "b"
-    assert _lead_to_refine(ranked[1], ranked, refined) is None and _lead_to_refine(None, ranked, frf_only) is None
+    refined, frf_only = _Stub(time_refined=True, rmse=30e-6), _Stub(time_refined=False, rmse=30e-6)
+    assert [c.effect for c in _leads_to_refine(None, ranked, refined)] == ["b"]
+    assert _leads_to_refine(ranked[1], ranked, refined) == [] and _leads_to_refine(None, ranked, frf_only) == []
+    # candidates that did not move from the base are refined after the lead, in ΔBIC order (circuit_lab s38:
+    # five drafts at the base's 25.94 µm, and only the dead zone, of one parameter, was refined)
+    at_base = [cand("deadzone", True, 9.4, 25.94e-6), cand("soft", True, 18.8, 25.94e-6),
+               cand("clip", True, 9.42, 25.94e-6), cand("moved", True, 30.0, 25.0e-6)]
+    assert [c.effect for c in _leads_to_refine(None, at_base, _Stub(time_refined=True, rmse=25.94e-6))] == \
+        ["deadzone", "clip", "soft"]
     fit = _Stub(result=_Stub(problem=_Stub(labels=["Rs", "kf@40", "saturation_knee"]),
                              fit=_Stub(theta=np.array([80.0, 1e-3, 0.4]))))
     base = _Stub(values={"Rs": 39.4, "kf@40": 2e-3, "D_solvent": 3e-12})
