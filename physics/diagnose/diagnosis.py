@@ -970,6 +970,7 @@ def _forward(k: int, step_base: ModelFit, left, step_feats: dict, data: Prepared
         run.log(f"  {rival.effect} (beside the large-signal {decision.pick.effect}) refined on the time records: "
                 f"RMS {1e6 * rival.fit.rmse:.4g} µm")
         decision = decided()
+    # each refined in place on the time records from the base's values; those whose refinement ran
     leads = [c for c in (_leads_to_refine(decision.pick, ranked, step_base) if run.refine_rival else [])
              if refine_on_time(c.fit, data.records, start=_values_of(step_base, c.fit))]
     for lead in leads:
