@@ -1040,10 +1040,14 @@ def _linear_rival(pick, ranked) -> "CandidateResult | None":
 STAYED = 1e-3
 
 
+def _linear(ranked, but=None) -> list:
+    """The linear candidates of ``ranked`` (other than ``but``) compared with their base."""
+    return [c for c in ranked if c is not but and c.fit.model.is_linear and c.comparison is not None]
+
+
 def _best_linear(ranked, but=None) -> "CandidateResult | None":
     """The linear candidate of ``ranked`` (other than ``but``) with the lowest ΔBIC, or None."""
-    linear = [c for c in ranked if c is not but and c.fit.model.is_linear and c.comparison is not None]
-    return min(linear, key=lambda c: c.comparison.delta_bic, default=None)
+    return min(_linear(ranked, but), key=lambda c: c.comparison.delta_bic, default=None)
 
 
 def _leads_to_refine(pick, ranked, base: ModelFit) -> list:
@@ -1064,8 +1068,7 @@ def _leads_to_refine(pick, ranked, base: ModelFit) -> list:
     lead = _best_linear(ranked)
     if lead is None:
         return []
-    stayed = [c for c in ranked if c is not lead and c.fit.model.is_linear and c.comparison is not None
-              and abs(c.fit.rmse - base.rmse) <= STAYED * base.rmse]
+    stayed = [c for c in _linear(ranked, lead) if abs(c.fit.rmse - base.rmse) <= STAYED * base.rmse]
     return [lead] + sorted(stayed, key=lambda c: c.comparison.delta_bic)
 
 
