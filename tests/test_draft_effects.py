@@ -1227,3 +1227,58 @@ def test_an_rh_level_holding_a_second_amplitude_does_not_make_a_compression_an_r
     assert "amplitudes 0.6, 1.5 V" in ff.text and _fit("amplitude_dependence", _design(compressed, cells)).significant
     ff = _fit("rh_dependence", _design(lambda p, rh, a, t: -0.1 * p * (rh == 60.0), cells))
     assert ff.significant and not ff.info.get("confounded_with_amplitude"), ff.text
+
+
+def test_a_kept_draft_is_named_by_the_catalog_effect_whose_physics_makes_its_form():
+    """A kept drafted saturation of the drive is offered to ``nonlinear_charge`` (the catalog's
+    physics of that form) in its place on the model written: picked there, it joins the verdict's
+    chain, left out of the model written (which keeps the draft), labelled against the draft as its
+    closest rival — "low" when it fits no better, as a near twin; "high" only when it removes ≥ 95 %
+    of the excess error the draft leaves.  Not picked there, or named already: the chain is as it was."""
+    from physics.diagnose.confidence import Confidence
+    from physics.diagnose.draft import DraftOutcome, _name_counterparts
+    from physics.diagnose.verdict import Verdict
+    sat, lp, nc = "drafted_input_soft_saturation", "drafted_output_lowpass2", "nonlinear_charge"
+
+    def case(after, draft_rmse=1.52e-6, status="partly explained", named=("electrode_resistance",), picked=True):
+        res = _Stub(final=_fit_stub(60e-6), noise_floor=1.5e-6,
+                    verdict=_Stub(status=status, picks=[_verdict_pick(e, "low", 117e-6, 60e-6) for e in named]))
+        out = DraftOutcome([_Stub(form="input_saturation", effect_id=sat)], [], 60e-6)
+        out.final = _fit_stub(draft_rmse)
+        out.final.effects = ["double_layer", lp, sat]
+        calls = []
+
+        def rediagnose(device, effects, free, candidates, refit_own=False):
+            calls.append((tuple(effects), tuple(candidates)))
+            q = _verdict_pick(nc, "high", 29e-6, after)
+            q.confidence = Confidence(1.0, 19.0, after / 1.5e-6, 1.0, None, 1.0, 0, 0, 1.0, None, label="high")
+            return _Stub(verdict=_Stub(picks=[q] if picked else [], status="not explained by the catalog"))
+        _name_counterparts(res, out, rediagnose, ["kf", "Y"], lambda msg: None)
+        return res, out, calls
+
+    res, out, calls = case(5.24e-6, status="not explained by the catalog", named=())
+    assert calls == [(("double_layer", lp), (nc,))]
+    [p] = res.verdict.picks
+    assert (p.effect, p.label, p.step, p.on) == (nc, "low", 1, f"the model written less {sat}")
+    assert p.confidence.in_place_of == sat and "no better than that draft" in " ".join(p.confidence.why)
+    assert "5.24 µm, the draft to 1.52 µm" in p.left_out and res.verdict.status == "partly explained"
+    assert any(n.startswith(f"{nc} named for {sat}") and "confidence low" in n for n in out.notes)
+    v = Verdict("partly explained", res.verdict.picks, {}, None, 117e-6, 1.5e-6, "test")
+    lines = v.lines()
+    assert any(line.startswith(f"Named for the drafted {sat}: {nc} (confidence low") for line in lines)
+    assert any(line.startswith("  Left out of the model written: in place of") for line in lines)
+    assert v.final_rmse == 117e-6 and not any(line.startswith("Which effect: nonlinear") for line in lines)
+    assert p.to_dict()["confidence_features"]["in_place_of"] == sat
+    assert Confidence.from_dict(p.to_dict()["confidence_features"]).in_place == p.confidence.in_place
+    # beside the chain's own pick it comes second; a fit that removes nearly all the draft leaves is "high"
+    res, _, _ = case(1.51e-6, draft_rmse=3e-6)
+    assert [(p.effect, p.label, p.step) for p in res.verdict.picks] == [("electrode_resistance", "low", 1), (nc, "high", 2)]
+    # removing less than a third of what the draft leaves: "low"; between: "medium"
+    assert case(2.7e-6, draft_rmse=3e-6)[0].verdict.picks[-1].label == "low"
+    assert case(2.0e-6, draft_rmse=3e-6)[0].verdict.picks[-1].label == "medium"
+    # not picked there, or named by the chain already: nothing joins
+    res, out, _ = case(5.24e-6, picked=False)
+    assert [p.effect for p in res.verdict.picks] == ["electrode_resistance"]
+    assert any("is not picked" in n for n in out.notes)
+    res, _, calls = case(5.24e-6, named=(nc,))
+    assert calls == [] and len(res.verdict.picks) == 1

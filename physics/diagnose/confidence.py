@@ -43,6 +43,10 @@ so that label replaces the pick's only when it is not lower.
 
 * **ahead of** — a pick the chain took only with a second effect on top of it (the look-ahead
   of :func:`.diagnosis.select`): alone it explains too little of the failure, so it is never "high".
+* **in place** — a pick named for a kept draft (:func:`.draft._name_counterparts`): the catalog
+  effect whose physics shows as the drafted form, fitted in the draft's place on the model written;
+  the share of the excess error the draft leaves that it removes needs what **twin** needs (below
+  a third: "low"), since the draft is the closest rival it has.
 * **chain left** — the error the chain's final model leaves, in noise floors (:func:`at_chain_end`):
   a chain that ends far from the noise with this pick in it explains a part of the failure, and
   what the pick removed may be the share of physics the catalog lacks that its form happens to
@@ -252,6 +256,8 @@ class Confidence:
     ahead_of: str | None = None    # picked only with this effect on top (the look-ahead: :func:`.diagnosis.select`)
     chain_left: float = math.nan   # error the chain's final model leaves [noise floors] (NaN: not known)
     undetermined: int = 0          # own parameters inside their range and not determined
+    in_place_of: str | None = None  # a kept draft the pick names the physics of, fitted in its place
+    in_place: float = 1.0          # share of the excess error that draft leaves which the pick removes
     label: str = "low"
     why: list[str] = field(default_factory=list)   # what kept it from "high"
 
@@ -264,7 +270,8 @@ class Confidence:
                    float(d.get("twin_share", 1.0)), d.get("closest_rival"), float(d.get("records_improved", 1.0)),
                    int(d.get("quality_flags", 0)), int(d.get("pinned_parameters") or 0),
                    float(d.get("held_rival_share", 1.0)), d.get("held_rival"), bool(d.get("on_refitted_model")),
-                   d.get("picked_ahead_of"), num("chain_left_noise_floors"), int(d.get("undetermined_parameters") or 0))
+                   d.get("picked_ahead_of"), num("chain_left_noise_floors"), int(d.get("undetermined_parameters") or 0),
+                   d.get("in_place_of"), float(d.get("in_place_share", 1.0)))
 
     def to_dict(self) -> dict:
         return {"label": self.label, "weight": self.weight, "change_noise_floors": _num(self.change),
@@ -273,6 +280,7 @@ class Confidence:
                 "undetermined_parameters": self.undetermined,
                 "held_rival_share": self.held, "held_rival": self.held_of, "on_refitted_model": self.refitted,
                 "picked_ahead_of": self.ahead_of, "chain_left_noise_floors": _num(self.chain_left),
+                "in_place_of": self.in_place_of, "in_place_share": self.in_place,
                 "not_high_because": self.why}
 
 
@@ -373,6 +381,11 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
     if c.held_of and c.held < twin_hi and c.held_of != c.twin_of:
         why.append(f"{c.held_of} {bound}; the pick removes {100 * c.held:.3g} % of the excess error it leaves "
                    f"('high' needs {100 * twin_hi:.0f} %)")
+    if c.in_place_of and c.in_place < twin_hi:
+        how = (f"removes only {100 * c.in_place:.2g} % of the excess error that draft leaves" if c.in_place > 0
+               else "fits the records no better than that draft")
+        why.append(f"it names the physics of the drafted {c.in_place_of}, fitted in its place, and {how} ('high' "
+                   f"needs {100 * twin_hi:.0f} % of it): the records do not tell the catalog's law from the drafted form")
     if c.records < rec_hi:
         why.append(f"it lowers the error on only {100 * c.records:.3g} % of the records (fitted on all of them, it "
                    "does not generalise from record to record)")
@@ -397,6 +410,7 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
     if not why:
         c.label = "high"
     elif (math.isfinite(c.change) and c.change < ch_lo) or (c.twin < twin_lo and c.twin_of) or c.pinned \
+            or (c.in_place < twin_lo and c.in_place_of) \
             or c.undetermined or far:
         c.label = "low"
     else:

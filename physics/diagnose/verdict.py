@@ -399,6 +399,12 @@ class Pick:
     def label(self) -> str:
         return self.confidence.label if self.confidence is not None else "low"
 
+    @property
+    def in_place_of(self) -> str | None:
+        """The kept draft this pick names the physics of, fitted in its place
+        (:func:`.draft._name_counterparts`); None for a pick of the chain."""
+        return self.confidence.in_place_of if self.confidence is not None else None
+
     def to_dict(self) -> dict:
         return {"step": self.step, "effect": self.effect, "confidence": self.weight, "confidence_label": self.label,
                 "confidence_features": self.confidence.to_dict() if self.confidence else None,
@@ -467,8 +473,9 @@ class Verdict:
 
     @property
     def final_rmse(self) -> float:
+        on_chain = [p for p in self.picks if not p.in_place_of]
         return self.adequacy.rmse if self.adequacy is not None else (
-            self.picks[-1].rmse_after if self.picks else self.base_rmse)
+            on_chain[-1].rmse_after if on_chain else self.base_rmse)
 
     def lines(self) -> list[str]:
         """The verdict as sentences: status, which effect, adequacy, what remains, nuisance."""
@@ -488,7 +495,8 @@ class Verdict:
                        "physics.")
         if self.picks:
             for k, p in enumerate(self.picks):
-                head = "Which effect: " if k == 0 else "Then, on top of it: "
+                head = (f"Named for the drafted {p.in_place_of}: " if p.in_place_of else
+                        "Which effect: " if k == 0 else "Then, on top of it: ")
                 params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
                 if p.twin:
                     out.append(f"{head}ambiguous between {p.effect} and {p.twin} — these data cannot tell them apart"
@@ -533,7 +541,8 @@ class Verdict:
     def _adequacy_text(self) -> str:
         ad = self.adequacy
         model = "the base" + "".join(f" − {r['effect']}" for r in self.removed) + \
-            (" with its own effects refitted" if self.refitted else "") + "".join(f" + {e}" for e in self.chain) + \
+            (" with its own effects refitted" if self.refitted else "") + \
+            "".join(f" + {p.effect}" for p in self.picks if not p.in_place_of) + \
             (" (the picks' shape refined)" if self.refined else "")
         if ad is None or ad.adequate is None:
             return f"not assessed — the noise floor is unknown ({self.noise_source})."
