@@ -1265,7 +1265,7 @@ def test_a_kept_draft_is_named_by_the_catalog_effect_whose_physics_makes_its_for
     assert any(n.startswith(f"{nc} named for {sat}") and "confidence low" in n for n in out.notes)
     v = Verdict("partly explained", res.verdict.picks, {}, None, 117e-6, 1.5e-6, "test")
     lines = v.lines()
-    assert any(line.startswith(f"Named for the drafted {sat}: {nc} (confidence low") for line in lines)
+    assert any(line.startswith(f"Named for the draft {sat}: {nc} (confidence low") for line in lines)
     assert any(line.startswith("  Left out of the model written: in place of") for line in lines)
     assert v.final_rmse == 117e-6 and not any(line.startswith("Which effect: nonlinear") for line in lines)
     assert p.to_dict()["confidence_features"]["in_place_of"] == sat

@@ -384,8 +384,8 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
     if c.in_place_of and c.in_place < twin_hi:
         how = (f"removes only {100 * c.in_place:.2g} % of the excess error that draft leaves" if c.in_place > 0
                else "fits the records no better than that draft")
-        why.append(f"it names the physics of the drafted {c.in_place_of}, fitted in its place, and {how} ('high' "
-                   f"needs {100 * twin_hi:.0f} % of it): the records do not tell the catalog's law from the drafted form")
+        why.append(f"it names the physics of the draft {c.in_place_of}, fitted in its place, and {how} ('high' "
+                   f"needs {100 * twin_hi:.0f} % of it): the records confirm the form, not the catalog's law for it")
     if c.records < rec_hi:
         why.append(f"it lowers the error on only {100 * c.records:.3g} % of the records (fitted on all of them, it "
                    "does not generalise from record to record)")

@@ -495,7 +495,7 @@ class Verdict:
                        "physics.")
         if self.picks:
             for k, p in enumerate(self.picks):
-                head = (f"Named for the drafted {p.in_place_of}: " if p.in_place_of else
+                head = (f"Named for the draft {p.in_place_of}: " if p.in_place_of else
                         "Which effect: " if k == 0 else "Then, on top of it: ")
                 params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
                 if p.twin:
