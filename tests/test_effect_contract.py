@@ -251,3 +251,19 @@ class SlowCreep(EXAMPLE):
 def test_the_solvers_check_waits_for_a_slow_output_pole_to_settle():
     r = check_effect(SlowCreep, fast=False)
     assert r["solvers"].status == "pass", r["solvers"].detail
+
+
+def test_shows_as_must_name_residual_forms_as_a_tuple():
+    """A spec's ``shows_as`` (the residual forms the effect shows as, :func:`physics.diagnose.specs.shown_as`)
+    is a tuple of form ids: a bare string is refused by the declaration check, and the built-in
+    saturation of the charge is what a drafted saturation of the drive is named by."""
+    from physics.diagnose.specs import shown_as
+    from physics.effects.declaration import declaration_problems
+
+    class Bare(OutputEffect):
+        id = "bare_shows_as"
+        diagnosis = {"free": ("g",), "shows_as": "input_saturation"}
+    assert any("'shows_as' must be a tuple" in p for p in declaration_problems(Bare))
+    Bare.diagnosis = {"free": ("g",), "shows_as": ("input_saturation",)}
+    assert not any("shows_as" in p for p in declaration_problems(Bare))
+    assert shown_as("input_saturation") == ["nonlinear_charge"] and shown_as("output_lowpass") == []

@@ -127,7 +127,7 @@ def _table(family: str, seeds: str, cases: int, code: str, caveat: str, rule: st
 CALIBRATION = (
     _table("pnp_fd", "40", 23, "4da3232",
            "seed 40, a fresh draw, all 23 of its truths, measured with the rules in force; no rule was chosen on it "
-           "(the four wrong \"medium\" picks: the sensor low-pass read as electrode_resistance, alone and beside the "
+           "(the four wrong \"medium\" picks: the sensor low-pass read as the electrode's resistance, alone and beside the "
            "saturation; humidity for the play and for the eigen-moment strips)",
            high=(8, 1, 0), medium=(6, 2, 4), low=(1, 1, 1)),
     _table("pnp_fd", "36", 23, "b998019",

@@ -450,7 +450,8 @@ def _left_out_of_written(res, outcome: DraftOutcome) -> None:
 
 
 def _name_counterparts(res, outcome: DraftOutcome, rediagnose, free: list, say) -> None:
-    """Each kept draft whose form a catalog effect's physics produces (:attr:`.forms.Form.counterparts`),
+    """Each kept draft whose form a catalog effect's physics produces (its spec's ``shows_as``,
+    :func:`.specs.shown_as`),
     named by that effect when it is picked in the draft's place: a forward step on the model written
     (:attr:`DraftOutcome.final`) less the draft, the counterpart its one candidate.  The pick joins the
     verdict's chain, labelled as the step labels it with the draft as its closest rival
@@ -463,16 +464,15 @@ def _name_counterparts(res, outcome: DraftOutcome, rediagnose, free: list, say) 
     gives 5.24 µm.  Not tried when the verdict names the effect already."""
     from dataclasses import replace
 
-    from ..effects import EFFECTS
     from .candidates import map_free
     from .confidence import excess_share, label
+    from .specs import shown_as
     fit = outcome.final
     if not outcome.kept or fit is None or fit.rmse >= res.final.rmse:
         return
     for d in outcome.kept:
-        for eid in form_of(d.form).counterparts:
-            if d.effect_id not in fit.effects or eid in fit.effects or eid not in EFFECTS \
-                    or any(p.effect == eid for p in res.verdict.picks):
+        for eid in shown_as(d.form):
+            if d.effect_id not in fit.effects or eid in fit.effects or any(p.effect == eid for p in res.verdict.picks):
                 continue
             keep = [e for e in fit.effects if e != d.effect_id]
             say(f"drafts: {eid} fitted in place of {d.effect_id} (the catalog's physics of its form)")

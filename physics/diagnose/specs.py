@@ -24,6 +24,13 @@ def spec_of(effect: str) -> dict:
     return dict(getattr(cls, "diagnosis", None) or {})
 
 
+def shown_as(form: str) -> list[str]:
+    """The effects whose physics shows as the residual form ``form`` (a :mod:`.forms` id) when it
+    is missing (their spec's ``shows_as``): a kept draft of that form is named by them when they fit
+    in its place (:func:`.draft._name_counterparts`)."""
+    return [e for e in EFFECTS if form in spec_of(e).get("shows_as", ())]
+
+
 def default_candidates() -> list[str]:
     """Effects with a spec that are tried by default, in registry order."""
     return [e for e in EFFECTS if spec_of(e) and spec_of(e).get("by_default", True)]

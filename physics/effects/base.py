@@ -88,7 +88,7 @@ from ..parameters import ParamSpec, TableSpec
 #: scale)`` the large-signal parameter of a ``describing_function`` effect and its grid (c = scale /
 #: parameter); ``hints`` {parameter: sentence}: why a parameter may have no effect.
 DIAGNOSIS_KEYS = ("free", "shape", "refine", "bounds", "starts", "nested", "off", "excitation", "reveal", "signature",
-                  "roles", "per_rh", "describing_function", "by_default")
+                  "roles", "per_rh", "describing_function", "by_default", "shows_as")
 #: ``reveal`` rules: {"f_hi_min": Hz}, {"decades_min": n}, {"f_lo_max": Hz, "hold_s": s} (either),
 #: {"spans_resonance": True}, {"rh_levels": n}, {"amplitude_levels": n}; absent: always revealable.
 REVEAL_RULES = ("f_hi_min", "decades_min", "f_lo_max", "hold_s", "spans_resonance", "rh_levels", "amplitude_levels")

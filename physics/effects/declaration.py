@@ -48,6 +48,9 @@ def declaration_problems(cls, *, user: bool = True) -> list[str]:
         bad = [n for n in names if n not in known | set(cls.requires)]
         if user and bad:
             out.append(f"diagnosis names parameters {bad} that the effect does not declare")
+        shows = spec.get("shows_as", ())
+        if not isinstance(shows, (tuple, list)) or not all(isinstance(f, str) for f in shows):
+            out.append(f"diagnosis 'shows_as' must be a tuple of residual-form ids, got {shows!r}")
         bad_rules = sorted(set(spec.get("reveal", {})) - set(REVEAL_RULES))
         if bad_rules:
             out.append(f"unknown reveal rule(s) {bad_rules}; known: {', '.join(REVEAL_RULES)}")

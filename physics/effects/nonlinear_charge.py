@@ -119,6 +119,8 @@ class NonlinearCharge(LinearCharge):
         "excitation": "the same excitation at two or more amplitudes (ratio at least 1.25) at one RH level",
         "reveal": {"amplitude_levels": 2},
         "signature": [("amplitude_dependence", 1.0), ("harmonics", 0.5)],
+        # a charge that grows slower than the voltage shows as a saturation of the drive
+        "shows_as": ("input_saturation",),
     }
 
     @classmethod

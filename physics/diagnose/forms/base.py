@@ -151,9 +151,6 @@ class Form:
     #: The form is written through the fitted model's linear response (:attr:`Residual.respond`),
     #: which a large-signal model does not have.
     needs_response: ClassVar[bool] = False
-    #: Catalog effects whose physics shows as this form: a kept draft of it is named by them when
-    #: they fit in its place (:func:`..draft._name_counterparts`).
-    counterparts: ClassVar[tuple[str, ...]] = ()
 
     def fit(self, res: Residual) -> FormFit | None:
         """The form fitted to ``res`` (None: the records cannot show it)."""

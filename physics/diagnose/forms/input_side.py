@@ -169,8 +169,6 @@ class InputDeadZone(_InputNonlinearity):
 class InputSaturation(_InputNonlinearity):
     id = "input_saturation"
     title = "saturation of the input"
-    # a double layer whose charge grows slower than the voltage saturates the drive's effect
-    counterparts = ("nonlinear_charge",)
     grid = (0.3, 0.95, 10)
     effect = {"title": title, "what": "the drive acts as if clipped at ±{0} V",
               "params": [("saturation_level", "V", 0.0, 1e3, "level L at which the drive clips", "log")],
