@@ -472,10 +472,14 @@ class Verdict:
         return [p.effect for p in self.picks]
 
     @property
+    def on_chain(self) -> list[Pick]:
+        """The picks of the chain's final model (not those named for a draft in its place)."""
+        return [p for p in self.picks if not p.in_place_of]
+
+    @property
     def final_rmse(self) -> float:
-        on_chain = [p for p in self.picks if not p.in_place_of]
         return self.adequacy.rmse if self.adequacy is not None else (
-            on_chain[-1].rmse_after if on_chain else self.base_rmse)
+            self.on_chain[-1].rmse_after if self.on_chain else self.base_rmse)
 
     def lines(self) -> list[str]:
         """The verdict as sentences: status, which effect, adequacy, what remains, nuisance."""
@@ -542,7 +546,7 @@ class Verdict:
         ad = self.adequacy
         model = "the base" + "".join(f" − {r['effect']}" for r in self.removed) + \
             (" with its own effects refitted" if self.refitted else "") + \
-            "".join(f" + {p.effect}" for p in self.picks if not p.in_place_of) + \
+            "".join(f" + {p.effect}" for p in self.on_chain) + \
             (" (the picks' shape refined)" if self.refined else "")
         if ad is None or ad.adequate is None:
             return f"not assessed — the noise floor is unknown ({self.noise_source})."
