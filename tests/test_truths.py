@@ -20,9 +20,13 @@ ROOT = Path(__file__).resolve().parents[1]
 BETA_L = (1.8751040687, 4.6940911330)         # clamped–free Euler–Bernoulli roots (Meirovitch)
 
 
+#: the families recorded as a lab does (five records, three RH levels, two amplitudes)
+LAB_DESIGNED = ("pnp_fd", "circuit_lab")
+
+
 @pytest.fixture(scope="module")
 def cases():
-    return {f: make_case(f, "none", 0) for f in INDEPENDENT}
+    return {f: make_case(f, "none", 0) for f in LAB_DESIGNED}
 
 
 # ---------------------------------------------------------------- the beam
@@ -135,7 +139,8 @@ def test_truth_table_names_only_catalog_effects():
         assert set(t.expected) | set(t.acceptable) <= set(EFFECTS), t.name
         assert t.kind in ("none", "catalog", "outside", "twin", "pair", "route")
         assert (t.kind in ("catalog", "pair")) == bool(t.expected) or t.name == "pair_lowpass_sat"
-    assert set(FAMILIES) == {"pnp_fd", "circuit_lab", "lab", "perturbed"}
+    assert set(FAMILIES) == {"pnp_fd", "pnp_sweep", "circuit_lab", "lab", "perturbed"}
+    assert set(LAB_DESIGNED) < set(INDEPENDENT)
     assert truth("lab", "solvent_diffusion").expected == ("solvent_diffusion",)
     assert truth("perturbed", "creep").kind == "outside"
     assert len([t for t in truths("pnp_fd") if truth("pnp_fd", t).kind == "pair"]) == 6
@@ -160,8 +165,8 @@ def test_cases_are_deterministic_and_seeded(cases):
     assert [r.name for r in again.records] == [r.name for r in c.records]
     for a, b in zip(again.records, c.records):
         assert np.array_equal(a.measured, b.measured) and np.array_equal(a.voltage, b.voltage)
-    for mod in (pnp_fd, circuit_lab):           # another seed draws another strip
-        fam = zlib.crc32(mod.NAME.encode())
+    for mod, name in ((pnp_fd, pnp_fd.LAB.name), (circuit_lab, circuit_lab.NAME)):   # another seed, another strip
+        fam = zlib.crc32(name.encode())
         d0 = mod._draw_strip(np.random.default_rng([0, fam]))[1]
         d1 = mod._draw_strip(np.random.default_rng([1, fam]))[1]
         assert d0 != d1 and d0 == mod._draw_strip(np.random.default_rng([0, fam]))[1]
@@ -194,7 +199,32 @@ def test_hidden_ingredient_changes_the_response_and_user_model_leaves_it_out(cas
     assert 0.8 * step_b.clean[k0] < step_b.clean[k1] < 0.97 * step_b.clean[k0]
 
 
-@pytest.mark.parametrize("fam", INDEPENDENT)
+def test_the_two_record_design_is_a_sweep_and_a_square_train_at_one_rh(tmp_path):
+    """pnp_sweep: the same physics as pnp_fd recorded as the user of issue 34 did — a 120 s log
+    sweep and a 60 s square pulse train at one RH, 1 µm noise; no truth that needs two RH levels;
+    its strips drawn apart from pnp_fd's; the files read back by the package's reader."""
+    from physics.io.timeseries import read_timeseries
+    names = truths("pnp_sweep")
+    assert "humidity" not in names and "route_creep_rh" not in names and "pair_modulus_rh" not in names
+    assert {"none", "solvent", "creep", "pair_elec_solvent"} <= set(names)
+    with pytest.raises(ValueError, match="not one of pnp_sweep"):
+        make_case("pnp_sweep", "humidity", 0)
+    c = make_case("pnp_sweep", "none", 0)
+    assert c.family == "pnp_sweep" and c.effects == "none"
+    assert [r.name.split("_")[1] for r in c.records] == ["sweep", "square"]
+    assert [r.time[-1] for r in c.records] == pytest.approx([120.0 - 1 / 250, 60.0 - 1 / 250])
+    assert max(float(np.mean(r.rh)) for r in c.records) - min(float(np.mean(r.rh)) for r in c.records) < 1.0
+    assert c.noise_floor == pytest.approx(1e-6, rel=0.01) and c.true_error() == pytest.approx(c.noise_floor, rel=0.1)
+    sq = c.records[1].voltage
+    assert sq[:2 * 250].max() == 0 and sq.max() == pytest.approx(-sq.min()) and sq.max() > 0     # rest, then ± pulses
+    assert make_case("pnp_fd", "none", 0).truth_params["L_total_mm"] != c.truth_params["L_total_mm"]
+    files = c.write(tmp_path)
+    ts = read_timeseries(files[1])
+    assert np.allclose(ts.deflection, c.records[1].measured, atol=1e-8)
+    assert ts.meta["sensor"]["deflection_noise"] == pytest.approx(1e-6)
+
+
+@pytest.mark.parametrize("fam", LAB_DESIGNED)
 def test_records_read_back_through_the_package_reader(cases, fam, tmp_path):
     from physics.io.timeseries import read_timeseries
     c = cases[fam]

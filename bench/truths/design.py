@@ -6,7 +6,8 @@ Excitations (voltage [V] sampled at ``fs``):
   logarithmic selection of the harmonics of 1/period (period 20 s: 0.05 Hz resolution), the
   record holding whole periods; scaled to a peak of ``amplitude``;
 * :func:`step` — rest, a step held for a long time, release and a long hold at zero;
-* :func:`log_sweep` — a logarithmic swept sine (Farina's exponential chirp).
+* :func:`log_sweep` — a logarithmic swept sine (Farina's exponential chirp);
+* :func:`square` — rest, then a bipolar square wave (a pulse train).
 
 :class:`Plan` lists the records of a family (kind, amplitude factor, nominal RH);
 :func:`measure` adds what a laser triangulation sensor and a capacitive hygrometer add.
@@ -43,6 +44,13 @@ def step(amplitude: float, fs: float, duration: float, *, rest: float = 2.0, hol
     return np.where((t >= rest) & (t < rest + hold), amplitude, 0.0)
 
 
+def square(amplitude: float, fs: float, duration: float, *, rest: float = 2.0, period: float = 10.0) -> np.ndarray:
+    """``rest`` s at 0 V, then +``amplitude`` and −``amplitude`` for half a ``period`` [s] each."""
+    t = np.arange(int(round(duration * fs))) / fs
+    phase = np.mod(t - rest, period) < period / 2
+    return np.where(t < rest, 0.0, np.where(phase, amplitude, -amplitude))
+
+
 def log_sweep(amplitude: float, fs: float, duration: float, f0: float = 0.1, f1: float = 50.0) -> np.ndarray:
     """Exponential chirp from ``f0`` to ``f1`` [Hz] over ``duration`` [s], starting at 0 V."""
     t = np.arange(int(round(duration * fs))) / fs
@@ -52,11 +60,17 @@ def log_sweep(amplitude: float, fs: float, duration: float, f0: float = 0.1, f1:
 
 @dataclass(frozen=True)
 class Plan:
-    """One record: ``kind`` (multisine, step, sweep), amplitude factor, nominal RH [%]."""
+    """One record: ``kind`` (multisine, step, sweep, square), amplitude factor, nominal RH [%],
+    length [s] (None: the family's)."""
 
     kind: str
     scale: float
     rh: float
+    duration: float | None = None
+
+    def length(self, default: float) -> float:
+        """The record's length [s]."""
+        return default if self.duration is None else self.duration
 
     def name(self, k: int, amp: float) -> str:
         return f"{k + 1:02d}_{self.kind}_{amp * self.scale:.3g}V_RH{self.rh:g}"
@@ -69,6 +83,8 @@ class Plan:
             return step(a, fs, duration)
         if self.kind == "sweep":
             return log_sweep(a, fs, duration)
+        if self.kind == "square":
+            return square(a, fs, duration)
         raise ValueError(f"unknown record kind {self.kind!r}")
 
     def describe(self, amp: float, fs: float, duration: float) -> dict:
@@ -79,6 +95,8 @@ class Plan:
                     "f_stop_Hz": 20.0, "fs_Hz": fs, "duration_s": duration, "amplitude_V": a}
         if self.kind == "step":
             return {"kind": "steps", "fs_Hz": fs, "duration_s": duration, "amplitude_V": a}
+        if self.kind == "square":
+            return {"kind": "square", "period_s": 10.0, "fs_Hz": fs, "duration_s": duration, "amplitude_V": a}
         return {"kind": "sweep", "f_start_Hz": 0.1, "f_stop_Hz": 50.0, "fs_Hz": fs, "duration_s": duration,
                 "amplitude_V": a}
 

@@ -51,6 +51,11 @@ Records (lab design, the same for every truth): five 60 s records at 250 Hz — 
 0.05–20 Hz at RH 65 % and at 2.5× its amplitude, a 25 s step with a 33 s hold at zero, a
 log sweep 0.1–50 Hz at half the amplitude at RH 45 % and the multisine at RH 85 %.  Tip in µm with 1.5 µm laser noise
 stated in the sidecars (with the excitation), a zero offset of ±25 µm, RH column ±0.1 %.
+
+Family ``pnp_sweep`` (:data:`SWEEP`): the same physics recorded as a user with two records does —
+a 120 s log sweep 0.1–50 Hz and a 60 s bipolar square pulse train (period 10 s), both at RH 65 %,
+with 1 µm laser noise; its strips are drawn apart from ``pnp_fd``'s.  One RH level reveals no
+humidity dependence, so its truths leave those out (:func:`truths_of`).
 """
 from __future__ import annotations
 
@@ -68,13 +73,25 @@ from .lines import electrode_ladder, solvent_moment
 from .pnp import charge_per_volt
 from .truthset import TRUTHS
 
-NAME = "pnp_fd"
 FS, OVER, DURATION = 250.0, 4, 60.0
-PLAN = (Plan("multisine", 1.0, 65.0), Plan("multisine", 2.5, 65.0), Plan("step", 1.0, 65.0),
-        Plan("sweep", 0.5, 45.0), Plan("multisine", 1.0, 85.0))
+
+
+@dataclass(frozen=True)
+class Design:
+    """How a family records its strips: its name, the records, the laser's white noise [m]."""
+
+    name: str
+    plan: tuple
+    noise: float
+
+
+LAB = Design("pnp_fd", (Plan("multisine", 1.0, 65.0), Plan("multisine", 2.5, 65.0), Plan("step", 1.0, 65.0),
+                        Plan("sweep", 0.5, 45.0), Plan("multisine", 1.0, 85.0)), 1.5e-6)
+SWEEP = Design("pnp_sweep", (Plan("sweep", 1.0, 65.0, 120.0), Plan("square", 1.0, 65.0)), 1.0e-6)
+DESIGNS = {d.name: d for d in (LAB, SWEEP)}
 RH_REF = 65.0
 N_EL, N_MODES = 24, 8
-NOISE, STEP = 1.5e-6, 1.0e-7
+STEP = 1.0e-7                      # laser resolution [m]
 PEAK = 2.0e-3                      # largest tip deflection the lab aims for [m]
 LEAK = 2.16e-3                     # polymer conductivity [S/m] (thesis Table III)
 
@@ -265,8 +282,9 @@ def _pad(tp: dict) -> float:
     return 40.0 + 10.0 * max(slow)
 
 
-def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarray, rng) -> np.ndarray:
-    """The sensor-spot deflection [m] sampled at FS for the drive ``v`` (on the fine grid)."""
+def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarray, rng, noise: float) -> np.ndarray:
+    """The sensor-spot deflection [m] sampled at FS for the drive ``v`` (on the fine grid);
+    ``noise``: the laser's [m], the scale of a drift."""
     vf = v
     if "deadzone_over_amp" in tp:
         vf = forms.dead_zone(vf, tp["deadzone_over_amp"] * amp_lo)
@@ -286,43 +304,53 @@ def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarr
         y = fft_filter(y, FS * OVER, lambda f: forms.lowpass2_response(f, tp["lowpass_Hz"], tp["lowpass_zeta"]))
     y = y[::OVER]
     if "drift_over_noise" in tp:
-        y = y + forms.thermal_drift(t, rng, tp["drift_over_noise"] * NOISE)
+        y = y + forms.thermal_drift(t, rng, tp["drift_over_noise"] * noise)
     return y
 
 
-def make_case(truth: str, seed: int) -> Case:
+def truths_of(design: Design) -> tuple[str, ...]:
+    """The truths ``design``'s records can reveal: an RH dependence needs two RH levels."""
+    one_rh = len({p.rh for p in design.plan}) < 2
+    return tuple(n for n, t in TRUTHS.items()
+                 if not (one_rh and {"humidity", "rh_law"} & set(t.ingredients)))
+
+
+def make_case(truth: str, seed: int, design: Design = LAB) -> Case:
     tr = TRUTHS[truth]
-    fam = zlib.crc32(NAME.encode())
+    plan, noise = design.plan, design.noise
+    fam = zlib.crc32(design.name.encode())
     st, drawn = _draw_strip(np.random.default_rng([seed, fam]))
     rng = np.random.default_rng([seed, fam, zlib.crc32(truth.encode())])
     tp = _draw_truth(tr.ingredients, rng, st)
     # the coupling κ that gives the drawn static gain on the base strip at the reference RH
     base = _Chain(st, {k: v for k, v in tp.items() if k == "eigen_moment"}, RH_REF)
     kappa = st.gain / base.static_gain()
-    rh_true = {p.rh: p.rh + float(rng.uniform(-0.5, 0.5)) for p in PLAN}
+    rh_true = {p.rh: p.rh + float(rng.uniform(-0.5, 0.5)) for p in plan}
     chains = {rh: _Chain(st, tp, rh_true[rh], kappa) for rh in rh_true}
-    t = np.arange(int(DURATION * FS)) / FS
     # the lab's excitations: the same for every truth of a seed
     # drive from a signal generator, logged at FS (the strip sees the continuous drive: the
     # simulation grid is OVER times finer)
-    volts = [p.voltage(1.0, FS * OVER, DURATION, np.random.default_rng([seed, fam, 7, k])) for k, p in enumerate(PLAN)]
+    volts = [p.voltage(1.0, FS * OVER, p.length(DURATION), np.random.default_rng([seed, fam, 7, k]))
+             for k, p in enumerate(plan)]
     lin = {k: _Chain(st, {k2: v for k2, v in tp.items() if k2 in ("Rs_ohm_sq", "cpe_a", "cpe_gain_1Hz",
                                                                     "cpe_f_lo_Hz", "contact_corner_Hz",
                                                                     "eigen_moment")},
                      rh_true[p.rh], kappa)
-           for k, p in enumerate(PLAN)}
+           for k, p in enumerate(plan)}
     peak = max(float(np.max(np.abs(fft_filter(v, FS * OVER, lin[k].response, pad_s=_pad(tp)))))
-               for k, (p, v) in enumerate(zip(PLAN, volts)))
+               for k, (p, v) in enumerate(zip(plan, volts)))
     amp = float(f"{min(1.0, max(0.1, PEAK / peak)):.2g}")
     offset = 1e-6 * float(rng.uniform(-25, 25))
     records = []
-    for k, (p, v1) in enumerate(zip(PLAN, volts)):
+    for k, (p, v1) in enumerate(zip(plan, volts)):
         v = amp * v1
-        y = _simulate(chains[p.rh], tp, v, amp, t, rng)
+        t = np.arange(int(p.length(DURATION) * FS)) / FS
+        y = _simulate(chains[p.rh], tp, v, amp, t, rng, noise)
         v = v[::OVER]
-        m = measure(y, rng, noise=NOISE, step_m=STEP, offset=offset)
-        meta = {"description": f"IPMC strip, {drawn['L_total_mm']:g} mm, tapered", "signal": p.describe(amp, FS, DURATION),
-                "sensor": {"model": "laser triangulation", "noise_rms_um": 1e6 * NOISE, "resolution_um": 1e6 * STEP}}
+        m = measure(y, rng, noise=noise, step_m=STEP, offset=offset)
+        meta = {"description": f"IPMC strip, {drawn['L_total_mm']:g} mm, tapered",
+                "signal": p.describe(amp, FS, p.length(DURATION)),
+                "sensor": {"model": "laser triangulation", "noise_rms_um": 1e6 * noise, "resolution_um": 1e6 * STEP}}
         records.append(Record(p.name(k, amp), t, np.round(v, 5), m, y,
                               hygrometer(rh_true[p.rh], t.size, rng, jitter=0.1), offset, meta))
     tp_all = {**drawn, **tp, "amplitude_V": amp, "kappa": kappa, "rh_true": list(rh_true.values())}
@@ -330,8 +358,8 @@ def make_case(truth: str, seed: int) -> Case:
         tp_all["sat_Us_V"] = tp["sat_Us_over_amp"] * amp
     if "deadzone_over_amp" in tp:
         tp_all["deadzone_V"] = tp["deadzone_over_amp"] * amp
-    return Case(NAME, tr, seed, records, drawn_params(drawn), "none", tp_all,
-                math.sqrt(NOISE ** 2 + STEP ** 2 / 12), units={"deflection": "um"})
+    return Case(design.name, tr, seed, records, drawn_params(drawn), "none", tp_all,
+                math.sqrt(noise ** 2 + STEP ** 2 / 12), units={"deflection": "um"})
 
 
 def drawn_params(drawn: dict) -> dict:

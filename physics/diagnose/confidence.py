@@ -130,6 +130,14 @@ CALIBRATION = (
            "(the four wrong \"medium\" picks: the sensor low-pass read as the electrode's resistance, alone and beside the "
            "saturation; humidity for the play and for the eigen-moment strips)",
            high=(8, 1, 0), medium=(6, 2, 4), low=(1, 1, 1)),
+    _table("circuit_lab", "40", 6, "4da3232",
+           "seed 40, a fresh draw, 6 of its 23 truths (a creep, a play, the eigen-moment, humidity, the modulus + "
+           "humidity pair, the default route's creep + humidity strip), measured with the rules in force; no rule was "
+           "chosen on it (the two wrong \"medium\" picks: the electrode's resistance and the fractional coupling for "
+           "the eigen-moment strip; the three wrong \"low\": the layered beam for the creep and for the route strip, "
+           "the fractional coupling picked before humidity for the modulus + humidity pair, whose relaxing modulus "
+           "was not named)",
+           high=(1, 0, 0), medium=(1, 0, 2), low=(0, 0, 3)),
     _table("pnp_fd", "36", 23, "b998019",
            "seed 36, a fresh draw, all 23 of its truths, measured with the rules in force; no rule was chosen on it "
            "(the two wrong \"medium\" picks: the layered beam second for the one-relaxation polymer, the fractional "
