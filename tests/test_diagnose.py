@@ -171,12 +171,14 @@ def test_a_pick_the_refitted_model_needs_is_labelled_again_on_it():
     assert "on the model with its own effects refitted" in pick.reason
 
 
-def test_a_pick_s_refine_parameter_is_fitted_on_the_final_model_only(monkeypatch):
+def test_a_pick_s_refine_parameter_is_fitted_once_picked_before_the_next_candidates(monkeypatch):
     """Solvent diffusion hidden with its solvent released in a layer at each face 5 % of the
     membrane thick (δ = 9 µm, the closed form checked against a finite-volume solve in
     test_physics_effects.py): the chain picks it with δ held at the device's 0 (the classical law);
-    its last step fits δ on the final model, which brings the error to the noise and δ near the
-    truth.  The same strip with δ = 0 keeps no such step (the extra parameter buys nothing)."""
+    the next step fits δ on that model, before fractional_coupling is tried on top of it (a
+    flexible law that would otherwise trim what the layer leaves), which brings the error to the
+    noise and δ near the truth, so no candidate is tried after it.  The same strip with δ = 0 keeps
+    no such step (the extra parameter buys nothing)."""
     from physics.effects import EFFECTS
     cls = EFFECTS["solvent_diffusion"]
     draw = cls.draw_truth
@@ -192,12 +194,14 @@ def test_a_pick_s_refine_parameter_is_fitted_on_the_final_model_only(monkeypatch
     for share in (0.05, 0.0):
         monkeypatch.setattr(cls, "draw_truth", with_layer(share))
         case = hidden_effect_case("solvent_diffusion", seed=1)
-        res = _diagnose(case, candidates="solvent_diffusion", check_support=False)
+        res = _diagnose(case, candidates="solvent_diffusion,fractional_coupling", check_support=False)
         assert res.verdict.chain == ["solvent_diffusion"], res.verdict.reason
         found[share] = (case, res)
     case, res = found[0.05]
     last, pick = res.steps[-1], res.steps[0].decision.pick
-    assert last.kind == "refit" and list(last.refitted) == ["solvent_layer"]
+    assert [s.kind for s in res.steps] == ["add", "refit"], [s.kind for s in res.steps]
+    assert last.kind == "refit" and list(last.refitted) == ["solvent_layer"] and last.picks_refined
+    assert "before the next candidates" in last.decision.reason
     assert "solvent_layer" not in pick.fit.spec.free          # not freed while the candidates competed
     delta = case.truth_params["solvent_layer"]
     assert last.refitted["solvent_layer"]["refined"] == pytest.approx(delta, rel=0.15)
@@ -207,7 +211,7 @@ def test_a_pick_s_refine_parameter_is_fitted_on_the_final_model_only(monkeypatch
     line = res.verdict.picks[0]
     assert line.on == "the model with the picks' shape refined" and line.rmse_after == res.final.rmse
     assert line.confidence.refitted and line.confidence.left == pytest.approx(res.final.rmse / res.noise_floor)
-    assert any(line.startswith("Then the picks' shape refined on the final model") and "solvent_layer 0 → 9" in line
+    assert any(line.startswith("The picks' shape refined once picked") and "solvent_layer 0 → 9" in line
                for line in res.verdict.lines())
     case, res = found[0.0]
     assert not any(s.picks_refined for s in res.steps) and not res.verdict.refined

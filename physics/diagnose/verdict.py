@@ -524,8 +524,8 @@ class Verdict:
             if self.stopped:
                 out.append(f"The chain stops: {self.stopped}.")
             if self.refined:
-                out.append("Then the picks' shape refined on the final model (held at the device's values while the "
-                           "candidates competed, so that it could not let a pick stand in for another effect): "
+                out.append("The picks' shape refined once picked (held at the device's values while the candidates "
+                           "competed, so that it could not let a pick stand in for another effect): "
                            + ", ".join(_fmt_refit(n, v) for n, v in self.refined.items()) + ".")
         elif self.status == "nothing to explain":
             out.append(f"Which effect: none is needed — {self.reason}.")
