@@ -643,6 +643,71 @@ def test_no_swap_when_the_runner_up_does_not_fit_better_or_did_not_pass(monkeypa
     assert (rival_bic > -10) == (log == [])
 
 
+def test_a_lone_pick_s_runner_up_takes_its_place_with_what_the_step_s_others_do_on_top(monkeypatch):
+    """A chain of one pick that ends outside the noise: viscoelastic (66 µm) beat fractional_coupling
+    on the base and solvent_diffusion did not pass on top of it (a two-record strip with rough
+    electrodes and solvent diffusion).  Its runner-up goes in its place and the step's other
+    candidates are tried on top of it: solvent_diffusion there reaches 1.05 µm, so the swap is
+    taken — a withdrawal and two forward steps — and the runner-up, picked for what it does with
+    the second, is never "high"; the verdict's line says it took the other's place.  When the
+    chain's one pick is within the noise, nothing is tried."""
+    from types import SimpleNamespace as NS
+
+    from physics.diagnose import diagnosis as dg
+    from physics.diagnose.verdict import Decision, Pick, Verdict
+
+    def fit(effects, um):
+        return NS(effects=["double_layer", *effects], rmse=um * UM, taus=[1.0], n=[1000], k=3 + len(effects),
+                  resid_d=None)
+
+    def cand(effect, f, dbic):
+        return _Ranked(effect, f, NS(delta_bic=dbic))
+    ve = cand("viscoelastic", fit(["viscoelastic"], 66.0), -5805.0)
+    fc = cand("fractional_coupling", fit(["fractional_coupling"], 80.0), -3821.0)
+    sd = cand("solvent_diffusion", fit([], 138.0), 20.0)
+    base = fit([], 138.0)
+    steps = [dg.Step(1, base, [ve, fc, sd], Decision(ve, {}, {"viscoelastic": -5805.0, "fractional_coupling": -3821.0,
+                                                               "solvent_diffusion": 20.0}, confidence=_label(138, 66))),
+             dg.Step(2, ve.fit, [], Decision(None, {}, {}))]
+    swapped = cand("fractional_coupling", fit(["fractional_coupling"], 80.0), -3821.0)
+    second = cand("solvent_diffusion", fit(["fractional_coupling", "solvent_diffusion"], 1.05), -9000.0)
+    calls = []
+
+    def forward(k, on, left, feats, data, run, after_pick, trial):
+        calls.append(list(left))
+        got = swapped if left == ["fractional_coupling"] else second
+        assert on is (base if got is swapped else swapped.fit) and after_pick
+        label = _label(138, 1.0) if got is swapped else _label(80, 1.05)      # alone, each would read "high"
+        trial.append(dg.Step(k, on, [got], Decision(got, {}, {got.effect: got.comparison.delta_bic},
+                                                     confidence=label)))
+        return got
+    monkeypatch.setattr(dg, "_support_of", lambda eff, final, data, run: (
+        dg.SupportResult(eff, "assessed", True, 500.0, 0.0, base.rmse, "supported"), base))
+    monkeypatch.setattr(dg, "_forward", forward)
+    monkeypatch.setattr(dg, "_features_after", lambda *a: {})
+    monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
+    for adequate in (True, False):
+        monkeypatch.setattr(dg, "_adequate", lambda data, f, adequate=adequate: adequate)
+        tried = [*steps]
+        dg._swap_first(tried, set(), NS(noise=UM), NS(log=lambda m: None))
+        if adequate:
+            assert tried == steps and calls == []
+    assert calls == [["fractional_coupling"], ["solvent_diffusion"]]
+    assert [s.kind for s in tried] == ["add", "add", "withdraw", "add", "add"]
+    assert tried[2].removal.effect == "viscoelastic" and tried[2].swapped_for == "fractional_coupling"
+    assert "in its place with solvent_diffusion on top of it fits better: RMS error 66 → 1.05 µm" in \
+        tried[2].removal.explanation
+    c = tried[3].decision.confidence
+    assert _label(138, 1.0).label == "high" and c.ahead_of == "solvent_diffusion" and c.label != "high"
+    lead = Pick(4, "fractional_coupling", 1.0, 138 * UM, 80 * UM, -3821.0, 0.0, {}, [], "", c)
+    v = Verdict("explained", [lead], {}, None, 138 * UM, UM, "stated",
+                withdrawn=[{"step": 3, "effect": "viscoelastic", "rmse_before_m": 66 * UM, "rmse_after_m": 138 * UM,
+                            "delta_bic": 500.0, "reason": tried[2].removal.explanation,
+                            "swapped_for": "fractional_coupling"}])
+    assert "Alone it explained less than viscoelastic, whose place it took: fractional_coupling was picked for " \
+        "what it does with solvent_diffusion, fitted on top of it (a swap)." in "\n".join(v.lines())
+
+
 def test_the_verdict_names_records_by_file_name_unless_two_share_one():
     """The nuisance line names each record by its file name, not its whole path (five paths of a
     lab's folder made it a paragraph); where two records share a file name (two folders), every

@@ -510,7 +510,11 @@ class Verdict:
                 out.append(f"{head}{p.effect} (confidence {p.label}, weight {_w(p.weight)}) — {on}RMS error "
                            f"{1e6 * p.rmse_before:.4g} → {1e6 * p.rmse_after:.4g} µm, ΔBIC {_signed(p.delta_bic)}"
                            + (f"; {params}" if params else "") + ".")
-                if p.confidence is not None and p.confidence.ahead_of:
+                swapped = next((r["effect"] for r in self.withdrawn if r.get("swapped_for") == p.effect), None)
+                if p.confidence is not None and p.confidence.ahead_of and swapped:
+                    out.append(f"  Alone it explained less than {swapped}, whose place it took: {p.effect} was picked "
+                               f"for what it does with {p.confidence.ahead_of}, fitted on top of it (a swap).")
+                elif p.confidence is not None and p.confidence.ahead_of:
                     out.append(f"  Alone it explains less than a third of the failure: {p.effect} was picked for "
                                f"what it does with {p.confidence.ahead_of}, tried on top of it (a look-ahead).")
                 if p.confidence is not None and p.confidence.chain_left > conf.LEFT_LOW:
