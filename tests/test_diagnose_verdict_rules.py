@@ -548,6 +548,19 @@ class _Ranked:
     evaluated: bool = True
 
 
+def _patch_swap(monkeypatch, without, forward):
+    """The swap's fits replaced: the model without the first pick is ``without``, its forward
+    steps ``forward``, and ΔBIC 2000·ln(RMS ratio) between two models."""
+    from types import SimpleNamespace as NS
+
+    from physics.diagnose import diagnosis as dg
+    monkeypatch.setattr(dg, "_support_of", lambda eff, final, data, run: (
+        dg.SupportResult(eff, "assessed", True, 500.0, 0.0, without.rmse, "supported"), without))
+    monkeypatch.setattr(dg, "_forward", forward)
+    monkeypatch.setattr(dg, "_features_after", lambda *a: {})
+    monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
+
+
 def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
     """A chain base → viscoelastic (101 µm; runner-up fractional_coupling, ΔBIC ``rival_bic``)
     → solvent_diffusion (35.2 µm); the model with fractional_coupling in viscoelastic's place
@@ -575,11 +588,7 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
         assert base is without and left == ["fractional_coupling"] and after_pick
         trial.append(dg.Step(k, base, [swapped], Decision(swapped, {}, {"fractional_coupling": -900.0})))
         return swapped
-    monkeypatch.setattr(dg, "_support_of", lambda eff, final, data, run: (
-        dg.SupportResult(eff, "assessed", True, 500.0, 0.0, without.rmse, "supported"), without))
-    monkeypatch.setattr(dg, "_forward", forward)
-    monkeypatch.setattr(dg, "_features_after", lambda *a: {})
-    monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
+    _patch_swap(monkeypatch, without, forward)
     monkeypatch.setattr(dg, "doubts", lambda c: [])
     monkeypatch.setattr(dg, "pinned", lambda c: [])
     monkeypatch.setattr(dg, "undetermined", lambda c: [])
@@ -681,11 +690,7 @@ def test_a_lone_pick_s_runner_up_takes_its_place_with_what_the_step_s_others_do_
         trial.append(dg.Step(k, on, [got], Decision(got, {}, {got.effect: got.comparison.delta_bic},
                                                      confidence=label)))
         return got
-    monkeypatch.setattr(dg, "_support_of", lambda eff, final, data, run: (
-        dg.SupportResult(eff, "assessed", True, 500.0, 0.0, base.rmse, "supported"), base))
-    monkeypatch.setattr(dg, "_forward", forward)
-    monkeypatch.setattr(dg, "_features_after", lambda *a: {})
-    monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
+    _patch_swap(monkeypatch, base, forward)
     for adequate in (True, False):
         monkeypatch.setattr(dg, "_adequate", lambda data, f, adequate=adequate: adequate)
         tried = [*steps]
