@@ -658,7 +658,7 @@ def test_a_lone_pick_s_runner_up_takes_its_place_with_what_the_step_s_others_do_
     electrodes and solvent diffusion).  Its runner-up goes in its place and the step's other
     candidates are tried on top of it: solvent_diffusion there reaches 1.05 µm, so the swap is
     taken — a withdrawal and two forward steps — and the runner-up, picked for what it does with
-    the second, is never "high"; the verdict's line says it took the other's place.  When the
+    the second, is not "high" on its step; the verdict's line says it took the other's place.  When the
     chain's one pick is within the noise, nothing is tried."""
     from types import SimpleNamespace as NS
 

@@ -871,7 +871,7 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
         second = _forward(k + 2, pick.fit, rest, _features_after(data, pick.fit, f"+{rival.effect}", run), data,
                           run, True, trial)
         c = trial[0].decision.confidence
-        if second is not None and c is not None:    # taken for what the two do: never "high" (as a look-ahead)
+        if second is not None and c is not None:    # taken for what the two do: not "high" on its step
             c.ahead_of = second.effect
             conf.label(c)
         pick = second or pick
