@@ -140,7 +140,7 @@ def test_a_pick_whose_parameter_the_records_do_not_determine_is_low():
     of the effect there is: "low", not "medium" for its flags alone; the count is read from the fit
     (inside the range: not pinned) and survives the refit and diagnosis.json."""
     from physics.diagnose.verdict import pinned, undetermined
-    layered = _fitted("layered_beam", ["Y_electrode", "Y@RH60"], np.array([[1.0, -0.998], [-0.998, 1.0]]))
+    layered = _fitted("layered_beam", ["Y_electrode", "Y@RH60"], np.array([[1.0, -0.95], [-0.95, 1.0]]))
     assert undetermined(layered) == []
     layered.fit.rel_std_errors["Y_electrode"] = 6.75
     assert undetermined(layered) == ["Y_electrode"] and pinned(layered) == []
@@ -152,6 +152,31 @@ def test_a_pick_whose_parameter_the_records_do_not_determine_is_low():
     assert again.label == "low" and any("not determined inside its range" in w for w in again.why)
     assert conf.Confidence.from_dict(again.to_dict()).undetermined == 1
     assert conf.reconfirmed(step, 3.04 * UM, 10.73 * UM, 2.47 * UM, flags=2, pinned=0).label == "medium"
+
+
+def test_a_pick_the_rest_of_the_model_can_trade_for_is_undetermined():
+    """The two-record test bed's single Maxwell arm (pnp_sweep seed 41): ``layered_beam`` picked second,
+    2.01 → 1.03 µm, its electrode modulus correlated −0.9995 with the first pick's modulus scale and
+    −0.998 with the coupling — determined only in combination with the rest of the model, so the
+    records do not say how much of it there is, and it was "medium".  Every own parameter traded
+    makes all of them undetermined ("low"); one of several traded (a relaxing modulus whose loss
+    tangent trades with the coupling while its scale and slope stand) does not."""
+    from physics.diagnose.verdict import undetermined
+    corr = np.array([[1.0, -0.9995, -0.998], [-0.9995, 1.0, 0.3], [-0.998, 0.3, 1.0]])
+    assert undetermined(_fitted("layered_beam", ["Y_electrode", "dma_scale", "beta_f"], corr)) == ["Y_electrode"]
+    corr[0, 1] = corr[1, 0] = corr[0, 2] = corr[2, 0] = -0.95
+    assert undetermined(_fitted("layered_beam", ["Y_electrode", "dma_scale", "beta_f"], corr)) == []
+    arm = np.eye(4)
+    arm[0, 3] = arm[3, 0] = -0.9988                      # ve_tan_delta with the coupling only
+    arm[1, 2] = arm[2, 1] = -1.0                         # a pair of its own: which values, not whether
+    assert undetermined(_fitted("viscoelastic", ["ve_tan_delta", "dma_scale", "ve_slope", "beta_f"], arm)) == []
+    arm[1, 3] = arm[3, 1] = arm[2, 3] = arm[3, 2] = 0.995   # every own parameter now trades with it
+    assert undetermined(_fitted("viscoelastic", ["ve_tan_delta", "dma_scale", "ve_slope", "beta_f"], arm)) == \
+        ["ve_tan_delta", "dma_scale", "ve_slope"]
+    step = _label(29.4, 2.01, flags=4)
+    assert conf.reconfirmed(step, 1.03 * UM, 2.01 * UM, 1.0 * UM, flags=4, pinned=0).label == "medium"
+    c = conf.reconfirmed(step, 1.03 * UM, 2.01 * UM, 1.0 * UM, flags=4, pinned=0, undetermined=1)
+    assert c.label == "low" and any("only in combination with the rest of the model" in w for w in c.why)
 
 
 def test_on_the_refitted_model_a_pick_is_judged_by_its_flags_there():

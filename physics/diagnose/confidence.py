@@ -25,7 +25,9 @@ a little.  The label therefore asks what a weight cannot:
 * **undetermined** — the pick's own parameters that ended inside their range but are not
   determined (:func:`.verdict.undetermined`): the records do not say how much of the effect there
   is (a creep on the output read as ``layered_beam``: its electrode modulus at 675 % relative
-  standard error, correlated −0.998 with the polymer's modulus, which the model already has);
+  standard error, correlated −0.998 with the polymer's modulus, which the model already has) —
+  all of them when each is correlated beyond |ρ| = 0.99 with a parameter of the rest of the model,
+  which can then trade for the whole effect;
 * **held** — the share of the excess error left by a rival whose own parameter ended on a bound
   of its range (:func:`.verdict.held`) that the pick removes: such a rival's error is what its
   range allowed, an upper bound of what the effect can reach.  It needs the same share as
@@ -425,7 +427,8 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
         why.append(f"{c.flags} quality flag(s)")
     if c.undetermined:
         why.append(f"{c.undetermined} of its parameters {'is' if c.undetermined == 1 else 'are'} not determined inside "
-                   "its range (the records do not say how much of the effect there is)")
+                   "its range, or only in combination with the rest of the model's (the records do not say how much "
+                   "of the effect there is)")
     if c.pinned:
         why.append(f"{c.pinned} of its parameters ended on a bound and are not determined (the data chose a "
                    "limit of the effect, not a value)")

@@ -126,8 +126,25 @@ def pinned(c) -> list[str]:
 
 def undetermined(c) -> list[str]:
     """The own parameters of a fitted candidate that ended inside their range and are not
-    determined: the records do not say how much of the effect there is."""
-    return [lab for _, _, lab, _, bound, rel in _own_estimates(c) if not bound and _undetermined(rel)]
+    determined: the records do not say how much of the effect there is.  So too, all of them, when
+    each is correlated beyond :data:`CORR_FLAG` with a parameter of the rest of the model
+    (:func:`_traded`): the rest can trade for every direction the effect adds, and only a
+    combination with it is determined.  On a two-record strip with one Maxwell arm, ``layered_beam``
+    picked second took 2.01 → 1.03 µm with its electrode modulus correlated 0.9995 with the first
+    pick's modulus scale and 0.998 with the coupling, and was "medium"."""
+    est = list(_own_estimates(c))
+    every = bool(est) and len(_traded(c, est)) == len(est)
+    return [lab for _, _, lab, _, bound, rel in est if not bound and (every or _undetermined(rel))]
+
+
+def _traded(c, est: list) -> set[int]:
+    """Indices of the own parameters ``est`` (:func:`_own_estimates` of ``c``) correlated beyond
+    :data:`CORR_FLAG` with a parameter that is not the candidate's own."""
+    corr, mine = c.fit.correlation, {e[0] for e in est}
+    if corr is None:
+        return set()
+    return {i for i in mine for j in range(corr.shape[0])
+            if j not in mine and math.isfinite(corr[i, j]) and abs(corr[i, j]) > CORR_FLAG}
 
 
 def held(c) -> list[str]:
