@@ -141,9 +141,9 @@ CALIBRATION = (
            "seed 41, a fresh draw, 14 of its 23 truths (the six in-catalog effects, the six pairs, nothing hidden, the "
            "partial relaxation), measured at the start of 2026-12-05's eighth session, before the two rules chosen on "
            "pnp_sweep seed 41 (a pick's shape refined once picked, the swap of a lone pick); its rough electrode, rough "
-           "electrode + solvent and partial relaxation strips (where they could act) and its electrode + modulus pair "
-           "(where a pick has a parameter traded with the rest of the model) run again at b0c7ee0 and 51fd590: "
-           "unchanged; no rule was chosen on it (all six pairs had both named; the rough electrode at 2.72× and the "
+           "electrode + solvent, partial relaxation, saturation + solvent and electrode + solvent strips (where they "
+           "could act) and its electrode + modulus pair (where a pick has a parameter traded with the rest of the model) "
+           "run again at b0c7ee0, 51fd590 and 652dbde: unchanged; no rule was chosen on it (all six pairs had both named; the rough electrode at 2.72× and the "
            "saturation at 9.17× the true model's error after the chain, 2.51× and 1.14× for the best model written)",
            high=(9, 0, 0), medium=(6, 1, 0), low=(2, 0, 0)),
     _table("pnp_fd", "40", 23, "4da3232, b6b394d",
