@@ -130,8 +130,8 @@ def undetermined(c) -> list[str]:
     each is correlated beyond :data:`CORR_FLAG` with a parameter of the rest of the model
     (:func:`_traded`): the rest can trade for every direction the effect adds, and only a
     combination with it is determined.  On a two-record strip with one Maxwell arm, ``layered_beam``
-    picked second took 2.01 → 1.03 µm with its electrode modulus correlated 0.9995 with the first
-    pick's modulus scale and 0.998 with the coupling, and was "medium"."""
+    picked second took 2.01 → 1.03 µm with its electrode modulus correlated −0.9995 with the first
+    pick's modulus scale and −0.998 with the coupling, and was "medium"."""
     est = list(_own_estimates(c))
     every = bool(est) and len(_traded(c, est)) == len(est)
     return [lab for _, _, lab, _, bound, rel in est if not bound and (every or _undetermined(rel))]
