@@ -80,6 +80,14 @@ def test_a_pick_in_a_chain_that_ends_far_from_the_noise_is_low():
                                               "", ended_far)], {}, None, 110 * UM, 1.5 * UM, "stated").lines()
     assert any(w.startswith("  A possible proxy: the chain ends leaving 31.5× the noise floor") for w in lines)
     assert "confidence low" in "\n".join(lines)
+    # the verdict says why the pick is not "high", each reason once (the chain's end has its own line)
+    why = [w for w in lines if w.startswith('  Not "high": ')]
+    assert len(why) == 1 and "it leaves 31.5× the noise floor" in why[0] and "rival comes close" in why[0]
+    assert "chain ends leaving" not in why[0]
+    high = conf.label(conf.Confidence(1.0, 70.0, 1.0, 1.0, None, 1.0, 0))
+    assert high.label == "high" and not any(w.startswith('  Not "high"') for w in Verdict(
+        "explained", [Pick(1, "electrode_resistance", 1.0, 70 * UM, 1 * UM, -1e5, 0.0, {}, [], "", high)], {}, None,
+        1 * UM, 1 * UM, "stated").lines())
 
 
 def test_a_near_twin_keeps_a_pick_from_high():

@@ -438,10 +438,10 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
     if c.weight < w_hi:
         why.append(f"its weight {c.weight:.3g} is below {w_hi}")
     if c.ahead_of:
-        why.append(f"alone it explains too little of the failure: it was picked only with {c.ahead_of} on top of it")
+        why.append(f"{AHEAD_WHY}: it was picked only with {c.ahead_of} on top of it")
     far = c.chain_left > left_lo          # False for NaN
     if far:
-        why.append(f"the chain ends leaving {c.chain_left:.3g}× the noise floor ('low' beyond {left_lo:g}×): it "
+        why.append(f"{FAR_WHY} {c.chain_left:.3g}× the noise floor ('low' beyond {left_lo:g}×): it "
                    "explains a part of the failure, and that part may be physics the catalog lacks that the "
                    "pick's form happens to follow")
     c.why = why
@@ -454,6 +454,16 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
     else:
         c.label = "medium"
     return c
+
+
+#: How the reasons the verdict gives a line of their own begin (:func:`told_apart`).
+AHEAD_WHY, FAR_WHY, TWIN_WHY = "alone it explains too little of the failure", "the chain ends leaving", "a near twin,"
+
+
+def told_apart(c: Confidence) -> list[str]:
+    """The reasons ``c`` is not "high" that the verdict's text does not already give on a line of
+    their own (a look-ahead's or a swap's lead, a chain ending far from the noise, a near twin)."""
+    return [w for w in c.why if not w.startswith((AHEAD_WHY, FAR_WHY, TWIN_WHY))]
 
 
 def thresholds() -> dict:

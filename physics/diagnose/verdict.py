@@ -273,7 +273,7 @@ def decide(base, ranked: Sequence, noise: float, taus_ref, records,
             # written is the better one), labelled "low" — the data do not say which twin it is
             c = _confidence(top, base, ranked, weights, noise)
             c.label = "low"
-            c.why.insert(0, f"a near twin, {ru.effect}, fits as well: these data cannot tell them apart")
+            c.why.insert(0, f"{conf.TWIN_WHY} {ru.effect}, fits as well: these data cannot tell them apart")
             return Decision(top, weights, ev, [top.effect, ru.effect], sep, reason, alpha, c)
     cmp = top.comparison
     reason = (f"ΔBIC {cmp.delta_bic:.4g} ({stats.evidence_label(cmp.delta_bic)}), p = {cmp.p_value:.2g} "
@@ -538,6 +538,9 @@ class Verdict:
                     out.append(f"  A possible proxy: the chain ends leaving {p.confidence.chain_left:.3g}× the noise "
                                f"floor, so {p.effect} explains a part of the failure, and that part may be physics "
                                "the catalog lacks that its form happens to follow (hence \"low\").")
+                why = conf.told_apart(p.confidence) if p.confidence is not None and p.label != "high" else []
+                if why:
+                    out.append(f"  Not \"high\": " + "; ".join(why) + ".")
                 if p.quality:
                     out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
                 if p.left_out:
