@@ -243,6 +243,39 @@ def test_the_low_pass_form_tells_a_second_order_sensor_from_a_first_order_one(tm
                                atol=0.05)
 
 
+def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it(tmp_path):
+    """A deflection logged 30 ms late (a sensor's or logger's latency: phase lag ∝ f, no gain
+    change) is described as a delay of 30 ms with a = 1 and forward-selected before a low-pass;
+    a sensor's second-order low-pass is not read as a delay (its delay fit is worse than the
+    low-pass's).  The draft passes the contract and its response is e^(−s d)."""
+    from physics.diagnose.forms.output_delay import delayed
+
+    d = 0.03
+    res = _residual(lambda p, t, fs: response_filter(p, fs, lambda f: delayed(f, d)) - p)
+    ff = _fit("output_delay", res)
+    assert ff.significant and ff.params["delay_s"] == pytest.approx(d, rel=0.05) \
+        and ff.params["gain"] == pytest.approx(1.0, abs=0.05)
+
+    class _Fit:
+        pass
+    fit = _Fit()
+    fit.resid_d, fit.pred_d = res.resid, res.preds
+    assert F.selected(F.describe(fit, res.records))[0].form == "output_delay"
+    lp = _residual(lambda p, t, fs: response_filter(p, fs, lambda f: lowpass2(f, 6.0, 0.7)) - p)
+    assert _fit("output_lowpass", lp).delta_bic < _fit("output_delay", lp).delta_bic
+    (dr,) = F.form_of("output_delay")().draft(ff, res)
+    dr.seen = ff.full_text
+    path = tmp_path / dr.file_name
+    path.write_text(dr.source(), encoding="utf-8")
+    assert check_draft(path) == []
+    (cls,) = effect_classes_in_file(path)
+    effect = cls(load_device("ipmc_pt_eg"))
+    f = np.array([1.0, 8.0, 20.0])
+    np.testing.assert_allclose(effect.output_response(2j * np.pi * f, {}), np.exp(-2j * np.pi * f * d), rtol=1e-3)
+    y = np.sin(2 * np.pi * 5.0 * np.arange(2000) / 100.0)
+    np.testing.assert_allclose(effect.filter_output(y, 100.0, {})[200:], y[197:-3], atol=0.02)
+
+
 def test_input_dead_zone_found_behind_a_base_fitted_to_the_distorted_records():
     """A base fitted to dead-zoned records has lowered its gain to a compromise; the form fits
     the records' own linear gain beside the nonlinearity and still finds the threshold, and a

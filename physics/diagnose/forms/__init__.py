@@ -39,13 +39,14 @@ from .base import (MAX_SELECTED, MIN_GAIN, PURE, SIGNIFICANT_BIC, Form, FormFit,
 from .dependence import AmplitudeDependence, RHDependence
 from .drift import Drift
 from .input_side import InputDeadZone, InputSaturation
+from .output_delay import OutputDelay
 from .output_lowpass import OutputLowPass
 from .play import Play
 from .saturation import OutputSaturation
 from .slow_pole import SlowPole
 
 #: Every form, in the order they are reported when their evidence ties.
-FORMS: tuple[type[Form], ...] = (SlowPole, OutputLowPass, Drift, Play, OutputSaturation, InputDeadZone,
+FORMS: tuple[type[Form], ...] = (SlowPole, OutputLowPass, OutputDelay, Drift, Play, OutputSaturation, InputDeadZone,
                                  InputSaturation, AmplitudeDependence, RHDependence)
 
 

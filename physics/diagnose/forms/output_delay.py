@@ -1,0 +1,82 @@
+"""Delay on the output: the deflection is logged later than the voltage (sensor or logger latency).
+
+Form: e ≈ a · (ŷ(t − d) − ŷ): the measured deflection is the model's shifted by a dead time d
+(a laser head's processing time, a controller's output stage, two channels of a logger sampled
+one after the other), a = 1 for a pure delay.  Its phase lag grows in proportion to frequency,
+360° · f · d, while the gain stays put; a low-pass's lag levels off at 90° or 180° and its
+gain falls (:mod:`.output_lowpass`), an electrode line's lag grows as √f.  The delay is scanned
+from a tenth of a sample to the larger of 1/(2 f_top) and eight samples, f_top the top of the
+excited band, then refined.  The effect it drafts multiplies the deflection by e^(−s d), exact
+in the frequency domain (not a rational factor: it gives ``output_response`` and
+``filter_output``), off at d = 0.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..effect_draft import EffectDraft, Param
+from ..records import spectral_filter
+from .base import PURE, Form, FormFit, Residual, best_on_grid, refined
+
+
+def delayed(f, d: float) -> np.ndarray:
+    """The pure delay e^(−j2πf d) at frequencies ``f`` [Hz] for a delay ``d`` [s]."""
+    return np.exp(-2j * math.pi * np.asarray(f, dtype=float) * d)
+
+
+class OutputDelay(Form):
+    id = "output_delay"
+    title = "delay on the output (sensor or logger latency)"
+
+    def fit(self, res: Residual) -> FormFit | None:
+        fs = res.fs_min
+        lo = 0.1 / fs
+        hi = max(0.5 / res.band[1], 8.0 / fs)
+        spectra = [spectral_filter(p, r.fs_d) for r, p in zip(res.records, res.preds)]
+
+        def cols(x):
+            return [[through(lambda f: delayed(f, math.exp(x[0]))) - p] for through, p in zip(spectra, res.preds)]
+        d, _ = best_on_grid(res, np.geomspace(lo, hi, 30), lambda d: cols([math.log(d)]))
+        (ld,), reg = refined(res, [math.log(d)], [(math.log(lo), math.log(hi))], cols, 1)
+        d, a = math.exp(ld), reg.gains[0]
+        pure = PURE[0] <= a <= PURE[1]
+        text = (f"a delay on the output of d ≈ {1e3 * d:.3g} ms ({d * fs:.2g} samples; residual ≈ "
+                f"a·(model output at t − d − model output), a = {a:+.3g}"
+                + ("" if pure else "; a is far from 1: a band of error, not a delay") + ")")
+        ff = self.scored(res, reg, {"delay_s": d, "gain": a}, {"delay_s": "s", "gain": "1"}, text,
+                         f_excited_Hz=[res.band[0], res.band[1]])
+        ff.admissible = pure
+        ff.significant = ff.significant and pure
+        return ff
+
+    def draft(self, ff: FormFit, res: Residual) -> list:
+        """The delay as an effect, only when the residual shows it (``ff`` significant; each draft
+        offered costs a refit of the model with it, and a pure delay is rare where it is not seen)."""
+        if not ff.significant:
+            return []
+        d = ff.params["delay_s"]
+        fs = res.fs_min
+        # its phase lag reaches 17° at f = 17/(360 d); the records it was found in reach that far
+        reach = float(f"{min(17.0 / (360.0 * d), ff.info['f_excited_Hz'][1]):.2g}")
+        return [EffectDraft(
+            form=self.id, effect_id="drafted_output_delay", class_name="DraftedOutputDelay",
+            summary="a delay on the tip deflection: × e^(−s d)",
+            model=("The measured deflection is the tip's a dead time ``d`` later (a sensor's or a logger's "
+                   "latency): × ``e^(−s d)``, exact in the frequency domain; d = 0 is the model without it."),
+            params=[Param("output_delay_s", "s", 0.0, 1.0, "dead time d of the deflection channel", d,
+                          (0.05 / fs, max(1.0 / res.band[1], 16.0 / fs)))],
+            scan="output_delay_s", off={"output_delay_s": 0.0},
+            excitation=f"a broadband record reaching ≥ {reach:.2g} Hz", reveal={"f_hi_min": reach},
+            signature=[("hf_phase_lag", 1.0)],
+            body=('    def output_response(self, s, p):\n'
+                  '        return np.exp(-np.asarray(s) * self.value(p, "output_delay_s"))     # e^(−s d)\n'
+                  '\n'
+                  '    def filter_output(self, y, fs, p):\n'
+                  '        d = self.value(p, "output_delay_s")\n'
+                  '        if d <= 0:\n'
+                  '            return np.asarray(y, float)\n'
+                  '        return response_filter(y, fs, lambda f: delayed(f, d))\n'),
+            imports=("import numpy as np", "", "from physics.diagnose.forms.output_delay import delayed",
+                     "from physics.diagnose.records import response_filter"))]
