@@ -46,6 +46,7 @@ rh_law           Table V ratios raised to a power U(1.5, 2) (the user's model ke
 eigen_moment     the charge bends each section with an eigen-moment (a swelling bimorph's uniform
                  curvature), ∫ M φ_i'' dz, instead of the faces' couple
 creep, lowpass2, drift, play, deadzone: :mod:`.forms`
+delay            the deflection channel logged d U(4, 15) ms late (a sensor's or logger's dead time)
 ===============  =============================================================================
 
 Records as a lab exports them: five 60 s records at 200 Hz — multisines 0.05–20 Hz at RH 40,
@@ -399,6 +400,8 @@ def _simulate(model: _Model, tp: dict, v: np.ndarray, amp_lo: float, tf: np.ndar
         w0, z = 2 * np.pi * tp["lowpass_Hz"], tp["lowpass_zeta"]
         A = np.array([[0.0, 1.0], [-w0 * w0, -2 * z * w0]])
         y = lti_foh(A, np.array([0.0, w0 * w0]), np.array([1.0, 0.0]), y, dt)
+    if "delay_ms" in tp:        # the deflection channel read d later: the fine grid's value at t − d
+        y = np.interp(tf - 1e-3 * tp["delay_ms"], tf, y, left=float(y[0]))
     y = np.asarray(y, dtype=float)[::OVER]
     if "drift_over_noise" in tp:
         y = y + forms.thermal_drift(t, rng, tp["drift_over_noise"] * noise)

@@ -45,6 +45,7 @@ eigen_moment     the charge bends the strip as a swelling bimorph does — an ei
 zener            one-relaxation polymer, E*(s) = E0 (1 + sτ_ε)/(1 + sτ_σ), τ_ε/τ_σ = 1 + Δ,
                  Δ U(0.3, 0.6), loss peak log-U(1, 8) Hz
 creep, lowpass2, drift, play, deadzone: :mod:`.forms`
+delay            the deflection channel logged d U(4, 15) ms late (a sensor's or logger's dead time)
 ===============  ===========================================================================
 
 Records (lab design, the same for every truth): five 60 s records at 250 Hz — a multisine
@@ -302,6 +303,8 @@ def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarr
         y = forms.play(y, 1e-6 * tp["play_um"])
     if "lowpass_Hz" in tp:
         y = fft_filter(y, FS * OVER, lambda f: forms.lowpass2_response(f, tp["lowpass_Hz"], tp["lowpass_zeta"]))
+    if "delay_ms" in tp:        # the deflection channel's dead time, exact for the band-limited signal
+        y = fft_filter(y, FS * OVER, lambda f: np.exp(-2j * np.pi * f * 1e-3 * tp["delay_ms"]))
     y = y[::OVER]
     if "drift_over_noise" in tp:
         y = y + forms.thermal_drift(t, rng, tp["drift_over_noise"] * noise)
