@@ -52,10 +52,9 @@ class OutputDelay(Form):
         return ff
 
     def draft(self, ff: FormFit, res: Residual) -> list:
-        """The delay as an effect, only when the residual shows it (``ff`` significant; each draft
-        offered costs a refit of the model with it, and a pure delay is rare where it is not seen)."""
-        if not ff.significant:
-            return []
+        """The delay as an effect, offered whether or not the final model's residual shows it (as a
+        low-pass is): a pick that stands in for it takes up most of its lag and leaves a band of
+        error no form reads as a delay (a 9.3 ms dead time behind the electrode's resistance)."""
         d = ff.params["delay_s"]
         fs = res.fs_min
         # its phase lag reaches 17° at f = 17/(360 d); the records it was found in reach that far
