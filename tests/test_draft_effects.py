@@ -392,7 +392,9 @@ def _diagnosis_stub(winner, res, rmse_final):
     fit = _fit_stub(rmse_final, resid=res.resid, preds=res.preds)
     if winner:
         fit.spec = _Stub(label=f"+{winner}", free=["kf", "Y", "beta_f"])
-    forms = F.describe(fit, res.records)
+    # the rounds under test offer the low-pass, slow-pole and drift drafts: the delay, drafted on every
+    # residual too, is left out of these tables (its own draft is tested above)
+    forms = [f for f in F.describe(fit, res.records) if f.form != "output_delay"]
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
                  adequacy=_Stub(adequate=False, forms=forms), records=res.records, candidates=[], steps=[],
                  verdict=_Stub(status="partly explained" if winner else "not explained by the catalog", picks=[],
@@ -448,7 +450,7 @@ def test_drafts_compete_with_the_catalog_pick_then_go_forward():
     assert "the diagnosis's pick" in out.notes[0] and out.rmse_after == 3.5e-6
     # an adequate catalog pick still meets the drafts (it may be a mimic within the noise) ...
     adequate = _diagnosis_stub(pick, res, 4e-6)
-    adequate.adequacy = _Stub(adequate=True, forms=[])
+    adequate.adequacy = _Stub(adequate=True, forms=adequate.adequacy.forms)
     calls.clear()
     draft_effects(adequate, _rediagnose(table, calls))
     assert calls and calls[0][0] == on_base
