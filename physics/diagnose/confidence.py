@@ -127,33 +127,40 @@ def _table(family: str, seeds: str, cases: int, code: str, caveat: str, rule: st
 #: ``rule`` marks the tables measured under an earlier rule (kept: more cases, and that rule's change can only turn
 #: a "high" into a "medium").
 CALIBRATION = (
-    _table("pnp_sweep", "41", 20, "36c7b92, de21935, b6b394d, 51fd590",
+    _table("pnp_sweep", "41", 21, "36c7b92, de21935, b6b394d, 51fd590, 5db2cb6",
            "seed 41, the first draw of pnp_fd's physics recorded as two records (a sweep and a square pulse train at "
-           "one RH), all 20 of its truths; three rules were chosen on it (a pick's shape refined once picked, on its "
+           "one RH), all 21 of its truths (the dead time of the deflection channel added on 2026-12-06 and run with "
+           "the delay form in, 5db2cb6: the electrode's resistance \"medium\", wrong, left out of the model written, "
+           "which keeps a drafted delay at 1.63× the true model's error; 19 others run again there: unchanged, the "
+           "saturation + solvent pair not); three rules were chosen on it (a pick's shape refined once picked, on its "
            "solvent strip; the swap of a lone pick, on its rough electrode + solvent strip; every own parameter traded "
            "with the rest of the model counted undetermined, on its one-relaxation strip) and those three strips, five "
            "more where the swap could act and the saturation + solvent pair were run again (at de21935 and b6b394d; the "
            "one-relaxation strip and the pair at 51fd590; the six others unchanged: the pair's solvent line named, its saturation drafted, 1.45× the true "
            "model's error) (the three wrong \"low\": the layered beam second for the one-relaxation polymer, the sensor "
            "low-pass read as the electrode's resistance, alone and beside the saturation)",
-           high=(6, 1, 0), medium=(6, 2, 0), low=(0, 0, 3)),
-    _table("circuit_lab", "41", 14, "387863f",
-           "seed 41, a fresh draw, 14 of its 23 truths (the six in-catalog effects, the six pairs, nothing hidden, the "
-           "partial relaxation), measured at the start of 2026-12-05's eighth session, before the two rules chosen on "
+           high=(6, 1, 0), medium=(6, 2, 1), low=(0, 0, 3)),
+    _table("circuit_lab", "41", 15, "387863f, 5db2cb6",
+           "seed 41, a fresh draw, 15 of its 24 truths (the six in-catalog effects, the six pairs, nothing hidden, the "
+           "partial relaxation; the dead time of the deflection channel, added on 2026-12-06 and run with the delay "
+           "form in, 5db2cb6: nothing named, the model written keeps a drafted delay at 1.01× the true model's error), measured at the start of 2026-12-05's eighth session, before the two rules chosen on "
            "pnp_sweep seed 41 (a pick's shape refined once picked, the swap of a lone pick); its rough electrode, rough "
            "electrode + solvent, partial relaxation, saturation + solvent and electrode + solvent strips (where they "
            "could act) and its electrode + modulus pair (where a pick has a parameter traded with the rest of the model) "
            "run again at b0c7ee0, 51fd590 and 652dbde: unchanged; no rule was chosen on it (all six pairs had both named; the rough electrode at 2.72× and the "
            "saturation at 9.17× the true model's error after the chain, 2.51× and 1.14× for the best model written)",
            high=(9, 0, 0), medium=(6, 1, 0), low=(2, 0, 0)),
-    _table("pnp_fd", "40", 23, "4da3232, b6b394d",
-           "seed 40, a fresh draw, all 23 of its truths, measured with the rules in force; no rule was chosen on it; "
+    _table("pnp_fd", "40", 24, "4da3232, b6b394d, 5db2cb6",
+           "seed 40, a fresh draw, all 24 of its truths, measured with the rules in force; no rule was chosen on it "
+           "(the dead time of the deflection channel, added on 2026-12-06, run with the delay form in, 5db2cb6: the "
+           "electrode's resistance \"low\", wrong, left out of the model written, which keeps a drafted delay at "
+           "1.02× the true model's error; \"medium\" and wrong before the form); "
            "ten strips where the two rules chosen on pnp_sweep seed 41 could act were run again with them (b6b394d): "
            "the rough electrode + solvent pair went from the relaxing modulus \"low\" (wrong) at 59.6× the true "
            "model's error to the fractional coupling and the solvent line, both \"high\", at 1.00×, the nine others unchanged "
            "(the four wrong \"medium\" picks: the sensor low-pass read as the electrode's resistance, alone and beside "
            "the saturation; humidity for the play and for the eigen-moment strips)",
-           high=(10, 1, 0), medium=(6, 2, 4), low=(1, 1, 0)),
+           high=(10, 1, 0), medium=(6, 2, 4), low=(1, 1, 1)),
     _table("circuit_lab", "40", 6, "4da3232",
            "seed 40, a fresh draw, 6 of its 23 truths (a creep, a play, the eigen-moment, humidity, the modulus + "
            "humidity pair, the default route's creep + humidity strip), measured with the rules in force; no rule was "
