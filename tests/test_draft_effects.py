@@ -392,8 +392,9 @@ def _diagnosis_stub(winner, res, rmse_final):
     fit = _fit_stub(rmse_final, resid=res.resid, preds=res.preds)
     if winner:
         fit.spec = _Stub(label=f"+{winner}", free=["kf", "Y", "beta_f"])
-    # the rounds under test offer the low-pass, slow-pole and drift drafts: the delay, drafted on every
-    # residual too, is left out of these tables (its own draft is tested above)
+    # the rounds under test offer the low-pass, slow-pole and drift drafts: the delay, drafted wherever the
+    # residual shows any evidence of it (these low-passes do), is left out of these tables (its own draft is
+    # tested above)
     forms = [f for f in F.describe(fit, res.records) if f.form != "output_delay"]
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
                  adequacy=_Stub(adequate=False, forms=forms), records=res.records, candidates=[], steps=[],
