@@ -247,7 +247,8 @@ def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it
     """A deflection logged 30 ms late (a sensor's or logger's latency: phase lag ∝ f, no gain
     change) is described as a delay of 30 ms with a = 1 and forward-selected before a low-pass;
     a sensor's second-order low-pass is not read as a delay (its delay fit is worse than the
-    low-pass's).  The draft passes the contract and its response is e^(−s d)."""
+    low-pass's).  The draft passes the contract and its response is e^(−s d); on a residual that is
+    noise no delay is drafted."""
     from physics.diagnose.forms.output_delay import delayed
 
     d = 0.03
@@ -263,6 +264,8 @@ def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it
     assert F.selected(F.describe(fit, res.records))[0].form == "output_delay"
     lp = _residual(lambda p, t, fs: response_filter(p, fs, lambda f: lowpass2(f, 6.0, 0.7)) - p)
     assert _fit("output_lowpass", lp).delta_bic < _fit("output_delay", lp).delta_bic
+    noise = _residual(lambda p, t, fs: 0 * p)       # nothing to read as a delay: not offered (no refit)
+    assert F.form_of("output_delay")().draft(_fit("output_delay", noise), noise) == []
     (dr,) = F.form_of("output_delay")().draft(ff, res)
     dr.seen = ff.full_text
     path = tmp_path / dr.file_name

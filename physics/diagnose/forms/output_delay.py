@@ -55,8 +55,8 @@ class OutputDelay(Form):
         """The delay as an effect, offered when the residual shows any evidence of it (ΔBIC < 0: it
         fits better than its parameters cost), significant or not: a pick that stands in for a delay
         takes up most of its lag and leaves a band of error that is not significantly a delay (a
-        9.3 ms dead time behind the electrode's resistance: ΔBIC −589, a = 1.5 at 0.4 ms); on a residual that
-        is noise (ΔBIC ≥ 0) it is not offered, and the model is not refitted with it."""
+        9.3 ms dead time behind the electrode's resistance: ΔBIC −589, a = 1.5 at 0.4 ms); on a
+        residual that is noise (ΔBIC ≥ 0) it is not offered, and the model is not refitted with it."""
         if not ff.delta_bic < 0:
             return []
         d = ff.params["delay_s"]
