@@ -540,7 +540,7 @@ class Verdict:
                                "the catalog lacks that its form happens to follow (hence \"low\").")
                 why = conf.told_apart(p.confidence) if p.confidence is not None and p.label != "high" else []
                 if why:
-                    out.append(f"  Not \"high\": " + "; ".join(why) + ".")
+                    out.append("  Not \"high\": " + "; ".join(why) + ".")
                 if p.quality:
                     out.append(f"  Caution on {p.effect}: " + "; ".join(p.quality) + ".")
                 if p.left_out:
