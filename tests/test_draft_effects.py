@@ -279,6 +279,30 @@ def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it
     np.testing.assert_allclose(effect.filter_output(y, 100.0, {})[200:], y[197:-3], atol=0.02)
 
 
+def test_the_slow_pole_drafts_a_full_relaxation_as_an_ac_coupled_sensor_makes(tmp_path):
+    """Records seen through a first-order high-pass (a sensor's AC coupling, τ = 8 s): the residual
+    is −LP_τ(prediction), read as a slow pole relaxing back completely (g ≈ −1), and the draft's
+    range reaches r = −1, where its response is the high-pass sτ/(1 + sτ) exactly (with r held
+    above −1 a draft could not take the part of a catalog pick that relaxes back)."""
+    tau = 8.0
+    res = _residual(lambda p, t, fs: response_filter(p, fs, lambda f: 2j * np.pi * f * tau
+                                                     / (1 + 2j * np.pi * f * tau)) - p)
+    ff = _fit("slow_pole", res)
+    assert ff.significant and ff.params["gain"] == pytest.approx(-1.0, abs=0.1) \
+        and ff.params["tau_s"] == pytest.approx(tau, rel=0.25)
+    (dr,) = F.form_of("slow_pole")().draft(ff, res)
+    dr.seen = ff.full_text
+    path = tmp_path / dr.file_name
+    path.write_text(dr.source(), encoding="utf-8")
+    assert check_draft(path) == []
+    (cls,) = effect_classes_in_file(path)
+    (r_spec,) = [q for q in cls.params if q.name == "slow_pole_r"]
+    assert r_spec.lo <= -1.0 and cls.diagnosis["bounds"]["slow_pole_r"][0] <= -1.0
+    s = 2j * np.pi * np.array([0.0, 0.02, 1.0])
+    np.testing.assert_allclose(cls(load_device("ipmc_pt_eg")).output_response(s, {"slow_pole_r": -1.0, "slow_pole_tau": tau}),
+                               s * tau / (1 + s * tau), atol=1e-9)
+
+
 def test_input_dead_zone_found_behind_a_base_fitted_to_the_distorted_records():
     """A base fitted to dead-zoned records has lowered its gain to a compromise; the form fits
     the records' own linear gain beside the nonlinearity and still finds the threshold, and a
@@ -565,12 +589,14 @@ def test_a_pick_the_model_written_leaves_out_says_so_on_its_verdict_line():
                    Verdict("partly explained", d.verdict.picks, {}, None, 90e-6, 1e-6, "test").lines())
 
 
-def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_against_its_step_s_rivals():
+def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_against_its_step_s_rivals(monkeypatch):
     """When the draft rounds keep a draft beside a pick of the chain, the pick is labelled again on
     the model written: a forward step on that model less the pick, offered with its step's rivals
     not in the model; its verdict line (label, errors, where) becomes that step's.  When that step
     picks a rival, or nothing, or the pick at a lower label, the pick keeps its label and the notes
-    say why; without a kept draft nothing is labelled again."""
+    say why; when nothing is picked because the drafts alone are within the noise there and the pick
+    does not earn its parameters beside them, the model written drops it and its line says so;
+    without a kept draft nothing is labelled again."""
     from physics.diagnose.draft import WRITTEN, draft_effects
     sd, sp, lp, dr = "solvent_diffusion", "drafted_slow_pole", "drafted_output_lowpass", "drafted_drift"
     res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
@@ -590,13 +616,14 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
         d.verdict.picks = [_verdict_pick(sd, "medium", 90e-6, 10e-6)]
         return d
 
-    def rediagnose(relabel):
+    def rediagnose(relabel, without=None):
         rounds, calls = _rediagnose(table, []), []
 
         def run(device, effects, free, candidates):
             calls.append((tuple(effects), tuple(candidates)))
             if sd in candidates:            # the relabel: the model written less the pick
-                return _Stub(verdict=_Stub(picks=relabel, status="nothing to explain"))
+                return _Stub(verdict=_Stub(picks=relabel, status="nothing to explain" if without else "partly explained"),
+                             base=_Stub(**{**_fit_stub(without).__dict__, "effects": list(effects)}))
             out = rounds(device, effects, free, candidates)
             for c in out.candidates:
                 c.fit.effects = list(effects) + [c.effect]
@@ -614,13 +641,23 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
     assert (p.label, p.on, p.rmse_before, p.rmse_after) == ("high", WRITTEN, 159e-6, 2.95e-6)
     assert "against fractional_coupling, viscoelastic fitted there too: confidence high" in p.reason
     # a rival picked in its place, or nothing picked: the pick keeps its label
-    for relabel, said in [([_verdict_pick("viscoelastic", "high", 159e-6, 2.9e-6)], "viscoelastic is picked in its place"),
-                          ([], "no candidate is picked (nothing to explain)")]:
-        d = diagnosis()
-        out = draft_effects(d, rediagnose(relabel)[0])
-        p = d.verdict.picks[0]
-        assert (p.label, p.on, p.rmse_after) == ("medium", "", 10e-6)
-        assert any(said in n and f"{sd} keeps its confidence (medium)" in n for n in out.notes)
+    import physics.diagnose.candidates as cands
+    for relabel, without, said in [([_verdict_pick("viscoelastic", "high", 159e-6, 2.9e-6)], None,
+                                    "viscoelastic is picked in its place"),
+                                   ([], None, "no candidate is picked (partly explained)"),
+                                   ([], 2.98e-6, "no candidate is picked (nothing to explain)")]:
+        for dbic in (4.0, -50.0):      # the pick added back to the drafts alone: not earned, earned
+            monkeypatch.setattr(cands, "compare_fits", lambda base, cand, nested, taus=None: _Stub(delta_bic=dbic))
+            d = diagnosis()
+            out = draft_effects(d, rediagnose(relabel, without)[0])
+            p = d.verdict.picks[0]
+            assert (p.label, p.on, p.rmse_after) == ("medium", "", 10e-6)
+            assert any(said in n and f"{sd} keeps its confidence (medium)" in n for n in out.notes)
+            dropped = without is not None and dbic > -10
+            assert (sd not in out.final.effects, out.final.rmse == 2.98e-6) == (dropped, dropped)
+            assert (sp in p.left_out and "2.98 µm" in p.left_out) == dropped
+            assert any(n.startswith(f"{sd} left out of the model written: without it the kept drafts fit") for n in
+                       out.notes) == dropped
     # picked again but labelled lower there: the pick keeps its label, its line says what the step found
     for chain, written_label, kept in [("high", "medium", "high"), ("medium", "low", "medium"), ("low", "medium", "medium")]:
         d = diagnosis()

@@ -5,7 +5,11 @@ Form: e ≈ g · LP_τ(ŷ) with τ ≥ :func:`slowest` (below the excited band),
 deflection, g < 0 it relaxes back.  The effect
 it drafts multiplies the deflection by 1 + r/(1 + sτ) (a standard linear solid in series
 with the beam; Findley, Lai & Onaran, *Creep and relaxation of nonlinear viscoelastic
-materials*, 1976, ch. 5), r = g, off at r = 0.
+materials*, 1976, ch. 5), r = g, off at r = 0, and r = −1 the deflection relaxes back
+completely: sτ/(1 + sτ), a first-order high-pass, what a sensor's AC coupling does.  r may reach
+−1 so that, beside a catalog pick that relaxes back, the draft can take the pick's whole part
+(:func:`.draft._relabel_on_written`): a held-out strip seen through a 0.012 Hz AC-coupled
+sensor named ``solvent_diffusion`` "high" when r stopped at −0.9.
 """
 from __future__ import annotations
 
@@ -47,9 +51,10 @@ class SlowPole(Form):
             form=self.id, effect_id="drafted_slow_pole", class_name="DraftedSlowPole",
             summary="a slow pole on the tip: deflection × (1 + r/(1 + sτ))",
             model=("The deflection is multiplied by ``1 + r / (1 + s τ)``: a fraction ``r`` of it builds up "
-                   "(r > 0, creep) or relaxes back (r < 0) with time constant ``τ``; r = 0 is the model without it "
+                   "(r > 0, creep) or relaxes back (r < 0; r = −1 completely, a high-pass as a sensor's AC coupling "
+                   "makes) with time constant ``τ``; r = 0 is the model without it "
                    "(a standard linear solid in series with the beam; Findley, Lai & Onaran 1976, ch. 5)."),
-            params=[Param("slow_pole_r", "1", -0.9, 5.0, "static fraction r of the extra deflection", r, "fixed"),
+            params=[Param("slow_pole_r", "1", -1.0, 5.0, "static fraction r of the extra deflection", r, "fixed"),
                     Param("slow_pole_tau", "s", float(f"{slowest(res):.3g}"), 1e5, "time constant τ", tau)],
             scan="slow_pole_tau",
             off={"slow_pole_r": 0.0},
