@@ -64,6 +64,7 @@ from .candidates import (Comparison, ModelFit, ModelSpec, ROLE_GAIN, ROLE_STIFF,
 from . import confidence as conf
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN, SIGNIFICANT_BIC
+from .interference import find_line
 from .records import NUISANCE_TERMS, PreparedRecord, frf_measurements, prepare_records, stated_drift
 from .wander import shared_wander, slow_wander
 from .residuals import ResidualAnalysis, analyse
@@ -1216,8 +1217,10 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                   "clamp settling), find what does and record the test again")
         ad = assess(label, final, data.records, noise, describe=False, wander=data.wander_beyond)
         kind, forms = remaining_of(ad)
+    line = find_line(data.records, final.resid_d, final.pred_d) if kind == "base mismatch" else None
     return Verdict(status, picks, first.weights, ad, base.rmse, noise, source, reason, forms, kind, stopped,
-                   first.alpha, nuisance_summary(final, data.records), removed, withdrawn, refitted, refined)
+                   first.alpha, nuisance_summary(final, data.records), removed, withdrawn, refitted, refined,
+                   interference=line.text(final.rmse, noise, ADEQUATE_RATIO) if line is not None else "")
 
 
 def assess_support(final: ModelFit, picked: Sequence[str], data: PreparedRecords, run: DiagnosisRun) -> list[SupportResult]:

@@ -458,6 +458,9 @@ class Verdict:
     #: ({"kept": {form id: effect id}, "fitted": [form ids], "rmse_m": the RMS error [m] of the
     #: model they reached, None when they kept none}; None: they did not run)
     drafts: dict | None = None
+    #: an interference line in every record's residual (:mod:`.interference`), said where no form
+    #: describes the rest ("" none)
+    interference: str = ""
 
     # --- the first answer, as before the chain existed ---------------------------------
     @property
@@ -586,6 +589,8 @@ class Verdict:
     def _remaining_text(self) -> str:
         if self.remaining_kind == "described":
             return "; and ".join(d["text"] for d in self.remaining) + " — " + self._how_to_model() + "."
+        if self.remaining_kind == "base mismatch" and self.interference:
+            return self.interference + "."
         if self.remaining_kind == "base mismatch" and self.drafted_remaining:
             return ("no residual form fitted to the final model's residual describes it, but the drafts fitted "
                     f"with the model do: {self.drafted_remaining} (the best model below).")
@@ -654,7 +659,8 @@ class Verdict:
                 "ambiguous": self.ambiguous, "separating_record": self.separating,
                 "adequacy": self.adequacy.to_dict() if self.adequacy else None,
                 "remaining_kind": self.remaining_kind, "remaining": self.remaining,
-                "drafted_remaining": self.drafted_remaining or None, "drafts": self.drafts, "chain_stopped": self.stopped,
+                "drafted_remaining": self.drafted_remaining or None, "interference": self.interference or None,
+                "drafts": self.drafts, "chain_stopped": self.stopped,
                 "nuisance": self.nuisance, "alpha_bonferroni": self.alpha_bonferroni, "text": self.lines(),
                 "removed": self.removed, "withdrawn": self.withdrawn, "refitted": self.refitted, "refined": self.refined,
                 "final_rmse_m": self.final_rmse,
