@@ -180,7 +180,8 @@ def remove_trend(e: np.ndarray, t: np.ndarray) -> np.ndarray:
 def shared_draw(ing: str, rng) -> dict:
     """Parameters of an ingredient both families draw alike (a near twin's Zener arm, an output
     saturation, and the forms outside the catalog: creep, a second-order sensor low-pass, drift,
-    play, dead zone, an eigen-moment load, a dead time of the deflection channel); {} for another."""
+    play, dead zone, an eigen-moment load, a dead time of the deflection channel, a sensor's AC
+    coupling, mains pickup); {} for another."""
     if ing == "zener":
         return {"zener_delta": float(rng.uniform(0.3, 0.6)), "zener_f_Hz": float(np.exp(rng.uniform(np.log(1), np.log(8))))}
     if ing == "saturation":
@@ -199,4 +200,8 @@ def shared_draw(ing: str, rng) -> dict:
         return {"eigen_moment": 1.0}
     if ing == "delay":
         return {"delay_ms": float(rng.uniform(4, 15))}
+    if ing == "ac_coupled":
+        return {"highpass_Hz": float(np.exp(rng.uniform(np.log(0.01), np.log(0.04))))}
+    if ing == "hum":
+        return {"hum_um": float(rng.uniform(2, 4))}
     return {}

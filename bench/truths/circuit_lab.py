@@ -47,6 +47,10 @@ eigen_moment     the charge bends each section with an eigen-moment (a swelling 
                  curvature), ∫ M φ_i'' dz, instead of the faces' couple
 creep, lowpass2, drift, play, deadzone: :mod:`.forms`
 delay            the deflection channel logged d U(4, 15) ms late (a sensor's or logger's dead time)
+ac_coupled       the sensor AC-coupled: the fine grid through a first-order high-pass, corner log-U(0.01,
+                 0.04) Hz (the deflection less its first-order lag)
+hum              mains pickup: a 50 Hz sinusoid of U(2, 4) µm, its phase drawn per record, added to
+                 what is logged
 ===============  =============================================================================
 
 Records as a lab exports them: five 60 s records at 200 Hz — multisines 0.05–20 Hz at RH 40,
@@ -402,7 +406,12 @@ def _simulate(model: _Model, tp: dict, v: np.ndarray, amp_lo: float, tf: np.ndar
         y = lti_foh(A, np.array([0.0, w0 * w0]), np.array([1.0, 0.0]), y, dt)
     if "delay_ms" in tp:        # the deflection channel read d later: the fine grid's value at t − d
         y = np.interp(tf - 1e-3 * tp["delay_ms"], tf, y, left=float(y[0]))
+    if "highpass_Hz" in tp:     # an AC-coupled sensor: the deflection less its first-order lag
+        tau = 1.0 / (2 * np.pi * tp["highpass_Hz"])
+        y = y - lti_foh(np.array([[-1.0 / tau]]), np.array([1.0 / tau]), np.array([1.0]), y, dt)
     y = np.asarray(y, dtype=float)[::OVER]
+    if "hum_um" in tp:          # mains pickup on the sensor's cable
+        y = y + 1e-6 * tp["hum_um"] * np.sin(2 * np.pi * 50.0 * t + rng.uniform(0, 2 * np.pi))
     if "drift_over_noise" in tp:
         y = y + forms.thermal_drift(t, rng, tp["drift_over_noise"] * noise)
     return y

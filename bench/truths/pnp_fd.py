@@ -46,6 +46,9 @@ zener            one-relaxation polymer, E*(s) = E0 (1 + sτ_ε)/(1 + sτ_σ), �
                  Δ U(0.3, 0.6), loss peak log-U(1, 8) Hz
 creep, lowpass2, drift, play, deadzone: :mod:`.forms`
 delay            the deflection channel logged d U(4, 15) ms late (a sensor's or logger's dead time)
+ac_coupled       the sensor AC-coupled: a first-order high-pass, corner log-U(0.01, 0.04) Hz
+hum              mains pickup: a 50 Hz sinusoid of U(2, 4) µm, its phase drawn per record, added to
+                 what is logged
 ===============  ===========================================================================
 
 Records (lab design, the same for every truth): five 60 s records at 250 Hz — a multisine
@@ -305,7 +308,12 @@ def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarr
         y = fft_filter(y, FS * OVER, lambda f: forms.lowpass2_response(f, tp["lowpass_Hz"], tp["lowpass_zeta"]))
     if "delay_ms" in tp:        # the deflection channel's dead time, exact for the band-limited signal
         y = fft_filter(y, FS * OVER, lambda f: np.exp(-2j * np.pi * f * 1e-3 * tp["delay_ms"]))
+    if "highpass_Hz" in tp:     # an AC-coupled sensor: j f/fc / (1 + j f/fc), padded past its memory
+        y = fft_filter(y, FS * OVER, lambda f: 1j * f / tp["highpass_Hz"] / (1 + 1j * f / tp["highpass_Hz"]),
+                       pad_s=max(60.0, 10.0 / (2 * np.pi * tp["highpass_Hz"])))
     y = y[::OVER]
+    if "hum_um" in tp:          # mains pickup on the sensor's cable
+        y = y + 1e-6 * tp["hum_um"] * np.sin(2 * np.pi * 50.0 * t + rng.uniform(0, 2 * np.pi))
     if "drift_over_noise" in tp:
         y = y + forms.thermal_drift(t, rng, tp["drift_over_noise"] * noise)
     return y

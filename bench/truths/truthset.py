@@ -23,6 +23,8 @@ deadzone           outside  dead zone of the drive                      —
 eigen_moment       outside  bimorph-like eigen-moment instead of the    —
                             face tractions' distributed couple
 delay              outside  deflection logged 4–15 ms late (dead time)  —
+ac_coupled         outside  sensor AC-coupled (0.01–0.04 Hz high-pass)   —
+hum                outside  50 Hz mains pickup of 2–4 µm on the sensor   —
 twin_contact       twin     lumped contact resistance at the clamp      — (electrode_resistance)
 twin_relax         twin     partial back-relaxation                     — (solvent_diffusion)
 twin_zener         twin     one-relaxation (Zener) polymer, loss peak   — (viscoelastic)
@@ -69,7 +71,8 @@ def _pair(name: str, a: str, b: str) -> Truth:
 TRUTHS: dict[str, Truth] = {t.name: t for t in (
     Truth("none", "none"),
     *(_catalog(n) for n in ("electrode", "rough", "solvent", "modulus", "saturation", "humidity")),
-    *(Truth(n, "outside", (), (), (n,)) for n in ("creep", "lowpass2", "drift", "play", "deadzone", "eigen_moment", "delay")),
+    *(Truth(n, "outside", (), (), (n,)) for n in ("creep", "lowpass2", "drift", "play", "deadzone", "eigen_moment",
+                                                  "delay", "ac_coupled", "hum")),
     Truth("twin_contact", "twin", (), ("electrode_resistance",), ("contact",)),
     Truth("twin_relax", "twin", (), ("solvent_diffusion",), ("partial_relax",), slow=True),
     Truth("twin_zener", "twin", (), ("viscoelastic",), ("zener",)),
