@@ -379,7 +379,8 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
     only refined further on the time records, a wrong pick of a bending eigen-moment offered alone
     read "high".  A pick that is not picked again (another candidate is, or the model without it
     is within the noise: the draft took its part), or that has a near twin, keeps its label; the
-    notes say so.  So does a pick labelled lower there than on the chain: the drafts answer the
+    notes say so.  When the drafts took its whole part and it does not earn its parameters beside
+    them, the model written leaves it out (:func:`_drop_if_drafts_suffice`).  So does a pick labelled lower there than on the chain: the drafts answer the
     residual a pick left, they do not question a pick that held without them (a viscoelastic
     modulus, ``circuit_lab`` seed 24, "high" on its refitted model, read "medium" beside a drafted
     slow pole only for two quality flags the pole brought: its loss correlated with a solvent
@@ -432,8 +433,8 @@ def _drop_if_drafts_suffice(outcome: DraftOutcome, without, eid: str, say) -> No
     own verdict) replaces the model written when ``eid`` does not earn its parameters beside the
     kept drafts (ΔBIC > −:data:`.forms.SIGNIFICANT_BIC` for adding it back): the drafts took its
     whole part, and the simpler model is written; :func:`_left_out_of_written` then says so on the
-    pick's verdict line.  A held-out strip seen through a 0.012 Hz AC-coupled sensor: the chain named
-    ``solvent_diffusion`` (2.26 µm, noise floor 1.49 µm), a drafted slow pole relaxing back
+    pick's verdict line.  Chosen on a strip seen through a 0.012 Hz AC-coupled sensor: the chain
+    named ``solvent_diffusion`` (2.26 µm, noise floor 1.49 µm), a drafted slow pole relaxing back
     completely fitted the records alone to 1.50 µm, and the model written kept both."""
     from .candidates import compare_fits, effect_values
     fit = outcome.final

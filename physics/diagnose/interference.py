@@ -9,14 +9,15 @@ calls it "a mismatch of the model's own base forms" sends the user after the wro
 :func:`find_line` looks in each record's residual (the final model's, at the analysis rate) for
 its strongest narrow line above :data:`MIN_HZ`: the periodogram's (Hann window) power within
 ±:data:`HALF_WIDTH` bins of the peak, less the residual's local median level, must hold at least
-:data:`MIN_SHARE` of the residual's power and stand :data:`MIN_PROMINENCE` × above that median;
-the drive must not make it: the model's prediction holds less than :data:`MAX_DRIVEN` of the line's
-power in the same bins (a square drive's far harmonics, filtered by the strip, hold far less), and
-the line is no low harmonic (2–10) of a periodic drive's strongest line (a nonlinearity's).  A line is reported only when *every* record (at least two)
-holds one at the same frequency (within the coarser record's bin width, and 1 %) and the records'
-drives differ (two kinds of excitation, or two strongest lines): a disturbance of the setup, not a
-distortion product that identical drives would put at one frequency in each.  Its RMS is √2·amplitude/2 of the sinusoid it adds,
-estimated from the line's power.
+:data:`MIN_SHARE` of the residual's power and stand :data:`MIN_PROMINENCE` × above that median.
+The drive must not make it: the model's prediction holds less than :data:`MAX_DRIVEN` of the
+line's power in the same bins (a square drive's far harmonics, filtered by the strip, hold far
+less), and the line is no low harmonic (:data:`HARMONICS`) of a periodic drive's strongest line (a
+nonlinearity's).  A line is reported only when *every* record (at least two) holds one at the
+same frequency (within the coarser record's bin width, and 1 %) and the records' drives differ
+(two kinds of excitation, or two strongest lines): a disturbance of the setup, not a distortion
+product that identical drives would put at one frequency in each.  Its RMS (amplitude/√2 of the
+sinusoid) is estimated from the line's share of the residual's power.
 """
 from __future__ import annotations
 

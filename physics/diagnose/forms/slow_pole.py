@@ -8,8 +8,8 @@ with the beam; Findley, Lai & Onaran, *Creep and relaxation of nonlinear viscoel
 materials*, 1976, ch. 5), r = g, off at r = 0, and r = −1 the deflection relaxes back
 completely: sτ/(1 + sτ), a first-order high-pass, what a sensor's AC coupling does.  r may reach
 −1 so that, beside a catalog pick that relaxes back, the draft can take the pick's whole part
-(:func:`.draft._relabel_on_written`): a held-out strip seen through a 0.012 Hz AC-coupled
-sensor named ``solvent_diffusion`` "high" when r stopped at −0.9.
+(:func:`.draft._relabel_on_written`): the strip this was chosen on, seen through a 0.012 Hz
+AC-coupled sensor, named ``solvent_diffusion`` "high" when r stopped at −0.9.
 """
 from __future__ import annotations
 
