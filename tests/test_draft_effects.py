@@ -594,9 +594,9 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
     the model written: a forward step on that model less the pick, offered with its step's rivals
     not in the model; its verdict line (label, errors, where) becomes that step's.  When that step
     picks a rival, or nothing, or the pick at a lower label, the pick keeps its label and the notes
-    say why; when nothing is picked because the drafts alone are within the noise there and the pick
-    does not earn its parameters beside them, the model written drops it and its line says so;
-    without a kept draft nothing is labelled again."""
+    say why; when nothing is picked because the drafts alone are within the noise there, the pick is
+    labelled against them and, when it does not earn its parameters beside them, left out of the
+    model written; without a kept draft nothing is labelled again."""
     from physics.diagnose.draft import WRITTEN, draft_effects
     sd, sp, lp, dr = "solvent_diffusion", "drafted_slow_pole", "drafted_output_lowpass", "drafted_drift"
     res = _residual(lambda p, t, fs: F.lowpass(p, 1 / (2 * math.pi * 6.0), fs) - p)
@@ -614,6 +614,7 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
         d.steps = [_Stub(index=1, result=d.final,
                          ranking=[_Stub(effect=e) for e in (sd, "fractional_coupling", "viscoelastic")])]
         d.verdict.picks = [_verdict_pick(sd, "medium", 90e-6, 10e-6)]
+        d.noise_floor = 1e-6
         return d
 
     def rediagnose(relabel, without=None):
@@ -641,23 +642,36 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
     assert (p.label, p.on, p.rmse_before, p.rmse_after) == ("high", WRITTEN, 159e-6, 2.95e-6)
     assert "against fractional_coupling, viscoelastic fitted there too: confidence high" in p.reason
     # a rival picked in its place, or nothing picked: the pick keeps its label
+    for relabel, said in [([_verdict_pick("viscoelastic", "high", 159e-6, 2.9e-6)], "viscoelastic is picked in its place"),
+                          ([], "no candidate is picked (partly explained)")]:
+        d = diagnosis()
+        out = draft_effects(d, rediagnose(relabel)[0])
+        p = d.verdict.picks[0]
+        assert (p.label, p.on, p.rmse_after) == ("medium", "", 10e-6)
+        assert any(said in n and f"{sd} keeps its confidence (medium)" in n for n in out.notes)
+    # nothing picked because the drafts alone are within the noise there (the model written: 3 µm, floor
+    # 1 µm): the pick is labelled against them with the twin's thresholds, and left out of the model
+    # written when it does not earn its parameters beside them (ΔBIC of adding it back > −10)
     import physics.diagnose.candidates as cands
-    for relabel, without, said in [([_verdict_pick("viscoelastic", "high", 159e-6, 2.9e-6)], None,
-                                    "viscoelastic is picked in its place"),
-                                   ([], None, "no candidate is picked (partly explained)"),
-                                   ([], 2.98e-6, "no candidate is picked (nothing to explain)")]:
-        for dbic in (4.0, -50.0):      # the pick added back to the drafts alone: not earned, earned
-            monkeypatch.setattr(cands, "compare_fits", lambda base, cand, nested, taus=None: _Stub(delta_bic=dbic))
-            d = diagnosis()
-            out = draft_effects(d, rediagnose(relabel, without)[0])
-            p = d.verdict.picks[0]
-            assert (p.label, p.on, p.rmse_after) == ("medium", "", 10e-6)
-            assert any(said in n and f"{sd} keeps its confidence (medium)" in n for n in out.notes)
-            dropped = without is not None and dbic > -10
-            assert (sd not in out.final.effects, out.final.rmse == 2.98e-6) == (dropped, dropped)
-            assert (sp in p.left_out and "2.98 µm" in p.left_out) == dropped
-            assert any(n.startswith(f"{sd} left out of the model written: without it the kept drafts fit") for n in
-                       out.notes) == dropped
+    from physics.diagnose.confidence import Confidence, label
+    for without, dbic, chain, after, dropped in [(2.98e-6, 4.0, "medium", "low", True),
+                                                 (2.98e-6, -50.0, "high", "low", False),
+                                                 (6e-6, -50.0, "high", "medium", False),
+                                                 (13e-6, -50.0, "high", "high", False)]:
+        monkeypatch.setattr(cands, "compare_fits", lambda base, cand, nested, taus=None: _Stub(delta_bic=dbic))
+        d = diagnosis()
+        d.verdict.picks = [_verdict_pick(sd, chain, 90e-6, 10e-6)]
+        if chain == "high":     # features that make it "high": 50 noise floors removed, 1 left, no rival
+            d.verdict.picks[0].confidence = label(Confidence(1.0, 50.0, 1.0, 1.0, None, 1.0, 0))
+        assert d.verdict.picks[0].label == chain
+        out = draft_effects(d, rediagnose([], without)[0])
+        p = d.verdict.picks[0]
+        assert p.label == after and p.on == ""
+        assert p.confidence.alone_of == sp and (sp in " ".join(p.confidence.why)) == (after != "high")
+        assert any(n.startswith(f"without {sd} on {WRITTEN} the kept drafts fit the records within the noise")
+                   and n.endswith(chain if after == chain else f"{chain} → {after}") for n in out.notes)
+        assert (sd not in out.final.effects, out.final.rmse == without) == (dropped, dropped)
+        assert (sp in p.left_out and "2.98 µm" in p.left_out) == dropped
     # picked again but labelled lower there: the pick keeps its label, its line says what the step found
     for chain, written_label, kept in [("high", "medium", "high"), ("medium", "low", "medium"), ("low", "medium", "medium")]:
         d = diagnosis()

@@ -302,6 +302,8 @@ class Confidence:
     undetermined: int = 0          # own parameters inside their range and not determined
     in_place_of: str | None = None  # a kept draft the pick names the physics of, fitted in its place
     in_place: float = 1.0          # share of the excess error that draft leaves which the pick removes
+    alone_of: str | None = None    # kept drafts that fit the records within the noise without the pick
+    alone: float = 1.0             # share of the excess error they leave which the pick removes
     label: str = "low"
     why: list[str] = field(default_factory=list)   # what kept it from "high"
 
@@ -315,7 +317,8 @@ class Confidence:
                    int(d.get("quality_flags", 0)), int(d.get("pinned_parameters") or 0),
                    float(d.get("held_rival_share", 1.0)), d.get("held_rival"), bool(d.get("on_refitted_model")),
                    d.get("picked_ahead_of"), num("chain_left_noise_floors"), int(d.get("undetermined_parameters") or 0),
-                   d.get("in_place_of"), float(d.get("in_place_share", 1.0)))
+                   d.get("in_place_of"), float(d.get("in_place_share", 1.0)), d.get("drafts_alone"),
+                   float(d.get("drafts_alone_share", 1.0)))
 
     def to_dict(self) -> dict:
         return {"label": self.label, "weight": self.weight, "change_noise_floors": _num(self.change),
@@ -325,6 +328,7 @@ class Confidence:
                 "held_rival_share": self.held, "held_rival": self.held_of, "on_refitted_model": self.refitted,
                 "picked_ahead_of": self.ahead_of, "chain_left_noise_floors": _num(self.chain_left),
                 "in_place_of": self.in_place_of, "in_place_share": self.in_place,
+                "drafts_alone": self.alone_of, "drafts_alone_share": self.alone,
                 "not_high_because": self.why}
 
 
@@ -430,6 +434,10 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
                else "fits the records no better than that draft")
         why.append(f"it names the physics of the draft {c.in_place_of}, fitted in its place, and {how} ('high' "
                    f"needs {100 * twin_hi:.0f} % of it): the records confirm the form, not the catalog's law for it")
+    if c.alone_of and c.alone < twin_hi:
+        why.append(f"without it the kept drafts {c.alone_of} fit the records within the noise, and it removes only "
+                   f"{100 * max(c.alone, 0.0):.2g} % of the excess error they leave ('high' needs {100 * twin_hi:.0f} %): "
+                   "the records need the form the drafts describe, not this effect")
     if c.records < rec_hi:
         why.append(f"it lowers the error on only {100 * c.records:.3g} % of the records (fitted on all of them, it "
                    "does not generalise from record to record)")
@@ -455,7 +463,7 @@ def label(c: Confidence, th: dict | None = None) -> Confidence:
     if not why:
         c.label = "high"
     elif (math.isfinite(c.change) and c.change < ch_lo) or (c.twin < twin_lo and c.twin_of) or c.pinned \
-            or (c.in_place < twin_lo and c.in_place_of) \
+            or (c.in_place < twin_lo and c.in_place_of) or (c.alone < twin_lo and c.alone_of) \
             or c.undetermined or far:
         c.label = "low"
     else:

@@ -379,8 +379,9 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
     only refined further on the time records, a wrong pick of a bending eigen-moment offered alone
     read "high".  A pick that is not picked again (another candidate is, or the model without it
     is within the noise: the draft took its part), or that has a near twin, keeps its label; the
-    notes say so.  When the drafts took its whole part and it does not earn its parameters beside
-    them, the model written leaves it out (:func:`_drop_if_drafts_suffice`).  So does a pick labelled lower there than on the chain: the drafts answer the
+    notes say so.  When the model without it is within the noise (the drafts alone fit the
+    records), it is labelled against those drafts, and left out of the model written when it does
+    not earn its parameters beside them (:func:`_drafts_suffice`).  So does a pick labelled lower there than on the chain: the drafts answer the
     residual a pick left, they do not question a pick that held without them (a viscoelastic
     modulus, ``circuit_lab`` seed 24, "high" on its refitted model, read "medium" beside a drafted
     slow pole only for two quality flags the pole brought: its loss correlated with a solvent
@@ -404,7 +405,8 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
             continue
         q = next(iter(again.verdict.picks), None)
         if q is None and again.verdict.status == "nothing to explain":
-            _drop_if_drafts_suffice(outcome, again.base, p.effect, say)
+            _drafts_suffice(res, p, outcome, again.base, say)
+            continue
         if q is None or q.effect != p.effect or q.twin:
             what = (f"{q.effect} is picked in its place" if q is not None and q.effect != p.effect
                     else f"it is ambiguous with {q.twin}" if q is not None
@@ -428,24 +430,37 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
         say(f"drafts: {p.effect} on {WRITTEN}: confidence {q.label}")
 
 
-def _drop_if_drafts_suffice(outcome: DraftOutcome, without, eid: str, say) -> None:
-    """The model written less the pick ``eid`` (``without``: refitted, and within the noise by its
-    own verdict) replaces the model written when ``eid`` does not earn its parameters beside the
-    kept drafts (ΔBIC > −:data:`.forms.SIGNIFICANT_BIC` for adding it back): the drafts took its
-    whole part, and the simpler model is written; :func:`_left_out_of_written` then says so on the
-    pick's verdict line.  Chosen on a strip seen through a 0.012 Hz AC-coupled sensor: the chain
-    named ``solvent_diffusion`` (2.26 µm, noise floor 1.49 µm), a drafted slow pole relaxing back
-    completely fitted the records alone to 1.50 µm, and the model written kept both."""
+def _drafts_suffice(res, p, outcome: DraftOutcome, without, say) -> None:
+    """The model written less the pick ``p`` (``without``: refitted, within the noise by its own
+    verdict) — the kept drafts alone fit the records.  The pick is labelled with those drafts as
+    its rival (:class:`.confidence.Confidence` ``alone``: the share of the excess error they leave
+    that it removes; the twin's thresholds, none new), and when it does not earn its parameters
+    beside them (ΔBIC > −:data:`.forms.SIGNIFICANT_BIC` for adding it back) the simpler model is
+    written; :func:`_left_out_of_written` then says so on the pick's verdict line.  Chosen on a
+    strip seen through a 0.012 Hz AC-coupled sensor: the chain named ``solvent_diffusion`` (2.26 µm,
+    noise floor 1.49 µm), a drafted slow pole relaxing back completely fitted the records alone
+    to 1.50 µm, and the model written kept both."""
+    from dataclasses import replace
+
     from .candidates import compare_fits, effect_values
-    fit = outcome.final
+    from .confidence import excess_share, label
+    fit, was = outcome.final, p.label
+    drafts = ", ".join(d.effect_id for d in outcome.kept)
+    share = excess_share(without.rmse, fit.rmse, res.noise_floor)
+    if p.confidence is not None:
+        p.confidence = label(replace(p.confidence, alone_of=drafts, alone=share, why=[]))
+    outcome.notes.append(f"without {p.effect} on {WRITTEN} the kept drafts fit the records within the noise "
+                         f"({1e6 * without.rmse:.4g} µm; {1e6 * fit.rmse:.4g} µm with it): it removes "
+                         f"{100 * max(share, 0.0):.2g} % of the excess error they leave, confidence {was}"
+                         + ("" if p.label == was else f" → {p.label}"))
     cmp = compare_fits(without, fit, True)
     if cmp.delta_bic <= -SIGNIFICANT_BIC:
         return
     outcome.final = without
     for d in outcome.kept:
         d.refit(effect_values(without, d.effect_id))
-    text = (f"{eid} left out of the model written: without it the kept drafts fit the records within the noise "
-            f"({1e6 * without.rmse:.4g} µm; {1e6 * fit.rmse:.4g} µm with it, ΔBIC {cmp.delta_bic:+.3g} for its "
+    text = (f"{p.effect} left out of the model written: without it the kept drafts fit the records within the "
+            f"noise ({1e6 * without.rmse:.4g} µm; {1e6 * fit.rmse:.4g} µm with it, ΔBIC {cmp.delta_bic:+.3g} for its "
             "parameters)")
     outcome.notes.append(text)
     say(f"drafts: {text}")
