@@ -668,7 +668,7 @@ def test_a_pick_kept_beside_a_draft_is_labelled_again_on_the_model_written_again
         p = d.verdict.picks[0]
         assert p.label == after and p.on == ""
         assert p.confidence.alone_of == sp and (sp in " ".join(p.confidence.why)) == (after != "high")
-        assert any(n.startswith(f"without {sd} on {WRITTEN} the kept drafts fit the records within the noise")
+        assert any(n.startswith(f"without {sd} on {WRITTEN}, the drafts alone fit the records within the noise")
                    and n.endswith(chain if after == chain else f"{chain} → {after}") for n in out.notes)
         assert (sd not in out.final.effects, out.final.rmse == without) == (dropped, dropped)
         assert (sp in p.left_out and "2.98 µm" in p.left_out) == dropped

@@ -449,7 +449,7 @@ def _drafts_suffice(res, p, outcome: DraftOutcome, without, say) -> None:
     share = excess_share(without.rmse, fit.rmse, res.noise_floor)
     if p.confidence is not None:
         p.confidence = label(replace(p.confidence, alone_of=drafts, alone=share, why=[]))
-    outcome.notes.append(f"without {p.effect} on {WRITTEN} the kept drafts fit the records within the noise "
+    outcome.notes.append(f"without {p.effect} on {WRITTEN}, the drafts alone fit the records within the noise "
                          f"({1e6 * without.rmse:.4g} µm; {1e6 * fit.rmse:.4g} µm with it): it removes "
                          f"{100 * max(share, 0.0):.2g} % of the excess error they leave, confidence {was}"
                          + ("" if p.label == was else f" → {p.label}"))
