@@ -58,9 +58,8 @@ class SlowPole(Form):
                     Param("slow_pole_tau", "s", float(f"{slowest(res):.3g}"), 1e5, "time constant τ", tau)],
             scan="slow_pole_tau",
             off={"slow_pole_r": 0.0},
-            # below the band the FRF cannot place r and τ: with r free down to −1 its FRF optimum
-            # (r −0.95, off its bound) left a circuit_lab strip's time records no better than without it,
-            # where the time records' optimum was r −0.57 (2.67 → 2.12 µm)
+            # below the band the FRF cannot place r and τ: with r free down to −1 a circuit_lab strip's
+            # slow pole was not kept (2.67 µm) where with r held above −0.9 it had reached 2.12 µm
             time_starts=True,
             excitation=f"a step or pulse held ≥ {hold:.2g} s, or a sweep down to {f_max:.2g} Hz",
             reveal={"f_lo_max": f_max, "hold_s": hold},
