@@ -883,7 +883,7 @@ def on_bound(prm, value: float) -> bool:
     return x <= lo + tol or x >= hi - tol
 
 
-def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord], base_rmse: float | None = None) -> bool:
+def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     """Start the added effect's own parameters from the spec's start points when the FRF
     optimum left one of them on a bound of its range and a start point fits the time records
     better (in place; True when it did).
@@ -896,16 +896,13 @@ def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord], base_rmse: fl
     residual's bounded nuisance removed (:meth:`.records.PreparedRecord.detrend_d`); the best,
     when it beats the FRF optimum, is refined on the time records (:func:`refine_on_time`), so
     that its values, uncertainties and quality flags are those of the error the verdict
-    reports.  Linear models only, as :func:`refine_on_time`.  An effect whose spec says
-    ``time_starts`` (its parameters act below the excited band) is started again so also when its FRF
-    optimum leaves the time records no better than the model without it (``base_rmse`` [m])."""
+    reports.  Linear models only, as :func:`refine_on_time`."""
     eff = mf.spec.added
     if not mf.ok or eff is None or not mf.model.is_linear:
         return False
     problem, fit = mf.result.problem, mf.result.fit
     own = {prm.name: i for i, prm in enumerate(problem.params) if prm.rh is None and prm.name in effect_params(eff)}
-    failed = base_rmse is not None and mf.rmse >= base_rmse and bool(spec_of(eff).get("time_starts"))
-    if not failed and not any(on_bound(problem.params[i], float(fit.theta[i])) for i in own.values()):
+    if not any(on_bound(problem.params[i], float(fit.theta[i])) for i in own.values()):
         return False
 
     def cost(theta) -> float:

@@ -655,8 +655,7 @@ def try_candidates(step: int, base: ModelFit, cand_ids, data: PreparedRecords, r
         slots.append(len(results))
         results.append(CandidateResult(eff, "pending", reason=why if ok else f"forced ({why})", step=step))
         tasks.append({"spec": spec, "device": base.device, "targets": data.targets, "trecs": data.target_records,
-                      "records": data.records, "base_rmse": base.rmse, "n_starts": run.n_starts,
-                      "keep": run.options.keep_starts,
+                      "records": data.records, "n_starts": run.n_starts, "keep": run.options.keep_starts,
                       "seed": run.options.seed,
                       "n_modes": run.options.n_modes, "effect_files": user_effect_files(),
                       "df_cache": data.df_cache if settings is None or settings.serial else None})
@@ -1467,7 +1466,7 @@ def _fit_candidate(task: dict):
                      df_cache=task["df_cache"] if task["df_cache"] is not None else {})
     if mf.ok:
         score(mf, task["records"])
-        start_on_time(mf, task["records"], task.get("base_rmse"))
+        start_on_time(mf, task["records"])
     return mf, time.perf_counter() - t0
 
 

@@ -69,7 +69,6 @@ class EffectDraft:
     evidence: dict = field(default_factory=dict)
     base: str = "OutputEffect"       # the effect class it subclasses (physics.effects)
     starts: list = field(default_factory=list)    # further start points {param: value} (SI)
-    time_starts: bool = False                      # its spec's ``time_starts`` (physics.effects.base)
 
     def refit(self, values: dict) -> None:
         """Take ``values`` (fitted jointly with the model) as the defaults; bounds and starts follow."""
@@ -88,7 +87,7 @@ class EffectDraft:
                 + [{k: _num(v) for k, v in st.items()} for st in self.starts],
                 "nested": True, "off": {k: _num(v) for k, v in self.off.items()},
                 "excitation": self.excitation, "reveal": {k: _num(v) for k, v in self.reveal.items()},
-                "signature": [tuple(s) for s in self.signature], **({"time_starts": True} if self.time_starts else {})}
+                "signature": [tuple(s) for s in self.signature]}
 
     def scan_values(self) -> list[float]:
         p = next(q for q in self.params if q.name == self.scan)

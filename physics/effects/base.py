@@ -80,10 +80,7 @@ from ..parameters import ParamSpec, TableSpec
 #: ``refine`` parameters of its law fitted only once the chain has picked it, on the final model
 #: (freed while the candidates compete, they would let it stand in for other effects); ``describing_function``
 #: True for a large-signal effect fitted through the describing function; ``by_default`` False
-#: to try it only on request (``--candidates``); ``time_starts`` True when its parameters act mostly below
-#: the excited band, where the frequency fit cannot place them: when that fit leaves the time records
-#: no better than the model without it, its start points are tried on the time records
-#: (:func:`physics.diagnose.candidates.start_on_time`).  An effect may also define a classmethod
+#: to try it only on request (``--candidates``).  An effect may also define a classmethod
 #: ``diagnosis_start(device) -> {name: value}`` for starts derived from the device (e.g. a table).
 #: Further optional class hooks, read by the diagnosis, its demos and test beds: ``draw_truth(device,
 #: rng) -> (device, values)`` draws a plausible hidden truth of the effect; ``draw_twin(device, rng)``
@@ -91,7 +88,7 @@ from ..parameters import ParamSpec, TableSpec
 #: scale)`` the large-signal parameter of a ``describing_function`` effect and its grid (c = scale /
 #: parameter); ``hints`` {parameter: sentence}: why a parameter may have no effect.
 DIAGNOSIS_KEYS = ("free", "shape", "refine", "bounds", "starts", "nested", "off", "excitation", "reveal", "signature",
-                  "roles", "per_rh", "describing_function", "by_default", "shows_as", "time_starts")
+                  "roles", "per_rh", "describing_function", "by_default", "shows_as")
 #: ``reveal`` rules: {"f_hi_min": Hz}, {"decades_min": n}, {"f_lo_max": Hz, "hold_s": s} (either),
 #: {"spans_resonance": True}, {"rh_levels": n}, {"amplitude_levels": n}; absent: always revealable.
 REVEAL_RULES = ("f_hi_min", "decades_min", "f_lo_max", "hold_s", "spans_resonance", "rh_levels", "amplitude_levels")

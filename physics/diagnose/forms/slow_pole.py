@@ -58,9 +58,6 @@ class SlowPole(Form):
                     Param("slow_pole_tau", "s", float(f"{slowest(res):.3g}"), 1e5, "time constant τ", tau)],
             scan="slow_pole_tau",
             off={"slow_pole_r": 0.0},
-            # below the band the FRF cannot place r and τ: with r free down to −1 a circuit_lab strip's
-            # slow pole was not kept (2.67 µm) where with r held above −0.9 it had reached 2.12 µm
-            time_starts=True,
             excitation=f"a step or pulse held ≥ {hold:.2g} s, or a sweep down to {f_max:.2g} Hz",
             reveal={"f_lo_max": f_max, "hold_s": hold},
             signature=[("step_creep", 1.0), ("lf_excess_lag", 0.5)] if creeps else
