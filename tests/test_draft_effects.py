@@ -72,6 +72,18 @@ def _fit(form_id, res):
     return next(f for f in F.FORMS if f.id == form_id)().fit(res)
 
 
+def _written_draft(form_id, ff, res, folder):
+    """The effect class of ``form_id``'s one draft of the fit ``ff``, written into ``folder`` and
+    passing the drafts' contract check."""
+    (dr,) = F.form_of(form_id)().draft(ff, res)
+    dr.seen = ff.full_text
+    path = folder / dr.file_name
+    path.write_text(dr.source(), encoding="utf-8")
+    assert check_draft(path) == []
+    (cls,) = effect_classes_in_file(path)
+    return cls
+
+
 def test_each_form_recovers_what_made_the_residual():
     tau = 12.0
     ff = _fit("slow_pole", _residual(lambda p, t, fs: 0.3 * F.lowpass(p, tau, fs)))
@@ -266,13 +278,7 @@ def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it
     assert _fit("output_lowpass", lp).delta_bic < _fit("output_delay", lp).delta_bic
     noise = _residual(lambda p, t, fs: 0 * p)       # nothing to read as a delay: not offered (no refit)
     assert F.form_of("output_delay")().draft(_fit("output_delay", noise), noise) == []
-    (dr,) = F.form_of("output_delay")().draft(ff, res)
-    dr.seen = ff.full_text
-    path = tmp_path / dr.file_name
-    path.write_text(dr.source(), encoding="utf-8")
-    assert check_draft(path) == []
-    (cls,) = effect_classes_in_file(path)
-    effect = cls(load_device("ipmc_pt_eg"))
+    effect = _written_draft("output_delay", ff, res, tmp_path)(load_device("ipmc_pt_eg"))
     f = np.array([1.0, 8.0, 20.0])
     np.testing.assert_allclose(effect.output_response(2j * np.pi * f, {}), np.exp(-2j * np.pi * f * d), rtol=1e-3)
     y = np.sin(2 * np.pi * 5.0 * np.arange(2000) / 100.0)
@@ -290,12 +296,7 @@ def test_the_slow_pole_drafts_a_full_relaxation_as_an_ac_coupled_sensor_makes(tm
     ff = _fit("slow_pole", res)
     assert ff.significant and ff.params["gain"] == pytest.approx(-1.0, abs=0.1) \
         and ff.params["tau_s"] == pytest.approx(tau, rel=0.25)
-    (dr,) = F.form_of("slow_pole")().draft(ff, res)
-    dr.seen = ff.full_text
-    path = tmp_path / dr.file_name
-    path.write_text(dr.source(), encoding="utf-8")
-    assert check_draft(path) == []
-    (cls,) = effect_classes_in_file(path)
+    cls = _written_draft("slow_pole", ff, res, tmp_path)
     (r_spec,) = [q for q in cls.params if q.name == "slow_pole_r"]
     assert r_spec.lo <= -1.0 and cls.diagnosis["bounds"]["slow_pole_r"][0] <= -1.0
     s = 2j * np.pi * np.array([0.0, 0.02, 1.0])
