@@ -377,15 +377,16 @@ def _relabel_on_written(res, outcome: DraftOutcome, rediagnose, free: list, say)
     the model to 1.19 floors, and there the pick lowers the error 24.9 → 2.95 µm with every rival of
     its step fitted again.  Only beside a kept draft, and with the rivals fitted again: on a model
     only refined further on the time records, a wrong pick of a bending eigen-moment offered alone
-    read "high".  A pick that is not picked again (another candidate is, or the model without it
-    is within the noise: the draft took its part), or that has a near twin, keeps its label; the
-    notes say so.  When the model without it is within the noise (the drafts alone fit the
-    records), it is labelled against those drafts, and left out of the model written when it does
-    not earn its parameters beside them (:func:`_drafts_suffice`).  So does a pick labelled lower there than on the chain: the drafts answer the
-    residual a pick left, they do not question a pick that held without them (a viscoelastic
-    modulus, ``circuit_lab`` seed 24, "high" on its refitted model, read "medium" beside a drafted
-    slow pole only for two quality flags the pole brought: its loss correlated with a solvent
-    constant, its signature no longer seen beside the pole); its verdict line still says what that step found."""
+    read "high".  A pick that is not picked again (another candidate is, or none is while the model
+    without it is still outside the noise), or that has a near twin, keeps its label; the notes say
+    so.  So does a pick labelled lower there than on the chain: the drafts answer the residual a
+    pick left, they do not question a pick that held without them (a viscoelastic modulus,
+    ``circuit_lab`` seed 24, "high" on its refitted model, read "medium" beside a drafted slow pole
+    only for two quality flags the pole brought: its loss correlated with a solvent constant, its
+    signature no longer seen beside the pole); its verdict line still says what that step found.
+    When the model without it is within the noise (the drafts alone fit the records), the pick is
+    labelled against those drafts, and left out of the model written when it does not earn its
+    parameters beside them (:func:`_drafts_suffice`)."""
     from .candidates import effect_rows, map_free
     fit = outcome.final
     if not outcome.kept or fit is None or fit.rmse >= res.final.rmse:
