@@ -27,6 +27,8 @@ from typing import Sequence
 
 import numpy as np
 
+from ..analysis.frf_estimation import power_spectrum
+
 #: Lines below this [Hz] are left to the drift and wander terms.
 MIN_HZ = 1.0
 #: Half-width [bins] of a line's window (a Hann window spreads a sinusoid over ±2 bins).
@@ -69,8 +71,9 @@ class Line:
 
 
 def _periodogram(x: np.ndarray) -> np.ndarray:
-    w = np.hanning(x.size)
-    return np.abs(np.fft.rfft((x - x.mean()) * w)) ** 2
+    """|X_k|² of ``x`` less its mean through a Hann window (a line spreads over ±2 bins, not the
+    whole spectrum)."""
+    return power_spectrum((x - x.mean()) * np.hanning(x.size))
 
 
 def _line_of(e: np.ndarray, y: np.ndarray, v: np.ndarray, fs: float) -> "tuple[float, float, float, float] | None":
