@@ -285,6 +285,62 @@ def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it
     np.testing.assert_allclose(effect.filter_output(y, 100.0, {})[200:], y[197:-3], atol=0.02)
 
 
+def test_records_that_lead_the_model_are_described_as_an_advance_and_never_drafted():
+    """A deflection read 30 ms *early* (y + τ dy/dt, a derivative term in the sensor's conditioning, or
+    a sensor bandwidth given lower than the setup's) is an advance of 30 ms with a = 1, selected; no
+    causal effect writes it, so nothing is drafted.  A lag is still read as a lag."""
+    from physics.diagnose.forms.output_delay import delayed
+
+    res = _residual(lambda p, t, fs: response_filter(p, fs, lambda f: delayed(f, -0.03)) - p)
+    ff = _fit("output_delay", res)
+    assert ff.significant and ff.params["delay_s"] == pytest.approx(-0.03, rel=0.05) \
+        and ff.params["gain"] == pytest.approx(1.0, abs=0.05) and "lead the model by 30 ms" in ff.text
+    assert F.form_of("output_delay")().draft(ff, res) == []
+    lead = _fit("output_delay", _residual(lambda p, t, fs: 0.02 * np.gradient(p, 1 / fs)))
+    assert lead.significant and lead.params["delay_s"] == pytest.approx(-0.02, rel=0.05) and "τ·dŷ/dt" in lead.text
+    lag = _fit("output_delay", _residual(lambda p, t, fs: response_filter(p, fs, lambda f: delayed(f, 0.03)) - p))
+    assert lag.params["delay_s"] == pytest.approx(0.03, rel=0.05)
+
+
+@pytest.mark.parametrize("exponent, a", [(1.0, 0.15), (2.0, -0.1)])
+def test_bending_unequal_in_the_two_directions_is_an_even_form(exponent, a):
+    """y = ŷ(1 + a sign ŷ) (p = 1) and y = ŷ + a ŷ²/P (p = 2): the even residual a|ŷ|^p/P^(p−1) is
+    found with its exponent and gain and selected first; an odd distortion of the same size (a clip)
+    is not read as one."""
+    peak = 1.0 * GAIN
+    res = _residual(lambda p, t, fs: a * np.abs(p) ** exponent / peak ** (exponent - 1))
+    ff = _fit("output_asymmetry", res)
+    assert ff.significant and ff.params["exponent"] == exponent and ff.params["gain"] == pytest.approx(a, rel=0.1)
+
+    class _Fit:
+        pass
+    fit = _Fit()
+    fit.resid_d, fit.pred_d = res.resid, res.preds
+    assert F.selected(F.describe(fit, res.records))[0].form == "output_asymmetry"
+    clip = _residual(lambda p, t, fs: np.clip(p, -0.6 * peak, 0.6 * peak) - p)
+    assert not _fit("output_asymmetry", clip).significant
+
+
+def test_a_gain_drifting_along_the_records_is_found_shared_or_per_record():
+    """The response's gain changing by +6 % over each record (a strip drying, a sensor warming) is one
+    shared change; +6 % in one record and −5 % in the other is a change per record; a creep (slow pole)
+    of the same records is forward-selected as the slow pole, not as a drifting gain."""
+    def ramp(p):
+        return np.linspace(-0.5, 0.5, p.size) * p
+    ff = _fit("gain_drift", _residual(lambda p, t, fs: 0.06 * ramp(p)))
+    assert ff.significant and not ff.info["per_record"] and ff.params["gain_change"] == pytest.approx(0.06, rel=0.1)
+    sign = iter([0.06, -0.05])
+    ff = _fit("gain_drift", _residual(lambda p, t, fs: next(sign) * ramp(p)))
+    assert ff.significant and ff.info["per_record"] and ff.info["gain_changes"] == pytest.approx([0.06, -0.05], rel=0.1)
+
+    class _Fit:
+        pass
+    res = _residual(lambda p, t, fs: 0.3 * F.lowpass(p, 12.0, fs))
+    fit = _Fit()
+    fit.resid_d, fit.pred_d = res.resid, res.preds
+    assert F.selected(F.describe(fit, res.records))[0].form == "slow_pole"
+
+
 def test_the_slow_pole_drafts_a_full_relaxation_as_an_ac_coupled_sensor_makes(tmp_path):
     """Records seen through a first-order high-pass (a sensor's AC coupling, τ = 8 s): the residual
     is −LP_τ(prediction), read as a slow pole relaxing back completely (g ≈ −1), and the draft's

@@ -38,7 +38,9 @@ from .base import (MAX_SELECTED, MIN_GAIN, PURE, SIGNIFICANT_BIC, Form, FormFit,
                    best_on_grid, lowpass)
 from .dependence import AmplitudeDependence, RHDependence
 from .drift import Drift
+from .gain_drift import GainDrift
 from .input_side import InputDeadZone, InputSaturation
+from .output_asymmetry import OutputAsymmetry
 from .output_delay import OutputDelay
 from .output_lowpass import OutputLowPass
 from .play import Play
@@ -47,7 +49,7 @@ from .slow_pole import SlowPole
 
 #: Every form, in the order they are reported when their evidence ties.
 FORMS: tuple[type[Form], ...] = (SlowPole, OutputLowPass, OutputDelay, Drift, Play, OutputSaturation, InputDeadZone,
-                                 InputSaturation, AmplitudeDependence, RHDependence)
+                                 InputSaturation, OutputAsymmetry, GainDrift, AmplitudeDependence, RHDependence)
 
 
 def titles() -> str:

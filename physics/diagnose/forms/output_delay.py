@@ -6,7 +6,9 @@ one after the other), a = 1 for a pure delay.  Its phase lag grows in proportion
 360° · f · d, while the gain stays put; a low-pass's lag levels off at 90° or 180° and its
 gain falls (:mod:`.output_lowpass`), an electrode line's lag grows as √f.  The delay is scanned
 from a tenth of a sample to the larger of 1/(2 f_top) and eight samples, f_top the top of the
-excited band, then refined.  The effect it drafts multiplies the deflection by e^(−s d), exact
+excited band, then refined; the same on the other side of zero, an advance: records that *lead*
+the model (a sensor bandwidth or latency given larger than the setup's, a derivative term in the
+sensor's conditioning, y + τ dy/dt ≈ y(t + τ)), described, never drafted.  The effect it drafts multiplies the deflection by e^(−s d), exact
 in the frequency domain (not a rational factor: it gives ``output_response`` and
 ``filter_output``), off at d = 0.
 """
@@ -36,20 +38,44 @@ class OutputDelay(Form):
         hi = max(0.5 / res.band[1], 8.0 / fs)
         spectra = [spectral_filter(p, r.fs_d) for r, p in zip(res.records, res.preds)]
 
-        def cols(x):
-            return [[through(lambda f: delayed(f, math.exp(x[0]))) - p] for through, p in zip(spectra, res.preds)]
-        d, _ = best_on_grid(res, np.geomspace(lo, hi, 30), lambda d: cols([math.log(d)]))
-        (ld,), reg = refined(res, [math.log(d)], [(math.log(lo), math.log(hi))], cols, 1)
-        d, a = math.exp(ld), reg.gains[0]
-        pure = PURE[0] <= a <= PURE[1]
-        text = (f"a delay on the output of d ≈ {1e3 * d:.3g} ms ({d * fs:.2g} samples; residual ≈ "
-                f"a·(model output at t − d − model output), a = {a:+.3g}"
-                + ("" if pure else "; a is far from 1: a band of error, not a delay") + ")")
+        def branch(sign):
+            def cols(x):
+                return [[through(lambda f: delayed(f, sign * math.exp(x[0]))) - p]
+                        for through, p in zip(spectra, res.preds)]
+            d, _ = best_on_grid(res, np.geomspace(lo, hi, 30), lambda d: cols([math.log(d)]))
+            (ld,), reg = refined(res, [math.log(d)], [(math.log(lo), math.log(hi))], cols, 1)
+            return sign * math.exp(ld), reg
+        lag = branch(1.0)
+        leads = [b for b in (branch(-1.0), self._derivative(res)) if b is not None]
+        # a lead is reported only when it is one (an advance with a near 1, or a derivative term with
+        # τ > 0) and fits better than the lag, whose fit (pure or not) is what a draft is written from
+        lead = min(leads, key=lambda b: b[1].delta_bic, default=None)
+        d, reg = lead if lead is not None and lead[1].delta_bic < lag[1].delta_bic else lag
+        a = reg.gains[0] if reg.k > 1 else 1.0        # a derivative term is a lead of τ at unit gain
+        pure = d < 0 or PURE[0] <= a <= PURE[1]
+        why = ("the model lags the setup — a sensor bandwidth or latency given larger than the setup's, a derivative "
+               "term in the sensor's conditioning, or a model too slow at the top of the band")
+        if d > 0:
+            far = "" if pure else "; a is far from 1: a band of error, not a delay"
+            text = (f"a delay on the output of d ≈ {1e3 * d:.3g} ms ({d * fs:.2g} samples; residual ≈ "
+                    f"a·(model output at t − d − model output), a = {a:+.3g}{far})")
+        elif reg.k == 1:
+            text = (f"the records lead the model as y ≈ ŷ + τ·dŷ/dt, τ ≈ {1e3 * -d:.3g} ms ({-d * fs:.2g} samples): "
+                    + why)
+        else:
+            text = (f"the records lead the model by {1e3 * -d:.3g} ms ({-d * fs:.2g} samples; residual ≈ "
+                    f"a·(model output at t + {1e3 * -d:.3g} ms − model output), a = {a:+.3g}): " + why)
         ff = self.scored(res, reg, {"delay_s": d, "gain": a}, {"delay_s": "s", "gain": "1"}, text,
                          f_excited_Hz=[res.band[0], res.band[1]])
         ff.admissible = pure
         ff.significant = ff.significant and pure
         return ff
+
+    @staticmethod
+    def _derivative(res: Residual):
+        """(−τ, regression) of e ≈ τ·dŷ/dt when τ > 0 (a first-order lead), else None."""
+        reg = res.regress([[np.gradient(p, 1.0 / r.fs_d)] for r, p in zip(res.records, res.preds)], k_grid=0)
+        return (-reg.gains[0], reg) if reg.gains[0] > 0 else None
 
     def draft(self, ff: FormFit, res: Residual) -> list:
         """The delay as an effect, offered when the residual shows any evidence of it (ΔBIC < 0: it
@@ -57,7 +83,7 @@ class OutputDelay(Form):
         takes up most of its lag and leaves a band of error that is not significantly a delay (a
         9.3 ms dead time behind the electrode's resistance: ΔBIC −589, a = 1.5 at 0.4 ms); on a
         residual that is noise (ΔBIC ≥ 0) it is not offered, and the model is not refitted with it."""
-        if not ff.delta_bic < 0:
+        if not ff.delta_bic < 0 or ff.params["delay_s"] <= 0:      # a lead is no causal effect
             return []
         d = ff.params["delay_s"]
         fs = res.fs_min

@@ -1,0 +1,48 @@
+"""A gain that drifts along each record: the response grows or shrinks steadily while the
+drive goes on.
+
+Form: e_r ≈ a_r · ((t − t̄_r)/T_r) · ŷ_r, T_r the length of record r and t̄_r its middle: the
+response's gain changes by a_r from the start to the end of the record.  An IPMC loses water
+while it is driven in open air and its Joule heating warms it, and its gain follows its
+water content (the dependence :mod:`physics.effects.humidity` models through the RH), so a
+strip that dries during a record answers less and less; a sensor's gain drifts with its
+temperature.  Either one gain change shared by the records (the same drying
+in each) or one per record (a setup that drifts between them), whichever the evidence prefers
+(ΔBIC counts one gain, or one per record).  Unlike a slow pole (creep), which changes only the
+slow part of the response, the change acts on every frequency at once; unlike an additive
+drift it is proportional to the response.  Described, not drafted: a gain that depends on the
+time since the record began is not a property of the device's model.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Form, FormFit, Residual
+
+
+def _ramp(n: int) -> np.ndarray:
+    """(t − t̄)/T over a record of ``n`` samples: −½ at its start, +½ at its end."""
+    return np.linspace(-0.5, 0.5, n) if n > 1 else np.zeros(n)
+
+
+class GainDrift(Form):
+    id = "gain_drift"
+    title = "a gain drifting along each record (the strip drying or warming, or the sensor's gain)"
+
+    def fit(self, res: Residual) -> FormFit | None:
+        n = len(res.preds)
+        x = [_ramp(p.size) * p for p in res.preds]
+        shared = res.regress([[xi] for xi in x], k_grid=0)
+        own = res.regress([[xi if j == i else np.zeros_like(xi) for j in range(n)] for i, xi in enumerate(x)],
+                          k_grid=0) if n > 1 else shared
+        reg = own if own.delta_bic < shared.delta_bic else shared
+        gains = reg.gains if reg is own else reg.gains * n
+        if reg is shared:
+            text = (f"the response's gain changes by {100 * gains[0]:+.2g} % from the start to the end of each "
+                    "record (residual ≈ a·((t − t̄)/T)·ŷ, a shared by the records)")
+        else:
+            text = ("the response's gain changes along each record, by " + ", ".join(f"{100 * g:+.2g} %" for g in gains)
+                    + " from start to end (residual ≈ a_r·((t − t̄)/T)·ŷ, a gain change per record)")
+        return self.scored(res, reg, {"gain_change": float(np.mean(gains))}, {"gain_change": "1"},
+                           text + ": the strip drying out or warming while driven, or a sensor whose gain drifts",
+                           gain_changes=[float(g) for g in gains], per_record=reg is own)
