@@ -19,7 +19,8 @@ passive            Re Y_in ≥ 0 (the strip absorbs electrical power), no negati
 spec               the diagnosis spec is complete: bounds and starts inside them, roles, off
                    values, signature features (skipped: not a diagnosis candidate)
 solvers            frequency and time solvers agree within 1 % / 1° over 0.1–20 Hz (linear; the
-                   time response to no input, e.g. an additive drift, subtracted)
+                   time response to no input, e.g. an additive drift, subtracted; skipped for a
+                   map of the deflection that is nonlinear or changes along the record)
 off                the spec's ``off`` values give exactly the model without the effect
 identify           identification on its own noise-free FRF recovers the free parameters
                    within 2 % (linear, not fitted through a describing function); parameters
@@ -344,11 +345,33 @@ class _Context:
             return "skip", "large-signal effect: the frequency solver gives its small-signal form only"
         if issubclass(self.cls, InputEffect) and not self._linear_input_map():
             return "skip", "a nonlinear map of the voltage: the frequency solver gives its small-signal form only"
+        if issubclass(self.cls, OutputEffect) and (why := self._output_map_not_lti()):
+            return "skip", f"{why}: the frequency solver gives the response at the drive's own lines only"
         f, H = self._periodic_frf(self.model)
         ratio = H / frequency_response(self.model, None, f, rh=self.rh).deflection
         mag, ph = np.max(np.abs(np.abs(ratio) - 1)), np.max(np.abs(np.degrees(np.angle(ratio))))
         detail = f"time vs closed form over 0.1–20 Hz: {100 * mag:.3g} % and {ph:.3g}° at most"
         return ("pass" if mag < 0.01 and ph < 1.0 else "fail"), detail + " (limits 1 %, 1°)"
+
+    def _output_map_not_lti(self) -> str:
+        """Why the effect's ``filter_output``, less its response to no input (an additive drift), is
+        no linear time-invariant map of the deflection ("" when it is one): superposition on two
+        tones, and the response to a tone shifted by a second against the shifted response (an
+        even map of the output, a gain that drifts along the record)."""
+        e, p = self._instance(), self.model.params_at(self.rh)
+        a, b = signals.tone(0.3, 0.7, 8.0, 100.0).v, signals.tone(0.2, 3.0, 8.0, 100.0).v
+        zero = np.asarray(e.filter_output(np.zeros_like(a), 100.0, p), float)
+
+        def out(x):
+            return np.asarray(e.filter_output(x, 100.0, p), float) - zero
+        fa, fb, fab = out(a), out(b), out(2.0 * a + b)
+        tol = 1e-9 * np.max(np.abs(fab))
+        if not np.allclose(fab, 2.0 * fa + fb, rtol=1e-9, atol=tol):
+            return "a nonlinear map of the deflection"
+        shifted = out(np.concatenate([np.zeros(100), a[:-100]]))
+        if not np.allclose(shifted[400:], fa[300:-100], rtol=1e-6, atol=1e-6 * np.max(np.abs(fa))):
+            return "a map of the deflection that changes along the record"
+        return ""
 
     def _linear_input_map(self) -> bool:
         """True when the effect's ``filter_input`` is linear (superposition on two tones)."""

@@ -321,6 +321,29 @@ def test_bending_unequal_in_the_two_directions_is_an_even_form(exponent, a):
     assert not _fit("output_asymmetry", clip).significant
 
 
+@pytest.mark.parametrize("form_id, made, param, value", [
+    ("output_asymmetry", lambda p: 0.15 * np.abs(p), "asymmetry_gain", 0.15),
+    ("gain_drift", lambda p: 0.06 * np.linspace(-0.5, 0.5, p.size) * p, "gain_drift", 0.06)])
+def test_even_and_drifting_gain_drafts_pass_the_contract_and_rebuild_the_records(form_id, made, param, value, tmp_path):
+    """The drafts of the two forms are output effects (the frequency response unchanged, their one
+    parameter fitted on the time records) whose time path turns the prediction into the records."""
+    from physics.contract import time_only_params
+    from physics.effects import register
+    from physics.model import ActuatorModel
+
+    res = _residual(lambda p, t, fs: made(p))
+    ff = _fit(form_id, res)
+    cls = _written_draft(form_id, ff, res, tmp_path)
+    register(cls)
+    effect = cls(load_device("ipmc_pt_eg"))
+    y = res.preds[0]
+    np.testing.assert_allclose(effect.filter_output(y, 100.0, {param: value}), y + made(y), atol=1e-12)
+    np.testing.assert_allclose(effect.filter_output(y, 100.0, {param: 0.0}), y)
+    dev = load_device("ipmc_pt_eg").with_params(**{param: value})
+    model = ActuatorModel(dev, ["double_layer", cls.id])
+    assert time_only_params(model, [param], dict(dev.params)) == [param]
+
+
 def test_a_gain_drifting_along_the_records_is_found_shared_or_per_record():
     """The response's gain changing by +6 % over each record (a strip drying, a sensor warming) is one
     shared change; +6 % in one record and −5 % in the other is a change per record; a creep (slow pole)

@@ -181,6 +181,28 @@ class Relax(LoadEffect):
         return [(1.0 - r) * tau, 1.0], [tau, 1.0]
 
 
+class _WrongPath(Lag):
+    """A time path that forgets the lag (linear and time-invariant, yet not the closed form)."""
+    id = "sensor_lag_wrong_x"
+
+    def filter_output(self, y, fs, p):
+        return np.asarray(y, float)
+
+
+class _EvenMap(Lag):
+    """An even map of the deflection in the time path (y + 0.1|y|/m): no LTI map to compare."""
+    id = "sensor_even_x"
+
+    def filter_output(self, y, fs, p):
+        return super().filter_output(y, fs, p) + 0.1 * np.abs(np.asarray(y, float))
+
+
+def test_the_solvers_check_skips_only_an_output_map_that_is_not_linear_time_invariant():
+    wrong, even = check_effect(_WrongPath), check_effect(_EvenMap)
+    assert wrong["solvers"].status == "fail", str(wrong)
+    assert even["solvers"].status == "skip" and "nonlinear map of the deflection" in even["solvers"].detail
+
+
 COUPLING = next(c for c in CHAIN if c.stage == "coupling")
 
 

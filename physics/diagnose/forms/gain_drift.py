@@ -10,13 +10,16 @@ temperature.  Either one gain change shared by the records (the same drying
 in each) or one per record (a setup that drifts between them), whichever the evidence prefers
 (ΔBIC counts one gain, or one per record).  Unlike a slow pole (creep), which changes only the
 slow part of the response, the change acts on every frequency at once; unlike an additive
-drift it is proportional to the response.  Described, not drafted: a gain that depends on the
-time since the record began is not a property of the device's model.
+drift it is proportional to the response.  The effect it drafts
+(the shared change only: one per record is the setup's, not a model's) scales the simulated
+deflection by 1 + g·(t/T − ½), t from the record's start; the response averaged over a
+record is unchanged, so g is fitted on the time records; off at g = 0.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..effect_draft import EffectDraft, Param
 from .base import Form, FormFit, Residual
 
 
@@ -27,7 +30,7 @@ def _ramp(n: int) -> np.ndarray:
 
 class GainDrift(Form):
     id = "gain_drift"
-    title = "a gain drifting along each record (the strip drying or warming, or the sensor's gain)"
+    title = "gain drifting along each record (the strip drying or warming, or the sensor's gain)"
 
     def fit(self, res: Residual) -> FormFit | None:
         n = len(res.preds)
@@ -46,3 +49,30 @@ class GainDrift(Form):
         return self.scored(res, reg, {"gain_change": float(np.mean(gains))}, {"gain_change": "1"},
                            text + ": the strip drying out or warming while driven, or a sensor whose gain drifts",
                            gain_changes=[float(g) for g in gains], per_record=reg is own)
+
+    def draft(self, ff: FormFit, res: Residual) -> list:
+        """The draft, offered only where the form is significant: it is fitted on the time records, and
+        every draft offered is fitted with the model in each draft round."""
+        if not ff.significant:
+            return []
+        g = ff.params["gain_change"]
+        return [EffectDraft(
+            form=self.id, effect_id="drafted_gain_drift", class_name="DraftedGainDrift",
+            summary="a gain drifting along each record: y·(1 + g·(t/T − ½))",
+            model=("The simulated deflection is scaled by 1 + g·(t/T − ½), t from the record's start and T its length: "
+                   "the response grows (g > 0) or shrinks steadily while the drive goes on, the same change in every "
+                   "record; the response averaged over a record is unchanged, so g is fitted on the time records; "
+                   "g = 0 is the model without it.  A strip drying out or warming while driven, or a sensor's gain "
+                   "drift: check which before using the model for control."),
+            params=[Param("gain_drift", "1", -0.9, 0.9, "g: change of the gain from a record's start to its end",
+                          g, "signed")],
+            scan="gain_drift", off={"gain_drift": 0.0},
+            excitation="records of the length the model is used for (any input)", reveal={},
+            signature=[("slow_trend", 1.0)],
+            body=('    def filter_output(self, y, fs, p):\n'
+                  '        y = np.asarray(y, float)\n'
+                  '        return y * (1.0 + self.value(p, "gain_drift") * np.linspace(-0.5, 0.5, y.size))\n'
+                  '\n'
+                  '    def output_response(self, s, p):\n'
+                  '        return np.ones_like(np.asarray(s), dtype=complex)     # unchanged on average\n'),
+            imports=("import numpy as np",))]

@@ -8,13 +8,16 @@ differs by direction, y = ŷ (1 + a sign ŷ): electrodes of unequal thickness or
 strip pre-curved or clamped off its neutral plane; p = 2 a curved calibration, y = ŷ + a ŷ²/P:
 a triangulation or eddy-current sensor read off its linear range, a lever arm that changes
 with the bend.  At the largest deflection the two directions differ by 2a (both p).
-Described, not drafted: a static even map of the output is no linear factor, and writing it as
-an effect needs the large-signal time path and a describing function for the frequency fit.
+The effect it drafts maps the simulated deflection y ↦ y + a|y|^p/P^(p−1) (P and p as found,
+constants of the file), off at a = 0; an even map adds no line at a sinusoidal drive's own
+frequency (its describing function is 1), so the frequency response is unchanged and a is
+fitted on the time records.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..effect_draft import EffectDraft, Param
 from .base import Form, FormFit, Residual, best_on_grid
 
 #: The exponents p tried: a gain that differs by direction (1) and a curved calibration (2).
@@ -37,3 +40,30 @@ class OutputAsymmetry(Form):
                            f"much smaller the other way at the largest predicted deflection ({1e6 * peak:.3g} µm; "
                            f"{law}, a = {a:+.3g}): unequal electrodes, a pre-curved or off-centre clamped strip, or a "
                            "sensor read off its linear range")
+
+    def draft(self, ff: FormFit, res: Residual) -> list:
+        """The draft, offered only where the form is significant: it is fitted on the time records, and
+        every draft offered is fitted with the model in each draft round."""
+        if not ff.significant:
+            return []
+        a, p, peak = ff.params["gain"], ff.params["exponent"], ff.params["peak_m"]
+        law = "|y|" if p == 1.0 else f"y²/P, P = {peak:.4g} m"
+        return [EffectDraft(
+            form=self.id, effect_id="drafted_output_asymmetry", class_name="DraftedOutputAsymmetry",
+            summary=f"bending unequal in the two directions: y + a·{law}",
+            model=(f"The simulated deflection y is read as y + a·{law} (a gain that differs by direction for "
+                   "|y|, a curved calibration for y²): an even map, which adds no line at a sinusoidal drive's own "
+                   "frequency, so the frequency response is unchanged and a is fitted on the time records; a = 0 "
+                   "is the model without it."),
+            params=[Param("asymmetry_gain", "1", -0.9, 0.9, "a: relative excess of the deflection one way at P",
+                          a, "signed")],
+            scan="asymmetry_gain", off={"asymmetry_gain": 0.0},
+            excitation="records that bend the strip both ways (any input)", reveal={},
+            signature=[("harmonics", 1.0)],
+            body=('    def filter_output(self, y, fs, p):\n'
+                  '        y = np.asarray(y, float)\n'
+                  f'        return y + self.value(p, "asymmetry_gain") * np.abs(y) ** {p!r} / {peak ** (p - 1.0)!r}\n'
+                  '\n'
+                  '    def output_response(self, s, p):\n'
+                  '        return np.ones_like(np.asarray(s), dtype=complex)     # an even map: the fundamental unchanged\n'),
+            imports=("import numpy as np",))]

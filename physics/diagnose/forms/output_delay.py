@@ -1,4 +1,4 @@
-"""Delay on the output: the deflection is logged later than the voltage (sensor or logger latency).
+"""Delay on the output: the deflection is logged later than the voltage (sensor or logger latency), or earlier.
 
 Form: e ≈ a · (ŷ(t − d) − ŷ): the measured deflection is the model's shifted by a dead time d
 (a laser head's processing time, a controller's output stage, two channels of a logger sampled
@@ -30,7 +30,7 @@ def delayed(f, d: float) -> np.ndarray:
 
 class OutputDelay(Form):
     id = "output_delay"
-    title = "delay on the output (sensor or logger latency)"
+    title = "delay (or lead) of the output against the model (a sensor's or logger's latency)"
 
     def fit(self, res: Residual) -> FormFit | None:
         fs = res.fs_min
