@@ -45,11 +45,11 @@ class OutputDelay(Form):
             d, _ = best_on_grid(res, np.geomspace(lo, hi, 30), lambda d: cols([math.log(d)]))
             (ld,), reg = refined(res, [math.log(d)], [(math.log(lo), math.log(hi))], cols, 1)
             return sign * math.exp(ld), reg
-        lag = branch(1.0)
-        leads = [b for b in (branch(-1.0), self._derivative(res)) if b is not None]
+        lag, advance = branch(1.0), branch(-1.0)
         # a lead is reported only when it is one (an advance with a near 1, or a derivative term with
         # τ > 0) and fits better than the lag, whose fit (pure or not) is what a draft is written from
-        lead = min(leads, key=lambda b: b[1].delta_bic, default=None)
+        leads = [self._derivative(res)] + ([advance] if PURE[0] <= advance[1].gains[0] <= PURE[1] else [])
+        lead = min((b for b in leads if b is not None), key=lambda b: b[1].delta_bic, default=None)
         d, reg = lead if lead is not None and lead[1].delta_bic < lag[1].delta_bic else lag
         a = reg.gains[0] if reg.k > 1 else 1.0        # a derivative term is a lead of τ at unit gain
         pure = d < 0 or PURE[0] <= a <= PURE[1]
