@@ -13,6 +13,7 @@ import pytest
 from physics.diagnose import forms as F
 from physics.diagnose.draft import check_draft, write_drafts
 from physics.diagnose.forms.output_lowpass import lowpass2
+from physics.diagnose.forms.play import play
 from physics.diagnose.records import response_filter
 from physics.device import load_device
 from physics.effects import EFFECTS, InputEffect, effect_classes_in_file, load_effects_file, unregister
@@ -321,12 +322,13 @@ def test_bending_unequal_in_the_two_directions_is_an_even_form(exponent, a):
     assert not _fit("output_asymmetry", clip).significant
 
 
-@pytest.mark.parametrize("form_id, made, param, value", [
-    ("output_asymmetry", lambda p: 0.15 * np.abs(p), "asymmetry_gain", 0.15),
-    ("gain_drift", lambda p: 0.06 * np.linspace(-0.5, 0.5, p.size) * p, "gain_drift", 0.06)])
-def test_even_and_drifting_gain_drafts_pass_the_contract_and_rebuild_the_records(form_id, made, param, value, tmp_path):
-    """The drafts of the two forms are output effects (the frequency response unchanged, their one
-    parameter fitted on the time records) whose time path turns the prediction into the records."""
+@pytest.mark.parametrize("form_id, made, values", [
+    ("output_asymmetry", lambda p: 0.15 * np.abs(p), {"asymmetry_gain": 0.15}),
+    ("gain_drift", lambda p: 0.06 * np.linspace(-0.5, 0.5, p.size) * p, {"gain_drift": 0.06}),
+    ("hysteresis", lambda p: 0.5 * (play(p, 0.2 * GAIN) - p), {"play_share": 0.5, "play_width": 0.2 * GAIN})])
+def test_even_map_drifting_gain_and_play_drafts_pass_the_contract_and_rebuild_the_records(form_id, made, values, tmp_path):
+    """The drafts of the three forms are output effects (the frequency response unchanged, their
+    parameters fitted on the time records) whose time path turns the prediction into the records."""
     from physics.contract import time_only_params
     from physics.effects import register
     from physics.model import ActuatorModel
@@ -337,11 +339,12 @@ def test_even_and_drifting_gain_drafts_pass_the_contract_and_rebuild_the_records
     register(cls)
     effect = cls(load_device("ipmc_pt_eg"))
     y = res.preds[0]
-    np.testing.assert_allclose(effect.filter_output(y, 100.0, {param: value}), y + made(y), atol=1e-12)
-    np.testing.assert_allclose(effect.filter_output(y, 100.0, {param: 0.0}), y)
-    dev = load_device("ipmc_pt_eg").with_params(**{param: value})
+    np.testing.assert_allclose(effect.filter_output(y, 100.0, values), y + made(y), atol=1e-12)
+    off = {n: 0.0 for n in cls.diagnosis["off"]}
+    np.testing.assert_allclose(effect.filter_output(y, 100.0, {**values, **off}), y)
+    dev = load_device("ipmc_pt_eg").with_params(**values)
     model = ActuatorModel(dev, ["double_layer", cls.id])
-    assert time_only_params(model, [param], dict(dev.params)) == [param]
+    assert time_only_params(model, list(values), dict(dev.params)) == list(values)
 
 
 def test_a_gain_drifting_along_the_records_is_found_shared_or_per_record():
