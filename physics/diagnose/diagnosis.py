@@ -60,7 +60,7 @@ from ..execution.threads import single_threaded
 from .candidates import (Comparison, ModelFit, ModelSpec, ROLE_GAIN, ROLE_STIFF, candidate_spec, compare_fits,
                          default_candidates, default_free, derived_starts, effect_rows, effect_values, fit_model, is_nested,
                          no_worse_than_base, param_used, prediction_distance, refine_on_time, removal_spec, score,
-                         start_in_range, start_on_time, TIME_REFINE_SIMS)
+                         start_in_range, start_on_time, held_on_time, TIME_REFINE_SIMS)
 from . import confidence as conf
 from .adequacy import Adequacy, assess
 from .forms import MIN_GAIN, SIGNIFICANT_BIC
@@ -1466,7 +1466,7 @@ def _fit_candidate(task: dict):
                      df_cache=task["df_cache"] if task["df_cache"] is not None else {})
     if mf.ok:
         score(mf, task["records"])
-        start_on_time(mf, task["records"])
+        start_on_time(mf, task["records"]) or held_on_time(mf, task["records"])
     return mf, time.perf_counter() - t0
 
 
