@@ -379,6 +379,45 @@ def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
     assert fit.values["diffuse_share"] == pytest.approx(0.25, rel=0.2)
 
 
+@pytest.mark.parametrize("share", [0.25, 1.0])
+def test_a_large_signal_parameter_held_at_one_amplitude_is_chosen_on_the_time_records(share):
+    """Two multisines of one level (1.5 V RMS) cannot tell the compact layers' share from the gain in the
+    frequency fit (the describing function only scales the fundamental), so it is held at the
+    device's value (1, layers that saturate at tenths of a volt); the records' waveform can: the share
+    is chosen on them, within a step of the grid of the truth's (0.25), the error falls and the
+    parameter counts in the BIC.  When the held value is the truth's, it stays."""
+    from physics import signals
+    from physics.io.record import TimeSeries
+    from physics.model import ActuatorModel
+    from physics.solvers.timedomain import simulate
+    truth = ActuatorModel(load_device("ipmc_pt_eg").with_params(diffuse_share=share), ["nonlinear_charge"])
+    rng = np.random.default_rng(2)
+    records = []
+    for k in range(2):
+        sig = signals.multisine(1.5, 0.1, 20.0, 10.0, periods=2, fs=100.0, seed=k)
+        y = simulate(truth, None, sig.t, sig.v, rh=60.0, hold="cubic").deflection
+        records.append(TimeSeries(sig.t, sig.v, y + rng.normal(0, 0.3e-6, y.size), rh=np.full(y.size, 60.0),
+                                  source=f"ms{k}"))
+    dev = load_device("ipmc_pt_eg")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_records(records, FitOptions())
+        ids = tuple(C.resolve_effects(["double_layer"], dev))
+        spec = C.candidate_spec("nonlinear_charge", ids, ["kf", "Y", "beta_f"], [], dev, data.band, 1)
+        fit = C.score(C.fit_model(spec, dev, data.targets, data.target_records, n_starts=2), data.records)
+        assert fit.ok and not fit.df_info["fitted"] and fit.device.params.get("diffuse_share", 1.0) == 1.0
+        before, k = fit.rmse, fit.k
+        moved = C.held_on_time(fit, data.records)
+    if share == 1.0:
+        assert not moved and fit.rmse == before
+        return
+    assert moved and fit.k == k + 1 and fit.rmse < 0.5 * before
+    assert 0.18 <= fit.device.params["diffuse_share"] <= 0.34 and fit.values["diffuse_share"] == \
+        fit.device.params["diffuse_share"]
+    assert any(n.startswith("diffuse_share chosen on the time records") for n in fit.spec.notes)
+    assert not any(n.startswith("diffuse_share held at") for n in fit.spec.notes)
+
+
 def test_a_large_signal_fit_holds_a_free_parameter_without_effect():
     """The describing-function fit of a large-signal candidate holds a free parameter that leaves
     the frequency response unchanged, as the linear fit does (the damping factor at ~0 beside a
