@@ -102,8 +102,8 @@ RECENTRE_GAIN = 1e-3
 #: squares by more than this share (2 %, ~1 % in RMS: less is not worth a time-domain refinement).
 TIME_START_GAIN = 0.02
 #: Simulations of every record spent refining a held large-signal parameter between its grid's
-#: neighbours on the time records (:func:`held_on_time`), beside one per grid coordinate.
-HELD_REFINE_SIMS = 6
+#: neighbours on the time records (:func:`held_on_time`), beside one per other grid coordinate.
+HELD_REFINE_SIMS = 5
 
 
 def gain_param(ids) -> str:
@@ -959,8 +959,8 @@ def held_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     gain (:func:`_df_problem` holds it at the device's value, e.g. ``diffuse_share`` 1: a charge
     law that saturates at a few tenths of a volt), while the waveform of the time records — its
     harmonics, the flattened top of a square — shows how the strip saturates.  When the added
-    effect is the large-signal one, each coordinate of its describing grid is simulated on every
-    record with the gain profiled out in closed form (as :func:`start_on_time`), the best is
+    effect is the large-signal one, every other coordinate of its describing grid is simulated on
+    every record with the gain profiled out in closed form (as :func:`start_on_time`), the best is
     refined between its neighbours (:data:`HELD_REFINE_SIMS`) and replaces the held value when it lowers the time records' sum of squares by more than
     :data:`TIME_START_GAIN`, the gain is refined and the model scored again; the parameter then
     counts in the model's BIC.  Chosen on a strip whose double layer saturates through compact
@@ -988,12 +988,13 @@ def held_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
             base = cost(now)
-            tried = {c: cost(scale / c) for c in coords if not math.isclose(scale / c, now, rel_tol=1e-6)}
+            grid = sorted(set(coords[::2]) | {coords[-1]})     # every other one and the last, refined (log scale)
+            tried = {c: cost(scale / c) for c in grid if not math.isclose(scale / c, now, rel_tol=1e-6)}
             if not tried:
                 return False
             best = min(tried, key=tried.get)
-            i = list(coords).index(best)     # refined between the grid's neighbours (log scale)
-            lo, hi = math.log(coords[max(i - 1, 0)]), math.log(coords[min(i + 1, len(coords) - 1)])
+            i = grid.index(best)
+            lo, hi = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, len(grid) - 1)])
             sol = minimize_scalar(lambda x: cost(scale / math.exp(x)), bounds=(lo, hi), method="bounded",
                                   options={"maxiter": HELD_REFINE_SIMS, "xatol": 0.02})
             if sol.fun < tried[best]:
