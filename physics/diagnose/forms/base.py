@@ -13,6 +13,7 @@ from scipy.signal import lfilter, lfilter_zi
 
 from ...analysis import stats
 from ...analysis.metrics import remove_nuisance
+from ..effect_draft import EffectDraft, Param
 
 #: A form is significant at ΔBIC ≤ −this (very strong evidence, Kass & Raftery) ...
 SIGNIFICANT_BIC = 10.0
@@ -171,6 +172,33 @@ class Form:
         sig = bool(reg.delta_bic <= -SIGNIFICANT_BIC and gain >= MIN_GAIN)
         return FormFit(self.id, params, units, text, reg.delta_bic, gain, sig, reg.parts, reg.k, reg.rss, info=info,
                        draftable=type(self).draft is not Form.draft)
+
+
+def time_path_draft(ff: FormFit, name: str, summary: str, model: str, params: list[Param], returns: str,
+                    excitation: str, signature: str, imports: tuple[str, ...] = ()) -> list[EffectDraft]:
+    """The draft of a form written as a map of the simulated deflection that leaves the frequency
+    response at 1 (an even map, a gain that averages out over a record, a play): its parameters
+    are fitted on the time records (:func:`physics.contract.time_only_params`), so it is offered
+    only where the form is significant (every draft offered is fitted with the model in each
+    draft round).  ``returns``: the expression ``filter_output`` returns, of ``y`` (an array [m]),
+    ``fs`` and ``p``; the last parameter is scanned (its value, a third and three times it), the first
+    off at 0."""
+    if not ff.significant:
+        return []
+    first = params[0].name
+    return [EffectDraft(
+        form=ff.form, effect_id=f"drafted_{name}", class_name="Drafted" + "".join(w.title() for w in name.split("_")),
+        summary=summary, model=model + "  Its frequency response is left at 1, so its parameters are fitted on the "
+                                       f"time records; {first} = 0 is the model without it.",
+        params=params, scan=params[-1].name, off={first: 0.0}, excitation=excitation, reveal={},
+        signature=[(signature, 1.0)],
+        body=('    def filter_output(self, y, fs, p):\n'
+              '        y = np.asarray(y, float)\n'
+              f'        return {returns}\n'
+              '\n'
+              '    def output_response(self, s, p):\n'
+              '        return np.ones_like(np.asarray(s), dtype=complex)\n'),
+        imports=("import numpy as np",) + imports)]
 
 
 def best_on_grid(res: Residual, grid, columns, k_grid: int = 1,

@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..effect_draft import EffectDraft, Param
-from .base import Form, FormFit, Residual
+from ..effect_draft import Param
+from .base import Form, FormFit, Residual, time_path_draft
 
 
 def _ramp(n: int) -> np.ndarray:
@@ -51,28 +51,13 @@ class GainDrift(Form):
                            gain_changes=[float(g) for g in gains], per_record=reg is own)
 
     def draft(self, ff: FormFit, res: Residual) -> list:
-        """The draft, offered only where the form is significant: it is fitted on the time records, and
-        every draft offered is fitted with the model in each draft round."""
-        if not ff.significant:
-            return []
-        g = ff.params["gain_change"]
-        return [EffectDraft(
-            form=self.id, effect_id="drafted_gain_drift", class_name="DraftedGainDrift",
-            summary="a gain drifting along each record: y·(1 + g·(t/T − ½))",
-            model=("The simulated deflection is scaled by 1 + g·(t/T − ½), t from the record's start and T its length: "
-                   "the response grows (g > 0) or shrinks steadily while the drive goes on, the same change in every "
-                   "record; the response averaged over a record is unchanged, so g is fitted on the time records; "
-                   "g = 0 is the model without it.  A strip drying out or warming while driven, or a sensor's gain "
-                   "drift: check which before using the model for control."),
-            params=[Param("gain_drift", "1", -0.9, 0.9, "g: change of the gain from a record's start to its end",
-                          g, "signed")],
-            scan="gain_drift", off={"gain_drift": 0.0},
-            excitation="records of the length the model is used for (any input)", reveal={},
-            signature=[("slow_trend", 1.0)],
-            body=('    def filter_output(self, y, fs, p):\n'
-                  '        y = np.asarray(y, float)\n'
-                  '        return y * (1.0 + self.value(p, "gain_drift") * np.linspace(-0.5, 0.5, y.size))\n'
-                  '\n'
-                  '    def output_response(self, s, p):\n'
-                  '        return np.ones_like(np.asarray(s), dtype=complex)     # unchanged on average\n'),
-            imports=("import numpy as np",))]
+        return time_path_draft(
+            ff, "gain_drift", "a gain drifting along each record: y·(1 + g·(t/T − ½))",
+            "The simulated deflection is scaled by 1 + g·(t/T − ½), t from the record's start and T its length: the "
+            "response grows (g > 0) or shrinks steadily while the drive goes on, the same change in every record, "
+            "unchanged on average.  A strip drying out or warming while driven, or a sensor's gain drift: check which "
+            "before using the model for control.",
+            [Param("gain_drift", "1", -0.9, 0.9, "g: change of the gain from a record's start to its end",
+                   ff.params["gain_change"], "signed")],
+            'y * (1.0 + self.value(p, "gain_drift") * np.linspace(-0.5, 0.5, y.size))',
+            "records of the length the model is used for (any input)", "slow_trend")

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..effect_draft import EffectDraft, Param
-from .base import Form, FormFit, Residual, best_on_grid
+from ..effect_draft import Param
+from .base import Form, FormFit, Residual, best_on_grid, time_path_draft
 
 #: The exponents p tried: a gain that differs by direction (1) and a curved calibration (2).
 EXPONENTS = (1.0, 2.0)
@@ -42,28 +42,12 @@ class OutputAsymmetry(Form):
                            "sensor read off its linear range")
 
     def draft(self, ff: FormFit, res: Residual) -> list:
-        """The draft, offered only where the form is significant: it is fitted on the time records, and
-        every draft offered is fitted with the model in each draft round."""
-        if not ff.significant:
-            return []
         a, p, peak = ff.params["gain"], ff.params["exponent"], ff.params["peak_m"]
         law = "|y|" if p == 1.0 else f"y²/P, P = {peak:.4g} m"
-        return [EffectDraft(
-            form=self.id, effect_id="drafted_output_asymmetry", class_name="DraftedOutputAsymmetry",
-            summary=f"bending unequal in the two directions: y + a·{law}",
-            model=(f"The simulated deflection y is read as y + a·{law} (a gain that differs by direction for "
-                   "|y|, a curved calibration for y²): an even map, which adds no line at a sinusoidal drive's own "
-                   "frequency, so the frequency response is unchanged and a is fitted on the time records; a = 0 "
-                   "is the model without it."),
-            params=[Param("asymmetry_gain", "1", -0.9, 0.9, "a: relative excess of the deflection one way at P",
-                          a, "signed")],
-            scan="asymmetry_gain", off={"asymmetry_gain": 0.0},
-            excitation="records that bend the strip both ways (any input)", reveal={},
-            signature=[("harmonics", 1.0)],
-            body=('    def filter_output(self, y, fs, p):\n'
-                  '        y = np.asarray(y, float)\n'
-                  f'        return y + self.value(p, "asymmetry_gain") * np.abs(y) ** {p!r} / {peak ** (p - 1.0)!r}\n'
-                  '\n'
-                  '    def output_response(self, s, p):\n'
-                  '        return np.ones_like(np.asarray(s), dtype=complex)     # an even map: the fundamental unchanged\n'),
-            imports=("import numpy as np",))]
+        return time_path_draft(
+            ff, "output_asymmetry", f"bending unequal in the two directions: y + a·{law}",
+            f"The simulated deflection y is read as y + a·{law} (a gain that differs by direction for |y|, a curved "
+            "calibration for y²): an even map, which adds no line at a sinusoidal drive's own frequency.",
+            [Param("asymmetry_gain", "1", -0.9, 0.9, "a: relative excess of the deflection one way at P", a, "signed")],
+            f'y + self.value(p, "asymmetry_gain") * np.abs(y) ** {p!r} / {peak ** (p - 1.0)!r}',
+            "records that bend the strip both ways (any input)", "harmonics")

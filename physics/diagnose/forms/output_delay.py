@@ -8,8 +8,9 @@ gain falls (:mod:`.output_lowpass`), an electrode line's lag grows as √f.  The
 from a tenth of a sample to the larger of 1/(2 f_top) and eight samples, f_top the top of the
 excited band, then refined; the same on the other side of zero, an advance: records that *lead*
 the model (a sensor bandwidth or latency given larger than the setup's, a derivative term in the
-sensor's conditioning, y + τ dy/dt ≈ y(t + τ)), described, never drafted.  The effect it drafts multiplies the deflection by e^(−s d), exact
-in the frequency domain (not a rational factor: it gives ``output_response`` and
+sensor's conditioning, y + τ dy/dt ≈ y(t + τ); a first-order lead τ·dŷ/dt is tried beside it),
+described, never drafted.  The effect it drafts multiplies the deflection by e^(−s d), exact in
+the frequency domain (not a rational factor: it gives ``output_response`` and
 ``filter_output``), off at d = 0.
 """
 from __future__ import annotations

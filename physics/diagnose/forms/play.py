@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..effect_draft import EffectDraft, Param
-from .base import Form, FormFit, Residual, best_on_grid
+from ..effect_draft import Param
+from .base import Form, FormFit, Residual, best_on_grid, time_path_draft
 
 
 def play(x: np.ndarray, width: float) -> np.ndarray:
@@ -43,30 +43,14 @@ class Play(Form):
                            f"a rate-independent loop (backlash/play) on the output of width ≈ {1e6 * abs(w * a):.3g} µm")
 
     def draft(self, ff: FormFit, res: Residual) -> list:
-        """The play as an output effect, offered only where the form is significant (fitted on the
-        time records; every draft offered is fitted with the model in each draft round)."""
-        if not ff.significant:
-            return []
-        w, a = ff.params["play_width_m"], ff.params["gain"]
-        return [EffectDraft(
-            form=self.id, effect_id="drafted_play", class_name="DraftedPlay",
-            summary="a play (backlash) on the tip deflection: (1 − a)·y + a·P_w(y)",
-            model=("The simulated deflection y is read as (1 − a)·y + a·P_w(y), P_w the play operator of total width w "
-                   "(what the sensor sees follows the strip only after the slack w is taken up) started centred on "
-                   "the first sample: a loop of width a·w whatever the frequency.  Its frequency response is left "
-                   "unchanged (a play's describing function depends on the amplitude), so a and w are fitted on the "
-                   "time records; a = 0 is the model without it."),
-            params=[Param("play_share", "1", 0.0, 1.5, "a: share of the deflection seen through the play", a,
-                          (0.02, 1.5)),
-                    Param("play_width", "m", 1e-9, 1e-2, "w: total width of the play", w)],
-            scan="play_width", off={"play_share": 0.0},
-            excitation="records that reverse the bend (any periodic drive)", reveal={},
-            signature=[("harmonics", 1.0)],
-            body=('    def filter_output(self, y, fs, p):\n'
-                  '        y = np.asarray(y, float)\n'
-                  '        a = self.value(p, "play_share")\n'
-                  '        return (1.0 - a) * y + a * play(y, self.value(p, "play_width"))\n'
-                  '\n'
-                  '    def output_response(self, s, p):\n'
-                  '        return np.ones_like(np.asarray(s), dtype=complex)     # amplitude-dependent: fitted in time\n'),
-            imports=("import numpy as np", "", "from physics.diagnose.forms.play import play"))]
+        return time_path_draft(
+            ff, "play", "a play (backlash) on the tip deflection: (1 − a)·y + a·P_w(y)",
+            "The simulated deflection y is read as (1 − a)·y + a·P_w(y), P_w the play operator of total width w (what "
+            "the sensor sees follows the strip only after the slack w is taken up) started centred on the first "
+            "sample: a loop of width a·w whatever the frequency (its describing function depends on the amplitude).",
+            [Param("play_share", "1", 0.0, 1.5, "a: share of the deflection seen through the play", ff.params["gain"],
+                   (0.02, 1.5)),
+             Param("play_width", "m", 1e-9, 1e-2, "w: total width of the play", ff.params["play_width_m"])],
+            '(1.0 - self.value(p, "play_share")) * y + self.value(p, "play_share") * play(y, self.value(p, "play_width"))',
+            "records that reverse the bend (any periodic drive)", "harmonics",
+            ("", "from physics.diagnose.forms.play import play"))
