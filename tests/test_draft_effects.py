@@ -51,12 +51,13 @@ def _respond(k, u):
     return GAIN * u
 
 
-def _residual(make_resid, seed=0, noise=1e-6):
-    """Two records (a sweep and a pulse of 1 V, 60 s at 100 Hz, the prediction GAIN × the
-    voltage), the residual ``make_resid(pred, t, fs)`` + white noise."""
+def _residual(make_resid, seed=0, noise=1e-6, multisine=False):
+    """Two records (a sweep — or a multisine — and a pulse of 1 V, 60 s at 100 Hz, the prediction
+    GAIN × the voltage), the residual ``make_resid(pred, t, fs)`` + white noise."""
     rng = np.random.default_rng(seed)
     fs, t = 100.0, np.arange(6000) / 100.0
-    sweep = np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
+    sweep = (sum(np.sin(2 * np.pi * f * t + k) for k, f in enumerate((0.2, 0.7, 1.9, 4.3, 11.0))) / 2.5 if multisine
+             else np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2)))
     pulse = ((t > 5) & (t < 25)).astype(float)
     recs, resid, preds = [], [], []
     for v in (sweep, pulse):
@@ -333,7 +334,7 @@ def test_even_map_drifting_gain_and_play_drafts_pass_the_contract_and_rebuild_th
     from physics.effects import register
     from physics.model import ActuatorModel
 
-    res = _residual(lambda p, t, fs: made(p))
+    res = _residual(lambda p, t, fs: made(p), multisine=True)
     ff = _fit(form_id, res)
     cls = _written_draft(form_id, ff, res, tmp_path)
     register(cls)
@@ -349,15 +350,23 @@ def test_even_map_drifting_gain_and_play_drafts_pass_the_contract_and_rebuild_th
 
 def test_a_gain_drifting_along_the_records_is_found_shared_or_per_record():
     """The response's gain changing by +6 % over each record (a strip drying, a sensor warming) is one
-    shared change; +6 % in one record and −5 % in the other is a change per record; a creep (slow pole)
-    of the same records is forward-selected as the slow pole, not as a drifting gain."""
+    shared change; +6 % in one record and −5 % in the other is a change per record; along a sweep,
+    where time is frequency, it is not read (the pulse alone gives it); a creep (slow pole) of the
+    same records is forward-selected as the slow pole, not as a drifting gain."""
+    from physics.diagnose.forms.gain_drift import stationary
+
     def ramp(p):
         return np.linspace(-0.5, 0.5, p.size) * p
-    ff = _fit("gain_drift", _residual(lambda p, t, fs: 0.06 * ramp(p)))
+    ff = _fit("gain_drift", _residual(lambda p, t, fs: 0.06 * ramp(p), multisine=True))
     assert ff.significant and not ff.info["per_record"] and ff.params["gain_change"] == pytest.approx(0.06, rel=0.1)
     sign = iter([0.06, -0.05])
-    ff = _fit("gain_drift", _residual(lambda p, t, fs: next(sign) * ramp(p)))
+    ff = _fit("gain_drift", _residual(lambda p, t, fs: next(sign) * ramp(p), multisine=True))
     assert ff.significant and ff.info["per_record"] and ff.info["gain_changes"] == pytest.approx([0.06, -0.05], rel=0.1)
+    swept = _residual(lambda p, t, fs: 0.06 * ramp(p))
+    assert [stationary(r.v_d, r.fs_d) for r in swept.records] == [False, True]
+    ff = _fit("gain_drift", swept)
+    assert len(ff.info["records"]) == 1 and "along a sweep" in ff.text
+    assert ff.params["gain_change"] == pytest.approx(0.06, rel=0.15)
 
     class _Fit:
         pass
