@@ -71,8 +71,9 @@ class GainDrift(Form):
             text = ("the response's gain changes along each record, by " + ", ".join(f"{100 * g:+.2g} %" for g in gains)
                     + " from start to end (residual ≈ a_r·((t − t̄)/T)·ŷ, a gain change per record)")
         if not all(keep):
-            text += (f" (in the {len(own_idx)} records whose drive excites the same band throughout; along a sweep a "
-                     "gain that changes with time is one that changes with frequency)")
+            n = len(own_idx)
+            text += (f" (in the {'record' if n == 1 else f'{n} records'} whose drive excites the same band throughout; "
+                     "along a sweep a gain that changes with time is one that changes with frequency)")
         return self.scored(res, reg, {"gain_change": float(np.mean(gains))}, {"gain_change": "1"},
                            text + ": the strip drying out or warming while driven, or a sensor whose gain drifts",
                            gain_changes=[float(g) for g in gains], per_record=reg is own,
