@@ -381,11 +381,12 @@ def test_the_saturation_voltage_is_recovered_from_multisines_at_two_levels():
 
 @pytest.mark.parametrize("share", [0.25, 1.0])
 def test_a_large_signal_parameter_held_at_one_amplitude_is_chosen_on_the_time_records(share):
-    """Two multisines of one level (1.5 V RMS) cannot tell the compact layers' share from the gain in the
+    """A multisine of one level (1.5 V RMS) cannot tell the compact layers' share from the gain in the
     frequency fit (the describing function only scales the fundamental), so it is held at the
-    device's value (1, layers that saturate at tenths of a volt); the records' waveform can: the share
-    is chosen on them, within a step of the grid of the truth's (0.25), the error falls and the
-    parameter counts in the BIC.  When the held value is the truth's, it stays."""
+    device's value (1, layers that saturate at tenths of a volt); the time records with a square of
+    another power beside it can: the share is chosen on them, within a step of the grid of the
+    truth's (0.25), the error falls and the parameter counts in the BIC.  When the held value is the
+    truth's, it stays; with the multisine alone (one amplitude level) nothing is tried."""
     from physics import signals
     from physics.io.record import TimeSeries
     from physics.model import ActuatorModel
@@ -393,8 +394,9 @@ def test_a_large_signal_parameter_held_at_one_amplitude_is_chosen_on_the_time_re
     truth = ActuatorModel(load_device("ipmc_pt_eg").with_params(diffuse_share=share), ["nonlinear_charge"])
     rng = np.random.default_rng(2)
     records = []
-    for k in range(2):
-        sig = signals.multisine(1.5, 0.1, 20.0, 10.0, periods=2, fs=100.0, seed=k)
+    # the multisine is the frequency fit's one level; the square (time records only) a second power
+    for k, sig in enumerate((signals.multisine(1.5, 0.1, 20.0, 10.0, periods=2, fs=100.0),
+                             signals.square(1.0, 4.0, 4.0, cycles=2, fs=100.0))):
         y = simulate(truth, None, sig.t, sig.v, rh=60.0, hold="cubic").deflection
         records.append(TimeSeries(sig.t, sig.v, y + rng.normal(0, 0.3e-6, y.size), rh=np.full(y.size, 60.0),
                                   source=f"ms{k}"))
@@ -408,6 +410,8 @@ def test_a_large_signal_parameter_held_at_one_amplitude_is_chosen_on_the_time_re
         assert fit.ok and not fit.df_info["fitted"] and fit.device.params.get("diffuse_share", 1.0) == 1.0
         before, k = fit.rmse, fit.k
         moved = C.held_on_time(fit, data.records)
+        alone = [r for r in data.records if r.kind == "broadband"]
+        assert len(alone) == 1 and not C.held_on_time(fit, alone)
     if share == 1.0:
         assert not moved and fit.rmse == before
         return

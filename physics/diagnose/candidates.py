@@ -957,9 +957,11 @@ def held_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
 
     With one drive amplitude the describing function's parameter only scales the fundamental's
     gain (:func:`_df_problem` holds it at the device's value, e.g. ``diffuse_share`` 1: a charge
-    law that saturates at a few tenths of a volt), while the waveform of the time records — its
-    harmonics, the flattened top of a square — shows how the strip saturates.  When the added
-    effect is the large-signal one, every other coordinate of its describing grid is simulated on
+    law that saturates at a few tenths of a volt), while the time records — a sweep beside a square
+    of another power, the flattened top of the square — show how the strip saturates.  When the
+    added effect is the large-signal one and the time records hold two amplitude levels (the law's
+    own reveal rule; a candidate forced on records of one level is left as it is: eleven
+    simulations of a 200 s record at 1 kHz cost 87 s), every other coordinate of its describing grid is simulated on
     every record with the gain profiled out in closed form (as :func:`start_on_time`), the best is
     refined between its neighbours (:data:`HELD_REFINE_SIMS`) and replaces the held value when it lowers the time records' sum of squares by more than
     :data:`TIME_START_GAIN`, the gain is refined and the model scored again; the parameter then
@@ -968,7 +970,8 @@ def held_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     ``diffuse_share`` 1 lowered the error 10.18 → 5.99 µm."""
     info, eff = mf.df_info, mf.spec.added
     if not mf.ok or not info or info.get("fitted") or info["sensitivity"] <= DF_MIN_SENSITIVITY \
-            or eff is None or not spec_of(eff).get("describing_function"):
+            or eff is None or not spec_of(eff).get("describing_function") \
+            or len({r.amplitude_level for r in records}) < 2:
         return False
     name, coords, scale = EFFECTS[eff].describing_grid(mf.device)
     if name != info["parameter"]:
