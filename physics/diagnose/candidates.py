@@ -955,19 +955,20 @@ def held_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     """Choose on the time records the large-signal parameter the frequency fit of ``mf`` held (in
     place; True when it moved).
 
-    With one drive amplitude the describing function's parameter only scales the fundamental's
-    gain (:func:`_df_problem` holds it at the device's value, e.g. ``diffuse_share`` 1: a charge
-    law that saturates at a few tenths of a volt), while the time records — a sweep beside a square
-    of another power, the flattened top of the square — show how the strip saturates.  When the
-    added effect is the large-signal one and the time records hold two amplitude levels (the law's
-    own reveal rule; a candidate forced on records of one level is left as it is: eleven
-    simulations of a 200 s record at 1 kHz cost 87 s), every other coordinate of its describing grid is simulated on
-    every record with the gain profiled out in closed form (as :func:`start_on_time`), the best is
-    refined between its neighbours (:data:`HELD_REFINE_SIMS`) and replaces the held value when it lowers the time records' sum of squares by more than
-    :data:`TIME_START_GAIN`, the gain is refined and the model scored again; the parameter then
-    counts in the model's BIC.  Chosen on a strip whose double layer saturates through compact
-    layers, seen with one amplitude (`pnp_sweep` seed 41): ``nonlinear_charge`` held at
-    ``diffuse_share`` 1 lowered the error 10.18 → 5.99 µm."""
+    With one drive amplitude among the frequency fit's records the describing function's parameter
+    only scales the fundamental's gain (:func:`_df_problem` holds it at the device's value, e.g.
+    ``diffuse_share`` 1: a charge law that saturates at a few tenths of a volt), while the time
+    records — a sweep beside a square of another power, the flattened top of the square — show how
+    the strip saturates.  When the added effect is the large-signal one and the time records hold
+    two amplitude levels (the law's own reveal rule; a candidate forced on records of one level is
+    left as it is: eleven simulations of a 200 s record at 1 kHz cost 87 s), every other coordinate
+    of its describing grid is simulated on every record with the gain profiled out in closed form
+    (as :func:`start_on_time`), the best is refined between its neighbours
+    (:data:`HELD_REFINE_SIMS`) and replaces the held value when it lowers the time records' sum of
+    squares by more than :data:`TIME_START_GAIN`; the gain is refined and the model scored again,
+    the parameter counted in its BIC.  Chosen on a strip whose double layer saturates through
+    compact layers, seen with a sweep and a square of one voltage (`pnp_sweep` seed 41):
+    ``nonlinear_charge`` held at ``diffuse_share`` 1 lowered the error 10.18 → 5.99 µm."""
     info, eff = mf.df_info, mf.spec.added
     if not mf.ok or not info or info.get("fitted") or info["sensitivity"] <= DF_MIN_SENSITIVITY \
             or eff is None or not spec_of(eff).get("describing_function") \
@@ -1015,9 +1016,9 @@ def held_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     held = [n for n in mf.spec.notes if n.startswith(f"{name} held at ")]
     mf.spec.notes[:] = [n for n in mf.spec.notes if n not in held]
     score(mf, records)
-    mf.spec.notes.append(f"{name} chosen on the time records, whose waveform shows the saturation (one drive "
-                         f"amplitude: the frequency fit cannot tell it from the gain): {now:.4g} → {value:.4g}, RMS "
-                         f"error {1e6 * before:.4g} → {1e6 * mf.rmse:.4g} µm")
+    mf.spec.notes.append(f"{name} chosen on the time records, whose waveforms show the saturation (the frequency "
+                         "fit's records hold one drive amplitude and cannot tell it from the gain): "
+                         f"{now:.4g} → {value:.4g}, RMS error {1e6 * before:.4g} → {1e6 * mf.rmse:.4g} µm")
     return True
 
 
