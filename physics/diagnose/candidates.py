@@ -886,6 +886,17 @@ def on_bound(prm, value: float) -> bool:
     return x <= lo + tol or x >= hi - tol
 
 
+def profiled_cost(model: ActuatorModel, records: Sequence[PreparedRecord]) -> float:
+    """Sum of squares [m²] of ``model`` on the time records with its gain profiled out in closed form
+    (α = Σ⟨ŷ, y⟩/Σ⟨ŷ, ŷ⟩, offsets removed; 1 when that is not positive) and each residual's bounded
+    nuisance removed (:meth:`.records.PreparedRecord.detrend_d`)."""
+    preds = [predict(model, r) for r in records]
+    num = sum(float(remove_nuisance(p) @ remove_nuisance(r.y_d)) for p, r in zip(preds, records))
+    den = sum(float(remove_nuisance(p) @ remove_nuisance(p)) for p in preds)
+    a = num / den if den > 0 and num > 0 else 1.0
+    return sum(float(np.sum(r.detrend_d(r.y_d - a * p) ** 2)) for p, r in zip(preds, records))
+
+
 def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     """Start the added effect's own parameters from the spec's start points when the FRF
     optimum left one of them on a bound of its range and a start point fits the time records
@@ -909,12 +920,7 @@ def start_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
         return False
 
     def cost(theta) -> float:
-        model = model_at(mf, theta)
-        preds = [predict(model, r) for r in records]
-        num = sum(float(remove_nuisance(p) @ remove_nuisance(r.y_d)) for p, r in zip(preds, records))
-        den = sum(float(remove_nuisance(p) @ remove_nuisance(p)) for p in preds)
-        a = num / den if den > 0 and num > 0 else 1.0
-        return sum(float(np.sum(r.detrend_d(r.y_d - a * p) ** 2)) for p, r in zip(preds, records))
+        return profiled_cost(model_at(mf, theta), records)
 
     trials = []
     for st in start_points(eff, mf.device):
@@ -980,12 +986,8 @@ def held_on_time(mf: ModelFit, records: Sequence[PreparedRecord]) -> bool:
     now = float(mf.device.params.get(name, declared_default(name)))
 
     def cost(value) -> float:
-        model = ActuatorModel(mf.device.with_params(**{name: value}), mf.effects, n_modes=mf.model.n_modes)
-        preds = [predict(model, r) for r in records]
-        num = sum(float(remove_nuisance(p) @ remove_nuisance(r.y_d)) for p, r in zip(preds, records))
-        den = sum(float(remove_nuisance(p) @ remove_nuisance(p)) for p in preds)
-        a = num / den if den > 0 and num > 0 else 1.0
-        return sum(float(np.sum(r.detrend_d(r.y_d - a * p) ** 2)) for p, r in zip(preds, records))
+        return profiled_cost(ActuatorModel(mf.device.with_params(**{name: value}), mf.effects,
+                                           n_modes=mf.model.n_modes), records)
 
     from scipy.optimize import minimize_scalar
     try:
