@@ -765,25 +765,25 @@ def test_the_verdict_names_records_by_file_name_unless_two_share_one():
 
 
 def test_what_remains_says_which_forms_the_drafts_write_and_which_are_only_described():
-    """A saturation of the output and an amplitude dependence are described, not drafted (as a play
+    """An RH dependence and an amplitude dependence are described, not drafted (as a play
     was on pnp_fd seed 34, where the verdict said "--draft-effects drafts effect files for it" and the
     drafts wrote none).  It sends the user to --draft-effects only for the forms the drafts write."""
     from physics.diagnose.forms import FORMS, Form
     from physics.diagnose.verdict import Verdict
     draftable = {f.id: f.draft is not Form.draft for f in FORMS}
-    assert not draftable["output_saturation"] and not draftable["amplitude_dependence"] and draftable["slow_pole"]
+    assert not draftable["rh_dependence"] and not draftable["amplitude_dependence"] and draftable["slow_pole"]
 
     def remains(*kinds, drafts=None):
         rem = [{"kind": k, "text": f"a {k}", "draftable": draftable[k]} for k in kinds]
         return "\n".join(Verdict("not explained by the catalog", [], {}, None, 25 * UM, 1.5 * UM, "stated",
                                  remaining=rem, remaining_kind="described", drafts=drafts).lines())
 
-    only_described = remains("output_saturation", "amplitude_dependence")
+    only_described = remains("rh_dependence", "amplitude_dependence")
     assert "--draft-effects" not in only_described
-    assert "the saturation of the output and the amplitude dependence are described, not drafted: write an " \
+    assert "the RH dependence and the amplitude dependence are described, not drafted: write an " \
            "effect for them" in only_described
-    both = remains("slow_pole", "output_saturation")
-    assert "--draft-effects DIR` drafts effect files for the slow pole" in both and "saturation of the output " \
+    both = remains("slow_pole", "rh_dependence")
+    assert "--draft-effects DIR` drafts effect files for the slow pole" in both and "RH dependence " \
         "is described, not drafted" in both
     assert "--draft-effects DIR` drafts effect files for it" in remains("slow_pole")
     # once the draft rounds ran, it says what they did instead of offering them (circuit_lab s34's
@@ -793,7 +793,7 @@ def test_what_remains_says_which_forms_the_drafts_write_and_which_are_only_descr
     assert "--draft-effects" not in none_kept
     assert "the draft rounds fitted the draft of the saturation of the input with the model and did not keep it " \
            "(the draft lines say why): write an effect for it" in none_kept
-    kept = remains("slow_pole", "output_saturation", drafts={"kept": {"slow_pole": "drafted_slow_pole"},
+    kept = remains("slow_pole", "rh_dependence", drafts={"kept": {"slow_pole": "drafted_slow_pole"},
                                                       "fitted": ["slow_pole"]})
     assert "--draft-effects" not in kept and "the draft rounds kept drafted_slow_pole for the slow pole on the output " \
         "(creep), written with the report (pass it back with --effects-path)" in kept and "is described, not drafted" in kept

@@ -287,19 +287,29 @@ def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it
     np.testing.assert_allclose(effect.filter_output(y, 100.0, {})[200:], y[197:-3], atol=0.02)
 
 
-def test_records_that_lead_the_model_are_described_as_an_advance_and_never_drafted():
+def test_records_that_lead_the_model_are_read_as_an_advance_and_drafted_as_a_first_order_lead(tmp_path):
     """A deflection read 30 ms *early* (y + τ dy/dt, a derivative term in the sensor's conditioning, or
-    a sensor bandwidth given lower than the setup's) is an advance of 30 ms with a = 1, selected; no
-    causal effect writes it, so nothing is drafted.  A lag is still read as a lag."""
+    a sensor bandwidth given lower than the setup's) is an advance of 30 ms with a = 1, selected; a
+    derivative term τ·dŷ/dt is read as one.  Both are drafted as y + τ·dy/dt, × (1 + sτ): its time
+    path is its closed form (the drafts' contract) and it rebuilds the derivative term's records.
+    A lag is still read as a lag."""
     from physics.diagnose.forms.output_delay import delayed
 
     res = _residual(lambda p, t, fs: response_filter(p, fs, lambda f: delayed(f, -0.03)) - p)
     ff = _fit("output_delay", res)
     assert ff.significant and ff.params["delay_s"] == pytest.approx(-0.03, rel=0.05) \
         and ff.params["gain"] == pytest.approx(1.0, abs=0.05) and "lead the model by 30 ms" in ff.text
-    assert F.form_of("output_delay")().draft(ff, res) == []
-    lead = _fit("output_delay", _residual(lambda p, t, fs: 0.02 * np.gradient(p, 1 / fs)))
+    (dr,) = F.form_of("output_delay")().draft(ff, res)
+    assert dr.effect_id == "drafted_output_lead" and dr.params[0].default == pytest.approx(0.03, rel=0.05)
+    res = _residual(lambda p, t, fs: 0.02 * np.gradient(p, 1 / fs), multisine=True)
+    lead = _fit("output_delay", res)
     assert lead.significant and lead.params["delay_s"] == pytest.approx(-0.02, rel=0.05) and "τ·dŷ/dt" in lead.text
+    cls = _written_draft("output_delay", lead, res, tmp_path)
+    y, t = res.preds[0], np.arange(6000) / 100.0
+    dy = GAIN * sum(2 * np.pi * f * np.cos(2 * np.pi * f * t + k) for k, f in enumerate((0.2, 0.7, 1.9, 4.3, 11.0))) / 2.5
+    made = cls(load_device("ipmc_pt_eg")).filter_output(y, 100.0, {"output_lead_s": 0.02})
+    inner = slice(100, -100)        # the filter starts from rest; this multisine does not
+    assert np.max(np.abs(made - y - 0.02 * dy)[inner]) < 1e-3 * np.max(np.abs(y))     # its exact derivative
     lag = _fit("output_delay", _residual(lambda p, t, fs: response_filter(p, fs, lambda f: delayed(f, 0.03)) - p))
     assert lag.params["delay_s"] == pytest.approx(0.03, rel=0.05)
 
@@ -326,9 +336,11 @@ def test_bending_unequal_in_the_two_directions_is_an_even_form(exponent, a):
 @pytest.mark.parametrize("form_id, made, values", [
     ("output_asymmetry", lambda p: 0.15 * np.abs(p), {"asymmetry_gain": 0.15}),
     ("gain_drift", lambda p: 0.06 * np.linspace(-0.5, 0.5, p.size) * p, {"gain_drift": 0.06}),
-    ("hysteresis", lambda p: 0.5 * (play(p, 0.2 * GAIN) - p), {"play_share": 0.5, "play_width": 0.2 * GAIN})])
-def test_even_map_drifting_gain_and_play_drafts_pass_the_contract_and_rebuild_the_records(form_id, made, values, tmp_path):
-    """The drafts of the three forms are output effects (the frequency response unchanged, their
+    ("hysteresis", lambda p: 0.5 * (play(p, 0.2 * GAIN) - p), {"play_share": 0.5, "play_width": 0.2 * GAIN}),
+    ("output_saturation", lambda p: np.clip(p, -0.6 * GAIN, 0.6 * GAIN) - p, {"clip_share": 1.0, "clip_level": 0.6 * GAIN})])
+def test_even_map_drifting_gain_play_and_clip_drafts_pass_the_contract_and_rebuild_the_records(form_id, made, values,
+                                                                                                tmp_path):
+    """The drafts of the four forms are output effects (the frequency response unchanged, their
     parameters fitted on the time records) whose time path turns the prediction into the records."""
     from physics.contract import time_only_params
     from physics.effects import register

@@ -38,6 +38,9 @@ thermal                     (not by default) long large-amplitude records
   element, ``fractional_coupling``;
 * ``hf_phase_lag`` — arg R decreases with frequency in the upper decade (≥ 2° per
   decade, ending below −1°): ``electrode_resistance``;
+* ``hf_phase_lead`` — the opposite, arg R increases in the upper decade (≥ 2° per decade,
+  ending above +1°): the records lead the model (a derivative term in the sensor's
+  conditioning, a latency given larger than the setup's), no catalog effect;
 * ``resonance_error`` — the error peaks within ±40 % of the first resonance (peak height,
   width or frequency): ``viscoelastic`` (``layered_beam``);
 * ``lf_small_lag`` — a nearly constant small phase lag (−0.5° to −10°) below resonance:
@@ -75,6 +78,7 @@ FEATURE_TEXT = {
     "lf_excess_lag": "low-frequency excess gain with phase lag",
     "constant_slope_phase": "constant log-log slope with matching constant phase",
     "hf_phase_lag": "phase lag growing with frequency",
+    "hf_phase_lead": "phase lead growing with frequency",
     "resonance_error": "error concentrated at the resonance",
     "lf_small_lag": "small constant phase lag below resonance (material loss)",
     "amplitude_dependence": "gain that depends on amplitude",
@@ -217,8 +221,10 @@ def _frf_features(frf, resonance_hz: float | None) -> dict:
         s_ph = float(np.polyfit(np.log10(f[hi]), np.unwrap(np.radians(ph[hi])), 1)[0] * 180 / np.pi)
         out["hf_phase_lag"] = {"present": bool(s_ph < -2.0 and ph[hi][-1] < -1.0), "phase_slope_deg_per_dec": s_ph,
                                "phase_top_deg": float(ph[hi][-1])}
+        out["hf_phase_lead"] = {"present": bool(s_ph > 2.0 and ph[hi][-1] > 1.0), "phase_slope_deg_per_dec": s_ph,
+                                "phase_top_deg": float(ph[hi][-1])}
     else:
-        out["hf_phase_lag"] = {"present": False if f[-1] >= 10 else None}
+        out["hf_phase_lag"] = out["hf_phase_lead"] = {"present": False if f[-1] >= 10 else None}
     if resonance_hz and f[0] < 0.7 * resonance_hz and f[-1] > 1.3 * resonance_hz:
         err = np.abs(np.log(np.where(np.isfinite(R), R, 1.0)))
         near = (f > 0.7 * resonance_hz) & (f < 1.4 * resonance_hz)

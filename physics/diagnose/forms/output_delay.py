@@ -8,10 +8,12 @@ gain falls (:mod:`.output_lowpass`), an electrode line's lag grows as √f.  The
 from a tenth of a sample to the larger of 1/(2 f_top) and eight samples, f_top the top of the
 excited band, then refined; the same on the other side of zero, an advance: records that *lead*
 the model (a sensor bandwidth or latency given larger than the setup's, a derivative term in the
-sensor's conditioning, y + τ dy/dt ≈ y(t + τ); a first-order lead τ·dŷ/dt is tried beside it),
-described, never drafted.  The effect it drafts multiplies the deflection by e^(−s d), exact in
-the frequency domain (not a rational factor: it gives ``output_response`` and
-``filter_output``), off at d = 0.
+sensor's conditioning, y + τ dy/dt ≈ y(t + τ); a first-order lead τ·dŷ/dt is tried beside it).
+The effect it drafts for a delay multiplies the deflection by e^(−s d), exact in the frequency
+domain (not a rational factor: it gives ``output_response`` and ``filter_output``), off at d = 0;
+for a significant lead it adds τ·dy/dt, × (1 + sτ) (what a derivative term writes, and an advance
+to first order), off at τ = 0: the base, fitted to the records before the lead was seen, has taken
+part of it into its own parameters, and the fit with the model reads τ whole.
 """
 from __future__ import annotations
 
@@ -84,10 +86,12 @@ class OutputDelay(Form):
         takes up most of its lag and leaves a band of error that is not significantly a delay (a
         9.3 ms dead time behind the electrode's resistance: ΔBIC −589, a = 1.5 at 0.4 ms); on a
         residual that is noise (ΔBIC ≥ 0) it is not offered, and the model is not refitted with it."""
-        if not ff.delta_bic < 0 or ff.params["delay_s"] <= 0:      # a lead is no causal effect
-            return []
         d = ff.params["delay_s"]
         fs = res.fs_min
+        if d < 0:
+            return self._lead_draft(ff, res) if ff.significant else []
+        if not ff.delta_bic < 0 or d == 0:
+            return []
         # its phase lag reaches 17° at f = 17/(360 d); the records it was found in reach that far
         reach = float(f"{min(17.0 / (360.0 * d), ff.info['f_excited_Hz'][1]):.2g}")
         return [EffectDraft(
@@ -110,3 +114,28 @@ class OutputDelay(Form):
                   '        return response_filter(y, fs, lambda f: delayed(f, d))\n'),
             imports=("import numpy as np", "", "from physics.diagnose.forms.output_delay import delayed",
                      "from physics.diagnose.records import response_filter"))]
+
+    @staticmethod
+    def _lead_draft(ff: FormFit, res: Residual) -> list:
+        """Records that lead the model as a first-order lead of the deflection, y + τ·dy/dt."""
+        tau, fs = -ff.params["delay_s"], res.fs_min
+        return [EffectDraft(
+            form=OutputDelay.id, effect_id="drafted_output_lead", class_name="DraftedOutputLead",
+            summary="records that lead the model: y + τ·dy/dt, × (1 + sτ)",
+            model=("The measured deflection leads the tip's by a first-order lead: y + τ·dy/dt, × (1 + sτ) (a "
+                   "derivative term in the sensor's conditioning; to first order an advance of τ, a latency or "
+                   "bandwidth given larger than the setup's); τ = 0 is the model without it."),
+            params=[Param("output_lead_s", "s", 0.0, 1.0, "time constant τ of the lead", tau,
+                          (0.05 / fs, max(1.0 / res.band[1], 16.0 / fs)))],
+            scan="output_lead_s", off={"output_lead_s": 0.0},
+            excitation=f"a broadband record reaching ≥ {res.band[1]:.2g} Hz", reveal={},
+            signature=[("hf_phase_lead", 1.0)],
+            body=('    def output_response(self, s, p):\n'
+                  '        return 1.0 + np.asarray(s) * self.value(p, "output_lead_s")     # 1 + sτ\n'
+                  '\n'
+                  '    def filter_output(self, y, fs, p):\n'
+                  '        tau = self.value(p, "output_lead_s")\n'
+                  '        if tau <= 0:\n'
+                  '            return np.asarray(y, float)\n'
+                  '        return response_filter(y, fs, lambda f: 1.0 + 2j * np.pi * np.asarray(f) * tau)\n'),
+            imports=("import numpy as np", "", "from physics.diagnose.records import response_filter"))]
