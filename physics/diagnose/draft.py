@@ -11,7 +11,7 @@ checks each one against the contract (:func:`check_draft`) before the folder app
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -229,6 +229,7 @@ def draft_effects(res, rediagnose, max_effects: int = 2,
                 dbic, key, c = scored[0]
                 eid = key if isinstance(key, str) else key.effect_id
                 say(f"drafts: {eid} taken, RMS error {1e6 * again.base.rmse:.4g} → {1e6 * c.fit.rmse:.4g} µm")
+                _strip_other_drafts(c.fit, items, on_top + [eid])
                 values = effect_values(c.fit, eid)
                 text = _pick_text(scored, again, on_top)
                 if key in catalog:                  # the catalog's pick: on the chain, then the drafts on top
@@ -441,7 +442,6 @@ def _drafts_suffice(res, p, outcome: DraftOutcome, without, say) -> None:
     strip seen through a 0.012 Hz AC-coupled sensor: the chain named ``solvent_diffusion`` (2.26 µm,
     noise floor 1.49 µm), a drafted slow pole relaxing back completely fitted the records alone
     to 1.50 µm, and the model written kept both."""
-    from dataclasses import replace
 
     from .candidates import compare_fits, effect_values
     from .confidence import excess_share, label
@@ -505,7 +505,6 @@ def _name_counterparts(res, outcome: DraftOutcome, rediagnose, free: list, say) 
     saturation of the drive (1.52 µm, noise floor 1.50 µm) while the verdict named only the
     electrode's resistance, left out of that model; ``nonlinear_charge`` in the saturation's place
     gives 5.24 µm.  Not tried when the verdict names the effect already."""
-    from dataclasses import replace
 
     from .candidates import map_free
     from .confidence import excess_share, label
@@ -562,6 +561,21 @@ def _remaining_drafted(res, outcome: DraftOutcome) -> None:
                                      + " and ".join(d.effect_id for d in outcome.kept))
 
 
+def _strip_other_drafts(fit, items: list, kept: list[str]) -> None:
+    """Take the parameters of drafts not in ``kept`` out of ``fit``'s device (in place): a fit taken
+    from a swap is the model without the draft it replaced, whose parameters stay in its device at
+    their off values, and a draft not kept is unregistered after the rounds, so the device written
+    could not name them."""
+    params = getattr(fit.device, "params", None) or {}
+    stray = {p.name for d in items if isinstance(d, EffectDraft) and d.effect_id not in kept
+             for p in d.params} & set(params)
+    if not stray:
+        return
+    dev = replace(fit.device, params={k: v for k, v in fit.device.params.items() if k not in stray})
+    fit.device = fit.result.device = dev
+    fit.values = {k: v for k, v in fit.values.items() if k not in stray}
+
+
 def _drop_siblings(outcome: DraftOutcome, pool: list, kept) -> None:
     """Take the other versions of the kept draft's residual form (a low-pass of the other order)
     out of ``pool``: they were offered because the residual could not choose, and the fit with
@@ -614,6 +628,26 @@ def _carry(outcome: DraftOutcome, fit, note: str) -> None:
     outcome.notes.append(note)
 
 
+def _round_fits(again) -> dict:
+    """{effect: candidate} of a round's diagnosis ``again``: its first step's, or — where it swapped
+    its first pick for the runner-up, which fits better in its place — the runner-up as fitted
+    there, on the same model.  The first step refines its pick alone on the time records, so its
+    runner-up's error is the frequency fit's: on `pnp_sweep` seed 41's backlash, with a trial second
+    law for the play beside it, the trial law read 3.65 µm (the pick, refined) and the play 6.17 µm,
+    the swap refined the play to 1.95 µm, and the round took the trial law."""
+    by_id = {c.effect: c for c in again.candidates}
+    steps = list(getattr(again, "steps", []))
+    for s, nxt in zip(steps, steps[1:]):
+        c = nxt.decision.pick
+        if not s.swapped_for or c is None or c.effect != s.swapped_for or not c.evaluated \
+                or set(nxt.base.effects) != set(again.base.effects):
+            continue
+        old = by_id.get(c.effect)
+        if old is None or not old.evaluated or c.fit.rmse < old.fit.rmse:
+            by_id[c.effect] = c
+    return by_id
+
+
 def _scored(keys, again, on_top, before: float | None = None) -> tuple[list, dict]:
     """The candidates ``keys`` (drafts, or catalog effect ids) of the diagnosis ``again`` that
     pass ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` and ≥ :data:`.forms.MIN_GAIN` lower RMS error,
@@ -621,7 +655,7 @@ def _scored(keys, again, on_top, before: float | None = None) -> tuple[list, dic
     to lower is that of the round's refitted base, or ``before`` [m] when lower: the model the
     previous round kept (refitted without a time refinement of its own, the base can lose what
     that round gained, and a draft must never leave the chain worse than it was)."""
-    by_id = {c.effect: c for c in again.candidates}
+    by_id = _round_fits(again)
     ref = min(again.base.rmse, before) if before is not None else again.base.rmse
     scored, why = [], {}
     for key in keys:
