@@ -442,7 +442,6 @@ def _drafts_suffice(res, p, outcome: DraftOutcome, without, say) -> None:
     strip seen through a 0.012 Hz AC-coupled sensor: the chain named ``solvent_diffusion`` (2.26 µm,
     noise floor 1.49 µm), a drafted slow pole relaxing back completely fitted the records alone
     to 1.50 µm, and the model written kept both."""
-
     from .candidates import compare_fits, effect_values
     from .confidence import excess_share, label
     fit, was = outcome.final, p.label
@@ -505,7 +504,6 @@ def _name_counterparts(res, outcome: DraftOutcome, rediagnose, free: list, say) 
     saturation of the drive (1.52 µm, noise floor 1.50 µm) while the verdict named only the
     electrode's resistance, left out of that model; ``nonlinear_charge`` in the saturation's place
     gives 5.24 µm.  Not tried when the verdict names the effect already."""
-
     from .candidates import map_free
     from .confidence import excess_share, label
     from .specs import shown_as

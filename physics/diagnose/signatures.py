@@ -224,7 +224,8 @@ def _frf_features(frf, resonance_hz: float | None) -> dict:
         out["hf_phase_lead"] = {"present": bool(s_ph > 2.0 and ph[hi][-1] > 1.0), "phase_slope_deg_per_dec": s_ph,
                                 "phase_top_deg": float(ph[hi][-1])}
     else:
-        out["hf_phase_lag"] = out["hf_phase_lead"] = {"present": False if f[-1] >= 10 else None}
+        out["hf_phase_lag"] = {"present": False if f[-1] >= 10 else None}
+        out["hf_phase_lead"] = {"present": False if f[-1] >= 10 else None}
     if resonance_hz and f[0] < 0.7 * resonance_hz and f[-1] > 1.3 * resonance_hz:
         err = np.abs(np.log(np.where(np.isfinite(R), R, 1.0)))
         near = (f > 0.7 * resonance_hz) & (f < 1.4 * resonance_hz)

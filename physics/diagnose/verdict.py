@@ -603,7 +603,7 @@ class Verdict:
 
     def _how_to_model(self) -> str:
         """What to do with the described forms: ``--draft-effects`` writes the draftable ones as
-        effects; the others (an amplitude or RH dependence, a lead) are described, not drafted.
+        effects; the others (an amplitude or RH dependence) are described, not drafted.
         Once the draft rounds ran (:attr:`drafts`), it says what they did with each draft instead
         of offering them: a page read "--draft-effects drafts effect files for the saturation of
         the input" beside "nothing written (no draft lowers the error)"."""
