@@ -288,6 +288,19 @@ def test_the_delay_form_tells_a_logger_s_dead_time_from_a_low_pass_and_drafts_it
     np.testing.assert_allclose(effect.filter_output(y, 100.0, {})[200:], y[197:-3], atol=0.02)
 
 
+def test_a_lead_through_the_spectral_filter_does_not_ring_where_a_record_ends_away_from_its_start():
+    """A step response that settles 0.4 mm off its start, y = A·(1 − e^(−t/τ₁))², through the lead
+    1 + sτ applied in the frequency domain: y + τ·dy/dt to the last sample, the analytic derivative.
+    A zero pad after the record is a 0.4 mm jump that the lead rang on (0.2 mm at the end, 170× the
+    lead's own size)."""
+    fs, A, t1, tau = 250.0, 0.4e-3, 0.5, 3e-3
+    t = np.arange(0.0, 20.0, 1.0 / fs)
+    e = np.exp(-t / t1)
+    y, dy = A * (1 - e) ** 2, 2 * A * (1 - e) * e / t1
+    led = response_filter(y, fs, lambda f: 1.0 + 2j * np.pi * np.asarray(f) * tau)
+    assert np.max(np.abs(led - (y + tau * dy))) < 0.01 * np.max(tau * np.abs(dy))
+
+
 def test_records_that_lead_the_model_are_read_as_an_advance_and_drafted_as_a_first_order_lead(tmp_path):
     """A deflection read 30 ms *early* (y + τ dy/dt, a derivative term in the sensor's conditioning, or
     a sensor bandwidth given lower than the setup's) is an advance of 30 ms with a = 1, selected; a

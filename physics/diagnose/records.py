@@ -543,14 +543,19 @@ def response_filter(y: np.ndarray, fs: float, response) -> np.ndarray:
 def spectral_filter(y: np.ndarray, fs: float):
     """``apply(response)``: ``y`` sampled at ``fs`` [Hz] through the continuous-time response
     ``response(f)`` (f in Hz, H(0) = 1), applied in the frequency domain from rest at y[0]
-    (zero-padded FFT: the response time ≪ the record, so there is no wrap-around); y's spectrum
-    is taken once, for many responses."""
+    (an FFT over twice the record: the response time ≪ the record, so there is no wrap-around);
+    y's spectrum is taken once, for many responses.  Past its end the record is continued by its
+    point reflection about the last sample (value and slope go on) faded to rest by a half cosine,
+    then rest: a record ending away from y[0] or in motion has no jump or kink for a lead or a
+    fractional delay to ring on, and a slow response has the rest of the pad to settle in."""
     y = np.asarray(y, dtype=float)
-    n = y.size
+    y0, n = y[0], y.size
     nfft = 1 << int(math.ceil(math.log2(2 * n)))
-    Y = np.fft.rfft(y - y[0], nfft)
+    k = np.arange(1, min(n - 1, (nfft - n) // 2) + 1)
+    tail = (2.0 * y[-1] - y[n - 1 - k] - y0) * 0.5 * (1.0 + np.cos(np.pi * k / (k.size + 1)))
+    Y = np.fft.rfft(np.concatenate([y - y0, tail]), nfft)
     f = np.fft.rfftfreq(nfft, 1.0 / fs)
-    return lambda response: np.fft.irfft(Y * response(f), nfft)[:n] + y[0]
+    return lambda response: np.fft.irfft(Y * response(f), nfft)[:n] + y0
 
 
 def upsample(y_d: np.ndarray, q: int, n: int) -> np.ndarray:
