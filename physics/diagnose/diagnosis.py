@@ -835,9 +835,9 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
     later picks (the first pick switched off, the model refitted, the runner-up a forward step on
     it).  When the chain holds one pick and ends outside the noise, the runner-up is tried in its
     place and the other candidates of that step in a forward step on top of it (when the runner-up
-    alone fails only for the share of the excess it explains, as the look-ahead on it: :func:`_look_ahead`;
-    a rough electrode + solvent strip's fractional_coupling, 121 → 100 µm, 32 % of the excess, and
-    the relaxing modulus's 88.7 µm first).  It takes the place
+    alone fails only for the share of the excess it explains, the look-ahead on it, :func:`_look_ahead`:
+    on a rough electrode + solvent strip fractional_coupling alone took 121 → 100 µm, 32 % of the
+    excess, behind viscoelastic's 88.7 µm).  It takes the place
     when the model so made has a BIC lower than the chain's by
     :data:`.forms.SIGNIFICANT_BIC`: a withdrawal step and its forward steps are appended.  A
     greedy chain cannot undo its first pick, which was chosen before the later effects were in
