@@ -581,6 +581,19 @@ class _Ranked:
     evaluated: bool = True
 
 
+def _swap_fit(effects, um):
+    """A model of the swap's tests: double_layer + ``effects`` at RMS error ``um`` µm."""
+    from types import SimpleNamespace as NS
+    return NS(effects=["double_layer", *effects], rmse=um * UM, taus=[1.0], n=[1000], k=3 + len(effects),
+              resid_d=None)
+
+
+def _swap_cand(effect, f, dbic):
+    """A candidate of the swap's tests: ``effect`` fitted to ``f`` at ΔBIC ``dbic``."""
+    from types import SimpleNamespace as NS
+    return _Ranked(effect, f, NS(delta_bic=dbic))
+
+
 def _patch_swap(monkeypatch, without, forward):
     """The swap's fits replaced: the model without the first pick is ``without``, its forward
     steps ``forward``, and ΔBIC 2000·ln(RMS ratio) between two models."""
@@ -603,19 +616,13 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
     from physics.diagnose import diagnosis as dg
     from physics.diagnose.verdict import Decision
 
-    def fit(effects, um):
-        return NS(effects=["double_layer", *effects], rmse=um * UM, taus=[1.0], n=[1000], k=3 + len(effects),
-                  resid_d=None)
-
-    def cand(effect, f, dbic):
-        return _Ranked(effect, f, NS(delta_bic=dbic))
-    ve, fc = cand("viscoelastic", fit(["viscoelastic"], 101), -217.0), cand("fractional_coupling",
-                                                                            fit(["fractional_coupling"], 114), rival_bic)
-    sd = cand("solvent_diffusion", fit(["viscoelastic", "solvent_diffusion"], 35.2), -1302.0)
-    steps = [dg.Step(1, fit([], 136), [ve, fc], Decision(ve, {}, {"viscoelastic": -217.0, "fractional_coupling": rival_bic})),
+    ve, fc = _swap_cand("viscoelastic", _swap_fit(["viscoelastic"], 101), -217.0), _swap_cand("fractional_coupling",
+                                                                            _swap_fit(["fractional_coupling"], 114), rival_bic)
+    sd = _swap_cand("solvent_diffusion", _swap_fit(["viscoelastic", "solvent_diffusion"], 35.2), -1302.0)
+    steps = [dg.Step(1, _swap_fit([], 136), [ve, fc], Decision(ve, {}, {"viscoelastic": -217.0, "fractional_coupling": rival_bic})),
              dg.Step(2, ve.fit, [sd], Decision(sd, {}, {"solvent_diffusion": -1302.0}))]
-    without = fit(["solvent_diffusion"], 98.0)
-    swapped = cand("fractional_coupling", fit(["solvent_diffusion", "fractional_coupling"], swapped_um), -900.0)
+    without = _swap_fit(["solvent_diffusion"], 98.0)
+    swapped = _swap_cand("fractional_coupling", _swap_fit(["solvent_diffusion", "fractional_coupling"], swapped_um), -900.0)
 
     def forward(k, base, left, feats, data, run, after_pick, trial):
         assert base is without and left == ["fractional_coupling"] and after_pick
@@ -698,21 +705,15 @@ def test_a_lone_pick_s_runner_up_takes_its_place_with_what_the_step_s_others_do_
     from physics.diagnose import diagnosis as dg
     from physics.diagnose.verdict import Decision, Pick, Verdict
 
-    def fit(effects, um):
-        return NS(effects=["double_layer", *effects], rmse=um * UM, taus=[1.0], n=[1000], k=3 + len(effects),
-                  resid_d=None)
-
-    def cand(effect, f, dbic):
-        return _Ranked(effect, f, NS(delta_bic=dbic))
-    ve = cand("viscoelastic", fit(["viscoelastic"], 66.0), -5805.0)
-    fc = cand("fractional_coupling", fit(["fractional_coupling"], 80.0), -3821.0)
-    sd = cand("solvent_diffusion", fit([], 138.0), 20.0)
-    base = fit([], 138.0)
+    ve = _swap_cand("viscoelastic", _swap_fit(["viscoelastic"], 66.0), -5805.0)
+    fc = _swap_cand("fractional_coupling", _swap_fit(["fractional_coupling"], 80.0), -3821.0)
+    sd = _swap_cand("solvent_diffusion", _swap_fit([], 138.0), 20.0)
+    base = _swap_fit([], 138.0)
     steps = [dg.Step(1, base, [ve, fc, sd], Decision(ve, {}, {"viscoelastic": -5805.0, "fractional_coupling": -3821.0,
                                                                "solvent_diffusion": 20.0}, confidence=_label(138, 66))),
              dg.Step(2, ve.fit, [], Decision(None, {}, {}))]
-    swapped = cand("fractional_coupling", fit(["fractional_coupling"], 80.0), -3821.0)
-    second = cand("solvent_diffusion", fit(["fractional_coupling", "solvent_diffusion"], 1.05), -9000.0)
+    swapped = _swap_cand("fractional_coupling", _swap_fit(["fractional_coupling"], 80.0), -3821.0)
+    second = _swap_cand("solvent_diffusion", _swap_fit(["fractional_coupling", "solvent_diffusion"], 1.05), -9000.0)
     calls = []
 
     def forward(k, on, left, feats, data, run, after_pick, trial):
@@ -747,8 +748,8 @@ def test_a_lone_pick_s_runner_up_takes_its_place_with_what_the_step_s_others_do_
 
 
 def test_a_lone_pick_s_runner_up_that_explains_too_little_alone_is_looked_ahead_with(monkeypatch):
-    """The lone pick's runner-up may fail alone only for the share of the excess it explains (a
-    held-out strip with rough electrodes and solvent diffusion: fractional_coupling 121 → 100 µm,
+    """The lone pick's runner-up may fail alone only for the share of the excess it explains (pnp_fd
+    seed 60's strip with rough electrodes and solvent diffusion: fractional_coupling 121 → 100 µm,
     32 %, the relaxing modulus picked at 88.7 µm and nothing on top of it).  In the swap it is then
     looked ahead with (the step's other candidates on top of it, :func:`_look_ahead`): the two reach
     2.1 µm and take the place.  When the look-ahead takes nothing, nothing is swapped."""
@@ -757,17 +758,11 @@ def test_a_lone_pick_s_runner_up_that_explains_too_little_alone_is_looked_ahead_
     from physics.diagnose import diagnosis as dg
     from physics.diagnose.verdict import Decision
 
-    def fit(effects, um):
-        return NS(effects=["double_layer", *effects], rmse=um * UM, taus=[1.0], n=[1000], k=3 + len(effects),
-                  resid_d=None)
-
-    def cand(effect, f, dbic):
-        return _Ranked(effect, f, NS(delta_bic=dbic))
-    base = fit([], 121.5)
-    ve, fc = cand("viscoelastic", fit(["viscoelastic"], 88.7), -207.0), cand("fractional_coupling",
-                                                                              fit(["fractional_coupling"], 100.2), -123.0)
-    sd = cand("solvent_diffusion", fit(["solvent_diffusion"], 121.4), 5.0)
-    second = cand("solvent_diffusion", fit(["fractional_coupling", "solvent_diffusion"], 2.1), -900.0)
+    base = _swap_fit([], 121.5)
+    ve, fc = _swap_cand("viscoelastic", _swap_fit(["viscoelastic"], 88.7), -207.0), _swap_cand("fractional_coupling",
+                                                                              _swap_fit(["fractional_coupling"], 100.2), -123.0)
+    sd = _swap_cand("solvent_diffusion", _swap_fit(["solvent_diffusion"], 121.4), 5.0)
+    second = _swap_cand("solvent_diffusion", _swap_fit(["fractional_coupling", "solvent_diffusion"], 2.1), -900.0)
     weights = {"viscoelastic": -207.0, "fractional_coupling": -123.0, "solvent_diffusion": 5.0}
     looked = []
 
