@@ -834,7 +834,10 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
     passed ΔBIC ≤ −:data:`.forms.SIGNIFICANT_BIC` there) is tried in its place, on top of the
     later picks (the first pick switched off, the model refitted, the runner-up a forward step on
     it).  When the chain holds one pick and ends outside the noise, the runner-up is tried in its
-    place and the other candidates of that step in a forward step on top of it (when the runner-up
+    place, judged as on the step it lost (no pick beneath it, so no bar on a quality flag: on
+    pnp_sweep seed 61's rough electrode + solvent strip fractional_coupling, its signature absent,
+    passed step 1 and was refused in the swap, viscoelastic left at 29× the true model's error), and the
+    other candidates of that step in a forward step on top of it (when the runner-up
     alone fails only for the share of the excess it explains, the look-ahead on it, :func:`_look_ahead`:
     on a rough electrode + solvent strip fractional_coupling alone took 121 → 100 µm, 32 % of the
     excess, behind viscoelastic's 88.7 µm).  It takes the place
@@ -865,7 +868,7 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
     k = len(steps) + 1
     trial: list[Step] = []
     pick = _forward(k + 1, without, [rival.effect], _features_after(data, without, f"-{p1}", run), data, run,
-                    True, trial)
+                    not lone, trial)
     rest = [c.effect for c in first.ranking if c.effect not in (p1, rival.effect) and c.effect not in final.effects
             and c.effect not in removed] if lone else []
     if pick is None:        # a lone pick's runner-up that fails only for the share it explains: the look-ahead
