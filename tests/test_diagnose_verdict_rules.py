@@ -607,10 +607,10 @@ def _patch_swap(monkeypatch, without, forward):
     monkeypatch.setattr(dg, "compare_fits", lambda a, b, nested, taus: NS(delta_bic=2000 * math.log(b.rmse / a.rmse)))
 
 
-def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
+def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0, flags=()):
     """A chain base → viscoelastic (101 µm; runner-up fractional_coupling, ΔBIC ``rival_bic``)
     → solvent_diffusion (35.2 µm); the model with fractional_coupling in viscoelastic's place
-    fits to ``swapped_um``.  Returns (steps, the log)."""
+    fits to ``swapped_um``, the later pick's quality ``flags`` there.  Returns (steps, the log)."""
     from types import SimpleNamespace as NS
 
     from physics.diagnose import diagnosis as dg
@@ -629,7 +629,8 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0):
         trial.append(dg.Step(k, base, [swapped], Decision(swapped, {}, {"fractional_coupling": -900.0})))
         return swapped
     _patch_swap(monkeypatch, without, forward)
-    monkeypatch.setattr(dg, "doubts", lambda c: [])
+    monkeypatch.setattr(dg, "doubts", lambda c: list(flags))
+    monkeypatch.setattr(dg, "quality", lambda c: list(flags))
     monkeypatch.setattr(dg, "pinned", lambda c: [])
     monkeypatch.setattr(dg, "undetermined", lambda c: [])
     from dataclasses import replace          # "medium": 35× the noise floor left, fractional_coupling held on a bound
@@ -658,7 +659,20 @@ def test_the_first_pick_s_runner_up_takes_its_place_when_the_chain_then_fits_bet
     assert d.confidence.held_of is None and "on a bound" not in d.reason.split("after the swap")[1]
     # and its line of the verdict reads on that model, not on its step's (which held viscoelastic)
     assert d.relabelled == {"on": "the model after the swap", "rmse_without": 98 * UM, "rmse_with": 2 * UM,
-                            "delta_bic": -500.0}
+                            "delta_bic": -500.0, "quality": []}
+    assert "quality flags there" not in d.reason
+
+
+def test_a_pick_labelled_again_names_the_quality_flags_it_has_there(monkeypatch):
+    """circuit_lab seed 62's resistive electrodes: on the refitted model electrode_resistance removed
+    32 noise floors of error and was "low" for "2 quality flag(s)" that neither its reason nor its
+    caution line named (its step had none).  The flags on the later model are in the reason and in
+    what the verdict's line of the pick reads (its ``relabelled`` record)."""
+    flags = ["D_solvent and kf@RH60 are correlated (ρ = +0.9953): only a combination is determined"]
+    steps, _ = _swap_case(monkeypatch, 2.0, flags=flags)
+    d = steps[1].decision
+    assert d.confidence.flags == 1 and "1 quality flag(s)" in d.reason
+    assert d.reason.endswith(f"(quality flags there: {flags[0]})") and d.relabelled["quality"] == flags
 
 
 def test_a_pick_labelled_again_reads_its_numbers_on_the_later_model():

@@ -72,7 +72,7 @@ from .signatures import features, revealable, signatures
 from .specs import (declared_default, effect_params, excitation, keeps_spec_range, param_bounds, refine_params,
                     role_family, shape_params, spec_of, start_points)
 from .verdict import (ADEQUATE_RATIO, AFTER_PICK_SHARE, UNATTRIBUTED, Decision, Pick, Verdict, _signed, ahead,
-                      decide, doubts, lead_of, nuisance_summary, pinned, remaining_of, undetermined)
+                      decide, doubts, lead_of, nuisance_summary, pinned, quality, remaining_of, undetermined)
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
 SUPPORT_BIC = 6.0
@@ -976,7 +976,9 @@ def _relabel(steps: list[Step], every: dict, current: ModelFit, data: PreparedRe
     """The picks of ``steps`` in ``every`` ({effect: (support, fit without it)} on ``current``)
     labelled again on ``current`` (:func:`.confidence.reconfirmed`): the error each removes
     there, the error the model leaves and its own parameters' quality flags there; a near
-    twin's pick stays "low".  ``where`` names ``current`` in the pick's reason."""
+    twin's pick stays "low".  ``where`` names ``current`` in the pick's reason, which, like the
+    verdict's caution line (:func:`build_verdict`), names the quality flags there: a label lowered
+    for "2 quality flag(s)" says which."""
     for s in steps:
         d = s.decision
         if d.pick is None or d.pick.effect not in every or d.confidence is None or d.ambiguous:
@@ -984,14 +986,16 @@ def _relabel(steps: list[Step], every: dict, current: ModelFit, data: PreparedRe
         sup, _ = every[d.pick.effect]
         if sup.status == "assessed" and sup.rmse_without is not None:
             on_it = replace(d.pick, fit=current)    # the pick's own parameters as fitted there
+            flags = doubts(on_it)
             d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
-                                                len(doubts(on_it)), len(pinned(on_it)), current.effects,
+                                                len(flags), len(pinned(on_it)), current.effects,
                                                 len(undetermined(on_it)))
             if sup.delta_bic_if_removed is not None:       # the verdict's line of the pick reads on ``current``
                 d.relabelled = {"on": where, "rmse_without": sup.rmse_without, "rmse_with": current.rmse,
-                                "delta_bic": -sup.delta_bic_if_removed}
+                                "delta_bic": -sup.delta_bic_if_removed, "quality": quality(on_it)}
             d.reason += (f"; on {where} it lowers the RMS error {1e6 * sup.rmse_without:.4g} → "
-                         f"{1e6 * current.rmse:.4g} µm: confidence {c.label}" + (": " + "; ".join(c.why) if c.why else ""))
+                         f"{1e6 * current.rmse:.4g} µm: confidence {c.label}" + (": " + "; ".join(c.why) if c.why else "")
+                         + (f" (quality flags there: {'; '.join(flags)})" if flags else ""))
             run.log(f"  {d.pick.effect} on {where}: confidence {c.label}")
 
 
@@ -1166,7 +1170,7 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                                else (s.base.rmse, p.fit.rmse, p.comparison.delta_bic))
         picks.append(Pick(s.index, p.effect, s.decision.weight, before, after, dbic, p.comparison.p_value,
                           effect_rows(at, p.effect),
-                          list(p.quality), s.decision.reason,
+                          list(again.get("quality", p.quality)), s.decision.reason,
                           s.decision.confidence and conf.at_chain_end(s.decision.confidence, final.rmse, data.noise),
                           next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating,
                           again.get("on", "")))
