@@ -187,6 +187,36 @@ def test_a_pick_the_rest_of_the_model_can_trade_for_is_undetermined():
     assert c.label == "low" and any("only in combination with the rest of the model" in w for w in c.why)
 
 
+def test_a_trade_with_the_rest_does_not_doubt_a_pick_whose_removal_costs_many_noise_floors():
+    """circuit_lab seed 62's resistive electrodes: on the refitted model electrode_resistance took
+    85.98 → 2.676 µm (2.55 µm floor: it removes 34 noise floors and leaves 1.05), its resistance
+    ± 0.13 %, correlated 0.995 and 0.990 with the coupling fitted at two RH levels: two flags and,
+    its one parameter traded, "undetermined" — "low".  The rest refitted without it is 34 floors
+    worse, so it cannot stand in for it, and the standard error already carries the trade: "high".
+    Below CHANGE_HIGH (the one-relaxation strip's layered_beam, 1.7 floors) the trade still counts,
+    and so does a flag of another kind or a parameter whose standard error is large."""
+    from physics.diagnose.verdict import traded_only, undetermined, with_rest
+    rs = _fitted("electrode_resistance", ["Rs", "kf@RH60", "kf@RH80", "Y@RH60"],
+                 np.array([[1.0, 0.9953, 0.9904, 0.2], [0.9953, 1.0, 0.99, 0.1], [0.9904, 0.99, 1.0, 0.1],
+                           [0.2, 0.1, 0.1, 1.0]]))
+    assert len(with_rest(rs)) == 2 and undetermined(rs) == traded_only(rs) == ["Rs"]
+    step = _label(6.187 / 2.55, 6.187 / 2.55)         # its step: a label the refit replaces
+    on = dict(flags=2, pinned=0, undetermined=1, rest_flags=2, traded=1)
+    again = conf.reconfirmed(step, 2.676 * UM, 85.98 * UM, 2.55 * UM, **on)
+    assert again.label == "high" and not again.why, again.why
+    assert conf.Confidence.from_dict(again.to_dict()).traded == 1
+    before = conf.reconfirmed(step, 2.676 * UM, 85.98 * UM, 2.55 * UM, flags=2, pinned=0, undetermined=1)
+    assert before.label == "low"                      # the same counts, not known to be trades
+    small = conf.reconfirmed(step, 1.03 * UM, 2.01 * UM, 1.0 * UM, flags=4, pinned=0, undetermined=1, rest_flags=4,
+                             traded=1)
+    assert small.label == "low" and any("only in combination" in w for w in small.why)
+    other = conf.reconfirmed(step, 2.676 * UM, 85.98 * UM, 2.55 * UM, flags=3, pinned=0, undetermined=1,
+                             rest_flags=2, traded=0)
+    assert other.label == "low" and "1 quality flag(s)" in other.why
+    rs.fit.rel_std_errors["Rs"] = 0.8                 # the trade shows in the standard error: not a trade only
+    assert undetermined(rs) == ["Rs"] and traded_only(rs) == []
+
+
 def test_on_the_refitted_model_a_pick_is_judged_by_its_flags_there():
     """A relaxing modulus taken for viscoelastic: at its step it leaves 4.3 noise floors with its
     slope on a bound and correlated with the modulus (3 flags); once the model's own effects are
@@ -631,6 +661,8 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0, flags=()):
     _patch_swap(monkeypatch, without, forward)
     monkeypatch.setattr(dg, "doubts", lambda c: list(flags))
     monkeypatch.setattr(dg, "quality", lambda c: list(flags))
+    monkeypatch.setattr(dg, "with_rest", lambda c: [])
+    monkeypatch.setattr(dg, "traded_only", lambda c: [])
     monkeypatch.setattr(dg, "pinned", lambda c: [])
     monkeypatch.setattr(dg, "undetermined", lambda c: [])
     from dataclasses import replace          # "medium": 35× the noise floor left, fractional_coupling held on a bound

@@ -72,7 +72,8 @@ from .signatures import features, revealable, signatures
 from .specs import (declared_default, effect_params, excitation, keeps_spec_range, param_bounds, refine_params,
                     role_family, shape_params, spec_of, start_points)
 from .verdict import (ADEQUATE_RATIO, AFTER_PICK_SHARE, UNATTRIBUTED, Decision, Pick, Verdict, _signed, ahead,
-                      decide, doubts, lead_of, nuisance_summary, pinned, quality, remaining_of, undetermined)
+                      decide, doubts, lead_of, nuisance_summary, pinned, quality, remaining_of, traded_only,
+                      undetermined, with_rest)
 
 #: Removing an effect of the model must cost at least this ΔBIC for the data to support it.
 SUPPORT_BIC = 6.0
@@ -989,7 +990,8 @@ def _relabel(steps: list[Step], every: dict, current: ModelFit, data: PreparedRe
             flags = doubts(on_it)
             d.confidence = c = conf.reconfirmed(d.confidence, current.rmse, sup.rmse_without, data.noise,
                                                 len(flags), len(pinned(on_it)), current.effects,
-                                                len(undetermined(on_it)))
+                                                len(undetermined(on_it)), len(with_rest(on_it)),
+                                                len(traded_only(on_it)))
             if sup.delta_bic_if_removed is not None:       # the verdict's line of the pick reads on ``current``
                 d.relabelled = {"on": where, "rmse_without": sup.rmse_without, "rmse_with": current.rmse,
                                 "delta_bic": -sup.delta_bic_if_removed, "quality": quality(on_it)}

@@ -137,6 +137,16 @@ def undetermined(c) -> list[str]:
     return [lab for _, _, lab, _, bound, rel in est if not bound and (every or _undetermined(rel))]
 
 
+def traded_only(c) -> list[str]:
+    """Of :func:`undetermined`, the parameters counted only because every own parameter trades with
+    the rest of the model (their relative standard error, which already carries that trade, is
+    within :data:`REL_SE_FLAG`)."""
+    est = list(_own_estimates(c))
+    if not est or len(_traded(c, est)) != len(est):
+        return []
+    return [lab for _, _, lab, _, bound, rel in est if not bound and not _undetermined(rel)]
+
+
 def _traded(c, est: list) -> set[int]:
     """Indices of the own parameters ``est`` (:func:`_own_estimates` of ``c``) correlated beyond
     :data:`CORR_FLAG` with a parameter that is not the candidate's own."""
@@ -153,33 +163,46 @@ def held(c) -> list[str]:
     return [lab for _, _, lab, _, bound, _ in _own_estimates(c) if bound]
 
 
-def quality(c, *, own_pairs: bool = True) -> list[str]:
-    """The quality flags of a fitted candidate (module doc), as sentences; ``own_pairs=False``
-    leaves out a correlation between two of its own parameters (:func:`doubts`)."""
+def _flags(c):
+    """(kind, sentence) of each quality flag of a fitted candidate (module doc); kind "own pair": a
+    correlation between two of its own parameters, "rest": of one of them with a parameter of the
+    rest of the model, else "flag"."""
     f = c.fit
     labels = f.result.problem.labels
-    mine, flags = [], []
+    mine = []
     for i, prm, lab, v, bound, rel in _own_estimates(c):
         mine.append(i)
         if bound:
-            flags.append(f"{lab} = {v:.4g} {prm.unit} is on a bound of its range [{prm.lower:.3g}, {prm.upper:.3g}]")
+            yield "flag", f"{lab} = {v:.4g} {prm.unit} is on a bound of its range [{prm.lower:.3g}, {prm.upper:.3g}]"
         if _undetermined(rel):
-            flags.append(f"{lab} is not determined (relative standard error "
-                         f"{'∞' if not math.isfinite(rel) else f'{100 * rel:.3g} %'})")
+            yield "flag", (f"{lab} is not determined (relative standard error "
+                           f"{'∞' if not math.isfinite(rel) else f'{100 * rel:.3g} %'})")
     corr = f.correlation
     if corr is not None:
         for i in mine:
             for j in range(len(labels)):
-                if j == i or (j in mine and (j < i or not own_pairs)):
+                if j == i or (j in mine and j < i):
                     continue
                 r = corr[i, j]
                 if math.isfinite(r) and abs(r) > CORR_FLAG:
-                    flags.append(f"{labels[i]} and {labels[j]} are correlated (ρ = {r:+.4f}): only a combination "
-                                 "is determined")
+                    yield ("own pair" if j in mine else "rest"), (
+                        f"{labels[i]} and {labels[j]} are correlated (ρ = {r:+.4f}): only a combination is determined")
     sig = c.signature or {}
     if sig.get("score") == 0:
-        flags.append(f"its residual signature ({', '.join(sig.get('expected', []))}) is absent")
-    return flags
+        yield "flag", f"its residual signature ({', '.join(sig.get('expected', []))}) is absent"
+
+
+def quality(c, *, own_pairs: bool = True) -> list[str]:
+    """The quality flags of a fitted candidate (module doc), as sentences; ``own_pairs=False``
+    leaves out a correlation between two of its own parameters (:func:`doubts`)."""
+    return [text for kind, text in _flags(c) if own_pairs or kind != "own pair"]
+
+
+def with_rest(c) -> list[str]:
+    """Of :func:`doubts`, the correlations of the candidate's own parameters with a parameter of the
+    rest of the model: a local statement that the rest could trade for part of it, which
+    :mod:`.confidence` does not count once removing the effect costs the model many noise floors."""
+    return [text for kind, text in _flags(c) if kind == "rest"]
 
 
 def doubts(c) -> list[str]:
@@ -323,7 +346,8 @@ def ahead(d: Decision, lead, second, base, ranked, noise: float) -> Decision:
 def _confidence(top, base, ranked, weights: dict, noise: float) -> conf.Confidence:
     """The labelled confidence of the pick ``top`` among the step's evaluated ``ranked``."""
     return conf.label(conf.features(top, base, ranked, weights[top.effect], noise, len(doubts(top)),
-                                    len(pinned(top)), _held(ranked), len(undetermined(top))))
+                                    len(pinned(top)), _held(ranked), len(undetermined(top)),
+                                    len(with_rest(top)), len(traded_only(top))))
 
 
 def _held(ranked) -> set[str]:
