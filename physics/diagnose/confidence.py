@@ -433,14 +433,15 @@ def reconfirmed(c: Confidence, with_pick: float, without: float, noise: float, f
     """``c`` labelled again on the model whose own effects were refitted (:func:`.diagnosis.select`):
     the error the pick removes there (``without`` → ``with_pick`` [m RMS], the refitted model
     without and with it), the error that model leaves, and the quality ``flags``, ``pinned`` and
-    ``undetermined`` parameters of the pick's own parameters in it (the refit frees them again beside the own
-    effects'; ``rest_flags`` and ``traded``: those of them that are correlations with the rest there).  Before the refit a pick can leave a large residual, or a parameter on a bound, only
-    because the device's values of the model's own effects are not the strip's; once they are
-    refitted, what it leaves is what a missing physics could still hide.  Used so too on the model
-    after a swap (:func:`.diagnosis._swap_first`): a later pick's step had the withdrawn pick in
-    its model.  The rival shares, the records and the weight are the pick's step's, but a rival
-    now in the model (``in_model``: its effects) is no alternative to the pick any more: after a
-    swap, a rival held on a bound at the pick's step was the effect the swap put in."""
+    ``undetermined`` parameters of the pick's own parameters in it (the refit frees them again
+    beside the own effects'; ``rest_flags`` and ``traded``: those of them that are correlations
+    with the rest there).  Before the refit a pick can leave a large residual, or a parameter on
+    a bound, only because the device's values of the model's own effects are not the strip's;
+    once they are refitted, what it leaves is what a missing physics could still hide.  Used so
+    too on the model after a swap (:func:`.diagnosis._swap_first`): a later pick's step had the
+    withdrawn pick in its model.  The rival shares, the records and the weight are the pick's
+    step's, but a rival now in the model (``in_model``: its effects) is no alternative to the pick
+    any more: after a swap, a rival held on a bound at the pick's step was the effect the swap put in."""
     ok = math.isfinite(noise) and noise > 0
     if c.twin_of in in_model:
         c = replace(c, twin=1.0, twin_of=None)
