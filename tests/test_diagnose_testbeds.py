@@ -106,10 +106,13 @@ def test_an_effect_switched_off_reads_on_its_bound_without_a_warning():
 
 
 def _flags_only(monkeypatch, V):
-    """The fake candidates' quality is their ``_flags``; one is held on a bound when a flag says so."""
+    """The fake candidates' quality is their ``_flags`` (none a correlation with the rest of the
+    model); one is held on a bound when a flag says so."""
     monkeypatch.setattr(V, "quality", lambda c, own_pairs=True: list(c._flags))
+    monkeypatch.setattr(V, "with_rest", lambda c: [])
     monkeypatch.setattr(V, "pinned", lambda c: [])
     monkeypatch.setattr(V, "undetermined", lambda c: [])
+    monkeypatch.setattr(V, "traded_only", lambda c: [])
     monkeypatch.setattr(V, "held", lambda c: [q for q in c._flags if "bound" in q])
 
 
