@@ -210,7 +210,8 @@ def doubts(c) -> list[str]:
     confidence label counts (:mod:`.confidence`): all but a correlation between two of its own
     parameters (a stiffness scale it takes over and its frequency slope), which says which of
     its values the records determine, not whether it is needed — a correlation with a parameter
-    of the rest of the model says the rest could stand in for it, and counts."""
+    of the rest of the model says the rest could stand in for it, and counts unless the pick's
+    removal costs :data:`.confidence.CHANGE_HIGH` noise floors or more (:func:`with_rest`)."""
     return quality(c, own_pairs=False)
 
 
