@@ -680,7 +680,9 @@ def test_a_pick_the_model_written_leaves_out_says_so_on_its_verdict_line():
     assert any(n.startswith(f"{pick} (the diagnosis's pick) is left out") for n in out.notes)
     v = Verdict("partly explained", d.verdict.picks, {}, None, 90e-6, 1e-6, "test")
     assert any(line.startswith("  Left out of the model written:") and lp in line for line in v.lines())
-    assert v.to_dict()["chain"][0]["left_out_of_written"] == p.left_out
+    # a low-pass is no form the electrode's resistance makes: the pick stood in for the draft
+    assert p.stood_in == lp and d.verdict.status == "not explained by the catalog"
+    assert v.to_dict()["stood_in"][0]["left_out_of_written"] == p.left_out
     # the verdict found forms describing the rest: its "What remains" is its own
     assert d.verdict.drafted_remaining == ""
     # it found none ("base mismatch"): it says what the drafts fitted with the model found instead
@@ -1331,14 +1333,46 @@ def test_a_pick_left_out_stood_in_for_the_drafts_not_for_an_own_effect_restored(
     """The pick the model written leaves out may have stood in for what that model adds to the
     user's: the kept drafts, not an own effect of the user's model restored beside them."""
     from physics.diagnose.draft import DraftOutcome, _left_out_of_written
-    pick = _Stub(effect="nonlinear_charge", left_out="")
+    pick = _Stub(effect="nonlinear_charge", left_out="", stood_in="")
     res = _Stub(final=_Stub(rmse=19.85e-6, effects=["double_layer", "viscoelastic", "nonlinear_charge"]),
                 base=_Stub(effects=["double_layer", "solvent_diffusion", "viscoelastic"]),
                 verdict=_Stub(picks=[pick]))
     written = _Stub(rmse=2.5e-6, effects=["double_layer", "solvent_diffusion", "viscoelastic", "drafted_x"])
-    out = DraftOutcome([_Stub(effect_id="drafted_x")], [], 19.85e-6, final=written)
+    out = DraftOutcome([_Stub(effect_id="drafted_x", form="input_saturation")], [], 19.85e-6, final=written)
     _left_out_of_written(res, out)
     assert pick.left_out.endswith("so nonlinear_charge may have stood in for drafted_x")
+
+
+def test_a_pick_left_out_for_drafts_its_physics_does_not_make_is_not_named():
+    """A pick the model written leaves out for kept drafts alone is named only when one of their forms
+    is one its physics makes (``shows_as``: the charge's saturation for a drafted saturation of the
+    drive); else the verdict names no catalog effect and lists the pick as a stand-in.  Where the
+    model written also adds a catalog effect, the pick may have stood in for that: it stays named."""
+    from physics.diagnose.draft import DraftOutcome, _left_out_of_written
+    from physics.diagnose.verdict import Verdict
+
+    def case(effect, form, extra=()):
+        pick = _verdict_pick(effect, "medium", 120e-6, 40e-6)
+        res = _Stub(final=_Stub(rmse=40e-6, effects=["double_layer", effect]), base=_Stub(effects=["double_layer"]),
+                    verdict=_Stub(picks=[pick], status="partly explained"))
+        written = _Stub(rmse=1.5e-6, effects=["double_layer", *extra, "drafted_y"])
+        _left_out_of_written(res, DraftOutcome([_Stub(effect_id="drafted_y", form=form)], [], 40e-6, final=written))
+        return pick, res.verdict.status, Verdict(res.verdict.status, [pick], {}, None, 120e-6, 1.5e-6, "test")
+
+    pick, status, v = case("electrode_resistance", "output_lowpass")
+    assert pick.left_out and pick.stood_in == "drafted_y" and status == "not explained by the catalog"
+    assert v.missing_effect is None and v.chain == [] and v.label is None and v.to_dict()["chain"] == []
+    assert [d["effect"] for d in v.to_dict()["stood_in"]] == ["electrode_resistance"]
+    lines = v.lines()
+    assert any(x.startswith("Which effect: none from the catalog") and "drafted_y (a form outside" in x for x in lines)
+    assert any(x.startswith("Left out, a stand-in for drafted_y: electrode_resistance (confidence medium")
+               for x in lines)
+    pick, status, v = case("nonlinear_charge", "input_saturation")
+    assert pick.left_out and not pick.stood_in and status == "partly explained"
+    assert v.missing_effect == "nonlinear_charge" and v.to_dict()["stood_in"] == []
+    assert any(x.startswith("Which effect: nonlinear_charge") for x in v.lines())
+    pick, status, v = case("electrode_resistance", "output_lowpass", extra=("solvent_diffusion",))
+    assert pick.left_out and not pick.stood_in and v.chain == ["electrode_resistance"]
 
 
 def test_a_large_signal_pick_meets_its_best_linear_rival():

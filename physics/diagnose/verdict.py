@@ -436,6 +436,7 @@ class Pick:
     separating: str = ""             # the record that would separate them
     on: str = ""                     # labelled again on a later model (its numbers are then without → with it there)
     left_out: str = ""               # why the model written leaves it out (the draft rounds put drafts in its place)
+    stood_in: str = ""               # the kept drafts it stood in for: left out for forms its physics does not make
 
     @property
     def label(self) -> str:
@@ -453,7 +454,8 @@ class Pick:
                 "rmse_before_m": self.rmse_before, "rmse_after_m": self.rmse_after, "delta_bic": self.delta_bic,
                 "p_value": self.p_value, "parameters": self.parameters, "quality_flags": self.quality,
                 "reason": self.reason, "near_twin": self.twin or None, "separating_record": self.separating or None,
-                "relabelled_on": self.on or None, "left_out_of_written": self.left_out or None}
+                "relabelled_on": self.on or None, "left_out_of_written": self.left_out or None,
+                "stood_in_for": self.stood_in or None}
 
 
 @dataclass
@@ -489,32 +491,38 @@ class Verdict:
 
     # --- the first answer, as before the chain existed ---------------------------------
     @property
+    def named(self) -> list[Pick]:
+        """The picks the verdict names: all but those left out as stand-ins for kept drafts
+        (:attr:`Pick.stood_in`, set by :func:`.draft._left_out_of_written`)."""
+        return [p for p in self.picks if not p.stood_in]
+
+    @property
     def ambiguous(self) -> list[str]:
         """The first pick and its near twin when the data could not tell them apart, else []."""
-        p = self.picks[0] if self.picks else None
+        p = next(iter(self.named), None)
         return [p.effect, p.twin] if p is not None and p.twin else []
 
     @property
     def separating(self) -> str:
         """The record that would separate the first pick from its near twin ("" without one)."""
-        return self.picks[0].separating if self.picks else ""
+        return self.named[0].separating if self.named else ""
 
     @property
     def missing_effect(self) -> str | None:
-        return self.picks[0].effect if self.picks else None
+        return self.named[0].effect if self.named else None
 
     @property
     def confidence(self) -> float | None:
         """Weight of the first pick; None for a null answer (no confidence is claimed)."""
-        return self.picks[0].weight if self.picks else None
+        return self.named[0].weight if self.named else None
 
     @property
     def label(self) -> str | None:
-        return self.picks[0].label if self.picks else None
+        return self.named[0].label if self.named else None
 
     @property
     def chain(self) -> list[str]:
-        return [p.effect for p in self.picks]
+        return [p.effect for p in self.named]
 
     @property
     def on_chain(self) -> list[Pick]:
@@ -543,9 +551,16 @@ class Verdict:
                        f"refitted model it is {r['reason']}: it stood in for the device's values, not for missing "
                        "physics.")
         if self.picks:
-            for k, p in enumerate(self.picks):
+            first = next(iter(self.named), None)
+            if first is None:
+                one = " and " not in self.picks[0].stood_in
+                out.append("Which effect: none from the catalog — the model written fits the records better with "
+                           f"{self.picks[0].stood_in} ({'a form' if one else 'forms'} outside the catalog) and without "
+                           f"the catalog's pick below, which may have stood in for {'it' if one else 'them'}.")
+            for p in self.picks:
                 head = (f"Named for the draft {p.in_place_of}: " if p.in_place_of else
-                        "Which effect: " if k == 0 else "Then, on top of it: ")
+                        f"Left out, a stand-in for {p.stood_in}: " if p.stood_in else
+                        "Which effect: " if p is first else "Then, on top of it: ")
                 params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
                 if p.twin:
                     out.append(f"{head}ambiguous between {p.effect} and {p.twin} — these data cannot tell them apart"
@@ -678,7 +693,8 @@ class Verdict:
         return "; ".join(parts)
 
     def to_dict(self) -> dict:
-        return {"status": self.status, "chain": [p.to_dict() for p in self.picks],
+        return {"status": self.status, "chain": [p.to_dict() for p in self.named],
+                "stood_in": [p.to_dict() for p in self.picks if p.stood_in],
                 "missing_effect": self.missing_effect, "confidence": self.confidence,
                 "confidence_label": self.label, "weights": self.weights, "reason": self.reason,
                 "ambiguous": self.ambiguous, "separating_record": self.separating,
