@@ -1346,16 +1346,15 @@ def test_a_pick_left_out_stood_in_for_the_drafts_not_for_an_own_effect_restored(
 def test_a_pick_left_out_for_drafts_its_physics_does_not_make_is_not_named():
     """A pick the model written leaves out for kept drafts alone is named only when one of their forms
     is one its physics makes (``shows_as``: the charge's saturation for a drafted saturation of the
-    drive); else the verdict names no catalog effect and lists the pick as a stand-in.  Where the
-    model written also adds a catalog effect, the pick may have stood in for that: it stays named."""
+    drive); else the verdict names no catalog effect and lists the pick as a stand-in."""
     from physics.diagnose.draft import DraftOutcome, _left_out_of_written
     from physics.diagnose.verdict import Verdict
 
-    def case(effect, form, extra=()):
+    def case(effect, form):
         pick = _verdict_pick(effect, "medium", 120e-6, 40e-6)
         res = _Stub(final=_Stub(rmse=40e-6, effects=["double_layer", effect]), base=_Stub(effects=["double_layer"]),
                     verdict=_Stub(picks=[pick], status="partly explained"))
-        written = _Stub(rmse=1.5e-6, effects=["double_layer", *extra, "drafted_y"])
+        written = _Stub(rmse=1.5e-6, effects=["double_layer", "drafted_y"])
         _left_out_of_written(res, DraftOutcome([_Stub(effect_id="drafted_y", form=form)], [], 40e-6, final=written))
         return pick, res.verdict.status, Verdict(res.verdict.status, [pick], {}, None, 120e-6, 1.5e-6, "test")
 
@@ -1371,8 +1370,6 @@ def test_a_pick_left_out_for_drafts_its_physics_does_not_make_is_not_named():
     assert pick.left_out and not pick.stood_in and status == "partly explained"
     assert v.missing_effect == "nonlinear_charge" and v.to_dict()["stood_in"] == []
     assert any(x.startswith("Which effect: nonlinear_charge") for x in v.lines())
-    pick, status, v = case("electrode_resistance", "output_lowpass", extra=("solvent_diffusion",))
-    assert pick.left_out and not pick.stood_in and v.chain == ["electrode_resistance"]
 
 
 def test_a_large_signal_pick_meets_its_best_linear_rival():

@@ -477,13 +477,13 @@ def _left_out_of_written(res, outcome: DraftOutcome) -> None:
     more reliable on a held-out family (there the picks left out were right ones: a catalog saturation
     of the charge beside a drafted saturation of the drive).
 
-    Where what the model written adds is kept drafts alone and none of their forms is one the pick's
-    physics makes (its spec's ``shows_as``), the pick is not named (:attr:`.verdict.Pick.stood_in`):
-    the verdict says no catalog effect explains the records and lists the pick as a stand-in.  Chosen
-    on ``pnp_fd`` and ``pnp_sweep`` seed 63 (a sensor's low-pass or dead time named
-    ``electrode_resistance``, left out for a drafted low-pass or delay); held out on ``circuit_lab``
-    seed 62, where it withdrew a creep's ``fractional_coupling`` and kept the three saturations of the
-    charge, each left out for a drafted saturation of the drive, which ``nonlinear_charge`` makes."""
+    Where none of the kept drafts' forms is one the pick's physics makes (its spec's ``shows_as``),
+    the pick is not named (:attr:`.verdict.Pick.stood_in`): the verdict says no catalog effect
+    explains the records and lists the pick as a stand-in.  Chosen on ``pnp_fd`` and ``pnp_sweep``
+    seed 63 (a sensor's low-pass or dead time named ``electrode_resistance``, left out for a drafted
+    low-pass or delay); held out on ``circuit_lab`` seed 62, where it withdrew a creep's
+    ``fractional_coupling`` and kept both saturating charges left out for a drafted saturation of
+    the drive, which ``nonlinear_charge`` makes."""
     from .specs import shown_as
     fit = outcome.final
     if not outcome.kept or fit is None or fit.rmse >= res.final.rmse:
@@ -492,7 +492,6 @@ def _left_out_of_written(res, outcome: DraftOutcome) -> None:
     # rounds restored is not what the pick stood in for
     added = [e for e in fit.effects if e not in res.final.effects and e not in res.base.effects]
     drafts = [d for d in outcome.kept if d.effect_id in fit.effects]
-    only_drafts = bool(added) and set(added) <= {d.effect_id for d in drafts}
     for p in res.verdict.picks:
         if p.effect in fit.effects:
             continue
@@ -500,7 +499,7 @@ def _left_out_of_written(res, outcome: DraftOutcome) -> None:
                       f"against {1e6 * res.final.rmse:.4g} µm with it), so {p.effect} may have stood in for "
                       f"{' and '.join(added) or 'what the drafts model'}")
         outcome.notes.append(f"{p.effect} (the diagnosis's pick) is left out of the model written: {p.left_out}")
-        if only_drafts and not any(p.effect in shown_as(d.form) for d in drafts):
+        if added and not any(p.effect in shown_as(d.form) for d in drafts):
             p.stood_in = " and ".join(added)
             outcome.notes.append(f"{p.effect} is not named: the drafts' forms are none its physics makes")
     if res.verdict.picks and all(p.stood_in for p in res.verdict.picks):
