@@ -553,10 +553,11 @@ class Verdict:
         if self.picks:
             first = next(iter(self.named), None)
             if first is None:
-                one = " and " not in self.picks[0].stood_in
+                one, picks = " and " not in self.picks[0].stood_in, len(self.picks) > 1
                 out.append("Which effect: none from the catalog — the model written fits the records better with "
                            f"{self.picks[0].stood_in} ({'a form' if one else 'forms'} outside the catalog) and without "
-                           f"the catalog's pick below, which may have stood in for {'it' if one else 'them'}.")
+                           f"the catalog's {'picks' if picks else 'pick'} below, which may have stood in for "
+                           f"{'it' if one else 'them'}.")
             for p in self.picks:
                 head = (f"Named for the draft {p.in_place_of}: " if p.in_place_of else
                         f"Left out, a stand-in for {p.stood_in}: " if p.stood_in else
