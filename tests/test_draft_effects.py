@@ -1366,6 +1366,15 @@ def test_a_pick_left_out_for_drafts_its_physics_does_not_make_is_not_named():
     assert any(x.startswith("Which effect: none from the catalog") and "drafted_y (a form outside" in x for x in lines)
     assert any(x.startswith("Left out, a stand-in for drafted_y: electrode_resistance (confidence medium")
                for x in lines)
+    # beside a catalog effect named for a kept draft's physics, the line says so
+    named = _verdict_pick("nonlinear_charge", "low", 40e-6, 30e-6)
+    named.confidence.in_place_of = "drafted_z"
+    v = Verdict("partly explained", [pick, named], {}, None, 120e-6, 1.5e-6, "test")
+    assert v.missing_effect == "nonlinear_charge" and v.chain == ["nonlinear_charge"]
+    lines = v.lines()
+    assert lines[1].startswith("Which effect: the model written fits the records better with drafted_y")
+    assert lines[1].endswith("is named for it below.") and lines[2].startswith("Left out, a stand-in for drafted_y")
+    assert any(x.startswith("Named for the draft drafted_z: nonlinear_charge") for x in lines)
     pick, status, v = case("nonlinear_charge", "input_saturation")
     assert pick.left_out and not pick.stood_in and status == "partly explained"
     assert v.missing_effect == "nonlinear_charge" and v.to_dict()["stood_in"] == []

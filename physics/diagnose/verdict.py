@@ -552,12 +552,15 @@ class Verdict:
                        "physics.")
         if self.picks:
             first = next(iter(self.named), None)
-            if first is None:
-                one, picks = " and " not in self.picks[0].stood_in, len(self.picks) > 1
-                out.append("Which effect: none from the catalog — the model written fits the records better with "
-                           f"{self.picks[0].stood_in} ({'a form' if one else 'forms'} outside the catalog) and without "
-                           f"the catalog's {'picks' if picks else 'pick'} below, which may have stood in for "
-                           f"{'it' if one else 'them'}.")
+            stood = [p for p in self.picks if p.stood_in]
+            if stood and (first is None or first.in_place_of):
+                one, picks = " and " not in stood[0].stood_in, len(stood) > 1
+                out.append(("Which effect: none from the catalog — " if first is None else "Which effect: ")
+                           + f"the model written fits the records better with {stood[0].stood_in} "
+                           f"({'a form' if one else 'forms'} outside the catalog) and without the chain's "
+                           f"{'picks' if picks else 'pick'} below, which may have stood in for {'it' if one else 'them'}"
+                           + ("." if first is None else "; a catalog effect whose physics makes a kept draft is named "
+                                                        "for it below."))
             for p in self.picks:
                 head = (f"Named for the draft {p.in_place_of}: " if p.in_place_of else
                         f"Left out, a stand-in for {p.stood_in}: " if p.stood_in else
