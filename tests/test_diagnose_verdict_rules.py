@@ -914,3 +914,65 @@ def test_what_remains_says_which_forms_the_drafts_write_and_which_are_only_descr
     assert "the draft rounds kept drafted_output_lowpass2 for the low-pass on the output" in both_kept
     assert "they also kept drafted_input_soft_saturation for the saturation of the input, which the final model's " \
         "residual did not show on its own" in both_kept and "nothing else to write" in both_kept
+
+
+def test_an_own_effect_removed_and_taken_back_refitted_is_not_named_as_missing(monkeypatch):
+    """circuit_lab seed 62's AC-coupled sensor: the user's model held the device's modulus table,
+    the support test removed it (169 → 150 µm), a free-shaped ``viscoelastic`` was taken back
+    (17.5 → 2.9 µm) and the verdict named it as the missing effect, "medium".  The user's model had
+    it: it is refitted, not missing.  The verdict names no effect, says so, and lists it apart
+    (``own_taken_back`` in diagnosis.json); a pick the model lacked is still named beside it."""
+    from types import SimpleNamespace as NS
+    from physics.diagnose import diagnosis as dg
+    monkeypatch.setattr(dg, "assess", lambda label, fit, recs, noise, **kw: NS(
+        rmse=fit.rmse, adequate=fit.rmse <= 1.3 * noise, ratio=fit.rmse / noise, noise_floor=noise, wander=0.0,
+        structure="", to_dict=lambda: {}))
+    for name, value in (("shared_structure", ""), ("allowed_wander", 0.0), ("wander_for", 0.0)):
+        monkeypatch.setattr(dg, name, lambda *a, v=value, **k: v)
+    monkeypatch.setattr(dg, "remaining_of", lambda ad: ("none", []))
+    monkeypatch.setattr(dg, "nuisance_summary", lambda fit, recs: {})
+    monkeypatch.setattr(dg, "effect_rows", lambda fit, effect: {})
+    data = NS(noise=UM, records=[], wander_split=None, estimated=False, wander=0.0, wander_beyond=0.0,
+              noise_source="stated")
+
+    def step(i, kind, base_um, result, pick=None, removal=None):
+        d = NS(pick=pick, weights={"base": 0.0}, alpha=0.01, reason=f"step {i}", relabelled={}, weight=1.0,
+               confidence=None, ambiguous=[], separating="")
+        return NS(index=i, kind=kind, decision=d, base=NS(rmse=base_um * UM), result=result, removal=removal,
+                  removed_fit=NS(rmse=150 * UM), withdrawn=False, swapped_for=None, picks_refined=False,
+                  refitted={}, refit=None)
+
+    def cand(effect, um):
+        return NS(effect=effect, fit=NS(rmse=um * UM), comparison=NS(p_value=0.0, delta_bic=-1e4), quality=[])
+
+    base = NS(rmse=169 * UM, effects=["double_layer", "viscoelastic"])
+    gone = NS(effect="viscoelastic", delta_bic_if_removed=-54.0, explanation="not supported by these data")
+
+    def verdict(*later, um=1.2):
+        ve = cand("viscoelastic", um if not later else 5.0)
+        effects = ["double_layer", "viscoelastic"] + [c.effect for c in later]
+        final = NS(rmse=(later[-1].fit.rmse if later else ve.fit.rmse), effects=effects)
+        steps = [step(1, "add", 169, NS(rmse=169 * UM, effects=["double_layer", "viscoelastic"])),
+                 step(2, "remove", 169, NS(rmse=150 * UM, effects=["double_layer"]), removal=gone),
+                 step(3, "add", 150, final if not later else NS(rmse=5 * UM, effects=effects[:2]), pick=ve)]
+        steps += [step(4 + i, "add", 5, final, pick=c) for i, c in enumerate(later)]
+        return dg.build_verdict(data, base, steps, 3)
+
+    v = verdict()
+    text = "\n".join(v.lines())
+    assert v.chain == [] and v.missing_effect is None and v.label is None and v.status == "explained"
+    assert [p.effect for p in v.picks if p.own] == ["viscoelastic"]
+    assert "Which effect: none the model lacks — viscoelastic is in your model already" in text
+    assert "Your model's own effect, taken back refitted: viscoelastic" in text
+    assert "viscoelastic taken back with its own parameters free" in v.reason
+    d = v.to_dict()
+    assert d["chain"] == [] and [p["effect"] for p in d["own_taken_back"]] == ["viscoelastic"]
+    assert d["own_taken_back"][0]["own_effect_taken_back"] is True
+    # still beyond the noise once taken back: no catalog effect explains the rest (there: a sensor's high-pass)
+    assert verdict(um=2.9).status == "not explained by the catalog"
+    # a missing effect found beside it is named, and leads
+    v = verdict(cand("electrode_resistance", 1.1))
+    text = "\n".join(v.lines())
+    assert v.chain == ["electrode_resistance"] and v.missing_effect == "electrode_resistance"
+    assert "Which effect: electrode_resistance" in text and "none the model lacks" not in text
+    assert v.status == "explained" and "Your model's own effect, taken back refitted: viscoelastic" in text

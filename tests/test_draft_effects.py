@@ -1333,7 +1333,7 @@ def test_a_pick_left_out_stood_in_for_the_drafts_not_for_an_own_effect_restored(
     """The pick the model written leaves out may have stood in for what that model adds to the
     user's: the kept drafts, not an own effect of the user's model restored beside them."""
     from physics.diagnose.draft import DraftOutcome, _left_out_of_written
-    pick = _Stub(effect="nonlinear_charge", left_out="", stood_in="")
+    pick = _Stub(effect="nonlinear_charge", left_out="", stood_in="", own=False)
     res = _Stub(final=_Stub(rmse=19.85e-6, effects=["double_layer", "viscoelastic", "nonlinear_charge"]),
                 base=_Stub(effects=["double_layer", "solvent_diffusion", "viscoelastic"]),
                 verdict=_Stub(picks=[pick]))

@@ -1176,6 +1176,13 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
                           s.decision.confidence and conf.at_chain_end(s.decision.confidence, final.rmse, data.noise),
                           next((e for e in s.decision.ambiguous if e != p.effect), ""), s.decision.separating,
                           again.get("on", "")))
+    # an effect the support test removed and a later step took back with its own parameters free was
+    # in the user's model all along: refitted, not missing (circuit_lab seed 62's AC-coupled sensor:
+    # the device's modulus table removed, a free-shaped one taken back and named as the missing effect)
+    gone = {r["effect"] for r in removed}
+    for q in picks:
+        q.own = q.effect in gone
+    named = [q for q in picks if not q.own]
     label = "base" + "".join(f" − {r['effect']}" for r in removed) + (" (own effects refitted)" if refitted else "") \
         + "".join(f" + {p.effect}" for p in picks) + (" (the picks' shape refined)" if refined else "")
     ad = assess(label, final, data.records, data.noise, structure=shared_structure(data, final),
@@ -1193,7 +1200,7 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
         status = UNATTRIBUTED
     elif within:
         status = "nothing to explain"
-    elif picks or ((removed or refitted) and ad.adequate):
+    elif named or ((removed or refitted) and ad.adequate):
         status = {True: "explained", False: "partly explained", None: "found (adequacy not assessed)"}[ad.adequate]
     else:
         status = "not explained by the catalog"
@@ -1204,9 +1211,11 @@ def build_verdict(data: PreparedRecords, base: ModelFit, steps: list[Step], max_
         stopped = f"no further candidate passes on top of [{', '.join(last.base.effects)}] ({last.decision.reason})"
     elif picks and len(picks) == max_effects and ad.adequate is False:
         stopped = f"the chain reached max_effects = {max_effects}"
-    reason = first.reason if not picks else picks[0].reason
-    if refitted and not picks and ad.adequate:
-        reason = (f"with its own effects refitted ({', '.join(refitted)}) the model leaves {1e6 * final.rmse:.4g} µm "
+    reason = first.reason if not named else named[0].reason
+    if (refitted or picks) and not named and ad.adequate:
+        how = ([f"its own effects refitted ({', '.join(refitted)})"] if refitted else []) + \
+            ([f"{', '.join(q.effect for q in picks)} taken back with its own parameters free"] if picks else [])
+        reason = (f"with {' and '.join(how)} the model leaves {1e6 * final.rmse:.4g} µm "
                   f"(the base {1e6 * base.rmse:.4g} µm): the device's values of its effects were not this strip's")
     noise, source = data.noise, data.noise_source
     if unattributed:

@@ -502,7 +502,8 @@ def _left_out_of_written(res, outcome: DraftOutcome) -> None:
         if added and not any(p.effect in shown_as(d.form) for d in drafts):
             p.stood_in = " and ".join(added)
             outcome.notes.append(f"{p.effect} is not named: the drafts' forms are none its physics makes")
-    if res.verdict.picks and all(p.stood_in for p in res.verdict.picks):
+    picks = res.verdict.picks        # none named but stand-ins (and own effects taken back, :attr:`.verdict.Pick.own`)
+    if any(p.stood_in for p in picks) and all(p.stood_in or p.own for p in picks):
         res.verdict.status = "not explained by the catalog"
 
 

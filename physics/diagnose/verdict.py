@@ -437,6 +437,7 @@ class Pick:
     on: str = ""                     # labelled again on a later model (its numbers are then without → with it there)
     left_out: str = ""               # why the model written leaves it out (the draft rounds put drafts in its place)
     stood_in: str = ""               # the kept drafts it stood in for: left out for forms its physics does not make
+    own: bool = False                # an effect of the user's model, removed as given and taken back refitted
 
     @property
     def label(self) -> str:
@@ -455,7 +456,7 @@ class Pick:
                 "p_value": self.p_value, "parameters": self.parameters, "quality_flags": self.quality,
                 "reason": self.reason, "near_twin": self.twin or None, "separating_record": self.separating or None,
                 "relabelled_on": self.on or None, "left_out_of_written": self.left_out or None,
-                "stood_in_for": self.stood_in or None}
+                "stood_in_for": self.stood_in or None, "own_effect_taken_back": self.own}
 
 
 @dataclass
@@ -492,9 +493,10 @@ class Verdict:
     # --- the first answer, as before the chain existed ---------------------------------
     @property
     def named(self) -> list[Pick]:
-        """The picks the verdict names: all but those left out as stand-ins for kept drafts
-        (:attr:`Pick.stood_in`, set by :func:`.draft._left_out_of_written`)."""
-        return [p for p in self.picks if not p.stood_in]
+        """The picks the verdict names as missing: all but those left out as stand-ins for kept
+        drafts (:attr:`Pick.stood_in`, set by :func:`.draft._left_out_of_written`) and the model's
+        own effects taken back refitted (:attr:`Pick.own`: the user's model had them)."""
+        return [p for p in self.picks if not p.stood_in and not p.own]
 
     @property
     def ambiguous(self) -> list[str]:
@@ -553,6 +555,13 @@ class Verdict:
         if self.picks:
             first = next(iter(self.named), None)
             stood = [p for p in self.picks if p.stood_in]
+            own = [p.effect for p in self.picks if p.own and not p.stood_in]
+            if own and first is None and not stood:
+                one = len(own) == 1
+                out.append(f"Which effect: none the model lacks — {' and '.join(own)} {'is' if one else 'are'} in "
+                           f"your model already: the data did not support {'it' if one else 'them'} with the "
+                           f"device's values, and taken back with {'its' if one else 'their'} own parameters free "
+                           f"{'it fits' if one else 'they fit'} (below): the device's values were not this strip's.")
             if stood and (first is None or first.in_place_of):
                 one, picks = " and " not in stood[0].stood_in, len(stood) > 1
                 out.append(("Which effect: none from the catalog — " if first is None else "Which effect: ")
@@ -564,6 +573,7 @@ class Verdict:
             for p in self.picks:
                 head = (f"Named for the draft {p.in_place_of}: " if p.in_place_of else
                         f"Left out, a stand-in for {p.stood_in}: " if p.stood_in else
+                        "Your model's own effect, taken back refitted: " if p.own else
                         "Which effect: " if p is first else "Then, on top of it: ")
                 params = ", ".join(_fmt_param(n, v) for n, v in p.parameters.items())
                 if p.twin:
@@ -699,6 +709,7 @@ class Verdict:
     def to_dict(self) -> dict:
         return {"status": self.status, "chain": [p.to_dict() for p in self.named],
                 "stood_in": [p.to_dict() for p in self.picks if p.stood_in],
+                "own_taken_back": [p.to_dict() for p in self.picks if p.own and not p.stood_in],
                 "missing_effect": self.missing_effect, "confidence": self.confidence,
                 "confidence_label": self.label, "weights": self.weights, "reason": self.reason,
                 "ambiguous": self.ambiguous, "separating_record": self.separating,
