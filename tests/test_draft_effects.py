@@ -544,7 +544,7 @@ def _diagnosis_stub(winner, res, rmse_final):
     return _Stub(final=fit, picks=[_Stub(effect=winner)] if winner else [], base=_fit_stub(90e-6, resid=res.resid),
                  adequacy=_Stub(adequate=False, forms=forms), records=res.records, candidates=[], steps=[],
                  verdict=_Stub(status="partly explained" if winner else "not explained by the catalog", picks=[],
-                               remaining_kind="described", drafted_remaining=""))
+                               remaining_kind="described", drafted_remaining="", removed=[]))
 
 
 def _rediagnose(table, calls, verdicts=None):
@@ -1513,9 +1513,11 @@ def test_a_kept_draft_is_named_by_the_catalog_effect_whose_physics_makes_its_for
     from physics.diagnose.verdict import Verdict
     sat, lp, nc = "drafted_input_soft_saturation", "drafted_output_lowpass2", "nonlinear_charge"
 
-    def case(after, draft_rmse=1.52e-6, status="partly explained", named=("electrode_resistance",), picked=True):
+    def case(after, draft_rmse=1.52e-6, status="partly explained", named=("electrode_resistance",), picked=True,
+             removed=()):
         res = _Stub(final=_fit_stub(60e-6), noise_floor=1.5e-6,
-                    verdict=_Stub(status=status, picks=[_verdict_pick(e, "low", 117e-6, 60e-6) for e in named]))
+                    verdict=_Stub(status=status, picks=[_verdict_pick(e, "low", 117e-6, 60e-6) for e in named],
+                                  removed=[{"effect": e} for e in removed]))
         out = DraftOutcome([_Stub(form="input_saturation", effect_id=sat)], [], 60e-6)
         out.final = _fit_stub(draft_rmse)
         out.final.effects = ["double_layer", lp, sat]
@@ -1555,6 +1557,9 @@ def test_a_kept_draft_is_named_by_the_catalog_effect_whose_physics_makes_its_for
     assert any("is not picked" in n for n in out.notes)
     res, _, calls = case(5.24e-6, named=(nc,))
     assert calls == [] and len(res.verdict.picks) == 1
+    # an effect of the user's model that the support test removed, named for the draft, is its own taken back
+    res, _, _ = case(5.24e-6, status="not explained by the catalog", named=(), removed=(nc,))
+    assert res.verdict.picks[0].own and res.verdict.status == "not explained by the catalog"
 
 
 def test_a_draft_taken_from_a_swap_leaves_no_parameter_of_the_draft_it_replaced():

@@ -548,8 +548,9 @@ def _name_counterparts(res, outcome: DraftOutcome, rediagnose, free: list, say) 
             q.left_out = (f"in place of {d.effect_id} it fits the records to {1e6 * q.rmse_after:.4g} µm, the draft to "
                           f"{1e6 * fit.rmse:.4g} µm: {eid} names the physics of the drafted form, and the model "
                           "written keeps the draft")
+            q.own = any(r["effect"] == eid for r in res.verdict.removed)     # your model's, taken back refitted
             res.verdict.picks.append(q)
-            if res.verdict.status == "not explained by the catalog":
+            if res.verdict.status == "not explained by the catalog" and not q.own:
                 res.verdict.status = "partly explained"
             outcome.notes.append(f"{eid} named for {d.effect_id}: in its place it lowers the RMS error "
                                  f"{1e6 * q.rmse_before:.4g} → {1e6 * q.rmse_after:.4g} µm (the draft: "
