@@ -26,7 +26,8 @@
    ``max_effects``; when none passes alone, the others are tried on top of the best once
    (:func:`_look_ahead`: a pair each of whose effects hides the other); when none passes, an
    effect of the user's model that the data do not support is removed (:func:`try_removal`) and
-   tried again as a candidate with its own parameters free; when no removal is favoured either
+   tried again as a candidate with its own parameters free (taken back, it is the user's own effect
+   refitted, not the missing one: :attr:`.verdict.Pick.own`); when no removal is favoured either
    (or the chain is full), the model's own effects are refitted once (:func:`refine_own`), the
    picks the refitted model does not need are withdrawn and the candidates tried again on top of
    it (unless ``--free`` names the free parameters: the user's list, nothing besides).

@@ -41,7 +41,8 @@ fails only "explains a third of the excess" (:func:`lead_of`), the others are tr
 and the two are taken when they remove nearly all the failure together (:func:`ahead`: two effects
 that pull the response in opposite ways each explain little alone); when none passes, an effect
 of the user's model that the data do not support is removed and tried again as a candidate
-with its own parameters free.
+with its own parameters free; taken back, it is the user's own effect refitted, listed apart and
+never named as the missing one (:attr:`Pick.own`).
 
 **Is the final model adequate.**  Its RMS error against the noise floor — the measurement's
 own, one number everywhere (:mod:`.records`) — adequate within :data:`ADEQUATE_RATIO` ×
@@ -561,7 +562,7 @@ class Verdict:
                 out.append(f"Which effect: none the model lacks — {' and '.join(own)} {'is' if one else 'are'} in "
                            f"your model already: the data did not support {'it' if one else 'them'} with the "
                            f"device's values, and taken back with {'its' if one else 'their'} own parameters free "
-                           f"{'it fits' if one else 'they fit'} (below): the device's values were not this strip's.")
+                           f"{'it lowers' if one else 'they lower'} the error (below): the device's values were not this strip's.")
             if stood and (first is None or first.in_place_of):
                 one, picks = " and " not in stood[0].stood_in, len(stood) > 1
                 out.append(("Which effect: none from the catalog — " if first is None else "Which effect: ")
