@@ -500,6 +500,11 @@ class Verdict:
         return [p for p in self.picks if not p.stood_in and not p.own]
 
     @property
+    def taken_back(self) -> list[Pick]:
+        """The model's own effects taken back refitted (:attr:`Pick.own`), stand-ins aside."""
+        return [p for p in self.picks if p.own and not p.stood_in]
+
+    @property
     def ambiguous(self) -> list[str]:
         """The first pick and its near twin when the data could not tell them apart, else []."""
         p = next(iter(self.named), None)
@@ -556,7 +561,7 @@ class Verdict:
         if self.picks:
             first = next(iter(self.named), None)
             stood = [p for p in self.picks if p.stood_in]
-            own = [p.effect for p in self.picks if p.own and not p.stood_in]
+            own = [p.effect for p in self.taken_back]
             if own and first is None and not stood:
                 one = len(own) == 1
                 out.append(f"Which effect: none the model lacks — {' and '.join(own)} {'is' if one else 'are'} in "
@@ -710,7 +715,7 @@ class Verdict:
     def to_dict(self) -> dict:
         return {"status": self.status, "chain": [p.to_dict() for p in self.named],
                 "stood_in": [p.to_dict() for p in self.picks if p.stood_in],
-                "own_taken_back": [p.to_dict() for p in self.picks if p.own and not p.stood_in],
+                "own_taken_back": [p.to_dict() for p in self.taken_back],
                 "missing_effect": self.missing_effect, "confidence": self.confidence,
                 "confidence_label": self.label, "weights": self.weights, "reason": self.reason,
                 "ambiguous": self.ambiguous, "separating_record": self.separating,
