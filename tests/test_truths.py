@@ -278,3 +278,21 @@ def test_bench_extracts_and_judges_a_diagnosis():
     assert j["named"] and not j["right"] and j["wrong"] and not j["wrong_high"]     # the low second pick is wrong
     assert j["ratio"] == pytest.approx(1.1) and j["offset_err"] == pytest.approx(6e-6)
     assert lofo.judge({**meta, "expected": [], "acceptable": ["solvent_diffusion"]}, x)["wrong_high"] is False
+
+
+def test_the_sensor_forms_bow_and_cut_the_logged_deflection_only():
+    """``bow``: y + b y²/S (even order, b of the stroke S at the stroke); ``clipped``: the
+    logged deflection stops at ±c S — the strip's own motion is that of the nothing-hidden case."""
+    base = make_case("pnp_sweep", "none", 0)
+    stroke = max(float(np.max(np.abs(r.clean))) for r in base.records)
+    bowed = make_case("pnp_sweep", "bow", 0)
+    b = bowed.truth_params["bow"]
+    assert 0.03 <= abs(b) <= 0.08 and bowed.effects == base.effects
+    for r, r0 in zip(bowed.records, base.records):
+        assert np.allclose(r.clean, r0.clean + b * r0.clean ** 2 / stroke, rtol=0, atol=1e-3 * stroke)
+    cut = make_case("pnp_sweep", "clipped", 0)
+    level = max(float(np.max(np.abs(r.clean))) for r in cut.records)
+    assert level == pytest.approx(cut.truth_params["clip_over_stroke"] * stroke, rel=0.01)
+    assert any(np.max(np.abs(r0.clean)) > level for r0 in base.records)
+    for r, r0 in zip(cut.records, base.records):
+        assert np.allclose(r.clean, np.clip(r0.clean, -level, level), rtol=0, atol=1e-3 * stroke)

@@ -181,7 +181,7 @@ def shared_draw(ing: str, rng) -> dict:
     """Parameters of an ingredient both families draw alike (a near twin's Zener arm, an output
     saturation, and the forms outside the catalog: creep, a second-order sensor low-pass, drift,
     play, dead zone, an eigen-moment load, a dead time of the deflection channel, a sensor's AC
-    coupling, mains pickup); {} for another."""
+    coupling, mains pickup, a sensor's bowed characteristic and its range cut); {} for another."""
     if ing == "zener":
         return {"zener_delta": float(rng.uniform(0.3, 0.6)), "zener_f_Hz": float(np.exp(rng.uniform(np.log(1), np.log(8))))}
     if ing == "saturation":
@@ -204,4 +204,8 @@ def shared_draw(ing: str, rng) -> dict:
         return {"highpass_Hz": float(np.exp(rng.uniform(np.log(0.01), np.log(0.04))))}
     if ing == "hum":
         return {"hum_um": float(rng.uniform(2, 4))}
+    if ing == "bow":
+        return {"bow": float(rng.uniform(0.03, 0.08)) * float(rng.choice([-1.0, 1.0]))}
+    if ing == "clipped":
+        return {"clip_over_stroke": float(rng.uniform(0.75, 0.9))}
     return {}

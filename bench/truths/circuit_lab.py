@@ -51,6 +51,9 @@ ac_coupled       the sensor AC-coupled: the fine grid through a first-order high
                  0.04) Hz (the deflection less its first-order lag)
 hum              mains pickup: a 50 Hz sinusoid of U(2, 4) µm, its phase drawn per record, added to
                  what is logged
+bow, clipped     the laser's characteristic bowed (±U(3, 8) % of the case's largest linear stroke at
+                 that stroke), its range cut at U(0.75, 0.9) × that stroke: :mod:`.forms`, on the fine
+                 grid between the strip and the sensor's own dynamics
 ===============  =============================================================================
 
 Records as a lab exports them: five 60 s records at 200 Hz — multisines 0.05–20 Hz at RH 40,
@@ -386,8 +389,9 @@ def lti_foh(A: np.ndarray, B: np.ndarray, C: np.ndarray, u: np.ndarray, dt: floa
 
 
 def _simulate(model: _Model, tp: dict, v: np.ndarray, amp_lo: float, tf: np.ndarray, t: np.ndarray, rng,
-              noise: float) -> np.ndarray:
-    """The laser-spot deflection [m] sampled at FS for the drive ``v`` on the fine grid ``tf``."""
+              noise: float, stroke: float) -> np.ndarray:
+    """The laser-spot deflection [m] sampled at FS for the drive ``v`` on the fine grid ``tf``;
+    ``stroke``: the largest linear deflection of the case [m], the scale of the sensor's curve."""
     u = v
     if "deadzone_over_amp" in tp:
         u = forms.dead_zone(u, tp["deadzone_over_amp"] * amp_lo)
@@ -400,6 +404,10 @@ def _simulate(model: _Model, tp: dict, v: np.ndarray, amp_lo: float, tf: np.ndar
         y = y + tp["creep_g"] * lfilter([1 - a], [1, -a], y)
     if "play_um" in tp:
         y = forms.play(y, 1e-6 * tp["play_um"])
+    if "bow" in tp:
+        y = forms.bow(y, tp["bow"], stroke)
+    if "clip_over_stroke" in tp:
+        y = forms.clip(y, tp["clip_over_stroke"] * stroke)
     if "lowpass_Hz" in tp:
         w0, z = 2 * np.pi * tp["lowpass_Hz"], tp["lowpass_zeta"]
         A = np.array([[0.0, 1.0], [-w0 * w0, -2 * z * w0]])
@@ -430,7 +438,8 @@ def make_case(truth: str, seed: int) -> Case:
     tf = np.arange(int(DURATION * FS * OVER)) / (FS * OVER)
     t = tf[::OVER]
     volts = [p.voltage(1.0, FS * OVER, DURATION, np.random.default_rng([seed, fam, 7, k])) for k, p in enumerate(PLAN)]
-    lin = {k: v for k, v in tp.items() if k not in ("sat_Us_over_amp", "deadzone_over_amp", "play_um", "drift_over_noise")}
+    lin = {k: v for k, v in tp.items() if k not in ("sat_Us_over_amp", "deadzone_over_amp", "play_um", "drift_over_noise",
+                                                     "bow", "clip_over_stroke")}
     lin_models = {rh: _Model(st, lin, rh_true[rh], gamma) for rh in rh_true}
     peak = max(float(np.max(np.abs(lin_models[p.rh].simulate(tf, v)))) for p, v in zip(PLAN, volts))
     amp = float(f"{min(2.0, max(0.1, PEAK / peak)):.2g}")
@@ -441,7 +450,7 @@ def make_case(truth: str, seed: int) -> Case:
             "sample": f"IPMC strip {drawn['L_total_mm']:g} x {drawn['width_mm']:g} mm", "exported_by": "DAQ software"}
     for k, (p, v1) in enumerate(zip(PLAN, volts)):
         v = amp * v1
-        y = _simulate(models[p.rh], tp, v, amp, tf, t, rng, noise)
+        y = _simulate(models[p.rh], tp, v, amp, tf, t, rng, noise, amp * peak)
         m = measure(y, rng, noise=noise, step_m=0.5e-6, offset=offset)
         records.append(Record(p.name(k, amp), t, np.round(v[::OVER], 4), m, y,
                               hygrometer(rh_true[p.rh], t.size, rng, jitter=0.3), offset, dict(meta)))

@@ -10,7 +10,10 @@ textbook forms, never from the package's residual forms):
 * :func:`play` — backlash of total width ``width`` between the strip and what the laser sees
   (a loose reflector);
 * :func:`dead_zone` — a dead zone of the drive: no voltage reaches the polymer below ``d``
-  (a contact that needs a threshold, an amplifier's crossover).
+  (a contact that needs a threshold, an amplifier's crossover);
+* :func:`bow` — a displacement sensor's bowed characteristic, y + b y²/S (a triangulation
+  head's linearity error: even order, b of the stroke S at its ends);
+* :func:`clip` — a sensor whose range the largest stroke leaves: what is logged stops at ±c.
 
 Large-signal laws of the double layer's charge (the in-catalog ``nonlinear_charge`` analogues;
 each returns the charge as the *equivalent small-signal voltage* Q(U)/C0 so that the linear
@@ -67,6 +70,14 @@ def play(y: np.ndarray, width: float) -> np.ndarray:
 
 def dead_zone(v: np.ndarray, d: float) -> np.ndarray:
     return np.sign(v) * np.maximum(np.abs(v) - d, 0.0)
+
+
+def bow(y: np.ndarray, b: float, stroke: float) -> np.ndarray:
+    return y + b * y * y / stroke
+
+
+def clip(y: np.ndarray, level: float) -> np.ndarray:
+    return np.clip(y, -level, level)
 
 
 def steric_sqrt(u: np.ndarray, u_s: float) -> np.ndarray:

@@ -49,6 +49,9 @@ delay            the deflection channel logged d U(4, 15) ms late (a sensor's or
 ac_coupled       the sensor AC-coupled: a first-order high-pass, corner log-U(0.01, 0.04) Hz
 hum              mains pickup: a 50 Hz sinusoid of U(2, 4) µm, its phase drawn per record, added to
                  what is logged
+bow, clipped     the laser's characteristic bowed (±U(3, 8) % of the case's largest linear stroke at
+                 that stroke), its range cut at U(0.75, 0.9) × that stroke: :mod:`.forms`, between the
+                 strip and the sensor's own dynamics
 ===============  ===========================================================================
 
 Records (lab design, the same for every truth): five 60 s records at 250 Hz — a multisine
@@ -286,9 +289,11 @@ def _pad(tp: dict) -> float:
     return 40.0 + 10.0 * max(slow)
 
 
-def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarray, rng, noise: float) -> np.ndarray:
+def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarray, rng, noise: float,
+              stroke: float) -> np.ndarray:
     """The sensor-spot deflection [m] sampled at FS for the drive ``v`` (on the fine grid);
-    ``noise``: the laser's [m], the scale of a drift."""
+    ``noise``: the laser's [m], the scale of a drift; ``stroke``: the largest linear deflection of
+    the case [m], the scale of the sensor's curve."""
     vf = v
     if "deadzone_over_amp" in tp:
         vf = forms.dead_zone(vf, tp["deadzone_over_amp"] * amp_lo)
@@ -304,6 +309,10 @@ def _simulate(chain: _Chain, tp: dict, v: np.ndarray, amp_lo: float, t: np.ndarr
     y = fft_filter(vf, FS * OVER, resp, pad_s=_pad(tp))
     if "play_um" in tp:
         y = forms.play(y, 1e-6 * tp["play_um"])
+    if "bow" in tp:
+        y = forms.bow(y, tp["bow"], stroke)
+    if "clip_over_stroke" in tp:
+        y = forms.clip(y, tp["clip_over_stroke"] * stroke)
     if "lowpass_Hz" in tp:
         y = fft_filter(y, FS * OVER, lambda f: forms.lowpass2_response(f, tp["lowpass_Hz"], tp["lowpass_zeta"]))
     if "delay_ms" in tp:        # the deflection channel's dead time, exact for the band-limited signal
@@ -356,7 +365,7 @@ def make_case(truth: str, seed: int, design: Design = LAB) -> Case:
     for k, (p, v1) in enumerate(zip(plan, volts)):
         v = amp * v1
         t = np.arange(int(p.length(DURATION) * FS)) / FS
-        y = _simulate(chains[p.rh], tp, v, amp, t, rng, noise)
+        y = _simulate(chains[p.rh], tp, v, amp, t, rng, noise, amp * peak)
         v = v[::OVER]
         m = measure(y, rng, noise=noise, step_m=STEP, offset=offset)
         meta = {"description": f"IPMC strip, {drawn['L_total_mm']:g} mm, tapered",

@@ -25,6 +25,8 @@ eigen_moment       outside  bimorph-like eigen-moment instead of the    —
 delay              outside  deflection logged 4–15 ms late (dead time)  —
 ac_coupled         outside  sensor AC-coupled (0.01–0.04 Hz high-pass)   —
 hum                outside  50 Hz mains pickup of 2–4 µm on the sensor   —
+bow                outside  sensor's bowed characteristic, ±3–8 %       —
+clipped            outside  sensor's range cut at 75–90 % of the stroke  —
 twin_contact       twin     lumped contact resistance at the clamp      — (electrode_resistance)
 twin_relax         twin     partial back-relaxation                     — (solvent_diffusion)
 twin_zener         twin     one-relaxation (Zener) polymer, loss peak   — (viscoelastic)
@@ -72,7 +74,7 @@ TRUTHS: dict[str, Truth] = {t.name: t for t in (
     Truth("none", "none"),
     *(_catalog(n) for n in ("electrode", "rough", "solvent", "modulus", "saturation", "humidity")),
     *(Truth(n, "outside", (), (), (n,)) for n in ("creep", "lowpass2", "drift", "play", "deadzone", "eigen_moment",
-                                                  "delay", "ac_coupled", "hum")),
+                                                  "delay", "ac_coupled", "hum", "bow", "clipped")),
     Truth("twin_contact", "twin", (), ("electrode_resistance",), ("contact",)),
     Truth("twin_relax", "twin", (), ("solvent_diffusion",), ("partial_relax",), slow=True),
     Truth("twin_zener", "twin", (), ("viscoelastic",), ("zener",)),
