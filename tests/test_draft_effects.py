@@ -1329,6 +1329,46 @@ def test_an_effect_removed_before_the_drafts_is_restored_beside_them_when_it_pay
     assert not calls and out.chain == [("x", 4.4e-6)]
 
 
+def test_a_large_signal_pick_is_left_out_when_the_linear_model_refitted_without_it_fits_as_well():
+    """When the picks make the model written large-signal (its own effects cannot be refitted beside
+    the drafts), the model written less those picks is refitted with its own effects beside the drafts
+    (a round with no candidate and ``refit_own``) and written instead unless the picks earn their
+    parameters on top of it (ΔBIC ≤ −10); a linear model, the user's own large-signal effect and a
+    pick taken back into the user's model are left alone."""
+    from physics.diagnose.draft import DraftOutcome, _linear_without_picks
+    rng = np.random.default_rng(1)
+    noise = rng.standard_normal(4000)
+
+    def fit(rmse, effects, k, linear):
+        return _Stub(rmse=rmse, effects=list(effects), k=k, n=[4000], taus=[4.0], device=f"device at {rmse}",
+                     resid_d=[rmse * noise], model=_Stub(is_linear=linear), values={})
+    written = ["double_layer", "electrode_resistance", "nonlinear_charge", "drafted_bow"]
+    linear = ["double_layer", "electrode_resistance", "drafted_bow"]
+    calls = []
+    for after, left_out in ((3.3e-6, True), (6.5e-6, False)):
+        def rediagnose(device, effects, free, candidates, refit_own=False):
+            calls.append((device, tuple(effects), tuple(free), tuple(candidates), refit_own))
+            return _Stub(base=fit(9e-6, effects, 9, True), steps=[_Stub(refit=fit(after, effects, 15, True))])
+        res = _Stub(verdict=_Stub(picks=[_Stub(effect="nonlinear_charge", own=False)]))
+        out = DraftOutcome([_Stub(effect_id="drafted_bow", refit=lambda values: None)], [], 9e-6,
+                           chain=[("nonlinear_charge", 9e-6), ("drafted_bow", 5.865e-6)],
+                           final=fit(5.865e-6, written, 10, False))
+        _linear_without_picks(res, out, rediagnose, ["kf", "diffuse_share"], lambda msg: None)
+        assert calls[-1] == ("device at 5.865e-06", tuple(linear), ("kf",), (), True)
+        assert (out.final.effects == linear) == left_out and (out.chain[-1] == ("drafted_bow", 3.3e-6)) == left_out
+        note = [n for n in out.notes if n.startswith("without nonlinear_charge, the model written")]
+        assert len(note) == 1 and note[0].endswith("left out of the model written" if left_out else "kept")
+    calls.clear()
+    for pick, model in (("nonlinear_charge", True), ("viscoelastic", False)):
+        res = _Stub(verdict=_Stub(picks=[_Stub(effect=pick, own=False)]))
+        out = DraftOutcome([], [], 9e-6, chain=[("x", 5e-6)], final=fit(5e-6, written + [pick], 10, model))
+        _linear_without_picks(res, out, rediagnose, ["kf"], lambda msg: None)
+    res = _Stub(verdict=_Stub(picks=[_Stub(effect="nonlinear_charge", own=True)]))
+    _linear_without_picks(res, DraftOutcome([], [], 9e-6, chain=[("x", 5e-6)], final=fit(5e-6, written, 10, False)),
+                          rediagnose, ["kf"], lambda msg: None)
+    assert not calls
+
+
 def test_a_pick_left_out_stood_in_for_the_drafts_not_for_an_own_effect_restored():
     """The pick the model written leaves out may have stood in for what that model adds to the
     user's: the kept drafts, not an own effect of the user's model restored beside them."""
