@@ -324,6 +324,21 @@ def _refit_own(outcome: DraftOutcome, rediagnose, device, on_top: list, free: li
                                     f"RMS error {1e6 * before:.4g} → {1e6 * step.refit.rmse:.4g} µm")
 
 
+def _refitted_beside_drafts(rediagnose, outcome: DraftOutcome, fit, effects: list, free: list, failed: str):
+    """The model ``effects`` from ``fit``'s values (a ModelFit of the model written), its own effects
+    refitted beside the kept drafts (``rediagnose`` with no candidate and ``refit_own``): the refit,
+    or the round's base where the refit did not pay; None, with the note "``failed`` (why)", when
+    that model cannot be fitted."""
+    from .candidates import map_free
+    try:
+        again = rediagnose(fit.device, effects, map_free(free, list(fit.effects), effects), [], refit_own=True)
+    except (InputError, ModelError) as exc:
+        outcome.notes.append(f"{failed} ({exc})")
+        return None
+    step = next((s for s in again.steps if s.refit is not None), None)
+    return step.refit if step is not None else again.base
+
+
 def _linear_without_picks(res, outcome: DraftOutcome, rediagnose, free: list, say) -> None:
     """When the picks of the diagnosis ``res`` make the model written large-signal, so that
     :func:`_refit_own` could not refit its own effects beside the kept drafts: the model written less
@@ -337,7 +352,7 @@ def _linear_without_picks(res, outcome: DraftOutcome, rediagnose, free: list, sa
     rounds kept a drafted bow beside it, and the model written stayed at 5.87 µm (2.25× the noise
     floor); the base with the bow alone and its own effects refitted fits to 3.34 µm.  The user's own
     effects and picks taken back into the model are not left out."""
-    from .candidates import compare_fits, map_free
+    from .candidates import compare_fits
     from ..effects import EFFECTS
     fit = outcome.final
     if fit is None or getattr(getattr(fit, "model", None), "is_linear", True):
@@ -348,15 +363,10 @@ def _linear_without_picks(res, outcome: DraftOutcome, rediagnose, free: list, sa
     if not large:
         return
     say(f"drafts: [{', '.join(keep)}] without {', '.join(large)}, its own effects refitted beside the kept drafts")
-    try:
-        again = rediagnose(fit.device, keep, map_free(free, list(fit.effects), keep), [], refit_own=True)
-    except (InputError, ModelError) as exc:
-        outcome.notes.append(f"the model written was not refitted without {', '.join(large)} ({exc})")
+    new = _refitted_beside_drafts(rediagnose, outcome, fit, keep, free,
+                                  f"the model written was not refitted without {', '.join(large)}")
+    if new is None or not getattr(getattr(new, "model", None), "is_linear", False):
         return
-    if not getattr(getattr(again.base, "model", None), "is_linear", False):
-        return
-    step = next((s for s in again.steps if s.refit is not None), None)
-    new = step.refit if step is not None else again.base
     cmp = compare_fits(new, fit, False)
     text = (f"without {', '.join(large)}, the model written with its own effects refitted beside the kept drafts "
             f"fits the records to {1e6 * new.rmse:.4g} µm ({1e6 * fit.rmse:.4g} µm with "
@@ -383,20 +393,17 @@ def _restore_removed(outcome: DraftOutcome, rediagnose, free: list, removed: lis
     bound where it vanishes (4.85 µm against 4.36 without it), while restored with the own effects
     refitted the model written reached 2.50 µm (true model 2.07 µm).  Linear models only, as
     :func:`_refit_own`."""
-    from .candidates import compare_fits, map_free
+    from .candidates import compare_fits
     for eid in list(removed):
         fit = outcome.final
         if fit is None or not getattr(getattr(fit, "model", None), "is_linear", False):
             return
         on = list(fit.effects) + [eid]
         say(f"drafts: {eid} (removed before the drafts) restored beside them, the own effects refitted")
-        try:
-            again = rediagnose(fit.device, on, map_free(free, list(fit.effects), on), [], refit_own=True)
-        except (InputError, ModelError) as exc:
-            outcome.notes.append(f"{eid} was not restored beside the kept drafts ({exc})")
+        new = _refitted_beside_drafts(rediagnose, outcome, fit, on, free,
+                                      f"{eid} was not restored beside the kept drafts")
+        if new is None:
             continue
-        step = next((s for s in again.steps if s.refit is not None), None)
-        new = step.refit if step is not None else again.base
         cmp = compare_fits(fit, new, nested=False)
         text = (f"{eid} (removed before the drafts) restored beside them at the device's values, the own effects "
                 f"refitted: RMS error {1e6 * fit.rmse:.4g} → {1e6 * new.rmse:.4g} µm (ΔBIC {cmp.delta_bic:.3g})")
