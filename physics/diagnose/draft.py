@@ -353,12 +353,12 @@ def _linear_without_picks(res, outcome: DraftOutcome, rediagnose, free: list, sa
     floor); the base with the bow alone and its own effects refitted fits to 3.34 µm.  The user's own
     effects and picks taken back into the model are not left out."""
     from .candidates import compare_fits
-    from ..effects import EFFECTS
+    from ..effects import LINEAR_EFFECTS
     fit = outcome.final
     if fit is None or getattr(getattr(fit, "model", None), "is_linear", True):
         return
-    large = [p.effect for p in res.verdict.picks if p.effect in fit.effects and not p.own
-             and not getattr(EFFECTS.get(p.effect), "linear", True)]
+    linear = LINEAR_EFFECTS
+    large = [p.effect for p in res.verdict.picks if p.effect in fit.effects and not p.own and p.effect not in linear]
     keep = [e for e in fit.effects if e not in large]
     if not large:
         return
