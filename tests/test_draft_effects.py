@@ -1619,3 +1619,27 @@ def test_a_draft_taken_from_a_swap_leaves_no_parameter_of_the_draft_it_replaced(
     _strip_other_drafts(fit, drafts, ["double_layer", "drafted_play"])
     assert "asymmetry_gain" not in fit.device.params and fit.result.device is fit.device
     assert fit.device.params["play_share"] == 0.4 and fit.values == {"play_share": 0.4, "kf": 1.0}
+
+
+def test_a_kept_draft_keeps_the_parameters_it_shares_with_a_sibling_taken_out():
+    """The two orders of a drafted low-pass share their time constant: taking the first order's
+    parameters out of a fit that kept the second order must leave that τ in its device and values
+    (taken out, the next round refitted the kept low-pass from its draft's default τ, 12.08 → 33.3 µm
+    on a held-out strip, and the draft file kept the default)."""
+    import dataclasses
+
+    from physics.diagnose.draft import _strip_other_drafts
+    nothing = _residual(lambda p, t, fs: 0.0 * p)
+    band = _fit("output_lowpass", _residual(lambda p, t, fs: 0.25 * (response_filter(p, fs, lambda f: lowpass2(f, 8.0, 0.4)) - p)))
+    first, second = F.form_of("output_lowpass")().draft(band, nothing)
+    shared = {p.name for p in first.params} & {p.name for p in second.params}
+    assert shared, "the two orders are expected to share a parameter name"
+    dev = load_device("ipmc_pt_eg")
+    own = {p.name: 0.0104 for p in second.params}
+    dev = dataclasses.replace(dev, params={**dev.params, **own})
+    fit = _Stub(device=dev, result=_Stub(device=dev), values={**own, "kf": 1.0})
+    _strip_other_drafts(fit, [first, second], ["double_layer", second.effect_id])
+    assert all(fit.device.params[n] == 0.0104 for n in own) and fit.values == {**own, "kf": 1.0}
+    # with neither order kept, the shared name goes
+    _strip_other_drafts(fit, [first, second], ["double_layer"])
+    assert not shared & set(fit.device.params) and not shared & set(fit.values)
