@@ -668,7 +668,7 @@ def _swap_case(monkeypatch, swapped_um, rival_bic=-127.0, flags=()):
     from dataclasses import replace          # "medium": 35× the noise floor left, fractional_coupling held on a bound
     steps[1].decision.confidence = replace(_label(101.2, 35.2), held=0.879, held_of="fractional_coupling")
     log = []
-    dg._swap_first(steps, set(), NS(noise=UM), NS(log=log.append))
+    dg._swap_first(steps, set(), NS(noise=UM), NS(log=log.append, max_effects=3))
     return steps, log
 
 
@@ -779,7 +779,7 @@ def test_a_lone_pick_s_runner_up_takes_its_place_with_what_the_step_s_others_do_
     for adequate in (True, False):
         monkeypatch.setattr(dg, "_adequate", lambda data, f, adequate=adequate: adequate)
         tried = [*steps]
-        dg._swap_first(tried, set(), NS(noise=UM), NS(log=lambda m: None))
+        dg._swap_first(tried, set(), NS(noise=UM), NS(log=lambda m: None, max_effects=2))
         if adequate:
             assert tried == steps and calls == []
     assert calls == [["fractional_coupling"], ["solvent_diffusion"]]
@@ -796,6 +796,49 @@ def test_a_lone_pick_s_runner_up_takes_its_place_with_what_the_step_s_others_do_
                             "swapped_for": "fractional_coupling"}])
     assert "Alone it explained less than viscoelastic, whose place it took: fractional_coupling was picked for " \
         "what it does with solvent_diffusion, fitted on top of it (a swap)." in "\n".join(v.lines())
+
+
+def test_a_lone_pick_of_a_one_pick_chain_is_measured_with_what_goes_on_top_of_it_too(monkeypatch):
+    """A chain that may hold one pick only (each draft round's): its lone pick did not fail to take a
+    second, so the runner-up with a second effect on top is measured against the pick with the step's
+    others on top of it, not against the pick alone (pnp_fd seed 70: a drafted low-pass alone 34.5 µm,
+    the runner-up delay with a saturation on top 19.7 µm took its place, while the low-pass with the
+    saturation fits far better).  The swap is taken only when the pair beats that too."""
+    from types import SimpleNamespace as NS
+
+    from physics.diagnose import diagnosis as dg
+    from physics.diagnose.verdict import Decision
+
+    base = _swap_fit([], 109.5)
+    lp, dl = _swap_cand("lowpass", _swap_fit(["lowpass"], 34.5), -5e4), _swap_cand("delay", _swap_fit(["delay"], 39.0), -4e4)
+    sat = _swap_cand("saturation", _swap_fit(["saturation"], 106.0), -300.0)
+    pair = _swap_cand("saturation", _swap_fit(["delay", "saturation"], 19.7), -9000.0)
+    for ahead_um, taken in ((1.5, False), (25.0, True)):
+        ahead = _swap_cand("saturation", _swap_fit(["lowpass", "saturation"], ahead_um), -9000.0)
+        calls = []
+
+        def forward(k, on, left, feats, data, run, after_pick, trial):
+            calls.append((on.effects[-1] if len(on.effects) > 1 else "base", list(left)))
+            got = {"base": dl, "delay": pair, "lowpass": ahead}[calls[-1][0]]
+            trial.append(dg.Step(k, on, [got], Decision(got, {}, {got.effect: got.comparison.delta_bic})))
+            return got
+        _patch_swap(monkeypatch, base, forward)
+        monkeypatch.setattr(dg, "_adequate", lambda data, f: False)
+        steps = [dg.Step(1, base, [lp, dl, sat], Decision(lp, {}, {"lowpass": -5e4, "delay": -4e4, "saturation": -300.0},
+                                                          confidence=_label(109.5, 34.5)))]
+        log = []
+        dg._swap_first(steps, set(), NS(noise=1.5 * UM), NS(log=log.append, max_effects=1))
+        assert calls == [("base", ["delay"]), ("delay", ["saturation"]), ("lowpass", ["delay", "saturation"])]
+        assert ([s.kind for s in steps] == ["add", "withdraw", "add", "add"]) is taken
+        if not taken:
+            assert "1.5 µm with saturation on top of lowpass" in log[-1] and len(steps) == 1
+    # a chain that could have held a second pick and took none: the pick alone is the bar
+    calls.clear()
+    steps = [dg.Step(1, base, [lp, dl, sat], Decision(lp, {}, {"lowpass": -5e4, "delay": -4e4, "saturation": -300.0},
+                                                      confidence=_label(109.5, 34.5))),
+             dg.Step(2, lp.fit, [], Decision(None, {}, {}))]
+    dg._swap_first(steps, set(), NS(noise=1.5 * UM), NS(log=log.append, max_effects=2))
+    assert [c[0] for c in calls] == ["base", "delay"] and steps[2].swapped_for == "delay"
 
 
 def test_a_lone_pick_s_runner_up_that_explains_too_little_alone_is_looked_ahead_with(monkeypatch):
@@ -836,7 +879,7 @@ def test_a_lone_pick_s_runner_up_that_explains_too_little_alone_is_looked_ahead_
         steps = [dg.Step(1, base, [ve, fc, sd], Decision(ve, {}, dict(weights), confidence=_label(121.5, 88.7))),
                  dg.Step(2, ve.fit, [], Decision(None, {}, {}))]
         log = []
-        dg._swap_first(steps, set(), NS(noise=1.5 * UM), NS(log=log.append))
+        dg._swap_first(steps, set(), NS(noise=1.5 * UM), NS(log=log.append, max_effects=2))
         if not finds:
             assert [s.kind for s in steps] == ["add", "add"] and "not taken" in log[-1]
     assert looked == [["fractional_coupling", "solvent_diffusion"]] * 2

@@ -843,7 +843,8 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
     alone fails only for the share of the excess it explains, the look-ahead on it, :func:`_look_ahead`:
     on a rough electrode + solvent strip fractional_coupling alone took 121 → 100 µm, 32 % of the
     excess, behind viscoelastic's 88.7 µm).  It takes the place
-    when the model so made has a BIC lower than the chain's by
+    when the model so made has a BIC lower than the chain's (in a chain that may hold one pick only,
+    than the lone pick's with what the step's others do on top of it: :func:`_ahead_of_lone`) by
     :data:`.forms.SIGNIFICANT_BIC`: a withdrawal step and its forward steps are appended.  A
     greedy chain cannot undo its first pick, which was chosen before the later effects were in
     the model: on the test strip it was found on (rough electrodes and solvent diffusion), viscoelastic
@@ -888,10 +889,14 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
             c.ahead_of = second.effect
             conf.label(c)
         pick = second or pick
-    cmp = compare_fits(final, pick.fit, False, list(min((final, pick.fit), key=lambda f: f.rmse).taus))
+    bar = _ahead_of_lone(first, final, removed, data, run, k + 3) \
+        if lone and run.max_effects == 1 and pick.effect != rival.effect else None
+    against = final if bar is None else bar.fit
+    cmp = compare_fits(against, pick.fit, False, list(min((against, pick.fit), key=lambda f: f.rmse).taus))
     if cmp.delta_bic > -SIGNIFICANT_BIC:
-        run.log(f"  not taken: RMS error {1e6 * pick.fit.rmse:.4g} µm against the chain's {1e6 * final.rmse:.4g} µm "
-                f"(ΔBIC {cmp.delta_bic:+.4g})")
+        run.log(f"  not taken: RMS error {1e6 * pick.fit.rmse:.4g} µm against the chain's {1e6 * final.rmse:.4g} µm"
+                + ("" if bar is None else f", {1e6 * against.rmse:.4g} µm with {bar.effect} on top of {p1}")
+                + f" (ΔBIC {cmp.delta_bic:+.4g})")
         return
     on_top = "" if pick.effect == rival.effect else f" with {pick.effect} on top of it"
     why = (f"the runner-up of step {first.index}, {rival.effect}, in its place{on_top} fits better: RMS error "
@@ -904,6 +909,19 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
     later = [s.decision.pick.effect for s in adds[1:]]
     _relabel(steps[:-1], {e: _support_of(e, pick.fit, data, run) for e in later}, pick.fit, data, run,
              "the model after the swap")
+
+
+def _ahead_of_lone(first: Step, final: ModelFit, removed: set, data: PreparedRecords, run: DiagnosisRun,
+                   k: int) -> "CandidateResult | None":
+    """What the swap measures a lone pick's runner-up with a second effect on top against when the
+    chain could hold one pick only (``max_effects`` 1, each draft round's): the pick with the step's
+    other candidates in a forward step on top of it (its pick, or None).  Two effects against one:
+    on pnp_fd seed 70's low-pass sensor beside a saturating charge the runner-up delay with a
+    saturation on top (19.7 µm) took the place of the drafted low-pass alone (34.5 µm), and the
+    rounds wrote 13× the noise floor."""
+    p1 = first.decision.pick.effect
+    left = [c.effect for c in first.ranking if c.effect != p1 and c.effect not in final.effects and c.effect not in removed]
+    return _forward(k, final, left, _features_after(data, final, f"+{p1}", run), data, run, True, []) if left else None
 
 
 def _adequate(data: PreparedRecords, fit: ModelFit) -> bool:
