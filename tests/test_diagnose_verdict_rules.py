@@ -830,6 +830,9 @@ def test_a_lone_pick_of_a_one_pick_chain_is_measured_with_what_goes_on_top_of_it
         dg._swap_first(steps, set(), NS(noise=1.5 * UM), NS(log=log.append, max_effects=1))
         assert calls == [("base", ["delay"]), ("delay", ["saturation"]), ("lowpass", ["delay", "saturation"])]
         assert ([s.kind for s in steps] == ["add", "withdraw", "add", "add"]) is taken
+        if taken:
+            assert "fits better than lowpass with saturation on top of it: RMS error 25 → 19.7 µm" in \
+                steps[1].removal.explanation
         if not taken:
             assert "1.5 µm with saturation on top of lowpass" in log[-1] and len(steps) == 1
     # a chain that could have held a second pick and took none: the pick alone is the bar

@@ -899,8 +899,9 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
                 + f" (ΔBIC {cmp.delta_bic:+.4g})")
         return
     on_top = "" if pick.effect == rival.effect else f" with {pick.effect} on top of it"
-    why = (f"the runner-up of step {first.index}, {rival.effect}, in its place{on_top} fits better: RMS error "
-           f"{1e6 * final.rmse:.4g} → {1e6 * pick.fit.rmse:.4g} µm, ΔBIC {_signed(cmp.delta_bic)}")
+    than = "" if bar is None else f" than {p1} with {bar.effect} on top of it"
+    why = (f"the runner-up of step {first.index}, {rival.effect}, in its place{on_top} fits better{than}: RMS error "
+           f"{1e6 * against.rmse:.4g} → {1e6 * pick.fit.rmse:.4g} µm, ΔBIC {_signed(cmp.delta_bic)}")
     removed.add(p1)
     steps.append(Step(k, final, [], Decision(None, {}, {}, reason=why), replace(sup, explanation=why), without,
                       withdrawn=True, swapped_for=rival.effect))

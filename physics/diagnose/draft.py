@@ -635,7 +635,7 @@ def _strip_other_drafts(fit, items: list, kept: list[str]) -> None:
     their off values, and a draft not kept is unregistered after the rounds, so the device written
     could not name them.  A name a kept draft shares stays (the two orders of a low-pass share their
     time constant: taken out, a kept second-order low-pass lost its fitted τ, and the next round
-    refitted the model from the draft's default, 12.08 → 33.3 µm on a held-out strip)."""
+    refitted the model from the draft's default, 12.08 → 33.3 µm on pnp_sweep seed 70's test strip)."""
     params = getattr(fit.device, "params", None) or {}
     drafted = [d for d in items if isinstance(d, EffectDraft)]
     stray = ({p.name for d in drafted if d.effect_id not in kept for p in d.params}
