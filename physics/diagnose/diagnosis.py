@@ -872,8 +872,9 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
     trial: list[Step] = []
     pick = _forward(k + 1, without, [rival.effect], _features_after(data, without, f"-{p1}", run), data, run,
                     not lone, trial)
-    rest = [c.effect for c in first.ranking if c.effect not in (p1, rival.effect) and c.effect not in final.effects
-            and c.effect not in removed] if lone else []
+    others = [c.effect for c in first.ranking if c.effect != p1 and c.effect not in final.effects
+              and c.effect not in removed]          # the step's other candidates, the runner-up among them
+    rest = [e for e in others if e != rival.effect] if lone else []
     if pick is None:        # a lone pick's runner-up that fails only for the share it explains: the look-ahead
         pair = _look_ahead(trial[0], [rival.effect, *rest], data, run, trial) if rest else None
         if pair is None:
@@ -889,7 +890,7 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
             c.ahead_of = second.effect
             conf.label(c)
         pick = second or pick
-    bar = _ahead_of_lone(first, final, removed, data, run, k + 3) \
+    bar = _ahead_of_lone(p1, final, others, data, run, k + 3) \
         if lone and run.max_effects == 1 and pick.effect != rival.effect else None
     against = final if bar is None else bar.fit
     cmp = compare_fits(against, pick.fit, False, list(min((against, pick.fit), key=lambda f: f.rmse).taus))
@@ -912,17 +913,15 @@ def _swap_first(steps: list[Step], removed: set, data: PreparedRecords, run: Dia
              "the model after the swap")
 
 
-def _ahead_of_lone(first: Step, final: ModelFit, removed: set, data: PreparedRecords, run: DiagnosisRun,
+def _ahead_of_lone(p1: str, final: ModelFit, others: list, data: PreparedRecords, run: DiagnosisRun,
                    k: int) -> "CandidateResult | None":
     """What the swap measures a lone pick's runner-up with a second effect on top against when the
-    chain could hold one pick only (``max_effects`` 1, each draft round's): the pick with the step's
-    other candidates in a forward step on top of it (its pick, or None).  Two effects against one:
+    chain could hold one pick only (``max_effects`` 1, each draft round's): the pick ``p1`` (the model
+    ``final``) with the step's ``others`` in a forward step on top of it (its pick, or None).  Two effects against one:
     on pnp_fd seed 70's low-pass sensor beside a saturating charge the runner-up delay with a
     saturation on top (19.7 µm) took the place of the drafted low-pass alone (34.5 µm), and the
     rounds wrote 13× the noise floor."""
-    p1 = first.decision.pick.effect
-    left = [c.effect for c in first.ranking if c.effect != p1 and c.effect not in final.effects and c.effect not in removed]
-    return _forward(k, final, left, _features_after(data, final, f"+{p1}", run), data, run, True, []) if left else None
+    return _forward(k, final, others, _features_after(data, final, f"+{p1}", run), data, run, True, []) if others else None
 
 
 def _adequate(data: PreparedRecords, fit: ModelFit) -> bool:

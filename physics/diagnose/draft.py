@@ -357,8 +357,8 @@ def _linear_without_picks(res, outcome: DraftOutcome, rediagnose, free: list, sa
     fit = outcome.final
     if fit is None or getattr(getattr(fit, "model", None), "is_linear", True):
         return
-    linear = LINEAR_EFFECTS
-    large = [p.effect for p in res.verdict.picks if p.effect in fit.effects and not p.own and p.effect not in linear]
+    large = [p.effect for p in res.verdict.picks if p.effect in fit.effects and not p.own
+             and p.effect not in LINEAR_EFFECTS]
     keep = [e for e in fit.effects if e not in large]
     if not large:
         return
