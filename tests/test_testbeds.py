@@ -103,3 +103,41 @@ def test_perturbed_simulator_differs_a_little():
 def test_truths_cover_the_catalog_and_outside_physics():
     assert truths("lab")[0] == "none" and set(OUTSIDE) <= set(truths("perturbed"))
     assert len(truths("perturbed")) > len(truths("lab"))
+
+
+def _clipped_multisine(clip: float, sigma: float = 3e-6, seed: int = 2):
+    """Three 20 s periods of a multisine (0.05–20 Hz, 200 Hz) through a 20 Hz low-pass [m], the
+    sensor clipped at ``clip`` × the peak, then white noise ``sigma`` [m]."""
+    from scipy.signal import butter, lfilter
+    fs = 200.0
+    sig = signals.multisine(1.0, 0.05, 20.0, 20.0, 3, fs)
+    y = lfilter(*butter(2, 20.0, fs=fs), sig.v) * 1e-3
+    y = np.clip(y, -clip * np.abs(y).max(), clip * np.abs(y).max())
+    return sig, fs, y + np.random.default_rng(seed).normal(0.0, sigma, y.size)
+
+
+def test_a_clipped_multisine_reads_its_noise_from_the_difference_of_its_periods():
+    """A sensor clipped at 75 % of the stroke spreads harmonics over the whole spectrum, so the
+    spectrum's white level reads far above the noise; the harmonics repeat every period, the noise
+    does not, and the difference of successive periods reads the noise."""
+    from physics.analysis.frf_estimation import periodic_noise_level
+    from physics.io.timeseries import TimeSeries
+    sigma = 3e-6
+    sig, fs, y = _clipped_multisine(0.75, sigma)
+    assert math.sqrt(noise_level(y, fs)[0] * fs / 2) > 1.3 * sigma       # the harmonics fill the spectrum
+    assert math.sqrt(periodic_noise_level(y, fs, int(20.0 * fs))[0] * fs / 2) == pytest.approx(sigma, rel=0.1)
+    ts = TimeSeries(sig.t, sig.v, y, rh=np.full(y.size, 60.0))
+    rec, = prepare_records([ts])
+    assert rec.noise_floor == pytest.approx(sigma, rel=0.1)
+    assert "successive periods" in rec.noise_source
+
+
+def test_an_unclipped_multisine_keeps_the_spectrum_noise_level():
+    """Without a static nonlinearity on the sensor the two estimates agree, and the spectrum's
+    level (the one every other record uses) stays."""
+    sigma = 3e-6
+    sig, fs, y = _clipped_multisine(2.0, sigma)
+    from physics.io.timeseries import TimeSeries
+    rec, = prepare_records([TimeSeries(sig.t, sig.v, y, rh=np.full(y.size, 60.0))])
+    assert rec.noise_floor == pytest.approx(math.sqrt(noise_level(y, fs)[0] * fs / 2), rel=1e-12)
+    assert "successive periods" not in rec.noise_source and rec.noise_floor == pytest.approx(sigma, rel=0.1)

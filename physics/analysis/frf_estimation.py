@@ -320,6 +320,20 @@ def noise_level(y, fs: float) -> tuple[float, float, tuple[float, float]]:
 RESPONSE_SNR = 30.0
 
 
+def periodic_noise_level(y, fs: float, period: int) -> tuple[float, tuple[float, float]]:
+    """(white noise level of a periodic record's output [units²/Hz, one-sided], the band it came
+    from [Hz]) from the difference of successive periods, y[k + P] − y[k] (``period`` P in
+    samples): everything that repeats — the response and the harmonics a clipped sensor or a
+    static nonlinearity adds across the whole spectrum — cancels, while independent noise
+    doubles its power.  The level is that of :func:`noise_level` on the difference, halved.
+    NaN when fewer than two periods are recorded."""
+    y = _as_signal(y, "output y")
+    if not 0 < period <= y.size // 2:
+        return float("nan"), (float("nan"), float("nan"))
+    level, _, band = noise_level(y[period:] - y[:-period], fs)
+    return level / 2.0, band
+
+
 def _tone(x: np.ndarray, fs: float, f0: float, i0: int, n: int) -> tuple[complex, float]:
     """Least-squares fit of x[i0:i0+n] ≈ Re(X e^{j2πf0 t}) + c0 + c1 t; returns the phasor
     X and the standard error of each of its real and imaginary parts (numpy float, so

@@ -517,8 +517,11 @@ def _noise_source(records) -> str:
     kinds = []
     for r in records:
         src = r.noise_source
-        k = ("estimated from the records' deflection spectra (the white level where the response has fallen away; "
-             "drift not included)") if src.startswith("estimated") else src
+        k = src
+        if src.startswith("estimated"):
+            k = ("estimated from the records' deflection spectra (the white level " +
+                 ("of the difference of successive periods, where everything periodic cancels; "
+                  if "successive periods" in src else "where the response has fallen away; ") + "drift not included)")
         if k not in kinds:
             kinds.append(k)
     return "; ".join(kinds)
