@@ -141,3 +141,29 @@ def test_an_unclipped_multisine_keeps_the_spectrum_noise_level():
     rec, = prepare_records([TimeSeries(sig.t, sig.v, y, rh=np.full(y.size, 60.0))])
     assert rec.noise_floor == pytest.approx(math.sqrt(noise_level(y, fs)[0] * fs / 2), rel=1e-12)
     assert "successive periods" not in rec.noise_source and rec.noise_floor == pytest.approx(sigma, rel=0.1)
+
+
+def test_a_clipped_sweep_reads_its_noise_in_its_quietest_segments():
+    """A sweep's harmonics from a clipped sensor pass each band of the spectrum only while the
+    sweep's frequency is in the right range: the record's quietest segments read the noise."""
+    from physics.analysis.frf_estimation import quiet_noise_level
+    from physics.io.timeseries import TimeSeries
+    from scipy.signal import butter, lfilter
+    fs, sigma = 200.0, 3e-6
+    sig = signals.sweep(1.0, 0.1, 50.0, 60.0, fs)
+    y = lfilter(*butter(2, 20.0, fs=fs), sig.v) * 1e-3
+    y = np.clip(y, -0.75 * np.abs(y).max(), 0.75 * np.abs(y).max()) + np.random.default_rng(2).normal(0.0, sigma, y.size)
+    assert math.sqrt(noise_level(y, fs)[0] * fs / 2) > 2.0 * sigma
+    assert math.sqrt(quiet_noise_level(y, fs)[0] * fs / 2) == pytest.approx(sigma, rel=0.15)
+    rec, = prepare_records([TimeSeries(sig.t, sig.v, y, rh=np.full(y.size, 60.0))])
+    assert rec.noise_floor == pytest.approx(sigma, rel=0.15) and "quietest" in rec.noise_source
+
+
+def test_the_quiet_noise_reading_is_calibrated_on_white_noise():
+    """On stationary white noise the quiet-segment reading agrees with the Welch level on average
+    (its low quantile is scaled back by the same reading on other draws of white noise)."""
+    from physics.analysis.frf_estimation import quiet_noise_level
+    fs = 200.0
+    draws = [np.random.default_rng(100 + seed).normal(0.0, 1.0, 12000) for seed in range(6)]
+    ratios = [quiet_noise_level(w, fs)[0] / noise_level(w, fs)[0] for w in draws]
+    assert np.mean(ratios) == pytest.approx(1.0, abs=0.08) and max(abs(np.log(ratios))) < 0.2

@@ -21,6 +21,7 @@ Welch's equivalent number of averages (P. D. Welch, IEEE Trans. Audio Electroaco
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -299,15 +300,9 @@ def noise_level(y, fs: float) -> tuple[float, float, tuple[float, float]]:
     quantisation remain, while a drift lives below 1 Hz.  When the response fills the whole
     spectrum the level is an upper bound.  NaN when the record is too short."""
     y = signal.detrend(_as_signal(y, "output y"))
-    nper = int(min(y.size, max(256, 4.0 * fs)))
+    nper = _noise_segment(y.size, fs)
     f, P = signal.welch(y, fs=fs, nperseg=nper)
-    lo = max(1.0, 8.0 * fs / nper)
-    edges = np.geomspace(lo, 0.98 * fs / 2, 9) if 0.98 * fs / 2 > 2 * lo else np.array([lo, fs / 2])
-    meds = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        m = (f >= a) & (f < b)
-        if m.sum() >= 3:
-            meds.append((float(np.median(P[m])), float(a), float(b)))
+    meds = [(float(np.median(P[m])), a, b) for a, b, m in _noise_bands(f, fs, nper, 3)]
     if not meds:
         return float("nan"), fs / 2, (float("nan"), float("nan"))
     level, a, b = min(meds)
@@ -318,6 +313,64 @@ def noise_level(y, fs: float) -> tuple[float, float, tuple[float, float]]:
 
 #: The response band ends where the output spectrum falls below this × its noise level.
 RESPONSE_SNR = 30.0
+
+
+def _noise_segment(n: int, fs: float) -> int:
+    """Welch segment [samples] of the noise estimates: ~4 s, at least 256, at most the record."""
+    return int(min(n, max(256, 4.0 * fs)))
+
+
+def _noise_bands(f: np.ndarray, fs: float, nper: int, min_lines: int) -> list[tuple[float, float, np.ndarray]]:
+    """(low edge, high edge [Hz], mask of ``f``) of the eight log-spaced bands above 1 Hz (and
+    above 8 lines of the segment) that the noise estimates read, each of ``min_lines`` lines or more."""
+    lo = max(1.0, 8.0 * fs / nper)
+    edges = np.geomspace(lo, 0.98 * fs / 2, 9) if 0.98 * fs / 2 > 2 * lo else np.array([lo, fs / 2])
+    bands = [(float(a), float(b), (f >= a) & (f < b)) for a, b in zip(edges[:-1], edges[1:])]
+    return [x for x in bands if x[2].sum() >= min_lines]
+
+
+def _quiet_bands(y: np.ndarray, fs: float) -> list[tuple[float, float, float, float]]:
+    """Per band of :func:`_noise_bands` (16 lines or more): (the :data:`QUIET_SHARE` quantile over
+    the ~4 s segments of the segment's median power, the Welch median power, low and high edge)."""
+    nper = _noise_segment(y.size, fs)
+    f, P = signal.welch(y, fs=fs, nperseg=nper)
+    _, _, S = signal.spectrogram(y, fs=fs, nperseg=nper, noverlap=nper // 2, window="hann", detrend="constant",
+                                 scaling="density")
+    if S.shape[1] < 4:
+        return []
+    return [(float(np.quantile(np.median(S[m], axis=0), QUIET_SHARE)), float(np.median(P[m])), a, b)
+            for a, b, m in _noise_bands(f, fs, nper, 16)]
+
+
+@functools.lru_cache(maxsize=32)
+def _quiet_calibration(n: int, fs: float) -> tuple[float, ...]:
+    """Per band, Welch median ÷ quiet quantile on white noise of ``n`` samples (eight draws of a
+    fixed seed; at most 64 segments, beyond which the factor no longer changes): the factor that
+    puts :func:`quiet_noise_level` on :func:`noise_level`'s scale."""
+    rng = np.random.default_rng(0)
+    n = min(n, 32 * _noise_segment(n, fs))
+    draws = [_quiet_bands(rng.standard_normal(n), fs) for _ in range(8)]
+    return tuple(float(np.mean([d[k][1] / d[k][0] for d in draws])) for k in range(len(draws[0])))
+
+
+def quiet_noise_level(y, fs: float) -> tuple[float, tuple[float, float]]:
+    """(white noise level of the output [units²/Hz, one-sided], the band it came from [Hz]) read
+    in the record's quietest segments: the :data:`QUIET_SHARE` quantile over its ~4 s segments of
+    each band's median power, scaled by what the same reading gives on white noise of the record's
+    length (:func:`_quiet_calibration`), lowest over the bands of :func:`noise_level`.  A sweep
+    through a play or a clipped sensor puts its harmonics in each band only while its frequency
+    is in the right range; stationary noise is in every segment.  NaN when the record holds fewer
+    than four segments or no band of 16 lines."""
+    y = signal.detrend(_as_signal(y, "output y"))
+    rec = _quiet_bands(y, fs)
+    if not rec:
+        return float("nan"), (float("nan"), float("nan"))
+    level, a, b = min((q * c, a, b) for (q, _, a, b), c in zip(rec, _quiet_calibration(y.size, float(fs))))
+    return level, (a, b)
+
+
+#: The share of a record's segments whose power the quiet noise reading takes (its lower quartile).
+QUIET_SHARE = 0.25
 
 
 def periodic_noise_level(y, fs: float, period: int) -> tuple[float, tuple[float, float]]:

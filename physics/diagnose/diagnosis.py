@@ -517,11 +517,9 @@ def _noise_source(records) -> str:
     kinds = []
     for r in records:
         src = r.noise_source
-        k = src
-        if src.startswith("estimated"):
-            k = ("estimated from the records' deflection spectra (the white level " +
-                 ("of the difference of successive periods, where everything periodic cancels; "
-                  if "successive periods" in src else "where the response has fallen away; ") + "drift not included)")
+        k = ("estimated from the records' deflection spectra (the white level where the response has fallen away, "
+             "or in a record's quietest segments or the difference of its periods where that reads clearly lower; "
+             "drift not included)") if src.startswith("estimated") else src
         if k not in kinds:
             kinds.append(k)
     return "; ".join(kinds)

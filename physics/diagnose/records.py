@@ -21,9 +21,9 @@ Each time-series record is
   the RMS of what a perfect model would leave — the sensor's white noise and quantisation and
   the part of its drift that the nuisance terms do not absorb — from the record's sensor
   metadata (written by :class:`physics.io.sensor.SensorModel`) or, failing that, estimated from
-  the deflection spectrum where the response has fallen away, or from the difference of a
-  periodic record's successive periods where that reads clearly lower (:func:`deflection_spectrum`:
-  the white part only, and the source says so);
+  the deflection spectrum where the response has fallen away, or from its quietest segments or
+  the difference of a periodic record's successive periods where that reads clearly lower
+  (:func:`deflection_spectrum`: the white part only, and the source says so);
 * given its **nuisance terms** (:meth:`PreparedRecord.nuisance`): the least-squares offset and linear
   drift of a residual, bounded by what a sensor's zero does — the drift's rise over the record
   by :data:`STATED_DRIFT_FACTOR` × the drift the sensor states, or :data:`DRIFT_SHARE` of the
@@ -51,7 +51,8 @@ from scipy import signal as sps
 from ..compare import (FRFOptions, cluster_rh, load_measurements, model_rh, sensor_bandwidth_of,
                        sensor_response, source_name)
 from ..errors import InputError, arg
-from ..analysis.frf_estimation import detect_excitation, leading_transient, noise_level, periodic_noise_level, stepped_sine
+from ..analysis.frf_estimation import (detect_excitation, leading_transient, noise_level, periodic_noise_level,
+                                       quiet_noise_level, stepped_sine)
 from ..io.frfdata import FRFData
 from ..analysis.metrics import NUISANCE_TERMS, nuisance_terms, remove_nuisance
 from ..io.timeseries import TimeSeries
@@ -414,36 +415,42 @@ def stated_drift(ts: TimeSeries) -> float:
 def deflection_spectrum(ts: TimeSeries, period: float | None = None) -> tuple[float, float, str]:
     """(white noise level as an RMS over the full band [m], highest frequency where the
     response stands above it [Hz], how the level was found) from the deflection alone
-    (:func:`physics.analysis.frf_estimation.noise_level`).  A record of whole periods
-    (``period`` [s], an integer number of samples) is also read from the difference of its
-    successive periods (:func:`~physics.analysis.frf_estimation.periodic_noise_level`); that
-    level replaces the spectrum's when it is below :data:`PERIODIC_SHARE` of it: a clipped
-    sensor's harmonics (or a play's, a bowed characteristic's) fill the spectrum of a strongly
-    driven multisine but repeat every period, while on a record without them the two agree
-    within a few per cent and the spectrum's level stays."""
+    (:func:`physics.analysis.frf_estimation.noise_level`).  A sensor whose range the strip
+    leaves, a play or a bowed characteristic spread harmonics over the whole spectrum, and its
+    white level rises with them; two more readings are immune to part of that: the record's
+    quietest segments (:func:`~physics.analysis.frf_estimation.quiet_noise_level`: a sweep's
+    harmonics pass each band only for a while) and, for a record of whole periods (``period``
+    [s], an integer number of samples), the difference of its successive periods
+    (:func:`~physics.analysis.frf_estimation.periodic_noise_level`: a multisine's harmonics
+    repeat every period).  The lower of the two replaces the spectrum's level when it is below
+    :data:`CLEANER_SHARE` of it; on a record without such harmonics all three agree within a few
+    per cent and the spectrum's level stays."""
     level, f_resp, (a, b) = noise_level(ts.deflection, ts.fs)
     if not math.isfinite(level):
         return math.nan, ts.fs / 2, "unknown (the record is too short or too slowly sampled to estimate it)"
     how = (f"estimated from the deflection spectrum (white level in {a:.3g}–{b:.3g} Hz, where the response has "
            "fallen away; drift and anything below that level not included)")
+    lq, (qa, qb) = quiet_noise_level(ts.deflection, ts.fs)
+    other = [(lq, f"white level in {qa:.3g}–{qb:.3g} Hz of its quietest quarter of 4 s segments, where a "
+                  "sweep's harmonics are not")]
     p = period * ts.fs if period else 0.0
     if p >= 1 and abs(p - round(p)) < PERIOD_SAMPLES_TOL:
-        lp, (a, b) = periodic_noise_level(ts.deflection, ts.fs, int(round(p)))
-        if math.isfinite(lp) and lp < PERIODIC_SHARE ** 2 * level:
-            level = lp
-            how = (f"estimated from the deflection spectrum (white level in {a:.3g}–{b:.3g} Hz of the difference of "
-                   "successive periods, where everything periodic cancels; drift and anything below that level "
-                   "not included)")
+        lp, (pa, pb) = periodic_noise_level(ts.deflection, ts.fs, int(round(p)))
+        other.append((lp, f"white level in {pa:.3g}–{pb:.3g} Hz of the difference of successive periods, where "
+                          "everything periodic cancels"))
+    lo, text = min(((v, t) for v, t in other if math.isfinite(v)), default=(math.inf, ""))
+    if lo < CLEANER_SHARE ** 2 * level:
+        level, how = lo, f"estimated from the deflection spectrum ({text}; drift and anything below that level not included)"
     return math.sqrt(level * ts.fs / 2), f_resp, how
 
 
 #: A period is differenced only when it spans a whole number of samples within this many.
 PERIOD_SAMPLES_TOL = 0.01
-#: The noise floor [RMS] read from the difference of successive periods replaces the spectrum's
-#: when below this share of it.  On 176 periodic records of an independent family (circuit_lab,
-#: seeds 21–73) without a static nonlinearity on the sensor the two agreed within 0.94–1.03;
-#: a clipped sensor and a play gave 0.35–0.58.
-PERIODIC_SHARE = 0.8
+#: The noise floor [RMS] read from the quietest segments or the difference of successive periods
+#: replaces the spectrum's when below this share of it.  On 176 periodic records of an independent
+#: family (circuit_lab, seeds 21–73) without a static nonlinearity on the sensor the period
+#: difference and the spectrum agreed within 0.94–1.03; a clipped sensor and a play gave 0.35–0.58.
+CLEANER_SHARE = 0.8
 
 
 def estimate_noise_floor(ts: TimeSeries, f_hi: float | None = None) -> tuple[float, str]:
