@@ -242,15 +242,14 @@ def record_period(ts: TimeSeries, how: str) -> float | None:
     return period if period and period > 0 else None
 
 
-def periodic_lead(ts: TimeSeries, how: str, q: int) -> int:
+def periodic_lead(ts: TimeSeries, period: float | None, q: int) -> int:
     """Samples (full rate, a multiple of ``q``) of the periods that precede a periodic record
     of at least :data:`MIN_PERIODS` periods — a multisine recorded once its response has
     settled is entered in its steady state: the model is driven through the record's own
     periods (whole ones, up to :data:`LEAD_S`) before it starts; 0 for other records and for
     one whose first period is not yet periodic (a fade-in, the response settling from rest:
     :func:`~physics.analysis.frf_estimation.leading_transient`), which the model enters at rest
-    as the strip did.  The period comes from :func:`record_period`."""
-    period = record_period(ts, how)
+    as the strip did.  ``period`` [s] is :func:`record_period`'s."""
     if period is None:
         return 0
     if leading_transient(ts.voltage, ts.deflection, ts.fs, period):
@@ -484,13 +483,14 @@ def prepare_records(measurements: Sequence, *, rh: float | None = None, sensor_b
         if m.n < 64:
             raise InputError(f"{where}: only {m.n} samples; a diagnosis needs a record of at least 64")
         kind, band, tone_hz, how = classify(m)
-        level, f_resp, spec_how = deflection_spectrum(m, record_period(m, how) if kind == "broadband" else None)
+        period = record_period(m, how) if kind == "broadband" else None
+        level, f_resp, spec_how = deflection_spectrum(m, period)
         # decimate to keep what the sensor saw: the excited band and the response above the noise
         q = _decimation(m.fs, max(band[1], min(f_resp, m.fs / 2)), fs_max)
         if fs_max is not None and m.n // q < 64:    # a cap below the record's own scale: refused before any array of it is made
             raise InputError(f"{arg('fs_max')} {fs_max:g} Hz leaves {m.n // q} samples of {where} at the analysis "
                              f"rate; a diagnosis needs at least 64 — give at least {64 * m.fs / m.n:.3g} Hz")
-        lead = periodic_lead(m, how, q) if kind == "broadband" else 0
+        lead = periodic_lead(m, period, q)
         v_sim = _decimate(np.concatenate([m.voltage[m.n - lead:], m.voltage]) if lead else m.voltage, q)
         y_d = _decimate(m.deflection, q)[PAD:]
         n_d = int(math.ceil(m.n / q))
