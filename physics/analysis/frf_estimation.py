@@ -331,13 +331,14 @@ def _noise_bands(f: np.ndarray, fs: float, nper: int, min_lines: int) -> list[tu
 
 def _quiet_bands(y: np.ndarray, fs: float) -> list[tuple[float, float, float, float]]:
     """Per band of :func:`_noise_bands` (16 lines or more): (the :data:`QUIET_SHARE` quantile over
-    the ~4 s segments of the segment's median power, the Welch median power, low and high edge)."""
+    the ~4 s segments of the segment's median power, the Welch median power, low and high edge).
+    Welch's spectrum is the mean of these segments (same window, overlap and detrending)."""
     nper = _noise_segment(y.size, fs)
-    f, P = signal.welch(y, fs=fs, nperseg=nper)
-    _, _, S = signal.spectrogram(y, fs=fs, nperseg=nper, noverlap=nper // 2, window="hann", detrend="constant",
+    f, _, S = signal.spectrogram(y, fs=fs, nperseg=nper, noverlap=nper // 2, window="hann", detrend="constant",
                                  scaling="density")
     if S.shape[1] < 4:
         return []
+    P = S.mean(axis=1)
     return [(float(np.quantile(np.median(S[m], axis=0), QUIET_SHARE)), float(np.median(P[m])), a, b)
             for a, b, m in _noise_bands(f, fs, nper, 16)]
 
