@@ -276,6 +276,26 @@ def test_period_matches_a_direct_correlation():
             assert got == expected == L
 
 
+def test_a_faded_in_multisine_is_periodic_after_its_lead_in():
+    """A multisine faded in over part of its first period (as a lab starts its drive) repeats
+    too little as a whole record to pass the correlation test, yet every later period repeats:
+    it is read as periodic at its period, and leading_transient counts the faded period.
+    Broadband noise stays non-periodic with the second look."""
+    from physics.analysis.frf_estimation import PERIODIC_CORRELATION, detect_excitation
+    p = 2000
+    one = multisine_period(p, np.arange(1, 200), seed=4)
+    u = np.tile(one, 3)
+    t = np.arange(u.size) / FS
+    fade = t < 0.6
+    u[fade] *= 0.5 * (1 - np.cos(np.pi * t[fade] / 0.6))
+    rho = u[p:] @ u[:-p] / np.sqrt((u[p:] @ u[p:]) * (u[:-p] @ u[:-p]))
+    assert rho < PERIODIC_CORRELATION                      # the whole record alone fails the test
+    ex = detect_excitation(u, FS)
+    assert ex.kind == "periodic" and ex.period_s == pytest.approx(p / FS)
+    assert leading_transient(u, None, FS, ex.period_s) == p
+    assert detect_excitation(noise_input(3 * p, seed=2), FS).kind == "noise"
+
+
 def test_jump_scan_in_blocks_matches_the_whole_record(monkeypatch):
     """The blockwise jump scan of detect_excitation sees a jump wherever it lies, block edges included."""
     import physics.analysis.frf_estimation as fe

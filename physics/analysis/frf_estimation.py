@@ -588,6 +588,23 @@ def _jumps(x: np.ndarray, k: int, size: float) -> bool:
 
 
 def _period(x: np.ndarray, fs: float, mean: float = 0.0) -> float | None:
+    """The period [s] of x − ``mean`` (:func:`_repeat_lag`), or — when the whole record does not
+    repeat — that of the record after its first :data:`LEAD_IN_SHARE`: a lab often fades the
+    drive in or starts it inside the record, and that lead-in lowers the correlation at the
+    period although every period after it repeats (:func:`leading_transient` then counts the
+    periods it spoils).  None when neither repeats."""
+    lag = _repeat_lag(x, fs, mean)
+    if lag is None and x.size >= 64:
+        lag = _repeat_lag(x[int(x.size * LEAD_IN_SHARE):], fs, mean)
+    return lag
+
+
+#: A record that does not repeat as a whole is tried again without this share of its start
+#: (a lead-in of up to a quarter; the rest must still hold two periods).
+LEAD_IN_SHARE = 0.25
+
+
+def _repeat_lag(x: np.ndarray, fs: float, mean: float = 0.0) -> float | None:
     """The shortest lag (≤ n/2, ≥ 8 samples) at which x − ``mean`` repeats (normalised
     correlation over the overlap ≥ :data:`PERIODIC_CORRELATION`), in s; None when it does not.
 
