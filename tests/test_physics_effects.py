@@ -217,6 +217,26 @@ def test_an_rh_series_warns_once_per_map_with_its_range_and_stays_silent_inside(
         h.factors(np.array([]))
 
 
+def test_hygrometer_jitter_about_a_maps_end_levels_does_not_warn():
+    """A map identified per RH level spans the levels' means (here 40.2–79.8 %); the readings of
+    the records it came from jitter about them: within RH_MARGIN the end value is used silently,
+    beyond it the warning names the range with enough digits to tell the two apart."""
+    import dataclasses
+    import warnings
+    from physics.effects.humidity import RH_MARGIN, Humidity
+    dev = load_device("ipmc_pt_eg")
+    m = dev.humidity_maps["Y"]
+    narrow = dataclasses.replace(m, rh=np.array([40.2, 60.3, 79.8]),
+                                 values=np.interp([40.2, 60.3, 79.8], m.rh, m.values))
+    h = Humidity(dataclasses.replace(dev, humidity_maps={"Y": narrow}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        f = h.factors(np.array([40.16, 60.0, 79.85, 40.2 - 0.9 * RH_MARGIN]))
+    assert float(f["Y"][0]) == pytest.approx(float(h.factors(40.2)["Y"]))
+    with pytest.warns(UserWarning, match=r"RH 38\.9–60 % is outside the 40\.2–79\.8 % range of the Y map"):
+        h.factors(np.array([40.2 - 1.3 * RH_MARGIN, 60.0]))
+
+
 # --- thesis behaviour ---------------------------------------------------------------------
 def test_ipmc_at_full_hydration_is_an_underdamped_resonator_inside_1_50_Hz():
     f = np.logspace(0, np.log10(50), 400)

@@ -22,6 +22,10 @@ from .base import Effect
 
 # Parameters whose maps act on the mechanical chain only (no re-solve of the electrochemistry).
 MECHANICAL_MAPS = ("Y", "Y_polymer", "kf", "kf0")
+#: An RH reading up to this far [% RH] outside a map's range takes the end value without a
+#: warning: a map identified per RH level spans the levels' means, and a hygrometer's readings
+#: jitter about them by about this much (the records' grouping tolerance, ``--rh-tolerance``).
+RH_MARGIN = 1.0
 
 
 class HumidityInvariant(Effect):
@@ -109,8 +113,8 @@ class Humidity(HumidityInvariant):
         lo, hi = (float(rh.min()), float(rh.max())) if rh.size else (np.inf, -np.inf)
         out = {}
         for name, m in self.device.humidity_maps.items():
-            if lo < m.rh[0] - 1e-9 or hi > m.rh[-1] + 1e-9:
-                warnings.warn(f"RH {lo:.3g}–{hi:.3g} % is outside the "
+            if lo < m.rh[0] - RH_MARGIN or hi > m.rh[-1] + RH_MARGIN:
+                warnings.warn(f"RH {lo:.4g}–{hi:.4g} % is outside the "
                               f"{m.rh[0]:g}–{m.rh[-1]:g} % range of the {name} map of device "
                               f"{self.device.name!r}; the end value is used", stacklevel=3)
             base = self.device.params.get(name, 1.0)
