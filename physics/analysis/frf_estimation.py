@@ -523,7 +523,8 @@ def detect_excitation(v, fs: float, source: str | None = None) -> Excitation:
 
     Steps: the samples sit on a few levels (histogram of 2 %-of-span bins) and jump between
     them.  Tone: one spectral line holds 90 % of the power.  Periodic: the autocorrelation
-    reaches :data:`PERIODIC_CORRELATION` at a lag L ≤ n/2 (two periods or more).  Sweep: the
+    reaches :data:`PERIODIC_CORRELATION` at a lag L ≤ n/2 (two periods or more), over the whole
+    record or after its first :data:`LEAD_IN_SHARE` (a drive faded in).  Sweep: the
     power-weighted mean log-frequency of 24 successive segments is monotone in time (Spearman
     rank correlation ≥ :data:`SWEEP_RANK`) over ≥ :data:`SWEEP_DECADES` decades.  Noise: the rest
     of the broadband records.  ``source`` names the record in errors."""
@@ -594,7 +595,7 @@ def _period(x: np.ndarray, fs: float, mean: float = 0.0) -> float | None:
     period although every period after it repeats (:func:`leading_transient` then counts the
     periods it spoils).  None when neither repeats."""
     lag = _repeat_lag(x, fs, mean)
-    if lag is None and x.size >= 64:
+    if lag is None:
         lag = _repeat_lag(x[int(x.size * LEAD_IN_SHARE):], fs, mean)
     return lag
 
