@@ -182,7 +182,7 @@ def test_a_later_pick_must_be_free_of_quality_flags(monkeypatch):
     args = (floor, [1.0], [], lambda *a, **k: Cmp(-5.0), lambda a, b: 1e-6)
     assert decide(base, [mimic], *args).pick is mimic
     later = decide(base, [mimic], *args, after_pick=True)
-    assert later.pick is None and "no quality flag after a pick" in later.reason
+    assert later.pick is None and "it has quality flags after a pick" in later.reason
     clean = Cand("clean", -40.0, 1.3e-6, [])
     assert decide(base, [mimic, clean], *args, after_pick=True).pick is clean
     assert V.excess_share(1.7e-6, 1.22e-6, floor) < V.AFTER_PICK_SHARE          # the mimic: 78 % of the excess
@@ -207,7 +207,7 @@ def test_a_step_without_a_pick_looks_ahead_with_its_best_and_takes_the_pair_as_n
     electrode = Cand("electrode_resistance", -97.0, 120e-6, [])
     dec = decide(base, [solvent, weak, electrode], floor, [1.0], [], lambda *a, **k: Cmp(-5.0),
                  lambda a, b: 1e-6)
-    assert dec.pick is None and "explains a third of the excess" in dec.reason
+    assert dec.pick is None and "removes less than a third of the error above the noise floor" in dec.reason
     assert V.lead_of(dec, [solvent, weak, electrode]) is solvent
     assert V.lead_of(dec, [weak]) is None
     second = Cand("fractional_coupling", -4000.0, 1.6e-6, [])

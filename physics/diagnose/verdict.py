@@ -89,6 +89,13 @@ DELTA_BIC_MIN, ALPHA, MIN_SHARE = 10.0, 0.01, 1.0 / 3.0
 AFTER_PICK_SHARE = 0.9
 CRITERIA = ("very_strong_bic", "p_below_alpha_over_m", "explains_a_third_of_the_excess", "base_above_noise",
             "no_quality_flag_after_a_pick")
+#: Each criterion of :data:`CRITERIA` a candidate fails, as the reason of "none named" says it.
+FAILED = {"very_strong_bic": f"its evidence is not very strong (ΔBIC above −{DELTA_BIC_MIN:g})",
+          "p_below_alpha_over_m": "its p-value is not below α/m",
+          "explains_a_third_of_the_excess": "it removes less than a third of the error above the noise floor",
+          "base_above_noise": "the base is already within the noise floor",
+          "no_quality_flag_after_a_pick": f"it has quality flags after a pick and removes less than "
+                                          f"{100 * AFTER_PICK_SHARE:.0f} % of the error above the noise floor"}
 #: Two candidates closer than this in pairwise ΔBIC are close on fit.
 DISTINCT_BIC = 6.0
 #: Status of a base within the noise floor only because the floor counts a slow wander that the
@@ -368,8 +375,8 @@ def _no_pick_reason(base, ranked, noise, within, wander: float = 0.0) -> str:
     if not ranked:
         return "no candidate could be evaluated on these data (see the candidates not evaluated)"
     top = min(ranked, key=lambda c: c.comparison.delta_bic)
-    failed = [k.replace("_", " ") for k, v in top.passes.items() if not v]
-    return (f"no candidate passes every criterion; the best, {top.effect}, fails: {', '.join(failed)} "
+    failed = [FAILED.get(k, k.replace("_", " ")) for k, v in top.passes.items() if not v]
+    return (f"no candidate passes every criterion; the best, {top.effect}, fails: {'; '.join(failed)} "
             f"(ΔBIC {top.comparison.delta_bic:.3g}, p = {top.comparison.p_value:.2g}, RMS {1e6 * base.rmse:.3g} → "
             f"{1e6 * top.fit.rmse:.3g} µm)")
 
