@@ -208,6 +208,7 @@ def test_a_step_without_a_pick_looks_ahead_with_its_best_and_takes_the_pair_as_n
     dec = decide(base, [solvent, weak, electrode], floor, [1.0], [], lambda *a, **k: Cmp(-5.0),
                  lambda a, b: 1e-6)
     assert dec.pick is None and "removes less than a third of the error above the noise floor" in dec.reason
+    assert set(V.FAILED) == set(V.CRITERIA)             # every criterion has its sentence
     assert V.lead_of(dec, [solvent, weak, electrode]) is solvent
     assert V.lead_of(dec, [weak]) is None
     second = Cand("fractional_coupling", -4000.0, 1.6e-6, [])

@@ -375,7 +375,7 @@ def _no_pick_reason(base, ranked, noise, within, wander: float = 0.0) -> str:
     if not ranked:
         return "no candidate could be evaluated on these data (see the candidates not evaluated)"
     top = min(ranked, key=lambda c: c.comparison.delta_bic)
-    failed = [FAILED.get(k, k.replace("_", " ")) for k, v in top.passes.items() if not v]
+    failed = [FAILED[k] for k, v in top.passes.items() if not v]
     return (f"no candidate passes every criterion; the best, {top.effect}, fails: {'; '.join(failed)} "
             f"(ΔBIC {top.comparison.delta_bic:.3g}, p = {top.comparison.p_value:.2g}, RMS {1e6 * base.rmse:.3g} → "
             f"{1e6 * top.fit.rmse:.3g} µm)")
