@@ -374,6 +374,28 @@ def test_even_map_drifting_gain_play_and_clip_drafts_pass_the_contract_and_rebui
     assert time_only_params(model, list(values), dict(dev.params)) == list(values)
 
 
+
+def test_the_play_operator_is_the_sample_by_sample_clamp():
+    """P_w clamps its state into [x − w/2, x + w/2] at each sample (Krasnosel'skii & Pokrovskii):
+    on a triangle it lags each reversal by the full width and runs w/2 behind the ramps; the
+    vectorised scan equals the plain loop to the bit on random walks of every length."""
+    x = np.array([0.0, 1.0, 2.0, 1.0, 0.0, -1.0, 0.0, 1.0])
+    np.testing.assert_array_equal(play(x, 1.0), [0.0, 0.5, 1.5, 1.5, 0.5, -0.5, -0.5, 0.5])
+
+    def clamped(x, w):
+        out, y = np.empty_like(x), float(x[0])
+        for i, v in enumerate(x.tolist()):
+            y = min(max(y, v - 0.5 * w), v + 0.5 * w)
+            out[i] = y
+        return out
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 5, 64, 1000, 4097):
+        walk = np.cumsum(rng.normal(size=n))
+        for w in (0.0, 0.3, 5.0):
+            np.testing.assert_array_equal(play(walk, w), clamped(walk, w))
+    with pytest.raises(ValueError, match="width"):
+        play(x, -1.0)
+
 def test_a_gain_drifting_along_the_records_is_found_shared_or_per_record():
     """The response's gain changing by +6 % over each record (a strip drying, a sensor warming) is one
     shared change; +6 % in one record and −5 % in the other is a change per record; along a sweep,

@@ -16,17 +16,26 @@ from .base import Form, FormFit, Residual, best_on_grid, time_path_draft
 
 
 def play(x: np.ndarray, width: float) -> np.ndarray:
-    """Play (backlash) operator of total width ``width``, started centred on x[0]."""
-    out = np.empty_like(x)
-    y = float(x[0])
+    """Play (backlash) operator of total width ``width`` ≥ 0, started centred on x[0].
+
+    Each sample clamps the state, y_k = min(max(y_{k−1}, x_k − w/2), x_k + w/2), and clamps
+    compose into clamps (the later one applied to the earlier one's bounds), so the state at
+    every sample is one clamp of x[0] found by a prefix scan in log2(n) vectorised passes
+    (Hillis & Steele, *Data parallel algorithms*, 1986).  Only min and max act on x ± w/2:
+    the result equals the sample-by-sample loop exactly.
+    """
+    x = np.asarray(x, dtype=float)
+    if not width >= 0.0:
+        raise ValueError(f"play width must be >= 0, got {width!r}")
     h = 0.5 * width
-    for i, v in enumerate(x.tolist()):
-        if v - h > y:
-            y = v - h
-        elif v + h < y:
-            y = v + h
-        out[i] = y
-    return out
+    lo, hi = x - h, x + h
+    step = 1
+    while step < x.size:
+        # the clamp up to sample k ← clamp k ∘ (the clamp up to k − step)
+        lo[step:], hi[step:] = (np.minimum(np.maximum(lo[:-step], lo[step:]), hi[step:]),
+                                np.minimum(np.maximum(hi[:-step], lo[step:]), hi[step:]))
+        step *= 2
+    return np.minimum(np.maximum(x[:1], lo), hi)
 
 
 class Play(Form):
