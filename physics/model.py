@@ -153,6 +153,8 @@ class ActuatorModel:
 
     def check_rh(self, rh, what: str = arg("rh")):
         """Validate RH [%]; None is allowed only when the humidity effect is off."""
+        if isinstance(rh, float) and 0.0 <= rh <= 100.0:   # the common case (a scalar), checked without numpy
+            return float(rh)
         if rh is None:
             if self.needs_rh:
                 raise InputError(f"the humidity effect is on: give {what} (relative humidity, %)")
@@ -165,7 +167,7 @@ class ActuatorModel:
     def params_at(self, rh=None) -> dict:
         """Parameters (SI) at relative humidity ``rh`` [%] (Y's factor is applied by the section)."""
         rh = self.check_rh(rh)
-        return self.hook("params_at")(dict(self.device.params), float(np.mean(rh)))
+        return self.hook("params_at")(dict(self.device.params), rh if isinstance(rh, float) else float(np.mean(rh)))
 
     def key_at(self, rh, p: dict | None = None) -> tuple | None:
         """What this model's small-signal response and its time response at a constant ``rh``

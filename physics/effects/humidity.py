@@ -106,8 +106,23 @@ class Humidity(HumidityInvariant):
             from ..errors import InputError
             raise InputError(f"humidity needs 'humidity_maps' in device {device.name!r} "
                              f"({device.path or 'in memory'})")
+        self._at: dict[float, dict] = {}
 
     def factors(self, rh) -> dict[str, np.ndarray]:
+        # one RH level is asked for several times per model evaluation (its parameters, its
+        # stiffness, its response): remembered per instance while it raises no warning
+        known = self._at.get(rh) if isinstance(rh, float) else None
+        if known is not None:
+            return dict(known)
+        out = self._factors(rh)
+        if isinstance(rh, float) and self._in_range(rh):
+            self._at[rh] = dict(out)
+        return out
+
+    def _in_range(self, rh: float) -> bool:
+        return all(m.rh[0] - RH_MARGIN <= rh <= m.rh[-1] + RH_MARGIN for m in self.device.humidity_maps.values())
+
+    def _factors(self, rh) -> dict[str, np.ndarray]:
         rh = np.asarray(rh, dtype=float)
         # the range checked once per call, as floats: a fit evaluates this millions of times
         lo, hi = (float(rh.min()), float(rh.max())) if rh.size else (np.inf, -np.inf)

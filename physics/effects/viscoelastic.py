@@ -154,10 +154,9 @@ class Viscoelastic(ElasticModulus):
         if "ve_slope" in p and "ve_tan_delta" in p:
             f_hi = float(np.max(t["freq"]))
             f_lo = min(float(p.get("ve_f_lo", np.min(t["freq"]))), f_hi / 2.0)
-            f = np.geomspace(f_lo, f_hi, max(16, int(np.ceil(4 * np.log10(f_hi / f_lo))) + 1))
             E1 = float(np.exp(np.interp(0.0, np.log10(t["freq"]), np.log(t["storage"]))))
-            Es = E1 * (1.0 + float(p["ve_slope"])) ** np.log10(f)
-            return fit_prony(tuple(f), tuple(Es), tuple(float(p["ve_tan_delta"]) * Es)).scaled(p.get("dma_scale", 1.0))
+            return shape_prony(f_lo, f_hi, E1, float(p["ve_slope"]), float(p["ve_tan_delta"])).scaled(
+                p.get("dma_scale", 1.0))
         return fit_prony(tuple(t["freq"]), tuple(t["storage"]), tuple(t["loss"])).scaled(p.get("dma_scale", 1.0))
 
 
@@ -167,6 +166,16 @@ def dma_shape(table) -> tuple[float, float]:
     slope = float(10 ** np.polyfit(lf, ls, 1)[0] - 1.0) if lf.size > 1 else 0.0
     tand = float(np.median(np.asarray(table["loss"], float) / np.asarray(table["storage"], float)))
     return max(slope, 0.0), max(tand, 0.0)
+
+
+@lru_cache(maxsize=256)
+def shape_prony(f_lo: float, f_hi: float, E1: float, slope: float, tan_delta: float) -> Prony:
+    """Prony series of the free shape: storage E1·(1 + slope)^log10(f/1 Hz) [Pa] and loss
+    tan_delta × storage, from ``f_lo`` to ``f_hi`` [Hz] at four points a decade (at least 16).
+    Remembered: a fit asks for the same shape at every frequency response of an evaluation."""
+    f = np.geomspace(f_lo, f_hi, max(16, int(np.ceil(4 * np.log10(f_hi / f_lo))) + 1))
+    Es = E1 * (1.0 + slope) ** np.log10(f)
+    return fit_prony(tuple(f), tuple(Es), tuple(tan_delta * Es))
 
 
 @lru_cache(maxsize=64)
