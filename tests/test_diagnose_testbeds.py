@@ -60,6 +60,13 @@ def test_lab_records_on_the_command_line(tmp_path, capsys):
     # the noise floor was estimated from the records and said so; the nuisance terms reported
     assert "estimated from the records' deflection spectra" in text
     assert "Nuisance terms (estimated per record, not physics)" in text
+    # the time printed is the command's, the diagnosis and its draft rounds within it
+    import re
+    took = re.search(r"PNGs in ([\d.]+) s \(the diagnosis ([\d.]+) s, its draft rounds ([\d.]+) s\)", text)
+    assert took, text[-400:]
+    whole, diag, rounds = map(float, took.groups())
+    assert whole >= diag + rounds - 0.2
+    assert d["timings_s"]["draft rounds"] == pytest.approx(rounds, abs=0.06)
 
 
 def test_nothing_hidden_gives_nothing_to_explain_without_a_confidence():

@@ -296,7 +296,9 @@ def _html(res: DiagnosisResult, d: Path, out: dict, provenance) -> None:
     rep.table({"base effects": ", ".join(b.effects), "free parameters": ", ".join(b.spec.free + b.spec.per_rh),
                "RMS error [µm]": 1e6 * b.rmse, "fit [%]": b.fit_pct, "BIC (effective n)": b.bic,
                "noise floor [µm]": 1e6 * res.noise_floor if math.isfinite(res.noise_floor) else None,
-               "first resonance [Hz]": res.resonance_hz, "wall time [s]": res.timings.get("total")},
+               "first resonance [Hz]": res.resonance_hz, "wall time [s]": res.timings.get("total"),
+               **({"draft rounds' wall time [s]": res.timings["draft rounds"]} if "draft rounds" in res.timings
+                  else {})},
               caption="base model")
     rep.heading("Where the base model fails")
     rep.bullets(res.analysis_base.findings)

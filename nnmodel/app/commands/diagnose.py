@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from pathlib import Path
 
 from physics.diagnose import AnalysisOptions, SelectionOptions, diagnose, write_diagnosis
@@ -116,6 +117,7 @@ def print_summary(res, file=None) -> None:
 
 
 def run(args) -> int:
+    t_start = time.perf_counter()
     if args.noise_floor_um is not None and not (args.noise_floor_um > 0):
         raise InputError(f"--noise-floor-um {args.noise_floor_um!r}: must be a positive number of µm")
     if args.fs_max_Hz is not None and not (args.fs_max_Hz > 0):
@@ -159,8 +161,10 @@ def run(args) -> int:
     if apply:
         ap = out["applied"]
         print(f"applied: {ap['path']}\n  use it: {ap['usage']}" if ap.get("written") else f"applied: {ap['reason']}")
+    phases = f"the diagnosis {res.timings['total']:.1f} s" + (
+        f", its draft rounds {res.timings['draft rounds']:.1f} s" if "draft rounds" in res.timings else "")
     print(f"wrote {d}/diagnosis.json, {d}/index.html and {len([f for f in out['files'] if f.endswith('.png')])} PNGs "
-          f"in {res.timings['total']:.1f} s")
+          f"in {time.perf_counter() - t_start:.1f} s ({phases})")
     return 0
 
 
@@ -180,7 +184,10 @@ def _diagnose(args):
     if args.no_draft:
         return res, None
     from physics.diagnose.draft import draft_effects, rediagnosis
-    return res, draft_effects(res, rediagnosis(ms, res, opts, fs_max=args.fs_max_Hz, progress=log), progress=log)
+    t0 = time.perf_counter()
+    outcome = draft_effects(res, rediagnosis(ms, res, opts, fs_max=args.fs_max_Hz, progress=log), progress=log)
+    res.timings["draft rounds"] = time.perf_counter() - t0
+    return res, outcome
 
 
 def _best(res, outcome, drafts_dir: Path, user_files=()) -> dict | None:
