@@ -614,3 +614,52 @@ def test_a_refit_of_own_effects_also_starts_from_their_spec_starts(clean, monkey
     spec_starts = [pt["Rs"] for pt in start_points("electrode_resistance", dev)]
     assert [s["Rs"] for s in spec.extra_starts] == pytest.approx(spec_starts)
     assert min(spec_starts) < dev.params["Rs"] / 2 and max(spec_starts) > 3 * dev.params["Rs"]    # other valleys
+
+
+def test_the_model_written_is_refined_with_its_drafts_parameters_at_once(tmp_path):
+    """Records seen through a play (backlash) of width W: the drafted play fitted as the draft
+    rounds fit it — its share and width on the time records with the linear model held, then the
+    linear model with them held — can end apart from the joint optimum (the gain the play hides
+    and its width trade off).  The model written is refined with all its free parameters at once:
+    the error falls to the noise's, the width to W's; the fit it started from is left as it was."""
+    from physics import signals
+    from physics.diagnose import forms as F
+    from physics.diagnose.forms.play import play
+    from physics.effects import load_effects_file, unregister
+    from physics.io.record import TimeSeries
+    from physics.solvers.timedomain import simulate
+    dev = load_device("ipmc_pt_eg")
+    rng = np.random.default_rng(5)
+    recs, width = [], None
+    for sig, hold in ((signals.sweep(0.3, 0.1, 20.0, 40.0, 250.0), "cubic"),
+                      (signals.square(0.3, t_on=10.0, t_off=10.0, cycles=2, fs=250.0), "linear")):
+        y = simulate(dev, "none", sig.t, sig.v, rh=60.0, hold=hold).deflection
+        width = 0.3 * float(np.ptp(y)) if width is None else width
+        recs.append(TimeSeries(sig.t, sig.v, play(y, width) + 1e-6 * rng.standard_normal(y.size),
+                               rh=np.full(sig.t.size, 60.0), meta={"signal": sig.describe(), "sensor": {"noise_rms_m": 1e-6}}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_records(recs, FitOptions())
+        ids = tuple(C.resolve_effects("none", dev))
+        base = C.score(C.fit_model(C.ModelSpec("base", ids, ["kf", "Y", "beta_f"]), dev, data.targets,
+                                   data.target_records, n_starts=2), data.records)
+        res = F.residual_of(base, data.records)
+        form = F.form_of("hysteresis")()
+        d = form.draft(form.fit(res), res)[0]
+        path = tmp_path / d.file_name
+        path.write_text(d.source(), encoding="utf-8")
+        registered = load_effects_file(path)
+        try:
+            names = [p.name for p in d.params]
+            spec = C.ModelSpec("+play", ids + (d.effect_id,), ["kf", "Y", "beta_f"] + names)
+            rounds = C.score(C.fit_model(spec, base.device, data.targets, data.target_records, n_starts=2), data.records)
+            C.refine_on_time(rounds, data.records)
+            before = (rounds.rmse, dict(rounds.device.params))
+            written = C.polish_on_time(rounds, data.records)
+        finally:
+            for i in registered:
+                unregister(i)
+    assert (rounds.rmse, dict(rounds.device.params)) == before          # the copy was refined, not the fit
+    assert written is not None and written.rmse < 1.3e-6 < 5 * written.rmse < rounds.rmse     # 1.0 against 16.7 µm
+    assert written.device.params["play_width"] * written.device.params["play_share"] == pytest.approx(width, rel=0.1)
+    assert "values it had" in written.spec.notes[-1] and "play_width" in written.spec.notes[-1]
