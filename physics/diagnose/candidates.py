@@ -70,6 +70,7 @@ from ..identify.settings import DEFAULT_DECADES
 from ..errors import InputError, ModelError
 from ..execution.memo import remembered
 from ..identify import (IdentifiabilityWarning, IdentificationProblem, IdentificationResult, fit_lsq)
+from ..identify.free_parameters import FreeParameter
 from ..effects import EFFECTS
 from ..model import ActuatorModel, resolve_effects
 from ..solvers.timedomain import simulate
@@ -802,23 +803,15 @@ def model_at(mf: ModelFit, theta, time_only: dict | None = None) -> ActuatorMode
     return ActuatorModel(dev.with_params(**extra) if extra else dev, mf.effects, n_modes=mf.model.n_modes)
 
 
-class _TimeOnly:
-    """Search coordinates of the free parameters the FRF fit does not hold (an output or input
-    map's, set on the time records): the logarithm within positive bounds, else the value."""
-
-    def __init__(self, names: list[str], device: Device):
-        self.names = names
-        bounds = [param_bounds(n, device) or (-np.inf, np.inf) for n in names]
-        self.log = np.array([b[0] > 0 for b in bounds], dtype=bool)
-        lo, hi = np.array([b[0] for b in bounds], float), np.array([b[1] for b in bounds], float)
-        self.lo, self.hi = self.to_x(lo), self.to_x(hi)
-
-    def to_x(self, v) -> np.ndarray:
-        v = np.asarray(v, dtype=float)
-        return np.where(self.log, np.log(np.where(self.log, np.maximum(v, 1e-300), 1.0)), v)
-
-    def values(self, x) -> dict:
-        return dict(zip(self.names, np.where(self.log, np.exp(x), x).tolist()))
+def _map_params(names: list[str], device: Device) -> list[FreeParameter]:
+    """The free parameters ``names`` the FRF fit does not hold (an output or input map's, set on the
+    time records) as search coordinates: their draft or spec bounds, the logarithm within positive
+    ones, started at the device's values."""
+    out = []
+    for n in names:
+        lo, hi = param_bounds(n, device) or (-np.inf, np.inf)
+        out.append(FreeParameter(n, float(device.params[n]), lo, hi, "log" if lo > 0 else "linear", ""))
+    return out
 
 
 def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int = TIME_REFINE_SIMS,
@@ -847,22 +840,26 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
     problem, fit = mf.result.problem, mf.result.fit
     own = {p.name for p in problem.params}
     extra = [n for n in mf.spec.free if n not in own and n in mf.device.params]
-    maps = _TimeOnly(extra if joint else [], mf.device)
+    maps = _map_params(extra, mf.device) if joint else []
     p = len(problem.params)
-    lo, hi = np.concatenate([problem.x_bounds[0], maps.lo]), np.concatenate([problem.x_bounds[1], maps.hi])
+    lo, hi = (np.concatenate([b, [q.x_bounds[k] for q in maps]]) for k, b in enumerate(problem.x_bounds))
     span = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
     scale = math.sqrt(sum(mf.rss) / sum(mf.n)) or 1.0
     memos = [{} for _ in records]       # a per-RH parameter's Jacobian column re-simulates only its level's records
 
     def resid(x):
-        m = model_at(mf, problem.from_x(x[:p]), maps.values(x[p:]))
+        m = model_at(mf, problem.from_x(x[:p]), map_values(x[p:]))
         parts = []
         for r, memo in zip(records, memos):
             parts.append(r.detrend_d(r.y_d - remembered(memo, m.key_at(r.rh_model), lambda: predict(m, r))))
         return np.concatenate(parts) / scale
 
+    def map_values(x):
+        return {q.name: float(q.from_x(v)) for q, v in zip(maps, x)}
+
     def inside(theta):
-        x = np.concatenate([problem.to_x(theta), maps.to_x([mf.device.params[n] for n in maps.names])])
+        with np.errstate(divide="ignore"):          # a map switched off (0) on a log scale: its lower bound
+            x = np.concatenate([problem.to_x(theta), [q.to_x(q.initial) for q in maps]])
         return np.clip(x, lo + 1e-9 * span, hi - 1e-9 * span)
 
     x0 = inside(fit.theta)
@@ -891,10 +888,10 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
     fit.theta[:], fit.x[:] = theta, x[:p]
     fit.std_error[:], fit.rel_std_error[:], fit.ci95[:] = unc["std_error"], unc["rel_std_error"], unc["ci95"]
     labels = problem.labels
-    mf.model = model_at(mf, theta, maps.values(x_maps))
+    mf.model = model_at(mf, theta, map_values(x_maps))
     mf.device = mf.result.device = mf.model.device
     mf.values.update(zip(labels, theta.tolist()))
-    mf.values.update(maps.values(x_maps))
+    mf.values.update(map_values(x_maps))
     mf.std_errors.update(zip(labels, unc["std_error"].tolist()))
     mf.rel_std_errors.update(zip(labels, unc["rel_std_error"].tolist()))
     mf.correlation = np.array(unc["correlation"], dtype=float)
@@ -902,7 +899,7 @@ def refine_on_time(mf: ModelFit, records: Sequence[PreparedRecord], *, sims: int
     score(mf, records)
     mf.time_refined = True
     origin = "start" if start is not None else "values it had" if joint else "FRF optimum"
-    mf.spec.notes.append(f"{', '.join(labels + maps.names)} refined on the time records from the {origin}: "
+    mf.spec.notes.append(f"{', '.join(labels + [q.name for q in maps])} refined on the time records from the {origin}: "
                          f"RMS error {1e6 * before:.4g} → {1e6 * mf.rmse:.4g} µm")
     return True
 

@@ -120,7 +120,7 @@ class Humidity(HumidityInvariant):
         return out
 
     def _in_range(self, rh: float) -> bool:
-        return all(m.rh[0] - RH_MARGIN <= rh <= m.rh[-1] + RH_MARGIN for m in self.device.humidity_maps.values())
+        return not any(_outside(m, rh, rh) for m in self.device.humidity_maps.values())
 
     def _factors(self, rh) -> dict[str, np.ndarray]:
         rh = np.asarray(rh, dtype=float)
@@ -128,10 +128,16 @@ class Humidity(HumidityInvariant):
         lo, hi = (float(rh.min()), float(rh.max())) if rh.size else (np.inf, -np.inf)
         out = {}
         for name, m in self.device.humidity_maps.items():
-            if lo < m.rh[0] - RH_MARGIN or hi > m.rh[-1] + RH_MARGIN:
+            if _outside(m, lo, hi):
                 warnings.warn(f"RH {lo:.4g}–{hi:.4g} % is outside the "
                               f"{m.rh[0]:g}–{m.rh[-1]:g} % range of the {name} map of device "
                               f"{self.device.name!r}; the end value is used", stacklevel=3)
             base = self.device.params.get(name, 1.0)
             out[name] = m.factor(rh, base, self.device.reference_rh)
         return out
+
+
+def _outside(m, lo: float, hi: float) -> bool:
+    """Whether RH readings from ``lo`` to ``hi`` [%] leave the range of the humidity map ``m`` by
+    more than :data:`RH_MARGIN`."""
+    return lo < m.rh[0] - RH_MARGIN or hi > m.rh[-1] + RH_MARGIN
