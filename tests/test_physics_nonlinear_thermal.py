@@ -39,6 +39,16 @@ def test_equilibrium_law_matches_an_independent_poisson_boltzmann_root_solve():
     assert Q[-1] ** 2 / (2 * d.kappa * 96485.33212 * p["C_anion"] * U[-1]) == pytest.approx(1.0, abs=0.15)
 
 
+def test_a_lattice_too_small_for_the_fixed_anions_is_refused_by_name():
+    """C_max ≤ C⁻ (ν ≥ 1) has no Bikerman law: the error names both concentrations and the
+    search-bound flag instead of a NaN deep inside a fit."""
+    dev = load_device("ipmc_pt_eg").with_params(C_max=50.0)
+    t = np.arange(0, 0.5, 1e-3)
+    with pytest.raises(physics.InputError, match=r"C_max = 50 mol/m\^3 is not above .*C_anion = 1100") as exc:
+        physics.simulate(dev, "none,+nonlinear_charge", t=t, voltage=np.sin(2 * np.pi * t), rh=60.0)
+    assert exc.value.params == ("bounds",)
+
+
 @pytest.mark.parametrize("c_max,share", [(np.inf, 1.0), (5000.0, 1.0), (5000.0, 0.2)])
 def test_stepper_law_matches_a_root_solve_on_every_branch(c_max, share):
     """The time stepper's compiled law (one interpolation in a ±q̂ table) against an

@@ -47,6 +47,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..errors import InputError, arg
 from ..parameters import ParamSpec
 from .base import Effect
 from .double_layer import DoubleLayer, DoubleLayerProps
@@ -142,7 +143,13 @@ class NonlinearCharge(LinearCharge):
         return "diffuse_share", cls.SHARE_GRID, 1.0
 
     def nu(self, p) -> float:
-        return float(p["C_anion"] / p.get("C_max", np.inf))
+        """ν = C⁻/C_max, the lattice's share taken by the fixed anions; below 1 for any law."""
+        nu = float(p["C_anion"] / p.get("C_max", np.inf))
+        if not nu < 1.0:
+            raise InputError(f"nonlinear_charge: C_max = {p.get('C_max'):.4g} mol/m^3 is not above the fixed-anion "
+                             f"concentration C_anion = {p['C_anion']:.4g} mol/m^3 (the lattice must hold the anions); "
+                             f"raise C_max in the device file, or its lower search bound with {arg('bounds')}")
+        return nu
 
     @staticmethod
     def share(p) -> float:
