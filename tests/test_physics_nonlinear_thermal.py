@@ -44,7 +44,7 @@ def test_a_lattice_too_small_for_the_fixed_anions_is_refused_by_name():
     search-bound flag instead of a NaN deep inside a fit."""
     dev = load_device("ipmc_pt_eg").with_params(C_max=50.0)
     t = np.arange(0, 0.5, 1e-3)
-    with pytest.raises(physics.InputError, match=r"C_max = 50 mol/m\^3 is not above .*C_anion = 1100") as exc:
+    with pytest.raises(physics.InputError, match=r"C_max = 50 mol/m\^3 of nonlinear_charge is not above .*C_anion = 1100") as exc:
         physics.simulate(dev, "none,+nonlinear_charge", t=t, voltage=np.sin(2 * np.pi * t), rh=60.0)
     assert exc.value.params == ("bounds",)
 

@@ -146,9 +146,10 @@ class NonlinearCharge(LinearCharge):
         """ν = C⁻/C_max, the lattice's share taken by the fixed anions; below 1 for any law."""
         nu = float(p["C_anion"] / p.get("C_max", np.inf))
         if not nu < 1.0:
-            raise InputError(f"nonlinear_charge: C_max = {p.get('C_max'):.4g} mol/m^3 is not above the fixed-anion "
+            raise InputError(f"C_max = {p.get('C_max'):.4g} mol/m^3 of nonlinear_charge is not above the fixed-anion "
                              f"concentration C_anion = {p['C_anion']:.4g} mol/m^3 (the lattice must hold the anions); "
-                             f"raise C_max in the device file, or its lower search bound with {arg('bounds')}")
+                             f"raise C_max in the device file, or the low end of its search range where it is fitted "
+                             f"({arg('bounds')})")
         return nu
 
     @staticmethod
