@@ -263,7 +263,8 @@ def test_large_signal_charge_along_the_resistive_electrodes_matches_an_independe
     banded Kirchhoff system at each instant, and scipy's Radau integrator.  Only the equilibrium law
     (checked above against a root solve) and the branch constants R_b, σ/(2h) are the model's.  At
     2 V the compact-layer law changes the charge by ~44 % of its range against a nearly linear
-    law, so agreement to 1e-3 tests the large-signal line itself."""
+    law, so agreement within 2e-3 of the charge's range (1e-2 of the current's, rich in harmonics)
+    tests the large-signal line itself (measured: 7e-4 and 4e-3)."""
     from scipy.integrate import solve_ivp
     from scipy.linalg import solve_banded
 
