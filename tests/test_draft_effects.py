@@ -470,6 +470,43 @@ def test_input_dead_zone_found_behind_a_base_fitted_to_the_distorted_records():
         assert not _fit(form, residual(gain_only)).significant, form
 
 
+def test_input_saturation_takes_the_gain_of_each_rh_level_the_base_fitted_on_its_own():
+    """A base with its gain fitted per RH level (``--per-rh Y,kf``) has taken up a different share
+    of a clipped drive at each level: none at a level whose record never reaches the clip, much at a
+    level with one large record.  The form fits one linear gain per level beside the clip, finds it
+    and calls it pure; with one shared gain (the records' levels ignored) the clip lowers the error
+    of the large records and raises that of the others, and its evidence was against it (a held-out
+    strip's saturating drive was not drafted)."""
+    rng = np.random.default_rng(5)
+    t = np.arange(6000) / 100.0
+    sweep = np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
+    multisine = sum(np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) for f in (0.2, 0.7, 1.9, 4.3)) / 2.5
+    volts = [0.5 * multisine, 1.6 * multisine, 0.4 * sweep, 1.3 * sweep]
+    levels = [60.0, 60.0, 40.0, 80.0]
+    truth = [GAIN * np.clip(v, -0.8, 0.8) + rng.normal(0, 1e-6, t.size) for v in volts]
+    gain = {h: sum(float(y @ v) for y, v, lv in zip(truth, volts, levels) if lv == h)
+            / sum(float(v @ v) for v, lv in zip(volts, levels) if lv == h) for h in set(levels)}
+    assert gain[40.0] == pytest.approx(GAIN, rel=1e-3) and gain[60.0] < 0.7 * GAIN
+
+    def residual(groups):
+        resid = [y - gain[h] * v - np.mean(y - gain[h] * v) for y, v, h in zip(truth, volts, levels)]
+        return F.Residual([_Rec(y, v, rh=h) for y, v, h in zip(truth, volts, levels)], resid,
+                          [gain[h] * v for v, h in zip(volts, levels)], [float(t.size)] * 4,
+                          lambda k, u: gain[levels[k]] * u, groups)
+
+    ff = _fit("input_saturation", residual([1, 1, 0, 2]))
+    assert ff.significant and ff.rms_reduction > 0.9
+    assert ff.params["level_V"] == pytest.approx(0.8, rel=0.05) and ff.params["gain"] == pytest.approx(1.0, rel=0.1)
+    shared = _fit("input_saturation", residual(None))
+    assert not shared.significant and shared.delta_bic > 0 and shared.rms_reduction > 0.3
+    # the groups are the fit's RH levels when it freed parameters per level, else one group
+    from physics.diagnose.forms.base import gain_groups
+    recs = [_Rec(y, v, rh=h) for y, v, h in zip(truth, volts, levels)]
+    assert gain_groups(_Stub(spec=_Stub(per_rh=["Y", "kf"])), recs) == [1, 1, 0, 2]
+    assert gain_groups(_Stub(spec=_Stub(per_rh=[])), recs) is None
+    assert gain_groups(_Stub(spec=_Stub(per_rh=["Y"])), recs[:2]) is None
+
+
 def test_forms_stay_quiet_on_white_noise_and_describe_selects_nothing():
     res = _residual(lambda p, t, fs: np.zeros_like(p), noise=2e-6)
     for f in F.FORMS:

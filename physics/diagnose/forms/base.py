@@ -30,15 +30,18 @@ PURE = (0.5, 1.5)
 
 @dataclass
 class Residual:
-    """What a form is fitted to: the residual, the model's prediction, the records, and (a
-    linear model) ``respond(k, u)``: the fitted model's deflection [m] for record k driven by
-    the voltage ``u`` [V] at its ``fs_d`` instead of its own (:func:`linear_response`)."""
+    """What a form is fitted to: the residual, the model's prediction, the records, (a linear
+    model) ``respond(k, u)``: the fitted model's deflection [m] for record k driven by the voltage
+    ``u`` [V] at its ``fs_d`` instead of its own (:func:`linear_response`), and ``gain_groups``:
+    per record, the group of records whose gain the fit set together (one group, None, unless
+    parameters were fitted per RH level: then one group per level)."""
 
     records: list
     resid: list                  # per record, decimated [m], nuisance terms removed
     preds: list                  # model prediction per record, decimated [m]
     n_eff: list                  # effective sample size per record
     respond: Callable | None = None
+    gain_groups: list | None = None
 
     @classmethod
     def of(cls, fit, records: Sequence) -> "Residual":
@@ -47,13 +50,13 @@ class Residual:
         n_eff = [e.size / max(stats.integrated_time(e), 1.0) for e in resid]
         model = getattr(fit, "model", None)
         respond = linear_response(model, records) if has_response(model) else None
-        return cls(list(records), resid, preds, n_eff, respond)
+        return cls(list(records), resid, preds, n_eff, respond, gain_groups(fit, records))
 
     def minus(self, parts: list) -> "Residual":
         """The residual with a fitted part removed (its own effective sample sizes)."""
         resid = [e - p for e, p in zip(self.resid, parts)]
         return Residual(self.records, resid, self.preds, [e.size / max(stats.integrated_time(e), 1.0) for e in resid],
-                        self.respond)
+                        self.respond, self.gain_groups)
 
     @property
     def rss(self) -> list[float]:
@@ -235,6 +238,17 @@ def has_response(model) -> bool:
     """Whether ``model`` has the linear response :attr:`Residual.respond` needs: a linear model
     that does not map the voltage first (its frequency response is then not its own)."""
     return model is not None and model.is_linear and not model.inputs
+
+
+def gain_groups(fit, records: Sequence) -> list[int] | None:
+    """Per record, the index of the group whose gain ``fit`` set together: its RH level when the
+    fit freed parameters per RH level (each level's stiffness and coupling then take up on their
+    own what the records at that level lack), else None (one group)."""
+    spec = getattr(fit, "spec", None)
+    if not getattr(spec, "per_rh", None):
+        return None
+    levels = sorted({float(r.rh) for r in records})
+    return [levels.index(float(r.rh)) for r in records] if len(levels) > 1 else None
 
 
 def linear_response(model, records: Sequence) -> Callable:

@@ -20,9 +20,14 @@ The second term is there because the base was fitted to the distorted records: i
 κ·H(N(v)), the fitted gain has taken up part of the distortion and the residual is
 (κ − 1)·H(v) + κ·H(N(v) − v), so c = κ − 1 and a = κ.  Without it, a leans on the part of
 H(N(v) − v) that looks like H(v) and the threshold comes out wrong (on a test-bed strip with a
-0.17 V dead-zone: 0.05 V with a = 1.6 alone, 0.18 V with a/(1 + c) = 0.88 beside H(v)).  The
-form is significant only with a/(1 + c) in :data:`.PURE` and 1 + c > 0 (the pure nonlinearity
-gives 1; far from it, H of a part of the voltage only happens to fit a band of error).
+0.17 V dead-zone: 0.05 V with a = 1.6 alone, 0.18 V with a/(1 + c) = 0.88 beside H(v)).  A base
+whose gain was fitted per RH level has taken up a share of its own at each level, so c is fitted
+per level (:attr:`.base.Residual.gain_groups`) and κ is their mean weighted by each level's
+‖H(v)‖²: with one c for all, a saturating strip's map lowered the error of its two large records
+and raised that of its small record at another level 2.4-fold, and its evidence went against it
+(ΔBIC +49, RMS −53 %; with one c per level −1.35e3, −79 %).  The form is significant only with
+a/(1 + c) in :data:`.PURE` and every 1 + c > 0 (the pure nonlinearity gives 1; far from it, H of a
+part of the voltage only happens to fit a band of error).
 Skipped for a large-signal model, or one that maps the voltage already (no H).
 
 Each form drafts an input effect (:class:`physics.effects.InputEffect`) that maps the voltage
@@ -70,10 +75,11 @@ class _InputNonlinearity(Form):
         """N(v) − v for the threshold ``level`` [V]."""
         raise NotImplementedError
 
-    def search(self, res: Residual, vmax: float, columns) -> list[tuple[tuple, "object"]]:
+    def search(self, res: Residual, vmax: float, columns, pure) -> list[tuple[tuple, "object"]]:
         """[(the law's parameters, regression)] of each law the form knows, the best fit first: the
         threshold on the form's grid, then finer between the neighbours of the best; ``columns(x)``
-        gives the regressors for the parameters ``x`` (arguments of :meth:`distort` after the voltage)."""
+        gives the regressors for the parameters ``x`` (arguments of :meth:`distort` after the voltage),
+        ``pure(reg)`` whether a regression is the pure nonlinearity (:func:`_pure`)."""
         levels = np.geomspace(*self.grid[:2], self.grid[2]) * vmax
         level, reg = best_on_grid(res, levels, lambda x: columns((x,)))
         i = int(np.argmin(np.abs(levels - level)))
@@ -87,11 +93,20 @@ class _InputNonlinearity(Form):
         volts = [r.v_d for r in res.records]
         vmax = max(float(np.max(np.abs(v))) for v in volts) or 1.0
         linear = [res.respond(k, v) for k, v in enumerate(volts)]
+        group = res.gain_groups or [0] * len(volts)
+        n_groups = max(group) + 1
+        # each group's weight in the records' linear gain: the energy of its linear response
+        weights = np.bincount(group, [float(lin @ lin) for lin in linear], minlength=n_groups)
 
         def columns(x):
-            return [[res.respond(k, self.distort(v, *x)), lin] for k, (v, lin) in enumerate(zip(volts, linear))]
-        (x, reg), *others = self.search(res, vmax, columns)
-        kappa = 1.0 + reg.gains[1]                  # the records' linear gain over the fitted model's
+            return [[res.respond(k, self.distort(v, *x))] + [lin if g == group[k] else np.zeros_like(lin)
+                                                               for g in range(n_groups)]
+                    for k, (v, lin) in enumerate(zip(volts, linear))]
+
+        def pure(r):
+            return _pure(r, weights)
+        (x, reg), *others = self.search(res, vmax, columns, pure)
+        kappa = _linear_gain(reg, weights)          # the records' linear gain over the fitted model's
         a = reg.gains[0] / kappa if kappa > 0 else float("nan")
         params, units = {"level_V": x[0], "gain": a, "linear_gain": kappa}, {"level_V": "V", "gain": "1",
                                                                             "linear_gain": "1"}
@@ -99,7 +114,7 @@ class _InputNonlinearity(Form):
             params["exponent"], units["exponent"] = x[1], "1"
         # another law that is a pure map of the drive is drafted beside it: the fit with the model decides
         # (module doc); what the residual shows of it need not be significant there, the form's own may not be
-        also = [(y, r) for y, r in others if _pure(r)]
+        also = [(y, r) for y, r in others if pure(r)]
         text = self.sentence(x, vmax, a, kappa)
         if also:
             y, r = also[0]
@@ -108,7 +123,7 @@ class _InputNonlinearity(Form):
         ff = self.scored(res, reg, params, units, text, v_max_V=vmax)
         if also:
             ff.info["other_law"] = [float(v) for v in also[0][0]]
-        ff.admissible = _pure(reg)
+        ff.admissible = pure(reg)
         ff.significant = ff.significant and ff.admissible
         return ff
 
@@ -201,26 +216,36 @@ class InputSaturation(_InputNonlinearity):
     def law(self, x):
         return self.effect if len(x) == 1 else self.soft
 
-    def search(self, res, vmax, columns):
+    def search(self, res, vmax, columns, pure):
         """The clip's threshold, and the soft law's knee and exponent (grid, then refined); the
         lower ΔBIC first."""
-        [(x, reg)] = super().search(res, vmax, columns)
+        [(x, reg)] = super().search(res, vmax, columns, pure)
         grid = [(k, g + SHIFT) for g in SOFT_EXPONENTS for k in np.geomspace(*SOFT_KNEES[:2], SOFT_KNEES[2])]
 
         def soft(z):        # z: knee / largest |v|, and γ + SHIFT (Nelder–Mead first steps 5 % of a coordinate)
             return columns((z[0] * vmax, z[1] - SHIFT))
-        best = best_on_grid(res, range(len(grid)), lambda i: soft(grid[int(i)]), 2, admit=_pure)
+        best = best_on_grid(res, range(len(grid)), lambda i: soft(grid[int(i)]), 2, admit=pure)
         if best is None:
             return [(x, reg)]
         (k, g), reg2 = refined(res, list(grid[int(best[0])]), [SOFT_BOUNDS[0], tuple(b + SHIFT for b in SOFT_BOUNDS[1])],
-                               soft, 2, admit=_pure)
+                               soft, 2, admit=pure)
         return sorted([(x, reg), ((k * vmax, g - SHIFT), reg2)], key=lambda law: law[1].delta_bic)
 
 
-def _pure(reg) -> bool:
-    """Whether the regression e ≈ a'·H(N(v) − v) + c·H(v) is the pure nonlinearity: κ = 1 + c > 0 and
-    a = a'/κ in :data:`.PURE`.  The soft law needs it while it is fitted: a knee far beyond the drive
-    with γ near 1 leaves only a small curvature of the voltage, and a large a can fit any band of error
-    with it (a held-out strip's residual took a = 84 at a knee 10× its largest drive)."""
-    kappa = 1.0 + reg.gains[1]
+def _linear_gain(reg, weights) -> float:
+    """κ: the records' linear gain over the fitted model's, 1 + c of the regression
+    e ≈ a'·H(N(v) − v) + Σ_g c_g·H(v)·[record in g] (one c per group of records whose gain the fit
+    set together, :attr:`.Residual.gain_groups`), averaged with the ``weights`` of the groups; NaN
+    when a group's κ is not positive."""
+    kappas = 1.0 + np.asarray(reg.gains[1:], float)
+    return float(np.dot(weights, kappas) / np.sum(weights)) if np.all(kappas > 0) else float("nan")
+
+
+def _pure(reg, weights) -> bool:
+    """Whether the regression e ≈ a'·H(N(v) − v) + Σ_g c_g·H(v) is the pure nonlinearity: every
+    κ_g = 1 + c_g > 0 and a = a'/κ in :data:`.PURE` (κ: :func:`_linear_gain`).  The soft law needs it
+    while it is fitted: a knee far beyond the drive with γ near 1 leaves only a small curvature of the
+    voltage, and a large a can fit any band of error with it (a held-out strip's residual took a = 84 at
+    a knee 10× its largest drive)."""
+    kappa = _linear_gain(reg, weights)
     return kappa > 0 and PURE[0] <= reg.gains[0] / kappa <= PURE[1]
