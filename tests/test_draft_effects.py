@@ -475,8 +475,8 @@ def test_input_saturation_takes_the_gain_of_each_rh_level_the_base_fitted_on_its
     of a clipped drive at each level: none at a level whose record never reaches the clip, much at a
     level with one large record.  The form fits one linear gain per level beside the clip, finds it
     and calls it pure; with one shared gain (the records' levels ignored) the clip lowers the error
-    of the large records and raises that of the others, and its evidence was against it (a held-out
-    strip's saturating drive was not drafted)."""
+    of the large records and raises that of the others, and its evidence was against it (circuit_lab
+    seed 91's saturating drive was not drafted so)."""
     rng = np.random.default_rng(5)
     t = np.arange(6000) / 100.0
     sweep = np.sin(2 * np.pi * (0.1 * t + 0.5 * (20 - 0.1) / 60 * t ** 2))
