@@ -14,6 +14,7 @@ from scipy.signal import lfilter, lfilter_zi
 from ...analysis import stats
 from ...analysis.metrics import remove_nuisance
 from ..effect_draft import EffectDraft, Param
+from ..records import rh_levels
 
 #: A form is significant at ΔBIC ≤ −this (very strong evidence, Kass & Raftery) ...
 SIGNIFICANT_BIC = 10.0
@@ -247,8 +248,8 @@ def gain_groups(fit, records: Sequence) -> list[int] | None:
     spec = getattr(fit, "spec", None)
     if not getattr(spec, "per_rh", None):
         return None
-    levels = sorted({float(r.rh) for r in records})
-    return [levels.index(float(r.rh)) for r in records] if len(levels) > 1 else None
+    levels = rh_levels(records)
+    return [levels.index(r.rh) for r in records] if len(levels) > 1 else None
 
 
 def linear_response(model, records: Sequence) -> Callable:

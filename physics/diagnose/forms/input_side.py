@@ -98,10 +98,12 @@ class _InputNonlinearity(Form):
         # each group's weight in the records' linear gain: the energy of its linear response
         weights = np.bincount(group, [float(lin @ lin) for lin in linear], minlength=n_groups)
 
+        # record k's H(v) in its group's column, zero in the others' (built once: the scans call columns often)
+        gain_cols = [[lin if g == group[k] else np.zeros_like(lin) for g in range(n_groups)]
+                     for k, lin in enumerate(linear)]
+
         def columns(x):
-            return [[res.respond(k, self.distort(v, *x))] + [lin if g == group[k] else np.zeros_like(lin)
-                                                               for g in range(n_groups)]
-                    for k, (v, lin) in enumerate(zip(volts, linear))]
+            return [[res.respond(k, self.distort(v, *x))] + gain_cols[k] for k, v in enumerate(volts)]
 
         def pure(r):
             return _pure(r, weights)
