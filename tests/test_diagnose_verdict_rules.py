@@ -297,6 +297,33 @@ def test_the_calibration_table_has_a_row_per_draw_with_each_label_s_count_and_it
     assert page.index(notes[0]) < page.index(notes[-1])
 
 
+def test_the_calibration_summary_sums_every_draw_and_the_pages_lead_with_it():
+    """The pooled line adds every draw's picks per label (each pick right, a relative or wrong, counted
+    once), gives the share right or a relative, and leads the calibration table on the pages; a run's
+    stored summary is shown as stored."""
+    import html
+    from physics.diagnose.report import calibration_table
+    from physics.pages.report import Report
+    pool = conf.calibration_pooled()
+    assert pool["draws"] == len(conf.CALIBRATION) and pool["cases"] == sum(c["cases"] for c in conf.CALIBRATION)
+    text = conf.calibration_summary()
+    for lab in conf.LABELS:
+        x = pool["labels"][lab]
+        counts = [(c["labels"][lab]["right"], c["labels"][lab]["acceptable"], c["labels"][lab]["wrong"])
+                  for c in conf.CALIBRATION]
+        assert (x["right"], x["acceptable"], x["wrong"]) == tuple(map(sum, zip(*counts)))
+        assert x["n"] == x["right"] + x["acceptable"] + x["wrong"] > 0
+        share = round(100 * (x["right"] + x["acceptable"]) / x["n"])
+        assert f"\"{lab}\" {x['n']} picks, {x['right']} right" in text and f"({share} % right or a relative)" in text
+    rep = Report("t")
+    calibration_table(rep)
+    page = html.unescape(rep.to_html())
+    assert text in page and page.index(text) < page.index("the labels on held-out physics")
+    rep = Report("t")
+    calibration_table(rep, conf.calibration_rows(), conf.calibration_notes(), "a stored summary")
+    assert "a stored summary" in html.unescape(rep.to_html())
+
+
 def test_the_calibration_sentence_says_each_table_and_marks_those_of_an_earlier_rule():
     """The sentence gives each label's count of each table, the table measured with the current
     rules first, and says that the others were measured under an earlier rule, naming it and the

@@ -32,3 +32,19 @@ def test_the_python_example_prints_what_the_readme_shows(tmp_path):
                          env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == shown.split()
+
+
+def test_the_readme_states_the_pooled_calibration_of_the_labels():
+    """The front page's figures for what the labels have meant are the pooled calibration table's
+    (:func:`physics.diagnose.confidence.calibration_pooled`): a new draw there must update them here."""
+    from physics.diagnose.confidence import calibration_pooled
+    pool = calibration_pooled()
+    text = " ".join(README.split())
+    assert f"the {pool['draws']} draws of the calibration table ({pool['cases']} strips" in text
+    for lab, x in pool["labels"].items():
+        assert f"\"{lab}\" {x['n']} picks" in text
+    high, medium, low = (pool["labels"][lab] for lab in ("high", "medium", "low"))
+    wrong = "none wrong" if not high["wrong"] else f"{high['wrong']} wrong"
+    assert f"{wrong} ({high['right']} right, {high['acceptable']} a near twin's relative)" in text
+    for x in (medium, low):
+        assert f"{x['n']} picks, {round(100 * (x['right'] + x['acceptable']) / x['n'])} %" in text

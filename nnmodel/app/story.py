@@ -28,7 +28,7 @@ OUTSIDE_KIND, OUTSIDE_SEED, OUTSIDE_FS_HZ, OUTSIDE_DURATION_S = "creep", 0, 200.
 def loop_stage(d: Path) -> dict:
     """Records with a hidden effect, the diagnosis of the model without it, and the figure
     of the error before and after (``d/loop.png``); returns the figures as a dict."""
-    from physics.diagnose.confidence import calibration_notes, calibration_rows, calibration_text
+    from physics.diagnose.confidence import calibration_notes, calibration_rows, calibration_summary, calibration_text
     from physics.testbeds.demo import hidden_effect_case
     from physics.diagnose.diagnosis import diagnose
     case = hidden_effect_case(LOOP_EFFECT, LOOP_SEED, device=LOOP_DEVICE, duration=LOOP_DURATION_S)
@@ -43,7 +43,7 @@ def loop_stage(d: Path) -> dict:
                          "evidence": c.evidence(b)} for c in res.ranking],
             "verdict": v.to_dict(), "adequacy": res.adequacy.to_dict() if res.adequacy else None,
             "calibration": calibration_text(), "calibration_table": calibration_rows(),
-            "calibration_notes": calibration_notes(),
+            "calibration_notes": calibration_notes(), "calibration_summary": calibration_summary(),
             "rmse_before_um": 1e6 * b.rmse, "rmse_after_um": None if after is None else 1e6 * after.rmse,
             "fit_before_pct": b.fit_pct, "fit_after_pct": None if after is None else after.fit_pct,
             "effect_parameters": {} if w is None else {k: float(x) for k, x in w.fit.values.items()}}
@@ -247,7 +247,7 @@ def write_page(d: Path, report: dict, provenance: dict) -> Path:
                  + (f"{v['missing_effect']}, confidence {v['confidence_label']}." if v["missing_effect"]
                     else "no catalog effect named.") + f" {v['reason']}")
         rep.table(loop["ranking"], caption="candidates: RMS error after adding each [µm], ΔBIC (negative: better)")
-        calibration_table(rep, loop["calibration_table"], loop["calibration_notes"])
+        calibration_table(rep, loop["calibration_table"], loop["calibration_notes"], loop.get("calibration_summary"))
         rep.paragraph("A label is not the weight: over thousands of correlated samples every weight is 1.000. "
                       "\"high\" needs a pick that changes the model by several noise floors, leaves at most a couple, "
                       "clearly beats its closest rival, lowers the error on every record and has no quality flag "

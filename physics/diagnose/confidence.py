@@ -615,6 +615,36 @@ def calibration_text() -> str:
     return text.strip()
 
 
+def calibration_pooled() -> dict:
+    """Every draw of :data:`CALIBRATION` summed: ``draws``, ``cases`` and per label ``n``, ``right``,
+    ``acceptable`` (a near twin's relative) and ``wrong`` picks.  Each draw counts under the rules in
+    force when it was measured (an earlier rule is named in its row), so the sum says what the labels
+    have meant across the rules' history, not only under today's."""
+    labels = {lab: {k: sum(c["labels"][lab][k] for c in CALIBRATION) for k in ("n", "right", "acceptable", "wrong")}
+              for lab in LABELS}
+    return {"draws": len(CALIBRATION), "cases": sum(c["cases"] for c in CALIBRATION), "labels": labels}
+
+
+def calibration_summary() -> str:
+    """One sentence for the pages and the README: :func:`calibration_pooled` per label, with the share
+    of picks that named the hidden effect or its near twin's relative."""
+    if not CALIBRATION:
+        return "The confidence labels have not been calibrated on held-out physics yet."
+    pool = calibration_pooled()
+
+    def said(lab: str) -> str:
+        x = pool["labels"][lab]
+        if not x["n"]:
+            return f"\"{lab}\" never given"
+        share = 100.0 * (x["right"] + x["acceptable"]) / x["n"]
+        wrong = "none wrong" if not x["wrong"] else f"{x['wrong']} wrong"
+        return (f"\"{lab}\" {x['n']} picks, {x['right']} right, {x['acceptable']} a near twin's relative, "
+                f"{wrong} ({share:.0f} % right or a relative)")
+    return (f"Summed over the table's {pool['draws']} draws ({pool['cases']} strips; each counted under the rules in "
+            "force when it was measured, and a draw on which a later rule was chosen says so in its note): "
+            + "; ".join(said(lab) for lab in LABELS) + ".")
+
+
 def calibration_rows() -> list[dict]:
     """:data:`CALIBRATION` as the rows of a page's table, one per held-out draw, in its order:
     family, seeds, cases, the code it was measured at, per label "k of n" picks right (a near twin's
@@ -651,5 +681,5 @@ def _per_label(labels: dict) -> str:
 
 
 __all__ = ["Confidence", "features", "label", "excess_share", "thresholds", "calibration_text", "calibration_rows",
-           "calibration_notes", "CALIBRATION",
+           "calibration_notes", "calibration_pooled", "calibration_summary", "CALIBRATION",
            "LABELS"]

@@ -25,7 +25,7 @@ from ..identify import write_device
 from ..identify.free_parameters import switchable
 from ..io.outputs import component, final_path
 from ..pages.report import Report, header
-from .confidence import calibration_notes, calibration_rows
+from .confidence import calibration_notes, calibration_rows, calibration_summary
 from .diagnosis import DiagnosisResult
 from .signatures import excitation
 
@@ -264,13 +264,15 @@ def _fmt(x, unit="", scale=1.0, digits=4):
     return f"{x * scale:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
-def calibration_table(rep: Report, rows: Sequence[dict] | None = None, notes: Sequence[str] | None = None) -> None:
+def calibration_table(rep: Report, rows: Sequence[dict] | None = None, notes: Sequence[str] | None = None,
+                      summary: str | None = None) -> None:
     """What the confidence labels have meant on held-out physics (:func:`.confidence.calibration_rows`,
-    or the ``rows`` and ``notes`` a run stored), as a table with the draws' caveats under it."""
+    or the ``rows``, ``notes`` and ``summary`` a run stored): the draws summed
+    (:func:`.confidence.calibration_summary`), then a table with the draws' caveats under it."""
     rep.paragraph("What the confidence labels mean: how often a pick of each label named the hidden effect "
                   "(right, or a near twin's relative) on records from truth families held out of the choice of "
-                  "the rules (python bench/diagnose_lofo.py; docs/reference/truth-families.md), newest first.",
-                  note=True)
+                  "the rules (python bench/diagnose_lofo.py; docs/reference/truth-families.md), newest first. "
+                  + (calibration_summary() if summary is None else summary), note=True)
     rep.table(list(calibration_rows() if rows is None else rows), caption="the labels on held-out physics",
               notes=list(calibration_notes() if notes is None else notes))
 
