@@ -603,11 +603,15 @@ def thresholds() -> dict:
             "twin_low_share": TWIN_LOW, "records_high_share": RECORDS_HIGH, "record_tolerance": RECORD_TOLERANCE}
 
 
+#: What the pages say while :data:`CALIBRATION` holds no draw.
+UNCALIBRATED = "The confidence labels have not been calibrated on held-out physics yet."
+
+
 def calibration_text() -> str:
     """One sentence: what "high", "medium" and "low" have meant on held-out families
     (:data:`CALIBRATION`), the tables of an earlier rule marked as such."""
     if not CALIBRATION:
-        return "The confidence labels have not been calibrated on held-out physics yet."
+        return UNCALIBRATED
     now = [c for c in CALIBRATION if not c.get("rule")]
     before = [c for c in CALIBRATION if c.get("rule")]
     text = " ".join(f"On {c['family']} ({c['cases']} cases; {c['caveat']}): {_per_label(c['labels'])}." for c in now)
@@ -635,7 +639,7 @@ def calibration_summary() -> str:
     """One sentence for the pages and the README: :func:`calibration_pooled` per label, with the share
     of picks that named the hidden effect or its near twin's relative."""
     if not CALIBRATION:
-        return "The confidence labels have not been calibrated on held-out physics yet."
+        return UNCALIBRATED
     pool = calibration_pooled()
 
     def said(lab: str) -> str:
